@@ -1,0 +1,228 @@
+"""Fuzzy PID controllers: interval type-2 (IT2-FPID) and type-1 (FPID).
+
+Law (one controller per axis; ``specs/controller.md`` §1; Kumbasar-group structure used by
+Candan & Li's agricultural-UAV paper, Table I)::
+
+    e_k  = error,   ed_k = (e_k - e_{k-1})/dt   or  -(y_k - y_{k-1})/dt (derivative="measurement")
+    ed_k = 0 on the first call (no derivative kick); optional low-pass with time constant d_tau
+    E    = clip(Ke e_k, -1, 1)
+    dE   = clip(Kd ed_k, -1, 1)
+    U    = Φ(E, dE)                      fuzzy PD core, |U| <= 1  (controllers.fuzzy)
+    I_k  = I_{k-1} + dt U                clamped so that |K1 I_k| <= i_limit
+    u_k  = K0 U + K1 I_k                 "PD part" + "PI part"; clamped to u_limit with
+                                         conditional integration
+
+Near the origin Φ ≈ G_E E + G_dE dE, which gives the equivalent linear PID (see
+:func:`equivalent_pid`): Kp = K0 Ke G_E + K1 Kd G_dE, Ki = K1 Ke G_E, Kd = K0 Kd G_dE.
+The controller is odd in (Ke, Kd, K0, K1) jointly; tune with positive bounds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from .fuzzy import IT2FuzzyPD, T1FuzzyPD
+from .pid import ControllerBase
+
+__all__ = ["FPID", "IT2FPID", "PAPER_TABLE_I", "equivalent_pid"]
+
+#: Candan & Li, Table I (indicative only: units and plant of the paper are unknown; the
+#: paper does not say which type reducer it used — ``zeta`` suggests the "zeta" reducer).
+PAPER_TABLE_I: dict[str, float] = {
+    "Ke": 0.0034,
+    "Kd": 0.003,
+    "K0": 0.001,
+    "K1": 65.0,
+    "alpha": 0.25,
+    "zeta": 0.5,
+}
+
+
+def equivalent_pid(
+    Ke: float, Kd: float, K0: float, K1: float, G: float | tuple[float, float]
+) -> tuple[float, float, float]:
+    """Linear PID gains (Kp, Ki, Kd) of a fuzzy PID near the origin.
+
+    ``G`` is the small-signal slope of the core (a float, or (G_E, G_dE) when the two inputs
+    have different slopes)::
+
+        Kp = K0 Ke G_E + K1 Kd G_dE,   Ki = K1 Ke G_E,   Kd = K0 Kd G_dE
+
+    (substitute U ≈ G_E Ke e + G_dE Kd ė into u = K0 U + K1 ∫U).
+
+    Caveat: the NT, BMM, zeta and type-1 cores are differentiable at the origin, so this is
+    their first-order model for any small signal. The KM core is only piecewise linear there:
+    the slopes hold along the axes and where E and dE have the same sign, but in the
+    quadrants E·dE < 0 the first-order response differs (by ~17 % at Table I's heights).
+    """
+    if isinstance(G, tuple | list):
+        g_e, g_de = float(G[0]), float(G[1])
+    else:
+        g_e = g_de = float(G)
+    return (K0 * Ke * g_e + K1 * Kd * g_de, K1 * Ke * g_e, K0 * Kd * g_de)
+
+
+class _FuzzyPID(ControllerBase):
+    """Shared implementation of the fuzzy PID law around a core ``Φ(E, dE) -> float``.
+
+    Attributes set by :meth:`update` (for logging): ``e, de, E, dE, U, integral, u`` and the
+    two parts ``u_pd = K0 U`` and ``u_pi = K1 I``.
+    """
+
+    core: IT2FuzzyPD | T1FuzzyPD
+
+    def _init_gains(
+        self,
+        Ke: float,
+        Kd: float,
+        K0: float,
+        K1: float,
+        derivative: str,
+        i_limit: float | None,
+        u_limit: float | tuple[float, float] | None,
+        d_tau: float,
+    ) -> None:
+        self.Ke = float(Ke)
+        self.Kd = float(Kd)
+        self.K0 = float(K0)
+        self.K1 = float(K1)
+        self._init_common(derivative, i_limit, u_limit, d_tau)
+        self.reset()
+
+    def reset(self, integral: float = 0.0) -> None:
+        """Clear derivative memory; set the integral state I (default 0)."""
+        self._reset_derivative()
+        self.integral = float(integral)
+        self.e = self.de = self.E = self.dE = self.U = 0.0
+        self.u_pd = 0.0
+        self.u_pi = self.K1 * self.integral
+        self.u = 0.0
+
+    def small_signal_gains(self) -> tuple[float, float]:
+        """(G_E, G_dE) of the core at the origin (closed form when available)."""
+        core = self.core
+        if isinstance(core, T1FuzzyPD):
+            return core.cm, core.cm
+        if core.heights_e == core.heights_de and core.heights_e[0] == core.heights_e[2]:
+            g = core.small_signal_gain()
+            return g, g
+        return core.small_signal_gains()
+
+    def equivalent_pid(self) -> tuple[float, float, float]:
+        """(Kp, Ki, Kd) of the linearisation at the origin; see :func:`equivalent_pid`."""
+        return equivalent_pid(self.Ke, self.Kd, self.K0, self.K1, self.small_signal_gains())
+
+    def update(self, error: float, dt: float, measurement: float | None = None) -> float:
+        """One control tick; returns the (clamped) control output u."""
+        de = self._derivative(error, dt, measurement)
+        E = self.Ke * error
+        if E > 1.0:
+            E = 1.0
+        elif E < -1.0:
+            E = -1.0
+        dE = self.Kd * de
+        if dE > 1.0:
+            dE = 1.0
+        elif dE < -1.0:
+            dE = -1.0
+        U = self.core(E, dE)
+        K1 = self.K1
+        I_old = self.integral
+        I = I_old + dt * U
+        lim = self.i_limit
+        if lim is not None and K1 != 0.0:
+            imax = lim / abs(K1)
+            if I > imax:
+                I = imax
+            elif I < -imax:
+                I = -imax
+        u_pd = self.K0 * U
+        u = u_pd + K1 * I
+        if u > self._umax:
+            if K1 * (I - I_old) > 0.0:  # integration drives further into saturation
+                I = I_old
+                u = u_pd + K1 * I
+            if u > self._umax:
+                u = self._umax
+        elif u < self._umin:
+            if K1 * (I - I_old) < 0.0:
+                I = I_old
+                u = u_pd + K1 * I
+            if u < self._umin:
+                u = self._umin
+        self.integral = I
+        self.e = error
+        self.de = de
+        self.E = E
+        self.dE = dE
+        self.U = U
+        self.u_pd = u_pd
+        self.u_pi = K1 * I
+        self.u = u
+        return u
+
+
+class IT2FPID(_FuzzyPID):
+    """Interval type-2 fuzzy PID (one axis).
+
+    Parameters
+    ----------
+    Ke, Kd : input scaling of the error and of its derivative.
+    K0, K1 : output gains of the PD part (K0·U) and of the PI part (K1·∫U).
+    alpha, cm, reducer, zeta, heights : IT2 core, see :class:`controllers.fuzzy.IT2FuzzyPD`.
+    derivative : "error" (d e/dt) or "measurement" (−d y/dt; pass ``measurement=y``).
+    i_limit : anti-windup clamp, |K1·I| <= i_limit (None: no clamp).
+    u_limit : output clamp, a symmetric bound or (lower, upper); conditional integration.
+    d_tau : time constant of a first-order low-pass on the derivative (0: none).
+    """
+
+    def __init__(
+        self,
+        Ke: float,
+        Kd: float,
+        K0: float,
+        K1: float,
+        *,
+        alpha: float = 0.25,
+        cm: float = 0.7,
+        reducer: str = "km",
+        zeta: float = 0.5,
+        heights: Sequence[float] | Sequence[Sequence[float]] | None = None,
+        derivative: str = "error",
+        i_limit: float | None = None,
+        u_limit: float | tuple[float, float] | None = None,
+        d_tau: float = 0.0,
+    ) -> None:
+        self.core = IT2FuzzyPD(alpha=alpha, cm=cm, reducer=reducer, zeta=zeta, heights=heights)
+        self._init_gains(Ke, Kd, K0, K1, derivative, i_limit, u_limit, d_tau)
+
+    def __repr__(self) -> str:
+        return (
+            f"IT2FPID(Ke={self.Ke}, Kd={self.Kd}, K0={self.K0}, K1={self.K1}, core={self.core!r})"
+        )
+
+
+class FPID(_FuzzyPID):
+    """Type-1 fuzzy PID (one axis): same law as :class:`IT2FPID` with a type-1 core.
+
+    Parameters as :class:`IT2FPID`; the core has only ``cm`` (small-signal slope c_m).
+    """
+
+    def __init__(
+        self,
+        Ke: float,
+        Kd: float,
+        K0: float,
+        K1: float,
+        *,
+        cm: float = 0.7,
+        derivative: str = "error",
+        i_limit: float | None = None,
+        u_limit: float | tuple[float, float] | None = None,
+        d_tau: float = 0.0,
+    ) -> None:
+        self.core = T1FuzzyPD(cm=cm)
+        self._init_gains(Ke, Kd, K0, K1, derivative, i_limit, u_limit, d_tau)
+
+    def __repr__(self) -> str:
+        return f"FPID(Ke={self.Ke}, Kd={self.Kd}, K0={self.K0}, K1={self.K1}, cm={self.core.cm})"
