@@ -1,0 +1,343 @@
+"""Tests for ag_uav.gps: noise components, outages, presets and the GpsSensor."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import tomli_w
+from scipy import stats
+
+from ag_uav.gps import (
+    AR1,
+    AlphaStable,
+    Gaussian,
+    GaussianMixture,
+    GaussMarkov,
+    GpsSensor,
+    Laplace,
+    MultipathSpikes,
+    OutageProcess,
+    StudentT,
+    SymmetricWeibull,
+    available_presets,
+    gps_preset,
+    make_component,
+)
+
+tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
+
+N = 300_000
+
+
+def _lag_corr(x: np.ndarray, lag: int) -> float:
+    x = x - x.mean()
+    return float(np.dot(x[:-lag], x[lag:]) / np.dot(x, x))
+
+
+# ------------------------------------------------------------------ i.i.d. components
+
+
+@pytest.mark.parametrize(
+    "comp, dist",
+    [
+        (Gaussian(1.7, 1), stats.norm(scale=1.7)),
+        (StudentT(1.3, 5.0, 2), stats.t(5.0, scale=1.3 * math.sqrt(3.0 / 5.0))),
+        (StudentT(2.0, 3.0, 3), stats.t(3.0, scale=2.0 * math.sqrt(1.0 / 3.0))),
+        (Laplace(0.8, 4), stats.laplace(scale=0.8 / math.sqrt(2.0))),
+    ],
+)
+def test_iid_shape_matches_reference_distribution(comp, dist):
+    x = comp.sample(50_000)
+    assert stats.kstest(x, dist.cdf).pvalue > 1e-3
+
+
+@pytest.mark.parametrize(
+    "comp",
+    [
+        Gaussian(1.7, 1),
+        StudentT(1.3, 5.0, 2),
+        Laplace(0.8, 4),
+        SymmetricWeibull(1.1, 0.8, 5),
+        SymmetricWeibull(1.1, 2.0, 6),
+        GaussianMixture(0.1, 0.3, 2.0, 7),
+        MultipathSpikes(0.05, 3.0, 8),
+        MultipathSpikes(0.05, 3.0, 9, amplitude_max=6.0),
+    ],
+)
+def test_variance_matched(comp):
+    x = comp.sample(N)
+    assert x.var() == pytest.approx(comp.variance, rel=0.04)
+    assert abs(x.mean()) < 0.01 * math.sqrt(comp.variance)
+
+
+def test_weibull_magnitude_and_random_sign():
+    k, sigma = 0.8, 1.5
+    c = SymmetricWeibull(sigma, k, 3)
+    x = c.sample(100_000)
+    lam = sigma / math.sqrt(math.gamma(1 + 2 / k))
+    assert c.lam == pytest.approx(lam)
+    assert stats.kstest(np.abs(x), stats.weibull_min(k, scale=lam).cdf).pvalue > 1e-3
+    assert (x > 0).mean() == pytest.approx(0.5, abs=0.01)
+
+
+def test_mixture_outlier_rate_and_kurtosis():
+    eps = 0.07
+    x = GaussianMixture(eps, 0.0, 2.0, 11).sample(N)
+    assert (x != 0).mean() == pytest.approx(eps, abs=0.003)
+    m = GaussianMixture(eps, 0.5, 3.0, 12)
+    y = m.sample(N)
+    m4 = 3 * ((1 - eps) * 0.5**4 + eps * 3.0**4)
+    assert np.mean(y**4) == pytest.approx(m4, rel=0.06)
+
+
+def test_spike_rate_amplitude_and_sign():
+    x = MultipathSpikes(0.03, 4.0, 13).sample(N)
+    hit = x != 0
+    assert hit.mean() == pytest.approx(0.03, abs=0.002)
+    np.testing.assert_array_equal(np.abs(x[hit]), 4.0)
+    assert (x[hit] > 0).mean() == pytest.approx(0.5, abs=0.03)
+
+
+@pytest.mark.parametrize("alpha, beta", [(1.5, 0.0), (1.2, 0.5), (1.0, 0.3), (0.8, 0.0)])
+def test_alpha_stable_matches_scipy_levy_stable(alpha, beta):
+    scale = 0.7
+    x = AlphaStable(alpha, scale, 17, beta=beta).sample(100_000)
+    q = np.array([-3.0, -1.0, -0.3, 0.0, 0.3, 1.0, 3.0])
+    ref = stats.levy_stable.cdf(q, alpha, beta, scale=scale)
+    emp = np.array([(x <= v).mean() for v in q])
+    np.testing.assert_allclose(emp, ref, atol=0.006)
+
+
+def test_alpha_stable_alpha2_is_gaussian():
+    x = AlphaStable(2.0, 0.5, 19).sample(N)
+    assert x.var() == pytest.approx(2 * 0.5**2, rel=0.03)
+
+
+# ------------------------------------------------------------------ coloured components
+
+
+def test_gauss_markov_variance_and_correlation():
+    sigma, tau, dt = 2.0, 0.5, 0.05
+    x = GaussMarkov(sigma, tau, 23).sample(N, dt)
+    assert x.std() == pytest.approx(sigma, rel=0.05)
+    for lag in (1, 10):
+        assert _lag_corr(x, lag) == pytest.approx(math.exp(-lag * dt / tau), abs=0.02)
+
+
+def test_gauss_markov_dt_enters_discretisation():
+    # same tau, different fix interval: per-sample correlation must follow e^{-dt/tau}
+    x = GaussMarkov(1.0, 2.0, 29).sample(N, 1.0)
+    assert _lag_corr(x, 1) == pytest.approx(math.exp(-0.5), abs=0.01)
+
+
+def test_ar1_keeps_driver_variance_and_rho():
+    drv = StudentT(1.5, 4.0, 31)
+    ar = AR1(drv, rho=0.8)
+    x = ar.sample(N)
+    assert x.var() == pytest.approx(1.5**2, rel=0.08)
+    assert _lag_corr(x, 1) == pytest.approx(0.8, abs=0.01)
+    ar_tau = AR1(Laplace(1.0, 37), tau_s=1.0)
+    y = ar_tau.sample(N, 0.05)
+    assert _lag_corr(y, 1) == pytest.approx(math.exp(-0.05), abs=0.01)
+    assert y.var() == pytest.approx(1.0, rel=0.1)
+
+
+def test_ar1_with_stable_driver_keeps_scale():
+    x = AR1(AlphaStable(1.5, 1.0, 41), rho=0.7).sample(200_000)
+    ref = AlphaStable(1.5, 1.0, 43).sample(200_000)
+    assert stats.ks_2samp(x, ref).pvalue > 1e-3
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        {"type": "gaussian", "sigma": 1.0},
+        {"type": "student-t", "sigma": 1.0, "nu": 3.0},
+        {"type": "laplace", "sigma": 1.0},
+        {"type": "weibull", "sigma": 1.0, "k": 0.8},
+        {"type": "mixture", "eps": 0.1, "sigma1": 1.0, "sigma2": 4.0},
+        {"type": "alpha-stable", "alpha": 1.5, "scale": 1.0, "beta": 0.2},
+        {"type": "spikes", "prob": 0.1, "amplitude": 2.0, "amplitude_max": 3.0},
+        {"type": "gauss-markov", "sigma": 1.0, "tau_s": 3.0},
+        {"type": "ar1", "rho": 0.9, "driver": {"type": "weibull", "sigma": 1.0, "k": 1.5}},
+    ],
+)
+def test_components_deterministic_and_chunk_invariant(cfg):
+    a = make_component(cfg, np.random.SeedSequence(5))
+    b = make_component(cfg, np.random.SeedSequence(5))
+    c = make_component(cfg, np.random.SeedSequence(6))
+    xa = a.sample(1000, 0.05)
+    xb = np.concatenate([b.sample(1, 0.05), b.sample(336, 0.05), b.sample(663, 0.05)])
+    np.testing.assert_allclose(xa, xb, rtol=1e-13, atol=1e-15)
+    assert not np.array_equal(xa, c.sample(1000, 0.05))
+
+
+# ------------------------------------------------------------------ outages
+
+
+def test_outage_mean_durations():
+    dt = 0.05
+    out = OutageProcess(2.0, 0.5, 47).sample(400_000, dt)
+    edges = np.flatnonzero(np.diff(out.astype(np.int8))) + 1
+    runs = np.diff(np.concatenate(([0], edges, [out.size])))
+    states = out[np.concatenate(([0], edges))]
+    runs, states = runs[1:-1], states[1:-1]  # drop the censored first and last runs
+    assert runs[~states].mean() * dt == pytest.approx(2.0, rel=0.05)
+    assert runs[states].mean() * dt == pytest.approx(0.5, rel=0.05)
+    assert 1 - out.mean() == pytest.approx(2.0 / 2.5, abs=0.01)
+
+
+def test_outage_starts_up_unless_asked():
+    assert not OutageProcess(1.0, 1.0, 1).sample(1, 0.05)[0]
+    assert OutageProcess(1.0, 1.0, 1, start_in_outage=True).sample(1, 0.05)[0]
+
+
+# ------------------------------------------------------------------ sensor
+
+
+def _fixes(sensor: GpsSensor, seconds: float, ctrl_hz: float = 100.0, pos=None):
+    out = []
+    for i in range(int(round(seconds * ctrl_hz))):
+        t = i / ctrl_hz
+        p = (0.0, 0.0, 0.0) if pos is None else pos(t)
+        out.append((t, sensor.measure(t, p)))
+    return out
+
+
+def test_rate_20hz_when_called_at_100hz():
+    s = GpsSensor.from_preset("standalone", 1, rate_hz=20.0)
+    res = _fixes(s, 10.0)
+    times = [t for t, f in res if f is not None]
+    assert len(times) == 200
+    np.testing.assert_allclose(np.diff(times), 0.05, atol=1e-12)
+    s5 = GpsSensor.from_preset("rtk", 1, rate_hz=5.0)
+    assert sum(f is not None for _, f in _fixes(s5, 10.0)) == 50
+
+
+def test_latency_returns_delayed_truth():
+    s = GpsSensor.from_preset("perfect", 0, latency_s=0.1)
+
+    def pos(t):
+        return (t, 2.0 * t, 3.0)
+
+    res = [(t, f) for t, f in _fixes(s, 2.0, pos=pos) if f is not None]
+    for t, f in res:
+        if t >= 0.1:
+            np.testing.assert_allclose(f, pos(t - 0.1), atol=1e-9)
+    # a latency between control ticks is interpolated
+    s = GpsSensor.from_preset("perfect", 0, latency_s=0.025)
+    res = [(t, f) for t, f in _fixes(s, 1.0, pos=pos) if f is not None and t > 0.1]
+    np.testing.assert_allclose(res[0][1], pos(res[0][0] - 0.025), atol=1e-9)
+
+
+def i_fix(t: float) -> bool:
+    return abs(t * 20.0 - round(t * 20.0)) < 1e-6
+
+
+def test_measure_equals_generate_errors_with_outages():
+    over = {
+        "outage": {"mean_up_s": 3.0, "mean_down_s": 0.4},
+        "components": {"bias": {"type": "gauss-markov", "sigma": 0.5, "tau_s": 10.0}},
+    }
+    a = GpsSensor.from_preset("coloured-impulsive", 99, **over)
+    b = GpsSensor.from_preset("coloured-impulsive", 99, **over)
+    res = _fixes(a, 150.0)  # 3000 fixes, crosses several 1024-fix blocks
+    got = np.array([f if f is not None else [np.nan] * 3 for t, f in res if i_fix(t)])
+    ref = b.generate_errors(3000)
+    assert np.isnan(ref[:, 0]).any() and (~np.isnan(ref[:, 0])).any()
+    np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-13)
+
+
+def test_determinism_and_stream_independence():
+    base = GpsSensor.from_preset("standalone", 2024).generate_errors(5000)
+    again = GpsSensor.from_preset("standalone", 2024).generate_errors(5000)
+    other = GpsSensor.from_preset("standalone", 2025).generate_errors(5000)
+    np.testing.assert_array_equal(base, again)
+    assert not np.allclose(base, other)
+    # add a component in FRONT of the list: the existing components' draws are unchanged
+    cfg = gps_preset("standalone")
+    spikes = {"type": "spikes", "name": "mp", "prob": 0.05, "amplitude": 7.0}
+    cfg["components"].insert(0, spikes)
+    more = GpsSensor.from_config(cfg, 2024).generate_errors(5000)
+    diff = more - base
+    hit = np.abs(diff) > 1e-9
+    assert 0.03 < hit.mean() < 0.07
+    np.testing.assert_allclose(np.abs(diff[hit]), 7.0 * np.broadcast_to(
+        np.array(cfg["axis_scale"]), diff.shape)[hit], rtol=1e-9)
+    # reordering components changes nothing
+    cfg2 = gps_preset("standalone")
+    cfg2["components"].reverse()
+    np.testing.assert_allclose(GpsSensor.from_config(cfg2, 2024).generate_errors(5000), base,
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_axes_independent_and_scaled():
+    s = GpsSensor.from_preset("paper-numerical", 3)
+    e = s.generate_errors(N)
+    np.testing.assert_allclose(e.var(axis=0), [10.0, 100.0, 10.0], rtol=0.03)
+    assert abs(np.corrcoef(e.T)[0, 1]) < 0.01
+    assert s.variance == pytest.approx((10.0, 100.0, 10.0))
+
+
+def test_presets_build_and_magnitudes():
+    assert set(available_presets()) >= {
+        "perfect", "rtk", "sbas", "standalone", "paper-numerical", "student-t", "laplace",
+        "weibull", "mixture", "alpha-stable", "coloured", "coloured-impulsive",
+    }
+    for name in available_presets():
+        e = GpsSensor.from_preset(name, 1).generate_errors(100)
+        assert e.shape == (100, 3)
+    h = {n: math.sqrt(GpsSensor.from_preset(n, 1).variance[0]) for n in available_presets()}
+    assert h["perfect"] == 0.0
+    assert 0.005 <= h["rtk"] <= 0.02
+    assert 0.5 <= h["sbas"] <= 1.0
+    assert 1.0 <= h["standalone"] <= 2.0
+    for n in ("student-t", "laplace", "weibull", "mixture", "coloured", "coloured-impulsive"):
+        assert GpsSensor.from_preset(n, 1).variance[:2] == pytest.approx((10.0, 100.0))
+    sa = GpsSensor.from_preset("standalone", 1)
+    assert 1.5 <= sa.axis_scale[2] / sa.axis_scale[0] <= 2.0
+
+
+def test_standalone_dominated_by_slow_bias():
+    e = GpsSensor.from_preset("standalone", 8).generate_errors(20_000)[:, 0]  # 2000 s at 10 Hz
+    assert _lag_corr(e, 10) > 0.8  # 1 s apart: still strongly correlated
+
+
+def test_overrides_and_toml_roundtrip():
+    s = GpsSensor.from_preset("standalone", 4, components={"bias": {"tau_s": 30.0}},
+                              latency_s=0.2)
+    (name, procs, _), *_ = s.components
+    assert name == "bias" and procs[0].tau_s == 30.0 and s.latency_s == 0.2
+    s = GpsSensor.from_preset("standalone", 4, components={"white": {}})
+    assert [c[0] for c in s.components] == ["bias"]
+    cfg = tomllib.loads(tomli_w.dumps({"gps": gps_preset("coloured-impulsive")}))["gps"]
+    np.testing.assert_array_equal(
+        GpsSensor.from_config(cfg, 5).generate_errors(500),
+        GpsSensor.from_preset("coloured-impulsive", 5).generate_errors(500),
+    )
+
+
+def test_errors_name_key_value_and_allowed():
+    with pytest.raises(ValueError, match="'nonsense'.*allowed: perfect"):
+        gps_preset("nonsense")
+    with pytest.raises(ValueError, match=r"sigma = -1.0.*>= 0"):
+        GpsSensor.from_preset("standalone", 1, components={"white": {"sigma": -1.0}})
+    with pytest.raises(ValueError, match=r"nu = 2.0.*> 2"):
+        make_component({"type": "student-t", "sigma": 1.0, "nu": 2.0}, 1)
+    with pytest.raises(ValueError, match="sigmaa"):
+        make_component({"type": "gaussian", "sigmaa": 1.0}, 1)
+    with pytest.raises(ValueError, match="type = 'cauchy'.*allowed"):
+        make_component({"type": "cauchy", "sigma": 1.0}, 1)
+    with pytest.raises(ValueError, match="rate_hz = 0"):
+        GpsSensor.from_preset("rtk", 1, rate_hz=0)
+    with pytest.raises(ValueError, match="ratehz"):
+        GpsSensor.from_preset("rtk", 1, ratehz=5)
+    with pytest.raises(ValueError, match="rho"):
+        make_component({"type": "ar1", "rho": 1.0, "driver": {"type": "gaussian", "sigma": 1}}, 1)
+    with pytest.raises(ValueError, match="unique"):
+        GpsSensor(components=[{"type": "gaussian", "sigma": 1}, {"type": "gaussian", "sigma": 2}],
+                  seed=1)
+    with pytest.raises(ValueError, match="mean_down_s"):
+        GpsSensor(seed=1, outage={"mean_up_s": 1.0})
