@@ -90,10 +90,10 @@ class SimConfig:
 class AxisGains:
     """Gains of one position-axis controller (the keys used depend on ``controller.type``)."""
 
-    ke: float = _f(0.5, "IT2/T1-FPID: error scaling Ke (1/m)", gt=0)
-    kd: float = _f(0.5, "IT2/T1-FPID: error-rate scaling Kd (s/m)", gt=0)
-    k0: float = _f(3.0, "IT2/T1-FPID: PD-part output gain K0 (m/s^2)", ge=0)
-    k1: float = _f(0.6, "IT2/T1-FPID: PI-part output gain K1 (m/s^3)", ge=0)
+    ke: float = _f(1.0, "IT2/T1-FPID: error scaling Ke (1/m)", gt=0)
+    kd: float = _f(1.0, "IT2/T1-FPID: error-rate scaling Kd (s/m)", gt=0)
+    k0: float = _f(4.0, "IT2/T1-FPID: PD-part output gain K0 (m/s^2)", ge=0)
+    k1: float = _f(1.0, "IT2/T1-FPID: PI-part output gain K1 (m/s^3)", ge=0)
     alpha: float = _f(0.5, "IT2-FPID: lower-MF height parameter (h_Z = alpha, h_N = h_P = "
                       "1 - alpha)", gt=0, le=1)
     zeta: float = _f(0.5, "IT2-FPID: weight of the zeta type reducer", ge=0, le=1)

@@ -112,9 +112,10 @@ class _FuzzyPID(ControllerBase):
         """(Kp, Ki, Kd) of the linearisation at the origin; see :func:`equivalent_pid`."""
         return equivalent_pid(self.Ke, self.Kd, self.K0, self.K1, self.small_signal_gains())
 
-    def update(self, error: float, dt: float, measurement: float | None = None) -> float:
+    def update(self, error: float, dt: float, measurement: float | None = None,
+               error_rate: float | None = None) -> float:
         """One control tick; returns the (clamped) control output u."""
-        de = self._derivative(error, dt, measurement)
+        de = self._derivative(error, dt, measurement, error_rate)
         E = self.Ke * error
         if E > 1.0:
             E = 1.0

@@ -75,10 +75,19 @@ class ControllerBase:
         self._prev: float | None = None
         self._dfilt = 0.0
 
-    def _derivative(self, error: float, dt: float, measurement: float | None) -> float:
-        """Raw (optionally low-passed) derivative of the error; 0 on the first call."""
+    def _derivative(self, error: float, dt: float, measurement: float | None,
+                    error_rate: float | None = None) -> float:
+        """Raw (optionally low-passed) derivative of the error; 0 on the first call.
+
+        ``error_rate``, when given, is used as the derivative directly (e.g. ``v_ref − v`` from a
+        velocity estimate, which is smoother than differencing a position that jumps at every
+        GPS fix); the finite-difference memory is still updated.
+        """
         if not dt > 0.0:
             raise ValueError(f"dt must be > 0, got {dt}")
+        if error_rate is not None:
+            self._prev = -measurement if (self._on_meas and measurement is not None) else error
+            return error_rate
         if self._on_meas:
             if measurement is None:
                 raise ValueError('derivative="measurement" needs update(..., measurement=y)')
@@ -130,9 +139,10 @@ class PID(ControllerBase):
         self.integral = float(integral)
         self.e = self.de = self.p = self.i = self.d = self.u = 0.0
 
-    def update(self, error: float, dt: float, measurement: float | None = None) -> float:
+    def update(self, error: float, dt: float, measurement: float | None = None,
+               error_rate: float | None = None) -> float:
         """One control tick; returns the (clamped) control output."""
-        de = self._derivative(error, dt, measurement)
+        de = self._derivative(error, dt, measurement, error_rate)
         Ki = self.Ki
         I_old = self.integral
         I = I_old + dt * error

@@ -1,0 +1,133 @@
+"""``ag-uav bench``: speed figures measured in one process and one run.
+
+Closed-loop speed of the default mission (no log, no renders) against raw MuJoCo stepping of the
+very same compiled model, in sim-seconds per wall-second, and their ratio. Ratios taken in one run
+are what to quote: absolute figures move with machine load.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+import mujoco
+
+from .config import Config
+from .vehicle import G, build_vehicle
+
+
+def _median_rate(fn: Callable[[], tuple[float, float]], repeats: int) -> float:
+    """Median of sim-seconds per wall-second over ``repeats`` calls of ``fn`` -> (sim_s, wall_s)."""
+    rates = []
+    for _ in range(repeats):
+        sim_s, wall_s = fn()
+        rates.append(sim_s / wall_s)
+    return statistics.median(rates)
+
+
+def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float, float]:
+    """Raw MuJoCo stepping of the mission's model: hover thrust, ``mj_step(m, d, nstep)`` in a
+    Python loop (nstep=1: one call per physics step)."""
+    veh = build_vehicle(cfg, _outline(cfg))
+    m = veh.model
+    d = mujoco.MjData(m)
+    d.qpos[2] = 3.0
+    d.ctrl[:] = veh.mass * G / 4
+    d.act[:] = veh.mass * G / 4
+    n_calls = int(sim_seconds / (m.opt.timestep * nstep))
+    step = mujoco.mj_step
+    t0 = time.perf_counter()
+    if nstep == 1:
+        for _ in range(n_calls):
+            step(m, d)
+    else:
+        for _ in range(n_calls):
+            step(m, d, nstep)
+    wall = time.perf_counter() - t0
+    return n_calls * nstep * m.opt.timestep, wall
+
+
+def _outline(cfg: Config):
+    import numpy as np
+
+    from .sim import build_field
+
+    fld = build_field(cfg)
+    return [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
+
+
+def closed_loop(cfg: Config) -> tuple[float, float, dict]:
+    from .sim import simulate
+
+    c = copy.deepcopy(cfg)
+    c.log.enabled = False
+    res = simulate(c)
+    s = res.summary
+    return s["sim_time_s"], s["loop_wall_time_s"], s
+
+
+def run_bench(cfg: Config, repeats: int = 3, quick: bool = False) -> dict[str, Any]:
+    out: dict[str, Any] = {"repeats": repeats}
+    c = copy.deepcopy(cfg)
+    if quick:
+        c.sim.max_time_s = min(c.sim.max_time_s, 60.0)
+    last: dict = {}
+
+    def cl() -> tuple[float, float]:
+        sim_s, wall_s, s = closed_loop(c)
+        last.update(s)
+        return sim_s, wall_s
+
+    closed = _median_rate(cl, repeats)
+    sim_len = last.get("sim_time_s", 60.0)
+    nsub = round(1.0 / (c.sim.timestep_s * c.sim.control_hz))
+    raw1 = _median_rate(lambda: raw_stepping(c, sim_len, 1), repeats)
+    rawn = _median_rate(lambda: raw_stepping(c, sim_len, nsub), repeats)
+    out["closed_loop"] = {
+        "sim_s_per_wall_s": round(closed, 1),
+        "mission_sim_s": sim_len,
+        "completed": last.get("completed"),
+        "control_hz": c.sim.control_hz,
+        "timestep_s": c.sim.timestep_s,
+    }
+    out["raw_mujoco"] = {
+        "per_step_call_sim_s_per_wall_s": round(raw1, 1),
+        f"nstep{nsub}_call_sim_s_per_wall_s": round(rawn, 1),
+    }
+    out["ratio_closed_vs_raw_per_step"] = round(closed / raw1, 3)
+    out["ratio_closed_vs_raw_nstep"] = round(closed / rawn, 3)
+    for extra in _EXTRA:
+        try:
+            out.update(extra(c, repeats, quick))
+        except Exception as e:  # a failing extra must not hide the main figures
+            out[f"{extra.__name__}_error"] = f"{type(e).__name__}: {e}"
+    return out
+
+
+#: more benchmark sections (estimators, logging, workers) register here: fn(cfg, repeats, quick)
+_EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = []
+
+
+def print_bench(out: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title="ag-uav bench (one process, one run)")
+    t.add_column("measurement")
+    t.add_column("value", justify="right")
+
+    def walk(d: dict, prefix: str = "") -> None:
+        for k, v in d.items():
+            if isinstance(v, dict):
+                walk(v, f"{prefix}{k}.")
+            else:
+                if isinstance(v, float) and not math.isfinite(v):
+                    v = "n/a"
+                t.add_row(f"{prefix}{k}", str(v))
+
+    walk(out)
+    Console().print(t)

@@ -1,0 +1,175 @@
+"""``ag-uav`` command line.
+
+Every command has ``--help``. A bad config prints one line naming the key, the value and what is
+allowed, and exits with code 2 (no traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from .config import ConfigError
+
+
+def _add_config_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", "-c", metavar="FILE.toml", help="run config (TOML); defaults if "
+                   "omitted (see `ag-uav config`)")
+    p.add_argument("--seed", type=int, help="override the config's seed")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one config key, e.g. --set wind.speed_mps=5 (TOML value)")
+
+
+def _overrides(args: argparse.Namespace) -> dict:
+    import tomllib
+
+    out: dict = {}
+    for item in args.set:
+        if "=" not in item:
+            raise ConfigError(f'--set "{item}": expected KEY=VALUE')
+        k, v = item.split("=", 1)
+        try:
+            out[k.strip()] = tomllib.loads(f"v = {v}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[k.strip()] = v  # a bare string
+    if getattr(args, "seed", None) is not None:
+        if args.seed < 0:
+            raise ConfigError(f"--seed = {args.seed}: must be >= 0")
+        out["seed"] = args.seed
+    return out
+
+
+def _load(args: argparse.Namespace):
+    from .config import load_config
+
+    return load_config(args.config, _overrides(args))
+
+
+# -------------------------------------------------------------------------------------- commands
+def cmd_config(args: argparse.Namespace) -> int:
+    from .config import config_toml_with_comments
+
+    cfg = _load(args)
+    if args.model_info:
+        from .vehicle import build_vehicle
+
+        print(json.dumps(build_vehicle(cfg).info(), indent=2))
+        return 0
+    print(config_toml_with_comments(cfg), end="")
+    return 0
+
+
+def cmd_fly(args: argparse.Namespace) -> int:
+    from .run import fly
+
+    cfg = _load(args)
+    if args.no_render:
+        cfg.log.render = False
+    if args.no_log:
+        cfg.log.enabled = False
+    res, run_dir = fly(cfg, out_root=args.out, run_id=args.run_id, progress=not args.quiet)
+    from .report import print_summary
+
+    print_summary(res.summary, run_dir)
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from .bench import run_bench
+
+    cfg = _load(args)
+    out = run_bench(cfg, repeats=args.repeats, quick=args.quick)
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        from .bench import print_bench
+
+        print_bench(out)
+    return 0
+
+
+# ------------------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="ag-uav",
+        description="Agricultural UAV simulator: fly coverage missions in MuJoCo under an "
+                    "interval type-2 fuzzy PID, with wind, noisy GPS and robust Kalman filters.")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+
+    f = sub.add_parser("fly", help="fly one mission; writes runs/<run-id>/summary.json (+ MCAP)",
+                       description="Fly the configured field once, print a summary table and "
+                                   "write runs/<run-id>/summary.json and run.mcap.")
+    _add_config_args(f)
+    f.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run "
+                   "folder (default: runs)")
+    f.add_argument("--run-id", help="run folder name (default: time-field-seed)")
+    f.add_argument("--no-render", action="store_true", help="no camera frames in the log")
+    f.add_argument("--no-log", action="store_true", help="no MCAP log (summary.json only)")
+    f.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    f.set_defaults(func=cmd_fly)
+
+    c = sub.add_parser("config", help="print the full default config (TOML, commented)",
+                       description="Print the resolved config (defaults, or --config with "
+                                   "overrides) as commented TOML.")
+    _add_config_args(c)
+    c.add_argument("--model-info", action="store_true",
+                   help="print the compiled vehicle's mass, inertia, rotor layout instead")
+    c.set_defaults(func=cmd_config)
+
+    b = sub.add_parser("bench", help="measure closed-loop sim speed against raw MuJoCo stepping",
+                       description="Measure, in one process and one run, the closed-loop speed "
+                                   "of the default mission (sim-s per wall-s) and raw MuJoCo "
+                                   "stepping of the same model, and their ratio.")
+    _add_config_args(b)
+    b.add_argument("--json", action="store_true", help="machine-readable output")
+    b.add_argument("--repeats", type=int, default=3, help="repeats per measurement (median)")
+    b.add_argument("--quick", action="store_true", help="shorter measurements")
+    b.set_defaults(func=cmd_bench)
+
+    _register_optional(sub)
+    return p
+
+
+def _register_optional(sub) -> None:
+    """Commands that live in other modules register themselves here (logging, batch, tuning)."""
+    import importlib
+
+    for mod in ("ag_uav.cli_view", "ag_uav.cli_experiments", "ag_uav.cli_batch"):
+        try:
+            m = importlib.import_module(mod)
+        except ModuleNotFoundError as e:
+            if e.name != mod:
+                raise
+            continue
+        m.register(sub)
+
+
+def main(argv: list[str] | None = None) -> int:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    t0 = time.perf_counter()
+    try:
+        return int(args.func(args) or 0)
+    except ConfigError as e:
+        print(f"ag-uav: config error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"ag-uav: interrupted after {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    except FileNotFoundError as e:
+        print(f"ag-uav: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
+__all__ = ["main", "build_parser", "Path"]

@@ -1,0 +1,118 @@
+"""Per-run metrics from the recorded trajectory (numpy/shapely, after the loop).
+
+Definitions (all horizontal errors in the ENU x–y plane):
+
+- ``tracking_rmse_m``: RMS of |p_true − p_ref| (horizontal) over the mission, i.e. from the first
+  to the last tick with the sprayer on (take-off and the final hover are not part of it).
+- ``cross_track_rmse_m`` / ``cross_track_max_m``: distance of the true position to the planned
+  polyline of the active *spraying* segment (sweep legs and headland laps), over ticks with the
+  sprayer on. Turns and transits are not counted (the sprayer is off there).
+- ``altitude_rmse_m``: RMS of z_true − z_ref over the mission ticks.
+- ``coverage_fraction`` / ``overlap_fraction``: :func:`ag_uav.coverage.spray_coverage` of the true
+  track while spraying, with the swath footprint.
+- ``completed``: not crashed, the reference ran to its end, the vehicle ended within 1 m of the
+  path's end, and every leg was flown (its cross-track error stayed below half a swath).
+- ``mission_time_s``: time at which the true position first came within 0.5 m of the path's end
+  after the last leg started (None if never).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import shapely
+
+from .config import Config
+from .coverage import spray_coverage
+
+
+def _rms(x: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(x * x))) if x.size else None
+
+
+def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index pairs of the True runs of a boolean array."""
+    m = np.concatenate([[False], mask.astype(bool), [False]])
+    d = np.flatnonzero(np.diff(m.astype(np.int8)))
+    return list(zip(d[::2].tolist(), d[1::2].tolist(), strict=True))
+
+
+def cross_track(res, plan) -> np.ndarray:
+    """Distance (m) of each spraying tick's true position to its planned segment (NaN elsewhere)."""
+    out = np.full(len(res.t), np.nan)
+    xy = res.p_true[:, :2]
+    for s in np.unique(res.seg[res.spray]):
+        if s < 0 or s >= len(plan.segments):
+            continue
+        idx = np.flatnonzero((res.seg == s) & res.spray)
+        line = shapely.LineString(plan.segments[s].points)
+        out[idx] = shapely.distance(shapely.points(xy[idx]), line)
+    return out
+
+
+def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float | None,
+              reference=None) -> dict[str, Any]:
+    plan = res.plan
+    crashed = crash_reason is not None
+    n = len(res.t)
+    spray_idx = np.flatnonzero(res.spray)
+    if spray_idx.size:
+        mission = slice(int(spray_idx[0]), int(spray_idx[-1]) + 1)
+    else:
+        mission = slice(0, n)
+    d_h = res.p_true[mission, :2] - res.p_ref[mission, :2]
+    tracking = _rms(np.hypot(d_h[:, 0], d_h[:, 1]))
+    alt = _rms(res.p_true[mission, 2] - res.p_ref[mission, 2])
+    ct = cross_track(res, plan)
+    ct_spray = ct[np.isfinite(ct)]
+    tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
+    cov, ovl = spray_coverage(res.field, tracks, cfg.mission.swath_m) if tracks else (0.0, 0.0)
+    steps = np.diff(res.p_true, axis=0)
+    path_len = float(np.sum(np.linalg.norm(steps, axis=1))) if n > 1 else 0.0
+
+    end = np.asarray(plan.end, dtype=float)
+    ref_done = reference is not None and n and res.t[-1] >= reference.duration
+    final_err = float(np.hypot(*(res.p_true[-1, :2] - end))) if n else float("inf")
+    legs = [i for i, s in enumerate(plan.segments) if s.kind == "leg"]
+    legs_flown = 0
+    half = 0.5 * cfg.mission.swath_m
+    for i in legs:
+        sel = ct[res.seg == i]
+        sel = sel[np.isfinite(sel)]
+        if sel.size and float(np.max(sel)) < half:
+            legs_flown += 1
+    completed = bool(not crashed and ref_done and final_err < 1.0 and legs_flown == len(legs))
+    mission_time = None
+    if n and legs:
+        last_leg_ticks = np.flatnonzero(res.seg == legs[-1])
+        if last_leg_ticks.size:
+            after = np.arange(last_leg_ticks[0], n)
+            dist = np.hypot(*(res.p_true[after, :2] - end).T)
+            hit = np.flatnonzero(dist < 0.5)
+            if hit.size:
+                mission_time = float(res.t[after[hit[0]]])
+
+    def r(x: float | None, nd: int = 4) -> float | None:
+        return None if x is None else round(float(x), nd)
+
+    return {
+        "completed": completed,
+        "crashed": crashed,
+        "crash_reason": crash_reason,
+        "crash_time_s": r(crash_time, 3),
+        "mission_time_s": r(mission_time, 2),
+        "tracking_rmse_m": r(tracking),
+        "cross_track_rmse_m": r(_rms(ct_spray)),
+        "cross_track_max_m": r(float(np.max(ct_spray)) if ct_spray.size else None),
+        "altitude_rmse_m": r(alt),
+        "coverage_fraction": r(cov, 5),
+        "overlap_fraction": r(ovl, 5),
+        "path_length_m": r(path_len, 2),
+        "planned_path_length_m": r(plan.length, 2),
+        "legs": len(legs),
+        "legs_flown": legs_flown,
+        "final_position_error_m": r(final_err),
+        "field_area_m2": r(res.field.area, 1),
+        "sweep_direction_deg": r(plan.direction_deg, 2),
+    }

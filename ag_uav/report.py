@@ -1,0 +1,59 @@
+"""Human-facing output: the summary table printed after a run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.table import Table
+
+#: (summary key, label, format, unit)
+ROWS = [
+    ("completed", "completed", "{}", ""),
+    ("crashed", "crashed", "{}", ""),
+    ("crash_reason", "crash reason", "{}", ""),
+    ("mission_time_s", "mission time", "{:.1f}", "s"),
+    ("tracking_rmse_m", "tracking RMSE (horizontal)", "{:.3f}", "m"),
+    ("cross_track_rmse_m", "cross-track RMSE", "{:.3f}", "m"),
+    ("cross_track_max_m", "cross-track max", "{:.3f}", "m"),
+    ("altitude_rmse_m", "altitude RMSE", "{:.3f}", "m"),
+    ("coverage_fraction", "spray coverage", "{:.2%}", ""),
+    ("overlap_fraction", "double-covered", "{:.2%}", ""),
+    ("path_length_m", "path flown", "{:.0f}", "m"),
+    ("legs", "sweep legs", "{}", ""),
+    ("field_area_m2", "field area", "{:.0f}", "m²"),
+    ("estimate_rmse_m", "estimate RMSE (horizontal)", "{:.3f}", "m"),
+    ("sim_time_s", "sim time", "{:.1f}", "s"),
+    ("wall_time_s", "wall time", "{:.2f}", "s"),
+    ("real_time_factor", "loop speed", "{:.0f}", "× real time"),
+    ("frames", "camera frames", "{}", ""),
+]
+
+
+def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
+                  console: Console | None = None) -> None:
+    console = console or Console()
+    t = Table(title="ag-uav run summary", show_header=True, header_style="bold")
+    t.add_column("metric")
+    t.add_column("value", justify="right")
+    for key, label, fmt, unit in ROWS:
+        if key not in summary or summary[key] is None:
+            continue
+        v = summary[key]
+        if key == "crash_reason" and not v:
+            continue
+        try:
+            s = fmt.format(v)
+        except (ValueError, TypeError):
+            s = str(v)
+        if key == "completed":
+            s = "[green]yes[/]" if v else "[red]no[/]"
+        if key == "crashed":
+            s = "[red]yes[/]" if v else "[green]no[/]"
+        t.add_row(label, f"{s} {unit}".strip())
+    console.print(t)
+    for note in summary.get("notes", []):
+        console.print(f"[yellow]note:[/] {note}")
+    if run_dir is not None:
+        console.print(f"run folder: {run_dir}")

@@ -1,0 +1,75 @@
+"""Short deterministic flight scenarios (step responses, hover in steady wind) on the same loop
+as the missions. Used by tests, by ``ag-uav tune`` costs and by the README's step figures."""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import Config
+from .sim import LoopOutput, fly_reference
+
+
+@dataclass(frozen=True)
+class RefSample:
+    p: tuple[float, float, float]
+    v: tuple[float, float, float]
+    a: tuple[float, float, float]
+    yaw: float
+    seg: int = -1
+    spray: bool = False
+
+
+class StepReference:
+    """Hover at ``p0`` and jump by ``step`` (m, world frame) at ``t_step`` (no feed-forward)."""
+
+    def __init__(self, p0=(0.0, 0.0, 3.0), step=(1.0, 0.0, 0.0), t_step: float = 1.0,
+                 yaw: float = 0.0) -> None:
+        self.p0 = tuple(float(v) for v in p0)
+        self.p1 = tuple(a + b for a, b in zip(self.p0, step, strict=True))
+        self.t_step = t_step
+        self._before = RefSample(self.p0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), yaw)
+        self._after = RefSample(self.p1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), yaw)
+
+    def sample(self, t: float) -> RefSample:
+        return self._before if t < self.t_step else self._after
+
+
+def hover_config(cfg: Config, wind_speed: float | None = None, turbulence: str = "none") -> Config:
+    c = copy.deepcopy(cfg)
+    c.sim.takeoff = False
+    if wind_speed is not None:
+        c.wind.speed_mps = wind_speed
+    c.wind.turbulence = turbulence
+    return c
+
+
+def step_response(cfg: Config, axis: int = 0, size: float = 1.0, duration: float = 8.0,
+                  t_step: float = 1.0, wind_speed: float = 0.0) -> tuple[np.ndarray, np.ndarray,
+                                                                          LoopOutput]:
+    """Step of ``size`` m on ``axis`` from hover at 3 m. Returns (t − t_step, response, output);
+    the response is the axis position minus its start, for t ≥ t_step."""
+    c = hover_config(cfg, wind_speed)
+    step = [0.0, 0.0, 0.0]
+    step[axis] = size
+    ref = StepReference(step=step, t_step=t_step)
+    out = fly_reference(c, ref, duration + t_step)
+    sel = out.t >= t_step
+    return out.t[sel] - t_step, out.rec[sel, axis] - ref.p0[axis], out
+
+
+def step_metrics(t: np.ndarray, y: np.ndarray, size: float, band: float = 0.05) -> dict:
+    """Overshoot (fraction of the step), settling time into ±band (m) and rise time 10–90 %."""
+    err = np.abs(y - size)
+    outside = np.flatnonzero(err > band)
+    settle = float(t[outside[-1] + 1]) if outside.size and outside[-1] + 1 < len(t) else (
+        0.0 if not outside.size else float("inf"))
+    over = float(max(0.0, (np.max(y) - size) / size)) if size > 0 else float(
+        max(0.0, (size - np.min(y)) / -size))
+    i10 = np.flatnonzero(y >= 0.1 * size)
+    i90 = np.flatnonzero(y >= 0.9 * size)
+    rise = float(t[i90[0]] - t[i10[0]]) if i10.size and i90.size else float("inf")
+    return {"overshoot": over, "settling_time_s": settle, "rise_time_s": rise,
+            "final_error_m": float(err[-1])}

@@ -1,0 +1,332 @@
+"""The simulation loop: physics ↔ control ↔ sensors → estimator, then metrics.
+
+Data flow (one way): config → plan (:mod:`ag_uav.plan`) → reference (:mod:`ag_uav.reference`) →
+simulate (this module: MuJoCo physics at ``sim.timestep_s``, control at ``sim.control_hz``) →
+metrics (:mod:`ag_uav.metrics`) and log (:mod:`ag_uav.runlog`).
+
+The **feedback seam** is :class:`Feedback`: each control tick it gets the true state and returns
+the position and velocity the controller flies on. :class:`TrueFeedback` passes the truth through;
+the estimator bank plugs in with the same interface (GPS fixes → filter → estimate).
+
+Every random draw comes from a Generator spawned from the run seed (:func:`rng_streams`), one
+stream per consumer, so the same config and seed give the same run, serial or parallel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from controllers.attitude import GeometricAttitudeController, XMixer, quat_to_rot
+from controllers.cascade import PositionCascade
+from controllers.factory import make_controller
+
+from .config import AxisGains, Config
+from .field import Field, load_field
+from .plan import plan_coverage
+from .reference import Reference
+from .vehicle import G, Vehicle, build_vehicle
+from .wind import Wind
+
+#: Names of the seeded random streams; appending a name never changes the others' draws.
+STREAMS = ("wind", "gps", "estimator", "spare1", "spare2", "spare3", "spare4", "spare5")
+
+
+def rng_streams(seed: int) -> dict[str, np.random.Generator]:
+    """One independent Generator per consumer, spawned from ``SeedSequence(seed)``."""
+    children = np.random.SeedSequence(seed).spawn(len(STREAMS))
+    return {name: np.random.default_rng(s) for name, s in zip(STREAMS, children, strict=True)}
+
+
+# ------------------------------------------------------------------------------ feedback seam
+class Feedback:
+    """What the controller flies on. ``update`` is called once per control tick."""
+
+    name = "base"
+
+    def update(self, t: float, p_true: tuple[float, float, float],
+               v_true: tuple[float, float, float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        raise NotImplementedError
+
+    def summary(self) -> dict[str, Any]:
+        return {}
+
+
+class TrueFeedback(Feedback):
+    """Perfect state feedback (the baseline and the tuning default)."""
+
+    name = "true"
+
+    def update(self, t, p_true, v_true):
+        return p_true, v_true
+
+
+# ------------------------------------------------------------------------------------ building
+def make_axis_controller(kind: str, g: AxisGains) -> Any:
+    """The per-axis position controller named by ``controller.type`` with its gains."""
+    if kind == "pid":
+        return make_controller("pid", Kp=g.kp, Ki=g.ki, Kd=g.kdd, i_limit=g.i_limit)
+    if kind == "t1-fpid":
+        return make_controller("t1-fpid", Ke=g.ke, Kd=g.kd, K0=g.k0, K1=g.k1, cm=g.cm,
+                               i_limit=g.i_limit)
+    return make_controller("it2-fpid", Ke=g.ke, Kd=g.kd, K0=g.k0, K1=g.k1, alpha=g.alpha,
+                           zeta=g.zeta, cm=g.cm, reducer=g.reducer, i_limit=g.i_limit)
+
+
+def make_cascade(cfg: Config, veh: Vehicle) -> PositionCascade:
+    c = cfg.controller
+    axes = [make_axis_controller(c.type, c.xy), make_axis_controller(c.type, c.xy),
+            make_axis_controller(c.type, c.z)]
+    att = GeometricAttitudeController(veh.inertia, wn=c.attitude.wn, zeta=c.attitude.zeta)
+    mixer = XMixer(veh.rotor_xy, veh.spin, veh.k_yaw, veh.f_max)
+    return PositionCascade(axes, veh.mass, G, att, mixer, tilt_max=math.radians(c.tilt_max_deg),
+                           accel_feedforward=c.accel_feedforward)
+
+
+def build_field(cfg: Config) -> Field:
+    try:
+        return load_field(cfg.mission.field)
+    except ValueError as e:
+        from .config import ConfigError
+
+        raise ConfigError(f'mission.field = "{cfg.mission.field}": {e}') from None
+
+
+def build_plan(cfg: Config, fld: Field):
+    from .config import ConfigError
+
+    m = cfg.mission
+    direction = None if m.direction_deg == "auto" else float(m.direction_deg)
+    try:
+        return plan_coverage(fld, swath=m.swath_m, headland=m.headland_m,
+                             direction_deg=direction)
+    except ValueError as e:
+        raise ConfigError(f"mission.swath_m = {m.swath_m}: {e}") from None
+
+
+# -------------------------------------------------------------------------------------- result
+@dataclass
+class RunResult:
+    summary: dict[str, Any]
+    t: np.ndarray                # (n,) control-tick times (s)
+    p_true: np.ndarray           # (n, 3)
+    v_true: np.ndarray           # (n, 3)
+    p_ref: np.ndarray            # (n, 3)
+    p_fb: np.ndarray             # (n, 3) position the controller flew on
+    seg: np.ndarray              # (n,) active plan segment
+    spray: np.ndarray            # (n,) sprayer on
+    motors: np.ndarray           # (n, 4) rotor thrust commands (N)
+    field: Field | None = None
+    plan: Any = None
+    extra: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+class Crash(Exception):
+    pass
+
+
+# -------------------------------------------------------------------------------------- the loop
+@dataclass
+class LoopOutput:
+    t: np.ndarray
+    rec: np.ndarray              # (n, 21) see REC_COLUMNS
+    crash_reason: str | None
+    crash_time: float | None
+    wall_loop_s: float
+    vehicle: Vehicle
+    frames: int = 0
+
+
+REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
+               "spray", "f0", "f1", "f2", "f3", "wx", "wy", "wz")
+
+
+def fly_reference(cfg: Config, reference: Any, duration: float, *,
+                  outline: list[np.ndarray] | None = None,
+                  bounds: tuple[float, float, float, float] | None = None,
+                  feedback: Feedback | None = None, progress: bool = False,
+                  tick_hook: Callable[..., None] | None = None, log: Any = None,
+                  renderer: Any = None, streams: dict | None = None) -> LoopOutput:
+    """Fly the vehicle along ``reference`` (``sample(t)`` → p, v, a, yaw, seg, spray) for
+    ``duration`` seconds of sim time. The core loop shared by missions and test scenarios."""
+    streams = streams or rng_streams(cfg.seed)
+    veh = build_vehicle(cfg, outline)
+    model = veh.model
+    data = mujoco.MjData(model)
+    start = reference.sample(0.0)
+    data.qpos[0] = start.p[0]
+    data.qpos[1] = start.p[1]
+    data.qpos[2] = veh.hover_z if cfg.sim.takeoff else start.p[2]
+    data.qpos[3] = math.cos(start.yaw / 2)
+    data.qpos[6] = math.sin(start.yaw / 2)
+    if not cfg.sim.takeoff:
+        data.ctrl[:] = veh.mass * G / 4
+        data.act[:] = veh.mass * G / 4
+    mujoco.mj_forward(model, data)
+
+    fb = feedback or TrueFeedback()
+    cascade = make_cascade(cfg, veh)
+    w = cfg.wind
+    wind = Wind(w.speed_mps, w.direction_deg, w.turbulence, rng=streams["wind"])
+    c_lin = tuple(cfg.vehicle.drag_linear)
+    c_quad = tuple(cfg.vehicle.drag_quadratic)
+
+    dt = 1.0 / cfg.sim.control_hz
+    nsub = round(dt / model.opt.timestep)
+    n_ticks = int(math.ceil(min(duration, cfg.sim.max_time_s) / dt - 1e-9))
+    body = veh.body_id
+    xfrc = data.xfrc_applied[body]
+    qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
+    ground, skids = veh.ground_geom, set(veh.skid_geoms)
+    cos_tilt_crash = math.cos(math.radians(80.0))
+    if bounds is None:
+        bounds = (start.p[0] - 100, start.p[1] - 100, start.p[0] + 100, start.p[1] + 100)
+    box = (bounds[0] - 100.0, bounds[1] - 100.0, bounds[2] + 100.0, bounds[3] + 100.0, 120.0)
+
+    rec: list[tuple] = []
+    crash_reason: str | None = None
+    crash_time: float | None = None
+    airborne = not cfg.sim.takeoff
+    render_every = None
+    frames = 0
+    if renderer is not None and cfg.log.render:
+        render_every = max(1, round(cfg.sim.control_hz / cfg.log.render_hz))
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=round(n_ticks * dt), unit="sim-s", desc="flying", leave=False,
+                   dynamic_ncols=True, mininterval=0.5)
+    bar_next = 1.0
+    sample = reference.sample
+    wall_loop = time.perf_counter()
+    for k in range(n_ticks):
+        t = k * dt
+        px, py, pz = float(qpos[0]), float(qpos[1]), float(qpos[2])
+        vx, vy, vz = float(qvel[0]), float(qvel[1]), float(qvel[2])
+        R = quat_to_rot(float(qpos[3]), float(qpos[4]), float(qpos[5]), float(qpos[6]))
+        omega = (float(qvel[3]), float(qvel[4]), float(qvel[5]))
+        # ---- safety / crash detection
+        if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(pz)):
+            crash_reason, crash_time = "diverged: non-finite state", t
+            break
+        if R[8] < cos_tilt_crash:
+            crash_reason, crash_time = f"tilt > 80 deg at t={t:.2f}s", t
+            break
+        if px < box[0] or py < box[1] or px > box[2] or py > box[3] or pz > box[4]:
+            crash_reason, crash_time = f"left the bounding box at t={t:.2f}s", t
+            break
+        if pz > veh.hover_z + 0.3:
+            airborne = True
+        if airborne and data.ncon:
+            for i in range(data.ncon):
+                c = data.contact[i]
+                g1, g2 = int(c.geom1), int(c.geom2)
+                if ground not in (g1, g2):
+                    continue
+                other = g2 if g1 == ground else g1
+                speed = math.sqrt(vx * vx + vy * vy + vz * vz)
+                if other not in skids or speed > 1.0:
+                    crash_reason = (f"ground contact at {speed:.1f} m/s "
+                                    f"({model.geom(other).name}) at t={t:.2f}s")
+                    crash_time = t
+                    break
+            if crash_reason:
+                break
+        # ---- reference, feedback, control
+        r = sample(t)
+        p_fb, v_fb = fb.update(t, (px, py, pz), (vx, vy, vz))
+        f = cascade.update(p_fb, v_fb, R, omega, r.p, r.v, r.a, r.yaw, dt)
+        ctrl[0], ctrl[1], ctrl[2], ctrl[3] = f
+        # ---- wind as a drag force (zero-order hold over the control period)
+        wx, wy, wz = wind.step(dt, pz if pz > 0.0 else 0.0, math.sqrt(vx * vx + vy * vy))
+        rx, ry, rz = vx - wx, vy - wy, vz - wz
+        xfrc[0] = -c_lin[0] * rx - c_quad[0] * abs(rx) * rx
+        xfrc[1] = -c_lin[1] * ry - c_quad[1] * abs(ry) * ry
+        xfrc[2] = -c_lin[2] * rz - c_quad[2] * abs(rz) * rz
+        rec.append((px, py, pz, vx, vy, vz, r.p[0], r.p[1], r.p[2], p_fb[0], p_fb[1], p_fb[2],
+                    r.seg, r.spray, f[0], f[1], f[2], f[3], wx, wy, wz))
+        if log is not None:
+            log.tick(t, p_true=(px, py, pz), q_true_wxyz=tuple(qpos[3:7]), v_true=(vx, vy, vz),
+                     p_ref=r.p, v_ref=r.v, yaw_ref=r.yaw, p_est=p_fb, v_est=v_fb,
+                     ctrl=cascade.internals(), motors=f, wind=(wx, wy, wz), spray=r.spray)
+            if render_every and k % render_every == 0:
+                for cam in renderer.cameras:
+                    log.frame(t, cam, renderer.jpeg(data, cam), renderer.width, renderer.height,
+                              renderer.fovy(cam))
+                    frames += 1
+        mujoco.mj_step(model, data, nstep=nsub)
+        if tick_hook is not None:
+            tick_hook(t, data)
+        if bar is not None and t >= bar_next:
+            bar.update(1)
+            bar_next += 1.0
+    if bar is not None:
+        bar.close()
+    wall_loop = time.perf_counter() - wall_loop
+    arr = np.asarray(rec, dtype=float).reshape(-1, len(REC_COLUMNS))
+    return LoopOutput(t=np.arange(len(arr)) * dt, rec=arr, crash_reason=crash_reason,
+                      crash_time=crash_time, wall_loop_s=wall_loop, vehicle=veh, frames=frames)
+
+
+def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
+             tick_hook: Callable[..., None] | None = None, log: Any = None,
+             renderer: Any = None) -> RunResult:
+    """Fly ``cfg``'s mission once and return the trajectory and the summary metrics.
+
+    ``feedback``: the feedback seam (default: true state). ``log``: an open
+    :class:`~ag_uav.runlog.RunLog` or None. ``renderer``: an :class:`~ag_uav.render.Renderer` or
+    None. ``tick_hook(t, data)`` is called after every control tick (tests, scenarios).
+    """
+    from . import metrics
+
+    wall0 = time.perf_counter()
+    streams = rng_streams(cfg.seed)
+    fld = build_field(cfg)
+    plan = build_plan(cfg, fld)
+    m = cfg.mission
+    ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
+                    takeoff=cfg.sim.takeoff)
+    outline = [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
+    if log is not None:
+        log.scene(0.0, outline[0], outline[1:],
+                  [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],
+                  m.swath_m, m.altitude_m)
+    fb = feedback or TrueFeedback()
+    out = fly_reference(cfg, ref, ref.duration + cfg.sim.hover_after_s, outline=outline,
+                        bounds=fld.bounds, feedback=fb, progress=progress, tick_hook=tick_hook,
+                        log=log, renderer=renderer, streams=streams)
+    arr = out.rec
+    res = RunResult(
+        summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
+        p_fb=arr[:, 9:12], seg=arr[:, 12].astype(int), spray=arr[:, 13].astype(bool),
+        motors=arr[:, 14:18], field=fld, plan=plan,
+        extra={"wind": arr[:, 18:21], "reference": ref, "vehicle": out.vehicle.info()},
+    )
+    sim_time = float(len(out.t) / cfg.sim.control_hz)
+    summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
+                             reference=ref)
+    wall = time.perf_counter() - wall0
+    summ.update({
+        "sim_time_s": round(sim_time, 3),
+        "wall_time_s": round(wall, 3),
+        "loop_wall_time_s": round(out.wall_loop_s, 3),
+        "real_time_factor": round(sim_time / out.wall_loop_s, 1) if out.wall_loop_s > 0 else None,
+        "frames": out.frames,
+        "seed": cfg.seed,
+        "feedback": fb.name,
+        **fb.summary(),
+        "config": cfg.to_dict(),
+    })
+    res.summary = summ
+    if log is not None:
+        log.summary(summ)
+    return res
