@@ -129,8 +129,9 @@ class ControllerConfig:
 class WindConfig:
     speed_mps: float = _f(3.0, "mean wind speed (m/s)", ge=0, le=25)
     direction_deg: float = _f(240.0, "direction the wind blows FROM (deg, 0 = north, clockwise)")
-    turbulence: str = _f("light", "Dryden turbulence intensity",
-                         choices=("none", "light", "moderate", "severe"))
+    turbulence: str = _f("light", "Dryden turbulence: MIL-F-8785C W20 of 15/30/45 kt for "
+                         "light/moderate/severe, or \"mean\" (W20 = the mean wind speed)",
+                         choices=("none", "light", "moderate", "severe", "mean"))
 
 
 @dataclass

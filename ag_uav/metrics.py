@@ -72,7 +72,8 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     path_len = float(np.sum(np.linalg.norm(steps, axis=1))) if n > 1 else 0.0
 
     end = np.asarray(plan.end, dtype=float)
-    ref_done = reference is not None and n and res.t[-1] >= reference.duration
+    dt = 1.0 / cfg.sim.control_hz
+    ref_done = reference is not None and n and res.t[-1] >= reference.duration - 1.5 * dt
     final_err = float(np.hypot(*(res.p_true[-1, :2] - end))) if n else float("inf")
     legs = [i for i, s in enumerate(plan.segments) if s.kind == "leg"]
     legs_flown = 0

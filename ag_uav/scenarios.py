@@ -14,12 +14,15 @@ from .sim import LoopOutput, fly_reference
 
 @dataclass(frozen=True)
 class RefSample:
-    p: tuple[float, float, float]
-    v: tuple[float, float, float]
-    a: tuple[float, float, float]
+    """Same fields as :class:`ag_uav.reference.RefSample`."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    acc: np.ndarray
     yaw: float
-    seg: int = -1
+    yaw_rate: float = 0.0
     spray: bool = False
+    seg: int = -1
 
 
 class StepReference:
@@ -30,11 +33,21 @@ class StepReference:
         self.p0 = tuple(float(v) for v in p0)
         self.p1 = tuple(a + b for a, b in zip(self.p0, step, strict=True))
         self.t_step = t_step
-        self._before = RefSample(self.p0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), yaw)
-        self._after = RefSample(self.p1, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), yaw)
+        z = np.zeros(3)
+        self._before = RefSample(np.array(self.p0), z, z, yaw)
+        self._after = RefSample(np.array(self.p1), z, z, yaw)
 
     def sample(self, t: float) -> RefSample:
         return self._before if t < self.t_step else self._after
+
+    def sample_all(self, times) -> dict[str, np.ndarray]:
+        times = np.asarray(times, float)
+        after = (times >= self.t_step)[:, None]
+        n = len(times)
+        return {"pos": np.where(after, self._after.pos, self._before.pos),
+                "vel": np.zeros((n, 3)), "acc": np.zeros((n, 3)),
+                "yaw": np.full(n, self._before.yaw), "yaw_rate": np.zeros(n),
+                "spray": np.zeros(n, bool), "seg": np.full(n, -1)}
 
 
 def hover_config(cfg: Config, wind_speed: float | None = None, turbulence: str = "none") -> Config:

@@ -154,16 +154,17 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
                   feedback: Feedback | None = None, progress: bool = False,
                   tick_hook: Callable[..., None] | None = None, log: Any = None,
                   renderer: Any = None, streams: dict | None = None) -> LoopOutput:
-    """Fly the vehicle along ``reference`` (``sample(t)`` → p, v, a, yaw, seg, spray) for
+    """Fly the vehicle along ``reference`` (``sample_all(times)`` → dict of pos, vel, acc, yaw,
+    seg, spray arrays, as :meth:`ag_uav.reference.Reference.sample_all`) for
     ``duration`` seconds of sim time. The core loop shared by missions and test scenarios."""
     streams = streams or rng_streams(cfg.seed)
     veh = build_vehicle(cfg, outline)
     model = veh.model
     data = mujoco.MjData(model)
     start = reference.sample(0.0)
-    data.qpos[0] = start.p[0]
-    data.qpos[1] = start.p[1]
-    data.qpos[2] = veh.hover_z if cfg.sim.takeoff else start.p[2]
+    data.qpos[0] = start.pos[0]
+    data.qpos[1] = start.pos[1]
+    data.qpos[2] = veh.hover_z if cfg.sim.takeoff else start.pos[2]
     data.qpos[3] = math.cos(start.yaw / 2)
     data.qpos[6] = math.sin(start.yaw / 2)
     if not cfg.sim.takeoff:
@@ -175,6 +176,7 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     cascade = make_cascade(cfg, veh)
     w = cfg.wind
     wind = Wind(w.speed_mps, w.direction_deg, w.turbulence, rng=streams["wind"])
+    wmx, wmy, _ = wind.mean  # airspeed for the Dryden time scales: relative to the mean wind
     c_lin = tuple(cfg.vehicle.drag_linear)
     c_quad = tuple(cfg.vehicle.drag_quadratic)
 
@@ -187,7 +189,8 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     ground, skids = veh.ground_geom, set(veh.skid_geoms)
     cos_tilt_crash = math.cos(math.radians(80.0))
     if bounds is None:
-        bounds = (start.p[0] - 100, start.p[1] - 100, start.p[0] + 100, start.p[1] + 100)
+        bounds = (start.pos[0] - 100, start.pos[1] - 100, start.pos[0] + 100,
+                  start.pos[1] + 100)
     box = (bounds[0] - 100.0, bounds[1] - 100.0, bounds[2] + 100.0, bounds[3] + 100.0, 120.0)
 
     rec: list[tuple] = []
@@ -206,14 +209,18 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
         bar = tqdm(total=round(n_ticks * dt), unit="sim-s", desc="flying", leave=False,
                    dynamic_ncols=True, mininterval=0.5)
     bar_next = 1.0
-    sample = reference.sample
+    # the reference on the control grid, precomputed as Python lists (cheap to index per tick)
+    tab = reference.sample_all(np.arange(n_ticks) * dt)
+    ref_p, ref_v, ref_a = tab["pos"].tolist(), tab["vel"].tolist(), tab["acc"].tolist()
+    ref_yaw, ref_seg = tab["yaw"].tolist(), tab["seg"].tolist()
+    ref_spray = tab["spray"].tolist()
     wall_loop = time.perf_counter()
     for k in range(n_ticks):
         t = k * dt
-        px, py, pz = float(qpos[0]), float(qpos[1]), float(qpos[2])
-        vx, vy, vz = float(qvel[0]), float(qvel[1]), float(qvel[2])
-        R = quat_to_rot(float(qpos[3]), float(qpos[4]), float(qpos[5]), float(qpos[6]))
-        omega = (float(qvel[3]), float(qvel[4]), float(qvel[5]))
+        px, py, pz, qw, qx, qy, qz = qpos.tolist()
+        vx, vy, vz, wbx, wby, wbz = qvel.tolist()
+        R = quat_to_rot(qw, qx, qy, qz)
+        omega = (wbx, wby, wbz)
         # ---- safety / crash detection
         if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(pz)):
             crash_reason, crash_time = "diverged: non-finite state", t
@@ -242,22 +249,23 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
             if crash_reason:
                 break
         # ---- reference, feedback, control
-        r = sample(t)
+        rp, rv, yaw_ref, spray = ref_p[k], ref_v[k], ref_yaw[k], ref_spray[k]
         p_fb, v_fb = fb.update(t, (px, py, pz), (vx, vy, vz))
-        f = cascade.update(p_fb, v_fb, R, omega, r.p, r.v, r.a, r.yaw, dt)
+        f = cascade.update(p_fb, v_fb, R, omega, rp, rv, ref_a[k], yaw_ref, dt)
         ctrl[0], ctrl[1], ctrl[2], ctrl[3] = f
         # ---- wind as a drag force (zero-order hold over the control period)
-        wx, wy, wz = wind.step(dt, pz if pz > 0.0 else 0.0, math.sqrt(vx * vx + vy * vy))
+        ax_, ay_ = vx - wmx, vy - wmy
+        wx, wy, wz = wind.step(dt, pz if pz > 0.0 else 0.0, math.sqrt(ax_ * ax_ + ay_ * ay_))
         rx, ry, rz = vx - wx, vy - wy, vz - wz
         xfrc[0] = -c_lin[0] * rx - c_quad[0] * abs(rx) * rx
         xfrc[1] = -c_lin[1] * ry - c_quad[1] * abs(ry) * ry
         xfrc[2] = -c_lin[2] * rz - c_quad[2] * abs(rz) * rz
-        rec.append((px, py, pz, vx, vy, vz, r.p[0], r.p[1], r.p[2], p_fb[0], p_fb[1], p_fb[2],
-                    r.seg, r.spray, f[0], f[1], f[2], f[3], wx, wy, wz))
+        rec.append((px, py, pz, vx, vy, vz, rp[0], rp[1], rp[2], p_fb[0], p_fb[1], p_fb[2],
+                    ref_seg[k], spray, f[0], f[1], f[2], f[3], wx, wy, wz))
         if log is not None:
-            log.tick(t, p_true=(px, py, pz), q_true_wxyz=tuple(qpos[3:7]), v_true=(vx, vy, vz),
-                     p_ref=r.p, v_ref=r.v, yaw_ref=r.yaw, p_est=p_fb, v_est=v_fb,
-                     ctrl=cascade.internals(), motors=f, wind=(wx, wy, wz), spray=r.spray)
+            log.tick(t, p_true=(px, py, pz), q_true_wxyz=(qw, qx, qy, qz), v_true=(vx, vy, vz),
+                     p_ref=rp, v_ref=rv, yaw_ref=yaw_ref, p_est=p_fb, v_est=v_fb,
+                     ctrl=cascade.internals(), motors=f, wind=(wx, wy, wz), spray=spray)
             if render_every and k % render_every == 0:
                 for cam in renderer.cameras:
                     log.frame(t, cam, renderer.jpeg(data, cam), renderer.width, renderer.height,
@@ -294,14 +302,15 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     plan = build_plan(cfg, fld)
     m = cfg.mission
     ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
-                    takeoff=cfg.sim.takeoff)
+                    takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
+                    rate=cfg.sim.control_hz)
     outline = [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
     if log is not None:
         log.scene(0.0, outline[0], outline[1:],
                   [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],
                   m.swath_m, m.altitude_m)
     fb = feedback or TrueFeedback()
-    out = fly_reference(cfg, ref, ref.duration + cfg.sim.hover_after_s, outline=outline,
+    out = fly_reference(cfg, ref, ref.duration, outline=outline,
                         bounds=fld.bounds, feedback=fb, progress=progress, tick_hook=tick_hook,
                         log=log, renderer=renderer, streams=streams)
     arr = out.rec
