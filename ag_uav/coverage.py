@@ -10,9 +10,10 @@ Definitions (all areas clipped to the field polygon, holes excluded):
   area(field): ground wetted by two or more *different* passes. A pass re-crossing itself (e.g. a
   headland lap's closing overrun) is not counted as double cover.
 
-Efficiency: tracks are first simplified (Douglas–Peucker, ``simplify_tol`` = 5 cm by default),
-only pairs of passes whose bounding boxes meet are intersected (STRtree), and the pairwise
-intersections are unioned once.
+Efficiency: tracks are first simplified (Douglas–Peucker, ``simplify_tol`` = 5 cm by default;
+a jittery track that keeps more than ~1 vertex per metre is simplified further, doubling the
+tolerance up to 0.4 m — smooth true tracks are unaffected), only pairs of passes whose bounding
+boxes meet are intersected (STRtree), and the pairwise intersections are unioned once.
 """
 
 from __future__ import annotations
@@ -45,9 +46,16 @@ def footprints(tracks: Sequence[np.ndarray], swath: float, simplify_tol: float =
         if len(a) == 1:  # a sprayer blip at one spot: a swath-wide square
             g = Point(a[0]).buffer(0.5 * swath, cap_style="square")
         else:
-            line = LineString(a)
-            if simplify_tol > 0:
-                line = line.simplify(simplify_tol, preserve_topology=False)
+            raw = LineString(a)
+            line = raw.simplify(simplify_tol, preserve_topology=False) if simplify_tol > 0 else raw
+            # jittery input (e.g. noisy positions) keeps thousands of vertices after a 5 cm
+            # simplification and makes buffering slow: coarsen the tolerance (up to 0.4 m)
+            # until there is at most about one vertex per metre of track
+            cap = 16 + raw.length
+            tol = max(simplify_tol, 0.025)
+            while len(line.coords) > cap and tol < 0.4:
+                tol *= 2.0
+                line = raw.simplify(tol, preserve_topology=False)
             g = line.buffer(0.5 * swath, cap_style="flat", join_style="round", quad_segs=4)
         if not g.is_empty:
             out.append(g)
