@@ -713,8 +713,9 @@ class RunLog:
             pv = _fit(xs[:3], 3)
             two = len(xs) == 2
         else:
-            pv = _fit(_flat(pos), 3)
-            two = len(pv) == 2
+            pl = _flat(pos)
+            pv = _fit(pl, 3)
+            two = len(pl) == 2
         if two:
             pv[2] = self._last_true[2]
         tx, ty, tz = self._last_true

@@ -1,0 +1,100 @@
+"""Every log passes Foxglove's own TypeScript reader (@mcap/core + @mcap/nodejs + @mcap/support):
+indexed read with CRC validation, every message decoded, then a streaming read.
+
+Needs node + npm; packages are pinned by tests/node/package-lock.json and installed with
+``npm ci`` when node_modules is missing (skipped, with the reason, where node is absent or
+the install fails, e.g. offline)."""
+
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shapely
+from mcap.reader import make_reader
+from PIL import Image
+
+from ag_uav.runlog import RunLog, synthetic_run
+from ag_uav.viewing import recover
+
+NODE_DIR = Path(__file__).resolve().parent / "node"
+
+
+@pytest.fixture(scope="module")
+def node_checker():
+    node, npm = shutil.which("node"), shutil.which("npm")
+    if node is None or npm is None:
+        pytest.skip("node/npm not installed: Foxglove TypeScript reader check not run")
+    if not (NODE_DIR / "node_modules" / "@mcap" / "support").exists():
+        r = subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=NODE_DIR,
+                           capture_output=True, text=True, timeout=300)
+        if r.returncode != 0:
+            pytest.skip(f"npm ci failed (offline?): {r.stderr.strip().splitlines()[-1:]}")
+
+    def check(path: Path) -> dict:
+        r = subprocess.run([node, str(NODE_DIR / "check_mcap.mjs"), str(path)],
+                           capture_output=True, text=True, timeout=120)
+        assert r.stdout, r.stderr
+        out = json.loads(r.stdout.strip().splitlines()[-1])
+        assert r.returncode == 0 and out["ok"], out.get("error")
+        return out
+
+    return check
+
+
+def _jpeg() -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray(np.full((24, 32, 3), 90, np.uint8)).save(buf, format="JPEG")
+    return buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def full_log(tmp_path_factory):
+    d = tmp_path_factory.mktemp("node")
+    jpg = _jpeg()
+    with RunLog(d / "run.mcap", channels="full", metadata={"seed": 1},
+                config_toml="x = 1\n") as log:
+        def on_tick(t, p, q):
+            if log.want_frame(t):
+                log.frame(t, "down", jpg, 32, 24, 70.0, pose=(p, (0.0, 1.0, 0.0, 0.0)))
+        synthetic_run(log, 5.0, on_tick=on_tick, estimators=("kf", "mckf", "pca_kf"))
+        log.sprayed(5.0, [shapely.box(0, 0, 10, 4).difference(shapely.box(4, 1, 5, 2))])
+        log.summary({"rmse_m": 0.3})
+    return d / "run.mcap"
+
+
+def _count(path: Path) -> dict[str, int]:
+    with open(path, "rb") as f:
+        r = make_reader(f)
+        s = r.get_summary()
+        return {s.channels[c].topic: n for c, n in s.statistics.channel_message_counts.items()}
+
+
+def test_full_log_passes_typescript_reader(node_checker, full_log):
+    out = node_checker(full_log)
+    assert out["indexed"]["by_topic"] == _count(full_log)
+    assert out["indexed"]["decoded"] == out["indexed"]["messages"] == out["stream"]["messages"]
+    assert out["stream"]["footer"] is True
+    assert set(out["indexed"]["metadata"]) >= {"run", "versions", "summary"}
+    assert set(out["indexed"]["attachments"]) == {"config.toml", "summary.json"}
+    # protobuf field names survive as written (Foxglove plot paths use them)
+    assert set(out["indexed"]["field_names"]["/drone/state"]) >= {"pos", "err", "est_err",
+                                                                   "ctrl", "motors"}
+
+
+def test_light_and_recovered_logs_pass_typescript_reader(node_checker, full_log, tmp_path):
+    light = tmp_path / "light.mcap"
+    with RunLog(light, channels="light", metadata={}, config_toml="", layout=False) as log:
+        synthetic_run(log, 3.0)
+    assert node_checker(light)["indexed"]["messages"] > 0
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(full_log.read_bytes()[: int(full_log.stat().st_size * 0.5)])
+    fixed = tmp_path / "fixed.mcap"
+    n = recover(cut, fixed)
+    out = node_checker(fixed)
+    assert out["indexed"]["messages"] == n > 0

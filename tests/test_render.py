@@ -1,0 +1,98 @@
+"""Off-screen JPEG frames through EGL (skipped with the reason where EGL cannot start)."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+
+from ag_uav.render import Renderer, RenderUnavailable, optical_quat
+
+mujoco = pytest.importorskip("mujoco")
+from PIL import Image  # noqa: E402
+
+XML = """
+<mujoco>
+  <worldbody>
+    <light pos="0 0 20" dir="0 0 -1" directional="true"/>
+    <geom type="plane" size="50 50 0.1" rgba=".3 .6 .3 1"/>
+    <body name="drone" pos="0 0 3">
+      <freejoint/>
+      <geom type="box" size=".5 .5 .15" rgba=".1 .1 .9 1"/>
+      <camera name="down" pos="0 0 -.2" xyaxes="0 -1 0 1 0 0" fovy="70"/>
+    </body>
+    <camera name="chase" mode="trackcom" pos="-5 0 5" xyaxes="0 -1 0 .7 0 .7" fovy="60"/>
+  </worldbody>
+</mujoco>"""
+
+
+@pytest.fixture(scope="module")
+def rig():
+    m = mujoco.MjModel.from_xml_string(XML)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    try:
+        r = Renderer(m, 160, 120, ("chase", "down"))
+    except RenderUnavailable as e:
+        pytest.skip(f"no off-screen rendering here: {e}")
+    yield m, d, r
+    r.close()
+
+
+def _img(jpg: bytes) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(jpg)).convert("RGB")).astype(int)
+
+
+def test_jpeg_size_and_content(rig):
+    m, d, r = rig
+    jpg = r.jpeg(d, "chase", quality=80)
+    assert jpg[:2] == b"\xff\xd8"
+    img = _img(jpg)
+    assert img.shape == (120, 160, 3)
+    blue = (img[..., 2] > 150) & (img[..., 0] < 90) & (img[..., 1] < 90)
+    assert blue.sum() > 30  # the drone's blue box is in view of the chase camera
+    ys, xs = np.nonzero(blue)
+    assert 40 < xs.mean() < 120  # ... near the middle of the image
+    down = _img(r.jpeg(d, "down"))
+    assert down[..., 1].mean() > down[..., 2].mean()  # green ground below
+    assert r.fovy("down") == pytest.approx(70.0)
+
+
+def test_frames_follow_the_body(rig):
+    m, d, r = rig
+    a = _img(r.jpeg(d, "down"))
+    d.qpos[2] = 1.0  # lower: the ground fills more of the down view
+    d.qpos[0] = 0.37
+    mujoco.mj_forward(m, d)
+    pos, q = r.camera_pose(d, "down")
+    assert pos[2] == pytest.approx(0.8, abs=1e-9) and pos[0] == pytest.approx(0.37)
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, q)
+    z_axis = R.reshape(3, 3)[:, 2]
+    assert z_axis == pytest.approx([0, 0, -1], abs=1e-9)  # optical z looks down
+    d.qpos[:3] = [0, 0, 3]
+    mujoco.mj_forward(m, d)
+    assert np.abs(_img(r.jpeg(d, "down")) - a).max() <= 10  # same pose, same frame (JPEG)
+
+
+def test_optical_quat_of_identity_camera_looks_along_minus_z():
+    q = optical_quat(np.eye(3))
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, q)
+    R = R.reshape(3, 3)
+    assert R[:, 2] == pytest.approx([0, 0, -1]) and R[:, 1] == pytest.approx([0, -1, 0])
+
+
+def test_unknown_camera_and_unavailable_backend(monkeypatch):
+    m = mujoco.MjModel.from_xml_string(XML)
+    with pytest.raises(ValueError, match="not in model"):
+        Renderer(m, 32, 24, ("nope",))
+
+    def boom(*a, **k):
+        raise RuntimeError("eglInitialize failed\nsecond line")
+
+    monkeypatch.setattr(mujoco, "Renderer", boom)
+    with pytest.raises(RenderUnavailable) as ei:
+        Renderer(m, 32, 24, ("chase",))
+    assert "\n" not in str(ei.value) and "eglInitialize failed" in str(ei.value)

@@ -1,0 +1,278 @@
+"""Run log writer: schemas, hand-encoded messages, rates, metadata, crash safety."""
+
+from __future__ import annotations
+
+import math
+import mmap
+import os
+import signal
+import struct
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from google.protobuf import descriptor_pb2, message_factory
+from mcap.reader import NonSeekingReader, make_reader
+
+from ag_uav.runlog import (
+    FlatSchema,
+    RunLog,
+    _str_field,
+    _ts_pb,
+    enc_pose_in_frame,
+    enc_transform,
+    synthetic_run,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _cls(schema_data: bytes, name: str):
+    fds = descriptor_pb2.FileDescriptorSet.FromString(schema_data)
+    return message_factory.GetMessages(list(fds.file))[name]
+
+
+def test_flat_schema_roundtrip_nested_and_vectors():
+    fields = [("t", 0), ("a.x", 0), ("a.y", 0), ("v", 3), ("b.c.d", 0), ("b.e", 0),
+              ("w", 2), ("z", 0)]
+    fs = FlatSchema("ag_uav.Test", fields)
+    vals = [1.5, -2.0, 3.25, 10.0, 20.0, 30.0, 7.0, 8.0, 0.0, -0.5, 9.0]
+    raw = fs.encode(vals)
+    assert len(raw) == fs.size
+    msg = _cls(fs.schema_data, "ag_uav.Test").FromString(raw)
+    assert msg.t == 1.5 and msg.a.x == -2.0 and msg.a.y == 3.25
+    assert list(msg.v) == [10.0, 20.0, 30.0]
+    assert msg.b.c.d == 7.0 and msg.b.e == 8.0
+    assert list(msg.w) == [0.0, -0.5] and msg.z == 9.0
+    nan = fs.encode([math.nan] * fs.n_values)
+    assert math.isnan(_cls(fs.schema_data, "ag_uav.Test").FromString(nan).a.x)
+
+
+def test_flat_schema_many_fields_two_byte_tags():
+    fields = [(f"g.f{i}", 0) for i in range(40)]
+    fs = FlatSchema("ag_uav.Big", fields)
+    vals = [float(i) * 1.25 for i in range(40)]
+    msg = _cls(fs.schema_data, "ag_uav.Big").FromString(fs.encode(vals))
+    assert [getattr(msg.g, f"f{i}") for i in range(40)] == vals
+
+
+def test_flat_schema_rejects_split_group():
+    with pytest.raises(ValueError):
+        FlatSchema("ag_uav.Bad", [("a.x", 0), ("b", 0), ("a.y", 0)])
+
+
+def test_hand_encoded_foxglove_messages_decode_with_official_schema():
+    from foxglove.messages import FrameTransforms, PoseInFrame
+
+    tn = 12_345_678_901
+    ts = _ts_pb(tn)
+    p, q = (1.5, -2.25, 3.0), (0.9, 0.1, -0.2, 0.3)
+    pif = _cls(PoseInFrame.get_schema().data, "foxglove.PoseInFrame").FromString(
+        enc_pose_in_frame(ts, p, q))
+    assert (pif.timestamp.seconds, pif.timestamp.nanos) == (12, 345_678_901)
+    assert pif.frame_id == "world"
+    assert (pif.pose.position.x, pif.pose.position.y, pif.pose.position.z) == p
+    o = pif.pose.orientation
+    assert (o.w, o.x, o.y, o.z) == q
+    raw = enc_transform(ts, _str_field(3, "base_link"), p, q) + enc_transform(
+        _ts_pb(0), _str_field(3, "cam_chase"), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0))
+    ft = _cls(FrameTransforms.get_schema().data, "foxglove.FrameTransforms").FromString(raw)
+    assert [t.child_frame_id for t in ft.transforms] == ["base_link", "cam_chase"]
+    assert all(t.parent_frame_id == "world" for t in ft.transforms)
+    assert ft.transforms[0].translation.y == -2.25 and ft.transforms[0].rotation.w == 0.9
+    assert ft.transforms[1].translation.z == 1.0
+
+
+def _tick_kwargs(p, ctrl=None):
+    return dict(p_true=np.asarray(p, float), q_true_wxyz=(1.0, 0.0, 0.0, 0.0),
+                v_true=(1.0, 0.0, 0.0), p_ref=(0.0, 0.0, 2.0), v_ref=(1.0, 0.0, 0.0),
+                yaw_ref=0.0, p_est=(p[0] + 0.3, p[1] - 0.4, p[2]), v_est=(1.0, 0.0, 0.0),
+                ctrl=ctrl if ctrl is not None else {"x.u": 0.1, "y.u": -0.2, "thrust": 0.5},
+                motors=[0.4, 0.5, 0.6, 0.7], wind=(2.0, 0.0, 0.0), spray=True)
+
+
+def _decoded(path):
+    from mcap_protobuf.decoder import DecoderFactory
+
+    with open(path, "rb") as f:
+        r = make_reader(f, decoder_factories=[DecoderFactory()])
+        return [(c.topic, m.log_time, d) for _, c, m, d in r.iter_decoded_messages()]
+
+
+def test_state_values_rates_and_errors(tmp_path):
+    path = tmp_path / "r" / "run.mcap"
+    with RunLog(path, channels="full", metadata={"seed": 7}, config_toml="a = 1\n") as log:
+        for k in range(100):  # 1 s at 100 Hz
+            log.tick(k * 0.01, **_tick_kwargs((k * 0.01, 1.0, 2.5)))
+        log.tick(1.0, **_tick_kwargs((1.0, 1.0, 2.5), ctrl={"x.u": 0.7}))  # key missing: NaN
+    msgs = _decoded(path)
+    st = [(t, d) for topic, t, d in msgs if topic == "/drone/state"]
+    assert len(st) == 21  # 20 Hz over [0, 1] inclusive
+    t0, d0 = st[1]
+    assert t0 == 50_000_000 and d0.t == pytest.approx(0.05)
+    assert d0.pos.x == pytest.approx(0.05) and d0.pos.z == 2.5
+    assert d0.err.z == pytest.approx(0.5) and d0.err.x == pytest.approx(0.05)
+    assert d0.est_err.x == pytest.approx(0.3) and d0.est_err.horiz == pytest.approx(0.5)
+    assert list(d0.motors) == [0.4, 0.5, 0.6, 0.7]
+    assert d0.ctrl.x.u == pytest.approx(0.1) and d0.ctrl.y.u == pytest.approx(-0.2)
+    assert d0.ctrl.thrust == 0.5 and d0.spray == 1.0 and d0.wind.x == 2.0
+    last = st[-1][1]
+    assert last.ctrl.x.u == 0.7 and math.isnan(last.ctrl.y.u)
+    counts = {}
+    for topic, _, _ in msgs:
+        counts[topic] = counts.get(topic, 0) + 1
+    assert counts["/drone/pose"] == counts["/drone/pose_ref"] == counts["/drone/pose_est"] == 21
+    assert counts["/tf"] == 21
+    with open(path, "rb") as f:
+        r = make_reader(f)
+        md = {m.name: m.metadata for m in r.iter_metadata()}
+        att = {a.name: a.data for a in r.iter_attachments()}
+    assert md["run"]["seed"] == "7" and "mujoco" in md["versions"]
+    assert att["config.toml"] == b"a = 1\n"
+    assert (path.parent / "layout.json").exists()
+
+
+def test_light_set_rates_and_custom_rates(tmp_path):
+    def run(**kw):
+        p = tmp_path / f"{len(list(tmp_path.iterdir()))}.mcap"
+        with RunLog(p, metadata={}, config_toml="", layout=False, **kw) as log:
+            for k in range(200):  # 2 s
+                t = k * 0.01
+                log.tick(t, **_tick_kwargs((t, 0.0, 2.0)))
+                if k % 5 == 0:  # 20 Hz GPS
+                    log.gps(t, (t, 0.1, 2.0))
+                    log.estimator(t, "kf", np.arange(6.0), np.ones(6), np.zeros(3))
+        out = {}
+        for topic, _, _ in _decoded(p):
+            out[topic] = out.get(topic, 0) + 1
+        return out
+
+    light = run(channels="light")
+    assert light["/drone/state"] == 10 and light["/gps"] == 2 and light["/estimator/kf"] == 2
+    full = run(channels="full")
+    assert full["/gps"] == 40 and full["/estimator/kf"] == 20 and full["/drone/state"] == 40
+    custom = run(channels=["state", "gps"], rates={"state": 2.0, "gps": None})
+    assert custom == {"/drone/state": 4, "/gps": 40}
+
+
+def test_none_is_a_cheap_no_op(tmp_path):
+    path = tmp_path / "x" / "run.mcap"
+    log = RunLog(path, channels="none", metadata={}, config_toml="")
+    log.scene(0.0, [[0, 0], [1, 0], [1, 1]], [], [], swath=1.0, altitude=1.0)
+    log.tick(0.0, **_tick_kwargs((0.0, 0.0, 0.0)))
+    log.gps(0.0, (0, 0, 0))
+    log.estimator(0.0, "kf", [0.0], [1.0])
+    log.frame(0.0, "chase", b"", 1, 1, 60.0)
+    log.summary({"a": 1})
+    log.close()
+    assert not path.exists() and not log.want_frame(0.0)
+    with pytest.raises(ValueError):
+        RunLog(path, channels=["tf", "nope"], metadata={}, config_toml="")
+    with pytest.raises(ValueError):
+        RunLog(path, channels="medium", metadata={}, config_toml="")
+
+
+def test_estimator_error_against_true_position(tmp_path):
+    path = tmp_path / "run.mcap"
+    with RunLog(path, metadata={}, config_toml="", layout=False) as log:
+        log.tick(0.0, **_tick_kwargs((3.0, 4.0, 2.0)))
+        log.estimator(0.0, "pca-kf", [0.0, 1.0, 0.0, 0.0], [1, 1, 1, 1], [0.5, 0.5],
+                      {"nis": 2.0}, pos=(6.0, 8.0))
+    est = [d for topic, _, d in _decoded(path) if topic == "/estimator/pca_kf"]
+    assert len(est) == 1
+    e = est[0]
+    assert e.err.x == pytest.approx(3.0) and e.err.horiz == pytest.approx(5.0)
+    assert e.pos.z == 2.0 and e.extra.nis == 2.0 and list(e.innovation) == [0.5, 0.5]
+
+
+_CHILD = textwrap.dedent("""
+    import mmap, struct, sys, time
+    sys.path.insert(0, {root!r})
+    from ag_uav.runlog import RunLog, synthetic_run
+    f = open({shm!r}, "r+b"); mm = mmap.mmap(f.fileno(), 8)
+    with RunLog({path!r}, channels="full", metadata={{"child": 1}}, config_toml="x = 1") as log:
+        def on_tick(t, p, q):
+            mm[:8] = struct.pack("<d", t)
+            time.sleep({sleep})
+        synthetic_run(log, {duration}, on_tick=on_tick)
+    print("finished", flush=True)
+""")
+
+
+def _spawn(tmp_path, duration, sleep):
+    shm = tmp_path / "t.bin"
+    shm.write_bytes(b"\0" * 8)
+    path = tmp_path / "run.mcap"
+    code = _CHILD.format(root=str(ROOT), shm=str(shm), path=str(path), duration=duration,
+                         sleep=sleep)
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    return proc, path, shm
+
+
+def _wait_for_t(shm, t_min, timeout=30.0):
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        t = struct.unpack("<d", shm.read_bytes()[:8])[0]
+        if t >= t_min:
+            return t
+        time.sleep(0.01)
+    raise TimeoutError
+
+
+def test_sigterm_finishes_the_file(tmp_path):
+    proc, path, shm = _spawn(tmp_path, 600.0, 0.0005)
+    _wait_for_t(shm, 2.0)
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=20)
+    assert proc.returncode == 128 + signal.SIGTERM
+    with open(path, "rb") as f:
+        r = make_reader(f)
+        assert r.get_summary().statistics.message_count > 0
+        assert sum(1 for _ in r.iter_messages()) == r.get_summary().statistics.message_count
+
+
+def test_sigkill_loses_at_most_one_sim_second_and_recovers(tmp_path):
+    """SIGKILL at a random moment: a streaming read keeps everything up to >= t_kill - 1 s."""
+    from ag_uav.viewing import recover
+
+    rng = np.random.default_rng(1234)
+    t_kill_target = float(rng.uniform(2.0, 6.0))
+    proc, path, shm = _spawn(tmp_path, 600.0, 0.0002)
+    _wait_for_t(shm, t_kill_target)
+    proc.kill()
+    proc.wait(timeout=10)
+    t_kill = struct.unpack("<d", shm.read_bytes()[:8])[0]
+    times = []
+    with open(path, "rb") as f:  # streaming read up to the cut (the tail raises)
+        try:
+            for _, _, m in NonSeekingReader(f).iter_messages(log_time_order=False):
+                times.append(m.log_time * 1e-9)
+        except Exception:  # noqa: BLE001 - the unfinished chunk at the cut
+            pass
+    assert times and max(times) >= t_kill - 1.0, (max(times, default=None), t_kill)
+    out = tmp_path / "recovered.mcap"
+    n = recover(path, out)
+    assert n == len(times)
+    with open(out, "rb") as f:
+        r = make_reader(f)
+        assert r.get_summary().statistics.message_count == n
+        assert {m.name for m in r.iter_metadata()} >= {"run", "versions"}
+
+
+def test_synthetic_run_is_deterministic(tmp_path):
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    for p in (a, b):
+        with RunLog(p, channels="light", metadata={}, config_toml="", layout=False) as log:
+            synthetic_run(log, 3.0, seed=5)
+    da = [(t, m.SerializeToString()) for _, t, m in _decoded(a)]
+    db = [(t, m.SerializeToString()) for _, t, m in _decoded(b)]
+    assert da == db and len(da) > 10
+
+
+def test_uses_mmap_module():  # keeps the child's imports honest on this platform
+    assert hasattr(mmap, "mmap") and os.name == "posix"
