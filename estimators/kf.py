@@ -16,7 +16,9 @@ This is Algorithm 1 of Candan & Li with the Joseph form in place of the short fo
 Interface shared by every filter of the bank: ``predict()``, ``update(z) -> bool``, attributes
 ``x`` (shape (n,)), ``P`` (n, n), and after an update ``y`` (innovation), ``S``, ``K``, ``nis``.
 ``update(None)`` or a fix with any NaN/inf component is "no fix": nothing changes and ``False``
-is returned.  ``F``, ``H``, ``Q``, ``R`` can be reassigned at any time (``kf.R = ...``).
+is returned (detected on the scalar NIS, so a finite fix so large that νᵀS⁻¹ν overflows, e.g.
+1e300 m, is also dropped; numpy may warn about the overflow).  ``F``, ``H``, ``Q``, ``R`` can be
+reassigned at any time (``kf.R = ...``).
 
 Speed: small matrices are dominated by numpy call overhead, so the code uses ``np.dot`` (cheaper
 than ``@`` on tiny arrays), caches Fᵀ, Hᵀ and I, inverts S in closed form for m ≤ 2 and

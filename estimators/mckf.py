@@ -34,9 +34,10 @@ Options
   When the innovations are persistently larger than the model says (coloured noise,
   manoeuvres, mis-set R) the kernel widens instead of rejecting good fixes; with a consistent
   model ŝ ≈ 1 and σ stays at its nominal value.
-- Lock-out recovery (``recovery``): a fix counts as *rejected* when the mean of C_y is below
-  ``reject_weight``.  After ``lockout_n`` consecutive rejections (default 10, 0.5 s at 20 Hz)
-  the filter assumes that it, not the sensor, is wrong (outage, sharp turn):
+- Lock-out recovery (``recovery``): a fix counts as *rejected* when any channel's weight C_y
+  is below ``reject_weight`` (default 0.05, i.e. |e| > 4.9 σ).  After ``lockout_n``
+  consecutive rejections (default 10, 0.5 s at 20 Hz) the filter assumes that it, not the
+  sensor, is wrong (outage, sharp turn):
   ``"kf"`` (default) fuses that fix with a plain KF update (a reset towards GPS, as navigation
   filters do after persistent innovation-gate failures) and restarts the count;
   ``"inflate"`` multiplies P̄ by ``inflate``^j on the j-th further rejected fix (the inflated P̄
@@ -168,7 +169,8 @@ class MCKF(LinearGaussianBase):
             self._BrinvH = _dot(self._Brinv, self._H)
 
     def update(self, z) -> bool:
-        """Fuse fix ``z``; ``None`` or non-finite ``z`` is "no fix" (returns ``False``)."""
+        """Fuse fix ``z``; returns ``False`` (nothing changes) for "no fix": ``None``, NaN/inf in
+        ``z``, or a fix so large that its NIS overflows."""
         if z is None:
             return False
         z = np.asarray(z, dtype=float).reshape(-1)
@@ -194,7 +196,7 @@ class MCKF(LinearGaussianBase):
             inflated = True
 
         x_new, K, Cy = self._fixed_point(xb, Pb, nu)
-        rejected = sum(Cy.tolist()) < self.reject_weight * self.m
+        rejected = min(Cy.tolist()) < self.reject_weight
         self.recovered = False
         if rejected:
             self.n_rejected += 1
