@@ -9,6 +9,10 @@ Python API::
     result.summary["cross_track_rmse_m"]
 """
 
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # off-screen renders; must precede `import mujoco`
+
 from .config import Config, ConfigError, default_config, load_config
 
 __version__ = "0.1.0"

@@ -134,6 +134,46 @@ class WindConfig:
                          choices=("none", "light", "moderate", "severe", "mean"))
 
 
+GPS_PRESETS = ("perfect", "rtk", "sbas", "standalone", "paper-numerical", "student-t", "laplace",
+               "weibull", "mixture", "alpha-stable", "coloured", "coloured-impulsive")
+ESTIMATORS = ("true", "kf", "mckf", "pca-kf", "pca-mckf", "kf-bias", "kf-diff")
+
+
+@dataclass
+class GpsConfig:
+    preset: str = _f("perfect", "GPS error preset (see ag_uav.gps)", choices=GPS_PRESETS)
+    rate_hz: float = _f(0.0, "fix rate (Hz); 0 = the preset's", ge=0, le=100)
+    multipath_prob: float = _f(0.0, "extra multipath spikes: probability per fix", ge=0, le=1)
+    multipath_amplitude_m: float = _f(5.0, "extra multipath spikes: amplitude (m)", ge=0)
+    altitude_source: str = _f("radar", "height channel of each fix: a radar altimeter (as on "
+                              "spray drones) or the GPS's own vertical", choices=("radar", "gps"))
+    radar_sigma_m: float = _f(0.05, "radar altimeter noise std (m), white", gt=0)
+    overrides: dict[str, Any] = _f({}, "raw overrides of the preset's keys (rate_hz, latency_s, "
+                                   "axis_scale, components, outage), see ag_uav.gps")
+
+
+@dataclass
+class EstimatorConfig:
+    name: str = _f("true", "what the controller flies on: true state or an estimator",
+                   choices=ESTIMATORS)
+    shadow: list[str] = _f([], "more estimators fed the very same fixes, for comparison "
+                           f"({', '.join(ESTIMATORS[1:])})")
+    model: str = _f("cv", "motion model: constant velocity or constant acceleration",
+                    choices=("cv", "ca"))
+    q: float = _f(0.05, "process noise: white acceleration (cv) or jerk (ca) PSD per axis "
+                  "(m^2/s^3); with imu = false the model alone must carry the manoeuvres (~2)",
+                  gt=0)
+    r_scale: float = _f(1.0, "R = r_scale x the GPS preset's nominal error variance per axis",
+                        gt=0)
+    imu: bool = _f(True, "accelerometer-aided prediction: the measured acceleration drives "
+                   "the motion model between fixes (GPS/INS loose coupling)")
+    imu_sigma_mps2: float = _f(0.1, "accelerometer white noise std per axis (m/s^2)", ge=0)
+    sigma: float = _f(2.0, "MCKF kernel bandwidth (dimensionless, whitened residuals)", gt=0)
+    max_iter: int = _f(10, "MCKF fixed-point iteration cap", ge=1, le=100)
+    window: int = _f(20, "PCA window N (fixes)", ge=3, le=1000)
+    pca_mode: str = _f("hankel", "PCA reading", choices=("hankel", "channels"))
+
+
 @dataclass
 class LogConfig:
     enabled: bool = _f(True, "write runs/<run-id>/run.mcap")
@@ -156,6 +196,9 @@ class Config:
     controller: ControllerConfig = field(default_factory=ControllerConfig,
                                          metadata={"help": "position cascade"})
     wind: WindConfig = field(default_factory=WindConfig, metadata={"help": "mean wind + Dryden"})
+    gps: GpsConfig = field(default_factory=GpsConfig, metadata={"help": "GPS sensor and errors"})
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig,
+                                       metadata={"help": "state estimation in the loop"})
     log: LogConfig = field(default_factory=LogConfig, metadata={"help": "MCAP log and renders"})
 
     def to_dict(self) -> dict[str, Any]:
@@ -212,6 +255,10 @@ def _coerce(tp: Any, v: Any, key: str) -> Any:
     if tp is bool:
         if not isinstance(v, bool):
             raise ConfigError(f"{key} = {_fmt(v)}: expected true or false")
+        return v
+    if tp is dict or typing.get_origin(tp) is dict:
+        if not isinstance(v, dict):
+            raise ConfigError(f"{key} = {_fmt(v)}: expected a table")
         return v
     if tp is str:
         if not isinstance(v, str):
@@ -273,6 +320,9 @@ def _validate(cfg: Config) -> None:
     if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
         raise ConfigError(f"sim.control_hz = {cfg.sim.control_hz}: must divide the physics rate "
                           f"1/timestep_s = {1.0 / cfg.sim.timestep_s:g} Hz")
+    for name in cfg.estimator.shadow:
+        if name not in ESTIMATORS[1:]:
+            raise ConfigError(f'estimator.shadow = "{name}": allowed: {", ".join(ESTIMATORS[1:])}')
     for cam in cfg.log.cameras:
         if cam not in ("chase", "down"):
             raise ConfigError(f'log.cameras = "{cam}": allowed: chase, down')
@@ -310,6 +360,10 @@ def default_config() -> Config:
 
 
 def _toml_value(v: Any) -> str:
+    if isinstance(v, dict):
+        if not v:
+            return "{}"
+        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
     if isinstance(v, list):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     return tomli_w.dumps({"k": v}).strip()[4:]

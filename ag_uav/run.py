@@ -41,24 +41,22 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     """Fly ``cfg`` once into ``out_root/run_id``; returns the result and the run folder."""
     run_dir = Path(out_root) / (run_id or default_run_id(cfg))
     run_dir.mkdir(parents=True, exist_ok=True)
-    log = renderer = None
-    notes: list[str] = []
-    try:
-        if cfg.log.enabled and cfg.log.channels != "none":
-            from .logging_setup import open_log_and_renderer
+    log = None
+    if cfg.log.enabled and cfg.log.channels != "none":
+        from . import __version__
+        from .runlog import RunLog
 
-            log, renderer, notes = open_log_and_renderer(cfg, run_dir)
-    except ModuleNotFoundError:
-        log = renderer = None
+        rates = {"camera": cfg.log.render_hz if cfg.log.render else 0.0}
+        log = RunLog(run_dir / "run.mcap", channels=cfg.log.channels, rates=rates,
+                     metadata={"run_id": run_dir.name, "seed": cfg.seed,
+                               "ag_uav": __version__, "field": cfg.mission.field,
+                               "estimator": cfg.estimator.name},
+                     config_toml=cfg.to_toml())
     try:
-        res = simulate(cfg, feedback=feedback, progress=progress, log=log, renderer=renderer)
+        res = simulate(cfg, feedback=feedback, progress=progress, log=log)
     finally:
         if log is not None:
             log.close()
-        if renderer is not None:
-            renderer.close()
     res.summary["run_dir"] = str(run_dir)
-    if notes:
-        res.summary["notes"] = notes
     write_summary(res.summary, run_dir / "summary.json")
     return res, run_dir

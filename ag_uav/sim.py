@@ -36,13 +36,18 @@ from .vehicle import G, Vehicle, build_vehicle
 from .wind import Wind
 
 #: Names of the seeded random streams; appending a name never changes the others' draws.
-STREAMS = ("wind", "gps", "estimator", "spare1", "spare2", "spare3", "spare4", "spare5")
+STREAMS = ("wind", "gps", "estimator", "altimeter", "imu", "spare3", "spare4", "spare5")
+
+
+def seed_sequences(seed: int) -> dict[str, np.random.SeedSequence]:
+    """One independent SeedSequence per consumer, spawned from ``SeedSequence(seed)``."""
+    children = np.random.SeedSequence(seed).spawn(len(STREAMS))
+    return dict(zip(STREAMS, children, strict=True))
 
 
 def rng_streams(seed: int) -> dict[str, np.random.Generator]:
-    """One independent Generator per consumer, spawned from ``SeedSequence(seed)``."""
-    children = np.random.SeedSequence(seed).spawn(len(STREAMS))
-    return {name: np.random.default_rng(s) for name, s in zip(STREAMS, children, strict=True)}
+    """One independent Generator per consumer (see :func:`seed_sequences`)."""
+    return {name: np.random.default_rng(s) for name, s in seed_sequences(seed).items()}
 
 
 # ------------------------------------------------------------------------------ feedback seam
@@ -142,6 +147,7 @@ class LoopOutput:
     wall_loop_s: float
     vehicle: Vehicle
     frames: int = 0
+    notes: list[str] = dataclasses.field(default_factory=list)
 
 
 REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
@@ -153,11 +159,12 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
                   bounds: tuple[float, float, float, float] | None = None,
                   feedback: Feedback | None = None, progress: bool = False,
                   tick_hook: Callable[..., None] | None = None, log: Any = None,
-                  renderer: Any = None, streams: dict | None = None) -> LoopOutput:
+                  render: bool = False, streams: dict | None = None) -> LoopOutput:
     """Fly the vehicle along ``reference`` (``sample_all(times)`` → dict of pos, vel, acc, yaw,
     seg, spray arrays, as :meth:`ag_uav.reference.Reference.sample_all`) for
     ``duration`` seconds of sim time. The core loop shared by missions and test scenarios."""
     streams = streams or rng_streams(cfg.seed)
+    notes: list[str] = []
     veh = build_vehicle(cfg, outline)
     model = veh.model
     data = mujoco.MjData(model)
@@ -197,10 +204,16 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     crash_reason: str | None = None
     crash_time: float | None = None
     airborne = not cfg.sim.takeoff
-    render_every = None
     frames = 0
-    if renderer is not None and cfg.log.render:
-        render_every = max(1, round(cfg.sim.control_hz / cfg.log.render_hz))
+    renderer = None
+    if log is not None and render:
+        from .render import Renderer, RenderUnavailable
+
+        try:
+            renderer = Renderer(model, cfg.log.width, cfg.log.height, tuple(cfg.log.cameras))
+        except RenderUnavailable as e:
+            notes.append(f"no camera frames: {e}")
+            renderer = None
 
     bar = None
     if progress:
@@ -263,13 +276,16 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
         rec.append((px, py, pz, vx, vy, vz, rp[0], rp[1], rp[2], p_fb[0], p_fb[1], p_fb[2],
                     ref_seg[k], spray, f[0], f[1], f[2], f[3], wx, wy, wz))
         if log is not None:
-            log.tick(t, p_true=(px, py, pz), q_true_wxyz=(qw, qx, qy, qz), v_true=(vx, vy, vz),
-                     p_ref=rp, v_ref=rv, yaw_ref=yaw_ref, p_est=p_fb, v_est=v_fb,
-                     ctrl=cascade.internals(), motors=f, wind=(wx, wy, wz), spray=spray)
-            if render_every and k % render_every == 0:
+            if t >= log._next_tick:
+                log.tick(t, p_true=(px, py, pz), q_true_wxyz=(qw, qx, qy, qz),
+                         v_true=(vx, vy, vz), p_ref=rp, v_ref=rv, yaw_ref=yaw_ref,
+                         p_est=p_fb if fb.name != "true" else None, v_est=v_fb,
+                         ctrl=cascade.internals() if log.want("state", t) else None,
+                         motors=f, wind=(wx, wy, wz), spray=spray)
+            if renderer is not None and log.want_frame(t):
                 for cam in renderer.cameras:
                     log.frame(t, cam, renderer.jpeg(data, cam), renderer.width, renderer.height,
-                              renderer.fovy(cam))
+                              renderer.fovy(cam), pose=renderer.camera_pose(data, cam))
                     frames += 1
         mujoco.mj_step(model, data, nstep=nsub)
         if tick_hook is not None:
@@ -280,19 +296,21 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     if bar is not None:
         bar.close()
     wall_loop = time.perf_counter() - wall_loop
+    if renderer is not None:
+        renderer.close()
     arr = np.asarray(rec, dtype=float).reshape(-1, len(REC_COLUMNS))
     return LoopOutput(t=np.arange(len(arr)) * dt, rec=arr, crash_reason=crash_reason,
-                      crash_time=crash_time, wall_loop_s=wall_loop, vehicle=veh, frames=frames)
+                      crash_time=crash_time, wall_loop_s=wall_loop, vehicle=veh, frames=frames,
+                      notes=notes)
 
 
 def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
-             tick_hook: Callable[..., None] | None = None, log: Any = None,
-             renderer: Any = None) -> RunResult:
+             tick_hook: Callable[..., None] | None = None, log: Any = None) -> RunResult:
     """Fly ``cfg``'s mission once and return the trajectory and the summary metrics.
 
-    ``feedback``: the feedback seam (default: true state). ``log``: an open
-    :class:`~ag_uav.runlog.RunLog` or None. ``renderer``: an :class:`~ag_uav.render.Renderer` or
-    None. ``tick_hook(t, data)`` is called after every control tick (tests, scenarios).
+    ``feedback``: the feedback seam (default: the config's estimator, or the true state).
+    ``log``: an open :class:`~ag_uav.runlog.RunLog` or None; with ``cfg.log.render`` camera
+    frames go into it. ``tick_hook(t, data)`` is called after every control tick.
     """
     from . import metrics
 
@@ -309,10 +327,17 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
         log.scene(0.0, outline[0], outline[1:],
                   [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],
                   m.swath_m, m.altitude_m)
+    if feedback is None and (cfg.estimator.name != "true" or cfg.estimator.shadow):
+        from .estimation import EstimatorFeedback
+
+        ss = seed_sequences(cfg.seed)
+        feedback = EstimatorFeedback(cfg, ss["gps"], ss["altimeter"], ss["imu"])
     fb = feedback or TrueFeedback()
+    if log is not None and hasattr(fb, "log"):
+        fb.log = log
     out = fly_reference(cfg, ref, ref.duration, outline=outline,
                         bounds=fld.bounds, feedback=fb, progress=progress, tick_hook=tick_hook,
-                        log=log, renderer=renderer, streams=streams)
+                        log=log, render=cfg.log.render, streams=streams)
     arr = out.rec
     res = RunResult(
         summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
@@ -323,6 +348,14 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     sim_time = float(len(out.t) / cfg.sim.control_hz)
     summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
                              reference=ref)
+    if hasattr(fb, "scores"):
+        sp = np.flatnonzero(res.spray)
+        mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))
+        scores = fb.scores(res.p_true, res.p_ref, mission)
+        summ["estimators"] = scores
+        if fb.name in scores:
+            summ["estimate_rmse_m"] = scores[fb.name]["estimate_rmse_m"]
+            summ["estimate_update_us"] = scores[fb.name]["update_us"]
     wall = time.perf_counter() - wall0
     summ.update({
         "sim_time_s": round(sim_time, 3),
@@ -330,6 +363,7 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
         "loop_wall_time_s": round(out.wall_loop_s, 3),
         "real_time_factor": round(sim_time / out.wall_loop_s, 1) if out.wall_loop_s > 0 else None,
         "frames": out.frames,
+        "notes": out.notes,
         "seed": cfg.seed,
         "feedback": fb.name,
         **fb.summary(),
@@ -337,5 +371,14 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     })
     res.summary = summ
     if log is not None:
+        from .metrics import contiguous_runs
+
+        tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
+        if tracks:
+            import shapely
+
+            foot = shapely.union_all([shapely.LineString(tr).simplify(0.1).buffer(
+                0.5 * m.swath_m, cap_style="flat") for tr in tracks])
+            log.sprayed(sim_time, [foot])
         log.summary(summ)
     return res

@@ -1,0 +1,68 @@
+"""``ag-uav show | plot | video | recover``: look at a run after the fact (from its MCAP)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _show(args: argparse.Namespace) -> int:
+    from .viewing import show
+
+    print(show(args.run))
+    return 0
+
+
+def _plot(args: argparse.Namespace) -> int:
+    from .viewing import mcap_path, plot
+
+    out = Path(args.out) if args.out else mcap_path(args.run).parent / "plots"
+    for p in plot(args.run, out):
+        print(p)
+    return 0
+
+
+def _video(args: argparse.Namespace) -> int:
+    from .viewing import video
+
+    print(video(args.run, args.out, camera=args.camera, fps=args.fps))
+    return 0
+
+
+def _recover(args: argparse.Namespace) -> int:
+    from .viewing import recover
+
+    n = recover(args.input, args.output)
+    print(f"recovered {n} messages into {args.output}", file=sys.stderr)
+    return 0
+
+
+def register(sub) -> None:
+    run_help = "run folder or its run.mcap"
+    s = sub.add_parser("show", help="config, metrics, channels and counts of a run (from MCAP)",
+                       description="Print a run's config, metrics and channels from its MCAP.")
+    s.add_argument("run", help=run_help)
+    s.set_defaults(func=_show)
+
+    p = sub.add_parser("plot", help="PNG plots of a run: map, errors, controller, estimators",
+                       description="Write PNG plots of a run: top-down map (field, path, true "
+                                   "and estimated tracks, GPS fixes), errors over time, "
+                                   "controller signals, estimator comparison.")
+    p.add_argument("run", help=run_help)
+    p.add_argument("-o", "--out", metavar="DIR", help="output folder (default: RUN/plots)")
+    p.set_defaults(func=_plot)
+
+    v = sub.add_parser("video", help="MP4 from the logged camera frames",
+                       description="Encode the camera frames logged in a run into an MP4.")
+    v.add_argument("run", help=run_help)
+    v.add_argument("-o", "--out", required=True, metavar="OUT.mp4")
+    v.add_argument("--camera", help="camera name (default: all, side by side)")
+    v.add_argument("--fps", type=float, default=None, help="frames per second of the video")
+    v.set_defaults(func=_video)
+
+    r = sub.add_parser("recover", help="turn a truncated MCAP (killed run) into an indexed one",
+                       description="Rewrite a truncated MCAP log into a finished, indexed file.")
+    r.add_argument("input", metavar="IN")
+    r.add_argument("output", metavar="OUT")
+    r.set_defaults(func=_recover)

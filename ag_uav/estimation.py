@@ -1,0 +1,202 @@
+"""The estimator bank in the loop: GPS fixes → filters → the estimate the controller flies on.
+
+:class:`EstimatorFeedback` plugs into the feedback seam of :mod:`ag_uav.sim`. Every control tick
+it asks the :class:`~ag_uav.gps.GpsSensor` for a fix (one arrives at the sensor's rate), predicts
+every filter one control period ahead, and updates all of them with the very same fix. The
+*primary* filter (``estimator.name``) is what the controller flies on; the *shadows*
+(``estimator.shadow``) see identical fixes and are only scored, so comparisons are fair (common
+random numbers). With ``estimator.name = "true"`` the controller flies on the truth and the
+shadows are still scored.
+
+With ``estimator.imu`` (default) the prediction is driven by the measured acceleration (the mean
+acceleration over the control period plus white accelerometer noise), as in a loosely coupled
+GPS/INS: ``x̄ = F x + B a`` with ``B = [dt²/2, dt]`` per axis, so the estimate follows the
+vehicle's manoeuvres between fixes; without it, a GPS-only filter in the loop adds enough lag to
+make the position loop oscillate (measured: 5 m control error on the default mission).
+
+Filters use a 3-D constant-velocity (or constant-acceleration) model predicted at the control
+rate (``dt = 1/control_hz``), state ``[x, vx, y, vy, z, vz]`` (see :mod:`estimators.models`),
+``R = r_scale · diag(GPS nominal error variance)``, floored at (1 cm)². By default the height
+channel of each fix comes from a radar altimeter (``gps.altitude_source = "radar"``, white noise
+``gps.radar_sigma_m``, height above the flat ground), as on spray drones, which cannot fly 3 m
+above a crop on a GPS vertical with metres of bias. They are initialised at
+the first fix with zero velocity and ``P0 = diag(R, 4 m²/s²)``.
+
+Scores per estimator (over the mission ticks, like the tracking error): ``estimate_rmse_m``
+(horizontal |p̂ − p|), ``estimate_share`` (mean-square estimate error / mean-square tracking
+error, horizontal: the part of the tracking error that the estimate explains if the two are
+uncorrelated; can exceed 1), and ``update_us`` (mean wall time of one ``update`` call).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+import estimators
+
+from .config import Config, ConfigError
+from .gps import GpsSensor
+from .sim import Feedback
+
+R_FLOOR = 1e-4
+
+
+def make_gps(cfg: Config, seed: np.random.SeedSequence) -> GpsSensor:
+    g = cfg.gps
+    ov: dict[str, Any] = dict(g.overrides)
+    if g.rate_hz > 0:
+        ov["rate_hz"] = g.rate_hz
+    if g.multipath_prob > 0:
+        comps = dict(ov.get("components", {})) if isinstance(ov.get("components"), dict) else {}
+        comps["multipath_extra"] = {"type": "spikes", "prob": g.multipath_prob,
+                                    "amplitude": g.multipath_amplitude_m}
+        if isinstance(ov.get("components"), list):
+            raise ConfigError("gps.multipath_prob: cannot be combined with a components list in "
+                              "gps.overrides; add the spikes to that list")
+        ov["components"] = comps
+    try:
+        return GpsSensor.from_preset(g.preset, seed, **ov)
+    except ValueError as e:
+        raise ConfigError(f"gps.overrides = {ov!r}: {e}") from None
+
+
+def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
+    e = cfg.estimator
+    dt = 1.0 / cfg.sim.control_hz
+    params: dict[str, Any] = {"model": e.model, "dim": 3, "dt": dt, "q": e.q,
+                              "r": list(r_diag)}
+    if "mckf" in name:
+        params.update(sigma=e.sigma, max_iter=e.max_iter)
+    if name.startswith("pca"):
+        params.update(window=e.window, mode=e.pca_mode)
+    return estimators.make(name, **params)
+
+
+class EstimatorFeedback(Feedback):
+    """GPS + primary estimator (+ shadows) behind the feedback seam."""
+
+    def __init__(self, cfg: Config, seed: np.random.SeedSequence,
+                 altimeter_seed: np.random.SeedSequence | None = None,
+                 imu_seed: np.random.SeedSequence | None = None) -> None:
+        self.cfg = cfg
+        self.gps = make_gps(cfg, seed)
+        var = np.asarray(self.gps.variance, dtype=float).reshape(-1)
+        if var.size == 1:
+            var = np.repeat(var, 3)
+        var = np.where(np.isfinite(var), var, 1.0)  # alpha-stable: infinite variance
+        self.r_diag = np.maximum(cfg.estimator.r_scale * var, R_FLOOR)
+        self.radar = cfg.gps.altitude_source == "radar"
+        if self.radar:
+            self.radar_sigma = cfg.gps.radar_sigma_m
+            self.radar_rng = np.random.default_rng(altimeter_seed)
+            self.r_diag[2] = max(self.radar_sigma**2, R_FLOOR)
+        e = cfg.estimator
+        self.primary = e.name
+        self.name = e.name
+        names = ([e.name] if e.name != "true" else []) + [s for s in e.shadow if s != e.name]
+        self.names = names
+        self.filters = {n: make_filter(n, cfg, self.r_diag) for n in names}
+        mdl = next(iter(self.filters.values())).model if self.filters else None
+        self.pos_idx = list(mdl.pos_idx) if mdl is not None else [0, 2, 4]
+        self.vel_idx = list(mdl.vel_idx) if mdl is not None else [1, 3, 5]
+        self.n = mdl.n if mdl is not None else 6
+        self.initialised = False
+        self.imu = cfg.estimator.imu
+        self.imu_sigma = cfg.estimator.imu_sigma_mps2
+        self.imu_rng = np.random.default_rng(imu_seed)
+        self.dt = 1.0 / cfg.sim.control_hz
+        self._v_prev: tuple[float, float, float] | None = None
+        self.est: dict[str, list[tuple[float, float, float]]] = {n: [] for n in names}
+        self.upd_ns = dict.fromkeys(names, 0)
+        self.n_upd = dict.fromkeys(names, 0)
+        self.fixes: list[tuple[float, float, float, float]] = []
+        self.log = None
+
+    def _init(self, z: np.ndarray) -> None:
+        x0 = np.zeros(self.n)
+        x0[self.pos_idx] = z
+        P0 = np.eye(self.n) * 4.0
+        P0[self.pos_idx, self.pos_idx] = self.r_diag
+        for f in self.filters.values():
+            f.x = x0.copy()
+            f.P = P0.copy()
+        self.initialised = True
+
+    def update(self, t, p_true, v_true):
+        z = self.gps.measure(t, p_true)
+        filters = self.filters
+        if z is not None and self.radar:
+            z[2] = p_true[2] + self.radar_sigma * self.radar_rng.standard_normal()
+        if z is not None:
+            self.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
+            if self.log is not None:
+                self.log.gps(t, z)
+        if not self.initialised:
+            if z is None:
+                return p_true, v_true  # no fix yet: nothing to fly on (only at t = 0)
+            self._init(z)
+            z = None
+        pi, vi = self.pos_idx, self.vel_idx
+        a = None
+        if self.imu:
+            # mean acceleration over the last control period (what an IMU integrates), plus
+            # accelerometer noise; it drives the prediction as a known input B·a
+            pv = self._v_prev
+            self._v_prev = v_true
+            if pv is not None:
+                s, dt, rng = self.imu_sigma, self.dt, self.imu_rng
+                n = rng.standard_normal(3) if s > 0 else (0.0, 0.0, 0.0)
+                a = [(v_true[i] - pv[i]) / dt + s * n[i] for i in range(3)]
+        for name, f in filters.items():
+            f.predict()
+            if a is not None:
+                x = f.x
+                h = 0.5 * self.dt * self.dt
+                for i in range(3):
+                    x[pi[i]] += h * a[i]
+                    x[vi[i]] += self.dt * a[i]
+            if z is not None:
+                t0 = time.perf_counter_ns()
+                f.update(z)
+                self.upd_ns[name] += time.perf_counter_ns() - t0
+                self.n_upd[name] += 1
+                if self.log is not None:
+                    self.log.estimator(t, name, f.x, np.diag(f.P), getattr(f, "y", None))
+            x = f.x
+            self.est[name].append((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])))
+        if self.primary == "true":
+            return p_true, v_true
+        x = filters[self.primary].x
+        return ((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])),
+                (float(x[vi[0]]), float(x[vi[1]]), float(x[vi[2]])))
+
+    def scores(self, p_true: np.ndarray, p_ref: np.ndarray, mission: slice) -> dict[str, Any]:
+        """Per-estimator scores over ``mission`` ticks (arrays aligned with the loop record)."""
+        out: dict[str, Any] = {}
+        n = len(p_true)
+        d = p_true[mission, :2] - p_ref[mission, :2]
+        track_ms = float(np.mean(np.sum(d * d, axis=1))) if len(d) else float("nan")
+        for name in self.names:
+            est = np.asarray(self.est[name], dtype=float).reshape(-1, 3)
+            # the first tick (initialisation) records no estimate: align from the end
+            full = np.full((n, 3), np.nan)
+            m = min(len(est), n)
+            full[n - m:] = est[:m] if len(est) <= n else est[-n:]
+            e = full[mission, :2] - p_true[mission, :2]
+            ok = np.all(np.isfinite(e), axis=1)
+            ms = float(np.mean(np.sum(e[ok] ** 2, axis=1))) if ok.any() else float("nan")
+            out[name] = {
+                "estimate_rmse_m": round(float(np.sqrt(ms)), 4),
+                "estimate_share": round(ms / track_ms, 4) if track_ms > 0 else None,
+                "update_us": round(self.upd_ns[name] / max(self.n_upd[name], 1) / 1e3, 2),
+                "updates": self.n_upd[name],
+            }
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        return {"gps_preset": self.cfg.gps.preset, "gps_fixes": len(self.fixes),
+                "gps_rate_hz": self.gps.rate_hz,
+                "estimator_r_diag_m2": [round(float(v), 5) for v in self.r_diag]}
