@@ -100,12 +100,39 @@ def run_bench(cfg: Config, repeats: int = 3, quick: bool = False) -> dict[str, A
     }
     out["ratio_closed_vs_raw_per_step"] = round(closed / raw1, 3)
     out["ratio_closed_vs_raw_nstep"] = round(closed / rawn, 3)
+    out["logging"] = logging_cost(c, repeats)
     for extra in _EXTRA:
         try:
             out.update(extra(c, repeats, quick))
         except Exception as e:  # a failing extra must not hide the main figures
             out[f"{extra.__name__}_error"] = f"{type(e).__name__}: {e}"
     return out
+
+
+def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
+    """Wall time of the mission loop with the full MCAP channel set (no renders) against the
+    same loop unlogged, alternating the two, median of ``repeats`` each."""
+    import tempfile
+    from pathlib import Path
+
+    from .runlog import RunLog
+    from .sim import simulate
+
+    c = copy.deepcopy(cfg)
+    c.log.render = False
+    plain, logged, light = [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(repeats):
+            plain.append(simulate(c).summary["loop_wall_time_s"])
+            for channels, acc in (("full", logged), ("light", light)):
+                with RunLog(Path(tmp) / f"{channels}{i}.mcap", channels=channels,
+                            rates={"camera": 0.0}, metadata={}, config_toml="") as log:
+                    acc.append(simulate(c, log=log).summary["loop_wall_time_s"])
+        size = (Path(tmp) / "full0.mcap").stat().st_size
+    p, f, li = (statistics.median(x) for x in (plain, logged, light))
+    return {"unlogged_loop_s": round(p, 3), "full_log_loop_s": round(f, 3),
+            "light_log_loop_s": round(li, 3), "full_over_unlogged": round(f / p, 3),
+            "light_over_unlogged": round(li / p, 3), "full_log_mb": round(size / 1e6, 2)}
 
 
 #: more benchmark sections (estimators, logging, workers) register here: fn(cfg, repeats, quick)

@@ -164,7 +164,9 @@ class EstimatorFeedback(Feedback):
                 self.upd_ns[name] += time.perf_counter_ns() - t0
                 self.n_upd[name] += 1
                 if self.log is not None:
-                    self.log.estimator(t, name, f.x, np.diag(f.P), getattr(f, "y", None))
+                    x = f.x
+                    self.log.estimator(t, name, x, np.diag(f.P), getattr(f, "y", None),
+                                       pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
             x = f.x
             self.est[name].append((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])))
         if self.primary == "true":

@@ -407,7 +407,7 @@ class RunLog:
         metadata: dict[str, Any] | None = None,
         config_toml: str = "",
         flush_wall_s: float = 1.0,
-        flush_sim_s: float = 0.5,
+        flush_sim_s: float = 0.9,
         layout: bool = True,
         chunk_size: int = 1 << 20,
     ):
@@ -451,7 +451,7 @@ class RunLog:
             allow_overwrite=True,
             context=self._ctx,
             writer_options=MCAPWriteOptions(
-                compression=MCAPCompression.Zstd,
+                compression=MCAPCompression.Lz4,
                 chunk_size=chunk_size,
                 compression_threads=0,
                 profile="",
