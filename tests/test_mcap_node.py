@@ -114,7 +114,7 @@ def test_real_flight_log_passes_foxglove_reader(node_checker, tmp_path):
     with open(run_dir / "run.mcap", "rb") as f:
         topics = {ch.topic for ch in make_reader(f).get_summary().channels.values()}
     for t in ("/tf", "/drone/pose", "/drone/pose_est", "/drone/state", "/gps", "/field",
-              "/estimator/pca-mckf", "/estimator/kf"):
+              "/estimator/pca_mckf", "/estimator/kf"):
         assert t in topics
     if res.summary["frames"]:
         assert {"/camera/chase", "/camera/down"} <= topics
