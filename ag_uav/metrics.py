@@ -14,8 +14,9 @@ Definitions (all horizontal errors in the ENU x–y plane):
   of the path's end, and every leg was flown: while the leg was active the true track came within
   one swath of both of its ends. (How *well* it was flown is what the errors and the coverage
   say; a biased GPS makes a drone fly every leg, offset.)
-- ``mission_time_s``: time at which the true position first came within 0.5 m of the path's end
-  after the last leg started (None if never).
+- ``mission_time_s``: time at which the drone's own position (the one it flies on: truth or
+  estimate) first came within 0.5 m of the path's end after the last leg started, as an
+  autopilot's "waypoint reached" (None if never).
 """
 
 from __future__ import annotations
@@ -97,7 +98,7 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
         last_leg_ticks = np.flatnonzero(res.seg == legs[-1])
         if last_leg_ticks.size:
             after = np.arange(last_leg_ticks[0], n)
-            dist = np.hypot(*(res.p_true[after, :2] - end).T)
+            dist = np.hypot(*(res.p_fb[after, :2] - end).T)
             hit = np.flatnonzero(dist < 0.5)
             if hit.size:
                 mission_time = float(res.t[after[hit[0]]])
