@@ -301,23 +301,17 @@ def scenario_cost(cfg: Config, sc: Scenario, metric: str, crash_penalty: float,
             sign = 1.0 if sc.size > 0 else -1.0
             info = step_metrics(t_rel, sign * y, abs(sc.size))
     else:
-        from .sim import simulate
-
         c = copy.deepcopy(cfg)
         c.sim.max_time_s = sc.max_time_s
         c.log.enabled = False
-        res = simulate(c)
-        e = res.p_ref - res.p_true
-        t = res.t
+        t, p_true, p_ref, motors, crash, crash_t, full = mission_trajectory(c)
+        e = p_ref - p_true
         t0 = 0.0
-        full = min(sc.max_time_s, res.extra["reference"].duration + c.sim.hover_after_s)
-        crash = res.summary.get("crash_reason")
-        crash_t = res.summary.get("crash_time_s")
-        motors = res.motors
         if details:
-            info = {"tracking_rmse_m": res.summary.get("tracking_rmse_m"),
-                    "altitude_rmse_m": res.summary.get("altitude_rmse_m"),
-                    "cross_track_max_m": res.summary.get("cross_track_max_m")}
+            dh = e[:, :2]
+            info = {"tracking_rmse_m": float(np.sqrt(np.mean(np.sum(dh * dh, axis=1))))
+                    if len(t) else None,
+                    "altitude_rmse_m": float(np.sqrt(np.mean(e[:, 2] ** 2))) if len(t) else None}
     cost = _error_cost(t, e, metric, t0, dt) if len(t) else math.inf
     if effort_weight > 0 and len(motors) > 1:
         cost += effort_weight * float(np.sum(np.diff(motors, axis=0) ** 2))
@@ -327,6 +321,53 @@ def scenario_cost(cfg: Config, sc: Scenario, metric: str, crash_penalty: float,
     else:
         cost = min(cost, crash_penalty)
     return {"cost": cost, "crash": crash or "", **info}
+
+
+_MISSION_CACHE: dict[str, tuple[Any, Any, Any]] = {}
+
+
+def _mission_setup(cfg: Config) -> tuple[Any, Any, Any]:
+    """(field, reference, outline) of the mission, cached per process: the plan and the
+    reference depend on the mission keys only, not on the gains being tuned."""
+    key = json.dumps([asdict(cfg.mission), cfg.sim.takeoff, cfg.sim.hover_after_s,
+                      cfg.sim.control_hz], default=str)
+    hit = _MISSION_CACHE.get(key)
+    if hit is None:
+        from .reference import Reference
+        from .sim import build_field, build_plan
+
+        fld = build_field(cfg)
+        plan = build_plan(cfg, fld)
+        m = cfg.mission
+        ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
+                        takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
+                        rate=cfg.sim.control_hz)
+        outline = [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
+        if len(_MISSION_CACHE) > 8:
+            _MISSION_CACHE.clear()
+        hit = _MISSION_CACHE[key] = (fld, ref, outline)
+    return hit
+
+
+def mission_trajectory(cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                             str | None, float | None, float]:
+    """(t, p_true, p_ref, motors, crash_reason, crash_time, duration) of ``cfg``'s mission
+    (cut at ``sim.max_time_s``). With the true state fed back this flies the core loop on a
+    cached plan/reference (no metrics); with an estimator it goes through
+    :func:`ag_uav.sim.simulate`. Both give the same trajectory."""
+    from .sim import fly_reference, rng_streams, simulate
+
+    if cfg.estimator.name == "true" and not cfg.estimator.shadow:
+        fld, ref, outline = _mission_setup(cfg)
+        out = fly_reference(cfg, ref, ref.duration, outline=outline, bounds=fld.bounds,
+                            streams=rng_streams(cfg.seed))
+        rec = out.rec
+        return (out.t, rec[:, 0:3], rec[:, 6:9], rec[:, 14:18], out.crash_reason,
+                out.crash_time, min(cfg.sim.max_time_s, ref.duration))
+    res = simulate(cfg)
+    full = min(cfg.sim.max_time_s, res.extra["reference"].duration)
+    return (res.t, res.p_true, res.p_ref, res.motors, res.summary.get("crash_reason"),
+            res.summary.get("crash_time_s"), full)
 
 
 def evaluate_candidate(task: dict[str, Any]) -> dict[str, Any]:

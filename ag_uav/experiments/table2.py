@@ -125,7 +125,10 @@ def table(rows: list[dict[str, Any]], ests: list[str]) -> tuple[list[str], list[
         pt, pr = PAPER_WEBOTS.get(e, (math.nan, math.nan))
         rel = upd[e] / upd["kf"] if "kf" in upd and upd["kf"] > 0 else math.nan
         prel = pt / PAPER_WEBOTS["kf"][0] if e in PAPER_WEBOTS else math.nan
-        out_rows.append([e, str(len(rs)), str(len(ok)), _pm(t[0], t[1], "{:.1f}"),
+        tt = _pm(t[0], t[1], "{:.1f}")
+        if t[2] < len(ok):  # runs that never reached the path's end have no task time
+            tt += f" (n={t[2]})"
+        out_rows.append([e, str(len(rs)), str(len(ok)), tt,
                          "–" if math.isnan(pt) else f"{pt:.0f}", _pm(tr[0], tr[1], "{:.3f}"),
                          _pm(es[0], es[1], "{:.3f}"), "–" if math.isnan(pr) else f"{pr:.3f}",
                          _pm(cv[0], cv[1], "{:.2f}"),
