@@ -135,8 +135,20 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
             "light_over_unlogged": round(li / p, 3), "full_log_mb": round(size / 1e6, 2)}
 
 
-#: more benchmark sections (estimators, logging, workers) register here: fn(cfg, repeats, quick)
-_EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = []
+def _workers(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    from .batch import bench_workers
+
+    return bench_workers(cfg, repeats=max(1, min(repeats, 2)), quick=quick)
+
+
+def _estimators(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    from .bench_estimators import bench_estimators
+
+    return {"estimators": bench_estimators(repeats=repeats, n=500 if quick else 2000)}
+
+
+#: further sections, each fn(cfg, repeats, quick) -> dict merged into the output
+_EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers]
 
 
 def print_bench(out: dict[str, Any]) -> None:
