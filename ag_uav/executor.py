@@ -40,9 +40,24 @@ THREAD_ENV = {
 }
 
 
-def _worker_init(env: dict[str, str]) -> None:
-    """Process-pool initializer: apply the thread environment (inherited anyway under spawn)."""
+def _worker_init(env: dict[str, str], watch_parent: bool = False) -> None:
+    """Process-pool initializer: apply the thread environment (inherited anyway under spawn);
+    with ``watch_parent``, exit when the parent process dies (e.g. a SIGKILLed batch), instead
+    of waiting forever on the task queue."""
     os.environ.update(env)
+    if watch_parent:
+        import threading
+        import time
+
+        ppid = os.getppid()
+
+        def watch() -> None:
+            while True:
+                time.sleep(0.5)
+                if os.getppid() != ppid:
+                    os._exit(0)
+
+        threading.Thread(target=watch, name="ag-uav-parent-watch", daemon=True).start()
 
 
 def _push_env(env: dict[str, str]) -> dict[str, str | None]:
@@ -156,7 +171,7 @@ class LocalPoolExecutor(Executor):
             try:
                 self._pool = ProcessPoolExecutor(self.workers, mp_context=self._ctx,
                                                  initializer=_worker_init,
-                                                 initargs=(self._env,))
+                                                 initargs=(self._env, True))
             finally:
                 _pop_env(old)
         return self._pool

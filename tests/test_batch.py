@@ -201,6 +201,26 @@ def test_report_files(tmp_path):
     assert "| kf | coloured-impulsive | 3 | 2 | 1 | 0 |" in md
 
 
+def _children(pid: int) -> list[int]:
+    out = []
+    for st in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = st.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(st.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state not in ("Z", "X")
+
+
 def _journal_hashes(path: Path) -> list[str]:
     out = []
     for line in path.read_text().splitlines():
@@ -212,7 +232,7 @@ def _journal_hashes(path: Path) -> list[str]:
 
 
 def test_sigkill_then_resume_equals_uninterrupted(tmp_path, tiny_field):
-    spec_d = tiny_spec(tiny_field, seeds=range(6))
+    spec_d = tiny_spec(tiny_field, seeds=range(8))
     import tomli_w
 
     spec_path = tmp_path / "spec.toml"
@@ -220,7 +240,7 @@ def test_sigkill_then_resume_equals_uninterrupted(tmp_path, tiny_field):
     n = load_spec(spec_path).n_runs
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "ag_uav.cli", "batch", str(spec_path), "--out", str(out),
-           "--workers", "1", "--quiet", "--no-report"]
+           "--workers", "2", "--quiet", "--no-report"]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     journal = out / "journal.jsonl"
@@ -231,9 +251,15 @@ def test_sigkill_then_resume_equals_uninterrupted(tmp_path, tiny_field):
         if proc.poll() is not None:
             break
         time.sleep(0.005)
+    workers = _children(proc.pid)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     done_before = len(_journal_hashes(journal))
+    assert workers, "the pool's worker processes"
+    t0 = time.monotonic()  # orphaned pool workers notice the dead parent and exit
+    while time.monotonic() - t0 < 10 and any(_alive(p) for p in workers):
+        time.sleep(0.05)
+    assert not any(_alive(p) for p in workers)
     assert 3 <= done_before < n, "the kill must land half-way"
     assert subprocess.run(cmd + ["--resume"], env=env, capture_output=True).returncode == 0
     hashes = _journal_hashes(journal)

@@ -6,10 +6,11 @@ turbulence), ``--runs`` times (seeds 0..runs-1). The seeds are shared across the
 run ``s`` of every estimator sees the same wind and GPS-noise draws (common random numbers), so
 the comparison is paired.
 
-Mission: by default a **40 m × 24 m rectangle** (4 legs at 6 m swath, ~60 s of sim time) so that
-400 missions fit in 10 minutes on 2 cores with the estimators in the loop; the default 1 ha field
-(~490 s of sim time per mission, ~4–5 s of wall time with a filter in the loop) would take
-~40 minutes there. ``--field default`` (or any field name / GeoJSON path) flies another one.
+Mission: by default a **40 m × 24 m rectangle** (6 m swath and headland, ~79 s of sim time) so
+that 400 missions fit in 10 minutes on 2 cores with the estimators in the loop (measured: 400
+missions in 233 s with ``--workers 2`` on a 2-core machine shared with other jobs); the default
+1 ha field (~485 s of sim time, ~3–5 s of wall time per mission with a filter in the loop) would
+take ~15–25 minutes there. ``--field default`` (or any field name / GeoJSON path) flies another.
 
 Printed next to the paper's Webots column (Candan & Li, Table II: MCKF 7850 s / 0.198,
 KF 3250 s / 0.415, PCA-MCKF 9615 s / 0.113, PCA-KF 3580 s / 0.365): mission (task) time,
@@ -46,7 +47,7 @@ SHORT_FIELD = (40.0, 24.0)
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=100, help="runs per estimator (seeds 0..runs-1)")
     p.add_argument("--field", default="short",
-                   help='"short" (a 40 m x 24 m rectangle, ~60 s missions), a built-in field '
+                   help='"short" (a 40 m x 24 m rectangle, ~80 s missions), a built-in field '
                         "name (default, l-shape, hole) or a GeoJSON path")
     p.add_argument("--gps-preset", default="coloured-impulsive", help="GPS noise preset")
     p.add_argument("--wind", type=float, default=3.0, help="mean wind speed (m/s)")
