@@ -264,6 +264,11 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
         # ---- reference, feedback, control
         rp, rv, yaw_ref, spray = ref_p[k], ref_v[k], ref_yaw[k], ref_spray[k]
         p_fb, v_fb = fb.update(t, (px, py, pz), (vx, vy, vz))
+        if not airborne:
+            # on the skids: no horizontal position control until lift-off (as autopilots do);
+            # an estimate that is off by a metre must not tip the vehicle over on the ground
+            p_fb = (rp[0], rp[1], p_fb[2])
+            v_fb = (rv[0], rv[1], v_fb[2])
         f = cascade.update(p_fb, v_fb, R, omega, rp, rv, ref_a[k], yaw_ref, dt)
         ctrl[0], ctrl[1], ctrl[2], ctrl[3] = f
         # ---- wind as a drag force (zero-order hold over the control period)
