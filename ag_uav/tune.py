@@ -89,6 +89,8 @@ class Scenario:
     wind_speed: float = 0.0
     max_time_s: float = 40.0       # mission: sim-time cut
     weight: float = 1.0
+    overshoot_max: float = math.inf  # step: soft bound on the overshoot (fraction of the step)
+    overshoot_penalty: float = 0.0   # step: cost per unit fraction of overshoot beyond the bound
 
 
 @dataclass
@@ -149,7 +151,7 @@ def _parse_scenario(i: int, s: Any) -> Scenario:
         raise ConfigError(f"{where} = {_fmt(s)}: expected a table")
     kind = s.get("kind")
     allowed = {"step": {"kind", "name", "axis", "size", "duration", "t_step", "wind_speed",
-                        "weight"},
+                        "weight", "overshoot_max", "overshoot_penalty"},
                "mission": {"kind", "name", "max_time_s", "weight"}}
     if kind not in allowed:
         raise ConfigError(f"{where}.kind = {_fmt(kind)}: allowed: step, mission")
@@ -169,7 +171,11 @@ def _parse_scenario(i: int, s: Any) -> Scenario:
         ts = _num(s.get("t_step", 1.0), f"{where}.t_step", ge=0.0)
         ws = _num(s.get("wind_speed", 0.0), f"{where}.wind_speed", ge=0.0)
         name = s.get("name", f"step-{ax}")
-        return Scenario("step", str(name), AXES[ax], size, dur, ts, ws, weight=weight)
+        om = (math.inf if "overshoot_max" not in s
+              else _num(s["overshoot_max"], f"{where}.overshoot_max", ge=0.0))
+        op = _num(s.get("overshoot_penalty", 0.0), f"{where}.overshoot_penalty", ge=0.0)
+        return Scenario("step", str(name), AXES[ax], size, dur, ts, ws, weight=weight,
+                        overshoot_max=om, overshoot_penalty=op)
     mt = _num(s.get("max_time_s", 40.0), f"{where}.max_time_s", gt=0.0)
     return Scenario("mission", str(s.get("name", "mission")), max_time_s=mt, weight=weight)
 
@@ -297,9 +303,10 @@ def scenario_cost(cfg: Config, sc: Scenario, metric: str, crash_penalty: float,
         full = sc.duration
         crash, crash_t = out.crash_reason, out.crash_time
         motors = rec[:, 14:18]
+        sign = 1.0 if sc.size > 0 else -1.0
         if details and not crash:
-            sign = 1.0 if sc.size > 0 else -1.0
             info = step_metrics(t_rel, sign * y, abs(sc.size))
+        over = float(max(0.0, (np.max(sign * y) - abs(sc.size)) / abs(sc.size))) if len(y) else 0.0
     else:
         c = copy.deepcopy(cfg)
         c.sim.max_time_s = sc.max_time_s
@@ -313,6 +320,9 @@ def scenario_cost(cfg: Config, sc: Scenario, metric: str, crash_penalty: float,
                     if len(t) else None,
                     "altitude_rmse_m": float(np.sqrt(np.mean(e[:, 2] ** 2))) if len(t) else None}
     cost = _error_cost(t, e, metric, t0, dt) if len(t) else math.inf
+    if sc.kind == "step" and over > sc.overshoot_max:
+        # a soft constraint: every unit fraction of overshoot beyond the bound costs this much
+        cost += sc.overshoot_penalty * (over - sc.overshoot_max)
     if effort_weight > 0 and len(motors) > 1:
         cost += effort_weight * float(np.sum(np.diff(motors, axis=0) ** 2))
     if crash or not math.isfinite(cost):
