@@ -21,8 +21,10 @@ Active segment
 The paper selects the segment by x ranges (eq 13: x_a ≤ x ≤ x_b), which fails for legs that run
 in −x (x_b < x_a) or along y (x_a = x_b).  Here the segment is chosen by the **along-track
 parameter** s = dᵀ(p̂ − a) of the estimate: the active segment advances while s exceeds its
-length (monotone progress along the route; a first call without history takes the nearest
-segment, ties going to the later one).  :meth:`Route.locate` implements the rule.
+length, or while the estimate is nearer the next segment than the current one (a vehicle that
+cuts a corner never reaches its end); progress is monotone along the route, and a first call
+without history takes the nearest segment, ties going to the later one
+(:meth:`Route.locate`).
 
 Turns (``turn``)
 ----------------
@@ -200,17 +202,24 @@ class Route:
         """Active segment for position ``p`` by the along-track rule.
 
         With ``hint`` (the current segment) the index only advances: i → i+1 while the along-track
-        parameter of p on segment i exceeds its length.  Without, the nearest segment (clamped
-        projection), ties (e.g. exactly at a corner) going to the later segment.
+        parameter of p on segment i exceeds its length, or p is closer to segment i+1 than to
+        segment i (a vehicle that cuts a corner never passes its end).  Without, the nearest
+        segment (clamped projection), ties (e.g. exactly at a corner) going to the later one.
         """
         if hint is None:
             dist = np.array([self.distance(i, p) for i in range(self.n_segments)])
             best = float(dist.min())
             return int(np.flatnonzero(dist <= best + 1e-9)[-1])
         i = int(min(max(hint, 0), self.n_segments - 1))
-        while i < self.n_segments - 1 and self.along(i, p) > self.lengths[i]:
+        while self.passed(i, p):
             i += 1
         return i
+
+    def passed(self, i: int, p) -> bool:
+        """Whether p has left segment i for segment i+1 (the advance rule of :meth:`locate`)."""
+        if i >= self.n_segments - 1:
+            return False
+        return self.along(i, p) > self.lengths[i] or self.distance(i + 1, p) < self.distance(i, p)
 
     def point_at(self, s: float) -> np.ndarray:
         """Point at arc length ``s`` from the start (clamped to the route)."""
@@ -341,7 +350,7 @@ class RouteConstrainedKF(KF):
             self.segment = rt.locate(self.position())
             return self.segment
         i = self.segment
-        while i < rt.n_segments - 1 and rt.along(i, self.position()) > rt.lengths[i]:
+        while rt.passed(i, self.position()):
             if rotate:
                 self._rotate_turn(i)
             i += 1

@@ -227,3 +227,40 @@ def test_route_prediction_experiment_smoke(tmp_path):
     # past the corner, the route + turn rotation beats the unconstrained KF by far
     assert float(by["PSO-CKF + turn"]["err_9s"]) < 0.3 * float(by["KF"]["err_9s"])
     assert float(by["KF"]["err_9s"]) > 5.0
+
+
+def test_locate_advances_when_a_corner_is_cut():
+    rt = Route([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    # a filleted corner: never past x = 10 on leg 0, but already nearer leg 1
+    assert rt.along(0, [9.5, 1.0]) < rt.lengths[0]
+    assert rt.locate([9.5, 1.0], hint=0) == 1
+    assert rt.locate([5.0, 0.5], hint=0) == 0
+
+
+# ------------------------------------------------------------------------------ mission side
+def test_route_feedback_bridges_an_outage_along_the_plan(tmp_path):
+    from ag_uav.batch import write_rect_field
+    from ag_uav.config import load_config
+    from ag_uav.route import ROUTE_NAME, OutageGps, RouteConstrainedFeedback, plan_for
+
+    fld = write_rect_field(tmp_path / "f.geojson", 60.0, 24.0)
+    cfg = load_config(None, {"mission.field": str(fld), "gps.preset": "sbas",
+                             "estimator.name": "true", "estimator.shadow": ["kf"]})
+    plan = plan_for(cfg)
+    fb = RouteConstrainedFeedback.for_config(cfg, plan=plan, outages=[(4.0, 9.0)])
+    assert isinstance(fb.gps, OutageGps) and fb.gps.in_outage(5.0) and not fb.gps.in_outage(9.0)
+    rt = Route(plan.path)
+    dt, v, alt = 1.0 / cfg.sim.control_hz, 3.0, cfg.mission.altitude_m
+    for k in range(int(12.0 / dt)):
+        t = k * dt
+        s = v * t
+        p = rt.point_at(s)
+        i = rt.locate(p)
+        vel = v * rt.dirs[i]
+        fb.update(t, (float(p[0]), float(p[1]), alt), (float(vel[0]), float(vel[1]), 0.0))
+    assert fb.n_virtual > 400 and fb.n_virtual_rejected == 0  # ~4.5 s of 100 Hz constraints
+    assert len(fb.est[ROUTE_NAME]) == len(fb.est["kf"])
+    # on the plan the bridged estimate stays on the path and follows it
+    e = np.asarray(fb.est[ROUTE_NAME][-1][:2]) - rt.point_at(v * (int(12.0 / dt) - 1) * dt)
+    assert np.hypot(*e) < 3.0
+    assert fb.summary()["route_virtual_updates"] == fb.n_virtual
