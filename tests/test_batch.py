@@ -27,7 +27,7 @@ from ag_uav.batch import (
     write_rect_field,
     write_report,
 )
-from ag_uav.config import ConfigError
+from ag_uav.config import Config, ConfigError
 from ag_uav.executor import DaskExecutor, LocalPoolExecutor, SerialExecutor
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,7 +67,7 @@ def test_expand_product_order_presets_and_base_file(tmp_path):
     d0, d5 = tasks[0].config, tasks[5].config
     assert d0["wind"]["speed_mps"] == 1.5 and d0["wind"]["turbulence"] == "none"
     assert d0["sim"]["max_time_s"] == 5.0 and d0["seed"] == 3
-    assert d0["controller"]["xy"]["k0"] == 4.0  # default preset = the config's default
+    assert d0["controller"]["xy"]["k0"] == Config().controller.xy.k0  # default preset
     assert d5["controller"]["xy"]["k0"] == 2.5 and d5["controller"]["z"]["k1"] == 0.5
     assert d5["seed"] == 5 and tasks[5].axis_values == {"controller": "soft", "seed": 5}
     assert len({t.config_hash for t in tasks}) == 6
