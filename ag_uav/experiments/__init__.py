@@ -4,4 +4,5 @@ Each module defines ``NAME`` (the sub-command), ``HELP`` (one line), ``add_argum
 and ``main(args) -> int``. Add a module name to :data:`MODULES` to register it.
 """
 
-MODULES = ("numerical", "table2", "bearing_tracking", "route_prediction", "langevin")
+MODULES = ("numerical", "table2", "bearing_tracking", "route_prediction", "langevin",
+           "outage")
