@@ -20,9 +20,12 @@ is returned (detected on the scalar NIS, so a finite fix so large that νᵀS⁻
 1e300 m, is also dropped; numpy may warn about the overflow).  ``F``, ``H``, ``Q``, ``R`` can be
 reassigned at any time (``kf.R = ...``).
 
-Speed: small matrices are dominated by numpy call overhead, so the code uses ``np.dot`` (cheaper
-than ``@`` on tiny arrays), caches Fᵀ, Hᵀ and I, inverts S in closed form for m ≤ 2 and
-checks finiteness once on the scalar NIS instead of on the input.
+Speed: small matrices are dominated by numpy call overhead (~0.5 µs per call, whatever the
+size), so the code counts calls: it uses the ``ndarray.dot`` method (cheaper than ``np.dot`` and
+``@`` on tiny arrays), caches Fᵀ, Hᵀ and I, inverts S in closed form for m ≤ 3 and checks
+finiteness once on the scalar NIS instead of on the input.  Measured with
+``ag_uav.bench_estimators``: ~2/3 of the time of filterpy's ``KalmanFilter`` per
+predict+update, identical results (to ~1e-14).
 """
 
 from __future__ import annotations
@@ -37,15 +40,30 @@ _dot = np.dot
 
 
 def inv_small(S: np.ndarray) -> np.ndarray:
-    """Inverse of a small symmetric positive-definite matrix (closed form for 1×1 and 2×2)."""
+    """Inverse of a small non-singular matrix: closed form (adjugate / determinant) for 1×1,
+    2×2 and 3×3 (a numpy call on a tiny matrix costs more than the arithmetic), LAPACK above."""
     m = S.shape[0]
     if m == 2:
-        a, b, c, d = S.ravel().tolist()
+        (a, b), (c, d) = S.tolist()
         det = a * d - b * c
         return np.array([[d / det, -b / det], [-c / det, a / det]])
+    if m == 3:
+        return np.array(_inv3(S.tolist()))
     if m == 1:
         return 1.0 / S
     return np.linalg.inv(S)
+
+
+def _inv3(M: list) -> list:
+    """Adjugate / determinant of a 3×3 matrix given as nested lists (returns nested lists)."""
+    (a, b, c), (d, e, f), (g, h, i) = M
+    c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * c00 + b * c01 + c * c02
+    return [
+        [c00 / det, (c * h - b * i) / det, (b * f - c * e) / det],
+        [c01 / det, (a * i - c * g) / det, (c * d - a * f) / det],
+        [c02 / det, (b * g - a * h) / det, (a * e - b * d) / det],
+    ]
 
 
 def as_fix(z) -> np.ndarray | None:
@@ -130,13 +148,13 @@ class LinearGaussianBase:
     def predict(self) -> None:
         """x̄ = F x̂, P̄ = F P Fᵀ + Q."""
         F = self._F
-        self.x = _dot(F, self.x)
-        self.P = _dot(_dot(F, self.P), self._FT) + self._Q
+        self.x = F.dot(self.x)
+        self.P = F.dot(self.P).dot(self._FT) + self._Q
 
     def _joseph(self, P: np.ndarray, K: np.ndarray) -> np.ndarray:
         """(I − K H) P (I − K H)ᵀ + K R Kᵀ."""
-        IKH = self._I - _dot(K, self._H)
-        return _dot(_dot(IKH, P), IKH.T) + _dot(_dot(K, self._R), K.T)
+        IKH = self._I - K.dot(self._H)
+        return IKH.dot(P).dot(IKH.T) + K.dot(self._R).dot(K.T)
 
 
 class KF(LinearGaussianBase):
@@ -154,16 +172,16 @@ class KF(LinearGaussianBase):
             return False
         z = np.asarray(z, dtype=float).reshape(-1)
         P, x, H = self.P, self.x, self._H
-        PHT = _dot(P, self._HT)
-        S = _dot(H, PHT) + self._R
+        PHT = P.dot(self._HT)
+        S = H.dot(PHT) + self._R
         Si = inv_small(S)
-        y = z - _dot(H, x)
-        nis = float(_dot(y, _dot(Si, y)))
+        y = z - H.dot(x)
+        nis = float(y.dot(Si.dot(y)))
         if not math.isfinite(nis):  # NaN / inf in z (or a broken S): no fix
             return False
-        K = _dot(PHT, Si)
-        self.x = x + _dot(K, y)
-        IKH = self._I - _dot(K, H)
-        self.P = _dot(_dot(IKH, P), IKH.T) + _dot(_dot(K, self._R), K.T)
+        K = PHT.dot(Si)
+        self.x = x + K.dot(y)
+        IKH = self._I - K.dot(H)
+        self.P = IKH.dot(P).dot(IKH.T) + K.dot(self._R).dot(K.T)
         self.y, self.S, self.K, self.nis = y, S, K, nis
         return True

@@ -302,3 +302,16 @@ def test_registry_errors():
         make("kf")  # no model
     with pytest.raises(TypeError):
         make("kf", model="cv", sigma=2.0)  # not a KF parameter
+
+
+@pytest.mark.parametrize("m", [1, 2, 3, 4])
+def test_inv_small_closed_forms(m):
+    from estimators.kf import inv_small
+
+    rng = np.random.default_rng(m)
+    for _ in range(20):
+        A = rng.normal(size=(m, m))
+        S = A @ A.T + 0.1 * np.eye(m)
+        np.testing.assert_allclose(inv_small(S), np.linalg.inv(S), rtol=1e-10, atol=1e-12)
+        B = rng.normal(size=(m, m)) + 3 * np.eye(m)  # not symmetric: general formula
+        np.testing.assert_allclose(inv_small(B), np.linalg.inv(B), rtol=1e-10, atol=1e-12)
