@@ -174,13 +174,10 @@ def leg_outage(cfg: Config, duration_s: float = 10.0, lead_s: float = 2.0,
                leg: int | None = None) -> tuple[float, float]:
     """An outage window of ``duration_s`` starting ``lead_s`` into a sweep leg long enough to
     hold it (the first such leg, or leg index ``leg`` among them), from the mission reference."""
-    from .reference import Reference
+    from .sim import build_reference
 
     plan = plan_for(cfg)
-    m = cfg.mission
-    ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
-                    takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
-                    rate=cfg.sim.control_hz)
+    ref = build_reference(cfg, plan)
     dt = 1.0 / cfg.sim.control_hz
     t = np.arange(0.0, ref.duration, dt)
     seg = ref.sample_all(t)["seg"]

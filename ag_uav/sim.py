@@ -116,6 +116,19 @@ def build_plan(cfg: Config, fld: Field):
         raise ConfigError(f"mission.swath_m = {m.swath_m}: {e}") from None
 
 
+def build_reference(cfg: Config, plan) -> Reference:
+    """The time-parameterised reference ``simulate`` flies along ``plan``."""
+    m = cfg.mission
+    return Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
+                     takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
+                     rate=cfg.sim.control_hz)
+
+
+def field_outline(fld: Field) -> list[np.ndarray]:
+    """Closed rings of the field boundary and its holes (local metres)."""
+    return [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
+
+
 # -------------------------------------------------------------------------------------- result
 @dataclass
 class RunResult:
@@ -324,10 +337,8 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     fld = build_field(cfg)
     plan = build_plan(cfg, fld)
     m = cfg.mission
-    ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
-                    takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
-                    rate=cfg.sim.control_hz)
-    outline = [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
+    ref = build_reference(cfg, plan)
+    outline = field_outline(fld)
     if log is not None:
         log.scene(0.0, outline[0], outline[1:],
                   [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],

@@ -343,16 +343,11 @@ def _mission_setup(cfg: Config) -> tuple[Any, Any, Any]:
                       cfg.sim.control_hz], default=str)
     hit = _MISSION_CACHE.get(key)
     if hit is None:
-        from .reference import Reference
-        from .sim import build_field, build_plan
+        from .sim import build_field, build_plan, build_reference, field_outline
 
         fld = build_field(cfg)
-        plan = build_plan(cfg, fld)
-        m = cfg.mission
-        ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
-                        takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
-                        rate=cfg.sim.control_hz)
-        outline = [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
+        ref = build_reference(cfg, build_plan(cfg, fld))
+        outline = field_outline(fld)
         if len(_MISSION_CACHE) > 8:
             _MISSION_CACHE.clear()
         hit = _MISSION_CACHE[key] = (fld, ref, outline)
