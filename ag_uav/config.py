@@ -157,8 +157,14 @@ class GpsConfig:
 
 @dataclass
 class EstimatorConfig:
+    source: str = _f("gps", "what the drone localises from: GPS fixes, or bearings to four "
+                     "field landmarks (GPS-denied; ag_uav.bearing)", choices=("gps", "bearings"))
     name: str = _f("true", "what the controller flies on: true state or an estimator",
                    choices=ESTIMATORS)
+    bearing_filter: str = _f("mcc-ekf", "source = bearings: the filter flown on",
+                             choices=("mcc-ekf", "ekf", "ukf"))
+    bearing_noise_scale: float = _f(0.1, "source = bearings: scale of the paper's mixture "
+                                    "bearing noise (1 = 5.7 deg nominal; 0.1 = 0.57 deg)", gt=0)
     shadow: list[str] = _f([], "more estimators fed the very same fixes, for comparison "
                            f"({', '.join(ESTIMATORS[1:])})")
     model: str = _f("cv", "motion model: constant velocity or constant acceleration",

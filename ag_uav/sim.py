@@ -343,6 +343,12 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
         log.scene(0.0, outline[0], outline[1:],
                   [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],
                   m.swath_m, m.altitude_m)
+    if feedback is None and cfg.estimator.source == "bearings":
+        from .bearing import BearingFeedback
+
+        e = cfg.estimator
+        feedback = BearingFeedback.for_config(cfg, filter=e.bearing_filter,
+                                              noise_scale=e.bearing_noise_scale)
     if feedback is None and (cfg.estimator.name != "true" or cfg.estimator.shadow):
         from .estimation import EstimatorFeedback
 

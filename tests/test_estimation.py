@@ -64,3 +64,10 @@ def test_shadow_does_not_change_the_flight():
     b = ag_uav.simulate(_cfg(**{"estimator.name": "kf", "estimator.shadow": ["mckf"],
                                 "sim.max_time_s": 10.0}))
     assert np.array_equal(a.p_true, b.p_true)
+
+
+def test_gps_denied_switch_flies_on_landmark_bearings():
+    cfg = _cfg(**{"estimator.source": "bearings", "sim.max_time_s": 20.0})
+    s = ag_uav.simulate(cfg).summary
+    assert s["gps_denied"] and s["gps_fixes"] == 0 and not s["crashed"]
+    assert s["feedback"] == "mcc-ekf" and s["estimate_rmse_m"] < 2.0
