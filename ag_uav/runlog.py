@@ -42,7 +42,7 @@ Channels (Foxglove well-known schemas where one fits; groups in brackets):
   always      metadata records ``run`` and ``versions`` (and ``summary``), attachments
               ``config.toml`` (and ``summary.json``)
 
-Channel sets: ``"full"`` (all groups; tf/pose/state 20 Hz, every GPS fix, each estimator at
+Channel sets: ``"full"`` (all groups; tf/pose 10 Hz, state 20 Hz, every GPS fix, each estimator at
 <= 10 Hz, camera 10 Hz), ``"light"`` (batch/tuning: pose/tf/state 5 Hz, GPS and estimators 1 Hz, no
 camera), ``"none"`` (no file; every method returns at once), or an iterable of group names.
 ``rates`` overrides per group in Hz (``None`` = every call, ``0`` = group off).
@@ -85,7 +85,7 @@ GROUPS = ("tf", "pose", "state", "gps", "estimator", "scene", "camera")
 
 #: Default rates per channel set, Hz (None = every call).
 PRESETS: dict[str, dict[str, float | None]] = {
-    "full": {"tf": 20.0, "pose": 20.0, "state": 20.0, "gps": None, "estimator": 10.0,
+    "full": {"tf": 10.0, "pose": 10.0, "state": 20.0, "gps": None, "estimator": 10.0,
              "scene": None, "camera": 10.0},
     "light": {"tf": 5.0, "pose": 5.0, "state": 5.0, "gps": 1.0, "estimator": 1.0,
               "scene": None, "camera": 0.0},

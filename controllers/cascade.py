@@ -56,6 +56,7 @@ class PositionCascade:
         self.tilt = 0.0
         self.R_d: Mat3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
         self.torque = (0.0, 0.0, 0.0)
+        self._internal_keys: list | None = None
 
     def reset(self) -> None:
         for a in self.axes:
@@ -96,11 +97,12 @@ class PositionCascade:
 
     def internals(self) -> dict[str, Any]:
         """Per-tick values for logs: per-axis controller state, command, thrust, tilt."""
-        out: dict[str, Any] = {}
-        for name, a in zip("xyz", self.axes, strict=True):
-            for attr in ("E", "dE", "U", "integral", "u"):
-                if hasattr(a, attr):
-                    out[f"{name}.{attr}"] = float(getattr(a, attr))
+        keys = self._internal_keys
+        if keys is None:
+            keys = self._internal_keys = [
+                (f"{name}.{attr}", a, attr) for name, a in zip("xyz", self.axes, strict=True)
+                for attr in ("E", "dE", "U", "integral", "u") if hasattr(a, attr)]
+        out: dict[str, Any] = {k: getattr(a, attr) for k, a, attr in keys}
         out["ax_cmd"], out["ay_cmd"], out["az_cmd"] = self.a_cmd
         out["thrust"] = self.thrust
         out["tilt_cmd"] = self.tilt
