@@ -125,7 +125,7 @@ def test_state_values_rates_and_errors(tmp_path):
     counts = {}
     for topic, _, _ in msgs:
         counts[topic] = counts.get(topic, 0) + 1
-    assert counts["/drone/pose"] == counts["/drone/pose_ref"] == counts["/drone/pose_est"] == 11  # 10 Hz
+    assert counts["/drone/pose"] == counts["/drone/pose_ref"] == counts["/drone/pose_est"] == 11
     assert counts["/tf"] == 11
     with open(path, "rb") as f:
         r = make_reader(f)
