@@ -146,10 +146,6 @@ class RunResult:
     extra: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 
-class Crash(Exception):
-    pass
-
-
 # -------------------------------------------------------------------------------------- the loop
 @dataclass
 class LoopOutput:
