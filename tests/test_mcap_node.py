@@ -121,3 +121,61 @@ def test_real_flight_log_passes_foxglove_reader(node_checker, tmp_path):
     else:  # EGL unavailable: the run goes on and says why
         assert any("no camera frames" in n for n in res.summary["notes"])
     assert (run_dir / "layout.json").exists()
+
+
+_REAL_CHILD = """
+import mmap, struct, sys
+sys.path.insert(0, {root!r})
+import ag_uav
+from ag_uav.runlog import RunLog
+from ag_uav.sim import simulate
+cfg = ag_uav.load_config(None, {{"log.render": False}})
+f = open({shm!r}, "r+b")
+mm = mmap.mmap(f.fileno(), 8)
+pack = struct.Struct("<d").pack
+def hook(t, data):
+    mm[:8] = pack(t + 0.01)   # sim time reached after this tick
+with RunLog({path!r}, channels="full", metadata={{}}, config_toml="") as log:
+    simulate(cfg, log=log, tick_hook=hook)
+"""
+
+
+def test_sigkill_of_a_real_flight_loses_under_a_sim_second(node_checker, tmp_path):
+    """A real MuJoCo mission logging the full channel set, SIGKILLed at a random moment."""
+    import os
+    import signal
+    import struct
+    import sys
+    import time
+
+    from mcap.stream_reader import StreamReader
+
+    root = Path(__file__).resolve().parent.parent
+    shm = tmp_path / "t.bin"
+    shm.write_bytes(b"\0" * 8)
+    path = tmp_path / "run.mcap"
+    t_target = float(np.random.default_rng(7).uniform(20.0, 200.0))
+    proc = subprocess.Popen([sys.executable, "-c", _REAL_CHILD.format(
+        root=str(root), shm=str(shm), path=str(path))], stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while struct.unpack("<d", shm.read_bytes()[:8])[0] < t_target:
+        assert proc.poll() is None, proc.stderr.read().decode()[-2000:]
+        assert time.monotonic() < deadline
+        time.sleep(0.002)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    t_kill = struct.unpack("<d", shm.read_bytes()[:8])[0]
+    times = []
+    with open(path, "rb") as f:
+        try:
+            for rec in StreamReader(f, skip_magic=False).records:
+                if hasattr(rec, "log_time") and hasattr(rec, "channel_id"):
+                    times.append(rec.log_time * 1e-9)
+        except Exception:  # noqa: BLE001 - the unfinished chunk at the cut
+            pass
+    print(f"killed at sim t = {t_kill:.2f} s; last message kept at {max(times):.2f} s")
+    assert times and max(times) >= t_kill - 1.0, (max(times, default=None), t_kill)
+    out = tmp_path / "recovered.mcap"
+    assert recover(path, out) == len(times)
+    res = node_checker(out)
+    assert res["indexed"]["decoded"] == res["indexed"]["messages"] == len(times)
