@@ -58,7 +58,6 @@ Usage (not wired into ``sim.simulate``'s config; pass it as the feedback)::
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -71,7 +70,7 @@ from estimators.models import motion_model
 from estimators.ukf import UKF
 
 from .config import Config
-from .estimation import EstimatorFeedback
+from .estimation import EstimatorFeedback, FilterBank
 from .sim import Feedback
 
 __all__ = ["FILTERS", "BearingFeedback", "default_landmarks"]
@@ -92,7 +91,7 @@ def default_landmarks(cfg: Config, margin_m: float = 10.0) -> np.ndarray:
     return np.array([[x0 - m, y0 - m], [x1 + m, y0 - m], [x1 + m, y1 + m], [x0 - m, y1 + m]])
 
 
-class BearingFeedback(Feedback):
+class BearingFeedback(FilterBank, Feedback):
     """Bearings to known landmarks + radar altimeter + IMU-aided prediction, no GPS.
 
     Parameters
@@ -248,37 +247,7 @@ class BearingFeedback(Feedback):
         if not self.initialised:
             self._init(p_true)
             z = None  # the first epoch's measurement is spent on nothing: we start at home
-        pi, vi = self.pos_idx, self.vel_idx
-        a = None
-        if self.imu:
-            pv = self._v_prev
-            self._v_prev = v_true
-            if pv is not None:
-                s, dt, rng = self.imu_sigma, self.dt, self.imu_rng
-                n = rng.standard_normal(3) if s > 0 else (0.0, 0.0, 0.0)
-                a = [(v_true[i] - pv[i]) / dt + s * n[i] for i in range(3)]
-        hh = 0.5 * self.dt * self.dt
-        for name, f in self.filters.items():
-            f.predict()
-            if a is not None:
-                x = f.x
-                for i in range(3):
-                    x[pi[i]] += hh * a[i]
-                    x[vi[i]] += self.dt * a[i]
-            if z is not None:
-                t0 = time.perf_counter_ns()
-                f.update(z)
-                self.upd_ns[name] += time.perf_counter_ns() - t0
-                self.n_upd[name] += 1
-                if self.log is not None:
-                    x = f.x
-                    self.log.estimator(t, name, x, np.diag(f.P), getattr(f, "y", None),
-                                       pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
-            x = f.x
-            self.est[name].append((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])))
-        x = self.filters[self.primary].x
-        return ((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])),
-                (float(x[vi[0]]), float(x[vi[1]]), float(x[vi[2]])))
+        return self._step_bank(t, z, v_true)
 
     #: per-estimator scores over the mission ticks, exactly as the GPS feedback scores them
     scores = EstimatorFeedback.scores

@@ -75,7 +75,60 @@ def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
     return estimators.make(name, **params)
 
 
-class EstimatorFeedback(Feedback):
+class FilterBank:
+    """What every estimator feedback shares: each control tick, predict every filter of
+    ``self.filters`` one control period ahead (driven by the IMU's acceleration when
+    ``self.imu``), update all of them with the same measurement ``z`` (timed, logged), and
+    record each filter's position estimate for the scores.
+
+    Needs the attributes ``filters``, ``pos_idx``, ``vel_idx``, ``dt``, ``imu``, ``imu_sigma``,
+    ``imu_rng``, ``_v_prev``, ``est``, ``upd_ns``, ``n_upd``, ``log`` and ``primary``.
+    """
+
+    def _imu_accel(self, v_true) -> list[float] | None:
+        """Mean acceleration over the last control period (what an IMU integrates) plus white
+        accelerometer noise; None without an IMU or on the first tick."""
+        if not self.imu:
+            return None
+        pv = self._v_prev
+        self._v_prev = v_true
+        if pv is None:
+            return None
+        s, dt = self.imu_sigma, self.dt
+        n = self.imu_rng.standard_normal(3) if s > 0 else (0.0, 0.0, 0.0)
+        return [(v_true[i] - pv[i]) / dt + s * n[i] for i in range(3)]
+
+    def _step_bank(self, t: float, z, v_true):
+        """Predict (+ IMU input ``B a``) and update every filter; the primary's (p, v)."""
+        pi, vi = self.pos_idx, self.vel_idx
+        a = self._imu_accel(v_true)
+        dt = self.dt
+        hh = 0.5 * dt * dt
+        for name, f in self.filters.items():
+            f.predict()
+            if a is not None:
+                x = f.x
+                for i in range(3):
+                    x[pi[i]] += hh * a[i]
+                    x[vi[i]] += dt * a[i]
+            if z is not None:
+                t0 = time.perf_counter_ns()
+                f.update(z)
+                self.upd_ns[name] += time.perf_counter_ns() - t0
+                self.n_upd[name] += 1
+                if self.log is not None:
+                    x = f.x
+                    self.log.estimator(t, name, x, np.diag(f.P), getattr(f, "y", None),
+                                       pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
+            x = f.x
+            self.est[name].append((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])))
+        if self.primary not in self.filters:
+            return None
+        x = self.filters[self.primary].x
+        return ((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])),
+                (float(x[vi[0]]), float(x[vi[1]]), float(x[vi[2]])))
+
+class EstimatorFeedback(FilterBank, Feedback):
     """GPS + primary estimator (+ shadows) behind the feedback seam."""
 
     def __init__(self, cfg: Config, seed: np.random.SeedSequence,
@@ -127,7 +180,6 @@ class EstimatorFeedback(Feedback):
 
     def update(self, t, p_true, v_true):
         z = self.gps.measure(t, p_true)
-        filters = self.filters
         if z is not None and self.radar:
             z[2] = p_true[2] + self.radar_sigma * self.radar_rng.standard_normal()
         if z is not None:
@@ -139,41 +191,8 @@ class EstimatorFeedback(Feedback):
                 return p_true, v_true  # no fix yet: nothing to fly on (only at t = 0)
             self._init(z)
             z = None
-        pi, vi = self.pos_idx, self.vel_idx
-        a = None
-        if self.imu:
-            # mean acceleration over the last control period (what an IMU integrates), plus
-            # accelerometer noise; it drives the prediction as a known input B·a
-            pv = self._v_prev
-            self._v_prev = v_true
-            if pv is not None:
-                s, dt, rng = self.imu_sigma, self.dt, self.imu_rng
-                n = rng.standard_normal(3) if s > 0 else (0.0, 0.0, 0.0)
-                a = [(v_true[i] - pv[i]) / dt + s * n[i] for i in range(3)]
-        for name, f in filters.items():
-            f.predict()
-            if a is not None:
-                x = f.x
-                h = 0.5 * self.dt * self.dt
-                for i in range(3):
-                    x[pi[i]] += h * a[i]
-                    x[vi[i]] += self.dt * a[i]
-            if z is not None:
-                t0 = time.perf_counter_ns()
-                f.update(z)
-                self.upd_ns[name] += time.perf_counter_ns() - t0
-                self.n_upd[name] += 1
-                if self.log is not None:
-                    x = f.x
-                    self.log.estimator(t, name, x, np.diag(f.P), getattr(f, "y", None),
-                                       pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
-            x = f.x
-            self.est[name].append((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])))
-        if self.primary == "true":
-            return p_true, v_true
-        x = filters[self.primary].x
-        return ((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])),
-                (float(x[vi[0]]), float(x[vi[1]]), float(x[vi[2]])))
+        pv = self._step_bank(t, z, v_true)
+        return (p_true, v_true) if pv is None else pv
 
     def scores(self, p_true: np.ndarray, p_ref: np.ndarray, mission: slice) -> dict[str, Any]:
         """Per-estimator scores over ``mission`` ticks (arrays aligned with the loop record)."""
