@@ -42,7 +42,6 @@ to ``--out``.
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import time
 from dataclasses import dataclass
@@ -53,6 +52,8 @@ import numpy as np
 
 from estimators.information import InformationKF, StateDependentNoiseKF
 from estimators.particle import ParticleFilter
+
+from . import write_csv
 
 NAME = "langevin"
 HELP = ("kfuea paper §3: double-well Langevin target seen as range + azimuth, nRMSE vs SNR for "
@@ -232,14 +233,6 @@ def one_run(s: Setup, snr: float, seed: int) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------------------------ output
-def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
 
 
 def summarise(results: list[dict[str, Any]], snrs: list[float]) -> list[dict[str, Any]]:

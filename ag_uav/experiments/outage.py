@@ -14,7 +14,6 @@ isolates the estimator's part from the closed loop's.
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 from pathlib import Path
 from typing import Any
@@ -67,6 +66,7 @@ def main(args: argparse.Namespace) -> int:
     from ..config import ConfigError, load_config
     from ..executor import make_executor
     from ..route import ROUTE_NAME, leg_outage
+    from . import write_csv
 
     if args.runs < 1:
         raise ConfigError(f"--runs = {args.runs}: must be >= 1")
@@ -88,11 +88,7 @@ def main(args: argparse.Namespace) -> int:
         rows = ex.map(_one, tasks)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    cols = sorted({k for r in rows for k in r})
-    with open(out / "results.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=cols)
-        w.writeheader()
-        w.writerows(rows)
+    write_csv(out / "results.csv", rows)
     t = Table(title=f"{args.duration:g} s GPS outage on a sweep leg ({args.gps}, "
                     f"window {window[0]:.1f}-{window[1]:.1f} s, {args.runs} seeds; mean ± 95 % CI)")
     for c in ("flies on", "peak cross-track [m]", "RMS cross-track [m]",

@@ -44,7 +44,6 @@ time) and ``route_prediction.png`` (mean error curves and one run's trajectories
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import time
 from dataclasses import dataclass
@@ -56,6 +55,8 @@ import numpy as np
 from estimators.kf import KF
 from estimators.pso_r import tune_r
 from estimators.route import Route, RouteConstrainedKF, singer_model
+
+from . import write_csv
 
 NAME = "route-prediction"
 HELP = ("Zhou et al. Table 1: 9 s position prediction on a two-leg route with KF, PSO-KF "
@@ -256,14 +257,6 @@ HEADER = ["filter", "1 s (m)", "paper", "5 s (m)", "paper", "9 s (m)", "paper", 
           "σ_v used (m/s)"]
 
 
-def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with path.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)
 
 
 def plot(results: list[dict[str, Any]], s: Setup, path: Path) -> None:
