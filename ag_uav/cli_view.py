@@ -26,7 +26,7 @@ def _plot(args: argparse.Namespace) -> int:
 def _video(args: argparse.Namespace) -> int:
     from .viewing import video
 
-    print(video(args.run, args.out, camera=args.camera, fps=args.fps))
+    print(video(args.run, args.out, camera=args.camera, fps=args.fps or None))
     return 0
 
 
@@ -58,7 +58,10 @@ def register(sub) -> None:
     v.add_argument("run", help=run_help)
     v.add_argument("-o", "--out", required=True, metavar="OUT.mp4")
     v.add_argument("--camera", help="camera name (default: all, side by side)")
-    v.add_argument("--fps", type=float, default=None, help="frames per second of the video")
+    v.add_argument("--fps", type=float, default=20.0,
+                   help="frames per second of the video (default 20: with frames logged at "
+                        "2 Hz of sim time the video plays 10x faster than the flight); 0 = the "
+                        "logged rate, i.e. real time")
     v.set_defaults(func=_video)
 
     r = sub.add_parser("recover", help="turn a truncated MCAP (killed run) into an indexed one",
