@@ -85,6 +85,11 @@ def build_vehicle(cfg: Config, field_outline: list[np.ndarray] | None = None) ->
                     contype=0, conaffinity=0, material="boundary", group=1)
         del mat
     model = spec.compile()
+    # MuJoCo's clipping planes are relative to the model extent, which the field geoms make
+    # ~100 m: pin them in metres (5 cm near, 800 m far) or the cameras clip the ground and the drone
+    ext = float(model.stat.extent)
+    model.vis.map.znear = 0.05 / ext
+    model.vis.map.zfar = 800.0 / ext
     body_id = model.body("drone").id
     # inertia tensor in body axes from the principal moments and their frame
     I_p = np.diag(model.body_inertia[body_id])

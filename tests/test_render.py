@@ -96,3 +96,38 @@ def test_unknown_camera_and_unavailable_backend(monkeypatch):
     with pytest.raises(RenderUnavailable) as ei:
         Renderer(m, 32, 24, ("chase",))
     assert "\n" not in str(ei.value) and "eglInitialize failed" in str(ei.value)
+
+
+def test_real_model_cameras_see_ground_and_drone():
+    """Regression: MuJoCo's clip planes are relative to the model extent, which the field
+    outline geoms make ~100 m; unpinned, the down camera saw only sky and the chase camera lost
+    the drone and the near ground."""
+    import mujoco
+    import numpy as np
+
+    from ag_uav.config import Config
+    from ag_uav.render import Renderer, RenderUnavailable
+    from ag_uav.sim import build_field, field_outline
+    from ag_uav.vehicle import build_vehicle
+
+    cfg = Config()
+    veh = build_vehicle(cfg, field_outline(build_field(cfg)))
+    d = mujoco.MjData(veh.model)
+    d.qpos[:3] = (20.0, 30.0, 3.0)
+    d.qpos[3] = 1.0
+    mujoco.mj_forward(veh.model, d)
+    try:
+        r = Renderer(veh.model, 160, 120, ("chase", "down"))
+    except RenderUnavailable as e:
+        pytest.skip(str(e))
+    down, chase = r.rgb(d, "down"), r.rgb(d, "chase")
+    r.close()
+    # crop rows below: green-dominant, textured; chase: ground in the lower half, drone centred
+    assert down[..., 1].mean() > down[..., 2].mean() and down.std() > 10
+    assert chase[60:].mean() > 40
+    # hide the drone's geoms: the centre of the chase view must change (the drone is there)
+    veh.model.geom_rgba[veh.model.geom_bodyid == veh.body_id, 3] = 0.0
+    hidden = Renderer(veh.model, 160, 120, ("chase",))
+    empty = hidden.rgb(d, "chase")
+    hidden.close()
+    assert np.abs(chase[50:70, 70:90].astype(int) - empty[50:70, 70:90]).mean() > 10
