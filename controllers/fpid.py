@@ -127,30 +127,8 @@ class _FuzzyPID(ControllerBase):
         elif dE < -1.0:
             dE = -1.0
         U = self.core(E, dE)
-        K1 = self.K1
-        I_old = self.integral
-        I = I_old + dt * U
-        lim = self.i_limit
-        if lim is not None and K1 != 0.0:
-            imax = lim / abs(K1)
-            if I > imax:
-                I = imax
-            elif I < -imax:
-                I = -imax
         u_pd = self.K0 * U
-        u = u_pd + K1 * I
-        if u > self._umax:
-            if K1 * (I - I_old) > 0.0:  # integration drives further into saturation
-                I = I_old
-                u = u_pd + K1 * I
-            if u > self._umax:
-                u = self._umax
-        elif u < self._umin:
-            if K1 * (I - I_old) < 0.0:
-                I = I_old
-                u = u_pd + K1 * I
-            if u < self._umin:
-                u = self._umin
+        I, u = self._integrate(dt * U, self.K1, u_pd)
         self.integral = I
         self.e = error
         self.de = de
@@ -158,7 +136,7 @@ class _FuzzyPID(ControllerBase):
         self.dE = dE
         self.U = U
         self.u_pd = u_pd
-        self.u_pi = K1 * I
+        self.u_pi = self.K1 * I
         self.u = u
         return u
 

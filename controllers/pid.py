@@ -106,6 +106,38 @@ class ControllerBase:
         return d
 
 
+    def _integrate(self, dI: float, K: float, u_rest: float) -> tuple[float, float]:
+        """Advance the integral by ``dI`` with anti-windup; returns (integral, output).
+
+        The output is ``u_rest + K·I``. The integral is clamped so that |K·I| ≤ ``i_limit``;
+        where the output saturates, the step is dropped if it drives further into the limit
+        (conditional integration), and the output is clamped to ``u_limit``.
+        """
+        I_old = self.integral
+        I = I_old + dI
+        lim = self.i_limit
+        if lim is not None and K != 0.0:
+            imax = lim / abs(K)
+            if I > imax:
+                I = imax
+            elif I < -imax:
+                I = -imax
+        u = u_rest + K * I
+        if u > self._umax:
+            if K * (I - I_old) > 0.0:  # integration drives further into saturation
+                I = I_old
+                u = u_rest + K * I
+            if u > self._umax:
+                u = self._umax
+        elif u < self._umin:
+            if K * (I - I_old) < 0.0:
+                I = I_old
+                u = u_rest + K * I
+            if u < self._umin:
+                u = self._umin
+        return I, u
+
+
 class PID(ControllerBase):
     """Parallel-form discrete PID: u = Kp·e + Ki·∫e + Kd·ė (see module docstring).
 
@@ -144,30 +176,9 @@ class PID(ControllerBase):
         """One control tick; returns the (clamped) control output."""
         de = self._derivative(error, dt, measurement, error_rate)
         Ki = self.Ki
-        I_old = self.integral
-        I = I_old + dt * error
-        lim = self.i_limit
-        if lim is not None and Ki != 0.0:
-            imax = lim / abs(Ki)
-            if I > imax:
-                I = imax
-            elif I < -imax:
-                I = -imax
         p = self.Kp * error
         d = self.Kd * de
-        u = p + Ki * I + d
-        if u > self._umax:
-            if Ki * (I - I_old) > 0.0:
-                I = I_old
-                u = p + Ki * I + d
-            if u > self._umax:
-                u = self._umax
-        elif u < self._umin:
-            if Ki * (I - I_old) < 0.0:
-                I = I_old
-                u = p + Ki * I + d
-            if u < self._umin:
-                u = self._umin
+        I, u = self._integrate(dt * error, Ki, p + d)
         self.integral = I
         self.e = error
         self.de = de
