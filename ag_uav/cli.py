@@ -25,17 +25,9 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
 
 
 def _overrides(args: argparse.Namespace) -> dict:
-    import tomllib
+    from .config import parse_set_items
 
-    out: dict = {}
-    for item in args.set:
-        if "=" not in item:
-            raise ConfigError(f'--set "{item}": expected KEY=VALUE')
-        k, v = item.split("=", 1)
-        try:
-            out[k.strip()] = tomllib.loads(f"v = {v}")["v"]
-        except tomllib.TOMLDecodeError:
-            out[k.strip()] = v  # a bare string
+    out = parse_set_items(args.set)
     if getattr(args, "seed", None) is not None:
         if args.seed < 0:
             raise ConfigError(f"--seed = {args.seed}: must be >= 0")

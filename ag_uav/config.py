@@ -344,6 +344,21 @@ def config_from_dict(data: dict[str, Any]) -> Config:
     return cfg
 
 
+def parse_set_items(items: list[str]) -> dict[str, Any]:
+    """``["wind.speed_mps=5", ...]`` (``--set`` arguments) -> dotted-key overrides; the value is
+    read as TOML, or kept as a bare string."""
+    out: dict[str, Any] = {}
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f'--set "{item}": expected KEY=VALUE')
+        k, v = item.split("=", 1)
+        try:
+            out[k.strip()] = tomllib.loads(f"v = {v}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[k.strip()] = v  # a bare string
+    return out
+
+
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> Config:
     """Load a TOML config file (``None`` = defaults) and apply dotted-key ``overrides``."""
     data: dict[str, Any] = {}

@@ -66,10 +66,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def build_spec(args: argparse.Namespace, out: Path):
-    import tomllib
-
     from ..batch import spec_from_dict, write_rect_field
-    from ..config import ConfigError
+    from ..config import ConfigError, parse_set_items
 
     if args.runs < 1:
         raise ConfigError(f"--runs = {args.runs}: must be >= 1")
@@ -80,14 +78,7 @@ def build_spec(args: argparse.Namespace, out: Path):
     ests = [e.strip() for e in args.estimators.split(",") if e.strip()]
     base: dict[str, Any] = {"mission.field": field, "gps.preset": args.gps_preset,
                             "wind.speed_mps": args.wind, "wind.turbulence": args.turbulence}
-    for item in args.set:
-        if "=" not in item:
-            raise ConfigError(f'--set "{item}": expected KEY=VALUE')
-        k, v = item.split("=", 1)
-        try:
-            base[k.strip()] = tomllib.loads(f"v = {v}")["v"]
-        except tomllib.TOMLDecodeError:
-            base[k.strip()] = v
+    base.update(parse_set_items(args.set))
     return spec_from_dict({"name": "table2", "base": base,
                            "axes": {"estimator.name": ests, "seed": list(range(args.runs))}},
                           base_dir=Path.cwd())
