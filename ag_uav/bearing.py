@@ -70,7 +70,7 @@ from estimators.models import motion_model
 from estimators.ukf import UKF
 
 from .config import Config
-from .estimation import EstimatorFeedback, FilterBank
+from .estimation import EstimatorFeedback, FilterBank, process_noise
 from .sim import Feedback
 
 __all__ = ["FILTERS", "BearingFeedback", "default_landmarks"]
@@ -153,7 +153,7 @@ class BearingFeedback(FilterBank, Feedback):
         self.init_offset = np.asarray(init_offset_m, dtype=float).reshape(3)
 
         self.dt = 1.0 / cfg.sim.control_hz
-        mdl = motion_model("cv", 3, self.dt, q=e.q)
+        mdl = motion_model("cv", 3, self.dt, q=process_noise(cfg)[0])
         self.F, self.Q = mdl.F, mdl.Q
         self.pos_idx, self.vel_idx = [0, 2, 4], [1, 3, 5]
         self.n = 6
@@ -165,16 +165,11 @@ class BearingFeedback(FilterBank, Feedback):
         self.names = [filter] + [s for s in dict.fromkeys(shadow) if s != filter]
         self.filters = {n: self._make(n) for n in self.names}
         self.initialised = False
-        self.imu = e.imu
-        self.imu_sigma = e.imu_sigma_mps2
-        self.imu_rng = np.random.default_rng(imu_seed)
-        self._v_prev: tuple[float, float, float] | None = None
+        self._setup_imu(cfg, imu_seed)
         self._k_next = 0  # index of the next measurement epoch (t = k / rate_hz)
         self.n_meas = 0
         self.n_outliers = 0
-        self.est: dict[str, list[tuple[float, float, float]]] = {n: [] for n in self.names}
-        self.upd_ns = dict.fromkeys(self.names, 0)
-        self.n_upd = dict.fromkeys(self.names, 0)
+        self._setup_records()
         self.log = None
 
     @classmethod
@@ -238,7 +233,7 @@ class BearingFeedback(FilterBank, Feedback):
             f.P = P0.copy()
         self.initialised = True
 
-    def update(self, t, p_true, v_true):
+    def update(self, t, p_true, v_true, imu=None):
         z = None
         if t + 1e-9 >= self._k_next / self.rate_hz:
             self._k_next += 1
@@ -247,7 +242,7 @@ class BearingFeedback(FilterBank, Feedback):
         if not self.initialised:
             self._init(p_true)
             z = None  # the first epoch's measurement is spent on nothing: we start at home
-        return self._step_bank(t, z, v_true)
+        return self._step_bank(t, z, v_true, imu)
 
     #: per-estimator scores over the mission ticks, exactly as the GPS feedback scores them
     scores = EstimatorFeedback.scores

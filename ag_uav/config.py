@@ -81,7 +81,8 @@ class SimConfig:
     timestep_s: float = _f(0.002, "MuJoCo physics step (s)", gt=0, le=0.01)
     control_hz: float = _f(100.0, "control rate (Hz); must divide the physics rate", gt=0,
                            le=1000)
-    max_time_s: float = _f(1800.0, "hard cap on simulated time (s)", gt=0)
+    max_time_s: float = _f(21600.0, "hard cap on simulated time (s); a mission cut by it "
+                           "says so in its summary", gt=0)
     hover_after_s: float = _f(3.0, "hover time at the end of the path (s)", ge=0)
     takeoff: bool = _f(True, "start on the ground and climb to spray altitude")
 
@@ -144,7 +145,7 @@ ESTIMATORS = ("true", "kf", "mckf", "pca-kf", "pca-mckf", "kf-bias", "kf-diff")
 
 @dataclass
 class GpsConfig:
-    preset: str = _f("perfect", "GPS error preset (see ag_uav.gps)", choices=GPS_PRESETS)
+    preset: str = _f("rtk", "GPS error preset (see ag_uav.gps)", choices=GPS_PRESETS)
     rate_hz: float = _f(0.0, "fix rate (Hz); 0 = the preset's", ge=0, le=100)
     multipath_prob: float = _f(0.0, "extra multipath spikes: probability per fix", ge=0, le=1)
     multipath_amplitude_m: float = _f(5.0, "extra multipath spikes: amplitude (m)", ge=0)
@@ -159,28 +160,68 @@ class GpsConfig:
 class EstimatorConfig:
     source: str = _f("gps", "what the drone localises from: GPS fixes, or bearings to four "
                      "field landmarks (GPS-denied; ag_uav.bearing)", choices=("gps", "bearings"))
-    name: str = _f("true", "what the controller flies on: true state or an estimator",
+    name: str = _f("pca-mckf", "what the controller flies on: true state or an estimator",
                    choices=ESTIMATORS)
     bearing_filter: str = _f("mcc-ekf", "source = bearings: the filter flown on",
                              choices=("mcc-ekf", "ekf", "ukf"))
     bearing_noise_scale: float = _f(0.1, "source = bearings: scale of the paper's mixture "
                                     "bearing noise (1 = 5.7 deg nominal; 0.1 = 0.57 deg)", gt=0)
-    shadow: list[str] = _f([], "more estimators fed the very same fixes, for comparison "
+    shadow: list[str] = _f(["kf", "mckf", "pca-kf"], "more estimators fed the very same fixes, "
+                           "for comparison "
                            f"({', '.join(ESTIMATORS[1:])})")
-    model: str = _f("cv", "motion model: constant velocity or constant acceleration",
-                    choices=("cv", "ca"))
-    q: float = _f(0.05, "process noise: white acceleration (cv) or jerk (ca) PSD per axis "
-                  "(m^2/s^3); with imu = false the model alone must carry the manoeuvres (~2)",
-                  gt=0)
+    model: str = _f("cvb", "motion model: constant velocity, constant acceleration, or "
+                    "constant velocity + IMU input bias states (estimators.models)",
+                    choices=("cv", "ca", "cvb"))
+    q: float | str = _f("auto", "process noise: white acceleration (cv) or jerk (ca) PSD per "
+                        "axis (m^2/s^3), or \"auto\": derived from the [imu] noise figures "
+                        "(ag_uav.imu.process_noise_psd); with imu = false the model alone must "
+                        "carry the manoeuvres (~2)", gt=0)
+    q_bias: float | str = _f("auto", "model cvb: PSD of the input-bias random walk per axis "
+                             "(m^2/s^5), or \"auto\" (from [imu])", gt=0)
     r_scale: float = _f(1.0, "R = r_scale x the GPS preset's nominal error variance per axis",
                         gt=0)
-    imu: bool = _f(True, "accelerometer-aided prediction: the measured acceleration drives "
-                   "the motion model between fixes (GPS/INS loose coupling)")
-    imu_sigma_mps2: float = _f(0.1, "accelerometer white noise std per axis (m/s^2)", ge=0)
+    imu: bool = _f(True, "IMU-aided prediction: the accelerometer's specific force, rotated "
+                   "by the attitude estimate, drives the motion model between fixes (GPS/INS "
+                   "loose coupling); see [imu]")
     sigma: float = _f(2.0, "MCKF kernel bandwidth (dimensionless, whitened residuals)", gt=0)
     max_iter: int = _f(10, "MCKF fixed-point iteration cap", ge=1, le=100)
     window: int = _f(20, "PCA window N (fixes)", ge=3, le=1000)
     pca_mode: str = _f("hankel", "PCA reading", choices=("hankel", "channels"))
+
+
+@dataclass
+class ImuConfig:
+    """The MEMS IMU at the vehicle's ``imu`` site and the attitude estimate (see ag_uav.imu).
+
+    Defaults: TDK InvenSense ICM-42688-P class (a common flight-controller IMU): datasheet
+    DS-000347 rev 1.8, Table 1-2. Residual biases are what is left after the flight controller's
+    calibrations (the raw board-level tolerances are +-20 mg and +-0.5 dps)."""
+
+    model: str = _f("mems", "mems: MuJoCo accelerometer + gyro with noise and biases, attitude "
+                    "estimate with a Gauss-Markov error; ideal: the true acceleration (finite "
+                    "difference of the velocity) + white noise and the true attitude",
+                    choices=("mems", "ideal"))
+    accel_noise_density_ug: float = _f(70.0, "accelerometer noise density (ug/sqrt(Hz); "
+                                       "ICM-42688-P: 70)", ge=0, le=1e5)
+    gyro_noise_density_mdps: float = _f(2.8, "gyro noise density (mdps/sqrt(Hz); ICM-42688-P: "
+                                        "2.8)", ge=0, le=1e5)
+    vibration_sigma_mps2: float = _f(0.1, "airframe vibration left after the IMU's low-pass, "
+                                     "white, per axis (m/s^2; engineering judgement, PX4's "
+                                     "EKF2_ACC_NOISE of 0.35 covers vibration too); also the "
+                                     "white noise of the ideal model", ge=0, le=10)
+    accel_bias_mg: float = _f(5.0, "accelerometer turn-on bias, 1 sigma per axis, left after "
+                              "calibration (mg; raw board-level tolerance +-20 mg)", ge=0,
+                              le=200)
+    accel_bias_rw: float = _f(3e-4, "accelerometer bias random walk ((m/s^2)/sqrt(s))", ge=0,
+                              le=1)
+    gyro_bias_dps: float = _f(0.05, "gyro turn-on bias, 1 sigma per axis, left after the "
+                              "at-rest calibration (deg/s; raw tolerance +-0.5)", ge=0, le=10)
+    gyro_bias_rw: float = _f(1e-3, "gyro bias random walk ((deg/s)/sqrt(s))", ge=0, le=1)
+    tilt_error_deg: float = _f(0.3, "attitude estimate: roll/pitch error, 1 sigma (deg)", ge=0,
+                               le=10)
+    yaw_error_deg: float = _f(1.0, "attitude estimate: yaw error, 1 sigma (deg)", ge=0, le=30)
+    attitude_error_tau_s: float = _f(30.0, "attitude estimate: correlation time of the "
+                                     "Gauss-Markov error (s)", gt=0, le=3600)
 
 
 @dataclass
@@ -208,6 +249,8 @@ class Config:
     gps: GpsConfig = field(default_factory=GpsConfig, metadata={"help": "GPS sensor and errors"})
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig,
                                        metadata={"help": "state estimation in the loop"})
+    imu: ImuConfig = field(default_factory=ImuConfig,
+                           metadata={"help": "MEMS IMU and attitude estimate"})
     log: LogConfig = field(default_factory=LogConfig, metadata={"help": "MCAP log and renders"})
 
     def to_dict(self) -> dict[str, Any]:
@@ -325,6 +368,10 @@ def _validate(cfg: Config) -> None:
     d = cfg.mission.direction_deg
     if isinstance(d, str) and d != "auto":
         raise ConfigError(f'mission.direction_deg = "{d}": expected a number or "auto"')
+    for key in ("q", "q_bias"):
+        q = getattr(cfg.estimator, key)
+        if isinstance(q, str) and q != "auto":
+            raise ConfigError(f'estimator.{key} = "{q}": expected a number > 0 or "auto"')
     steps = 1.0 / (cfg.sim.timestep_s * cfg.sim.control_hz)
     if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
         raise ConfigError(f"sim.control_hz = {cfg.sim.control_hz}: must divide the physics rate "

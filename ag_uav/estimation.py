@@ -40,6 +40,7 @@ import estimators
 from .config import Config, ConfigError
 from .gps import GpsSensor
 from .sim import Feedback
+from .vehicle import G
 
 R_FLOOR = 1e-4
 
@@ -63,11 +64,32 @@ def make_gps(cfg: Config, seed: np.random.SeedSequence) -> GpsSensor:
         raise ConfigError(f"gps.overrides = {ov!r}: {e}") from None
 
 
+def process_noise(cfg: Config) -> tuple[float, float, float]:
+    """``(q, q_bias, bias_var0)`` of the bank's motion model: ``estimator.q`` (and ``q_bias``),
+    or with ``"auto"`` what the IMU's figures imply (:func:`ag_uav.imu.process_noise_psd`);
+    without IMU aiding, ``q`` = 2 m²/s³ (the motion model alone must then carry the manoeuvres).
+    ``bias_var0`` is the initial variance of the ``"cvb"`` model's bias states."""
+    from .imu import process_noise_psd
+
+    e = cfg.estimator
+    q, q_bias, var0 = process_noise_psd(cfg.imu, cfg.sim.control_hz,
+                                        bias_states=e.model == "cvb")
+    if not e.imu and isinstance(e.q, str):
+        q = 2.0
+    if not isinstance(e.q, str):
+        q = float(e.q)
+    if not isinstance(e.q_bias, str):
+        q_bias = float(e.q_bias)
+    return q, q_bias, var0
+
+
 def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
     e = cfg.estimator
     dt = 1.0 / cfg.sim.control_hz
-    params: dict[str, Any] = {"model": e.model, "dim": 3, "dt": dt, "q": e.q,
-                              "r": list(r_diag)}
+    q, q_bias, _ = process_noise(cfg)
+    params: dict[str, Any] = {"model": e.model, "dim": 3, "dt": dt, "q": q, "r": list(r_diag)}
+    if e.model == "cvb":
+        params["q_bias"] = q_bias
     if "mckf" in name:
         params.update(sigma=e.sigma, max_iter=e.max_iter)
     if name.startswith("pca"):
@@ -85,11 +107,39 @@ class FilterBank:
     ``imu_rng``, ``_v_prev``, ``est``, ``upd_ns``, ``n_upd``, ``log`` and ``primary``.
     """
 
-    def _imu_accel(self, v_true) -> list[float] | None:
-        """Mean acceleration over the last control period (what an IMU integrates) plus white
-        accelerometer noise; None without an IMU or on the first tick."""
+    #: the loop passes the MEMS IMU's reading to ``update`` (``imu=(f̃, R̂)``)
+    wants_imu = False
+
+    def _setup_records(self) -> None:
+        """Per-filter records for the scores: estimates per tick, update costs, consistency."""
+        names = self.names
+        self.est: dict[str, list[tuple[float, float, float]]] = {n: [] for n in names}
+        self.upd_ns = dict.fromkeys(names, 0)
+        self.n_upd = dict.fromkeys(names, 0)
+        self.cons: dict[str, list[tuple[int, float, np.ndarray]]] = {n: [] for n in names}
+        self._pp = np.ix_(self.pos_idx, self.pos_idx)
+
+    def _setup_imu(self, cfg: Config, imu_seed) -> None:
+        self.imu = cfg.estimator.imu
+        self.wants_imu = self.imu and cfg.imu.model == "mems"
+        self.imu_sigma = cfg.imu.vibration_sigma_mps2
+        self.imu_rng = np.random.default_rng(imu_seed)
+        self._v_prev = None
+        self.dt = 1.0 / cfg.sim.control_hz
+
+    def _imu_accel(self, v_true, imu=None) -> list[float] | None:
+        """World-frame acceleration input of the prediction, or None without IMU aiding.
+
+        MEMS (``imu = (f̃, R̂)`` from the loop): ``â = R̂ f̃ + g``. Ideal: the mean acceleration
+        over the last control period (finite difference of the true velocity) plus white noise
+        (None on the first tick)."""
         if not self.imu:
             return None
+        if imu is not None:
+            f, R = imu
+            return [R[0] * f[0] + R[1] * f[1] + R[2] * f[2],
+                    R[3] * f[0] + R[4] * f[1] + R[5] * f[2],
+                    R[6] * f[0] + R[7] * f[1] + R[8] * f[2] - G]
         pv = self._v_prev
         self._v_prev = v_true
         if pv is None:
@@ -98,10 +148,10 @@ class FilterBank:
         n = self.imu_rng.standard_normal(3) if s > 0 else (0.0, 0.0, 0.0)
         return [(v_true[i] - pv[i]) / dt + s * n[i] for i in range(3)]
 
-    def _step_bank(self, t: float, z, v_true):
+    def _step_bank(self, t: float, z, v_true, imu=None):
         """Predict (+ IMU input ``B a``) and update every filter; the primary's (p, v)."""
         pi, vi = self.pos_idx, self.vel_idx
-        a = self._imu_accel(v_true)
+        a = self._imu_accel(v_true, imu)
         dt = self.dt
         hh = 0.5 * dt * dt
         for name, f in self.filters.items():
@@ -116,6 +166,9 @@ class FilterBank:
                 f.update(z)
                 self.upd_ns[name] += time.perf_counter_ns() - t0
                 self.n_upd[name] += 1
+                # consistency record: tick index of this estimate, NIS, position covariance
+                self.cons[name].append((len(self.est[name]), float(getattr(f, "nis", np.nan)),
+                                        f.P[self._pp].copy()))
                 if self.log is not None:
                     x = f.x
                     self.log.estimator(t, name, x, np.diag(f.P), getattr(f, "y", None),
@@ -157,14 +210,8 @@ class EstimatorFeedback(FilterBank, Feedback):
         self.vel_idx = list(mdl.vel_idx) if mdl is not None else [1, 3, 5]
         self.n = mdl.n if mdl is not None else 6
         self.initialised = False
-        self.imu = cfg.estimator.imu
-        self.imu_sigma = cfg.estimator.imu_sigma_mps2
-        self.imu_rng = np.random.default_rng(imu_seed)
-        self.dt = 1.0 / cfg.sim.control_hz
-        self._v_prev: tuple[float, float, float] | None = None
-        self.est: dict[str, list[tuple[float, float, float]]] = {n: [] for n in names}
-        self.upd_ns = dict.fromkeys(names, 0)
-        self.n_upd = dict.fromkeys(names, 0)
+        self._setup_imu(cfg, imu_seed)
+        self._setup_records()
         self.fixes: list[tuple[float, float, float, float]] = []
         self.log = None
 
@@ -173,12 +220,15 @@ class EstimatorFeedback(FilterBank, Feedback):
         x0[self.pos_idx] = z
         P0 = np.eye(self.n) * 4.0
         P0[self.pos_idx, self.pos_idx] = self.r_diag
+        if self.cfg.estimator.model == "cvb":   # bias states: the IMU's turn-on figures
+            bi = [i + 2 for i in self.pos_idx]
+            P0[bi, bi] = process_noise(self.cfg)[2]
         for f in self.filters.values():
             f.x = x0.copy()
             f.P = P0.copy()
         self.initialised = True
 
-    def update(self, t, p_true, v_true):
+    def update(self, t, p_true, v_true, imu=None):
         z = self.gps.measure(t, p_true)
         if z is not None and self.radar:
             z[2] = p_true[2] + self.radar_sigma * self.radar_rng.standard_normal()
@@ -191,29 +241,54 @@ class EstimatorFeedback(FilterBank, Feedback):
                 return p_true, v_true  # no fix yet: nothing to fly on (only at t = 0)
             self._init(z)
             z = None
-        pv = self._step_bank(t, z, v_true)
+        pv = self._step_bank(t, z, v_true, imu)
         return (p_true, v_true) if pv is None else pv
 
     def scores(self, p_true: np.ndarray, p_ref: np.ndarray, mission: slice) -> dict[str, Any]:
-        """Per-estimator scores over ``mission`` ticks (arrays aligned with the loop record)."""
+        """Per-estimator scores over ``mission`` ticks (arrays aligned with the loop record).
+
+        ``estimate_rmse_m`` / ``estimate_max_m``: horizontal |p̂ − p|. ``nees_mean``: mean of
+        ``eᵀ P_pp⁻¹ e`` over the updates (3-D position error against the filter's position
+        covariance; a consistent filter gives 3). ``nis_mean``: mean normalised innovation
+        squared ``νᵀ S⁻¹ ν`` (3 when consistent; the PCA filters' ν is on the reconstructed
+        fix). ``update_us``: mean wall time of one ``update`` call."""
         out: dict[str, Any] = {}
         n = len(p_true)
         d = p_true[mission, :2] - p_ref[mission, :2]
         track_ms = float(np.mean(np.sum(d * d, axis=1))) if len(d) else float("nan")
+        lo, hi, _ = mission.indices(n)
         for name in self.names:
             est = np.asarray(self.est[name], dtype=float).reshape(-1, 3)
             # the first tick (initialisation) records no estimate: align from the end
             full = np.full((n, 3), np.nan)
             m = min(len(est), n)
-            full[n - m:] = est[:m] if len(est) <= n else est[-n:]
+            off = n - m
+            full[off:] = est[:m] if len(est) <= n else est[-n:]
             e = full[mission, :2] - p_true[mission, :2]
             ok = np.all(np.isfinite(e), axis=1)
-            ms = float(np.mean(np.sum(e[ok] ** 2, axis=1))) if ok.any() else float("nan")
+            e2 = np.sum(e[ok] ** 2, axis=1)
+            ms = float(np.mean(e2)) if ok.any() else float("nan")
+            nees, nis = [], []
+            for j, nis_j, P in self.cons[name]:
+                k = off + j
+                if not (lo <= k < hi) or k >= n:
+                    continue
+                ev = full[k] - p_true[k]
+                if np.all(np.isfinite(ev)):
+                    try:
+                        nees.append(float(ev @ np.linalg.solve(P, ev)))
+                    except np.linalg.LinAlgError:
+                        pass
+                nis.append(nis_j)
             out[name] = {
                 "estimate_rmse_m": round(float(np.sqrt(ms)), 4),
+                "estimate_max_m": round(float(np.sqrt(np.max(e2))), 4) if e2.size else None,
                 "estimate_share": round(ms / track_ms, 4) if track_ms > 0 else None,
+                "nees_mean": round(float(np.mean(nees)), 3) if nees else None,
+                "nis_mean": round(float(np.nanmean(nis)), 3) if nis else None,
                 "update_us": round(self.upd_ns[name] / max(self.n_upd[name], 1) / 1e3, 2),
                 "updates": self.n_upd[name],
+                "flown": name == self.primary,
             }
         return out
 

@@ -13,6 +13,7 @@ ROWS = [
     ("completed", "completed", "{}", ""),
     ("crashed", "crashed", "{}", ""),
     ("crash_reason", "crash reason", "{}", ""),
+    ("incomplete_reason", "not completed", "{}", ""),
     ("mission_time_s", "mission time", "{:.1f}", "s"),
     ("tracking_rmse_m", "tracking RMSE (horizontal)", "{:.3f}", "m"),
     ("cross_track_rmse_m", "cross-track RMSE", "{:.3f}", "m"),
@@ -53,7 +54,28 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
             s = "[red]yes[/]" if v else "[green]no[/]"
         t.add_row(label, f"{s} {unit}".strip())
     console.print(t)
+    est = summary.get("estimators")
+    if est:
+        console.print(estimator_table(est))
     for note in summary.get("notes", []):
         console.print(f"[yellow]note:[/] {note}")
     if run_dir is not None:
         console.print(f"run folder: {run_dir}")
+
+
+def estimator_table(scores: dict[str, dict[str, Any]]) -> Table:
+    """Every filter of the bank on the very same fixes: the flown one marked."""
+    t = Table(title="estimators (same fixes; * = flown)", show_header=True, header_style="bold")
+    for col in ("filter", "RMSE (m)", "max (m)", "NEES (3 = consistent)", "NIS (3)",
+                "update (µs)"):
+        t.add_column(col, justify="left" if col == "filter" else "right")
+
+    def f(v: Any, fmt: str) -> str:
+        return "–" if v is None else fmt.format(v)
+
+    for name, s in scores.items():
+        label = f"[bold]{name} *[/]" if s.get("flown") else name
+        t.add_row(label, f(s.get("estimate_rmse_m"), "{:.3f}"), f(s.get("estimate_max_m"), "{:.3f}"),
+                  f(s.get("nees_mean"), "{:.2f}"), f(s.get("nis_mean"), "{:.2f}"),
+                  f(s.get("update_us"), "{:.0f}"))
+    return t

@@ -107,6 +107,7 @@ class RouteConstrainedFeedback(EstimatorFeedback):
         self.est[ROUTE_NAME] = []
         self.upd_ns[ROUTE_NAME] = 0
         self.n_upd[ROUTE_NAME] = 0
+        self.cons[ROUTE_NAME] = []
         if primary is not None:
             if primary not in self.filters and primary != "true":
                 raise ValueError(f"primary {primary!r}: not one of {list(self.filters)}")
@@ -136,9 +137,9 @@ class RouteConstrainedFeedback(EstimatorFeedback):
         super()._init(z)
         self._last_fix_t = None
 
-    def update(self, t, p_true, v_true):
+    def update(self, t, p_true, v_true, imu=None):
         n_fix = len(self.fixes)
-        p, v = super().update(t, p_true, v_true)
+        p, v = super().update(t, p_true, v_true, imu)
         if len(self.fixes) > n_fix:
             self._last_fix_t = t
             return p, v

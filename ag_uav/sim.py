@@ -36,7 +36,7 @@ from .vehicle import G, Vehicle, build_vehicle
 from .wind import Wind
 
 #: Names of the seeded random streams; appending a name never changes the others' draws.
-STREAMS = ("wind", "gps", "estimator", "altimeter", "imu", "spare3", "spare4", "spare5")
+STREAMS = ("wind", "gps", "estimator", "altimeter", "imu", "attitude", "spare4", "spare5")
 
 
 def seed_sequences(seed: int) -> dict[str, np.random.SeedSequence]:
@@ -52,12 +52,19 @@ def rng_streams(seed: int) -> dict[str, np.random.Generator]:
 
 # ------------------------------------------------------------------------------ feedback seam
 class Feedback:
-    """What the controller flies on. ``update`` is called once per control tick."""
+    """What the controller flies on. ``update`` is called once per control tick.
+
+    A feedback with ``wants_imu`` gets the MEMS IMU's reading each tick as
+    ``imu = (f̃, R̂)``: the measured specific force (body frame, m/s²) and the attitude estimate
+    (row-major 3×3), see :mod:`ag_uav.imu`; the controller then flies on ``R̂`` and the gyro.
+    """
 
     name = "base"
+    wants_imu = False
 
     def update(self, t: float, p_true: tuple[float, float, float],
-               v_true: tuple[float, float, float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+               v_true: tuple[float, float, float], imu: tuple | None = None,
+               ) -> tuple[tuple[float, ...], tuple[float, ...]]:
         raise NotImplementedError
 
     def summary(self) -> dict[str, Any]:
@@ -69,7 +76,7 @@ class TrueFeedback(Feedback):
 
     name = "true"
 
-    def update(self, t, p_true, v_true):
+    def update(self, t, p_true, v_true, imu=None):
         return p_true, v_true
 
 
@@ -157,6 +164,8 @@ class LoopOutput:
     vehicle: Vehicle
     frames: int = 0
     notes: list[str] = dataclasses.field(default_factory=list)
+    imu: np.ndarray | None = None         # (n, 9) measured f (3), gyro (3), attitude error (3)
+    imu_bias0: np.ndarray | None = None   # turn-on biases (accel m/s², gyro rad/s)
 
 
 REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
@@ -190,6 +199,16 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
 
     fb = feedback or TrueFeedback()
     cascade = make_cascade(cfg, veh)
+    imu = att = None
+    if fb.wants_imu:
+        from .imu import AttitudeError, ImuSensor
+
+        ss = seed_sequences(cfg.seed)
+        imu = ImuSensor(cfg.imu, cfg.sim.control_hz, ss["imu"])
+        att = AttitudeError(cfg.imu, cfg.sim.control_hz, ss["attitude"])
+        ia, ig = int(model.sensor("accel").adr[0]), int(model.sensor("gyro").adr[0])
+        sensordata = data.sensordata
+    imu_rec: list[tuple] = []
     w = cfg.wind
     wind = Wind(w.speed_mps, w.direction_deg, w.turbulence, rng=streams["wind"])
     wmx, wmy, _ = wind.mean  # airspeed for the Dryden time scales: relative to the mean wind
@@ -272,7 +291,14 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
                 break
         # ---- reference, feedback, control
         rp, rv, yaw_ref, spray = ref_p[k], ref_v[k], ref_yaw[k], ref_spray[k]
-        p_fb, v_fb = fb.update(t, (px, py, pz), (vx, vy, vz))
+        if imu is not None:
+            sd = sensordata.tolist()
+            f_m, omega = imu.measure(sd[ia:ia + 3], sd[ig:ig + 3])
+            R = att.apply(R)
+            imu_rec.append((*f_m, *omega, *att.last))
+            p_fb, v_fb = fb.update(t, (px, py, pz), (vx, vy, vz), (f_m, R))
+        else:
+            p_fb, v_fb = fb.update(t, (px, py, pz), (vx, vy, vz))
         if not airborne:
             # on the skids: no horizontal position control until lift-off (as autopilots do);
             # an estimate that is off by a metre must not tip the vehicle over on the ground
@@ -313,9 +339,23 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     if renderer is not None:
         renderer.close()
     arr = np.asarray(rec, dtype=float).reshape(-1, len(REC_COLUMNS))
-    return LoopOutput(t=np.arange(len(arr)) * dt, rec=arr, crash_reason=crash_reason,
-                      crash_time=crash_time, wall_loop_s=wall_loop, vehicle=veh, frames=frames,
-                      notes=notes)
+    out = LoopOutput(t=np.arange(len(arr)) * dt, rec=arr, crash_reason=crash_reason,
+                     crash_time=crash_time, wall_loop_s=wall_loop, vehicle=veh, frames=frames,
+                     notes=notes)
+    if imu is not None:
+        out.imu = np.asarray(imu_rec[:len(arr)], dtype=float).reshape(-1, 9)
+        out.imu_bias0 = imu.bias0
+    return out
+
+
+def _cut_by_max_time(cfg: Config, ref: Reference, out: LoopOutput,
+                     summ: dict[str, Any]) -> str | None:
+    """The one-line reason when ``sim.max_time_s`` cut the mission short (else None)."""
+    if out.crash_reason is not None or ref.duration <= cfg.sim.max_time_s:
+        return None
+    return (f"cut by sim.max_time_s = {cfg.sim.max_time_s:g} s after "
+            f"{summ.get('legs_flown', 0)} of {summ.get('legs', 0)} legs; the plan needs "
+            f"{ref.duration:.0f} s (raise sim.max_time_s)")
 
 
 def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
@@ -361,11 +401,15 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
         summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
         p_fb=arr[:, 9:12], seg=arr[:, 12].astype(int), spray=arr[:, 13].astype(bool),
         motors=arr[:, 14:18], field=fld, plan=plan,
-        extra={"wind": arr[:, 18:21], "reference": ref, "vehicle": out.vehicle.info()},
+        extra={"wind": arr[:, 18:21], "reference": ref, "vehicle": out.vehicle.info(),
+               "imu": out.imu, "imu_bias0": out.imu_bias0},
     )
     sim_time = float(len(out.t) / cfg.sim.control_hz)
     summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
                              reference=ref)
+    cut = _cut_by_max_time(cfg, ref, out, summ)
+    if cut:
+        summ["incomplete_reason"] = cut
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))

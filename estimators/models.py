@@ -6,6 +6,7 @@ Every model stacks one block per axis, the derivatives of that axis kept togethe
 
     CV ("cv"):  [px, vx, py, vy, pz, vz]            (per axis: position, velocity)
     CA ("ca"):  [px, vx, ax, py, vy, ay, pz, vz, az] (per axis: position, velocity, acceleration)
+    CVB ("cvb"): [px, vx, bx, py, vy, by, pz, vz, bz] (per axis: position, velocity, input bias)
 
 so the paper's eq 8 (2-D CV, ``Ts = 0.05``) is exactly ``transition("cv", 2, 0.05)``.
 The measurement matrix picks the positions (``H[i, i*order] = 1``): GPS gives position only.
@@ -39,6 +40,22 @@ with variance ``q`` (m²/s⁴ resp. m²/s⁶ per step) entering through Γ (§6.
 (``q = 0.025, dt = 0.05`` gives eq 9's 1.5625e-5 and 0.025).  It is not a discretisation of any
 continuous model; it is provided to reproduce the paper's numerical setup.
 
+Input bias (``"cvb"``)
+---------------------
+For a prediction driven by a measured acceleration ``ã = a + b + w_a`` (an IMU's specific force
+rotated into the world frame, plus gravity) as the known input ``B ã`` with ``B = [dt²/2, dt, 0]``
+per axis, the state carries the input's slowly varying error ``b`` (accelerometer bias and the
+gravity an attitude error projects, in the world frame) so that it is estimated, not averaged::
+
+    ṗ = v,   v̇ = ã − b − w_a,   ḃ = w_b          (w_a PSD q, w_b PSD q_bias)
+    F = [[1, dt, −dt²/2], [0, 1, −dt], [0, 0, 1]]
+    Q = q [[dt³/3, dt²/2, 0], [dt²/2, dt, 0], [0, 0, 0]]
+        + q_bias [[dt⁵/20, dt⁴/8, −dt³/6], [dt⁴/8, dt³/3, −dt²/2], [−dt³/6, −dt²/2, dt]]
+
+(the exact discretisation; the second block is the CA block with ``a = −b``; Groves 2013,
+*Principles of GNSS, Inertial, and Multisensor Integrated Navigation Systems*, §14.2, for the
+same bias states in a loosely coupled filter). Only ``q_form = "continuous"`` is defined.
+
 ``R`` is ``diag(r)`` per measured axis (variances in m²).
 """
 
@@ -60,7 +77,7 @@ __all__ = [
     "transition",
 ]
 
-_ORDER = {"cv": 2, "ca": 3}
+_ORDER = {"cv": 2, "ca": 3, "cvb": 3}
 Dim = int | str
 
 
@@ -68,7 +85,7 @@ def _order(kind: str) -> int:
     try:
         return _ORDER[kind.lower()]
     except (KeyError, AttributeError):
-        raise ValueError(f"unknown motion model {kind!r}; allowed: 'cv', 'ca'") from None
+        raise ValueError(f"unknown motion model {kind!r}; allowed: 'cv', 'ca', 'cvb'") from None
 
 
 def axis_count(dim: Dim) -> int:
@@ -102,6 +119,8 @@ def transition(kind: str, dim: Dim, dt: float) -> np.ndarray:
     order = _order(kind)
     if order == 2:
         blk = np.array([[1.0, dt], [0.0, 1.0]])
+    elif kind.lower() == "cvb":
+        blk = np.array([[1.0, dt, -0.5 * dt * dt], [0.0, 1.0, -dt], [0.0, 0.0, 1.0]])
     else:
         blk = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
     return np.kron(np.eye(axis_count(dim)), blk)
@@ -128,6 +147,15 @@ def _q_block(order: int, dt: float, q: float, form: str) -> np.ndarray:
     raise ValueError(f"unknown q_form {form!r}; allowed: 'continuous', 'discrete', 'paper'")
 
 
+def _cvb_block(dt: float, q: float, q_bias: float, form: str) -> np.ndarray:
+    if form != "continuous":
+        raise ValueError("the 'cvb' model is defined with q_form='continuous' only")
+    m = np.zeros((3, 3))
+    m[:2, :2] = _q_block(2, dt, q, form)
+    cb = _q_block(3, dt, q_bias, form) * np.array([[1, 1, -1], [1, 1, -1], [-1, -1, 1]])
+    return m + cb
+
+
 def process_noise(
     kind: str,
     dim: Dim,
@@ -135,15 +163,20 @@ def process_noise(
     q: float | Sequence[float],
     q_form: str = "continuous",
     q_alt: float | None = None,
+    q_bias: float | Sequence[float] = 0.0,
 ) -> np.ndarray:
     """Process noise Q (see the module docstring for the three forms)."""
     order = _order(kind)
     qs = _axis_values(dim, q, q_alt, "q")
+    qb = _per_axis(q_bias, qs.size, "q_bias")
     n = order * qs.size
     Q = np.zeros((n, n))
     for i, qi in enumerate(qs):
         sl = slice(i * order, (i + 1) * order)
-        Q[sl, sl] = _q_block(order, dt, qi, q_form)
+        if kind.lower() == "cvb":
+            Q[sl, sl] = _cvb_block(dt, qi, qb[i], q_form)
+        else:
+            Q[sl, sl] = _q_block(order, dt, qi, q_form)
     return Q
 
 
@@ -160,7 +193,8 @@ def state_labels(kind: str, dim: Dim) -> list[str]:
     """Names of the state components in order, e.g. ['px', 'vx', 'py', 'vy']."""
     order = _order(kind)
     axes = "xyz"[: axis_count(dim)]
-    return [f"{d}{a}" for a in axes for d in "pva"[:order]]
+    names = "pvb" if kind.lower() == "cvb" else "pva"[:order]
+    return [f"{d}{a}" for a in axes for d in names]
 
 
 @dataclass
@@ -216,13 +250,15 @@ def motion_model(
     q_form: str = "continuous",
     q_alt: float | None = None,
     r_alt: float | None = None,
+    q_bias: float | Sequence[float] = 0.0,
 ) -> LinearModel:
-    """CV/CA model with position measurements; see the module docstring for every argument."""
+    """CV/CA/CVB model with position measurements; see the module docstring for every
+    argument."""
     kind = kind.lower()
     rs = _axis_values(dim, r, r_alt, "r")
     return LinearModel(
         F=transition(kind, dim, dt),
-        Q=process_noise(kind, dim, dt, q, q_form, q_alt),
+        Q=process_noise(kind, dim, dt, q, q_form, q_alt, q_bias),
         H=measurement_matrix(kind, dim),
         R=np.diag(rs),
         kind=kind,

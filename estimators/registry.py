@@ -13,7 +13,7 @@ Two ways to give the model:
 
        make("pca-mckf", model="cv", dim=2, dt=0.05, q=1.0, r=4.0, x0=x0, sigma=2.0, window=20)
 
-   ``model`` ("cv" | "ca"), ``dim`` (1, 2, 3, "2d+alt"), ``dt`` (the ``predict()`` period),
+   ``model`` ("cv" | "ca" | "cvb"), ``dim`` (1, 2, 3, "2d+alt"), ``dt`` (the ``predict()`` period),
    ``q``, ``r`` (scalars or per axis), ``q_form``, ``q_alt``, ``r_alt`` build F, Q, H, R;
    any of F, H, Q, R given explicitly overrides the model's.  ``P0`` defaults to ``p0 · I``
    (``p0`` = 100, i.e. 10 m / 10 m/s std) and ``x0`` to zeros.  The model is attached to the
@@ -50,7 +50,7 @@ FILTERS: dict[str, type] = {
     "kf-diff": DifferencingKF,
 }
 
-_MODEL_KEYS = ("dim", "q", "r", "q_form", "q_alt", "r_alt")
+_MODEL_KEYS = ("dim", "q", "r", "q_form", "q_alt", "r_alt", "q_bias")
 
 
 def available() -> list[str]:
