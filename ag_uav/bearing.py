@@ -153,11 +153,16 @@ class BearingFeedback(FilterBank, Feedback):
         self.init_offset = np.asarray(init_offset_m, dtype=float).reshape(3)
 
         self.dt = 1.0 / cfg.sim.control_hz
-        mdl = motion_model("cv", 3, self.dt, q=process_noise(cfg)[0])
+        # CV, or CV + the IMU input-bias states ("cvb", the default) as the GPS bank
+        kind = "cvb" if e.model == "cvb" else "cv"
+        q, q_bias, self._bias_var0 = process_noise(cfg, kind)
+        mdl = motion_model(kind, 3, self.dt, q=q, q_bias=q_bias)
         self.F, self.Q = mdl.F, mdl.Q
-        self.pos_idx, self.vel_idx = [0, 2, 4], [1, 3, 5]
-        self.n = 6
-        self.bm = BearingModel(6, observer=(0, 2), landmarks=self.landmarks)
+        self.pos_idx, self.vel_idx = [int(i) for i in mdl.pos_idx], [int(i) for i in mdl.vel_idx]
+        self.n = mdl.n
+        self._kind = kind
+        self.bm = BearingModel(self.n, observer=(self.pos_idx[0], self.pos_idx[1]),
+                               landmarks=self.landmarks)
         self.R = np.diag([self.r_var] * self.L + [max(self.radar_sigma**2, R_FLOOR)])
         self.residual = residual_with_angles([True] * self.L + [False])
 
@@ -183,16 +188,17 @@ class BearingFeedback(FilterBank, Feedback):
 
     # ------------------------------------------------------------------ measurement model
     def h(self, x: np.ndarray) -> np.ndarray:
-        """[θ_1 … θ_N, z] for a state (6,) or a stack (k, 6)."""
+        """[θ_1 … θ_N, z] for a state (n,) or a stack (k, n)."""
         x = np.asarray(x, dtype=float)
+        iz = self.pos_idx[2]
         if x.ndim == 1:
-            return np.append(self.bm.h(x), x[4])
-        return np.column_stack([self.bm.h(x), x[:, 4]])
+            return np.append(self.bm.h(x), x[iz])
+        return np.column_stack([self.bm.h(x), x[:, iz]])
 
     def H_jac(self, x: np.ndarray) -> np.ndarray:
         H = np.zeros((self.L + 1, self.n))
         H[: self.L] = self.bm.jacobian(x)
-        H[self.L, 4] = 1.0
+        H[self.L, self.pos_idx[2]] = 1.0
         return H
 
     def _make(self, name: str) -> Any:
@@ -210,7 +216,9 @@ class BearingFeedback(FilterBank, Feedback):
     def measure(self, p_true: Sequence[float]) -> np.ndarray:
         """One noisy measurement [θ_1 … θ_N, h] at the true position (advances the streams)."""
         p = np.asarray(p_true, dtype=float)
-        theta = self.bm.h(np.array([p[0], 0.0, p[1], 0.0, p[2], 0.0]))
+        xs = np.zeros(self.n)
+        xs[self.pos_idx] = p
+        theta = self.bm.h(xs)
         if self.noise == "mixture":
             # same draws as estimators.bearing.mixture_noise (component choice, then normal)
             u = self.rng.random(self.L)
@@ -227,7 +235,7 @@ class BearingFeedback(FilterBank, Feedback):
     def _init(self, p_true: Sequence[float]) -> None:
         x0 = np.zeros(self.n)
         x0[self.pos_idx] = np.asarray(p_true, dtype=float) + self.init_offset
-        P0 = np.diag([self.init_sigma_m**2, 0.25] * 3)
+        P0 = np.diag([self.init_sigma_m**2, 0.25, self._bias_var0][: self.F.shape[0] // 3] * 3)
         for f in self.filters.values():
             f.x = x0.copy()
             f.P = P0.copy()

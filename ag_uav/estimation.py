@@ -64,16 +64,17 @@ def make_gps(cfg: Config, seed: np.random.SeedSequence) -> GpsSensor:
         raise ConfigError(f"gps.overrides = {ov!r}: {e}") from None
 
 
-def process_noise(cfg: Config) -> tuple[float, float, float]:
+def process_noise(cfg: Config, model: str | None = None) -> tuple[float, float, float]:
     """``(q, q_bias, bias_var0)`` of the bank's motion model: ``estimator.q`` (and ``q_bias``),
     or with ``"auto"`` what the IMU's figures imply (:func:`ag_uav.imu.process_noise_psd`);
     without IMU aiding, ``q`` = 2 m²/s³ (the motion model alone must then carry the manoeuvres).
-    ``bias_var0`` is the initial variance of the ``"cvb"`` model's bias states."""
+    ``bias_var0`` is the initial variance of the ``"cvb"`` model's bias states. ``model``:
+    the motion model it is for (default ``estimator.model``)."""
     from .imu import process_noise_psd
 
     e = cfg.estimator
     q, q_bias, var0 = process_noise_psd(cfg.imu, cfg.sim.control_hz,
-                                        bias_states=e.model == "cvb")
+                                        bias_states=(model or e.model) == "cvb")
     if not e.imu and isinstance(e.q, str):
         q = 2.0
     if not isinstance(e.q, str):

@@ -81,10 +81,12 @@ def process_noise_psd(cfg: ImuConfig, rate_hz: float, bias_states: bool = False,
     With ``bias_states`` (the ``"cvb"`` model estimates the slow part): ``q = σ_a² dt``; the
     bias wanders with ``q_bias = σ_rw² + 2 (g σ_tilt)² / τ`` (the PSD of a Gauss–Markov
     process's driving noise, ``2σ²/τ``) and starts with ``bias_var0 = σ_b² + (g σ_tilt)²``.
-    Without bias states the slow part is folded into the white one (it overstates its
-    high-frequency content; measured in the README to be the worse choice)::
+    Without bias states the slow part is folded into the white one at its low-frequency PSD
+    (a Gauss–Markov process of variance σ² and correlation time τ has the PSD 2σ²τ below
+    1/τ; the bias is given the attitude error's τ), which is what a position filter sees of it
+    (measured in the README to be the worse choice)::
 
-        q = dt (σ_a² + σ_b² + σ_rw² T + (g σ_tilt)²)        (T = ``duration_s``)
+        q = σ_a² dt + 2 τ (σ_b² + σ_rw² T + (g σ_tilt)²)        (T = ``duration_s``)
     """
     dt = 1.0 / rate_hz
     if cfg.model == "ideal":
@@ -97,7 +99,8 @@ def process_noise_psd(cfg: ImuConfig, rate_hz: float, bias_states: bool = False,
         q_bias = cfg.accel_bias_rw**2 + 2.0 * st * st / cfg.attitude_error_tau_s
         return max(sa * sa * dt, 1e-8), max(q_bias, 1e-10), bias_var0
     srw2 = cfg.accel_bias_rw**2 * duration_s
-    return max(dt * (sa * sa + sb * sb + srw2 + st * st), 1e-8), 0.0, bias_var0
+    tau = cfg.attitude_error_tau_s
+    return max(sa * sa * dt + 2.0 * tau * (sb * sb + srw2 + st * st), 1e-8), 0.0, bias_var0
 
 
 def _gauss_markov_block(rng: np.random.Generator, x0: np.ndarray, n: int, phi: float,
@@ -124,9 +127,10 @@ class ImuSensor:
         self.dt = 1.0 / rate_hz
         self.rng = np.random.default_rng(seed)
         self.block = block
-        self.sigma_white = np.array([accel_sigma(cfg, rate_hz)] * 3 + [gyro_sigma(cfg, rate_hz)] * 3)
-        self.sigma_rw = np.array([cfg.accel_bias_rw] * 3 + [cfg.gyro_bias_rw * DEG] * 3) \
-            * math.sqrt(self.dt)
+        sa, sg = accel_sigma(cfg, rate_hz), gyro_sigma(cfg, rate_hz)
+        self.sigma_white = np.array([sa] * 3 + [sg] * 3)
+        rw = np.array([cfg.accel_bias_rw] * 3 + [cfg.gyro_bias_rw * DEG] * 3)
+        self.sigma_rw = rw * math.sqrt(self.dt)
         self.bias0 = self.rng.standard_normal(6) * np.array(
             [cfg.accel_bias_mg * 1e-3 * G] * 3 + [cfg.gyro_bias_dps * DEG] * 3)
         self._bias = self.bias0.copy()

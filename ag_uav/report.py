@@ -75,7 +75,8 @@ def estimator_table(scores: dict[str, dict[str, Any]]) -> Table:
 
     for name, s in scores.items():
         label = f"[bold]{name} *[/]" if s.get("flown") else name
-        t.add_row(label, f(s.get("estimate_rmse_m"), "{:.3f}"), f(s.get("estimate_max_m"), "{:.3f}"),
-                  f(s.get("nees_mean"), "{:.2f}"), f(s.get("nis_mean"), "{:.2f}"),
+        t.add_row(label, f(s.get("estimate_rmse_m"), "{:.3f}"),
+                  f(s.get("estimate_max_m"), "{:.3f}"), f(s.get("nees_mean"), "{:.2f}"),
+                  f(s.get("nis_mean"), "{:.2f}"),
                   f(s.get("update_us"), "{:.0f}"))
     return t

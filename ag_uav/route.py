@@ -96,7 +96,9 @@ class RouteConstrainedFeedback(EstimatorFeedback):
             self.gps = OutageGps(self.gps, outages)
         self.route = Route(plan.path)
         base = self._template()
-        rf = RouteConstrainedKF(base.F, base.H, base.Q, base.R, self.route, [0, 2], [1, 3],
+        pi, vi = base.model.pos_idx, base.model.vel_idx
+        rf = RouteConstrainedKF(base.F, base.H, base.Q, base.R, self.route,
+                                [int(pi[0]), int(pi[1])], [int(vi[0]), int(vi[1])],
                                 r_virtual=r_virtual, virtual="never", gate_virtual=True,
                                 gate=None, gate_prob=gate_prob, recover_after=None, segment=0,
                                 x0=base.x, P0=base.P)

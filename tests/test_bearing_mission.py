@@ -58,11 +58,15 @@ def test_measurement_is_wrapped_bearing_plus_mixture_noise():
 
 def test_jacobian_matches_finite_differences():
     fb = BearingFeedback(_cfg(), np.random.SeedSequence(0))
-    x = np.array([30.0, 1.0, 40.0, -2.0, 3.0, 0.1])
+    x = np.zeros(fb.n)
+    x[fb.pos_idx] = [30.0, 40.0, 3.0]
+    x[fb.vel_idx] = [1.0, -2.0, 0.1]
+    if fb.n == 9:
+        x[[2, 5, 8]] = [0.01, -0.02, 0.03]
     H = fb.H_jac(x)
     num = np.zeros_like(H)
-    for j in range(6):
-        d = np.zeros(6)
+    for j in range(fb.n):
+        d = np.zeros(fb.n)
         d[j] = 1e-6
         num[:, j] = angle_residual(fb.h(x + d), fb.h(x - d)) / 2e-6
     np.testing.assert_allclose(H, num, atol=1e-7)
