@@ -413,8 +413,26 @@ def _check_gps_overrides(g: GpsConfig) -> None:
         raise ConfigError(f"gps.overrides = {_fmt(g.overrides)}: {e}") from None
 
 
+def _check_field(name: str) -> None:
+    """``mission.field`` names a built-in field or an existing GeoJSON file (what
+    :func:`ag_uav.field.load_field` accepts), so a typo fails at load, not at take-off."""
+    from .field import BUILTIN_FIELDS
+
+    if name.strip().lower().replace("_", "-") in BUILTIN_FIELDS:
+        return
+    why = "not a built-in field"
+    if name.lower().endswith((".geojson", ".json")):
+        p = Path(name)
+        if p.is_file():
+            return
+        why = "is a directory" if p.is_dir() else "no such file"
+    raise ConfigError(f"mission.field = {_fmt(name)}: {why}; allowed: "
+                      f"{', '.join(BUILTIN_FIELDS)} or the path of a .geojson file")
+
+
 def _validate(cfg: Config) -> None:
     """Checks across fields (one field's own range is :func:`_check_range`'s)."""
+    _check_field(cfg.mission.field)
     s = cfg.sim
     ctrl_steps = 1.0 / (s.timestep_s * s.control_hz) if s.timestep_s * s.control_hz > 0 else 0.0
     if (not math.isfinite(ctrl_steps) or abs(ctrl_steps - round(ctrl_steps)) > 1e-6
