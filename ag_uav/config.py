@@ -159,7 +159,7 @@ class WindConfig:
 
 
 GPS_PRESETS = ("perfect", "rtk", "sbas", "standalone", "paper-numerical", "student-t", "laplace",
-               "weibull", "mixture", "alpha-stable", "coloured", "coloured-impulsive")
+               "weibull", "mixture", "alpha-stable", "coloured", "coloured-impulsive", "rtk-m350")
 ESTIMATORS = ("true", "kf", "mckf", "pca-kf", "pca-mckf", "kf-bias", "kf-diff")
 
 
@@ -403,13 +403,9 @@ def _check_gps_overrides(g: GpsConfig) -> None:
     if g.multipath_prob > 0 and isinstance(g.overrides.get("components"), list):
         raise ConfigError(f"gps.multipath_prob = {g.multipath_prob}: cannot be combined with a "
                           "components list in gps.overrides; add the spikes to that list")
-    validate = getattr(gps, "validate_overrides", None)
     try:
-        if validate is not None:
-            validate(g.preset, g.overrides)
-        else:  # until gps.validate_overrides lands: building the sensor checks every key
-            gps.GpsSensor.from_preset(g.preset, 0, **g.overrides)
-    except (ValueError, TypeError) as e:
+        gps.validate_overrides(g.preset, g.overrides)
+    except ValueError as e:
         raise ConfigError(f"gps.overrides = {_fmt(g.overrides)}: {e}") from None
 
 
