@@ -433,7 +433,8 @@ def _validate(cfg: Config) -> None:
     ctrl_steps = 1.0 / (s.timestep_s * s.control_hz) if s.timestep_s * s.control_hz > 0 else 0.0
     if (not math.isfinite(ctrl_steps) or abs(ctrl_steps - round(ctrl_steps)) > 1e-6
             or round(ctrl_steps) < 1):
-        raise ConfigError(f"sim.control_hz = {s.control_hz}: must divide the physics rate "
+        raise ConfigError(f"sim.control_hz = {s.control_hz} with sim.timestep_s = "
+                          f"{s.timestep_s}: the control rate must divide the physics rate "
                           f"1/timestep_s = {1.0 / s.timestep_s:g} Hz")
     _check_gps_overrides(cfg.gps)
 

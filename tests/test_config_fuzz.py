@@ -129,8 +129,9 @@ def meta_ok(tp: Any, meta: Mapping[str, Any], v: Any) -> bool:
 
 
 def _divides(timestep_s: float, control_hz: float) -> bool:
-    steps = 1.0 / (timestep_s * control_hz)
-    return abs(steps - round(steps)) <= 1e-6 and round(steps) >= 1
+    rate = timestep_s * control_hz
+    steps = 1.0 / rate if rate > 0 else math.inf
+    return math.isfinite(steps) and abs(steps - round(steps)) <= 1e-6 and round(steps) >= 1
 
 
 CROSS = {  # the rules across fields, with every other key at its default
@@ -175,16 +176,21 @@ def valid_scalar(tp: Any, meta: Mapping[str, Any]) -> st.SearchStrategy:
     return st.one_of(floats, ints)
 
 
-def edge_scalar(tp: Any, meta: Mapping[str, Any]) -> st.SearchStrategy:
-    """Values on and just beside every bound, and the specials TOML can spell."""
-    out: list[Any] = [math.nan, -math.inf, math.inf, 2**63, -(2**63) - 1, 2**70, 0, -0.0, -1]
+def edge_values(meta: Mapping[str, Any]) -> list[Any]:
+    """Values on and just beside every bound and choice, and the specials TOML can spell."""
+    out: list[Any] = [math.nan, -math.inf, math.inf, 2**63, -(2**63) - 1, 2**70, 0, -0.0, -1,
+                      2**63 - 1, 1e308, 5e-324]
     for b in _bounds(meta):
         out += [b, -b, b + 1, b - 1, math.nextafter(b, math.inf), math.nextafter(b, -math.inf)]
         if float(b).is_integer():
             out += [int(b), int(b) + 1, int(b) - 1]
     for c in meta.get("choices") or ():
-        out += [c.upper(), f" {c}", f"{c} ", c[:-1], c + "\n"]
-    return st.sampled_from(out)
+        out += [c, c.upper(), f" {c}", f"{c} ", c[:-1], c + "\n", c + "\x1e"]
+    return out
+
+
+def edge_scalar(tp: Any, meta: Mapping[str, Any]) -> st.SearchStrategy:
+    return st.sampled_from(edge_values(meta))
 
 
 JUNK = st.one_of(
@@ -245,14 +251,17 @@ def error_line(err: str, key: str) -> str:
 
 def check_message(body: str, leaf: Leaf, v: Any) -> None:
     """The message names the key, the value (scalars) and what is allowed."""
-    assert body.startswith((f"{leaf.key} = ", f"{leaf.key}[")), body
-    assert any(w in body for w in ("expected", "must be", "allowed", "appears twice",
+    if leaf.key in CROSS:  # a rule across keys names them all
+        assert all(f"{k} = " in body for k in CROSS) or body.startswith(f"{leaf.key} = "), body
+    else:
+        assert body.startswith((f"{leaf.key} = ", f"{leaf.key}[")), body
+    assert any(w in body for w in ("expected", "must", "allowed", "appears twice",
                                    "outside the 64-bit")), body
     if isinstance(v, bool):
         assert ("true" if v else "false") in body, body
     elif _number(v):
-        shown = [repr(v)[:40]] + ([repr(float(v))] if isinstance(v, int) and
-                                  abs(v) < 2**53 else [])
+        shown = [repr(v)[:40]] + ([repr(float(v))] if isinstance(v, int) and  # as a number
+                                  abs(v) < 2**1000 else [])
         assert any(s in body for s in shown), (shown, body)
     elif isinstance(v, str) and v.isprintable() and '"' not in v and "\\" not in v:
         assert f'"{v}"' in body, body
@@ -298,6 +307,42 @@ def test_schema_walk_sees_every_kind() -> None:
     for lf in PLAIN:  # every plain leaf has an oracle, and its default passes it
         assert allowed(lf, _get(DEFAULT, lf.key)), lf.key
     assert len(PLAIN) > 60 and len(TABLES) == 12
+
+
+JUNK_VALUES: list[Any] = [True, False, "", "x", "1", [], [1.0], {}, {"a": 1},
+                          __import__("datetime").date(2020, 1, 1)]
+
+
+def _edge_cases(leaf: Leaf) -> list[Any]:
+    """For every leaf: its default, every edge and junk value; lists also get each edge value
+    in each slot, one value too few and too many, and a duplicate."""
+    default = _get(DEFAULT, leaf.key)
+    vals = [default, *edge_values(leaf.meta), *JUNK_VALUES]
+    if isinstance(default, list):
+        vals = [default, *JUNK_VALUES, [*default, *default[:1]], default[:-1],
+                [*default, default[0] if default else "kf"]]
+        vals += [[*default[:i], x, *default[i + 1:]] for x in edge_values(leaf.meta)
+                 for i in range(max(1, len(default)))]
+    return vals
+
+
+def test_every_leaf_every_edge() -> None:
+    """Deterministic sweep (the fuzz below samples): every key, every edge value."""
+    n_ok = n_bad = 0
+    for leaf in PLAIN:
+        for v in _edge_cases(leaf):
+            ok = allowed(leaf, v)
+            try:
+                cfg = C.config_from_dict(_nest(leaf.key, v))
+            except C.ConfigError as e:
+                assert not ok, f"refused a good value: {leaf.key} = {v!r}: {e}"
+                check_message(error_line(PREFIX + str(e), leaf.key), leaf, v)
+                n_bad += 1
+            else:
+                assert ok, f"accepted a bad value silently: {leaf.key} = {v!r}"
+                assert_lands(cfg, leaf, v)
+                n_ok += 1
+    assert n_ok > 3 * len(PLAIN) and n_bad > 15 * len(PLAIN)
 
 
 def test_gps_preset_choices_are_the_gps_modules() -> None:
