@@ -599,3 +599,19 @@ def test_mode_override_removes_a_mode():
     assert s.fix_types == ("rtk-fixed", "rtk-float")
     with pytest.raises(ValueError, match=r"next.dgps = 0.15"):
         validate_overrides("rtk-m350", {"fix_quality": {"modes": {"dgps": {}}}})
+
+
+def test_m350_filters_get_the_nominal_rtk_r_not_the_fix_type():
+    """The loop's R comes from the nominal (RTK-fixed) variance, floored at (1 cm)^2; the episode
+    levels (float: 0.2 m, DGPS: 0.85 m per axis) never reach it."""
+    import ag_uav
+    from ag_uav.estimation import R_FLOOR, EstimatorFeedback
+    from ag_uav.sim import seed_sequences
+
+    cfg = ag_uav.load_config(None, {"gps.preset": "rtk-m350", "estimator.name": "kf"})
+    ss = seed_sequences(cfg.seed)
+    fb = EstimatorFeedback(cfg, ss["gps"], ss["altimeter"], ss["imu"])
+    nominal = fb.gps.variance
+    assert nominal[0] < R_FLOOR
+    np.testing.assert_allclose(fb.r_diag[:2], [R_FLOOR, R_FLOOR])
+    assert fb.r_diag[0] < 1e-3 * fb.gps.mode_variance("dgps")[0]
