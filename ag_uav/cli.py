@@ -56,9 +56,9 @@ def cmd_config(args: argparse.Namespace) -> int:
 
 
 def cmd_fly(args: argparse.Namespace) -> int:
+    cfg = _load(args)  # before importing the simulator: a bad config fails fast
     from .run import fly
 
-    cfg = _load(args)
     if args.no_render:
         cfg.log.render = False
     if args.no_log:

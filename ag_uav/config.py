@@ -16,6 +16,7 @@ import math
 import tomllib
 import types
 import typing
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,14 +25,33 @@ import tomli_w
 
 
 class ConfigError(ValueError):
-    """A bad config value. The message is one line: ``key = value: what is allowed``."""
+    """A bad config value. The message is one line: ``key = value: what is allowed``.
+
+    Control characters (a newline in a string value or a key, a non-UTF-8 byte from the command
+    line) are escaped, so the message stays one printable line whatever the input.
+    """
+
+    def __init__(self, msg: str) -> None:
+        super().__init__(_one_line(str(msg)))
+
+
+def _one_line(msg: str) -> str:
+    """``msg`` with every non-printable character escaped (``\\n``, ``\\udcff``, ...)."""
+    if msg.isprintable():
+        return msg
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in msg)
+
+
+INT_MIN, INT_MAX = -(2**63), 2**63 - 1  # TOML integers are 64-bit signed
 
 
 def _f(default: Any, help: str, *, gt: float | None = None, ge: float | None = None,
        le: float | None = None, lt: float | None = None, choices: tuple | None = None,
-       length: int | None = None) -> Any:
+       length: int | None = None, unique: bool = False) -> Any:
+    """A config field: default, help text and what is allowed (bounds on numbers, ``choices``
+    for strings, ``length`` and ``unique`` for lists); :func:`_check_range` enforces them."""
     meta = {"help": help, "gt": gt, "ge": ge, "le": le, "lt": lt, "choices": choices,
-            "length": length}
+            "length": length, "unique": unique}
     if isinstance(default, list | dict):
         return field(default_factory=lambda: _copy(default), metadata=meta)
     return field(default=default, metadata=meta)
@@ -55,7 +75,8 @@ class MissionConfig:
     headland_m: float = _f(6.0, "headland margin swept by laps along the boundary (m); 0 = none",
                            ge=0)
     direction_deg: float | str = _f("auto", "sweep direction in degrees from east "
-                                    "(counter-clockwise), or \"auto\" (fewest turns)")
+                                    "(counter-clockwise), or \"auto\" (fewest turns)",
+                                    choices=("auto",))
     speed_mps: float = _f(5.0, "cruise ground speed on legs (m/s)", gt=0, le=15)
     altitude_m: float = _f(3.0, "spray altitude above ground (m)", gt=0.5, le=50)
     accel_max_mps2: float = _f(1.5, "acceleration bound of the reference (m/s^2)", gt=0, le=8)
@@ -139,7 +160,7 @@ class WindConfig:
 
 
 GPS_PRESETS = ("perfect", "rtk", "sbas", "standalone", "paper-numerical", "student-t", "laplace",
-               "weibull", "mixture", "alpha-stable", "coloured", "coloured-impulsive")
+               "weibull", "mixture", "alpha-stable", "coloured", "coloured-impulsive", "rtk-m350")
 ESTIMATORS = ("true", "kf", "mckf", "pca-kf", "pca-mckf", "kf-bias", "kf-diff")
 
 
@@ -167,17 +188,17 @@ class EstimatorConfig:
     bearing_noise_scale: float = _f(0.1, "source = bearings: scale of the paper's mixture "
                                     "bearing noise (1 = 5.7 deg nominal; 0.1 = 0.57 deg)", gt=0)
     shadow: list[str] = _f(["kf", "mckf", "pca-kf"], "more estimators fed the very same fixes, "
-                           "for comparison "
-                           f"({', '.join(ESTIMATORS[1:])})")
+                           f"for comparison ({', '.join(ESTIMATORS[1:])})",
+                           choices=ESTIMATORS[1:], unique=True)
     model: str = _f("cvb", "motion model: constant velocity, constant acceleration, or "
                     "constant velocity + IMU input bias states (estimators.models)",
                     choices=("cv", "ca", "cvb"))
     q: float | str = _f("auto", "process noise: white acceleration (cv) or jerk (ca) PSD per "
                         "axis (m^2/s^3), or \"auto\": derived from the [imu] noise figures "
                         "(ag_uav.imu.process_noise_psd); with imu = false the model alone must "
-                        "carry the manoeuvres (~2)", gt=0)
+                        "carry the manoeuvres (~2)", gt=0, choices=("auto",))
     q_bias: float | str = _f("auto", "model cvb: PSD of the input-bias random walk per axis "
-                             "(m^2/s^5), or \"auto\" (from [imu])", gt=0)
+                             "(m^2/s^5), or \"auto\" (from [imu])", gt=0, choices=("auto",))
     r_scale: float = _f(1.0, "R = r_scale x the GPS preset's nominal error variance per axis",
                         gt=0)
     imu: bool = _f(True, "IMU-aided prediction: the accelerometer's specific force, rotated "
@@ -232,7 +253,8 @@ class LogConfig:
     render_hz: float = _f(2.0, "camera frame rate in sim time (Hz)", gt=0, le=60)
     width: int = _f(320, "frame width (px)", ge=16, le=1920)
     height: int = _f(240, "frame height (px)", ge=16, le=1080)
-    cameras: list[str] = _f(["chase", "down"], "cameras to render (chase, down)")
+    cameras: list[str] = _f(["chase", "down"], "cameras to render (chase, down)",
+                            choices=("chase", "down"), unique=True)
 
 
 @dataclass
@@ -261,48 +283,78 @@ class Config:
 
 
 # ------------------------------------------------------------------------------------ parsing
-def _type_name(tp: Any) -> str:
+def _type_name(tp: Any, choices: tuple | None = None) -> str:
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
-        return " or ".join(_type_name(a) for a in typing.get_args(tp))
+        return " or ".join(_type_name(a, choices) for a in typing.get_args(tp))
     if origin is list:
-        return f"list of {_type_name(typing.get_args(tp)[0])}"
-    return {float: "number", int: "integer", str: "string", bool: "true/false"}.get(tp, str(tp))
+        inner = typing.get_args(tp)[0]
+        return "a list of " + {float: "numbers", int: "integers", str: "strings"}.get(
+            inner, _type_name(inner))
+    if tp is str and choices:
+        return " or ".join(_fmt(c) for c in choices)
+    return {float: "a number", int: "an integer", str: "a string",
+            bool: "true or false"}.get(tp, str(tp))
 
 
 def _fmt(v: Any) -> str:
-    if isinstance(v, str):
-        return f'"{v}"'
+    """``v`` as TOML would write it (strings quoted and escaped, tables inline), for messages."""
     if isinstance(v, bool):
         return "true" if v else "false"
-    if isinstance(v, dict):
-        return "{...}"
-    return repr(v)
+    if isinstance(v, int | float):
+        s = repr(v)
+    else:
+        try:
+            s = _toml_value(v)
+        except Exception:  # not TOML-shaped (a Python API caller's object): its repr
+            s = repr(v)
+    return s if len(s) <= 120 else s[:117] + "..."
 
 
-def _coerce(tp: Any, v: Any, key: str) -> Any:
+def _is_kind(tp: Any, v: Any) -> bool:
+    """Whether ``v`` has the TOML kind of type ``tp`` (so ``tp``'s own message fits it best)."""
+    if tp is float:
+        return isinstance(v, int | float) and not isinstance(v, bool)
+    if tp is int:
+        return isinstance(v, int) and not isinstance(v, bool)
+    if typing.get_origin(tp) is list:
+        return isinstance(v, list)
+    if tp is dict or typing.get_origin(tp) is dict:
+        return isinstance(v, dict)
+    return isinstance(v, tp)
+
+
+def _check_int64(v: int, key: str) -> None:
+    if not INT_MIN <= v <= INT_MAX:
+        raise ConfigError(f"{key} = {_fmt(v)}: outside the 64-bit integer range of TOML "
+                          "(-2^63 .. 2^63-1)")
+
+
+def _coerce(tp: Any, v: Any, key: str, choices: tuple | None = None) -> Any:
+    """``v`` as type ``tp`` (an int is a valid float, nothing else converts), or ConfigError."""
     origin = typing.get_origin(tp)
     if origin in (typing.Union, types.UnionType):
         for a in typing.get_args(tp):
-            try:
-                return _coerce(a, v, key)
-            except ConfigError:
-                continue
-        raise ConfigError(f"{key} = {_fmt(v)}: expected {_type_name(tp)}")
+            if _is_kind(a, v):
+                return _coerce(a, v, key, choices)
+        raise ConfigError(f"{key} = {_fmt(v)}: expected {_type_name(tp, choices)}")
     if origin is list:
         (inner,) = typing.get_args(tp)
         if not isinstance(v, list):
-            raise ConfigError(f"{key} = {_fmt(v)}: expected {_type_name(tp)}")
-        return [_coerce(inner, x, f"{key}[{i}]") for i, x in enumerate(v)]
+            raise ConfigError(f"{key} = {_fmt(v)}: expected {_type_name(tp, choices)}")
+        return [_coerce(inner, x, f"{key}[{i}]", choices) for i, x in enumerate(v)]
     if tp is float:
         if isinstance(v, bool) or not isinstance(v, int | float):
             raise ConfigError(f"{key} = {_fmt(v)}: expected a number")
+        if isinstance(v, int):
+            _check_int64(v, key)
         if not math.isfinite(v):
             raise ConfigError(f"{key} = {_fmt(v)}: expected a finite number")
         return float(v)
     if tp is int:
         if isinstance(v, bool) or not isinstance(v, int):
             raise ConfigError(f"{key} = {_fmt(v)}: expected an integer")
+        _check_int64(v, key)
         return v
     if tp is bool:
         if not isinstance(v, bool):
@@ -314,28 +366,49 @@ def _coerce(tp: Any, v: Any, key: str) -> Any:
         return v
     if tp is str:
         if not isinstance(v, str):
-            raise ConfigError(f"{key} = {_fmt(v)}: expected a string")
+            allowed = f"; allowed: {', '.join(choices)}" if choices else ""
+            raise ConfigError(f"{key} = {_fmt(v)}: expected a string{allowed}")
         return v
     raise TypeError(tp)
 
 
-def _check_range(meta: dict, v: Any, key: str) -> None:
-    vals = v if isinstance(v, list) else [v]
-    if meta.get("length") is not None and isinstance(v, list) and len(v) != meta["length"]:
+_BOUNDS = (("gt", ">", lambda a, b: a > b), ("ge", ">=", lambda a, b: a >= b),
+           ("lt", "<", lambda a, b: a < b), ("le", "<=", lambda a, b: a <= b))
+
+
+def _check_range(meta: Mapping[str, Any], v: Any, key: str, tp: Any = None) -> None:
+    """Enforce a field's metadata (bounds, choices, length, unique) on a coerced value."""
+    is_list = isinstance(v, list)
+    if meta.get("length") is not None and is_list and len(v) != meta["length"]:
         raise ConfigError(f"{key} = {_fmt(v)}: expected a list of {meta['length']} values")
-    for x in vals:
+    if meta.get("unique") and is_list:
+        seen: list[Any] = []
+        for x in v:
+            if x in seen:
+                raise ConfigError(f"{key} = {_fmt(v)}: {_fmt(x)} appears twice; each may appear "
+                                  "once")
+            seen.append(x)
+    for i, x in enumerate(v if is_list else [v]):
+        where = f"{key}[{i}]" if is_list else key
         if isinstance(x, str):
             ch = meta.get("choices")
             if ch and x not in ch:
-                raise ConfigError(f"{key} = {_fmt(x)}: allowed: {', '.join(ch)}")
+                if tp is not None and _is_union_with_number(tp):
+                    raise ConfigError(f"{where} = {_fmt(x)}: expected a number or "
+                                      f"{' or '.join(_fmt(c) for c in ch)}")
+                raise ConfigError(f"{where} = {_fmt(x)}: allowed: {', '.join(ch)}")
             continue
         if isinstance(x, bool):
             continue
-        for op, bound, ok in (("gt", ">", lambda a, b: a > b), ("ge", ">=", lambda a, b: a >= b),
-                              ("lt", "<", lambda a, b: a < b), ("le", "<=", lambda a, b: a <= b)):
+        for op, bound, ok in _BOUNDS:
             b = meta.get(op)
             if b is not None and not ok(x, b):
-                raise ConfigError(f"{key} = {_fmt(x)}: must be {bound} {b}")
+                raise ConfigError(f"{where} = {_fmt(x)}: must be {bound} {b}")
+
+
+def _is_union_with_number(tp: Any) -> bool:
+    return (typing.get_origin(tp) in (typing.Union, types.UnionType)
+            and float in typing.get_args(tp))
 
 
 def _build(cls: type, data: Any, prefix: str, base: Any = None) -> Any:
@@ -347,7 +420,7 @@ def _build(cls: type, data: Any, prefix: str, base: Any = None) -> Any:
     unknown = [k for k in data if k not in fields]
     if unknown:
         k = unknown[0]
-        where = f"{prefix}.{k}" if prefix else k
+        where = f"{prefix}.{k}" if prefix else str(k)
         raise ConfigError(f"{where} = {_fmt(data[k])}: unknown key; allowed in "
                           f"[{prefix or 'top level'}]: {', '.join(fields)}")
     base_obj = base if base is not None else cls()
@@ -358,30 +431,54 @@ def _build(cls: type, data: Any, prefix: str, base: Any = None) -> Any:
         if dataclasses.is_dataclass(tp):
             kwargs[name] = _build(tp, value, key, base=getattr(base_obj, name))
         else:
-            v = _coerce(tp, value, key)
-            _check_range(fields[name].metadata, v, key)
+            meta = fields[name].metadata
+            v = _coerce(tp, value, key, meta.get("choices"))
+            _check_range(meta, v, key, tp)
             kwargs[name] = v
     return dataclasses.replace(base_obj, **kwargs)
 
 
+def _check_gps_overrides(g: GpsConfig) -> None:
+    """``gps.overrides`` against the preset, by ``ag_uav.gps`` (the owner of those keys)."""
+    from . import gps
+
+    if g.multipath_prob > 0 and isinstance(g.overrides.get("components"), list):
+        raise ConfigError(f"gps.multipath_prob = {g.multipath_prob}: cannot be combined with a "
+                          "components list in gps.overrides; add the spikes to that list")
+    try:
+        gps.validate_overrides(g.preset, g.overrides)
+    except ValueError as e:
+        raise ConfigError(f"gps.overrides = {_fmt(g.overrides)}: {e}") from None
+
+
+def _check_field(name: str) -> None:
+    """``mission.field`` names a built-in field or an existing GeoJSON file (what
+    :func:`ag_uav.field.load_field` accepts), so a typo fails at load, not at take-off."""
+    from .field import BUILTIN_FIELDS
+
+    if name.strip().lower().replace("_", "-") in BUILTIN_FIELDS:
+        return
+    why = "not a built-in field"
+    if name.lower().endswith((".geojson", ".json")):
+        p = Path(name)
+        if p.is_file():
+            return
+        why = "is a directory" if p.is_dir() else "no such file"
+    raise ConfigError(f"mission.field = {_fmt(name)}: {why}; allowed: "
+                      f"{', '.join(BUILTIN_FIELDS)} or the path of a .geojson file")
+
+
 def _validate(cfg: Config) -> None:
-    d = cfg.mission.direction_deg
-    if isinstance(d, str) and d != "auto":
-        raise ConfigError(f'mission.direction_deg = "{d}": expected a number or "auto"')
-    for key in ("q", "q_bias"):
-        q = getattr(cfg.estimator, key)
-        if isinstance(q, str) and q != "auto":
-            raise ConfigError(f'estimator.{key} = "{q}": expected a number > 0 or "auto"')
-    steps = 1.0 / (cfg.sim.timestep_s * cfg.sim.control_hz)
-    if abs(steps - round(steps)) > 1e-6 or round(steps) < 1:
-        raise ConfigError(f"sim.control_hz = {cfg.sim.control_hz}: must divide the physics rate "
-                          f"1/timestep_s = {1.0 / cfg.sim.timestep_s:g} Hz")
-    for name in cfg.estimator.shadow:
-        if name not in ESTIMATORS[1:]:
-            raise ConfigError(f'estimator.shadow = "{name}": allowed: {", ".join(ESTIMATORS[1:])}')
-    for cam in cfg.log.cameras:
-        if cam not in ("chase", "down"):
-            raise ConfigError(f'log.cameras = "{cam}": allowed: chase, down')
+    """Checks across fields (one field's own range is :func:`_check_range`'s)."""
+    _check_field(cfg.mission.field)
+    s = cfg.sim
+    ctrl_steps = 1.0 / (s.timestep_s * s.control_hz) if s.timestep_s * s.control_hz > 0 else 0.0
+    if (not math.isfinite(ctrl_steps) or abs(ctrl_steps - round(ctrl_steps)) > 1e-6
+            or round(ctrl_steps) < 1):
+        raise ConfigError(f"sim.control_hz = {s.control_hz} with sim.timestep_s = "
+                          f"{s.timestep_s}: the control rate must divide the physics rate "
+                          f"1/timestep_s = {1.0 / s.timestep_s:g} Hz")
+    _check_gps_overrides(cfg.gps)
 
 
 def config_from_dict(data: dict[str, Any]) -> Config:
@@ -393,36 +490,113 @@ def config_from_dict(data: dict[str, Any]) -> Config:
 
 def parse_set_items(items: list[str]) -> dict[str, Any]:
     """``["wind.speed_mps=5", ...]`` (``--set`` arguments) -> dotted-key overrides; the value is
-    read as TOML, or kept as a bare string."""
+    read as one TOML value, or kept as a bare string where it is not TOML."""
     out: dict[str, Any] = {}
     for item in items:
         if "=" not in item:
-            raise ConfigError(f'--set "{item}": expected KEY=VALUE')
+            raise ConfigError(f"--set {_fmt(item)}: expected KEY=VALUE, e.g. "
+                              "--set wind.speed_mps=5")
         k, v = item.split("=", 1)
+        parts = [p.strip() for p in k.split(".")]
+        if not all(parts):
+            raise ConfigError(f"--set {_fmt(item)}: KEY {_fmt(k.strip())} has an empty part; "
+                              "expected dotted names, e.g. mission.swath_m")
         try:
-            out[k.strip()] = tomllib.loads(f"v = {v}")["v"]
+            doc = tomllib.loads(f"v = {v}")
         except tomllib.TOMLDecodeError:
-            out[k.strip()] = v  # a bare string
+            out[".".join(parts)] = v  # a bare string
+            continue
+        if list(doc) != ["v"]:
+            raise ConfigError(f"--set {_fmt(item)}: VALUE {_fmt(v)} is more than one TOML value")
+        out[".".join(parts)] = doc["v"]
     return out
+
+
+def _merge_section(cls: type, old: dict[str, Any], new: dict[str, Any]) -> dict[str, Any]:
+    """Table ``new`` over table ``old`` of dataclass ``cls``: sub-tables merge key by key,
+    everything else (values, ``gps.overrides``) is replaced."""
+    hints = typing.get_type_hints(cls)
+    out = dict(old)
+    for k, v in new.items():
+        tp = hints.get(k)
+        if (tp is not None and dataclasses.is_dataclass(tp) and isinstance(v, dict)
+                and isinstance(out.get(k), dict)):
+            out[k] = _merge_section(tp, out[k], v)
+        else:
+            out[k] = v
+    return out
+
+
+def _apply_override(data: dict[str, Any], key: str, value: Any) -> None:
+    """Set dotted ``key`` in the TOML-shaped ``data``; every table on the way must be one in the
+    schema (or inside a table-valued key such as ``gps.overrides``)."""
+    parts = key.split(".")
+    if not all(parts):
+        raise ConfigError(f"{_fmt(key)} = {_fmt(value)}: key has an empty part; expected dotted "
+                          "names, e.g. mission.swath_m")
+    cls: Any = Config  # the schema table we are in; None inside a free-form table
+    node = data
+    for i, part in enumerate(parts):
+        where = ".".join(parts[: i + 1])
+        last = i == len(parts) - 1
+        tp = None
+        if cls is not None:
+            hints = typing.get_type_hints(cls)
+            if part not in hints:
+                prefix = ".".join(parts[:i])
+                raise ConfigError(f"{where} = {_fmt(value)}: unknown key; allowed in "
+                                  f"[{prefix or 'top level'}]: {', '.join(hints)}")
+            tp = hints[part]
+        if last:
+            if (tp is not None and dataclasses.is_dataclass(tp) and isinstance(value, dict)
+                    and isinstance(node.get(part), dict)):
+                node[part] = _merge_section(tp, node[part], value)
+            else:
+                node[part] = value
+            return
+        if cls is not None:
+            if dataclasses.is_dataclass(tp):
+                cls = tp
+            elif tp is dict or typing.get_origin(tp) is dict:
+                cls = None
+            else:
+                raise ConfigError(f"{key} = {_fmt(value)}: {where} is a single value "
+                                  f"({_type_name(tp)}), not a table")
+        cur = node.get(part)
+        if cur is None:
+            cur = node[part] = {}
+        elif not isinstance(cur, dict):
+            raise ConfigError(f"{where} = {_fmt(cur)}: expected a table (to set {key} in it)")
+        node = cur
+
+
+def _read_toml(path: str | Path) -> dict[str, Any]:
+    p = Path(path)
+    what = f"config file = {_fmt(str(p))}"
+    if not p.exists():
+        raise ConfigError(f"{what}: no such file")
+    if not p.is_file():
+        raise ConfigError(f"{what}: not a file; expected a TOML file")
+    try:
+        raw = p.read_bytes()
+    except OSError as e:
+        raise ConfigError(f"{what}: cannot be read ({e.strerror or e})") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{what}: not UTF-8 text (byte {e.start}); TOML files are UTF-8") \
+            from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{what}: not valid TOML ({e})") from None
 
 
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> Config:
     """Load a TOML config file (``None`` = defaults) and apply dotted-key ``overrides``."""
-    data: dict[str, Any] = {}
-    if path is not None:
-        p = Path(path)
-        if not p.is_file():
-            raise ConfigError(f"config file = {_fmt(str(p))}: no such file")
-        try:
-            data = tomllib.loads(p.read_text())
-        except tomllib.TOMLDecodeError as e:
-            raise ConfigError(f"config file = {_fmt(str(p))}: not valid TOML ({e})") from None
+    data: dict[str, Any] = {} if path is None else _read_toml(path)
     for k, v in (overrides or {}).items():
-        node = data
-        parts = k.split(".")
-        for part in parts[:-1]:
-            node = node.setdefault(part, {})
-        node[parts[-1]] = v
+        _apply_override(data, str(k), v)
     return config_from_dict(data)
 
 

@@ -24,6 +24,7 @@ from ag_uav.gps import (
     available_presets,
     gps_preset,
     make_component,
+    validate_overrides,
 )
 
 tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
@@ -341,3 +342,276 @@ def test_errors_name_key_value_and_allowed():
                   seed=1)
     with pytest.raises(ValueError, match="mean_down_s"):
         GpsSensor(seed=1, outage={"mean_up_s": 1.0})
+
+
+# ------------------------------------------------------------------ rtk-m350: fix-quality episodes
+
+M350_DWELL = {"rtk-fixed": 300.0, "rtk-float": 20.0, "dgps": 30.0}
+# occupancy pi_i ~ nu_i T_i, nu the jump chain's stationary law: nu ~ (0.8, 1, 0.32) by hand
+# from next = fixed: {float .85, dgps .15}, float: {fixed .8, dgps .2}, dgps: {float 1}
+_OCC = np.array([0.8 * 300.0, 1.0 * 20.0, 0.32 * 30.0])
+M350_OCC = dict(zip(("rtk-fixed", "rtk-float", "dgps"), _OCC / _OCC.sum(), strict=True))
+
+
+def _runs(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lengths, states) of the runs of ``idx``, without the censored first and last runs."""
+    edges = np.flatnonzero(np.diff(idx)) + 1
+    starts = np.concatenate(([0], edges))
+    lengths = np.diff(np.concatenate((starts, [idx.size])))
+    return lengths[1:-1], idx[starts][1:-1]
+
+
+def test_m350_preset_nominal_figures_and_rate():
+    s = GpsSensor.from_preset("rtk-m350", 1)
+    assert s.rate_hz == 10.0
+    assert s.fix_types == ("rtk-fixed", "rtk-float", "dgps")
+    vx, vy, vz = s.variance  # nominal = RTK fixed, 1 cm + 1 ppm H, 1.5 cm + 1 ppm V at 1 km
+    assert math.sqrt(vx + vy) == pytest.approx(0.011, rel=1e-9)
+    assert math.sqrt(vz) == pytest.approx(0.016, rel=1e-9)
+    # the episodes' extra error is not in the nominal variance (R is the RTK-fixed figure)
+    assert s.mode_variance("dgps")[0] > 5000 * vx
+    assert s.fix_quality.occupancy() == pytest.approx(M350_OCC, rel=1e-9)
+    assert M350_OCC["rtk-fixed"] == pytest.approx(0.890, abs=1e-3)
+
+
+def test_m350_dwell_means_occupancy_and_jumps():
+    chain = GpsSensor.from_preset("rtk-m350", 7).fix_quality
+    dt = 0.1
+    idx = np.concatenate([chain.sample(500_000, dt)[0] for _ in range(8)])  # 400,000 s
+    lengths, states = _runs(idx)
+    tol = {"rtk-fixed": 0.10, "rtk-float": 0.08, "dgps": 0.15}  # ~4 standard errors
+    for i, name in enumerate(chain.names):
+        mean_s = lengths[states == i].mean() * dt
+        assert mean_s == pytest.approx(M350_DWELL[name], rel=tol[name]), name
+        assert (idx == i).mean() == pytest.approx(M350_OCC[name], rel=0.12), name
+    # jump table: from fixed 85 % to float; from float 80 % re-fix; dgps always to float
+    nxt = states[1:]
+    cur = states[:-1]
+    assert (nxt[cur == 0] == 1).mean() == pytest.approx(0.85, abs=0.04)
+    assert (nxt[cur == 1] == 0).mean() == pytest.approx(0.80, abs=0.04)
+    assert np.all(nxt[cur == 2] == 1)
+    assert not np.any(nxt == cur)
+
+
+def test_chain_weights_ramp_in_and_snap_back():
+    chain = GpsSensor.from_preset("rtk-m350", 3).fix_quality
+    dt = 0.1
+    idx, w = chain.sample(300_000, dt)
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=1e-12)
+    assert np.all(w >= -1e-15)
+    # every fixed fix is a pure fixed fix (the snap)
+    np.testing.assert_array_equal(w[idx == 0], np.broadcast_to([1.0, 0.0, 0.0], w[idx == 0].shape))
+    # a float episode entered from fixed ramps in as 1 - a^j, a = exp(-dt / 2 s)
+    a = math.exp(-dt / 2.0)
+    starts = np.flatnonzero((idx[1:] == 1) & (idx[:-1] == 0)) + 1
+    assert starts.size > 5
+    for k0 in starts[:5]:
+        j = np.arange(1, 6)
+        np.testing.assert_allclose(w[k0 : k0 + 5, 1], 1.0 - a**j, rtol=1e-12)
+
+
+def test_m350_errors_per_mode_exact_composition():
+    """In the fixed mode the error is the base (RTK-fixed) error plus rare glitches only."""
+    full, types = GpsSensor.from_preset("rtk-m350", 11).generate_errors(200_000,
+                                                                        with_fix_type=True)
+    base = GpsSensor.from_preset("rtk-m350", 11, fix_quality={}).generate_errors(200_000)
+    fixed = types == 0
+    d = np.abs(full[fixed] - base[fixed])
+    hit = d[:, 0] > 1e-12
+    assert 0.0005 < hit.mean() < 0.002  # glitch probability 0.001 per fix
+    assert np.all((d[hit, 0] >= 0.05 - 1e-12) & (d[hit, 0] <= 0.20 + 1e-12))
+    assert (types == 1).any() and (types == 2).any()
+    assert np.abs(full[types == 2] - base[types == 2])[:, 0].mean() > 0.3
+
+
+@pytest.mark.parametrize("mode, h_rms_lo, h_rms_hi", [
+    ("rtk-fixed", 0.010, 0.014),   # 1 cm + 1 ppm at 1 km = 1.1 cm; glitches make it 1.25
+    ("rtk-float", 0.25, 0.35),     # 0.3 m H RMS (0.1-0.5 m)
+    ("dgps", 1.10, 1.30),          # SBAS 1.0 m CEP -> 0.85 m per axis -> 1.20 m H RMS
+])
+def test_m350_error_level_per_mode(mode, h_rms_lo, h_rms_hi):
+    # hold the chain in `mode` (dwell 1e9 s) and sample 100,000 s at 1 s (>> every tau)
+    ov = {"fix_quality": {"start": mode, "modes": {mode: {"mean_dwell_s": 1e9}}}}
+    s = GpsSensor.from_preset("rtk-m350", 5, **ov)
+    e, types = s.generate_errors(100_000, dt=1.0, with_fix_type=True)
+    assert np.all(types == s.fix_types.index(mode))
+    e = e[100:]  # past any ramp
+    var = s.mode_variance(mode)
+    np.testing.assert_allclose(e.var(axis=0), var, rtol=0.08)
+    h_rms = math.sqrt(float(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2)))
+    assert h_rms_lo <= h_rms <= h_rms_hi
+    # heavy tails: the white part is Student-t, the spikes add outliers
+    z = e[:, 0] / e[:, 0].std()
+    assert np.mean(np.abs(z) > 4.0) > 2 * 2 * stats.norm.sf(4.0)
+
+
+def test_m350_chunk_invariant_and_measure_matches():
+    a = GpsSensor.from_preset("rtk-m350", 21)
+    b = GpsSensor.from_preset("rtk-m350", 21)
+    ea, ta = a.generate_errors(30_000, with_fix_type=True)
+    parts = [b.generate_errors(n, with_fix_type=True) for n in (1, 1023, 9000, 19_976)]
+    np.testing.assert_allclose(ea, np.concatenate([p[0] for p in parts]), rtol=1e-12,
+                               atol=1e-14)
+    np.testing.assert_array_equal(ta, np.concatenate([p[1] for p in parts]))
+    assert (ta > 0).any()  # the stretch crosses episodes
+    # measure() at 100 Hz delivers the same errors and reports the fix type of each fix
+    c = GpsSensor.from_preset("rtk-m350", 21)
+    kinds = []
+    errs = []
+    for i in range(300_000):  # 3000 s
+        t = i / 100.0
+        f = c.measure(t, (0.0, 0.0, 0.0))
+        if f is not None:
+            errs.append(f)
+            kinds.append(c.last_fix_type)
+    assert len(errs) == 30_000
+    np.testing.assert_allclose(np.array(errs), ea, rtol=1e-12, atol=1e-14)
+    assert kinds == [c.fix_types[i] for i in ta]
+    assert c.fix_type_counts == {n: int((ta == i).sum()) for i, n in enumerate(c.fix_types)}
+
+
+def test_m350_deterministic_per_seed_and_streams_keyed_by_name():
+    e1, t1 = GpsSensor.from_preset("rtk-m350", 2024).generate_errors(50_000, with_fix_type=True)
+    e2, t2 = GpsSensor.from_preset("rtk-m350", 2024).generate_errors(50_000, with_fix_type=True)
+    e3, t3 = GpsSensor.from_preset("rtk-m350", 2025).generate_errors(50_000, with_fix_type=True)
+    np.testing.assert_array_equal(e1, e2)
+    np.testing.assert_array_equal(t1, t2)
+    assert not np.allclose(e1, e3)
+    assert not np.array_equal(t1, t3)
+    # a new component in one mode changes neither the chain nor the other components' draws
+    ov = {"fix_quality": {"modes": {"dgps": {"components": {"extra": {
+        "type": "gaussian", "sigma": 5.0}}}}}}
+    e4, t4 = GpsSensor.from_preset("rtk-m350", 2024, **ov).generate_errors(50_000,
+                                                                           with_fix_type=True)
+    np.testing.assert_array_equal(t4, t1)
+    same = t1 != 2
+    # outside dgps only the fading dgps weight can differ: equal except within the ramp-out
+    assert np.mean(np.isclose(e4[same], e1[same], rtol=0, atol=1e-12)) > 0.97
+    assert not np.allclose(e4[t1 == 2], e1[t1 == 2])
+
+
+def test_presets_without_fix_quality_report_no_fix_type():
+    s = GpsSensor.from_preset("rtk", 1)
+    e, t = s.generate_errors(100, with_fix_type=True)
+    assert s.fix_types == () and np.all(t == -1)
+    s.measure(0.0, (0.0, 0.0, 0.0))
+    assert s.last_fix_type is None and s.fix_type_counts == {}
+
+
+# ------------------------------------------------------------------ strict override validation
+
+_BAD_OVERRIDES = [
+    # (preset, overrides, regex the one-line message must match)
+    ("rtk", {"axis_scale": "x"}, r"axis_scale = 'x'.*3 finite numbers >= 0"),
+    ("rtk", {"axis_scale": "123"}, r"axis_scale = '123'.*3 finite numbers"),
+    ("rtk", {"axis_scale": [1.0, 1.0]}, r"axis_scale = \[1.0, 1.0\].*3 finite"),
+    ("rtk", {"axis_scale": [1.0, float("nan"), 1.0]}, r"axis_scale = \[1.0, nan, 1.0\]"),
+    ("rtk", {"axis_scale": [1.0, True, 1.0]}, r"axis_scale = \[1.0, True, 1.0\]"),
+    ("rtk", {"axis_scale": [1.0, -1.0, 1.0]}, r"axis_scale.*>= 0"),
+    ("rtk", {"rate_hz": "20"}, r"rate_hz = '20'.*number > 0 and <= 100"),
+    ("rtk", {"rate_hz": True}, r"rate_hz = True.*number"),
+    ("rtk", {"rate_hz": float("nan")}, r"rate_hz = nan.*finite"),
+    ("rtk", {"rate_hz": float("inf")}, r"rate_hz = inf.*finite"),
+    ("rtk", {"rate_hz": 0}, r"rate_hz = 0.*> 0"),
+    ("rtk", {"rate_hz": 500.0}, r"rate_hz = 500.0.*<= 100"),
+    ("rtk", {"latency_s": -0.1}, r"latency_s = -0.1.*>= 0"),
+    ("rtk", {"latency_s": 5.0}, r"latency_s = 5.0.*<= 1"),
+    ("rtk", {"ratehz": 5}, r"ratehz = 5.*unknown key; allowed: axis_scale"),
+    ("rtk", {"components": "white"}, r"components = 'white'.*list of component tables"),
+    ("rtk", {"components": {"white": 0.5}}, r"components.white = 0.5.*must be a table"),
+    ("rtk", {"components": [1.0]}, r"components\[0\] = 1.0.*component table"),
+    ("rtk", {"components": {"white": {"sigma": "0.5"}}}, r"sigma = '0.5'.*number >= 0"),
+    ("rtk", {"components": {"white": {"sigma": float("nan")}}}, r"sigma = nan.*finite"),
+    ("rtk", {"components": {"white": {"sigmaa": 1.0}}}, r"sigmaa = 1.0.*unknown key"),
+    ("rtk", {"components": {"white": {"axis_scale": "xyz"}}}, r"axis_scale = 'xyz'"),
+    ("rtk", {"components": {"mp": {"type": "spikes", "prob": 1.5, "amplitude": 1.0}}},
+     r"prob = 1.5.*\[0, 1\]"),
+    ("rtk", {"components": {"ar": {"type": "ar1", "rho": 0.5, "driver": {
+        "type": "ar1", "rho": 0.5, "driver": {"type": "gaussian", "sigma": 1.0}}}}},
+     r"type = 'ar1'.*driver must be one of"),
+    ("rtk", {"components": {"t": {"type": "student-t", "sigma": 1.0, "nu": "3"}}},
+     r"nu = '3'"),
+    ("rtk", {"outage": "none"}, r"outage = 'none'.*must be a table"),
+    ("rtk", {"outage": []}, r"outage = \[\].*must be a table"),
+    ("rtk", {"outage": {"mean_up_s": "10", "mean_down_s": 1.0}}, r"mean_up_s = '10'"),
+    ("rtk", {"outage": {"mean_up_s": 10.0, "mean_down_s": 1.0, "start_in_outage": "yes"}},
+     r"start_in_outage = 'yes'.*true or false"),
+    ("rtk", {"outage": {"mean_up_s": 10.0, "mean_down": 1.0}}, r"mean_down = 1.0.*unknown key"),
+    ("rtk", [("rate_hz", 5.0)], r"overrides = .*must be a table"),
+    ("rtk", {3: 5.0}, r"overrides key = 3.*non-empty strings"),
+    ("nonsense", {}, r"name = 'nonsense'.*allowed: perfect"),
+    ("rtk-m350", {"fix_quality": 5}, r"fix_quality = 5.*must be a table"),
+    ("rtk-m350", {"fix_quality": {"mode": {}}}, r"mode = \{\}.*unknown key; allowed: modes"),
+    ("rtk-m350", {"fix_quality": {"start": "rtk"}}, r"start = 'rtk'.*one of the modes"),
+    ("rtk-m350", {"fix_quality": {"modes": "x"}}, r"modes = 'x'.*table of mode tables"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": 30.0}}}, r"modes.dgps = 30.0.*table"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": {"mean_dwell_s": -30.0}}}},
+     r"'dgps'.*mean_dwell_s = -30.0.*> 0"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": {"mean_dwell_s": "30"}}}},
+     r"mean_dwell_s = '30'"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": {"ramp_s": float("inf")}}}},
+     r"ramp_s = inf.*finite"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": {"next": {"rtk-float": 0.5}}}}},
+     r"next = \{'rtk-float': 0.5\}.*summing to 1"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": {"next": {"dgps": 1.0}}}}},
+     r"next.dgps = 1.0.*other modes"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": {"next": {"rtk-float": 1.0,
+                                                              "rtk-fixed": -0.0001}}}}},
+     r"next.rtk-fixed = -0.0001.*>= 0"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": {"dwell": 3.0}}}}, r"dwell = 3.0.*unknown"),
+    ("rtk-m350", {"fix_quality": {"modes": {"dgps": {"components": {"white": {"nu": 2.0}}}}}},
+     r"nu = 2.0.*> 2"),
+    ("rtk-m350", {"fix_quality": {"modes": {"sbas": {"mean_dwell_s": 10.0}}}},
+     r"'sbas'.*next = None.*required"),
+]
+
+
+@pytest.mark.parametrize("preset, overrides, pattern", _BAD_OVERRIDES)
+def test_bad_overrides_raise_one_line_naming_key_value_allowed(preset, overrides, pattern):
+    with pytest.raises(ValueError, match=pattern) as ei:
+        validate_overrides(preset, overrides)
+    assert "\n" not in str(ei.value)
+    if isinstance(overrides, dict) and all(isinstance(k, str) for k in overrides):
+        with pytest.raises(ValueError, match=pattern):
+            GpsSensor.from_preset(preset, 0, **overrides)
+
+
+@pytest.mark.parametrize("preset, overrides", [
+    ("rtk", {}),
+    ("rtk", {"axis_scale": [1, 1, 2], "rate_hz": 5, "latency_s": 0.05}),
+    ("standalone", {"components": {"bias": {"tau_s": 30.0}, "white": {}}}),
+    ("standalone", {"outage": {"mean_up_s": 10.0, "mean_down_s": 1.0,
+                               "start_in_outage": True}}),
+    ("rtk-m350", {"fix_quality": {}}),
+    ("rtk-m350", {"rate_hz": 20.0, "fix_quality": {"modes": {
+        "dgps": {"mean_dwell_s": 60.0, "components": {"multipath": {}}}}}}),
+])
+def test_good_overrides_pass(preset, overrides):
+    assert validate_overrides(preset, overrides) is None
+    GpsSensor.from_preset(preset, 0, **overrides)
+
+
+def test_mode_override_removes_a_mode():
+    ov = {"fix_quality": {"modes": {"dgps": {},
+                                    "rtk-fixed": {"next": {"rtk-float": 1.0}},
+                                    "rtk-float": {"next": {"rtk-fixed": 1.0}}}}}
+    s = GpsSensor.from_preset("rtk-m350", 0, **ov)
+    assert s.fix_types == ("rtk-fixed", "rtk-float")
+    with pytest.raises(ValueError, match=r"next.dgps = 0.15"):
+        validate_overrides("rtk-m350", {"fix_quality": {"modes": {"dgps": {}}}})
+
+
+def test_m350_filters_get_the_nominal_rtk_r_not_the_fix_type():
+    """The loop's R comes from the nominal (RTK-fixed) variance, floored at (1 cm)^2; the episode
+    levels (float: 0.2 m, DGPS: 0.85 m per axis) never reach it."""
+    import ag_uav
+    from ag_uav.estimation import R_FLOOR, EstimatorFeedback
+    from ag_uav.sim import seed_sequences
+
+    cfg = ag_uav.load_config(None, {"gps.preset": "rtk-m350", "estimator.name": "kf"})
+    ss = seed_sequences(cfg.seed)
+    fb = EstimatorFeedback(cfg, ss["gps"], ss["altimeter"], ss["imu"])
+    nominal = fb.gps.variance
+    assert nominal[0] < R_FLOOR
+    np.testing.assert_allclose(fb.r_diag[:2], [R_FLOOR, R_FLOOR])
+    assert fb.r_diag[0] < 1e-3 * fb.gps.mode_variance("dgps")[0]
