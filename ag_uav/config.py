@@ -166,10 +166,15 @@ ESTIMATORS = ("true", "kf", "mckf", "pca-kf", "pca-mckf", "kf-bias", "kf-diff")
 
 @dataclass
 class GpsConfig:
-    preset: str = _f("rtk", "GPS error preset (see ag_uav.gps)", choices=GPS_PRESETS)
+    preset: str = _f("rtk-m350", "GPS error preset (see ag_uav.gps)", choices=GPS_PRESETS)
     rate_hz: float = _f(0.0, "fix rate (Hz); 0 = the preset's", ge=0, le=100)
     multipath_prob: float = _f(0.0, "extra multipath spikes: probability per fix", ge=0, le=1)
     multipath_amplitude_m: float = _f(5.0, "extra multipath spikes: amplitude (m)", ge=0)
+    r_from_fix_type: bool = _f(True, "the filters set R from the fix type the receiver "
+                               "reports with each fix (RTK fixed / float / DGPS, as u-blox "
+                               "UBX-NAV-PVT carrSoln and hAcc; PX4's EKF2 likewise uses the "
+                               "reported accuracy); false: R stays at the preset's nominal "
+                               "figure (the robust-filter premise of the core paper)")
     altitude_source: str = _f("radar", "height channel of each fix: a radar altimeter (as on "
                               "spray drones) or the GPS's own vertical", choices=("radar", "gps"))
     radar_sigma_m: float = _f(0.05, "radar altimeter noise std (m), white", gt=0)
@@ -206,7 +211,8 @@ class EstimatorConfig:
                    "loose coupling); see [imu]")
     sigma: float = _f(2.0, "MCKF kernel bandwidth (dimensionless, whitened residuals)", gt=0)
     max_iter: int = _f(10, "MCKF fixed-point iteration cap", ge=1, le=100)
-    window: int = _f(20, "PCA window N (fixes)", ge=3, le=1000)
+    window: int = _f(10, "PCA window N (fixes; 10 = 1 s at the rtk-m350's 10 Hz, the span of "
+                     "the paper's N = 20 at 20 Hz)", ge=3, le=1000)
     pca_mode: str = _f("hankel", "PCA reading", choices=("hankel", "channels"))
 
 

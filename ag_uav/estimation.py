@@ -200,6 +200,16 @@ class EstimatorFeedback(FilterBank, Feedback):
             self.radar_sigma = cfg.gps.radar_sigma_m
             self.radar_rng = np.random.default_rng(altimeter_seed)
             self.r_diag[2] = max(self.radar_sigma**2, R_FLOOR)
+        # R per reported fix type (RTK fixed / float / DGPS), when the preset has fix types
+        self.r_by_fix: dict[str, np.ndarray] = {}
+        if cfg.gps.r_from_fix_type and getattr(self.gps, "fix_types", ()):
+            for mode in self.gps.fix_types:
+                r = np.maximum(cfg.estimator.r_scale * np.asarray(self.gps.mode_variance(mode)),
+                               R_FLOOR)
+                if self.radar:
+                    r[2] = self.r_diag[2]
+                self.r_by_fix[mode] = np.diag(r)
+        self._r_mode: str | None = None
         e = cfg.estimator
         self.primary = e.name
         self.name = e.name
@@ -233,6 +243,12 @@ class EstimatorFeedback(FilterBank, Feedback):
         z = self.gps.measure(t, p_true)
         if z is not None and self.radar:
             z[2] = p_true[2] + self.radar_sigma * self.radar_rng.standard_normal()
+        if z is not None and self.r_by_fix:
+            mode = self.gps.last_fix_type
+            if mode != self._r_mode and mode in self.r_by_fix:
+                self._r_mode = mode
+                for f in self.filters.values():
+                    f.R = self.r_by_fix[mode]
         if z is not None:
             self.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
             if self.log is not None:
@@ -294,6 +310,8 @@ class EstimatorFeedback(FilterBank, Feedback):
         return out
 
     def summary(self) -> dict[str, Any]:
+        counts = getattr(self.gps, "fix_type_counts", None)
         return {"gps_preset": self.cfg.gps.preset, "gps_fixes": len(self.fixes),
+                "gps_fix_types": dict(counts) if counts else None,
                 "gps_rate_hz": self.gps.rate_hz,
                 "estimator_r_diag_m2": [round(float(v), 5) for v in self.r_diag]}
