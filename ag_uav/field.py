@@ -306,6 +306,7 @@ class Field:
         or a parsed dict; ``select`` (``"KEY=VALUE"`` or ``"VALUE"`` for ``name=VALUE``) picks
         one feature of a collection. Coordinates are converted to local ENU about ``origin`` =
         (lat, lon[, h]); by default the mean of the outer rings' vertices."""
+        fallback = "field"
         if isinstance(src, dict):
             gj = src
         else:
@@ -315,10 +316,11 @@ class Field:
             else:
                 p = Path(s)
                 gj = _json_loads(_read_bytes(p, "GeoJSON"))
-                name = name or p.stem
+                fallback = p.stem
         if not isinstance(gj, dict):
             raise ValueError("GeoJSON: the top level must be an object")
-        return _from_features(cls, _geojson_features(gj), select, "GeoJSON", origin, name)
+        return _from_features(cls, _geojson_features(gj), select, "GeoJSON", origin, name,
+                              fallback)
 
     @classmethod
     def from_kml(
@@ -331,14 +333,16 @@ class Field:
         """Build from OGC KML 2.2 (a ``.kml`` path, a zipped ``.kmz`` path, or the KML bytes):
         the Placemark with a Polygon (or a MultiGeometry of them); ``select`` as in
         :meth:`from_geojson`, matched against the placemark's ``<name>`` and ExtendedData."""
+        fallback = "field"
         if isinstance(src, bytes):
             data = src
         else:
             p = Path(src)
+            fallback = p.stem
             data = _read_bytes(p, "KML")
             if p.suffix.lower() == ".kmz" or data[:2] == b"PK":
                 data = _kmz_doc(p)
-        return _from_features(cls, _kml_features(data), select, "KML", origin, name)
+        return _from_features(cls, _kml_features(data), select, "KML", origin, name, fallback)
 
     @classmethod
     def from_shapefile(
@@ -352,7 +356,7 @@ class Field:
         geographic lon/lat (read with pyshp); ``select`` as in :meth:`from_geojson`, matched
         against the record's attributes."""
         p = Path(path)
-        return _from_features(cls, _shp_features(p), select, "shapefile", origin, name)
+        return _from_features(cls, _shp_features(p), select, "shapefile", origin, name, p.stem)
 
     @classmethod
     def from_file(
@@ -489,8 +493,10 @@ def _fmt_val(v: Any) -> str:
 
 
 def _from_features(cls, feats: list[_Feature], select: str | None, what: str,
-                   origin: Sequence[float] | None, name: str | None) -> Field:
-    """Pick one feature (by ``select``) and build the Field."""
+                   origin: Sequence[float] | None, name: str | None,
+                   fallback: str = "field") -> Field:
+    """Pick one feature (by ``select``) and build the Field; its name is ``name``, else the
+    feature's ``name`` property, else ``fallback`` (the file's stem)."""
     if not feats:
         raise ValueError(f"{what}: no polygon found (need a Polygon or MultiPolygon)")
     if select is not None:
@@ -515,7 +521,7 @@ def _from_features(cls, feats: list[_Feature], select: str | None, what: str,
     else:
         feat = feats[0]
     props = {str(k): v for k, v in feat.props.items()}
-    nm = name or (_fmt_val(props["name"]) if props.get("name") not in (None, "") else "field")
+    nm = name or (_fmt_val(props["name"]) if props.get("name") not in (None, "") else fallback)
     return cls.from_lonlat_parts(feat.parts, origin=origin, name=nm,
                                  meta={k: v for k, v in props.items() if k != "name"})
 
@@ -709,12 +715,13 @@ def _shp_features(p: Path) -> list[_Feature]:
                              "lon/lat (EPSG:4326)")
     poly_types = {shapefile.POLYGON, shapefile.POLYGONZ, shapefile.POLYGONM}
     feats = []
+    bad_type = None
     try:
         with shapefile.Reader(str(p)) as r:
             if r.shapeType not in poly_types and r.shapeType != shapefile.NULL:
-                raise ValueError(f"shapefile holds {r.shapeTypeName} shapes, not polygons")
+                bad_type = r.shapeTypeName
             has_dbf = r.dbf is not None
-            for i in range(len(r)):
+            for i in range(0 if bad_type else len(r)):
                 shp = r.shape(i)
                 if shp.shapeType not in poly_types or not shp.points:
                     continue
@@ -725,8 +732,11 @@ def _shp_features(p: Path) -> list[_Feature]:
                 parts = _group_rings(rings)
                 if parts:
                     feats.append(_Feature(props, parts))
-    except shapefile.ShapefileException as e:
-        raise ValueError(f"cannot read shapefile {p}: {str(e).splitlines()[0]}") from None
+    except Exception as e:  # pyshp raises ShapefileException, struct.error, ... on a bad file
+        msg = (str(e).splitlines() or [""])[0]
+        raise ValueError(f"cannot read shapefile {p}: {type(e).__name__}: {msg}") from None
+    if bad_type:
+        raise ValueError(f"shapefile holds {bad_type} shapes, not polygons")
     return feats
 
 
