@@ -245,3 +245,19 @@ def test_two_part_field_flies_complete():
     assert max(near) < 25.0
     inside = shapely.contains_xy(fld.polygon.buffer(1.0), on[:, 0], on[:, 1])
     assert inside.all()
+
+
+def test_example_farm_kml():
+    """examples/farm.kml (the README's example): North has a hole, South is kept in two parts."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "farm.kml"
+    north = load_field(f"{path}#name=North")
+    south = load_field(f"{path}#South")
+    assert len(north.parts) == 1 and len(north.parts[0].interiors) == 1
+    assert north.area == pytest.approx(3132.0, abs=1.0) and north.meta["crop"] == "winter wheat"
+    assert len(south.parts) == 2 and south.area == pytest.approx(2647.5, abs=1.0)
+    p = plan_coverage(south)
+    assert sum(1 for s in p.segments if s.kind == "transit" and not s.spray) >= 1
+    cov, _ = spray_coverage(south, p.spray_tracks(), p.swath)
+    assert cov >= 0.98
