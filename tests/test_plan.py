@@ -11,7 +11,6 @@ from ag_uav.coverage import spray_coverage
 from ag_uav.field import BUILTIN_FIELDS, Field, load_field
 from ag_uav.plan import KINDS, plan_coverage
 
-
 SINGLE_PART = [n for n in BUILTIN_FIELDS if n != "two-part"]  # two-part: tests/test_fields_io.py
 
 
