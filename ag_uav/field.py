@@ -677,15 +677,13 @@ def _kmz_doc(p: Path) -> bytes:
 def _group_rings(rings: list[np.ndarray]) -> list[list[np.ndarray]]:
     """Sort rings into parts by containment (even nesting depth = boundary, odd = hole of the
     smallest boundary around it); winding is ignored."""
-    polys = [Polygon(r[:, :2]) if len(r) >= 3 else Polygon() for r in rings]
-    probe = [p.representative_point() if p.is_valid and not p.is_empty else
-             (Polygon(r[:, :2]).centroid if len(r) else None) for p, r in zip(polys, rings,
-                                                                              strict=True)]
-    areas = [abs(p.area) for p in polys]
+    polys = [Polygon(r[:, :2]) for r in rings]  # callers pass rings of >= 3 points
+    # a point strictly inside each ring (an invalid ring is reported later, by _make_polygon)
+    probe = [p.representative_point() if p.is_valid else p.centroid for p in polys]
+    areas = [p.area for p in polys]
     n = len(rings)
-    containers = [[j for j in range(n) if j != i and probe[i] is not None
-                   and areas[j] > areas[i] and polys[j].is_valid and polys[j].contains(probe[i])]
-                  for i in range(n)]
+    containers = [[j for j in range(n) if j != i and areas[j] > areas[i]
+                   and polys[j].is_valid and polys[j].contains(probe[i])] for i in range(n)]
     depth = [len(c) for c in containers]
     parts: dict[int, list[np.ndarray]] = {}
     order = [i for i in range(n) if depth[i] % 2 == 0]
