@@ -70,6 +70,40 @@ def cmd_fly(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_plan(args: argparse.Namespace) -> int:
+    from .config import load_config
+    from .plan_export import write_plan
+    from .sim import build_field, build_plan
+
+    ov = _overrides(args)
+    if args.field:
+        ov["mission.field"] = args.field
+    cfg = load_config(args.config, ov)
+    fld = build_field(cfg)
+    plan = build_plan(cfg, fld)
+    origin = None
+    if args.origin:
+        try:
+            origin = tuple(float(v) for v in args.origin.split(","))
+            assert len(origin) in (2, 3)
+        except (ValueError, AssertionError):
+            raise ConfigError(f'--origin = "{args.origin}": expected LAT,LON[,H] in degrees '
+                              "(and metres)") from None
+    elif fld.origin is None:
+        raise ConfigError(f'mission.field = "{cfg.mission.field}": a field in local metres has '
+                          "no lon/lat; give --origin LAT,LON")
+    m = cfg.mission
+    try:
+        info = write_plan(plan, args.output, altitude=m.altitude_m, speed=m.speed_mps,
+                          origin=origin, simplify_m=args.simplify)
+    except ValueError as e:
+        raise ConfigError(f'-o = "{args.output}": {e}') from None
+    items = f", {info['items']} mission items" if "items" in info else ""
+    print(f"{args.output}: {info['format']}, {info['waypoints']} waypoints{items}, "
+          f"{info['spray_switches']} nozzle switches; {plan.summary()}")
+    return 0
+
+
 def cmd_bench(args: argparse.Namespace) -> int:
     from .bench import run_bench
 
@@ -111,6 +145,23 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--model-info", action="store_true",
                    help="print the compiled vehicle's mass, inertia, rotor layout instead")
     c.set_defaults(func=cmd_config)
+
+    pl = sub.add_parser("plan", help="write the coverage plan (lon/lat) without flying: "
+                        ".geojson, .kml or QGroundControl .plan",
+                        description="Plan coverage of FIELD (a built-in name or a .geojson/"
+                                    ".kml/.kmz/.shp file; PATH#name=VALUE picks one feature) "
+                                    "with the config's swath, headland and direction, and write "
+                                    "it in the format OUT's extension names.")
+    pl.add_argument("field", nargs="?", metavar="FIELD",
+                    help="field (default: the config's mission.field)")
+    _add_config_args(pl)
+    pl.add_argument("-o", "--output", required=True, metavar="OUT",
+                    help="output file: .geojson, .kml or .plan (QGroundControl)")
+    pl.add_argument("--origin", metavar="LAT,LON", help="geodetic origin for a field given in "
+                    "local metres (e.g. the built-in default)")
+    pl.add_argument("--simplify", type=float, default=0.2, metavar="M",
+                    help="thin turn and transit polylines to this tolerance (m; default 0.2)")
+    pl.set_defaults(func=cmd_plan)
 
     b = sub.add_parser("bench", help="measure closed-loop sim speed against raw MuJoCo stepping",
                        description="Measure, in one process and one run, the closed-loop speed "

@@ -69,8 +69,8 @@ REDUCERS = ("km", "nt", "bmm", "zeta")
 
 @dataclass
 class MissionConfig:
-    field: str = _f("default", "built-in field name (default, l-shape, hole) or path to a "
-                    "GeoJSON polygon in lon/lat")
+    field: str = _f("default", "built-in field (default, l-shape, hole, two-part) or a lon/lat "
+                    ".geojson/.kml/.kmz/.shp path; PATH#name=VALUE picks one feature")
     swath_m: float = _f(6.0, "spray swath width (m)", gt=0)
     headland_m: float = _f(6.0, "headland margin swept by laps along the boundary (m); 0 = none",
                            ge=0)

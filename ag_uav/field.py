@@ -1,9 +1,34 @@
-"""Field geometry: a polygon in local ENU metres, with optional holes (obstacles).
+"""Field geometry: a polygon (or several parts) in local ENU metres, with optional holes.
 
-A :class:`Field` wraps a :class:`shapely.geometry.Polygon` whose coordinates are east/north metres
-in a local tangent plane. Fields are built from local coordinates (:meth:`Field.from_coords`), from
-a GeoJSON polygon in WGS-84 lon/lat (:meth:`Field.from_geojson`) or by name
-(:func:`load_field` / :meth:`Field.builtin`).
+A :class:`Field` wraps a :class:`shapely.geometry.Polygon` (or a ``MultiPolygon`` for a field
+kept as several parts) whose coordinates are east/north metres in a local tangent plane. Fields
+are built from local coordinates (:meth:`Field.from_coords`, :meth:`Field.from_parts`), from WGS-84
+lon/lat files (:meth:`Field.from_file`) or by name (:func:`load_field` / :meth:`Field.builtin`).
+
+Files accepted (the format follows the extension):
+
+* **GeoJSON** (RFC 7946; ``.geojson``/``.json``): a Polygon, MultiPolygon, GeometryCollection of
+  them, Feature or FeatureCollection. Positions are ``[lon, lat(, alt)]``; the first ring of a
+  polygon is its boundary, further rings are holes.
+* **KML** (OGC KML 2.2; ``.kml``, or zipped ``.kmz``): every ``Placemark`` with a ``Polygon``
+  (``outerBoundaryIs`` / ``innerBoundaryIs``), also inside ``MultiGeometry``. Properties of a
+  placemark: its ``<name>`` and its ``ExtendedData`` (``Data``/``value`` and ``SimpleData``).
+* **ESRI shapefile** (``.shp`` with its ``.shx``/``.dbf``; read with pyshp, pure Python): Polygon
+  shapes (Z/M too) in geographic lon/lat; a ``.prj`` naming a projected CRS is refused. Rings are
+  sorted into boundaries and holes by containment, not by winding.
+
+Ring winding is never trusted (RFC 7946 asks for counter-clockwise boundaries, the shapefile spec
+for clockwise ones, KML says nothing): holes may be wound either way; the polygon is normalised
+to a counter-clockwise boundary with clockwise holes. A feature with several polygons (a
+MultiPolygon, a KML MultiGeometry, a multi-part shapefile record) becomes one Field with several
+parts; :mod:`ag_uav.plan` plans each part and joins them with transits (nozzles off). Parts must
+not overlap (touching at a point is allowed).
+
+**Picking one feature** out of a file with several (a FeatureCollection, a KML with several
+placemarks, a shapefile with several records): append ``#KEY=VALUE`` to the path (the feature
+whose property ``KEY`` equals ``VALUE``), or ``#VALUE`` for ``#name=VALUE``, e.g.
+``mission.field = "farm.geojson#name=North"``. Without a selector the file must hold exactly one
+polygon feature.
 
 Geodetic conversion (no pyproj): WGS-84 geodetic (lat φ, lon λ, h) → ECEF → local ENU about an
 origin (φ0, λ0, h0), from the textbook formulas::
@@ -28,6 +53,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -35,17 +61,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from shapely.geometry import Polygon
+from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
 from shapely.validation import explain_validity
 
 __all__ = [
     "BUILTIN_FIELDS",
+    "FIELD_FILE_SUFFIXES",
     "Field",
     "enu_to_lonlat",
     "geodetic_to_ecef",
     "load_field",
     "lonlat_to_enu",
+    "split_field_spec",
 ]
 
 # WGS-84 ellipsoid
@@ -132,17 +160,54 @@ def _as_ring(pts: Iterable[Sequence[float]], what: str) -> np.ndarray:
     return a
 
 
+def _make_polygon(outer: Iterable[Sequence[float]], holes: Iterable[Iterable[Sequence[float]]],
+                  pre: str = "") -> Polygon:
+    """A validated, oriented (CCW boundary, CW holes) polygon; ``pre`` prefixes error messages."""
+    shell = _as_ring(outer, f"{pre}outer boundary")
+    rings = [_as_ring(h, f"{pre}hole {i}") for i, h in enumerate(holes)]
+    shell_poly = Polygon(shell)
+    c = shell - shell.mean(axis=0)
+    if np.linalg.svd(c, compute_uv=False)[-1] <= 1e-9 * max(1.0, float(np.abs(c).max())):
+        raise ValueError(f"{pre}outer boundary has zero area (collinear or repeated points)")
+    if not shell_poly.is_valid:
+        raise ValueError(
+            f"{pre}outer boundary is not a valid simple polygon: {explain_validity(shell_poly)}"
+            " (self-intersecting? check the vertex order)"
+        )
+    for i, h in enumerate(rings):
+        hp = Polygon(h)
+        if hp.area <= 1e-9:
+            raise ValueError(f"{pre}hole {i} has zero area")
+        if not hp.is_valid:
+            raise ValueError(f"{pre}hole {i} is not a valid simple polygon: {explain_validity(hp)}")
+        if not shell_poly.contains(hp):
+            raise ValueError(f"{pre}hole {i} is not inside the outer boundary")
+        for j in range(i):
+            if hp.intersects(Polygon(rings[j])):
+                raise ValueError(f"{pre}holes {j} and {i} overlap or touch; merge them into one")
+    poly = Polygon(shell, rings)
+    if not poly.is_valid:
+        raise ValueError(f"{pre}field polygon is invalid: {explain_validity(poly)}")
+    if poly.area <= 1e-9:
+        raise ValueError(f"{pre}field has zero area")
+    poly = Polygon(poly.exterior.coords, [r.coords for r in poly.interiors])
+    return orient(poly, 1.0)
+
+
 @dataclass
 class Field:
-    """A field polygon in local ENU metres (x = east, y = north), with optional holes.
+    """A field in local ENU metres (x = east, y = north): one polygon or several parts, with
+    optional holes.
 
     Attributes:
-        polygon: the shapely polygon (exterior = boundary, interiors = obstacles / no-spray holes).
+        polygon: the shapely ``Polygon`` (exterior = boundary, interiors = obstacles / no-spray
+            holes), or a ``MultiPolygon`` when the field has several parts (see :attr:`parts`).
         name: a label.
         origin: (lat, lon, h) of the local frame's origin when built from geodetic data, else None.
+        meta: the source feature's other properties.
     """
 
-    polygon: Polygon
+    polygon: Polygon | MultiPolygon
     name: str = "field"
     origin: tuple[float, float, float] | None = None
     meta: dict[str, Any] = field(default_factory=dict)
@@ -157,37 +222,76 @@ class Field:
         origin: tuple[float, float, float] | None = None,
     ) -> Field:
         """Build from local metres: ``outer`` ring and optional ``holes`` rings ((x, y) points;
-        closing point optional). Raises ValueError on a degenerate or invalid polygon."""
-        shell = _as_ring(outer, "outer boundary")
-        rings = [_as_ring(h, f"hole {i}") for i, h in enumerate(holes)]
-        shell_poly = Polygon(shell)
-        c = shell - shell.mean(axis=0)
-        if np.linalg.svd(c, compute_uv=False)[-1] <= 1e-9 * max(1.0, float(np.abs(c).max())):
-            raise ValueError("outer boundary has zero area (collinear or repeated points)")
-        if not shell_poly.is_valid:
-            raise ValueError(
-                f"outer boundary is not a valid simple polygon: {explain_validity(shell_poly)}"
-                " (self-intersecting? check the vertex order)"
-            )
-        for i, h in enumerate(rings):
-            hp = Polygon(h)
-            if hp.area <= 1e-9:
-                raise ValueError(f"hole {i} has zero area")
-            if not hp.is_valid:
-                raise ValueError(f"hole {i} is not a valid simple polygon: {explain_validity(hp)}")
-            if not shell_poly.contains(hp):
-                raise ValueError(f"hole {i} is not inside the outer boundary")
-            for j in range(i):
-                if hp.intersects(Polygon(rings[j])):
-                    raise ValueError(f"holes {j} and {i} overlap or touch; merge them into one")
-        poly = Polygon(shell, rings)
-        if not poly.is_valid:
-            raise ValueError(f"field polygon is invalid: {explain_validity(poly)}")
-        if poly.area <= 1e-9:
-            raise ValueError("field has zero area")
-        poly = Polygon(poly.exterior.coords, [r.coords for r in poly.interiors])
+        closing point optional; either winding). Raises ValueError on a degenerate or invalid
+        polygon."""
+        return cls(_make_polygon(outer, holes), name=name, origin=origin)
 
-        return cls(orient(poly, 1.0), name=name, origin=origin)
+    @classmethod
+    def from_parts(
+        cls,
+        parts: Sequence[Sequence[Iterable[Sequence[float]]]],
+        name: str = "field",
+        origin: tuple[float, float, float] | None = None,
+    ) -> Field:
+        """Build from local metres: ``parts`` = ``[[outer, hole, ...], ...]``, one entry per part.
+        One part gives the same Field as :meth:`from_coords`; several give a MultiPolygon.
+        Raises ValueError on an invalid part or on parts that overlap."""
+        if not parts:
+            raise ValueError("no polygon parts")
+        multi = len(parts) > 1
+        polys = []
+        for k, rings in enumerate(parts):
+            if not rings:
+                raise ValueError(f"part {k + 1} has no rings")
+            polys.append(_make_polygon(rings[0], rings[1:], f"part {k + 1}: " if multi else ""))
+        if not multi:
+            return cls(polys[0], name=name, origin=origin)
+        for i in range(len(polys)):
+            for j in range(i):
+                ov = polys[i].intersection(polys[j]).area
+                if ov > 1e-6:
+                    raise ValueError(f"parts {j + 1} and {i + 1} overlap ({ov:.1f} m²); a field's "
+                                     "parts must be disjoint (merge them into one polygon)")
+        return cls(MultiPolygon(polys), name=name, origin=origin)
+
+    @classmethod
+    def from_lonlat_parts(
+        cls,
+        parts: Sequence[Sequence[np.ndarray]],
+        origin: Sequence[float] | None = None,
+        name: str = "field",
+        meta: dict[str, Any] | None = None,
+    ) -> Field:
+        """Build from WGS-84 rings: ``parts`` = ``[[outer, hole, ...], ...]`` of (N, 2+) arrays of
+        (lon, lat[, alt]) degrees. Converted to local ENU about ``origin`` = (lat, lon[, h]); by
+        default the mean of the parts' outer-ring vertices."""
+        ll = [[np.asarray(r, dtype=float) for r in rings] for rings in parts]
+        for k, rings in enumerate(ll):
+            for i, r in enumerate(rings):
+                if r.ndim != 2 or r.shape[1] < 2 or len(r) == 0:
+                    raise ValueError(f"ring {i} of part {k + 1}: expected [[lon, lat], ...]")
+                if not np.all(np.isfinite(r[:, :2])):
+                    raise ValueError(f"ring {i} of part {k + 1}: non-finite coordinates")
+                if np.any(np.abs(r[:, 1]) > 90.0) or np.any(np.abs(r[:, 0]) > 180.0):
+                    raise ValueError(f"ring {i} of part {k + 1}: coordinates out of range; "
+                                     "expected WGS-84 longitude, latitude in degrees (GeoJSON "
+                                     "and KML order is lon, lat)")
+        if origin is None:
+            outers = []
+            for rings in ll:
+                o = rings[0][:, :2]
+                if len(o) > 1 and np.allclose(o[0], o[-1]):
+                    o = o[:-1]
+                outers.append(o)
+            allv = np.concatenate(outers)
+            org = (float(allv[:, 1].mean()), float(allv[:, 0].mean()), 0.0)
+        else:
+            org = (float(origin[0]), float(origin[1]),
+                   float(origin[2]) if len(origin) > 2 else 0.0)
+        local = [[lonlat_to_enu(r[:, 0], r[:, 1], org)[:, :2] for r in rings] for rings in ll]
+        f = cls.from_parts(local, name=name, origin=org)
+        f.meta.update(meta or {})
+        return f
 
     @classmethod
     def from_geojson(
@@ -195,50 +299,83 @@ class Field:
         src: str | Path | dict,
         origin: Sequence[float] | None = None,
         name: str | None = None,
+        select: str | None = None,
     ) -> Field:
-        """Build from a GeoJSON Polygon (lon/lat, WGS-84), or a Feature / FeatureCollection holding
-        exactly one Polygon (a one-part MultiPolygon is accepted). ``src`` is a path, a JSON
-        string or a parsed dict. Coordinates are converted to local ENU about ``origin`` =
-        (lat, lon[, h]); by default the mean of the outer ring's vertices. The first ring is the
-        boundary, further rings are holes."""
+        """Build from GeoJSON (RFC 7946, lon/lat WGS-84): a Polygon, MultiPolygon (every part is
+        kept), GeometryCollection, Feature or FeatureCollection. ``src`` is a path, a JSON string
+        or a parsed dict; ``select`` (``"KEY=VALUE"`` or ``"VALUE"`` for ``name=VALUE``) picks
+        one feature of a collection. Coordinates are converted to local ENU about ``origin`` =
+        (lat, lon[, h]); by default the mean of the outer rings' vertices."""
+        fallback = "field"
         if isinstance(src, dict):
             gj = src
         else:
             s = str(src)
             if s.lstrip().startswith("{"):
-                gj = json.loads(s)
+                gj = _json_loads(s)
             else:
                 p = Path(s)
-                if not p.exists():
-                    raise ValueError(f"GeoJSON file not found: {p}")
-                gj = json.loads(p.read_text())
-                name = name or p.stem
-        geom, props = _extract_polygon(gj)
-        rings = geom["coordinates"]
-        if not rings:
-            raise ValueError("GeoJSON Polygon has no rings")
-        lonlat = [np.asarray(r, dtype=float) for r in rings]
-        for i, r in enumerate(lonlat):
-            if r.ndim != 2 or r.shape[1] < 2:
-                raise ValueError(f"GeoJSON ring {i}: expected [[lon, lat], ...]")
-            if np.any(np.abs(r[:, 1]) > 90.0) or np.any(np.abs(r[:, 0]) > 180.0):
-                raise ValueError(
-                    f"GeoJSON ring {i}: coordinates out of range; GeoJSON order is [lon, lat]"
-                )
-        if origin is None:
-            outer = lonlat[0]
-            if len(outer) > 1 and np.allclose(outer[0], outer[-1]):
-                outer = outer[:-1]
-            lat0, lon0 = float(outer[:, 1].mean()), float(outer[:, 0].mean())
-            org = (lat0, lon0, 0.0)
+                gj = _json_loads(_read_bytes(p, "GeoJSON"))
+                fallback = p.stem
+        if not isinstance(gj, dict):
+            raise ValueError("GeoJSON: the top level must be an object")
+        return _from_features(cls, _geojson_features(gj), select, "GeoJSON", origin, name,
+                              fallback)
+
+    @classmethod
+    def from_kml(
+        cls,
+        src: str | Path | bytes,
+        origin: Sequence[float] | None = None,
+        name: str | None = None,
+        select: str | None = None,
+    ) -> Field:
+        """Build from OGC KML 2.2 (a ``.kml`` path, a zipped ``.kmz`` path, or the KML bytes):
+        the Placemark with a Polygon (or a MultiGeometry of them); ``select`` as in
+        :meth:`from_geojson`, matched against the placemark's ``<name>`` and ExtendedData."""
+        fallback = "field"
+        if isinstance(src, bytes):
+            data = src
         else:
-            org = (float(origin[0]), float(origin[1]),
-                   float(origin[2]) if len(origin) > 2 else 0.0)
-        local = [lonlat_to_enu(r[:, 0], r[:, 1], org)[:, :2] for r in lonlat]
-        nm = name or props.get("name") or "field"
-        f = cls.from_coords(local[0], local[1:], name=nm, origin=org)
-        f.meta.update({k: v for k, v in props.items() if k != "name"})
-        return f
+            p = Path(src)
+            fallback = p.stem
+            data = _read_bytes(p, "KML")
+            if p.suffix.lower() == ".kmz" or data[:2] == b"PK":
+                data = _kmz_doc(p)
+        return _from_features(cls, _kml_features(data), select, "KML", origin, name, fallback)
+
+    @classmethod
+    def from_shapefile(
+        cls,
+        path: str | Path,
+        origin: Sequence[float] | None = None,
+        name: str | None = None,
+        select: str | None = None,
+    ) -> Field:
+        """Build from an ESRI shapefile (``.shp`` + ``.shx`` + ``.dbf``) of Polygon records in
+        geographic lon/lat (read with pyshp); ``select`` as in :meth:`from_geojson`, matched
+        against the record's attributes."""
+        p = Path(path)
+        return _from_features(cls, _shp_features(p), select, "shapefile", origin, name, p.stem)
+
+    @classmethod
+    def from_file(
+        cls,
+        path: str | Path,
+        select: str | None = None,
+        origin: Sequence[float] | None = None,
+    ) -> Field:
+        """Any supported file, by extension (:data:`FIELD_FILE_SUFFIXES`); see the module doc."""
+        p = Path(path)
+        suf = p.suffix.lower()
+        if suf in (".geojson", ".json"):
+            return cls.from_geojson(p, origin=origin, select=select)
+        if suf in (".kml", ".kmz"):
+            return cls.from_kml(p, origin=origin, select=select)
+        if suf == ".shp":
+            return cls.from_shapefile(p, origin=origin, select=select)
+        raise ValueError(f"unknown field file type {suf or '(none)'!r}; allowed: "
+                         f"{', '.join(FIELD_FILE_SUFFIXES)}")
 
     @classmethod
     def builtin(cls, name: str) -> Field:
@@ -246,6 +383,13 @@ class Field:
         return load_field(name)
 
     # --- properties ---------------------------------------------------------------------------
+    @property
+    def parts(self) -> list[Polygon]:
+        """The field's parts (one polygon for a single-part field)."""
+        if isinstance(self.polygon, MultiPolygon):
+            return list(self.polygon.geoms)
+        return [self.polygon]
+
     @property
     def area(self) -> float:
         """Area in m² (holes excluded)."""
@@ -258,76 +402,376 @@ class Field:
 
     @property
     def exterior(self) -> np.ndarray:
-        """Outer ring (closed) as an (N, 2) array."""
-        return np.asarray(self.polygon.exterior.coords)[:, :2]
+        """Outer ring (closed) as an (N, 2) array; of the first part for a multi-part field (see
+        :meth:`rings` for all)."""
+        return np.asarray(self.parts[0].exterior.coords)[:, :2]
 
     @property
     def holes(self) -> list[np.ndarray]:
-        """Hole rings (closed) as (N, 2) arrays."""
-        return [np.asarray(r.coords)[:, :2] for r in self.polygon.interiors]
+        """Hole rings (closed) as (N, 2) arrays; of the first part for a multi-part field (see
+        :meth:`rings` for all)."""
+        return [np.asarray(r.coords)[:, :2] for r in self.parts[0].interiors]
+
+    def rings(self) -> list[tuple[np.ndarray, list[np.ndarray]]]:
+        """``[(outer, [hole, ...]), ...]``: closed (N, 2) rings of every part."""
+        return [(np.asarray(p.exterior.coords)[:, :2],
+                 [np.asarray(r.coords)[:, :2] for r in p.interiors]) for p in self.parts]
 
     def to_geojson(self) -> dict:
-        """GeoJSON Feature in lon/lat (needs ``origin``)."""
+        """GeoJSON Feature in lon/lat (needs ``origin``): a Polygon, or a MultiPolygon for a
+        multi-part field (RFC 7946 winding: counter-clockwise boundaries, clockwise holes)."""
         if self.origin is None:
             raise ValueError("field has no geodetic origin; cannot export lon/lat")
-        rings = []
-        for r in [self.exterior, *self.holes]:
-            lon, lat = enu_to_lonlat(r[:, 0], r[:, 1], self.origin)
-            rings.append([[round(float(a), 9), round(float(b), 9)]
-                          for a, b in zip(lon, lat, strict=True)])
-        return {
-            "type": "Feature",
-            "properties": {"name": self.name},
-            "geometry": {"type": "Polygon", "coordinates": rings},
-        }
+        polys = []
+        for outer, holes in self.rings():
+            rings = []
+            for r in [outer, *holes]:
+                lon, lat = enu_to_lonlat(r[:, 0], r[:, 1], self.origin)
+                rings.append([[round(float(a), 9), round(float(b), 9)]
+                              for a, b in zip(lon, lat, strict=True)])
+            polys.append(rings)
+        geom = ({"type": "Polygon", "coordinates": polys[0]} if len(polys) == 1
+                else {"type": "MultiPolygon", "coordinates": polys})
+        return {"type": "Feature", "properties": {"name": self.name}, "geometry": geom}
 
     def __repr__(self) -> str:
-        return (f"Field(name={self.name!r}, area={self.area:.1f} m², "
-                f"holes={len(self.polygon.interiors)})")
+        n_holes = sum(len(p.interiors) for p in self.parts)
+        extra = f", parts={len(self.parts)}" if len(self.parts) > 1 else ""
+        return f"Field(name={self.name!r}, area={self.area:.1f} m², holes={n_holes}{extra})"
 
 
-def _extract_polygon(gj: dict) -> tuple[dict, dict]:
+# --- reading files ----------------------------------------------------------------------------
+#: file name endings :func:`load_field` and :meth:`Field.from_file` accept
+FIELD_FILE_SUFFIXES = (".geojson", ".json", ".kml", ".kmz", ".shp")
+
+
+@dataclass
+class _Feature:
+    """One polygonal feature read from a file: its properties and its parts in lon/lat."""
+
+    props: dict[str, Any]
+    parts: list[list[np.ndarray]]
+
+
+def _read_bytes(p: Path, what: str) -> bytes:
+    try:
+        return p.read_bytes()
+    except FileNotFoundError:
+        raise ValueError(f"{what} file not found: {p}") from None
+    except OSError as e:
+        raise ValueError(f"cannot read {what} file {p}: {e.strerror or e}") from None
+
+
+def _json_loads(s: str | bytes) -> Any:
+    try:
+        return json.loads(s)
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"not valid JSON: {e}") from None
+
+
+def _parse_selector(select: str) -> tuple[str, str]:
+    key, sep, val = select.partition("=")
+    if not sep:
+        return "name", select.strip()
+    key = key.strip()
+    if not key:
+        raise ValueError(f"bad feature selector {select!r}; expected KEY=VALUE or a name")
+    return key, val.strip()
+
+
+def _prop_get(props: dict[str, Any], key: str) -> Any:
+    if key in props:
+        return props[key]
+    low = {str(k).lower(): v for k, v in props.items()}
+    return low.get(key.lower())
+
+
+def _fmt_val(v: Any) -> str:
+    if isinstance(v, float) and v.is_integer():
+        v = int(v)
+    return str(v).strip()
+
+
+def _from_features(cls, feats: list[_Feature], select: str | None, what: str,
+                   origin: Sequence[float] | None, name: str | None,
+                   fallback: str = "field") -> Field:
+    """Pick one feature (by ``select``) and build the Field; its name is ``name``, else the
+    feature's ``name`` property, else ``fallback`` (the file's stem)."""
+    if not feats:
+        raise ValueError(f"{what}: no polygon found (need a Polygon or MultiPolygon)")
+    if select is not None:
+        key, val = _parse_selector(select)
+        hits = [f for f in feats if _fmt_val(_prop_get(f.props, key)) == val
+                and _prop_get(f.props, key) is not None]
+        if len(hits) != 1:
+            have = [_fmt_val(v) for f in feats if (v := _prop_get(f.props, key)) is not None]
+            allowed = (", ".join(f'"{h}"' for h in have[:12]) + (" …" if len(have) > 12 else "")
+                       if have else f"none of the {len(feats)} polygon features has a {key!r}")
+            if len(hits) > 1:
+                raise ValueError(f"{what}: {len(hits)} polygon features have {key} = \"{val}\"; "
+                                 "pick by a property that is unique")
+            raise ValueError(f"{what}: no polygon feature with {key} = \"{val}\"; "
+                             f"{key} values: {allowed}")
+        feat = hits[0]
+    elif len(feats) > 1:
+        names = [_fmt_val(v) for f in feats if (v := _prop_get(f.props, "name")) is not None]
+        hint = (" (names: " + ", ".join(f'"{n}"' for n in names[:12]) + ")") if names else ""
+        raise ValueError(f"{what}: {len(feats)} polygon features{hint}; pick one with "
+                         "PATH#name=VALUE or PATH#KEY=VALUE")
+    else:
+        feat = feats[0]
+    props = {str(k): v for k, v in feat.props.items()}
+    nm = name or (_fmt_val(props["name"]) if props.get("name") not in (None, "") else fallback)
+    return cls.from_lonlat_parts(feat.parts, origin=origin, name=nm,
+                                 meta={k: v for k, v in props.items() if k != "name"})
+
+
+def _gj_polygon_parts(geom: Any) -> list[list[np.ndarray]] | None:
+    """Parts of a GeoJSON geometry (None if it is not polygonal)."""
+    if not isinstance(geom, dict):
+        return None
+    t = geom.get("type")
+
+    def poly(rings: Any, where: str) -> list[np.ndarray]:
+        if not isinstance(rings, list) or not rings:
+            raise ValueError(f"GeoJSON {where}: expected a list of rings [[[lon, lat], ...], ...]")
+        out = []
+        for i, r in enumerate(rings):
+            try:
+                a = np.asarray(r, dtype=float)
+            except (TypeError, ValueError):
+                a = np.empty((0,))
+            if a.ndim != 2 or a.shape[1] < 2:
+                raise ValueError(f"GeoJSON {where} ring {i}: expected [[lon, lat], ...]")
+            out.append(a)
+        return out
+
+    if t == "Polygon":
+        return [poly(geom.get("coordinates"), "Polygon")]
+    if t == "MultiPolygon":
+        cs = geom.get("coordinates")
+        if not isinstance(cs, list) or not cs:
+            raise ValueError("GeoJSON MultiPolygon has no parts")
+        return [poly(c, f"MultiPolygon part {k + 1}") for k, c in enumerate(cs)]
+    if t == "GeometryCollection":
+        parts: list[list[np.ndarray]] = []
+        for g in geom.get("geometries") or []:
+            parts += _gj_polygon_parts(g) or []
+        return parts or None
+    return None
+
+
+def _geojson_features(gj: dict) -> list[_Feature]:
     t = gj.get("type")
     if t == "FeatureCollection":
-        feats = [f for f in gj.get("features", []) if f.get("geometry")]
-        polys = [f for f in feats if f["geometry"].get("type") in ("Polygon", "MultiPolygon")]
-        if len(polys) != 1:
-            raise ValueError(
-                f"GeoJSON FeatureCollection must hold exactly one Polygon feature, "
-                f"found {len(polys)}"
-            )
-        return _extract_polygon(polys[0])
+        feats = gj.get("features")
+        if not isinstance(feats, list):
+            raise ValueError("GeoJSON FeatureCollection has no \"features\" list")
+        out = []
+        for f in feats:
+            if isinstance(f, dict):
+                out += _geojson_features(f) if f.get("type") == "Feature" else []
+        return out
     if t == "Feature":
-        geom = gj.get("geometry") or {}
-        g, _ = _extract_polygon(geom)
-        return g, dict(gj.get("properties") or {})
-    if t == "Polygon":
-        return gj, {}
-    if t == "MultiPolygon":
-        parts = gj.get("coordinates", [])
-        if len(parts) != 1:
-            raise ValueError(f"GeoJSON MultiPolygon must have exactly one part, has {len(parts)}")
-        return {"type": "Polygon", "coordinates": parts[0]}, {}
-    raise ValueError(f"GeoJSON: expected a Polygon, Feature or FeatureCollection, got {t!r}")
+        parts = _gj_polygon_parts(gj.get("geometry"))
+        return [_Feature(dict(gj.get("properties") or {}), parts)] if parts else []
+    if t in ("Polygon", "MultiPolygon", "GeometryCollection"):
+        parts = _gj_polygon_parts(gj)
+        return [_Feature({}, parts)] if parts else []
+    raise ValueError(f"GeoJSON: expected a Polygon, MultiPolygon, Feature or FeatureCollection, "
+                     f"got {t!r}")
+
+
+# KML ------------------------------------------------------------------------------------------
+def _local(tag: Any) -> str:
+    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
+
+
+def _kml_coords(text: str | None) -> np.ndarray:
+    """KML ``<coordinates>``: whitespace-separated ``lon,lat[,alt]`` tuples → (N, 2)."""
+    s = re.sub(r"\s*,\s*", ",", (text or "").strip())
+    pts = []
+    for tup in s.split():
+        vals = tup.split(",")
+        try:
+            pts.append((float(vals[0]), float(vals[1])))
+        except (ValueError, IndexError):
+            raise ValueError(f"KML: bad coordinate tuple {tup!r}; expected lon,lat[,alt]") from None
+    return np.asarray(pts, dtype=float).reshape(-1, 2)
+
+
+def _kml_ring(boundary: Any) -> list[np.ndarray]:
+    out = []
+    for el in boundary.iter():
+        if _local(el.tag) == "LinearRing":
+            for c in el:
+                if _local(c.tag) == "coordinates":
+                    out.append(_kml_coords(c.text))
+    return out
+
+
+def _kml_features(data: bytes) -> list[_Feature]:
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as e:
+        raise ValueError(f"KML is not well-formed XML: {e}") from None
+    if _local(root.tag) != "kml":
+        raise ValueError(f"not a KML document (root element <{_local(root.tag)}>, expected <kml>)")
+    feats = []
+    for pm in root.iter():
+        if _local(pm.tag) != "Placemark":
+            continue
+        props: dict[str, Any] = {}
+        parts: list[list[np.ndarray]] = []
+        for ch in pm:
+            tag = _local(ch.tag)
+            if tag in ("name", "description") and ch.text:
+                props[tag] = ch.text.strip()
+            elif tag == "ExtendedData":
+                for d in ch.iter():
+                    dt = _local(d.tag)
+                    if dt == "Data" and d.get("name"):
+                        v = next((x.text for x in d if _local(x.tag) == "value"), None)
+                        props.setdefault(d.get("name"), (v or "").strip())
+                    elif dt == "SimpleData" and d.get("name"):
+                        props.setdefault(d.get("name"), (d.text or "").strip())
+        for g in pm.iter():
+            if _local(g.tag) != "Polygon":
+                continue
+            outer: list[np.ndarray] = []
+            inner: list[np.ndarray] = []
+            for b in g:
+                bt = _local(b.tag)
+                if bt == "outerBoundaryIs":
+                    outer += _kml_ring(b)
+                elif bt == "innerBoundaryIs":
+                    inner += _kml_ring(b)
+            if len(outer) != 1:
+                nm = f" {props['name']!r}" if "name" in props else ""
+                raise ValueError(f"KML Polygon{nm}: needs exactly one outerBoundaryIs "
+                                 f"LinearRing, has {len(outer)}")
+            parts.append([outer[0], *inner])
+        if parts:
+            feats.append(_Feature(props, parts))
+    return feats
+
+
+def _kmz_doc(p: Path) -> bytes:
+    """The KML document inside a KMZ (``doc.kml``, else the first ``.kml`` entry)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(p) as z:
+            names = [n for n in z.namelist() if n.lower().endswith(".kml")]
+            if not names:
+                raise ValueError(f"KMZ {p} holds no .kml document")
+            name = "doc.kml" if "doc.kml" in names else names[0]
+            return z.read(name)
+    except zipfile.BadZipFile as e:
+        raise ValueError(f"KMZ {p} is not a valid zip archive: {e}") from None
+
+
+# shapefile ------------------------------------------------------------------------------------
+def _group_rings(rings: list[np.ndarray]) -> list[list[np.ndarray]]:
+    """Sort rings into parts by containment (even nesting depth = boundary, odd = hole of the
+    smallest boundary around it); winding is ignored."""
+    polys = [Polygon(r[:, :2]) for r in rings]  # callers pass rings of >= 3 points
+    # a point strictly inside each ring (an invalid ring is reported later, by _make_polygon)
+    probe = [p.representative_point() if p.is_valid else p.centroid for p in polys]
+    areas = [p.area for p in polys]
+    n = len(rings)
+    containers = [[j for j in range(n) if j != i and areas[j] > areas[i]
+                   and polys[j].is_valid and polys[j].contains(probe[i])] for i in range(n)]
+    depth = [len(c) for c in containers]
+    parts: dict[int, list[np.ndarray]] = {}
+    order = [i for i in range(n) if depth[i] % 2 == 0]
+    for i in order:
+        parts[i] = [rings[i]]
+    for i in range(n):
+        if depth[i] % 2 == 1:
+            outs = [j for j in containers[i] if depth[j] == depth[i] - 1]
+            if outs:
+                parts[min(outs, key=lambda j: areas[j])].append(rings[i])
+    return [parts[i] for i in order]
+
+
+def _shp_features(p: Path) -> list[_Feature]:
+    import shapefile  # pyshp
+
+    if not p.exists():
+        raise ValueError(f"shapefile not found: {p}")
+    prj = p.with_suffix(".prj")
+    if not prj.exists():
+        prj = p.with_suffix(".PRJ")
+    if prj.exists():
+        wkt = prj.read_text(errors="replace").strip()
+        if wkt.upper().startswith("PROJCS") or wkt.upper().startswith("PROJCRS"):
+            crs = wkt.split('"')[1] if wkt.count('"') >= 2 else "projected"
+            raise ValueError(f"shapefile is in a projected CRS ({crs}); reproject it to WGS-84 "
+                             "lon/lat (EPSG:4326)")
+    poly_types = {shapefile.POLYGON, shapefile.POLYGONZ, shapefile.POLYGONM}
+    feats = []
+    bad_type = None
+    try:
+        with shapefile.Reader(str(p)) as r:
+            if r.shapeType not in poly_types and r.shapeType != shapefile.NULL:
+                bad_type = r.shapeTypeName
+            has_dbf = r.dbf is not None
+            for i in range(0 if bad_type else len(r)):
+                shp = r.shape(i)
+                if shp.shapeType not in poly_types or not shp.points:
+                    continue
+                pts = np.asarray(shp.points, dtype=float)[:, :2]
+                idx = [*list(shp.parts), len(pts)]
+                rings = [pts[a:b] for a, b in zip(idx[:-1], idx[1:], strict=True) if b - a >= 3]
+                props = dict(r.record(i).as_dict()) if has_dbf else {}
+                parts = _group_rings(rings)
+                if parts:
+                    feats.append(_Feature(props, parts))
+    except Exception as e:  # pyshp raises ShapefileException, struct.error, ... on a bad file
+        msg = (str(e).splitlines() or [""])[0]
+        raise ValueError(f"cannot read shapefile {p}: {type(e).__name__}: {msg}") from None
+    if bad_type:
+        raise ValueError(f"shapefile holds {bad_type} shapes, not polygons")
+    return feats
 
 
 # --- built-in fields ------------------------------------------------------------------------
 #: "default": a slightly skewed quadrilateral farm field in local metres (~1.05 ha);
-#: "l-shape" and "hole": GeoJSON lon/lat files in ag_uav/data/ near Moscow, Idaho.
-BUILTIN_FIELDS = ("default", "l-shape", "hole")
+#: "l-shape" and "hole": GeoJSON lon/lat files in ag_uav/data/ near Moscow, Idaho;
+#: "two-part": a two-part MultiPolygon there (a 40 m × 24 m rectangle and a 36 m × 30 m
+#: quadrilateral 30 m apart, 0.20 ha).
+BUILTIN_FIELDS = ("default", "l-shape", "hole", "two-part")
 
 _DEFAULT_OUTER = [(0.0, 0.0), (112.0, 5.0), (116.0, 96.0), (-3.0, 90.0)]
 
 
+def split_field_spec(spec: str) -> tuple[str, str | None]:
+    """``"path.geojson#name=North"`` → ``("path.geojson", "name=North")``; no ``#`` (or a file
+    whose name holds one) → ``(spec, None)``."""
+    if "#" in spec and not Path(spec).exists():
+        path, _, sel = spec.partition("#")
+        return path, sel
+    return spec, None
+
+
 def load_field(name: str) -> Field:
-    """Load a built-in field ("default", "l-shape", "hole"), or a GeoJSON file path."""
-    key = name.strip().lower().replace("_", "-")
-    if key == "default":
+    """Load a built-in field (:data:`BUILTIN_FIELDS`) or a field file
+    (:data:`FIELD_FILE_SUFFIXES`), optionally with a feature selector: ``PATH#KEY=VALUE`` or
+    ``PATH#VALUE`` (= ``#name=VALUE``). Raises ValueError with a one-line reason."""
+    path, select = split_field_spec(name)
+    key = path.strip().lower().replace("_", "-")
+    if select is None and key == "default":
         return Field.from_coords(_DEFAULT_OUTER, name="default")
-    if key in ("l-shape", "hole"):
+    if select is None and key in BUILTIN_FIELDS:
         ref = resources.files("ag_uav") / "data" / f"{key}.geojson"
         return Field.from_geojson(json.loads(ref.read_text()), name=key)
-    if key.endswith((".geojson", ".json")) and Path(name).exists():
-        return Field.from_geojson(name)
+    if key.endswith(FIELD_FILE_SUFFIXES):
+        if not Path(path).exists():
+            raise ValueError(f"file not found: {path}")
+        return Field.from_file(path, select=select)
     raise ValueError(f"unknown field {name!r}; built-in fields are {', '.join(BUILTIN_FIELDS)}"
-                     " (or give a path to a .geojson file)")
+                     f", or give a path to a {'/'.join(FIELD_FILE_SUFFIXES)} file "
+                     "(optionally PATH#name=VALUE to pick one feature)")

@@ -23,6 +23,13 @@ and the agricultural headland/track practice in Oksanen & Visala, J. Field Robot
    ``spacing/2`` (falls back to a straight hop when the arc would leave the field, inset by
    ``swath/4``); ``turn="stop"``: straight hop (the vehicle stops at both corners).
 
+6. **Parts.** A multi-part field (:attr:`Field.parts`, e.g. a GeoJSON MultiPolygon) is planned
+   part by part (each with its own default direction), the first part first, then greedily the
+   part whose plan starts or ends nearest to the current position (a part may be flown in
+   reverse). Parts are joined by ``transit`` segments with the sprayer off, along the shortest
+   path inside the parts' convex hull grown by one swath that keeps ``swath/2`` clear of every
+   hole.
+
 Sweep direction default: the angle that minimises the number of legs (= turns + 1) over candidate
 angles: the minimum rotated rectangle's edges, every boundary/hole edge and a 5° sweep; ties go to
 fewer cells, then to rectangle/edge-aligned angles. Angles are of the leg heading, degrees
@@ -64,7 +71,11 @@ class Segment:
 
 @dataclass
 class CoveragePlan:
-    """Ordered coverage path. ``segments`` join end to start; ``path`` concatenates them."""
+    """Ordered coverage path. ``segments`` join end to start; ``path`` concatenates them.
+
+    For a multi-part field, ``direction_deg`` is the first part's; ``spacing`` the largest of the
+    parts'; ``meta["parts"]`` has each part's direction, legs, cells, spacing and area, and
+    ``meta["part_order"]`` the order flown (1-based)."""
 
     field: Field
     segments: list[Segment]
@@ -400,7 +411,74 @@ def plan_coverage(
     if n_headland is None:
         n_headland = math.ceil(headland / swath - 1e-9)
     n_headland = int(n_headland)
+    if len(field.parts) > 1:
+        return _plan_parts(field, swath, headland, direction_deg, n_headland, turn)
+    return _plan_single(field, swath, headland, direction_deg, n_headland, turn)
 
+
+def _reversed_segments(segs: list[Segment]) -> list[Segment]:
+    """The same path flown backwards."""
+    return [Segment(s.kind, s.points[::-1].copy(), s.spray) for s in reversed(segs)]
+
+
+def _plan_parts(field: Field, swath: float, headland: float, direction_deg: float | None,
+                n_headland: int, turn: str) -> CoveragePlan:
+    """Plan every part of a multi-part field and join the parts with spray-off transits."""
+    plans = []
+    for k, part in enumerate(field.parts):
+        sub = Field(part, name=f"{field.name}[{k + 1}]", origin=field.origin)
+        try:
+            plans.append(_plan_single(sub, swath, headland, direction_deg, n_headland, turn))
+        except ValueError as e:
+            raise ValueError(f"part {k + 1} of {len(field.parts)}: {e}") from None
+    holes = [Polygon(h) for p in field.parts for h in p.interiors]
+    region = field.polygon.convex_hull.buffer(swath, join_style="mitre")
+    if holes:
+        region = region.difference(shapely.union_all(holes).buffer(0.5 * swath))
+    if not isinstance(region, Polygon):  # holes cut the hull apart: keep the piece with most area
+        region = max(_polys(region), key=lambda g: g.area)
+    free = _Free(region)
+    order = [0]
+    segments: list[Segment] = list(plans[0].segments)
+    left = set(range(1, len(plans)))
+    while left:
+        pos = segments[-1].points[-1]
+        best = None
+        for k in sorted(left):
+            for rev in (False, True):
+                entry = plans[k].end if rev else plans[k].start
+                d = float(np.hypot(*(entry - pos)))
+                if best is None or d < best[0]:
+                    best = (d, k, rev)
+        _, k, rev = best
+        left.discard(k)
+        order.append(k)
+        segs = _reversed_segments(plans[k].segments) if rev else list(plans[k].segments)
+        a, b = segments[-1].points[-1], segs[0].points[0]
+        segments.append(Segment("transit", free.path(a, b), False))
+        segments += segs
+    first = plans[0]
+    return CoveragePlan(
+        field=field,
+        segments=segments,
+        swath=float(swath),
+        spacing=float(max(p.spacing for p in plans)),
+        headland=float(headland),
+        n_headland=n_headland,
+        direction_deg=float(first.direction_deg),
+        legs=sum(p.legs for p in plans),
+        cells=sum(p.cells for p in plans),
+        interior=shapely.union_all([p.interior for p in plans]),
+        meta={"parts": [{"part": k + 1, "direction_deg": p.direction_deg, "legs": p.legs,
+                         "cells": p.cells, "spacing": p.spacing, "area_m2": p.field.area}
+                        for k, p in enumerate(plans)],
+              "part_order": [k + 1 for k in order]},
+    )
+
+
+def _plan_single(field: Field, swath: float, headland: float, direction_deg: float | None,
+                 n_headland: int, turn: str) -> CoveragePlan:
+    """:func:`plan_coverage` of a one-part field (arguments already checked)."""
     poly = field.polygon
     centre = _offset(poly, 0.5 * swath)
     if centre.is_empty or centre.area < 1e-6:

@@ -11,8 +11,10 @@ from ag_uav.coverage import spray_coverage
 from ag_uav.field import BUILTIN_FIELDS, Field, load_field
 from ag_uav.plan import KINDS, plan_coverage
 
+SINGLE_PART = [n for n in BUILTIN_FIELDS if n != "two-part"]  # two-part: tests/test_fields_io.py
 
-@pytest.fixture(scope="module", params=BUILTIN_FIELDS)
+
+@pytest.fixture(scope="module", params=SINGLE_PART)
 def planned(request):
     f = load_field(request.param)
     return f, plan_coverage(f)
