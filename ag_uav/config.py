@@ -458,20 +458,23 @@ def _check_gps_overrides(g: GpsConfig) -> None:
 
 
 def _check_field(name: str) -> None:
-    """``mission.field`` names a built-in field or an existing GeoJSON file (what
-    :func:`ag_uav.field.load_field` accepts), so a typo fails at load, not at take-off."""
-    from .field import BUILTIN_FIELDS
+    """``mission.field`` names a built-in field or an existing field file (what
+    :func:`ag_uav.field.load_field` accepts, with an optional ``#KEY=VALUE`` feature selector),
+    so a typo fails at load, not at take-off."""
+    from .field import BUILTIN_FIELDS, FIELD_FILE_SUFFIXES
 
     if name.strip().lower().replace("_", "-") in BUILTIN_FIELDS:
         return
     why = "not a built-in field"
-    if name.lower().endswith((".geojson", ".json")):
-        p = Path(name)
+    path = name if Path(name).exists() or "#" not in name else name.partition("#")[0]
+    if path.lower().endswith(FIELD_FILE_SUFFIXES):
+        p = Path(path)
         if p.is_file():
             return
         why = "is a directory" if p.is_dir() else "no such file"
     raise ConfigError(f"mission.field = {_fmt(name)}: {why}; allowed: "
-                      f"{', '.join(BUILTIN_FIELDS)} or the path of a .geojson file")
+                      f"{', '.join(BUILTIN_FIELDS)} or the path of a "
+                      f"{'/'.join(FIELD_FILE_SUFFIXES)} file (optionally #KEY=VALUE)")
 
 
 def _validate(cfg: Config) -> None:
