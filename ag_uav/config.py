@@ -210,6 +210,10 @@ class EstimatorConfig:
                    "by the attitude estimate, drives the motion model between fixes (GPS/INS "
                    "loose coupling); see [imu]")
     sigma: float = _f(2.0, "MCKF kernel bandwidth (dimensionless, whitened residuals)", gt=0)
+    mckf_recovery: str = _f("kf", "MCKF lock-out recovery (not part of Chen et al. 2017): after "
+                            "10 consecutive rejected fixes, fuse one with a plain KF update "
+                            "(kf), or with an inflated prior (inflate); none = the MCKF as "
+                            "published", choices=("kf", "inflate", "none"))
     max_iter: int = _f(10, "MCKF fixed-point iteration cap", ge=1, le=100)
     window: int = _f(10, "PCA window N (fixes; 10 = 1 s at the rtk-m350's 10 Hz, the span of "
                      "the paper's N = 20 at 20 Hz)", ge=3, le=1000)

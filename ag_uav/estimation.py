@@ -92,7 +92,8 @@ def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
     if e.model == "cvb":
         params["q_bias"] = q_bias
     if "mckf" in name:
-        params.update(sigma=e.sigma, max_iter=e.max_iter)
+        params.update(sigma=e.sigma, max_iter=e.max_iter,
+                      recovery=None if e.mckf_recovery == "none" else e.mckf_recovery)
     if name.startswith("pca"):
         params.update(window=e.window, mode=e.pca_mode)
     return estimators.make(name, **params)
