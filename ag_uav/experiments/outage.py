@@ -30,6 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gps", default="sbas", help="GPS preset outside the outage")
     p.add_argument("--out", default="runs/experiment-outage", help="output folder")
     p.add_argument("--workers", "-j", type=int, default=None, help="worker processes")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="config override for every flight, e.g. imu.model=ideal (repeatable)")
 
 
 def _one(task: tuple[dict, str, tuple[float, float], bool]) -> dict[str, Any]:
@@ -63,7 +65,7 @@ def main(args: argparse.Namespace) -> int:
     from rich.table import Table
 
     from ..batch import mean_ci
-    from ..config import ConfigError, load_config
+    from ..config import ConfigError, load_config, parse_set_items
     from ..executor import make_executor
     from ..route import ROUTE_NAME, leg_outage
     from . import write_csv
@@ -71,7 +73,7 @@ def main(args: argparse.Namespace) -> int:
     if args.runs < 1:
         raise ConfigError(f"--runs = {args.runs}: must be >= 1")
     base = load_config(None, {"gps.preset": args.gps, "estimator.name": "kf",
-                              "estimator.shadow": ["mckf"]})
+                              "estimator.shadow": ["mckf"], **parse_set_items(args.set)})
     base.log.enabled = False
     window = leg_outage(base, duration_s=args.duration)
     base.sim.max_time_s = window[1] + 5.0
@@ -90,6 +92,7 @@ def main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", rows)
     t = Table(title=f"{args.duration:g} s GPS outage on a sweep leg ({args.gps}, "
+                    f"imu {base.imu.model}, "
                     f"window {window[0]:.1f}-{window[1]:.1f} s, {args.runs} seeds; mean ± 95 % CI)")
     for c in ("flies on", "peak cross-track [m]", "RMS cross-track [m]",
               "peak estimate error [m]", "crashes"):
