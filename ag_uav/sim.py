@@ -320,7 +320,8 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
                 log.tick(t, p_true=(px, py, pz), q_true_wxyz=(qw, qx, qy, qz),
                          v_true=(vx, vy, vz), p_ref=rp, v_ref=rv, yaw_ref=yaw_ref,
                          p_est=p_fb if fb.name != "true" else None, v_est=v_fb,
-                         ctrl=cascade.internals() if log.want("state", t) else None,
+                         ctrl=(_with_imu(cascade.internals(), imu_rec[-1] if imu_rec else None)
+                               if log.want("state", t) else None),
                          motors=f, wind=(wx, wy, wz), spray=spray)
             if renderer is not None and log.want_frame(t):
                 for cam in renderer.cameras:
@@ -346,6 +347,18 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
         out.imu = np.asarray(imu_rec[:len(arr)], dtype=float).reshape(-1, 9)
         out.imu_bias0 = imu.bias0
     return out
+
+
+IMU_KEYS = ("imu.fx", "imu.fy", "imu.fz", "imu.wx", "imu.wy", "imu.wz", "imu.att_err_x",
+            "imu.att_err_y", "imu.att_err_z")
+
+
+def _with_imu(ctrl: dict[str, float], rec: tuple | None) -> dict[str, float]:
+    """The controller internals plus the IMU's reading (specific force m/s², gyro rad/s) and
+    the attitude estimate's error (rad) for the ``/drone/state`` log."""
+    if rec is not None:
+        ctrl.update(zip(IMU_KEYS, rec, strict=True))
+    return ctrl
 
 
 def _cut_by_max_time(cfg: Config, ref: Reference, out: LoopOutput,
