@@ -30,6 +30,38 @@ def test_default_mission_meets_acceptance(default_run):
     assert s["coverage_fraction"] >= 0.98
 
 
+def test_default_mission_flies_the_estimator_bank(default_run):
+    """RTK GNSS with the real IMU; PCA-MCKF flown, KF/MCKF/PCA-KF scored on the same fixes."""
+    cfg, res = default_run
+    s = res.summary
+    assert s["feedback"] == "pca-mckf" and cfg.gps.preset == "rtk-m350"
+    assert set(s["estimators"]) == {"kf", "mckf", "pca-kf", "pca-mckf"}
+    assert [k for k, v in s["estimators"].items() if v["flown"]] == ["pca-mckf"]
+    for v in s["estimators"].values():
+        # an RTK-class estimate: centimetres, and its covariance within an order of magnitude
+        # of its errors (NEES 3 = consistent; coloured RTK errors make it a few times that)
+        assert 0.003 < v["estimate_rmse_m"] < 0.05
+        assert v["estimate_max_m"] < 0.3
+        assert 1.0 < v["nees_mean"] < 30.0 and 0.5 < v["nis_mean"] < 10.0
+        assert v["updates"] > 4000 and v["update_us"] > 0
+    # the controller flew on the estimate, not on the truth
+    d = res.p_fb[100:, :2] - res.p_true[100:, :2]
+    assert 0.002 < float(np.sqrt(np.mean(np.sum(d * d, axis=1)))) < 0.05
+    assert res.extra["imu"] is not None and res.extra["imu"].shape == (len(res.t), 9)
+
+
+def test_a_mission_cut_by_max_time_says_so():
+    cfg = ag_uav.load_config(None, {"sim.max_time_s": 150.0, "estimator.name": "true",
+                                    "estimator.shadow": []})
+    cfg.log.enabled = False
+    s = ag_uav.simulate(cfg).summary
+    assert not s["completed"] and not s["crashed"]
+    why = s["incomplete_reason"]
+    assert why.startswith("cut by sim.max_time_s = 150 s after ")
+    assert f"of {s['legs']} legs" in why and "the plan needs 485 s" in why
+    assert 0 < s["legs_flown"] < s["legs"]
+
+
 def test_summary_has_the_documented_keys(default_run):
     _, res = default_run
     for k in ("completed", "crashed", "crash_reason", "mission_time_s", "tracking_rmse_m",
