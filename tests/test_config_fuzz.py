@@ -625,13 +625,26 @@ def test_missing_and_unreadable_files(tmp_path: Path, capsys: pytest.CaptureFixt
         assert rc == 2 and why in error_line(err, str(p))
 
 
-def test_seed_flag_range(capsys: pytest.CaptureFixture[str]) -> None:
+def test_seed_flag(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--seed N`` is checked like ``--set seed=N`` (was argparse's two-line usage error for
+    ``1.5``, and an unbounded integer)."""
     for seed, ok in (("0", True), (str(2**63 - 1), True), ("-1", False), (str(2**63), False),
-                     (str(2**70), False)):
-        rc, err = through_cli(["--seed", seed], capsys)
+                     (str(2**70), False), ("1.5", False), ("abc", False), ("nan", False)):
+        rc, err = through_cli([f"--seed={seed}"], capsys)
         assert rc == (0 if ok else 2), (seed, err)
-        if not ok:
+        if ok:
+            assert C.load_config(None, cli._overrides(cli.build_parser().parse_args(
+                ["config", f"--seed={seed}"]))).seed == int(seed)
+        else:
             error_line(err, "seed")
+
+
+@pytest.mark.parametrize("cmd", ["batch", "tune"])
+def test_spec_files_not_utf8(cmd: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    p = tmp_path / "spec.toml"
+    p.write_bytes(b'name = "x"\n\xff\n')
+    assert cli.main([cmd, str(p)]) == 2
+    assert "not UTF-8" in error_line(capsys.readouterr().err, f"{cmd} spec")
 
 
 # ------------------------------------------------------------------ the real command, a few times
