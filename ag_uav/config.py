@@ -562,11 +562,20 @@ def default_config() -> Config:
     return Config()
 
 
+def _toml_key(k: Any) -> str:
+    """A TOML key: bare where it can be, else a quoted string (``"my comp"``)."""
+    k = str(k)
+    if k and all(c.isascii() and (c.isalnum() or c in "_-") for c in k):
+        return k
+    return _toml_value(k)
+
+
 def _toml_value(v: Any) -> str:
+    """``v`` as one inline TOML value (tables inline, keys quoted where they must be)."""
     if isinstance(v, dict):
         if not v:
             return "{}"
-        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
     if isinstance(v, list):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     return tomli_w.dumps({"k": v}).strip()[4:]

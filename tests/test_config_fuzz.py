@@ -20,6 +20,7 @@ import math
 import os
 import subprocess
 import sys
+import tomllib
 import typing
 from collections.abc import Mapping
 from pathlib import Path
@@ -201,6 +202,24 @@ JUNK = st.one_of(
 )
 
 
+def good_values(leaf: Leaf) -> st.SearchStrategy:
+    """Values the metadata allows (most of them; the oracle still decides)."""
+    tp, meta = leaf.tp, leaf.meta
+    if typing.get_origin(tp) is list:
+        (inner,) = typing.get_args(tp)
+        n = meta.get("length")
+        if n is not None:
+            return st.lists(valid_scalar(inner, meta), min_size=n, max_size=n)
+        return st.lists(valid_scalar(inner, meta), max_size=4, unique=bool(meta.get("unique")))
+    if _is_union(tp):
+        return st.one_of(valid_scalar(float, meta), st.sampled_from(meta["choices"]))
+    if leaf.key in CROSS:  # valid values are rarer here: build some that divide
+        if leaf.key == "sim.control_hz":
+            return st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.timestep_s * n))
+        return st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.control_hz * n))
+    return valid_scalar(tp, meta)
+
+
 def candidates(leaf: Leaf) -> st.SearchStrategy:
     """Good values (from the metadata), values at the edges, and junk of every TOML type."""
     tp, meta = leaf.tp, leaf.meta
@@ -208,23 +227,12 @@ def candidates(leaf: Leaf) -> st.SearchStrategy:
         (inner,) = typing.get_args(tp)
         n = meta.get("length")
         elem = st.one_of(valid_scalar(inner, meta), edge_scalar(inner, meta))
-        if n is not None:
-            good = st.lists(valid_scalar(inner, meta), min_size=n, max_size=n)
-            any_len = st.lists(elem, min_size=0, max_size=n + 2)
-        else:
-            good = st.lists(valid_scalar(inner, meta), max_size=4,
-                            unique=bool(meta.get("unique")))
-            any_len = st.lists(elem, max_size=4)
-        return st.one_of(good, any_len, JUNK)
+        any_len = st.lists(elem, max_size=(n or 2) + 2)
+        return st.one_of(good_values(leaf), any_len, JUNK)
     if _is_union(tp):
-        good = st.one_of(valid_scalar(float, meta), st.sampled_from(meta["choices"]))
-        return st.one_of(good, edge_scalar(str, meta), edge_scalar(float, {}), JUNK)
-    if leaf.key in CROSS:  # valid values are rarer here: build some that divide
-        if leaf.key == "sim.control_hz":
-            good = st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.timestep_s * n))
-        else:
-            good = st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.control_hz * n))
-        return st.one_of(good, valid_scalar(tp, meta), edge_scalar(tp, meta), JUNK)
+        return st.one_of(good_values(leaf), edge_scalar(str, meta), edge_scalar(float, {}), JUNK)
+    if leaf.key in CROSS:
+        return st.one_of(good_values(leaf), valid_scalar(tp, meta), edge_scalar(tp, meta), JUNK)
     return st.one_of(valid_scalar(tp, meta), edge_scalar(tp, meta), JUNK)
 
 
@@ -279,10 +287,14 @@ def _one_parser() -> typing.Iterator[None]:
 
 
 def through_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    """``ag-uav config ARGV`` in-process: (exit code, stderr); on success the printed TOML must
+    load back to the very config the command resolved."""
     rc = cli.main(["config", *argv])
     out, err = capsys.readouterr()
     if rc == 0:
         assert err == "" and out.startswith("# ag-uav run configuration"), err
+        resolved = cli._load(cli.build_parser().parse_args(["config", *argv]))
+        assert C.config_from_dict(tomllib.loads(out)) == resolved
     return rc, err
 
 
@@ -385,6 +397,46 @@ def test_every_leaf_value_accepted_iff_allowed(data: st.DataObject, tmp_path: Pa
         assert_lands(C.load_config(None, C.parse_set_items([item])), leaf, v)
     else:
         check_message(error_line(err, leaf.key), leaf, v)
+
+
+@FUZZ
+@given(data=st.data())
+def test_whole_configs(data: st.DataObject, tmp_path: Path,
+                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Several keys at once, mostly good: accepted iff every one is allowed (and the rates
+    divide); then all of them land and nothing else moves; else the one line names a bad key."""
+    leaves = data.draw(st.lists(st.sampled_from(PLAIN), min_size=2, max_size=8,
+                                unique_by=lambda lf: lf.key), label="keys")
+    vals = {lf.key: data.draw(st.one_of(good_values(lf), good_values(lf), good_values(lf),
+                                        candidates(lf)), label=lf.key) for lf in leaves}
+    bad = [lf.key for lf in leaves if not meta_ok(lf.tp, lf.meta, vals[lf.key])]
+    if not bad:
+        ts = vals.get("sim.timestep_s", DEFAULT.sim.timestep_s)
+        hz = vals.get("sim.control_hz", DEFAULT.sim.control_hz)
+        bad = [] if _divides(ts, hz) else list(CROSS)
+    doc: dict[str, Any] = {}
+    for k, v in vals.items():
+        C._apply_override(doc, k, v)
+    path = tmp_path / "whole.toml"
+    path.write_text(tomli_w.dumps(doc), encoding="utf-8")
+    sets = [f"--set={k}={toml_inline(v)}" for k, v in vals.items()]
+    for argv in (["--config", str(path)], sets):
+        rc, err = through_cli(argv, capsys)
+        assert rc == (2 if bad else 0), (vals, err)
+        if bad:
+            body = error_line(err, "")
+            assert any(body.startswith((f"{k} = ", f"{k}[")) for k in bad), (bad, body)
+    if not bad:
+        cfg = C.config_from_dict(doc)
+        want = DEFAULT.to_dict()
+        for lf in leaves:
+            node = want
+            *head, last = lf.key.split(".")
+            for part in head:
+                node = node[part]
+            node[last] = landed(lf, vals[lf.key])
+            assert _get(cfg, lf.key) == landed(lf, vals[lf.key])
+        assert cfg.to_dict() == want
 
 
 NAME = st.from_regex(r"[a-z_][a-z0-9_]{0,10}", fullmatch=True)
@@ -553,6 +605,15 @@ def test_gps_overrides(data: st.DataObject, capsys: pytest.CaptureFixture[str]) 
         assert error_line(err, "gps.overrides").startswith("gps.overrides = ")
 
 
+def test_config_prints_loadable_toml_for_any_override_keys() -> None:
+    """``ag-uav config`` printed ``{ my comp = ... }`` (not TOML) for a component named with a
+    space; every accepted config must print back to itself."""
+    ov = {"components": {"my comp": {"type": "gaussian", "sigma": 0.5},
+                         'é"x': {"type": "laplace", "sigma": 0.5}}}
+    cfg = C.config_from_dict({"gps": {"preset": "sbas", "overrides": ov}})
+    assert C.config_from_dict(tomllib.loads(C.config_toml_with_comments(cfg))) == cfg
+
+
 def test_known_gps_override_holes() -> None:
     """The inputs that exposed the holes, pinned."""
     for ov in ('{axis_scale="x"}', '{components={white={sigma=nan}}}', "{bogus=1}",
@@ -605,8 +666,6 @@ def test_any_file_bytes(raw: bytes, tmp_path: Path, capsys: pytest.CaptureFixtur
     except UnicodeDecodeError:
         assert rc == 2 and "not UTF-8" in error_line(err, str(path))
         return
-    import tomllib
-
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError:
