@@ -378,7 +378,7 @@ def _build(cls: type, data: Any, prefix: str, base: Any = None) -> Any:
     unknown = [k for k in data if k not in fields]
     if unknown:
         k = unknown[0]
-        where = f"{prefix}.{k}" if prefix else str(k)
+        where = f"{prefix}.{_toml_key(k)}" if prefix else _toml_key(k)  # "a.b": one key
         raise ConfigError(f"{where} = {_fmt(data[k])}: unknown key; allowed in "
                           f"[{prefix or 'top level'}]: {', '.join(fields)}")
     base_obj = base if base is not None else cls()
@@ -400,6 +400,10 @@ def _check_gps_overrides(g: GpsConfig) -> None:
     """``gps.overrides`` against the preset, by ``ag_uav.gps`` (the owner of those keys)."""
     from . import gps
 
+    ov_rate = g.overrides.get("rate_hz")
+    if g.rate_hz > 0 and ov_rate is not None and ov_rate != g.rate_hz:
+        raise ConfigError(f"gps.overrides.rate_hz = {_fmt(ov_rate)}: conflicts with gps.rate_hz = "
+                          f"{g.rate_hz} (which would win); set one of them")
     if g.multipath_prob > 0 and isinstance(g.overrides.get("components"), list):
         raise ConfigError(f"gps.multipath_prob = {g.multipath_prob}: cannot be combined with a "
                           "components list in gps.overrides; add the spikes to that list")
