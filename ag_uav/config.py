@@ -534,11 +534,11 @@ def _apply_override(data: dict[str, Any], key: str, value: Any) -> None:
 
 def _read_toml(path: str | Path) -> dict[str, Any]:
     p = Path(path)
-    what = f"config file = {_fmt(str(p))}"
-    if not p.exists():
+    what = f"config file = {_fmt(str(path))}"
+    if not str(path) or not p.exists():
         raise ConfigError(f"{what}: no such file")
-    if not p.is_file():
-        raise ConfigError(f"{what}: not a file; expected a TOML file")
+    if p.is_dir():  # anything else readable will do: a file, a pipe (<(...), /dev/stdin)
+        raise ConfigError(f"{what}: a directory; expected a TOML file")
     try:
         raw = p.read_bytes()
     except OSError as e:

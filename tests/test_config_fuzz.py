@@ -690,7 +690,7 @@ def test_any_file_bytes(raw: bytes, tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_missing_and_unreadable_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    for p, why in ((tmp_path / "nope.toml", "no such file"), (tmp_path, "not a file")):
+    for p, why in ((tmp_path / "nope.toml", "no such file"), (tmp_path, "a directory")):
         rc, err = through_cli(["--config", str(p)], capsys)
         assert rc == 2 and why in error_line(err, str(p))
 
