@@ -6,6 +6,11 @@ are the shipped mission); an unknown key, a wrong type or a value out of range r
 
     mission.swath_m = -3.0: must be > 0
 
+Numbers must be finite and within ±``FLOAT_LIMIT``; integers are TOML's 64-bit ones (a float is
+no integer: ``seed = 1.5`` and ``estimator.max_iter = 1e9`` are refused). ``--set KEY=VALUE``
+reads VALUE as one TOML value (else a bare string) and KEY must lead through tables of the
+schema (``seed.x=1`` and ``mission=3`` are refused).
+
 ``ag-uav config`` prints the full default config with a comment per key.
 """
 
@@ -43,6 +48,7 @@ def _one_line(msg: str) -> str:
 
 
 INT_MIN, INT_MAX = -(2**63), 2**63 - 1  # TOML integers are 64-bit signed
+FLOAT_LIMIT = 1e9  # no number key needs more; beyond it the simulation overflows (mass 1e300)
 
 
 def _f(default: Any, help: str, *, gt: float | None = None, ge: float | None = None,
@@ -308,6 +314,9 @@ def _coerce(tp: Any, v: Any, key: str, choices: tuple | None = None) -> Any:
             _check_int64(v, key)
         if not math.isfinite(v):
             raise ConfigError(f"{key} = {_fmt(v)}: expected a finite number")
+        if abs(v) > FLOAT_LIMIT:
+            raise ConfigError(f"{key} = {_fmt(v)}: must be between -{FLOAT_LIMIT:g} and "
+                              f"{FLOAT_LIMIT:g}")
         return float(v)
     if tp is int:
         if isinstance(v, bool) or not isinstance(v, int):
@@ -440,6 +449,9 @@ def _validate(cfg: Config) -> None:
         raise ConfigError(f"sim.control_hz = {s.control_hz} with sim.timestep_s = "
                           f"{s.timestep_s}: the control rate must divide the physics rate "
                           f"1/timestep_s = {1.0 / s.timestep_s:g} Hz")
+    if s.hover_after_s > s.max_time_s:
+        raise ConfigError(f"sim.hover_after_s = {s.hover_after_s} with sim.max_time_s = "
+                          f"{s.max_time_s}: the final hover must fit in the time cap")
     _check_gps_overrides(cfg.gps)
 
 

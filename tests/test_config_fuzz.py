@@ -121,7 +121,7 @@ def meta_ok(tp: Any, meta: Mapping[str, Any], v: Any) -> bool:
             return False
         if isinstance(v, int) and not INT64[0] <= v <= INT64[1]:
             return False
-        if not math.isfinite(v):
+        if not math.isfinite(v) or (tp is float and abs(v) > C.FLOAT_LIMIT):
             return False
         return all(b is None or op(v, b) for b, op in (
             (meta.get("gt"), lambda a, b: a > b), (meta.get("ge"), lambda a, b: a >= b),
@@ -135,14 +135,24 @@ def _divides(timestep_s: float, control_hz: float) -> bool:
     return math.isfinite(steps) and abs(steps - round(steps)) <= 1e-6 and round(steps) >= 1
 
 
-CROSS = {  # the rules across fields, with every other key at its default
-    "sim.control_hz": lambda v: _divides(DEFAULT.sim.timestep_s, v),
-    "sim.timestep_s": lambda v: _divides(v, DEFAULT.sim.control_hz),
-}
+def cross_ok(sim: Mapping[str, float]) -> list[str]:
+    """The rules across keys (all in [sim]): the keys of the first one broken, else []."""
+    s = {k: sim.get(k, getattr(DEFAULT.sim, k)) for k in ("timestep_s", "control_hz",
+                                                          "hover_after_s", "max_time_s")}
+    if not _divides(s["timestep_s"], s["control_hz"]):
+        return ["sim.control_hz", "sim.timestep_s"]
+    if s["hover_after_s"] > s["max_time_s"]:
+        return ["sim.hover_after_s", "sim.max_time_s"]
+    return []
+
+
+CROSS = {"sim.control_hz", "sim.timestep_s", "sim.hover_after_s", "sim.max_time_s"}
 
 
 def allowed(leaf: Leaf, v: Any) -> bool:
-    return meta_ok(leaf.tp, leaf.meta, v) and CROSS.get(leaf.key, lambda _: True)(v)
+    if not meta_ok(leaf.tp, leaf.meta, v):
+        return False
+    return leaf.key not in CROSS or not cross_ok({leaf.key.split(".")[1]: v})
 
 
 def landed(leaf: Leaf, v: Any) -> Any:
@@ -166,6 +176,9 @@ def valid_scalar(tp: Any, meta: Mapping[str, Any]) -> st.SearchStrategy:
         return st.sampled_from(meta["choices"])
     lo = meta.get("gt") if meta.get("gt") is not None else meta.get("ge")
     hi = meta.get("lt") if meta.get("lt") is not None else meta.get("le")
+    if tp is float:
+        lo = -C.FLOAT_LIMIT if lo is None else lo
+        hi = C.FLOAT_LIMIT if hi is None else hi
     if tp is int:
         return st.integers(min_value=max(lo if lo is not None else INT64[0], INT64[0]),
                            max_value=min(hi if hi is not None else INT64[1], INT64[1]))
@@ -179,8 +192,10 @@ def valid_scalar(tp: Any, meta: Mapping[str, Any]) -> st.SearchStrategy:
 
 def edge_values(meta: Mapping[str, Any]) -> list[Any]:
     """Values on and just beside every bound and choice, and the specials TOML can spell."""
+    big = C.FLOAT_LIMIT
     out: list[Any] = [math.nan, -math.inf, math.inf, 2**63, -(2**63) - 1, 2**70, 0, -0.0, -1,
-                      2**63 - 1, 1e308, 5e-324]
+                      2**63 - 1, 1e308, 5e-324, big, -big, int(big) + 1,
+                      math.nextafter(big, math.inf), math.nextafter(-big, -math.inf)]
     for b in _bounds(meta):
         out += [b, -b, b + 1, b - 1, math.nextafter(b, math.inf), math.nextafter(b, -math.inf)]
         if float(b).is_integer():
@@ -213,10 +228,14 @@ def good_values(leaf: Leaf) -> st.SearchStrategy:
         return st.lists(valid_scalar(inner, meta), max_size=4, unique=bool(meta.get("unique")))
     if _is_union(tp):
         return st.one_of(valid_scalar(float, meta), st.sampled_from(meta["choices"]))
-    if leaf.key in CROSS:  # valid values are rarer here: build some that divide
-        if leaf.key == "sim.control_hz":
-            return st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.timestep_s * n))
+    if leaf.key == "sim.control_hz":  # valid values are rare here: build rates that divide
+        return st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.timestep_s * n))
+    if leaf.key == "sim.timestep_s":
         return st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.control_hz * n))
+    if leaf.key == "sim.hover_after_s":
+        return st.floats(0.0, DEFAULT.sim.max_time_s)
+    if leaf.key == "sim.max_time_s":
+        return st.floats(DEFAULT.sim.hover_after_s, C.FLOAT_LIMIT)
     return valid_scalar(tp, meta)
 
 
@@ -260,7 +279,8 @@ def error_line(err: str, key: str) -> str:
 def check_message(body: str, leaf: Leaf, v: Any) -> None:
     """The message names the key, the value (scalars) and what is allowed."""
     if leaf.key in CROSS:  # a rule across keys names them all
-        assert all(f"{k} = " in body for k in CROSS) or body.startswith(f"{leaf.key} = "), body
+        broken = cross_ok({leaf.key.split(".")[1]: v}) if meta_ok(leaf.tp, leaf.meta, v) else []
+        assert all(f"{k} = " in body for k in broken) and f"{leaf.key} = " in body, body
     else:
         assert body.startswith((f"{leaf.key} = ", f"{leaf.key}[")), body
     assert any(w in body for w in ("expected", "must", "allowed", "appears twice",
@@ -411,9 +431,7 @@ def test_whole_configs(data: st.DataObject, tmp_path: Path,
                                         candidates(lf)), label=lf.key) for lf in leaves}
     bad = [lf.key for lf in leaves if not meta_ok(lf.tp, lf.meta, vals[lf.key])]
     if not bad:
-        ts = vals.get("sim.timestep_s", DEFAULT.sim.timestep_s)
-        hz = vals.get("sim.control_hz", DEFAULT.sim.control_hz)
-        bad = [] if _divides(ts, hz) else list(CROSS)
+        bad = cross_ok({k.split(".")[1]: v for k, v in vals.items() if k in CROSS})
     doc: dict[str, Any] = {}
     for k, v in vals.items():
         C._apply_override(doc, k, v)
@@ -739,3 +757,22 @@ def test_real_command_exit_2_one_line(tmp_path: Path) -> None:
         assert p.returncode == 2, (argv, err)
         assert out == b"", argv
         error_line(err.decode("utf-8"), key)
+
+
+@pytest.mark.parametrize("key, value, needle", [
+    ("vehicle.mass_kg", 1e300, r"must be between -1e\+09 and 1e\+09"),  # ZeroDivisionError
+    ("vehicle.payload_kg", 1e300, "must be between"),  # ZeroDivisionError in flight
+    ("gps.radar_sigma_m", 1e300, "must be between"),  # OverflowError in flight
+    ("estimator.imu_sigma_mps2", 1e300, "must be between"),  # NaN estimate RMSE, silently
+    ("sim.hover_after_s", 1e6, "must fit in the time cap"),  # reference of 1e8 samples: a hang
+    ("mission.direction_deg", math.nan, "expected a finite number"),
+    ("seed", 2**70, "64-bit"),
+    ("estimator.shadow", ["kf", "kf"], "appears twice"),
+    ("log.cameras", ["down", "down"], "appears twice"),
+    ("estimator.shadow", ["true"], "allowed: kf"),
+])
+def test_pinned_holes(key: str, value: Any, needle: str) -> None:
+    """Inputs that were accepted (and then crashed, hung or ran wrong), pinned."""
+    with pytest.raises(C.ConfigError, match=needle) as e:
+        C.load_config(None, {key: value})
+    assert str(e.value).startswith((f"{key} = ", f"{key}["))
