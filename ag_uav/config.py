@@ -83,9 +83,10 @@ class MissionConfig:
     direction_deg: float | str = _f("auto", "sweep direction in degrees from east "
                                     "(counter-clockwise), or \"auto\" (fewest turns)",
                                     choices=("auto",))
-    speed_mps: float = _f(5.0, "cruise ground speed on legs (m/s)", gt=0, le=15)
+    speed_mps: float = _f(5.0, "cruise ground speed on legs (m/s)", ge=0.5, le=15)
     altitude_m: float = _f(3.0, "spray altitude above ground (m)", gt=0.5, le=50)
-    accel_max_mps2: float = _f(1.5, "acceleration bound of the reference (m/s^2)", gt=0, le=8)
+    accel_max_mps2: float = _f(1.5, "acceleration bound of the reference (m/s^2)", ge=0.05,
+                                  le=8)
 
 
 @dataclass
@@ -105,8 +106,8 @@ class VehicleConfig:
 
 @dataclass
 class SimConfig:
-    timestep_s: float = _f(0.002, "MuJoCo physics step (s)", gt=0, le=0.01)
-    control_hz: float = _f(100.0, "control rate (Hz); must divide the physics rate", gt=0,
+    timestep_s: float = _f(0.002, "MuJoCo physics step (s)", ge=1e-5, le=0.01)
+    control_hz: float = _f(100.0, "control rate (Hz); must divide the physics rate", ge=1,
                            le=1000)
     max_time_s: float = _f(1800.0, "hard cap on simulated time (s)", gt=0)
     hover_after_s: float = _f(3.0, "hover time at the end of the path (s)", ge=0, le=3600)

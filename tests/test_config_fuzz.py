@@ -182,9 +182,8 @@ def valid_scalar(tp: Any, meta: Mapping[str, Any]) -> st.SearchStrategy:
     floats = st.floats(min_value=lo, max_value=hi, exclude_min=meta.get("gt") is not None,
                        exclude_max=meta.get("lt") is not None, allow_nan=False,
                        allow_infinity=False)
-    ints = st.integers(min_value=math.ceil(lo) if lo is not None else -(10**6),
-                       max_value=math.floor(hi) if hi is not None else 10**6)
-    return st.one_of(floats, ints)
+    lo_i, hi_i = math.ceil(lo), math.floor(hi)
+    return st.one_of(floats, st.integers(lo_i, hi_i)) if lo_i <= hi_i else floats
 
 
 def edge_values(meta: Mapping[str, Any]) -> list[Any]:
@@ -758,6 +757,10 @@ def test_real_command_exit_2_one_line(tmp_path: Path) -> None:
     ("gps.radar_sigma_m", 1e300, "must be between"),  # OverflowError in flight
     ("estimator.imu_sigma_mps2", 1e300, "must be between"),  # NaN estimate RMSE, silently
     ("sim.hover_after_s", 1e6, "must be <= 3600"),  # a reference of 1e8 samples: a hang
+    ("mission.speed_mps", 1e-6, "must be >= 0.5"),  # a 1.4 TiB reference: ArrayMemoryError
+    ("mission.accel_max_mps2", 1e-9, "must be >= 0.05"),  # 13 GB and counting
+    ("sim.timestep_s", 1e-7, "must be >= 1e-05"),  # 5e7 physics steps for 5 s: a hang
+    ("sim.control_hz", 0.002, "must be >= 1"),  # one control update per 500 s, silently
     ("mission.direction_deg", math.nan, "expected a finite number"),
     ("seed", 2**70, "64-bit"),
     ("estimator.shadow", ["kf", "kf"], "appears twice"),
