@@ -609,7 +609,7 @@ def config_toml_with_comments(cfg: Config | None = None) -> str:
                 continue
             help_ = f.metadata.get("help", "")
             ch = f.metadata.get("choices")
-            if ch:
+            if ch and not all(c in help_ for c in ch):  # unless the help lists them already
                 help_ += f" [{' | '.join(ch)}]"
             lines.append(f"# {help_}")
             lines.append(f"{f.name} = {_toml_value(v)}")
