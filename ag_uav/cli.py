@@ -19,7 +19,8 @@ from .config import ConfigError
 def _add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", "-c", metavar="FILE.toml", help="run config (TOML); defaults if "
                    "omitted (see `ag-uav config`)")
-    p.add_argument("--seed", type=int, help="override the config's seed")
+    p.add_argument("--seed", metavar="N", help="override the config's seed (an integer >= 0; "
+                   "checked like --set seed=N)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override one config key, e.g. --set wind.speed_mps=5 (TOML value)")
 
@@ -28,10 +29,8 @@ def _overrides(args: argparse.Namespace) -> dict:
     from .config import parse_set_items
 
     out = parse_set_items(args.set)
-    if getattr(args, "seed", None) is not None:
-        if args.seed < 0:
-            raise ConfigError(f"--seed = {args.seed}: must be >= 0")
-        out["seed"] = args.seed
+    if getattr(args, "seed", None) is not None:  # read as TOML and checked by the config
+        out["seed"] = parse_set_items([f"seed={args.seed}"])["seed"]
     return out
 
 

@@ -35,10 +35,20 @@ def _executor(args: argparse.Namespace):
         raise ConfigError(f'--dask = "{args.dask}": cannot connect ({e})') from None
 
 
+def _load_spec(load_spec, path: str, what: str):
+    """``load_spec(path)``; a file that is not UTF-8 is a one-line ConfigError (not a
+    traceback)."""
+    try:
+        return load_spec(path)
+    except UnicodeDecodeError as e:
+        raise ConfigError(f'{what} spec = "{path}": not UTF-8 text (byte {e.start}); TOML files '
+                          "are UTF-8") from None
+
+
 def cmd_batch(args: argparse.Namespace) -> int:
     from .batch import expand, load_spec, print_table, run_batch, summary_rows
 
-    spec = load_spec(args.spec)
+    spec = _load_spec(load_spec, args.spec, "batch")
     tasks = expand(spec)
     out = Path(args.out or f"runs/batch-{spec.name}")
     if args.dry_run:
@@ -63,7 +73,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
     from .tune import load_spec, run_tune
 
-    spec = load_spec(args.spec)
+    spec = _load_spec(load_spec, args.spec, "tune")
     if args.optimizer and args.optimizer != spec.optimizer:
         spec = dataclasses.replace(spec, optimizer=args.optimizer, optimizer_options={})
     if args.pop is not None:

@@ -6,6 +6,11 @@ are the shipped mission); an unknown key, a wrong type or a value out of range r
 
     mission.swath_m = -3.0: must be > 0
 
+Numbers must be finite and within ±``FLOAT_LIMIT``; integers are TOML's 64-bit ones (a float is
+no integer: ``seed = 1.5`` and ``estimator.max_iter = 1e9`` are refused). ``--set KEY=VALUE``
+reads VALUE as one TOML value (else a bare string) and KEY must lead through tables of the
+schema (``seed.x=1`` and ``mission=3`` are refused).
+
 ``ag-uav config`` prints the full default config with a comment per key.
 """
 
@@ -43,6 +48,7 @@ def _one_line(msg: str) -> str:
 
 
 INT_MIN, INT_MAX = -(2**63), 2**63 - 1  # TOML integers are 64-bit signed
+FLOAT_LIMIT = 1e9  # no number key needs more; beyond it the simulation overflows (mass 1e300)
 
 
 def _f(default: Any, help: str, *, gt: float | None = None, ge: float | None = None,
@@ -77,9 +83,10 @@ class MissionConfig:
     direction_deg: float | str = _f("auto", "sweep direction in degrees from east "
                                     "(counter-clockwise), or \"auto\" (fewest turns)",
                                     choices=("auto",))
-    speed_mps: float = _f(5.0, "cruise ground speed on legs (m/s)", gt=0, le=15)
+    speed_mps: float = _f(5.0, "cruise ground speed on legs (m/s)", ge=0.5, le=15)
     altitude_m: float = _f(3.0, "spray altitude above ground (m)", gt=0.5, le=50)
-    accel_max_mps2: float = _f(1.5, "acceleration bound of the reference (m/s^2)", gt=0, le=8)
+    accel_max_mps2: float = _f(1.5, "acceleration bound of the reference (m/s^2)", ge=0.05,
+                                  le=8)
 
 
 @dataclass
@@ -99,12 +106,12 @@ class VehicleConfig:
 
 @dataclass
 class SimConfig:
-    timestep_s: float = _f(0.002, "MuJoCo physics step (s)", gt=0, le=0.01)
-    control_hz: float = _f(100.0, "control rate (Hz); must divide the physics rate", gt=0,
+    timestep_s: float = _f(0.002, "MuJoCo physics step (s)", ge=1e-5, le=0.01)
+    control_hz: float = _f(100.0, "control rate (Hz); must divide the physics rate", ge=1,
                            le=1000)
     max_time_s: float = _f(21600.0, "hard cap on simulated time (s); a mission cut by it "
                            "says so in its summary", gt=0)
-    hover_after_s: float = _f(3.0, "hover time at the end of the path (s)", ge=0)
+    hover_after_s: float = _f(3.0, "hover time at the end of the path (s)", ge=0, le=3600)
     takeoff: bool = _f(True, "start on the ground and climb to spray altitude")
 
 
@@ -360,6 +367,9 @@ def _coerce(tp: Any, v: Any, key: str, choices: tuple | None = None) -> Any:
             _check_int64(v, key)
         if not math.isfinite(v):
             raise ConfigError(f"{key} = {_fmt(v)}: expected a finite number")
+        if abs(v) > FLOAT_LIMIT:
+            raise ConfigError(f"{key} = {_fmt(v)}: must be between -{FLOAT_LIMIT:g} and "
+                              f"{FLOAT_LIMIT:g}")
         return float(v)
     if tp is int:
         if isinstance(v, bool) or not isinstance(v, int):
@@ -430,7 +440,7 @@ def _build(cls: type, data: Any, prefix: str, base: Any = None) -> Any:
     unknown = [k for k in data if k not in fields]
     if unknown:
         k = unknown[0]
-        where = f"{prefix}.{k}" if prefix else str(k)
+        where = f"{prefix}.{_toml_key(k)}" if prefix else _toml_key(k)  # "a.b": one key
         raise ConfigError(f"{where} = {_fmt(data[k])}: unknown key; allowed in "
                           f"[{prefix or 'top level'}]: {', '.join(fields)}")
     base_obj = base if base is not None else cls()
@@ -452,6 +462,10 @@ def _check_gps_overrides(g: GpsConfig) -> None:
     """``gps.overrides`` against the preset, by ``ag_uav.gps`` (the owner of those keys)."""
     from . import gps
 
+    ov_rate = g.overrides.get("rate_hz")
+    if g.rate_hz > 0 and ov_rate is not None and ov_rate != g.rate_hz:
+        raise ConfigError(f"gps.overrides.rate_hz = {_fmt(ov_rate)}: conflicts with gps.rate_hz = "
+                          f"{g.rate_hz} (which would win); set one of them")
     if g.multipath_prob > 0 and isinstance(g.overrides.get("components"), list):
         raise ConfigError(f"gps.multipath_prob = {g.multipath_prob}: cannot be combined with a "
                           "components list in gps.overrides; add the spikes to that list")
@@ -585,11 +599,11 @@ def _apply_override(data: dict[str, Any], key: str, value: Any) -> None:
 
 def _read_toml(path: str | Path) -> dict[str, Any]:
     p = Path(path)
-    what = f"config file = {_fmt(str(p))}"
-    if not p.exists():
+    what = f"config file = {_fmt(str(path))}"
+    if not str(path) or not p.exists():
         raise ConfigError(f"{what}: no such file")
-    if not p.is_file():
-        raise ConfigError(f"{what}: not a file; expected a TOML file")
+    if p.is_dir():  # anything else readable will do: a file, a pipe (<(...), /dev/stdin)
+        raise ConfigError(f"{what}: a directory; expected a TOML file")
     try:
         raw = p.read_bytes()
     except OSError as e:
@@ -617,11 +631,20 @@ def default_config() -> Config:
     return Config()
 
 
+def _toml_key(k: Any) -> str:
+    """A TOML key: bare where it can be, else a quoted string (``"my comp"``)."""
+    k = str(k)
+    if k and all(c.isascii() and (c.isalnum() or c in "_-") for c in k):
+        return k
+    return _toml_value(k)
+
+
 def _toml_value(v: Any) -> str:
+    """``v`` as one inline TOML value (tables inline, keys quoted where they must be)."""
     if isinstance(v, dict):
         if not v:
             return "{}"
-        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
     if isinstance(v, list):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     return tomli_w.dumps({"k": v}).strip()[4:]
@@ -641,7 +664,7 @@ def config_toml_with_comments(cfg: Config | None = None) -> str:
                 continue
             help_ = f.metadata.get("help", "")
             ch = f.metadata.get("choices")
-            if ch:
+            if ch and not all(c in help_ for c in ch):  # unless the help lists them already
                 help_ += f" [{' | '.join(ch)}]"
             lines.append(f"# {help_}")
             lines.append(f"{f.name} = {_toml_value(v)}")

@@ -20,6 +20,7 @@ import math
 import os
 import subprocess
 import sys
+import tomllib
 import typing
 from collections.abc import Mapping
 from pathlib import Path
@@ -36,7 +37,7 @@ from ag_uav import cli  # noqa: E402
 from ag_uav import config as C  # noqa: E402
 from ag_uav.gps import available_presets, gps_preset  # noqa: E402
 
-FUZZ = settings(max_examples=150, deadline=None, derandomize=True, database=None,
+FUZZ = settings(max_examples=100, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
 INT64 = (-(2**63), 2**63 - 1)
@@ -120,7 +121,7 @@ def meta_ok(tp: Any, meta: Mapping[str, Any], v: Any) -> bool:
             return False
         if isinstance(v, int) and not INT64[0] <= v <= INT64[1]:
             return False
-        if not math.isfinite(v):
+        if not math.isfinite(v) or (tp is float and abs(v) > C.FLOAT_LIMIT):
             return False
         return all(b is None or op(v, b) for b, op in (
             (meta.get("gt"), lambda a, b: a > b), (meta.get("ge"), lambda a, b: a >= b),
@@ -134,14 +135,21 @@ def _divides(timestep_s: float, control_hz: float) -> bool:
     return math.isfinite(steps) and abs(steps - round(steps)) <= 1e-6 and round(steps) >= 1
 
 
-CROSS = {  # the rules across fields, with every other key at its default
-    "sim.control_hz": lambda v: _divides(DEFAULT.sim.timestep_s, v),
-    "sim.timestep_s": lambda v: _divides(v, DEFAULT.sim.control_hz),
-}
+def cross_ok(sim: Mapping[str, float]) -> list[str]:
+    """The rules across keys (all in [sim]): the keys of the first one broken, else []."""
+    s = {k: sim.get(k, getattr(DEFAULT.sim, k)) for k in ("timestep_s", "control_hz")}
+    if not _divides(s["timestep_s"], s["control_hz"]):
+        return ["sim.control_hz", "sim.timestep_s"]
+    return []
+
+
+CROSS = {"sim.control_hz", "sim.timestep_s"}
 
 
 def allowed(leaf: Leaf, v: Any) -> bool:
-    return meta_ok(leaf.tp, leaf.meta, v) and CROSS.get(leaf.key, lambda _: True)(v)
+    if not meta_ok(leaf.tp, leaf.meta, v):
+        return False
+    return leaf.key not in CROSS or not cross_ok({leaf.key.split(".")[1]: v})
 
 
 def landed(leaf: Leaf, v: Any) -> Any:
@@ -165,21 +173,25 @@ def valid_scalar(tp: Any, meta: Mapping[str, Any]) -> st.SearchStrategy:
         return st.sampled_from(meta["choices"])
     lo = meta.get("gt") if meta.get("gt") is not None else meta.get("ge")
     hi = meta.get("lt") if meta.get("lt") is not None else meta.get("le")
+    if tp is float:
+        lo = -C.FLOAT_LIMIT if lo is None else lo
+        hi = C.FLOAT_LIMIT if hi is None else hi
     if tp is int:
         return st.integers(min_value=max(lo if lo is not None else INT64[0], INT64[0]),
                            max_value=min(hi if hi is not None else INT64[1], INT64[1]))
     floats = st.floats(min_value=lo, max_value=hi, exclude_min=meta.get("gt") is not None,
                        exclude_max=meta.get("lt") is not None, allow_nan=False,
                        allow_infinity=False)
-    ints = st.integers(min_value=math.ceil(lo) if lo is not None else -(10**6),
-                       max_value=math.floor(hi) if hi is not None else 10**6)
-    return st.one_of(floats, ints)
+    lo_i, hi_i = math.ceil(lo), math.floor(hi)
+    return st.one_of(floats, st.integers(lo_i, hi_i)) if lo_i <= hi_i else floats
 
 
 def edge_values(meta: Mapping[str, Any]) -> list[Any]:
     """Values on and just beside every bound and choice, and the specials TOML can spell."""
+    big = C.FLOAT_LIMIT
     out: list[Any] = [math.nan, -math.inf, math.inf, 2**63, -(2**63) - 1, 2**70, 0, -0.0, -1,
-                      2**63 - 1, 1e308, 5e-324]
+                      2**63 - 1, 1e308, 5e-324, big, -big, int(big) + 1,
+                      math.nextafter(big, math.inf), math.nextafter(-big, -math.inf)]
     for b in _bounds(meta):
         out += [b, -b, b + 1, b - 1, math.nextafter(b, math.inf), math.nextafter(b, -math.inf)]
         if float(b).is_integer():
@@ -201,6 +213,24 @@ JUNK = st.one_of(
 )
 
 
+def good_values(leaf: Leaf) -> st.SearchStrategy:
+    """Values the metadata allows (most of them; the oracle still decides)."""
+    tp, meta = leaf.tp, leaf.meta
+    if typing.get_origin(tp) is list:
+        (inner,) = typing.get_args(tp)
+        n = meta.get("length")
+        if n is not None:
+            return st.lists(valid_scalar(inner, meta), min_size=n, max_size=n)
+        return st.lists(valid_scalar(inner, meta), max_size=4, unique=bool(meta.get("unique")))
+    if _is_union(tp):
+        return st.one_of(valid_scalar(float, meta), st.sampled_from(meta["choices"]))
+    if leaf.key == "sim.control_hz":  # valid values are rare here: build rates that divide
+        return st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.timestep_s * n))
+    if leaf.key == "sim.timestep_s":
+        return st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.control_hz * n))
+    return valid_scalar(tp, meta)
+
+
 def candidates(leaf: Leaf) -> st.SearchStrategy:
     """Good values (from the metadata), values at the edges, and junk of every TOML type."""
     tp, meta = leaf.tp, leaf.meta
@@ -208,23 +238,12 @@ def candidates(leaf: Leaf) -> st.SearchStrategy:
         (inner,) = typing.get_args(tp)
         n = meta.get("length")
         elem = st.one_of(valid_scalar(inner, meta), edge_scalar(inner, meta))
-        if n is not None:
-            good = st.lists(valid_scalar(inner, meta), min_size=n, max_size=n)
-            any_len = st.lists(elem, min_size=0, max_size=n + 2)
-        else:
-            good = st.lists(valid_scalar(inner, meta), max_size=4,
-                            unique=bool(meta.get("unique")))
-            any_len = st.lists(elem, max_size=4)
-        return st.one_of(good, any_len, JUNK)
+        any_len = st.lists(elem, max_size=(n or 2) + 2)
+        return st.one_of(good_values(leaf), any_len, JUNK)
     if _is_union(tp):
-        good = st.one_of(valid_scalar(float, meta), st.sampled_from(meta["choices"]))
-        return st.one_of(good, edge_scalar(str, meta), edge_scalar(float, {}), JUNK)
-    if leaf.key in CROSS:  # valid values are rarer here: build some that divide
-        if leaf.key == "sim.control_hz":
-            good = st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.timestep_s * n))
-        else:
-            good = st.integers(1, 600).map(lambda n: 1.0 / (DEFAULT.sim.control_hz * n))
-        return st.one_of(good, valid_scalar(tp, meta), edge_scalar(tp, meta), JUNK)
+        return st.one_of(good_values(leaf), edge_scalar(str, meta), edge_scalar(float, {}), JUNK)
+    if leaf.key in CROSS:
+        return st.one_of(good_values(leaf), valid_scalar(tp, meta), edge_scalar(tp, meta), JUNK)
     return st.one_of(valid_scalar(tp, meta), edge_scalar(tp, meta), JUNK)
 
 
@@ -252,7 +271,8 @@ def error_line(err: str, key: str) -> str:
 def check_message(body: str, leaf: Leaf, v: Any) -> None:
     """The message names the key, the value (scalars) and what is allowed."""
     if leaf.key in CROSS:  # a rule across keys names them all
-        assert all(f"{k} = " in body for k in CROSS) or body.startswith(f"{leaf.key} = "), body
+        broken = cross_ok({leaf.key.split(".")[1]: v}) if meta_ok(leaf.tp, leaf.meta, v) else []
+        assert all(f"{k} = " in body for k in broken) and f"{leaf.key} = " in body, body
     else:
         assert body.startswith((f"{leaf.key} = ", f"{leaf.key}[")), body
     assert any(w in body for w in ("expected", "must", "allowed", "appears twice",
@@ -279,10 +299,14 @@ def _one_parser() -> typing.Iterator[None]:
 
 
 def through_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    """``ag-uav config ARGV`` in-process: (exit code, stderr); on success the printed TOML must
+    load back to the very config the command resolved."""
     rc = cli.main(["config", *argv])
     out, err = capsys.readouterr()
     if rc == 0:
         assert err == "" and out.startswith("# ag-uav run configuration"), err
+        resolved = cli._load(cli.build_parser().parse_args(["config", *argv]))
+        assert C.config_from_dict(tomllib.loads(out)) == resolved
     return rc, err
 
 
@@ -387,27 +411,73 @@ def test_every_leaf_value_accepted_iff_allowed(data: st.DataObject, tmp_path: Pa
         check_message(error_line(err, leaf.key), leaf, v)
 
 
-NAME = st.from_regex(r"[a-z_][a-z0-9_]{0,10}", fullmatch=True)
+@FUZZ
+@given(data=st.data())
+def test_whole_configs(data: st.DataObject, tmp_path: Path,
+                       capsys: pytest.CaptureFixture[str]) -> None:
+    """Several keys at once, mostly good: accepted iff every one is allowed (and the rates
+    divide); then all of them land and nothing else moves; else the one line names a bad key."""
+    leaves = data.draw(st.lists(st.sampled_from(PLAIN), min_size=2, max_size=8,
+                                unique_by=lambda lf: lf.key), label="keys")
+    vals = {lf.key: data.draw(st.one_of(good_values(lf), good_values(lf), good_values(lf),
+                                        candidates(lf)), label=lf.key) for lf in leaves}
+    bad = [lf.key for lf in leaves if not meta_ok(lf.tp, lf.meta, vals[lf.key])]
+    if not bad:
+        bad = cross_ok({k.split(".")[1]: v for k, v in vals.items() if k in CROSS})
+    doc: dict[str, Any] = {}
+    for k, v in vals.items():
+        C._apply_override(doc, k, v)
+    path = tmp_path / "whole.toml"
+    path.write_text(tomli_w.dumps(doc), encoding="utf-8")
+    sets = [f"--set={k}={toml_inline(v)}" for k, v in vals.items()]
+    for argv in (["--config", str(path)], sets):
+        rc, err = through_cli(argv, capsys)
+        assert rc == (2 if bad else 0), (vals, err)
+        if bad:
+            body = error_line(err, "")
+            assert any(body.startswith((f"{k} = ", f"{k}[")) for k in bad), (bad, body)
+    if not bad:
+        cfg = C.config_from_dict(doc)
+        want = DEFAULT.to_dict()
+        for lf in leaves:
+            node = want
+            *head, last = lf.key.split(".")
+            for part in head:
+                node = node[part]
+            node[last] = landed(lf, vals[lf.key])
+            assert _get(cfg, lf.key) == landed(lf, vals[lf.key])
+        assert cfg.to_dict() == want
+
+
+NAME_RE = __import__("re").compile(r"[a-z_][a-z0-9_]{0,10}")
+NAME = st.from_regex(NAME_RE, fullmatch=True)
 
 
 @FUZZ
 @given(data=st.data())
 def test_unknown_key_at_every_level(data: st.DataObject, tmp_path: Path,
                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Any key name a TOML file can hold (``"mission.swath_m" = 3`` at the top level is one
+    unknown key, shown quoted), in every table."""
     prefix, cls = data.draw(st.sampled_from(TABLES), label="table")
     fields = {f.name for f in dataclasses.fields(cls)}
-    name = data.draw(NAME.filter(lambda n: n not in fields), label="name")
-    key = f"{prefix}.{name}" if prefix else name
-    v = data.draw(st.one_of(st.integers(0, 9), st.text(max_size=4), st.booleans()))
+    name = data.draw(st.one_of(NAME, st.text(max_size=6), st.sampled_from(
+        [f"{f}.x" for f in sorted(fields)] + ["", " ", "a b", "é"])).filter(
+        lambda n: n not in fields), label="name")
+    key = f"{prefix}.{C._toml_key(name)}" if prefix else C._toml_key(name)
+    doc = _nest(prefix, {name: 1}) if prefix else {name: 1}
     with pytest.raises(C.ConfigError, match="unknown key") as e:
-        C.config_from_dict(_nest(key, v))
-    assert str(e.value).startswith(f"{key} = ")
+        C.config_from_dict(doc)
+    assert str(e.value).startswith(f"{key} = ") or not name.isprintable(), str(e.value)
     path = tmp_path / "unknown.toml"
-    path.write_text(tomli_w.dumps(_nest(key, v)), encoding="utf-8")
-    for argv in (["--config", str(path)], ["--set", f"{key}={toml_inline(v)}"]):
+    path.write_text(tomli_w.dumps(doc), encoding="utf-8")
+    argvs = [["--config", str(path)]]
+    if NAME_RE.fullmatch(name):
+        argvs.append(["--set", f"{prefix + '.' if prefix else ''}{name}=1"])
+    for argv in argvs:
         rc, err = through_cli(argv, capsys)
         assert rc == 2
-        assert "unknown key" in error_line(err, key)
+        assert "unknown key" in error_line(err, key if name.isprintable() else "")
 
 
 @FUZZ
@@ -553,12 +623,24 @@ def test_gps_overrides(data: st.DataObject, capsys: pytest.CaptureFixture[str]) 
         assert error_line(err, "gps.overrides").startswith("gps.overrides = ")
 
 
+def test_config_prints_loadable_toml_for_any_override_keys() -> None:
+    """``ag-uav config`` printed ``{ my comp = ... }`` (not TOML) for a component named with a
+    space; every accepted config must print back to itself."""
+    ov = {"components": {"my comp": {"type": "gaussian", "sigma": 0.5},
+                         'é"x': {"type": "laplace", "sigma": 0.5}}}
+    cfg = C.config_from_dict({"gps": {"preset": "sbas", "overrides": ov}})
+    assert C.config_from_dict(tomllib.loads(C.config_toml_with_comments(cfg))) == cfg
+
+
 def test_known_gps_override_holes() -> None:
-    """The inputs that exposed the holes, pinned."""
+    """The inputs that exposed the holes, pinned (and a rate set twice: one would win)."""
     for ov in ('{axis_scale="x"}', '{components={white={sigma=nan}}}', "{bogus=1}",
                '{components={white={axis_scale="x"}}}'):
         with pytest.raises(C.ConfigError, match=r"^gps\.overrides = "):
             C.load_config(None, C.parse_set_items(["gps.preset=sbas", f"gps.overrides={ov}"]))
+    with pytest.raises(C.ConfigError, match=r"^gps\.overrides\.rate_hz = 10\.0: conflicts"):
+        C.config_from_dict({"gps": {"rate_hz": 5.0, "overrides": {"rate_hz": 10.0}}})
+    assert C.config_from_dict({"gps": {"rate_hz": 5.0, "overrides": {"rate_hz": 5.0}}})
     with pytest.raises(C.ConfigError, match="gps.multipath_prob"):
         C.config_from_dict({"gps": {"multipath_prob": 0.1,
                                     "overrides": {"components": [{"type": "gaussian",
@@ -605,8 +687,6 @@ def test_any_file_bytes(raw: bytes, tmp_path: Path, capsys: pytest.CaptureFixtur
     except UnicodeDecodeError:
         assert rc == 2 and "not UTF-8" in error_line(err, str(path))
         return
-    import tomllib
-
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError:
@@ -620,24 +700,36 @@ def test_any_file_bytes(raw: bytes, tmp_path: Path, capsys: pytest.CaptureFixtur
 
 
 def test_missing_and_unreadable_files(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    for p, why in ((tmp_path / "nope.toml", "no such file"), (tmp_path, "not a file")):
+    for p, why in ((tmp_path / "nope.toml", "no such file"), (tmp_path, "a directory")):
         rc, err = through_cli(["--config", str(p)], capsys)
         assert rc == 2 and why in error_line(err, str(p))
 
 
-def test_seed_flag_range(capsys: pytest.CaptureFixture[str]) -> None:
+def test_seed_flag(capsys: pytest.CaptureFixture[str]) -> None:
+    """``--seed N`` is checked like ``--set seed=N`` (was argparse's two-line usage error for
+    ``1.5``, and an unbounded integer)."""
     for seed, ok in (("0", True), (str(2**63 - 1), True), ("-1", False), (str(2**63), False),
-                     (str(2**70), False)):
-        rc, err = through_cli(["--seed", seed], capsys)
+                     (str(2**70), False), ("1.5", False), ("abc", False), ("nan", False)):
+        rc, err = through_cli([f"--seed={seed}"], capsys)
         assert rc == (0 if ok else 2), (seed, err)
-        if not ok:
+        if ok:
+            assert C.load_config(None, cli._overrides(cli.build_parser().parse_args(
+                ["config", f"--seed={seed}"]))).seed == int(seed)
+        else:
             error_line(err, "seed")
+
+
+@pytest.mark.parametrize("cmd", ["batch", "tune"])
+def test_spec_files_not_utf8(cmd: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    p = tmp_path / "spec.toml"
+    p.write_bytes(b'name = "x"\n\xff\n')
+    assert cli.main([cmd, str(p)]) == 2
+    assert "not UTF-8" in error_line(capsys.readouterr().err, f"{cmd} spec")
 
 
 # ------------------------------------------------------------------ the real command, a few times
 REAL = [  # (argv, key the message must name); run side by side, one process each
     (["fly", "--no-log", "-q", "--set", 'gps.overrides={axis_scale="x"}'], "gps.overrides"),
-    (["fly", "--no-log", "-q", "--set", "seed.x=1"], "seed.x"),
     (["config", "--set", b"controller.type=\xff\n"], "controller.type"),  # not UTF-8, newline
     (["config", "--config", "BADFILE"], "config file"),  # not UTF-8
 ]
@@ -656,3 +748,26 @@ def test_real_command_exit_2_one_line(tmp_path: Path) -> None:
         assert p.returncode == 2, (argv, err)
         assert out == b"", argv
         error_line(err.decode("utf-8"), key)
+
+
+@pytest.mark.parametrize("key, value, needle", [
+    ("vehicle.mass_kg", 1e300, r"must be between -1e\+09 and 1e\+09"),  # ZeroDivisionError
+    ("vehicle.payload_kg", 1e300, "must be between"),  # ZeroDivisionError in flight
+    ("gps.radar_sigma_m", 1e300, "must be between"),  # OverflowError in flight
+    ("imu.vibration_sigma_mps2", 1e300, "must be between"),  # was estimator.imu_sigma_mps2: NaN RMSE
+    ("sim.hover_after_s", 1e6, "must be <= 3600"),  # a reference of 1e8 samples: a hang
+    ("mission.speed_mps", 1e-6, "must be >= 0.5"),  # a 1.4 TiB reference: ArrayMemoryError
+    ("mission.accel_max_mps2", 1e-9, "must be >= 0.05"),  # 13 GB and counting
+    ("sim.timestep_s", 1e-7, "must be >= 1e-05"),  # 5e7 physics steps for 5 s: a hang
+    ("sim.control_hz", 0.002, "must be >= 1"),  # one control update per 500 s, silently
+    ("mission.direction_deg", math.nan, "expected a finite number"),
+    ("seed", 2**70, "64-bit"),
+    ("estimator.shadow", ["kf", "kf"], "appears twice"),
+    ("log.cameras", ["down", "down"], "appears twice"),
+    ("estimator.shadow", ["true"], "allowed: kf"),
+])
+def test_pinned_holes(key: str, value: Any, needle: str) -> None:
+    """Inputs that were accepted (and then crashed, hung or ran wrong), pinned."""
+    with pytest.raises(C.ConfigError, match=needle) as e:
+        C.load_config(None, {key: value})
+    assert str(e.value).startswith((f"{key} = ", f"{key}["))
