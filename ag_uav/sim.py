@@ -157,6 +157,7 @@ class LoopOutput:
     vehicle: Vehicle
     frames: int = 0
     notes: list[str] = dataclasses.field(default_factory=list)
+    sprayer: Any = None
 
 
 REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
@@ -236,6 +237,11 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     ref_p, ref_v, ref_a = tab["pos"].tolist(), tab["vel"].tolist(), tab["acc"].tolist()
     ref_yaw, ref_seg = tab["yaw"].tolist(), tab["seg"].tolist()
     ref_spray = tab["spray"].tolist()
+    sprayer = None  # spray job: tank, mass and energy per tick (ag_uav.spray)
+    if getattr(reference, "spray_job", None) is not None:
+        from .spray import Sprayer
+
+        sprayer = Sprayer(cfg, veh, data, cascade, tab, reference.spray_job, n_ticks, dt, log)
     wall_loop = time.perf_counter()
     for k in range(n_ticks):
         t = k * dt
@@ -279,6 +285,8 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
             p_fb = (rp[0], rp[1], p_fb[2])
             v_fb = (rv[0], rv[1], v_fb[2])
         f = cascade.update(p_fb, v_fb, R, omega, rp, rv, ref_a[k], yaw_ref, dt)
+        if sprayer is not None:
+            f, spray = sprayer.step(k, t, pz, vx, vy, spray, f)
         ctrl[0], ctrl[1], ctrl[2], ctrl[3] = f
         # ---- wind as a drag force (zero-order hold over the control period)
         ax_, ay_ = vx - wmx, vy - wmy
@@ -315,7 +323,7 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     arr = np.asarray(rec, dtype=float).reshape(-1, len(REC_COLUMNS))
     return LoopOutput(t=np.arange(len(arr)) * dt, rec=arr, crash_reason=crash_reason,
                       crash_time=crash_time, wall_loop_s=wall_loop, vehicle=veh, frames=frames,
-                      notes=notes)
+                      notes=notes, sprayer=sprayer)
 
 
 def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
@@ -334,6 +342,11 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     plan = build_plan(cfg, fld)
     m = cfg.mission
     ref = build_reference(cfg, plan)
+    if cfg.spray.enabled:
+        from .spray import plan_job
+
+        ref, _job = plan_job(cfg, plan, ref, fld, dry_mass_kg=cfg.vehicle.mass_kg
+                             + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08)
     outline = field_outline(fld)
     if log is not None:
         log.scene(0.0, outline[0], outline[1:],
@@ -366,6 +379,9 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     sim_time = float(len(out.t) / cfg.sim.control_hz)
     summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
                              reference=ref)
+    if out.sprayer is not None:
+        summ.update(out.sprayer.summary(sim_time))
+        res.extra["spray"] = out.sprayer.series(len(out.t))
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))
