@@ -458,9 +458,10 @@ class Sprayer:
             if self.cur >= 0:
                 self._close_sortie(t)
             self.cur = s
-            if s > 0:
+            if s > 0:  # refilled and a fresh battery at the base
                 self.tank = self.job.fill_l
                 self.energy_j = 0.0
+                self._set_mass(self.tank * self.rho)
             self.per.append({"sortie": s + 1, "t_takeoff_s": t, "litres": 0.0, "energy_j": 0.0,
                              "min_soc": 1.0, "ran_dry_s": None, "t_land_s": None})
         if self.ground[k]:
