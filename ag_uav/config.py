@@ -131,6 +131,8 @@ class BatteryConfig:
                                  gt=0.05)
     air_density_kgm3: float = _f(1.225, "air density (kg/m^3; ISA sea level)", gt=0.5, le=1.5)
     avionics_w: float = _f(25.0, "avionics, RTK, radios, pump (W); an estimate", ge=0)
+    plan_margin: float = _f(0.05, "the sortie planner predicts hover power x (1 + this): "
+                            "manoeuvres cost more than hover (measured +2-3 %)", ge=0, le=1)
 
 
 @dataclass

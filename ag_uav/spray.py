@@ -35,8 +35,9 @@ find the M350's figure for a loaded hover, so that check is indicative).
 
 **Sorties** (:func:`plan_job`). The planner walks the single-sortie reference (the coverage plan
 flown as today) on its control grid with the predicted tank use (R·w/10⁴ per metre sprayed) and
-the predicted energy (hover power of the current mass × time, plus the way home: the distance to
-the base at ``spray.transit_speed_mps`` plus acceleration and the descent). The sortie ends at the
+the predicted energy (hover power of the current mass × (1 + ``battery.plan_margin``) × time, plus
+the way home: the distance to the base at ``spray.transit_speed_mps`` plus acceleration and the
+descent; the margin covers what manoeuvres cost above hover, +2–3 % measured). The sortie ends at the
 last tick where (a) the tank still holds ``plan_margin`` of its volume and (b) the energy used plus
 the way home leaves ``battery.reserve_frac`` of the capacity. There the drone stops, flies to the
 base, lands (a deliberate phase: the skids touch at < 0.5 m/s, motors off), is refilled and gets a
@@ -265,7 +266,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
 
     def power(litres_left: np.ndarray | float) -> np.ndarray | float:
         mass = dry_mass_kg + np.asarray(litres_left) * rho
-        return 4.0 * k_p * (mass * G / 4.0) ** 1.5 + b.avionics_w
+        return (4.0 * k_p * (mass * G / 4.0) ** 1.5 + b.avionics_w) * (1.0 + b.plan_margin)
 
     d_home = np.hypot(*(pos[:, :2] - base[None]).T)
     i0 = 0
@@ -273,7 +274,8 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
     e_pre = 0.0
     while True:
         if len(cuts) >= sp.max_sorties:
-            raise ConfigError(f"spray.max_sorties = {sp.max_sorties}: the job needs more sorties")
+            raise ConfigError(f"spray.max_sorties = {sp.max_sorties}: the job needs more sorties "
+                              f"(one {fill:g} L tank sprays {fill / lpm:.0f} m of track)")
         left = fill - (litres_cum[i0:] - litres_cum[i0])
         p = power(np.maximum(left, 0.0))
         e_run = e_pre + np.concatenate([[0.0], np.cumsum(p[:-1] * dt)])
