@@ -34,18 +34,18 @@ gives 33 min (P ∝ m^{3/2}); DJI's M300 RTK sheet gives 31 min with 2.7 kg of p
 find the M350's figure for a loaded hover, so that check is indicative).
 
 **Sorties** (:func:`plan_job`). The planner walks the single-sortie reference (the coverage plan
-flown as today) on its control grid with the predicted tank use (R·w/10⁴ per metre sprayed) and
-the predicted energy (hover power of the current mass × (1 + ``battery.plan_margin``) × time, plus
-the way home: the distance to the base at ``spray.transit_speed_mps`` plus acceleration and the
-descent; the margin covers what manoeuvres cost above hover, +2–3 % measured). The sortie ends at the
-last tick where (a) the tank still holds ``plan_margin`` of its volume and (b) the energy used plus
-the way home leaves ``battery.reserve_frac`` of the capacity. There the drone stops, flies to the
-base, lands (a deliberate phase: the skids touch at < 0.5 m/s, motors off), is refilled and gets a
-fresh battery (``spray.service_s``), takes off, flies back to the cut point and resumes. A job
-that fits one battery and one tank is flown exactly as the plain mission (no base visit). The loop
-then integrates the actual flow, mass and energy (:class:`Sprayer`); the summary compares actual
-with planned and flags a battery below the reserve or a tank that ran dry before the planned
-return.
+flown as today) on its control grid with the predicted tank use (R·w/10⁴ per metre sprayed) and the
+predicted energy (hover power of the current mass × (1 + ``battery.plan_margin``) × time, plus the
+way home: the distance to the base at ``spray.transit_speed_mps`` plus acceleration and the
+descent; the margin covers what manoeuvres cost above hover, +2–3 % measured). The sortie ends at
+the last tick where (a) the tank still holds ``spray.plan_margin`` of its volume and (b) the energy
+used plus the way home leaves ``battery.reserve_frac`` of the capacity. There the drone stops,
+flies to the base, lands (a deliberate phase: the skids touch at < 0.5 m/s, motors off), is
+refilled and gets a fresh battery (``spray.service_s``), takes off, flies back to the cut point and
+resumes. A job that fits one battery and one tank is flown exactly as the plain mission (no base
+visit). The loop then integrates the actual flow, mass and energy (:class:`Sprayer`); the summary
+compares actual with planned and flags a battery below the reserve or a tank that ran dry before
+the planned return.
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 
 from .config import Config, ConfigError
-from .reference import RefSample, Reference
+from .reference import Reference, RefSample
 
 G = 9.81
 #: seg index of the inserted transits to and from the base, and of the time on the ground there
@@ -212,7 +212,7 @@ class ChainedReference:
 
 
 def _split_at(points: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Split polyline ``points`` at its point nearest to ``q``: (head ending at it, tail from it)."""
+    """Split polyline ``points`` at its point nearest to ``q``: (head to it, tail from it)."""
     a, b = points[:-1], points[1:]
     ab = b - a
     l2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
@@ -313,6 +313,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
     segs = plan.segments
     pieces: list[tuple[Reference, np.ndarray]] = []
     resume: tuple[int, np.ndarray] | None = None  # (segment, point)
+    land_xy = base
     t_acc = 0.0
     for si, (k, litres, e_j) in enumerate(cuts):
         last = si == len(cuts) - 1

@@ -18,8 +18,8 @@ from ag_uav.sim import make_cascade, simulate
 from ag_uav.spray import (
     SEG_GROUND,
     SEG_TRANSIT,
-    SprayJob,
     Sprayer,
+    SprayJob,
     hover_endurance_min,
     hover_power,
     implied_figure_of_merit,
