@@ -30,8 +30,9 @@ time 55 min without payload, DJI spec sheet; 2110s propellers, D = 0.533 m, A = 
 four. 526 Wh over 55 min is 574 W; with 25 W of avionics (an estimate) the rotors take 549 W,
 so FM = 342/549 = 0.623 (:func:`implied_figure_of_merit`; a plausible product of a rotor FM of
 ~0.75 and a motor/ESC efficiency of ~0.83). At the 9.2 kg maximum take-off mass the same model
-gives 33 min (P ∝ m^{3/2}); DJI's M300 RTK sheet gives 31 min with 2.7 kg of payload (I did not
-find the M350's figure for a loaded hover, so that check is indicative).
+gives 33 min (P ∝ m^{3/2}). I recall DJI quoting ~31 min at full payload for the M300 RTK (the
+M350's predecessor, same TB60-class energy) but could not confirm it here: treat the loaded figure
+as unverified.
 
 **Sorties** (:func:`plan_job`). The planner walks the single-sortie reference (the coverage plan
 flown as today) on its control grid with the predicted tank use (R·w/10⁴ per metre sprayed) and the
@@ -40,7 +41,8 @@ way home: the distance to the base at ``spray.transit_speed_mps`` plus accelerat
 descent; the margin covers what manoeuvres cost above hover, +2–3 % measured). The sortie ends at
 the last tick where (a) the tank still holds ``spray.plan_margin`` of its volume and (b) the energy
 used plus the way home leaves ``battery.reserve_frac`` of the capacity. There the drone stops,
-flies to the base, lands (a deliberate phase: the skids touch at < 0.5 m/s, motors off), is
+flies to the base, lands (a deliberate phase: the skids touch at ~0.5 m/s, measured, within the
+crash detector's 1 m/s for the skids; then motors off), is
 refilled and gets a fresh battery (``spray.service_s``), takes off, flies back to the cut point and
 resumes. A job that fits one battery and one tank is flown exactly as the plain mission (no base
 visit). The loop then integrates the actual flow, mass and energy (:class:`Sprayer`); the summary
