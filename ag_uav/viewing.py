@@ -378,13 +378,14 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
         _plot_off_target(ax, field_scene, sprayed_scene, summ)
     if st is not None and sortie is not None and sortie.max() > 1:
         # one colour per sortie; the track on the ground at the base is not drawn
-        cmap = plt.get_cmap("tab10")
-        for k in range(1, int(sortie.max()) + 1):
+        ns = int(sortie.max())
+        cmap = plt.get_cmap("tab10" if ns <= 10 else "tab20")
+        for k in range(1, ns + 1):
             m = sortie == k
             x = np.where(m, st["pos.x"], np.nan)
             y = np.where(m, st["pos.y"], np.nan)
-            ax.plot(x, y, color=cmap((k - 1) % 10), lw=1.0, zorder=5,
-                    label=f"sortie {k}" if k <= 12 else None)
+            ax.plot(x, y, color=cmap((k - 1) % cmap.N), lw=1.0, zorder=5,
+                    label=f"sortie {k}" if k <= 20 else None)
     elif st is not None:
         ax.plot(st["pos.x"], st["pos.y"], color="black", lw=1.2, zorder=5, label="true track")
     if summ.get("base_xy") and (summ.get("sorties") or 0) > 1:
@@ -406,8 +407,11 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
                   f"{100 * (summ.get('coverage_fraction') or 0):.1f} %, off-target "
                   f"{summ.get('off_target_m2') or 0:.0f} m²")
     ax.set_title(title)
-    ax.legend(loc="upper right", fontsize=8, framealpha=0.85,
-              ncol=2 if sortie is not None and sortie.max() > 6 else 1)
+    if sortie is not None and sortie.max() > 1:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, framealpha=0.85,
+                  ncol=2 if sortie.max() > 10 else 1)
+    else:
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
     ax.grid(alpha=0.3)
     p = out / "map.png"
     fig.savefig(p, dpi=110, bbox_inches="tight")
