@@ -86,6 +86,8 @@ class Reference:
             returns to its base); the descent, like the climb, has ``seg`` −1 and no spray.
         z_land: height the landing descends to (m); a little below the body height resting on
             the skids, so the vehicle settles at a low vertical speed.
+        land_speed: vertical speed cap of the last ``flare_height`` metres of the landing (m/s);
+            above that the descent runs at ``climb_speed``, with a stop in between.
         seg_speeds: optional per-plan-segment speed caps (m/s; None = ``speed``), e.g. a faster
             transit to and from the base.
     """
@@ -109,6 +111,8 @@ class Reference:
         ds: float = 0.05,
         landing: bool = False,
         z_land: float = 0.0,
+        land_speed: float = 0.3,
+        flare_height: float = 0.6,
         seg_speeds: list[float | None] | None = None,
     ):
         for nm, val in (("speed", speed), ("a_max", a_max), ("rate", rate),
@@ -133,6 +137,8 @@ class Reference:
         self._ds = float(ds)
         self._landing = bool(landing)
         self._z_land = float(z_land)
+        self._land_speed = float(land_speed)
+        self._flare = float(flare_height)
         self._seg_speeds = seg_speeds
         self._build_geometry(takeoff, float(z0), float(climb_speed),
                              math.radians(stop_angle_deg), float(max_deviation))
@@ -170,9 +176,14 @@ class Reference:
                     eseg.append(j)
                     ecap.append(cap_j)
         if self._landing:
+            z_flare = self._z_land + self._flare
+            if pts[-1][2] > z_flare + 1e-6:
+                pts.append(np.array([pts[-1][0], pts[-1][1], z_flare]))
+                eseg.append(-1)
+                ecap.append(climb_speed)
             pts.append(np.array([pts[-1][0], pts[-1][1], self._z_land]))
             eseg.append(-1)
-            ecap.append(climb_speed)
+            ecap.append(self._land_speed)
         P = np.array(pts)
         n = len(P)
         if n < 2:

@@ -41,8 +41,8 @@ way home: the distance to the base at ``spray.transit_speed_mps`` plus accelerat
 descent; the margin covers what manoeuvres cost above hover, +2–3 % measured). The sortie ends at
 the last tick where (a) the tank still holds ``spray.plan_margin`` of its volume and (b) the energy
 used plus the way home leaves ``battery.reserve_frac`` of the capacity. There the drone stops,
-flies to the base, lands (a deliberate phase: the skids touch at ~0.5 m/s, measured, within the
-crash detector's 1 m/s for the skids; then motors off), is
+flies to the base, lands (a deliberate phase: the last 0.6 m at 0.3 m/s, the skids touch at
+~0.3 m/s, within the crash detector's 1 m/s for the skids; then motors off), is
 refilled and gets a fresh battery (``spray.service_s``), takes off, flies back to the cut point and
 resumes. A job that fits one battery and one tank is flown exactly as the plain mission (no base
 visit). The loop then integrates the actual flow, mass and energy (:class:`Sprayer`); the summary
@@ -263,8 +263,8 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
 
     def t_way(d: np.ndarray | float) -> np.ndarray | float:
         """Predicted time (s) of a transit of d metres plus a descent or climb and dwells."""
-        return (np.asarray(d) / v_tr + v_tr / a_max + (m.altitude_m - z_land) / climb
-                + climb / a_max + 3.0)
+        return (np.asarray(d) / v_tr + v_tr / a_max + (m.altitude_m - z_land - 0.6) / climb
+                + 0.6 / 0.3 + climb / a_max + 3.0)  # the last 0.6 m at 0.3 m/s (Reference)
 
     def power(litres_left: np.ndarray | float) -> np.ndarray | float:
         mass = dry_mass_kg + np.asarray(litres_left) * rho

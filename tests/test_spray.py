@@ -181,6 +181,12 @@ def test_small_tank_returns_to_base_and_resumes(small_tank_run):
     assert np.all(res.seg[gi] == SEG_GROUND)
     assert np.any(res.seg == SEG_TRANSIT)
     assert not np.any(ser["nozzles"] & (res.seg < 0))   # never sprays off the plan
+    # a deliberate landing: the skids touch (body below 0.345 m) at ~0.3 m/s, well inside the
+    # crash detector's 1 m/s
+    z, vz = res.p_true[:, 2], res.v_true[:, 2]
+    for a in np.flatnonzero(np.diff(ground.astype(int)) == 1):
+        i = a - 300 + int(np.flatnonzero(z[a - 300:a + 1] < 0.345)[0])
+        assert -0.35 < vz[i] < -0.2
     # the tank is refilled at each take-off: the mass jumps back up
     jumps = np.flatnonzero(np.diff(ser["mass_kg"]) > 0.3)
     assert len(jumps) == 2
