@@ -402,7 +402,9 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
     ax.set_ylabel("north y [m]")
     title = f"Top-down map: {d.path.parent.name}"
     if summ.get("sorties"):
-        title += (f"\n{summ['sorties']} sorties, {summ.get('litres_sprayed_l', 0):.1f} L, "
+        ns_ = int(summ["sorties"])
+        title += (f"\n{ns_} sortie{'s' if ns_ != 1 else ''}, "
+                  f"{summ.get('litres_sprayed_l', 0):.1f} L, "
                   f"{summ.get('energy_wh', 0):.0f} Wh, coverage "
                   f"{100 * (summ.get('coverage_fraction') or 0):.1f} %, off-target "
                   f"{summ.get('off_target_m2') or 0:.0f} m²")

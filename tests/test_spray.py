@@ -251,21 +251,28 @@ def test_off_target_area_of_a_track_past_the_boundary():
     assert off_target(fld, across, 6.0, 0.5)["holes"] == pytest.approx(6.0 * 19.0, rel=1e-9)
 
 
-def test_off_target_is_positive_when_flown_past_the_boundary():
+def test_off_target_is_positive_when_flown_past_the_boundary(tmp_path):
     """A mission built to spray past the boundary: the drone flies the default field through a KF
     on a GPS whose error is a constant offset of several metres (a Gauss-Markov bias with a
     10^7 s time constant, as an uncorrected datum shift), so the whole pattern, headland laps
     included, is shifted over the edge."""
-    cfg = load_config(None, {**NOLOG, "gps.preset": "perfect", "estimator.name": "kf",
+    from ag_uav.run import fly
+    from ag_uav.viewing import plot
+
+    cfg = load_config(None, {"log.render": False, "log.channels": "light",
+                             "gps.preset": "perfect", "estimator.name": "kf",
                              "gps.overrides": {"components": [
                                  {"type": "gauss-markov", "name": "bias", "sigma": 3.0,
                                   "tau_s": 1e7}]}})
-    s = simulate(cfg).summary
+    res, run_dir = fly(cfg, out_root=tmp_path, run_id="ot")
+    s = res.summary
     assert not s["crashed"]
     assert s["tracking_rmse_m"] > 2.0                  # flown metres off the plan
     assert s["off_target_m2"] > 100.0
     assert s["off_target_outside_m2"] == pytest.approx(s["off_target_m2"])
     assert s["coverage_fraction"] < 0.97
+    # the map shades it in red (and gives the area in its title)
+    assert (run_dir / "plots" / "map.png") in plot(run_dir, run_dir / "plots")
 
 
 # ------------------------------------------------------------------------------ config
