@@ -342,11 +342,14 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     plan = build_plan(cfg, fld)
     m = cfg.mission
     ref = build_reference(cfg, plan)
+    bounds = fld.bounds
     if cfg.spray.enabled:
         from .spray import plan_job
 
-        ref, _job = plan_job(cfg, plan, ref, fld, dry_mass_kg=cfg.vehicle.mass_kg
-                             + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08)
+        ref, job = plan_job(cfg, plan, ref, fld, dry_mass_kg=cfg.vehicle.mass_kg
+                            + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08)
+        bx, by = (float(v) for v in job.base_xy)  # the base may lie outside the field
+        bounds = (min(bounds[0], bx), min(bounds[1], by), max(bounds[2], bx), max(bounds[3], by))
     outline = field_outline(fld)
     if log is not None:
         log.scene(0.0, outline[0], outline[1:],
@@ -367,7 +370,7 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     if log is not None and hasattr(fb, "log"):
         fb.log = log
     out = fly_reference(cfg, ref, ref.duration, outline=outline,
-                        bounds=fld.bounds, feedback=fb, progress=progress, tick_hook=tick_hook,
+                        bounds=bounds, feedback=fb, progress=progress, tick_hook=tick_hook,
                         log=log, render=cfg.log.render, streams=streams)
     arr = out.rec
     res = RunResult(

@@ -192,6 +192,18 @@ def test_small_tank_returns_to_base_and_resumes(small_tank_run):
     assert len(jumps) == 2
 
 
+def test_base_point_from_the_config_outside_the_field():
+    cfg = load_config(None, {**NOLOG, "spray.tank_l": 0.6, "spray.base": [-150.0, -40.0]})
+    res = simulate(cfg)
+    s = res.summary
+    assert s["completed"] and not s["crashed"]
+    assert s["base_xy"] == [-150.0, -40.0]
+    assert s["sorties"] >= 2
+    g = res.extra["spray"]["ground"]
+    assert np.max(np.hypot(res.p_true[g, 0] + 150.0, res.p_true[g, 1] + 40.0)) < 1.0
+    assert s["off_target_m2"] < 1.0                    # nozzles off on the transits
+
+
 def test_small_battery_limits_the_sorties_and_keeps_the_reserve():
     cfg = load_config(None, {**NOLOG, "battery.capacity_wh": 60.0})
     s = simulate(cfg).summary
