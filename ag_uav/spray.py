@@ -32,7 +32,9 @@ so FM = 342/549 = 0.623 (:func:`implied_figure_of_merit`; a plausible product of
 ~0.75 and a motor/ESC efficiency of ~0.83). At the 9.2 kg maximum take-off mass the same model
 gives 33 min (P ∝ m^{3/2}). I recall DJI quoting ~31 min at full payload for the M300 RTK (the
 M350's predecessor, same TB60-class energy) but could not confirm it here: treat the loaded figure
-as unverified.
+as unverified. The m^{3/2} scaling itself checks against a published pair: DJI's AGRAS T40 spec
+page (dji.com/support/product/t40) gives 18 min hover at 50 kg and 7 min at 90 kg on the same
+30,000 mAh battery; 18·(50/90)^{3/2} = 7.45 min, 6 % above the published 7 min.
 
 **Sorties** (:func:`plan_job`). The planner walks the single-sortie reference (the coverage plan
 flown as today) on its control grid with the predicted tank use (R·w/10⁴ per metre sprayed) and the
