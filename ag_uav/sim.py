@@ -385,6 +385,9 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     if out.sprayer is not None:
         summ.update(out.sprayer.summary(sim_time))
         res.extra["spray"] = out.sprayer.series(len(out.t))
+        from .spray import add_sortie_areas
+
+        add_sortie_areas(summ, res, m.swath_m)
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))

@@ -575,3 +575,23 @@ class Sprayer:
             "sortie_table": rows,
             **self.job.summary(),
         }
+
+
+def add_sortie_areas(summary: dict[str, Any], res, swath: float) -> None:
+    """Add ``area_m2`` (the union of the swath footprints sprayed in that sortie, as the
+    coverage computes them) to each row of ``summary["sortie_table"]``."""
+    import shapely
+
+    from .coverage import footprints
+    from .metrics import contiguous_runs
+
+    rows = summary.get("sortie_table") or []
+    sortie = res.extra.get("spray", {}).get("sortie")
+    if not rows or sortie is None:
+        return
+    runs = [(a, b) for a, b in contiguous_runs(res.spray) if b - a >= 2]
+    for i, row in enumerate(rows):
+        tracks = [res.p_true[a:b, :2] for a, b in runs if sortie[a] == i]
+        fps = footprints(tracks, swath)
+        row["area_m2"] = round(float(shapely.union_all(fps).area), 1) if fps else 0.0
+

@@ -169,6 +169,10 @@ def test_small_tank_returns_to_base_and_resumes(small_tank_run):
     rows = s["sortie_table"]
     for r in rows[:-1]:
         assert r["litres"] == pytest.approx(0.5 * (1 - cfg.spray.plan_margin), abs=0.005)
+    # per-sortie area: litres / rate (1 L/ha = 1e4 m^2 per litre), less the turns' blips
+    for r in rows:
+        assert r["area_m2"] == pytest.approx(r["litres"] * 1e4, rel=0.06)
+    assert sum(r["area_m2"] for r in rows) >= s["sprayed_area_m2"] - 1.0
     assert not s["tank_ran_dry"] and not s["battery_below_reserve"]
     # landed at the base between sorties (on the skids, motors off), then took off again
     ser = res.extra["spray"]
