@@ -116,12 +116,21 @@ def build_plan(cfg: Config, fld: Field):
         raise ConfigError(f"mission.swath_m = {m.swath_m}: {e}") from None
 
 
-def build_reference(cfg: Config, plan) -> Reference:
-    """The time-parameterised reference ``simulate`` flies along ``plan``."""
+def build_reference(cfg: Config, plan, *, spray: bool = True) -> Any:
+    """The time-parameterised reference ``simulate`` flies along ``plan``. With
+    ``spray.enabled`` (and ``spray``) it carries the spray job (``.spray_job``: tank, battery,
+    sorties; :func:`ag_uav.spray.plan_job`), split into sorties where one tank or battery does
+    not do the job."""
     m = cfg.mission
-    return Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
-                     takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
-                     rate=cfg.sim.control_hz)
+    ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
+                    takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
+                    rate=cfg.sim.control_hz)
+    if spray and cfg.spray.enabled:
+        from .spray import plan_job
+
+        ref, _job = plan_job(cfg, plan, ref, plan.field, dry_mass_kg=cfg.vehicle.mass_kg
+                             + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08)
+    return ref
 
 
 def field_outline(fld: Field) -> list[np.ndarray]:
@@ -343,12 +352,9 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     m = cfg.mission
     ref = build_reference(cfg, plan)
     bounds = fld.bounds
-    if cfg.spray.enabled:
-        from .spray import plan_job
-
-        ref, job = plan_job(cfg, plan, ref, fld, dry_mass_kg=cfg.vehicle.mass_kg
-                            + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08)
-        bx, by = (float(v) for v in job.base_xy)  # the base may lie outside the field
+    job = getattr(ref, "spray_job", None)
+    if job is not None:  # the base may lie outside the field
+        bx, by = (float(v) for v in job.base_xy)
         bounds = (min(bounds[0], bx), min(bounds[1], by), max(bounds[2], bx), max(bounds[3], by))
     outline = field_outline(fld)
     if log is not None:

@@ -230,7 +230,7 @@ def test_empty_tank_before_the_planned_return_is_flagged():
     cfg = load_config(None, {**NOLOG, "spray.tank_l": 0.5})
     fld = build_field(cfg)
     plan = build_plan(cfg, fld)
-    ref, job = plan_job(cfg, plan, build_reference(cfg, plan), fld, dry_mass_kg=6.47,
+    ref, job = plan_job(cfg, plan, build_reference(cfg, plan, spray=False), fld, dry_mass_kg=6.47,
                         z_land=build_vehicle(cfg).hover_z - 0.08)
     job.fill_l = 0.3
     out = fly_reference(cfg, ref, ref.duration, outline=field_outline(fld), bounds=fld.bounds)
