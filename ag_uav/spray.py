@@ -229,6 +229,61 @@ def _split_at(points: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return head, tail
 
 
+def transit_path(a, b, field, clearance: float) -> np.ndarray:
+    """Shortest polyline from ``a`` to ``b`` around the field's holes (obstacles), through their
+    corners grown by ``clearance`` and never closer than ``clearance``/2 to a hole: a visibility
+    graph (Lozano-Pérez & Wesley 1979) searched with Dijkstra. A straight line when nothing is
+    in the way."""
+    import heapq
+
+    import shapely
+
+    a = np.asarray(a, float)[:2]
+    b = np.asarray(b, float)[:2]
+    holes = [shapely.Polygon(h) for h in getattr(field, "holes", [])]
+    if not holes:
+        return np.array([a, b])
+    grown = [h.buffer(clearance, join_style="mitre") for h in holes]
+    # the no-fly test uses half the clearance, so that end points on a leg that passes a hole at
+    # half a swath still see the corners (which are at the full clearance)
+    solid = shapely.union_all([h.buffer(0.5 * clearance, join_style="mitre") for h in holes])
+
+    def visible(p, q) -> bool:
+        return not shapely.LineString([p, q]).intersects(solid)
+
+    if visible(a, b):
+        return np.array([a, b])
+    nodes = [a, b]
+    for g in grown:
+        for poly in getattr(g, "geoms", [g]):
+            nodes += [np.asarray(c) for c in list(poly.exterior.coords)[:-1]]
+    n = len(nodes)
+    dist = [math.inf] * n
+    prev = [-1] * n
+    dist[0] = 0.0
+    heap = [(0.0, 0)]
+    while heap:
+        d, i = heapq.heappop(heap)
+        if d > dist[i]:
+            continue
+        if i == 1:
+            break
+        for j in range(n):
+            if j == i:
+                continue
+            w = float(np.hypot(*(nodes[j] - nodes[i])))
+            if d + w < dist[j] and visible(nodes[i], nodes[j]):
+                dist[j] = d + w
+                prev[j] = i
+                heapq.heappush(heap, (d + w, j))
+    if prev[1] < 0:  # boxed in: fly straight
+        return np.array([a, b])
+    path = [1]
+    while path[-1] != 0:
+        path.append(prev[path[-1]])
+    return np.array([nodes[i] for i in reversed(path)])
+
+
 def _seg(kind: str, pts, spray: bool):
     from .plan import Segment
 
@@ -318,6 +373,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
     pieces: list[tuple[Reference, np.ndarray]] = []
     resume: tuple[int, np.ndarray] | None = None  # (segment, point)
     land_xy = base
+    clear = 0.5 * m.swath_m  # transits keep half a swath from the holes (obstacles)
     t_acc = 0.0
     for si, (k, litres, e_j) in enumerate(cuts):
         last = si == len(cuts) - 1
@@ -330,7 +386,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
         else:
             j_from, q = resume
             start_xy = land_xy
-            sub.append(_seg("transit", [start_xy, q[:2]], False))
+            sub.append(_seg("transit", transit_path(start_xy, q[:2], field, clear), False))
             gmap.append(SEG_TRANSIT)
             speeds.append(v_tr)
             _, first_pts = _split_at(segs[j_from].points, q)
@@ -362,7 +418,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
             nu = float(np.hypot(*u))
             u = u / nu if nu > 1e-9 else np.array([1.0, 0.0])
             land_xy = base + 0.5 * u
-            sub.append(_seg("transit", [end_xy, base], False))
+            sub.append(_seg("transit", transit_path(end_xy, base, field, clear), False))
             sub.append(_seg("transit", [base, land_xy], False))
             gmap += [SEG_TRANSIT, SEG_TRANSIT]
             speeds += [v_tr, 0.5]

@@ -208,6 +208,23 @@ def test_base_point_from_the_config_outside_the_field():
     assert s["off_target_m2"] < 1.0                    # nozzles off on the transits
 
 
+def test_transits_to_the_base_go_around_holes():
+    """A base on the far side of the hole field's obstacle from both cut points: the straight
+    way home would cross the obstacle (it did before the detour: 0.0 m); the transits keep
+    more than half a swath's clearance / 2 from it."""
+    cfg = load_config(None, {**NOLOG, "mission.field": "hole", "spray.tank_l": 0.4,
+                             "spray.base": [-9.9, -18.3]})
+    res = simulate(cfg)
+    s = res.summary
+    assert s["completed"] and not s["crashed"] and s["sorties"] == 3
+    hole = shapely.Polygon(res.field.holes[0])
+    tr = res.seg == SEG_TRANSIT
+    assert tr.sum() > 1000
+    d = shapely.distance(shapely.points(res.p_true[tr, :2]), hole)
+    assert d.min() > 0.5 * 0.5 * cfg.mission.swath_m
+    assert s["off_target_holes_m2"] == 0.0
+
+
 def test_small_battery_limits_the_sorties_and_keeps_the_reserve():
     cfg = load_config(None, {**NOLOG, "battery.capacity_wh": 60.0})
     s = simulate(cfg).summary
