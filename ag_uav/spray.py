@@ -36,20 +36,20 @@ as unverified. The m^{3/2} scaling itself checks against a published pair: DJI's
 page (dji.com/support/product/t40) gives 18 min hover at 50 kg and 7 min at 90 kg on the same
 30,000 mAh battery; 18·(50/90)^{3/2} = 7.45 min, 6 % above the published 7 min.
 
-**Sorties** (:func:`plan_job`). The planner walks the single-sortie reference (the coverage plan
-flown as today) on its control grid with the predicted tank use (R·w/10⁴ per metre sprayed) and the
-predicted energy (hover power of the current mass × (1 + ``battery.plan_margin``) × time, plus the
-way home: the distance to the base at ``spray.transit_speed_mps`` plus acceleration and the
-descent; the margin covers what manoeuvres cost above hover, +2–3 % measured). The sortie ends at
-the last tick where (a) the tank still holds ``spray.plan_margin`` of its volume and (b) the energy
-used plus the way home leaves ``battery.reserve_frac`` of the capacity. There the drone stops,
-flies to the base, lands (a deliberate phase: the last 0.6 m at 0.3 m/s, the skids touch at
-~0.3 m/s, within the crash detector's 1 m/s for the skids; then motors off), is
-refilled and gets a fresh battery (``spray.service_s``), takes off, flies back to the cut point and
-resumes. A job that fits one battery and one tank is flown exactly as the plain mission (no base
-visit). The loop then integrates the actual flow, mass and energy (:class:`Sprayer`); the summary
-compares actual with planned and flags a battery below the reserve or a tank that ran dry before
-the planned return.
+**Sorties** (:func:`plan_job`; transits go around holes, :func:`transit_path`). The planner walks
+the single-sortie reference (the coverage plan flown as today) on its control grid with the
+predicted tank use (R·w/10⁴ per metre sprayed) and the predicted energy (hover power of the current
+mass × (1 + ``battery.plan_margin``) × time, plus the way home: the distance to the base at
+``spray.transit_speed_mps`` plus acceleration and the descent; the margin covers what manoeuvres
+cost above hover, +2–3 % measured). The sortie ends at the last tick where (a) the tank still holds
+``spray.plan_margin`` of its volume and (b) the energy used plus the way home leaves
+``battery.reserve_frac`` of the capacity. There the drone stops, flies to the base, lands (a
+deliberate phase: the last 0.6 m at 0.3 m/s, the skids touch at ~0.3 m/s, within the crash
+detector's 1 m/s for the skids; then motors off), is refilled and gets a fresh battery
+(``spray.service_s``), takes off, flies back to the cut point and resumes. A job that fits one
+battery and one tank is flown exactly as the plain mission (no base visit). The loop then
+integrates the actual flow, mass and energy (:class:`Sprayer`); the summary compares actual with
+planned and flags a battery below the reserve or a tank that ran dry before the planned return.
 """
 
 from __future__ import annotations
