@@ -44,9 +44,9 @@ def test_momentum_theory_power_and_m350_calibration():
     assert fm == pytest.approx(0.623, abs=0.001)
     cfg = Config()
     assert cfg.battery.figure_of_merit == pytest.approx(fm, abs=0.001)
-    assert hover_endurance_min(cfg, 6.47) == pytest.approx(55.0, abs=0.15)
+    assert hover_endurance_min(cfg, 6.47) == pytest.approx(55.0, abs=0.05)
     # loaded to the 9.2 kg maximum take-off mass: P ~ m^1.5 -> about 33 min
-    assert hover_endurance_min(cfg, 9.2) == pytest.approx(33.1, abs=0.3)
+    assert hover_endurance_min(cfg, 9.2) == pytest.approx(33.0, abs=0.1)
     assert hover_power(9.2, k, 25.0) > 1.6 * hover_power(6.47, k, 25.0) - 25.0
 
 
