@@ -56,6 +56,31 @@ def test_flow_per_metre_is_rate_times_swath():
     assert liquid_l_per_m(cfg) == pytest.approx(0.006, rel=1e-12)
 
 
+@pytest.mark.parametrize("fill_l", [0.0, 2.7])
+def test_closed_loop_hover_energy_matches_the_model(fill_l):
+    """Hover 60 s in still air (no take-off) with the tank empty / full: the energy integrated
+    from the actual rotor thrusts in the loop equals the momentum-theory hover power of the
+    mass within 0.5 %; empty, 526 Wh would last 55 min."""
+    from ag_uav.scenarios import StepReference, hover_config
+    from ag_uav.sim import fly_reference
+
+    cfg = hover_config(load_config(None, {**NOLOG, "wind.speed_mps": 0.0}))
+    ref = StepReference(step=(0.0, 0.0, 0.0), t_step=1e9)
+    ref.spray_job = SprayJob(base_xy=np.zeros(2), sorties=[], fill_l=fill_l,
+                             dry_mass_kg=6.47, service_s=0.0)
+    out = fly_reference(cfg, ref, 60.0)
+    assert out.crash_reason is None
+    s = out.sprayer.summary(60.0)
+    mass = 6.471 + fill_l
+    b = cfg.battery
+    k = rotor_power_coeff(b.figure_of_merit, b.rotor_diameter_m, b.air_density_kgm3)
+    p_model = hover_power(mass, k, b.avionics_w)
+    p_loop = s["energy_wh"] * 3600.0 / 60.0
+    assert p_loop == pytest.approx(p_model, rel=0.005)
+    if fill_l == 0.0:
+        assert 60.0 * b.capacity_wh / p_loop == pytest.approx(55.0, abs=0.3)
+
+
 # ------------------------------------------------------------------------------ the liquid body
 def test_liquid_mass_set_at_run_time_equals_a_compiled_model():
     """Changing body_mass/inertia/subtreemass of the liquid body at run time gives the same mass
