@@ -690,6 +690,7 @@ class RunLog:
                 schema=self._fg.Schema(name="ag_uav.SprayState", encoding="protobuf",
                                        data=self._spray_schema.schema_data),
                 context=self._ctx)
+            self._write_layout()
         vals = [t, tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w, energy_wh, soc,
                 float(sortie), 1.0 if ground else 0.0]
         self._ch_spray.log(self._spray_schema.encode(vals), log_time=ns(t))
@@ -979,7 +980,8 @@ class RunLog:
                                         else ())
             write_foxglove_layout(self.path.parent / "layout.json", cameras=cams,
                                   estimators=tuple(sanitize_name(n) for n in self._est),
-                                  ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4)
+                                  ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4,
+                                  spray=getattr(self, "_ch_spray", None) is not None)
         except Exception:  # noqa: BLE001 - a missing layout never stops a run
             pass
 

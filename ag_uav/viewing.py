@@ -699,6 +699,7 @@ def write_foxglove_layout(
     ctrl_keys: tuple[str, ...] | list[str] = (),
     n_motors: int = 4,
     center: tuple[float, float] = (0.0, 0.0),
+    spray: bool = False,
 ) -> Path:
     """Write a Foxglove layout in app-export JSON (import with Layouts -> Import from file).
 
@@ -767,7 +768,13 @@ def write_foxglove_layout(
     left = chain(["3D!aguav3d", chain(cams, "row")], "column") if cams else "3D!aguav3d"
     if isinstance(left, dict):
         left["splitPercentage"] = 62
-    right = chain(["Plot!errors", "Plot!pos", "Plot!ctrl", "Plot!motors"], "column")
+    plots = ["Plot!errors", "Plot!pos", "Plot!ctrl", "Plot!motors"]
+    if spray:  # spray job (ag_uav.spray): tank, mass, battery
+        cfg["Plot!spray"] = _plot_cfg("spray job", [
+            ("/drone/spray.tank_l", "tank [L]"), ("/drone/spray.mass_kg", "mass [kg]"),
+            ("/drone/spray.battery_frac", "battery left"), ("/drone/spray.sortie", "sortie")])
+        plots.append("Plot!spray")
+    right = chain(plots, "column")
     layout = {
         "configById": cfg,
         "globalVariables": {},

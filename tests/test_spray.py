@@ -174,6 +174,7 @@ def test_mass_change_is_in_the_log(default_spray_run):
     assert np.nanmax(sp["energy_wh"]) == pytest.approx(res.summary["energy_wh"], rel=0.01)
     paths = plot(run_dir, run_dir / "plots")
     assert any(p.name == "spray.png" for p in paths)
+    assert "/drone/spray.mass_kg" in (run_dir / "layout.json").read_text()  # Foxglove plot
 
 
 # ------------------------------------------------------------------------------ sorties
