@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from array import array
 from dataclasses import dataclass
 from typing import Any
 
@@ -474,11 +475,12 @@ class Sprayer:
         self.litres_total = 0.0
         self.cur = -1
         self.mass_set = -1.0
-        self.rec_tank = [0.0] * n
-        self.rec_mass = [0.0] * n
-        self.rec_power = [0.0] * n
-        self.rec_soc = [0.0] * n
-        self.rec_on = [False] * n
+        # per-tick records as C doubles / bytes (no Python float objects: 1.7 M ticks on 38 ha)
+        self.rec_tank = array("d", bytes(8 * n))
+        self.rec_mass = array("d", bytes(8 * n))
+        self.rec_power = array("d", bytes(8 * n))
+        self.rec_soc = array("d", bytes(8 * n))
+        self.rec_on = bytearray(n)
         self.per: list[dict[str, Any]] = []
         self.gated_s = 0.0
         self.dry_s = 0.0
@@ -588,9 +590,12 @@ class Sprayer:
 
     def series(self, n: int) -> dict[str, np.ndarray]:
         """Per-tick records of the first ``n`` ticks (the ticks flown)."""
-        return {"tank_l": np.asarray(self.rec_tank[:n]), "mass_kg": np.asarray(self.rec_mass[:n]),
-                "power_w": np.asarray(self.rec_power[:n]), "soc": np.asarray(self.rec_soc[:n]),
-                "nozzles": np.asarray(self.rec_on[:n], bool),
+        def f(a: array) -> np.ndarray:
+            return np.frombuffer(a, dtype=np.float64, count=n).copy()
+
+        return {"tank_l": f(self.rec_tank), "mass_kg": f(self.rec_mass),
+                "power_w": f(self.rec_power), "soc": f(self.rec_soc),
+                "nozzles": np.frombuffer(self.rec_on, dtype=np.uint8, count=n).astype(bool),
                 "sortie": np.asarray(self.sortie[:n], int),
                 "ground": np.asarray(self.ground[:n], bool)}
 
