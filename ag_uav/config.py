@@ -116,6 +116,55 @@ class SimConfig:
 
 
 @dataclass
+class SprayConfig:
+    """Tank and application (ag_uav.spray). Defaults: the M350-class payload limit as the tank."""
+
+    enabled: bool = _f(True, "model the tank, the flow and sorties (false: the sprayer is an "
+                       "on/off flag only, the tank never empties)")
+    rate_l_per_ha: float = _f(1.0, "application rate (L/ha); 1 L/ha is an ultra-low-volume "
+                              "rate (ULV < 5 L/ha for field crops), as an M350-class payload "
+                              "needs; spray drones fly 10-20 L/ha with 20-40 L tanks", gt=0)
+    tank_l: float = _f(2.7, "tank volume (L); 2.7 L of water = the DJI M350 RTK's 2.7 kg "
+                       "payload limit (9.2 kg max take-off - 6.47 kg)", gt=0)
+    density_kg_per_l: float = _f(1.0, "liquid density (kg/L; water-based mixes ~1.0)", gt=0.3,
+                                 le=2.0)
+    min_height_m: float = _f(0.5, "nozzles off below this height above ground (m): on the "
+                             "ground, taking off, landing", ge=0)
+    max_height_m: float = _f(6.0, "nozzles off above this height above ground (m)", gt=0)
+    offtarget_buffer_m: float = _f(0.5, "spray within this distance outside the field (or "
+                                   "inside a hole) is not counted as off-target (m)", ge=0)
+    base: list[float] | str = _f("auto", "base point [x, y] (local m) where the drone lands to "
+                                 "refill / swap batteries, or \"auto\" (the field corner "
+                                 "nearest the take-off point)", choices=("auto",), length=2)
+    service_s: float = _f(90.0, "time on the ground at the base per refill and battery swap "
+                          "(s); an estimate", ge=0)
+    transit_speed_mps: float = _f(8.0, "ground speed to and from the base (m/s)", gt=0, le=20)
+    plan_margin: float = _f(0.02, "share of the tank held back when the sortie planner predicts "
+                            "where the tank runs dry (actual flow follows the actual speed)",
+                            ge=0, lt=0.5)
+    max_sorties: int = _f(200, "sortie limit of the planner", ge=1)
+
+
+@dataclass
+class BatteryConfig:
+    """Energy model (ag_uav.spray.rotor_power): momentum theory with a figure of merit."""
+
+    capacity_wh: float = _f(526.0, "usable battery energy (Wh); two DJI TB65 packs: "
+                            "2 x 263 Wh", gt=0)
+    reserve_frac: float = _f(0.2, "reserve: return to base so that this share of the capacity "
+                             "is left on landing", ge=0, lt=1)
+    figure_of_merit: float = _f(0.623, "rotor figure of merit x motor/ESC efficiency; 0.623 "
+                                "gives the M350's ~55 min hover on 526 Wh at 6.47 kg with "
+                                "avionics_w", gt=0.05, le=1)
+    rotor_diameter_m: float = _f(0.533, "rotor diameter (m); M350: 2110s propellers, 21 in",
+                                 gt=0.05)
+    air_density_kgm3: float = _f(1.225, "air density (kg/m^3; ISA sea level)", gt=0.5, le=1.5)
+    avionics_w: float = _f(25.0, "avionics, RTK, radios, pump (W); an estimate", ge=0)
+    plan_margin: float = _f(0.05, "the sortie planner predicts hover power x (1 + this): "
+                            "manoeuvres cost more than hover (measured +2-3 %)", ge=0, le=1)
+
+
+@dataclass
 class AxisGains:
     """Gains of one position-axis controller (the keys used depend on ``controller.type``)."""
 
@@ -282,6 +331,10 @@ class Config:
     vehicle: VehicleConfig = field(default_factory=VehicleConfig,
                                    metadata={"help": "M350-class quadrotor"})
     sim: SimConfig = field(default_factory=SimConfig, metadata={"help": "simulation loop"})
+    spray: SprayConfig = field(default_factory=SprayConfig,
+                               metadata={"help": "tank, application, off-target, sorties"})
+    battery: BatteryConfig = field(default_factory=BatteryConfig,
+                                   metadata={"help": "battery energy (momentum theory)"})
     controller: ControllerConfig = field(default_factory=ControllerConfig,
                                          metadata={"help": "position cascade"})
     wind: WindConfig = field(default_factory=WindConfig, metadata={"help": "mean wind + Dryden"})
@@ -506,6 +559,19 @@ def _validate(cfg: Config) -> None:
                           f"{s.timestep_s}: the control rate must divide the physics rate "
                           f"1/timestep_s = {1.0 / s.timestep_s:g} Hz")
     _check_gps_overrides(cfg.gps)
+    sp = cfg.spray
+    if sp.min_height_m >= sp.max_height_m:
+        raise ConfigError(f"spray.min_height_m = {sp.min_height_m}: must be < spray.max_height_m "
+                          f"= {sp.max_height_m}")
+    if not sp.min_height_m < cfg.mission.altitude_m < sp.max_height_m:
+        raise ConfigError(f"mission.altitude_m = {cfg.mission.altitude_m}: must be between "
+                          f"spray.min_height_m = {sp.min_height_m} and spray.max_height_m = "
+                          f"{sp.max_height_m} (the nozzles spray only there)")
+    if isinstance(sp.base, str):
+        if sp.base != "auto":
+            raise ConfigError(f'spray.base = "{sp.base}": expected [x, y] or "auto"')
+    elif len(sp.base) != 2:
+        raise ConfigError(f"spray.base = {sp.base}: expected [x, y] or \"auto\"")
 
 
 def config_from_dict(data: dict[str, Any]) -> Config:

@@ -14,6 +14,12 @@ Definitions (all horizontal errors in the ENU x–y plane):
   of the path's end, and every leg was flown: while the leg was active the true track came within
   one swath of both of its ends. (How *well* it was flown is what the errors and the coverage
   say; a biased GPS makes a drone fly every leg, offset.)
+- ``off_target_m2`` (``off_target_outside_m2`` + ``off_target_holes_m2``): area of the sprayed
+  footprint (the same swath footprints as the coverage) farther than ``spray.offtarget_buffer_m``
+  outside the field's boundary, or farther than that inside a hole (an obstacle or a no-spray
+  zone); ``sprayed_area_m2`` is the footprint's whole area. :func:`off_target`.
+- With sorties (:mod:`ag_uav.spray`) the inserted transits, climbs, descents and the time on the
+  ground at the base (seg < 0) are left out of the tracking and altitude errors.
 - ``mission_time_s``: time at which the drone's own position (the one it flies on: truth or
   estimate) first came within 0.5 m of the path's end after the last leg started, as an
   autopilot's "waypoint reached" (None if never).
@@ -27,7 +33,7 @@ import numpy as np
 import shapely
 
 from .config import Config
-from .coverage import spray_coverage
+from .coverage import footprints, spray_coverage
 
 
 def _rms(x: np.ndarray) -> float | None:
@@ -54,6 +60,27 @@ def cross_track(res, plan) -> np.ndarray:
     return out
 
 
+def off_target(field, tracks, swath: float, buffer_m: float = 0.0) -> dict[str, float]:
+    """Sprayed area off the target: ``outside`` = footprint − (field exterior grown by
+    ``buffer_m``), ``holes`` = footprint ∩ (each hole shrunk by ``buffer_m``); plus ``sprayed``,
+    the footprint's area (m²). Footprints as :func:`ag_uav.coverage.footprints`."""
+    fps = footprints(tracks, swath) if tracks else []
+    if not fps:
+        return {"outside": 0.0, "holes": 0.0, "sprayed": 0.0}
+    union = shapely.union_all(fps)
+    poly = field.polygon
+    outer = shapely.Polygon(poly.exterior.coords)
+    grown = outer.buffer(buffer_m, join_style="mitre") if buffer_m > 0 else outer
+    outside = union.difference(grown).area
+    holes = 0.0
+    for ring in poly.interiors:
+        h = shapely.Polygon(ring.coords)
+        h = h.buffer(-buffer_m, join_style="mitre") if buffer_m > 0 else h
+        if not h.is_empty:
+            holes += union.intersection(h).area
+    return {"outside": float(outside), "holes": float(holes), "sprayed": float(union.area)}
+
+
 def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float | None,
               reference=None) -> dict[str, Any]:
     plan = res.plan
@@ -64,13 +91,17 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
         mission = slice(int(spray_idx[0]), int(spray_idx[-1]) + 1)
     else:
         mission = slice(0, n)
-    d_h = res.p_true[mission, :2] - res.p_ref[mission, :2]
+    on_plan = np.zeros(n, bool)
+    on_plan[mission] = True
+    on_plan &= res.seg >= 0  # sorties: not the base transits, climbs, descents, ground time
+    d_h = res.p_true[on_plan, :2] - res.p_ref[on_plan, :2]
     tracking = _rms(np.hypot(d_h[:, 0], d_h[:, 1]))
-    alt = _rms(res.p_true[mission, 2] - res.p_ref[mission, 2])
+    alt = _rms(res.p_true[on_plan, 2] - res.p_ref[on_plan, 2])
     ct = cross_track(res, plan)
     ct_spray = ct[np.isfinite(ct)]
     tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
     cov, ovl = spray_coverage(res.field, tracks, cfg.mission.swath_m) if tracks else (0.0, 0.0)
+    off = off_target(res.field, tracks, cfg.mission.swath_m, cfg.spray.offtarget_buffer_m)
     steps = np.diff(res.p_true, axis=0)
     path_len = float(np.sum(np.linalg.norm(steps, axis=1))) if n > 1 else 0.0
 
@@ -118,6 +149,10 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
         "altitude_rmse_m": r(alt),
         "coverage_fraction": r(cov, 5),
         "overlap_fraction": r(ovl, 5),
+        "sprayed_area_m2": r(off["sprayed"], 1),
+        "off_target_m2": r(off["outside"] + off["holes"], 2),
+        "off_target_outside_m2": r(off["outside"], 2),
+        "off_target_holes_m2": r(off["holes"], 2),
         "path_length_m": r(path_len, 2),
         "planned_path_length_m": r(plan.length, 2),
         "legs": len(legs),

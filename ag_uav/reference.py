@@ -82,6 +82,14 @@ class Reference:
         lat_frac: share of ``a_max`` given to centripetal acceleration in curves.
         yaw_rate_max: yaw rate used to size the yaw ramps at stops (rad/s).
         ds: arc-length grid step (m).
+        landing: end with a vertical descent to ``z_land`` at ``climb_speed`` (a sortie that
+            returns to its base); the descent, like the climb, has ``seg`` −1 and no spray.
+        z_land: height the landing descends to (m); a little below the body height resting on
+            the skids, so the vehicle settles at a low vertical speed.
+        land_speed: vertical speed cap of the last ``flare_height`` metres of the landing (m/s);
+            above that the descent runs at ``climb_speed``, with a stop in between.
+        seg_speeds: optional per-plan-segment speed caps (m/s; None = ``speed``), e.g. a faster
+            transit to and from the base.
     """
 
     def __init__(
@@ -101,6 +109,11 @@ class Reference:
         lat_frac: float = 0.7,
         yaw_rate_max: float = math.radians(90.0),
         ds: float = 0.05,
+        landing: bool = False,
+        z_land: float = 0.0,
+        land_speed: float = 0.3,
+        flare_height: float = 0.6,
+        seg_speeds: list[float | None] | None = None,
     ):
         for nm, val in (("speed", speed), ("a_max", a_max), ("rate", rate),
                         ("climb_speed", climb_speed), ("ds", ds)):
@@ -122,6 +135,11 @@ class Reference:
         self.lat_frac = float(lat_frac)
         self.yaw_rate_max = float(yaw_rate_max)
         self._ds = float(ds)
+        self._landing = bool(landing)
+        self._z_land = float(z_land)
+        self._land_speed = float(land_speed)
+        self._flare = float(flare_height)
+        self._seg_speeds = seg_speeds
         self._build_geometry(takeoff, float(z0), float(climb_speed),
                              math.radians(stop_angle_deg), float(max_deviation))
         a_int = self.a_max
@@ -148,13 +166,24 @@ class Reference:
             ecap.append(climb_speed)
         else:
             pts.append(np.array([s0[0], s0[1], self.altitude]))
+        speeds = self._seg_speeds or [None] * len(plan.segments)
         for j, seg in enumerate(plan.segments):
+            cap_j = self.speed if speeds[j] is None else float(speeds[j])
             for q in seg.points:
                 p = np.array([q[0], q[1], self.altitude])
                 if np.linalg.norm(p - pts[-1]) > 1e-6:
                     pts.append(p)
                     eseg.append(j)
-                    ecap.append(self.speed)
+                    ecap.append(cap_j)
+        if self._landing:
+            z_flare = self._z_land + self._flare
+            if pts[-1][2] > z_flare + 1e-6:
+                pts.append(np.array([pts[-1][0], pts[-1][1], z_flare]))
+                eseg.append(-1)
+                ecap.append(climb_speed)
+            pts.append(np.array([pts[-1][0], pts[-1][1], self._z_land]))
+            eseg.append(-1)
+            ecap.append(self._land_speed)
         P = np.array(pts)
         n = len(P)
         if n < 2:

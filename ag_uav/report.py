@@ -24,6 +24,15 @@ ROWS = [
     ("path_length_m", "path flown", "{:.0f}", "m"),
     ("legs", "sweep legs", "{}", ""),
     ("field_area_m2", "field area", "{:.0f}", "m²"),
+    ("sorties", "sorties", "{}", ""),
+    ("litres_sprayed_l", "litres sprayed", "{:.2f}", "L"),
+    ("energy_wh", "battery energy used", "{:.1f}", "Wh"),
+    ("mass_start_kg", "take-off mass", "{:.2f}", "kg"),
+    ("mass_end_kg", "mass at the end", "{:.2f}", "kg"),
+    ("job_time_s", "job time (with base visits)", "{:.1f}", "s"),
+    ("off_target_m2", "off-target spray", "{:.1f}", "m²"),
+    ("battery_below_reserve", "battery below reserve", "{}", ""),
+    ("tank_ran_dry", "tank ran dry", "{}", ""),
     ("estimate_rmse_m", "estimate RMSE (horizontal)", "{:.3f}", "m"),
     ("sim_time_s", "sim time", "{:.1f}", "s"),
     ("wall_time_s", "wall time", "{:.2f}", "s"),
@@ -50,6 +59,8 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
             s = str(v)
         if key == "completed":
             s = "[green]yes[/]" if v else "[red]no[/]"
+        if key in ("battery_below_reserve", "tank_ran_dry"):
+            s = "[red]yes[/]" if v else "no"
         if key == "crashed":
             s = "[red]yes[/]" if v else "[green]no[/]"
         t.add_row(label, f"{s} {unit}".strip())

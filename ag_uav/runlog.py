@@ -32,6 +32,9 @@ Channels (Foxglove well-known schemas where one fits; groups in brackets):
   [pose]      ``/drone/pose``, ``/drone/pose_est``, ``/drone/pose_ref``  foxglove.PoseInFrame
   [state]     ``/drone/state``        ag_uav.DroneState: pos, vel, rpy, ref, est, err, est_err,
                                       speed, spray, wind, motors[], ctrl{...} (plots)
+              ``/drone/spray``        ag_uav.SprayState (spray jobs, ag_uav.spray): tank_l, mass_kg,
+                                      flow_lps, nozzles, power_w, energy_wh, battery_frac, sortie,
+                                      ground
   [gps]       ``/gps``                foxglove.PoseInFrame at each fix (3D + plots)
   [estimator] ``/estimator/<name>``   ag_uav.EstimatorState: x[], p_diag[], innovation[], pos,
                                       err (pos - last true position), extra{...}
@@ -664,6 +667,35 @@ class RunLog:
         self._next_tick = min(self._next[g] for g in self._tick_groups)
         self._maybe_flush(t)
 
+    SPRAY_FIELDS = ("t", "tank_l", "mass_kg", "flow_lps", "nozzles", "power_w", "energy_wh",
+                    "battery_frac", "sortie", "ground")
+
+    def spray_state(self, t: float, *, tank_l: float, mass_kg: float, flow_lps: float,
+                    nozzles: bool, power_w: float, energy_wh: float, soc: float, sortie: int,
+                    ground: bool) -> None:
+        """Spray job state (ag_uav.spray) -> ``/drone/spray`` (``ag_uav.SprayState``: tank,
+        vehicle mass, flow, nozzles on, electrical power, energy used, battery fraction left,
+        sortie number, on the ground at the base). Logged at the ``state`` group's rate."""
+        if self.closed or self._period["state"] == _INF:
+            return
+        nxt = getattr(self, "_next_spray", -_INF)
+        if t < nxt:
+            return
+        self._next_spray = t + self._period["state"] - 1e-9
+        if getattr(self, "_ch_spray", None) is None:
+            self._spray_schema = FlatSchema("ag_uav.SprayState",
+                                            [(k, 0) for k in self.SPRAY_FIELDS])
+            self._ch_spray = self._fg.Channel(
+                "/drone/spray", message_encoding="protobuf",
+                schema=self._fg.Schema(name="ag_uav.SprayState", encoding="protobuf",
+                                       data=self._spray_schema.schema_data),
+                context=self._ctx)
+            self._write_layout()
+        vals = [t, tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w, energy_wh, soc,
+                float(sortie), 1.0 if ground else 0.0]
+        self._ch_spray.log(self._spray_schema.encode(vals), log_time=ns(t))
+        self._count("/drone/spray")
+
     def gps(self, t: float, fix_xyz: Sequence[float]) -> None:
         """A GPS fix (local ENU metres) -> ``/gps`` PoseInFrame."""
         if self.closed or self._ch_gps is None or not self._due("gps", t):
@@ -948,7 +980,8 @@ class RunLog:
                                         else ())
             write_foxglove_layout(self.path.parent / "layout.json", cameras=cams,
                                   estimators=tuple(sanitize_name(n) for n in self._est),
-                                  ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4)
+                                  ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4,
+                                  spray=getattr(self, "_ch_spray", None) is not None)
         except Exception:  # noqa: BLE001 - a missing layout never stops a run
             pass
 

@@ -123,12 +123,21 @@ def build_plan(cfg: Config, fld: Field):
         raise ConfigError(f"mission.swath_m = {m.swath_m}: {e}") from None
 
 
-def build_reference(cfg: Config, plan) -> Reference:
-    """The time-parameterised reference ``simulate`` flies along ``plan``."""
+def build_reference(cfg: Config, plan, *, spray: bool = True) -> Any:
+    """The time-parameterised reference ``simulate`` flies along ``plan``. With
+    ``spray.enabled`` (and ``spray``) it carries the spray job (``.spray_job``: tank, battery,
+    sorties; :func:`ag_uav.spray.plan_job`), split into sorties where one tank or battery does
+    not do the job."""
     m = cfg.mission
-    return Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
-                     takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
-                     rate=cfg.sim.control_hz)
+    ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
+                    takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
+                    rate=cfg.sim.control_hz)
+    if spray and cfg.spray.enabled:
+        from .spray import plan_job
+
+        ref, _job = plan_job(cfg, plan, ref, plan.field, dry_mass_kg=cfg.vehicle.mass_kg
+                             + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08)
+    return ref
 
 
 def field_outline(fld: Field) -> list[np.ndarray]:
@@ -166,6 +175,7 @@ class LoopOutput:
     notes: list[str] = dataclasses.field(default_factory=list)
     imu: np.ndarray | None = None         # (n, 9) measured f (3), gyro (3), attitude error (3)
     imu_bias0: np.ndarray | None = None   # turn-on biases (accel m/s², gyro rad/s)
+    sprayer: Any = None
 
 
 REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
@@ -255,6 +265,11 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     ref_p, ref_v, ref_a = tab["pos"].tolist(), tab["vel"].tolist(), tab["acc"].tolist()
     ref_yaw, ref_seg = tab["yaw"].tolist(), tab["seg"].tolist()
     ref_spray = tab["spray"].tolist()
+    sprayer = None  # spray job: tank, mass and energy per tick (ag_uav.spray)
+    if getattr(reference, "spray_job", None) is not None:
+        from .spray import Sprayer
+
+        sprayer = Sprayer(cfg, veh, data, cascade, tab, reference.spray_job, n_ticks, dt, log)
     wall_loop = time.perf_counter()
     for k in range(n_ticks):
         t = k * dt
@@ -305,6 +320,8 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
             p_fb = (rp[0], rp[1], p_fb[2])
             v_fb = (rv[0], rv[1], v_fb[2])
         f = cascade.update(p_fb, v_fb, R, omega, rp, rv, ref_a[k], yaw_ref, dt)
+        if sprayer is not None:
+            f, spray = sprayer.step(k, t, pz, vx, vy, spray, f)
         ctrl[0], ctrl[1], ctrl[2], ctrl[3] = f
         # ---- wind as a drag force (zero-order hold over the control period)
         ax_, ay_ = vx - wmx, vy - wmy
@@ -342,7 +359,7 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
     arr = np.asarray(rec, dtype=float).reshape(-1, len(REC_COLUMNS))
     out = LoopOutput(t=np.arange(len(arr)) * dt, rec=arr, crash_reason=crash_reason,
                      crash_time=crash_time, wall_loop_s=wall_loop, vehicle=veh, frames=frames,
-                     notes=notes)
+                     notes=notes, sprayer=sprayer)
     if imu is not None:
         out.imu = np.asarray(imu_rec[:len(arr)], dtype=float).reshape(-1, 9)
         out.imu_bias0 = imu.bias0
@@ -387,6 +404,11 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     plan = build_plan(cfg, fld)
     m = cfg.mission
     ref = build_reference(cfg, plan)
+    bounds = fld.bounds
+    job = getattr(ref, "spray_job", None)
+    if job is not None:  # the base may lie outside the field
+        bx, by = (float(v) for v in job.base_xy)
+        bounds = (min(bounds[0], bx), min(bounds[1], by), max(bounds[2], bx), max(bounds[3], by))
     outline = field_outline(fld)
     if log is not None:
         log.scene(0.0, outline[0], outline[1:],
@@ -407,7 +429,7 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     if log is not None and hasattr(fb, "log"):
         fb.log = log
     out = fly_reference(cfg, ref, ref.duration, outline=outline,
-                        bounds=fld.bounds, feedback=fb, progress=progress, tick_hook=tick_hook,
+                        bounds=bounds, feedback=fb, progress=progress, tick_hook=tick_hook,
                         log=log, render=cfg.log.render, streams=streams)
     arr = out.rec
     res = RunResult(
@@ -423,6 +445,12 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     cut = _cut_by_max_time(cfg, ref, out, summ)
     if cut:
         summ["incomplete_reason"] = cut
+    if out.sprayer is not None:
+        summ.update(out.sprayer.summary(sim_time))
+        res.extra["spray"] = out.sprayer.series(len(out.t))
+        from .spray import add_sortie_areas
+
+        add_sortie_areas(summ, res, m.swath_m)
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))

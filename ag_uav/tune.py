@@ -340,7 +340,8 @@ def _mission_setup(cfg: Config) -> tuple[Any, Any, Any]:
     """(field, reference, outline) of the mission, cached per process: the plan and the
     reference depend on the mission keys only, not on the gains being tuned."""
     key = json.dumps([asdict(cfg.mission), cfg.sim.takeoff, cfg.sim.hover_after_s,
-                      cfg.sim.control_hz], default=str)
+                      cfg.sim.control_hz, asdict(cfg.spray), asdict(cfg.battery),
+                      asdict(cfg.vehicle)], default=str)
     hit = _MISSION_CACHE.get(key)
     if hit is None:
         from .sim import build_field, build_plan, build_reference, field_outline

@@ -66,6 +66,12 @@ def build_vehicle(cfg: Config, field_outline: list[np.ndarray] | None = None) ->
             g.mass = max(v.payload_kg, 1e-3)
         else:
             g.mass = g.mass * v.mass_kg / dry
+    # the tank's liquid: its own body welded under the airframe at the tank (no joint), massless
+    # here; ag_uav.spray.Sprayer sets its mass and inertia at run time as the tank drains
+    liq = body.add_body(name="liquid", pos=list(spec.geom("tank").pos))
+    liq.explicitinertial = True
+    liq.mass = 1e-6
+    liq.inertia = [1e-9, 1e-9, 1e-9]
     for a in spec.actuators:
         a.ctrlrange = [0.0, f_max]
         a.dynprm[0] = v.motor_tau_s

@@ -112,7 +112,29 @@ class RunData:
     t_end: float = math.nan
 
 
-_SERIES_TOPICS = ("/drone/state", "/gps", "/drone/pose", "/drone/pose_est", "/drone/pose_ref")
+_SERIES_TOPICS = ("/drone/state", "/gps", "/drone/pose", "/drone/pose_est", "/drone/pose_ref",
+                  "/drone/spray")
+
+
+def _summary_json(d: RunData) -> dict[str, Any]:
+    """The run's ``summary.json`` attachment ({} if absent)."""
+    import json
+
+    raw = d.attachments.get("summary.json")
+    if not raw:
+        return {}
+    try:
+        return json.loads(raw)
+    except ValueError:
+        return {}
+
+
+def _sortie_of(st: Series, sp: Series | None) -> np.ndarray | None:
+    """Sortie number (1, 2, ...) at each ``/drone/state`` sample, from ``/drone/spray``."""
+    if sp is None or not len(sp.t) or "sortie" not in sp:
+        return None
+    i = np.clip(np.searchsorted(sp.t, st.t, side="right") - 1, 0, len(sp.t) - 1)
+    return sp["sortie"][i].astype(int)
 
 
 def _iter_raw(path: Path) -> tuple[bool, Any]:
@@ -349,8 +371,28 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
     if gps is not None and len(gps.t):
         ax.scatter(gps["pose.position.x"], gps["pose.position.y"], s=4, color="orange",
                    alpha=0.6, zorder=4, label="GPS fixes")
-    if st is not None:
+    spr = d.series.get("/drone/spray")
+    summ = _summary_json(d)
+    sortie = _sortie_of(st, spr) if st is not None else None
+    if sprayed_scene is not None and field_scene is not None and summ.get("off_target_m2"):
+        _plot_off_target(ax, field_scene, sprayed_scene, summ)
+    if st is not None and sortie is not None and sortie.max() > 1:
+        # one colour per sortie; the track on the ground at the base is not drawn
+        ns = int(sortie.max())
+        cmap = plt.get_cmap("tab10" if ns <= 10 else "tab20")
+        for k in range(1, ns + 1):
+            m = sortie == k
+            x = np.where(m, st["pos.x"], np.nan)
+            y = np.where(m, st["pos.y"], np.nan)
+            ax.plot(x, y, color=cmap((k - 1) % cmap.N), lw=1.0, zorder=5,
+                    label=f"sortie {k}" if k <= 20 else None)
+    elif st is not None:
         ax.plot(st["pos.x"], st["pos.y"], color="black", lw=1.2, zorder=5, label="true track")
+    if summ.get("base_xy") and (summ.get("sorties") or 0) > 1:
+        bx, by = summ["base_xy"]
+        ax.scatter([bx], [by], marker="*", s=260, color="crimson", edgecolor="k", zorder=8,
+                   label="base (refill, battery swap)")
+    if st is not None:
         if np.isfinite(st["est.x"]).any():
             ax.plot(st["est.x"], st["est.y"], color="royalblue", lw=1.0, ls="--", zorder=6,
                     label="estimated track")
@@ -358,13 +400,48 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
     ax.autoscale_view()
     ax.set_xlabel("east x [m]")
     ax.set_ylabel("north y [m]")
-    ax.set_title(f"Top-down map: {d.path.parent.name}")
-    ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
+    title = f"Top-down map: {d.path.parent.name}"
+    if summ.get("sorties"):
+        ns_ = int(summ["sorties"])
+        title += (f"\n{ns_} sortie{'s' if ns_ != 1 else ''}, "
+                  f"{summ.get('litres_sprayed_l', 0):.1f} L, "
+                  f"{summ.get('energy_wh', 0):.0f} Wh, coverage "
+                  f"{100 * (summ.get('coverage_fraction') or 0):.1f} %, off-target "
+                  f"{summ.get('off_target_m2') or 0:.0f} m²")
+    ax.set_title(title)
+    if sortie is not None and sortie.max() > 1:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, framealpha=0.85,
+                  ncol=2 if sortie.max() > 10 else 1)
+    else:
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
     ax.grid(alpha=0.3)
     p = out / "map.png"
     fig.savefig(p, dpi=110, bbox_inches="tight")
     plt.close(fig)
     paths.append(p)
+
+    # --- spray job: tank, mass, battery, power
+    if spr is not None and len(spr.t):
+        fig, axs = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+        axs[0].plot(spr.t, spr["tank_l"], color="tab:blue", lw=1.0, label="tank [L]")
+        axs[0].plot(spr.t, spr["mass_kg"], color="k", lw=1.0, label="vehicle mass [kg]")
+        axs[0].legend(fontsize=8)
+        axs[1].plot(spr.t, 100 * spr["battery_frac"], color="tab:green", lw=1.0,
+                    label="battery left [%]")
+        res = summ.get("config", {}).get("battery", {}).get("reserve_frac")
+        if res is not None:
+            axs[1].axhline(100 * float(res), color="firebrick", ls="--", lw=0.8, label="reserve")
+        axs[1].legend(fontsize=8)
+        axs[2].plot(spr.t, spr["power_w"], color="tab:orange", lw=0.6, label="power [W]")
+        axs[2].legend(fontsize=8)
+        axs[2].set_xlabel("sim time [s]")
+        for a in axs:
+            a.grid(alpha=0.3)
+        fig.suptitle("Spray job: tank and mass, battery, electrical power")
+        p = out / "spray.png"
+        fig.savefig(p, dpi=100, bbox_inches="tight")
+        plt.close(fig)
+        paths.append(p)
 
     # --- errors over time
     if st is not None:
@@ -461,6 +538,33 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
         plt.close(fig)
         paths.append(p)
     return paths
+
+
+def _plot_off_target(ax: Any, field_scene: Any, sprayed_scene: Any,
+                     summ: dict[str, Any]) -> None:
+    """Shade the sprayed area beyond the field (and its buffer) or over holes, in red."""
+    import shapely
+
+    sprayed = shapely.union_all([shapely.Polygon(t) for t in
+                                 _scene_triangles(sprayed_scene, "sprayed")]).buffer(0)
+    field = shapely.union_all([shapely.Polygon(t) for t in
+                               _scene_triangles(field_scene, "field")]).buffer(0)
+    buf = float(summ.get("config", {}).get("spray", {}).get("offtarget_buffer_m", 0.0) or 0.0)
+    rings = _scene_lines(field_scene, "field")
+    outer = shapely.Polygon(rings[0][0][:, :2]) if rings else field
+    off = sprayed.difference(outer.buffer(buf, join_style="mitre"))
+    for pts, _c in rings[1:]:
+        hole = shapely.Polygon(pts[:, :2]).buffer(-buf, join_style="mitre")
+        off = off.union(sprayed.intersection(hole))
+    geoms = getattr(off, "geoms", [off])
+    first = True
+    for g in geoms:
+        if g.is_empty or g.geom_type != "Polygon":
+            continue
+        x, y = g.exterior.xy
+        ax.fill(x, y, color="red", alpha=0.7, zorder=7, lw=0,
+                label="off-target spray" if first else None)
+        first = False
 
 
 def _motor_matrix(d: RunData) -> np.ndarray:
@@ -595,6 +699,7 @@ def write_foxglove_layout(
     ctrl_keys: tuple[str, ...] | list[str] = (),
     n_motors: int = 4,
     center: tuple[float, float] = (0.0, 0.0),
+    spray: bool = False,
 ) -> Path:
     """Write a Foxglove layout in app-export JSON (import with Layouts -> Import from file).
 
@@ -663,7 +768,13 @@ def write_foxglove_layout(
     left = chain(["3D!aguav3d", chain(cams, "row")], "column") if cams else "3D!aguav3d"
     if isinstance(left, dict):
         left["splitPercentage"] = 62
-    right = chain(["Plot!errors", "Plot!pos", "Plot!ctrl", "Plot!motors"], "column")
+    plots = ["Plot!errors", "Plot!pos", "Plot!ctrl", "Plot!motors"]
+    if spray:  # spray job (ag_uav.spray): tank, mass, battery
+        cfg["Plot!spray"] = _plot_cfg("spray job", [
+            ("/drone/spray.tank_l", "tank [L]"), ("/drone/spray.mass_kg", "mass [kg]"),
+            ("/drone/spray.battery_frac", "battery left"), ("/drone/spray.sortie", "sortie")])
+        plots.append("Plot!spray")
+    right = chain(plots, "column")
     layout = {
         "configById": cfg,
         "globalVariables": {},

@@ -135,21 +135,30 @@ def _divides(timestep_s: float, control_hz: float) -> bool:
     return math.isfinite(steps) and abs(steps - round(steps)) <= 1e-6 and round(steps) >= 1
 
 
-def cross_ok(sim: Mapping[str, float]) -> list[str]:
-    """The rules across keys (all in [sim]): the keys of the first one broken, else []."""
-    s = {k: sim.get(k, getattr(DEFAULT.sim, k)) for k in ("timestep_s", "control_hz")}
-    if not _divides(s["timestep_s"], s["control_hz"]):
+def cross_ok(vals: Mapping[str, Any]) -> list[str]:
+    """The rules across keys (dotted keys; the rest at their defaults): the keys of the first
+    one broken, else []."""
+    def g(k: str) -> Any:
+        return vals.get(k, _get(DEFAULT, k))
+
+    if not _divides(g("sim.timestep_s"), g("sim.control_hz")):
         return ["sim.control_hz", "sim.timestep_s"]
+    lo, hi, alt = g("spray.min_height_m"), g("spray.max_height_m"), g("mission.altitude_m")
+    if lo >= hi:
+        return ["spray.min_height_m", "spray.max_height_m"]
+    if not lo < alt < hi:
+        return ["mission.altitude_m", "spray.min_height_m", "spray.max_height_m"]
     return []
 
 
-CROSS = {"sim.control_hz", "sim.timestep_s"}
+CROSS = {"sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",
+         "mission.altitude_m"}
 
 
 def allowed(leaf: Leaf, v: Any) -> bool:
     if not meta_ok(leaf.tp, leaf.meta, v):
         return False
-    return leaf.key not in CROSS or not cross_ok({leaf.key.split(".")[1]: v})
+    return leaf.key not in CROSS or not cross_ok({leaf.key: v})
 
 
 def landed(leaf: Leaf, v: Any) -> Any:
@@ -271,7 +280,7 @@ def error_line(err: str, key: str) -> str:
 def check_message(body: str, leaf: Leaf, v: Any) -> None:
     """The message names the key, the value (scalars) and what is allowed."""
     if leaf.key in CROSS:  # a rule across keys names them all
-        broken = cross_ok({leaf.key.split(".")[1]: v}) if meta_ok(leaf.tp, leaf.meta, v) else []
+        broken = cross_ok({leaf.key: v}) if meta_ok(leaf.tp, leaf.meta, v) else []
         assert all(f"{k} = " in body for k in broken) and f"{leaf.key} = " in body, body
     else:
         assert body.startswith((f"{leaf.key} = ", f"{leaf.key}[")), body
@@ -330,7 +339,7 @@ def test_schema_walk_sees_every_kind() -> None:
             "list[float]", "list[str]"} <= kinds
     for lf in PLAIN:  # every plain leaf has an oracle, and its default passes it
         assert allowed(lf, _get(DEFAULT, lf.key)), lf.key
-    assert len(PLAIN) > 60 and len(TABLES) == 13  # 12 + [imu]
+    assert len(PLAIN) > 60 and len(TABLES) == 15  # 12 + [imu] [spray] [battery]
 
 
 JUNK_VALUES: list[Any] = [True, False, "", "x", "1", [], [1.0], {}, {"a": 1},
@@ -423,7 +432,7 @@ def test_whole_configs(data: st.DataObject, tmp_path: Path,
                                         candidates(lf)), label=lf.key) for lf in leaves}
     bad = [lf.key for lf in leaves if not meta_ok(lf.tp, lf.meta, vals[lf.key])]
     if not bad:
-        bad = cross_ok({k.split(".")[1]: v for k, v in vals.items() if k in CROSS})
+        bad = cross_ok({k: v for k, v in vals.items() if k in CROSS})
     doc: dict[str, Any] = {}
     for k, v in vals.items():
         C._apply_override(doc, k, v)
@@ -754,7 +763,7 @@ def test_real_command_exit_2_one_line(tmp_path: Path) -> None:
     ("vehicle.mass_kg", 1e300, r"must be between -1e\+09 and 1e\+09"),  # ZeroDivisionError
     ("vehicle.payload_kg", 1e300, "must be between"),  # ZeroDivisionError in flight
     ("gps.radar_sigma_m", 1e300, "must be between"),  # OverflowError in flight
-    ("imu.vibration_sigma_mps2", 1e300, "must be between"),  # was estimator.imu_sigma_mps2: NaN RMSE
+    ("imu.vibration_sigma_mps2", 1e300, "must be between"),  # NaN RMSE (old imu_sigma_mps2)
     ("sim.hover_after_s", 1e6, "must be <= 3600"),  # a reference of 1e8 samples: a hang
     ("mission.speed_mps", 1e-6, "must be >= 0.5"),  # a 1.4 TiB reference: ArrayMemoryError
     ("mission.accel_max_mps2", 1e-9, "must be >= 0.05"),  # 13 GB and counting
