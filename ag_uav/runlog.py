@@ -483,6 +483,7 @@ class RunLog:
         flush_sim_s: float = 0.9,
         layout: bool = True,
         chunk_size: int = 1 << 20,
+        compression: Any = "lz4",
     ):
         self.path = Path(path)
         if isinstance(channels, str):
@@ -514,6 +515,10 @@ class RunLog:
         self._counts: dict[str, int] = {}  # rare topics; the frequent ones count in _n_*
         self._n_tf = self._n_pose = self._n_pose_est = self._n_state = self._n_gps = 0
         self._est: dict[str, _EstChan] = {}
+        # encoded messages (log, bytes, log_time) not yet handed to the writer: they go in one
+        # burst at each flush (and before any other write), which keeps the writer's work out
+        # of the control loop's way; a SIGKILL loses them with the unfinished chunk
+        self._pending: list[tuple[Any, bytes, int]] = []
         if not self.enabled:
             return
 
@@ -529,7 +534,7 @@ class RunLog:
             allow_overwrite=True,
             context=self._ctx,
             writer_options=MCAPWriteOptions(
-                compression=MCAPCompression.Lz4,
+                compression=(MCAPCompression.Lz4 if compression == "lz4" else compression),
                 chunk_size=chunk_size,
                 compression_threads=0,
                 profile="",
@@ -625,11 +630,20 @@ class RunLog:
                 out[ec.topic] = ec.count
         return out
 
+    def _drain(self) -> None:
+        """Hand the pending messages to the writer, in the order they were logged."""
+        pend = self._pending
+        if pend:
+            self._pending = []  # swapped first: a signal handler's close() drains only the rest
+            for log, msg, tn in pend:
+                log(msg, tn)
+
     def _maybe_flush(self, t: float) -> None:
         now = time.perf_counter()
         if now - self._last_flush_wall >= self._flush_wall_s or (
             t - self._last_flush_sim >= self._flush_sim_s
         ):
+            self._drain()
             self._writer.flush()
             self._last_flush_wall = now
             self._last_flush_sim = t
@@ -637,6 +651,7 @@ class RunLog:
     def flush(self) -> None:
         """Finish the current chunk and hand everything to the OS now."""
         if not self.closed:
+            self._drain()
             self._writer.flush()
             self._last_flush_wall = time.perf_counter()
 
@@ -734,27 +749,28 @@ class RunLog:
         nx = self._next
         head = None
         pack = _POSE.pack
+        ap = self._pending.append
         if t >= nx["tf"]:
             nx["tf"] = t + self._p_tf
             head = _ts_field(tn)
             body = head + self._tf_mid + pack(b"\x22\x1b", 9, px, 17, py, 25, pz,
                                               b"\x2a\x24", 9, qx, 17, qy, 25, qz, 33, qw)
-            self._log_tf(b"\x0a" + _varint(len(body)) + body, tn)
+            ap((self._log_tf, b"\x0a" + _varint(len(body)) + body, tn))
             self._n_tf += 1
         if t >= nx["pose"]:
             nx["pose"] = t + self._p_pose
             pre = (head or _ts_field(tn)) + _POSE_MID
-            self._log_pose(pre + pack(b"\x0a\x1b", 9, px, 17, py, 25, pz,
-                                      b"\x12\x24", 9, qx, 17, qy, 25, qz, 33, qw), tn)
+            ap((self._log_pose, pre + pack(b"\x0a\x1b", 9, px, 17, py, 25, pz,
+                                           b"\x12\x24", 9, qx, 17, qy, 25, qz, 33, qw), tn))
             h = 0.5 * yaw_ref
-            self._log_pose_ref(pre + pack(b"\x0a\x1b", 9, p_ref[0], 17, p_ref[1], 25, p_ref[2],
-                                          b"\x12\x24", 9, 0.0, 17, 0.0, 25, math.sin(h),
-                                          33, math.cos(h)), tn)
+            ap((self._log_pose_ref, pre + pack(b"\x0a\x1b", 9, p_ref[0], 17, p_ref[1],
+                                               25, p_ref[2], b"\x12\x24", 9, 0.0, 17, 0.0,
+                                               25, math.sin(h), 33, math.cos(h)), tn))
             self._n_pose += 1
             if p_est is not None:
-                self._log_pose_est(pre + pack(b"\x0a\x1b", 9, p_est[0], 17, p_est[1],
-                                              25, p_est[2], b"\x12\x24", 9, qx, 17, qy,
-                                              25, qz, 33, qw), tn)
+                ap((self._log_pose_est, pre + pack(b"\x0a\x1b", 9, p_est[0], 17, p_est[1],
+                                                   25, p_est[2], b"\x12\x24", 9, qx, 17, qy,
+                                                   25, qz, 33, qw), tn))
                 self._n_pose_est += 1
         if t >= nx["state"]:
             nx["state"] = t + self._p_state
@@ -801,7 +817,7 @@ class RunLog:
                     vals += [g(k, _NAN) for k in self._ctrl_keys]
             else:
                 vals += self._ctrl_nan
-            self._log_state(self._state_schema.encode(vals), tn)
+            ap((self._log_state, self._state_schema.encode(vals), tn))
             self._n_state += 1
         nt = nx["tf"]
         if nx["pose"] < nt:
@@ -813,6 +829,7 @@ class RunLog:
         if now - self._last_flush_wall >= self._flush_wall_s or (
             t - self._last_flush_sim >= self._flush_sim_s
         ):
+            self._drain()
             self._writer.flush()
             self._last_flush_wall = now
             self._last_flush_sim = t
@@ -824,9 +841,10 @@ class RunLog:
         self._next["gps"] = t + self._p_gps
         tn = ns(t)
         z = fix_xyz[2] if len(fix_xyz) > 2 else 0.0
-        self._log_gps(_ts_field(tn) + _POSE_MID
-                      + _POSE.pack(b"\x0a\x1b", 9, fix_xyz[0], 17, fix_xyz[1], 25, z,
-                                   b"\x12\x24", 9, 0.0, 17, 0.0, 25, 0.0, 33, 1.0), tn)
+        self._pending.append((self._log_gps, _ts_field(tn) + _POSE_MID
+                              + _POSE.pack(b"\x0a\x1b", 9, fix_xyz[0], 17, fix_xyz[1], 25, z,
+                                           b"\x12\x24", 9, 0.0, 17, 0.0, 25, 0.0, 33, 1.0),
+                              tn))
         self._n_gps += 1
 
     def estimator(
@@ -889,7 +907,7 @@ class RunLog:
                 vals += (_fit(_flat(innovation), ec.m) if innovation is not None
                          else [_NAN] * ec.m)
             msg = ec.schema.encode(vals + tail)
-        ec.log(msg, ns(t))
+        self._pending.append((ec.log, msg, ns(t)))
         ec.count += 1
 
     def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> _EstChan:
@@ -923,6 +941,7 @@ class RunLog:
         ch = self._scene_ch.get(topic)
         if ch is None:
             ch = self._scene_ch[topic] = self._fc.SceneUpdateChannel(topic, context=self._ctx)
+        self._drain()
         ch.log(self._M.SceneUpdate(entities=entities), log_time=ns(t))
         self._count(topic)
         self._writer.flush()
@@ -1059,6 +1078,7 @@ class RunLog:
                 base,
             )
         img, cal, base = ch
+        self._drain()
         fy = 0.5 * height / math.tan(math.radians(fovy_deg) / 2.0)
         fx = fy
         cx, cy = 0.5 * width, 0.5 * height
@@ -1097,6 +1117,7 @@ class RunLog:
         """Final metrics -> metadata record ``summary`` and attachment ``summary.json``."""
         if self.closed:
             return
+        self._drain()
         self._writer.write_metadata("summary", {k: _meta_str(v) for k, v in summary.items()})
         self._writer.attach(log_time=ns(self._t_last), create_time=time.time_ns(),
                             name="summary.json", media_type="application/json",
@@ -1128,6 +1149,7 @@ class RunLog:
         for ec in self._est.values():
             ec.next_t = _INF
         try:
+            self._drain()
             self._writer.close()
         finally:
             _OPEN.discard(self)
