@@ -64,7 +64,6 @@ import os
 import platform
 import signal
 import struct
-import sys
 import threading
 import time
 import weakref
@@ -330,15 +329,13 @@ _POSE_MID = _WORLD2 + b"\x1a\x43"  # PoseInFrame: frame_id "world", then the 67-
 _DEG = 57.29577951308232
 _D = struct.Struct("<d")
 _perf_counter = time.perf_counter
-_F8 = np.dtype(np.float64)
-_RAW_F8 = sys.byteorder == "little"  # an ndarray's bytes are protobuf's doubles as they are
 _PACKD: dict[int, struct.Struct] = {}
 
 
 def _f8bytes(a: Any, k: int) -> bytes:
     """``k`` little-endian doubles from ``a`` (NaN-padded / truncated), as a packed vector."""
-    if type(a) is np.ndarray and a.dtype is _F8 and a.size == k and _RAW_F8:
-        return a.tobytes()
+    if type(a) is np.ndarray and a.size == k and a.dtype.str == "<f8":
+        return a.tobytes()  # little-endian doubles: protobuf's packed encoding as they are
     st = _PACKD.get(k)
     if st is None:
         st = _PACKD[k] = struct.Struct(f"<{k}d")
@@ -742,10 +739,14 @@ class RunLog:
             return
         self._t_last = t
         tn = ns(t)
-        px, py, pz = float(p_true[0]), float(p_true[1]), float(p_true[2])
+        if type(p_true) is tuple and type(q_true_wxyz) is tuple:  # the loop's: plain floats
+            px, py, pz = p_true
+            qw, qx, qy, qz = q_true_wxyz
+        else:
+            px, py, pz = float(p_true[0]), float(p_true[1]), float(p_true[2])
+            qw, qx, qy, qz = (float(q_true_wxyz[0]), float(q_true_wxyz[1]),
+                              float(q_true_wxyz[2]), float(q_true_wxyz[3]))
         self._last_true = (px, py, pz)
-        qw, qx, qy, qz = (float(q_true_wxyz[0]), float(q_true_wxyz[1]), float(q_true_wxyz[2]),
-                          float(q_true_wxyz[3]))
         nx = self._next
         head = None
         pack = _POSE.pack
@@ -776,10 +777,10 @@ class RunLog:
             nx["state"] = t + self._p_state
             if self._state_schema is None:
                 self._make_state_schema(ctrl or {}, len(motors))
-            rx, ry, rz = float(p_ref[0]), float(p_ref[1]), float(p_ref[2])
+            rx, ry, rz = p_ref[0], p_ref[1], p_ref[2]
             ex, ey, ez = px - rx, py - ry, pz - rz
             eh = math.sqrt(ex * ex + ey * ey)
-            vx, vy, vz = float(v_true[0]), float(v_true[1]), float(v_true[2])
+            vx, vy, vz = v_true[0], v_true[1], v_true[2]
             # ZYX Euler angles (roll, pitch, yaw) in degrees, as _rpy_deg
             sp = 2.0 * (qw * qy - qz * qx)
             sp = 1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp)
@@ -790,7 +791,7 @@ class RunLog:
                     * _DEG,
                     rx, ry, rz, v_ref[0], v_ref[1], v_ref[2], yaw_ref]
             if p_est is not None:
-                sx, sy, sz = float(p_est[0]), float(p_est[1]), float(p_est[2])
+                sx, sy, sz = p_est[0], p_est[1], p_est[2]
                 dx, dy, dz = sx - px, sy - py, sz - pz
                 if v_est is not None:
                     vals += (sx, sy, sz, v_est[0], v_est[1], v_est[2])
