@@ -18,13 +18,18 @@ Usage (the simulation loop calls this; everything is in sim time, seconds -> ns)
         log.summary({"rmse_m": ..})
     # -> run.mcap and layout.json (Foxglove app-export layout) beside it
 
-Writer, chosen by measurement (2 cores, Python 3.11; see tests/test_runlog.py for the bench):
-``foxglove-sdk`` (Rust MCAP writer).  Per message: ``mcap.writer.Writer.add_message`` alone
-costs ~5 us of Python, plus ~2.5 us to build a protobuf message; the SDK's typed channels cost
-~3.5 us for a PoseInFrame all in, and ~1.2 us for pre-encoded bytes.  Our own numeric channels
-(``/drone/state``, ``/estimator/<name>``) are protobuf messages whose schema is generated at the
-first call (all fields ``double``, nested groups, packed vectors) and encoded with one
-``struct.pack`` (see :class:`FlatSchema`); they decode with any protobuf reader.
+Writer, chosen by measurement (figures in the README's Speed section; ``ag-uav bench``
+measures the logging cost): ``foxglove-sdk`` (Rust MCAP writer, LZ4 chunks) fed pre-encoded
+protobuf bytes through ``BaseChannel.log``; the pure-Python ``mcap`` writer and the SDK's typed
+message objects cost several times more per message.  The frequent messages are hand-encoded:
+PoseInFrame / FrameTransform as one ``struct.pack`` with memoised timestamp bytes; our own numeric
+channels (``/drone/state``, ``/estimator/<name>``) are protobuf messages whose schema is generated
+at the first call (all fields ``double``, nested groups, packed vectors) and encoded with one
+``struct.pack`` (see :class:`FlatSchema`), float64 numpy vectors going in as their raw bytes (a
+packed ``repeated double`` is exactly that); they decode with any protobuf reader.  The encoded
+messages of the per-tick channels wait in a list and reach the writer in one burst at each flush
+(and before any frame, scene or metadata write), so the control loop does not interleave with the
+writer's bookkeeping.
 
 Channels (Foxglove well-known schemas where one fits; groups in brackets):
   [tf]        ``/tf``                 foxglove.FrameTransforms world->base_link
@@ -50,7 +55,8 @@ camera), ``"none"`` (no file; every method returns at once), or an iterable of g
 Crash safety: use ``with`` (or call :meth:`RunLog.close`); SIGTERM/SIGINT close every open log
 and then behave as before (KeyboardInterrupt / exit status 128+signal); an ``atexit`` hook closes
 the rest.  The writer finishes its chunk and flushes to the OS every ``flush_wall_s`` of wall time
-or ``flush_sim_s`` of sim time, whichever comes first, so a SIGKILL loses at most that much;
+or ``flush_sim_s`` of sim time, whichever comes first (the buffered messages go in first), so
+a SIGKILL loses at most that much;
 ``ag_uav.viewing.recover`` turns a truncated file into a finished, indexed one.
 """
 
