@@ -288,10 +288,6 @@ def _rpy_deg(w: float, x: float, y: float, z: float) -> tuple[float, float, floa
     return math.atan2(sr, cr) * d, math.asin(sp) * d, math.atan2(sy, cy) * d
 
 
-def _yaw_quat(yaw: float) -> tuple[float, float, float, float]:
-    return (math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw))
-
-
 # Hand-encoded foxglove.PoseInFrame / foxglove.FrameTransform (protobuf wire format; the field
 # numbers are those of the schemas the SDK ships, checked in tests by decoding).  ~2x faster than
 # building the SDK's message objects, and these are the most frequent messages.
@@ -676,12 +672,6 @@ class RunLog:
     def want_frame(self, t: float) -> bool:
         """True when a camera frame at sim time ``t`` would be logged: render only then."""
         return self.want("camera", t)
-
-    def _due(self, group: str, t: float) -> bool:
-        if t < self._next[group]:  # inf when the group is off or the log closed
-            return False
-        self._next[group] = t + self._period[group] - 1e-9
-        return True
 
     def _ts(self, t_ns: int) -> Any:
         return self._M.Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)

@@ -21,6 +21,7 @@ from mcap.reader import NonSeekingReader, make_reader
 from ag_uav.runlog import (
     FlatSchema,
     RunLog,
+    _rpy_deg,
     _str_field,
     _ts_pb,
     enc_pose_in_frame,
@@ -348,3 +349,21 @@ def test_buffered_messages_precede_a_frame_and_counts_match_the_file(tmp_path):
     assert [tn for topic, tn in order if topic == "/drone/state"] == [
         k * 50_000_000 for k in range(7)]
     assert order[-1][1] == 300_000_000 and order[cam - 1][1] == 290_000_000
+
+
+def test_state_attitude_and_numpy_inputs(tmp_path):
+    """Roll/pitch/yaw of a tilted, yawed body, from numpy inputs and from the loop's tuples."""
+    path = tmp_path / "run.mcap"
+    q = np.array([0.9, 0.1, -0.2, 0.3])
+    q /= np.linalg.norm(q)
+    with RunLog(path, channels=["state"], metadata={}, config_toml="", layout=False) as log:
+        kw = _tick_kwargs((1.0, 2.0, 3.0))
+        log.tick(0.0, **(kw | {"q_true_wxyz": q, "p_true": np.array([1.0, 2.0, 3.0])}))
+        log.tick(0.05, **(kw | {"q_true_wxyz": tuple(q.tolist()), "p_true": (1.0, 2.0, 3.0)}))
+    st = [d for topic, _, d in _decoded(path) if topic == "/drone/state"]
+    expect = _rpy_deg(*q.tolist())
+    assert min(abs(a) for a in expect) > 3.0  # all three angles non-trivial
+    for d in st:
+        assert (d.rpy.roll, d.rpy.pitch, d.rpy.yaw) == pytest.approx(expect, abs=1e-12)
+        assert (d.pos.x, d.pos.y, d.pos.z) == (1.0, 2.0, 3.0)
+    assert len(st) == 2
