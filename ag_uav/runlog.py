@@ -468,6 +468,9 @@ class RunLog:
     :param flush_wall_s: finish the chunk and flush to the OS at least this often (wall time).
     :param flush_sim_s: ... and at least this often in sim time (bounds SIGKILL loss).
     :param layout: write ``layout.json`` beside the log.
+    :param chunk_size: the writer's chunk size in bytes (chunks end sooner, at each flush).
+    :param compression: chunk compression: ``"lz4"`` (default), a
+        ``foxglove.mcap.MCAPCompression`` member, or ``None`` for none.
     """
 
     def __init__(
