@@ -109,9 +109,65 @@ def run_bench(cfg: Config, repeats: int = 3, quick: bool = False) -> dict[str, A
     return out
 
 
+#: the estimator configuration the logging section also measures: RTK GNSS, PCA-MCKF in the loop,
+#: KF/MCKF/PCA-KF shadows (logs /gps and four /estimator/<name> channels on top of the state)
+ESTIMATOR_LOG_OVERRIDES: dict[str, Any] = {
+    "gps.preset": "rtk",
+    "estimator.name": "pca-mckf",
+    "estimator.shadow": ["kf", "mckf", "pca-kf"],
+}
+
+
+def with_overrides(cfg: Config, overrides: dict[str, Any]) -> Config:
+    """``cfg`` with dotted-key ``overrides`` applied (validated like ``--set``)."""
+    from .config import config_from_dict
+
+    data = cfg.to_dict()
+    for k, v in overrides.items():
+        node = data
+        parts = k.split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = copy.deepcopy(v)
+    return config_from_dict(data)
+
+
+def _spread(ratios: list[float]) -> dict[str, float]:
+    return {"min": round(min(ratios), 3), "max": round(max(ratios), 3)}
+
+
+class _LoopCpu:
+    """``tick_hook`` that samples the process CPU time every 64 ticks: the loop's CPU seconds
+    (first tick to the last sample), which a busy shared machine moves far less than wall time.
+    The same hook runs in the unlogged and the logged loops, so it cancels in their ratio."""
+
+    def __init__(self) -> None:
+        self.k = 0
+        self.first = self.last = 0.0
+
+    def __call__(self, t: float, data: Any) -> None:
+        k = self.k
+        self.k = k + 1
+        if k & 63 == 0:
+            self.last = time.process_time()
+            if k == 0:
+                self.first = self.last
+
+    @property
+    def seconds(self) -> float:
+        return self.last - self.first
+
+
 def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
-    """Wall time of the mission loop with the full MCAP channel set (no renders) against the
-    same loop unlogged, alternating the two, median of ``repeats`` each."""
+    """Loop wall time of the mission with the full MCAP channel set (no renders) and the light set
+    against the same loop unlogged, and the same for the estimator configuration
+    (:data:`ESTIMATOR_LOG_OVERRIDES` applied to ``cfg``).
+
+    Each repeat flies the unlogged loop and right after it the logged ones, so every ratio is
+    taken between neighbouring runs (a load change on a shared machine hits both); the ratios
+    are the medians of those per-repeat ratios, with their min and max as the spread.  The
+    ``*_cpu`` ratios are the same from the loop's process CPU time.
+    """
     import tempfile
     from pathlib import Path
 
@@ -120,19 +176,55 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
 
     c = copy.deepcopy(cfg)
     c.log.render = False
-    plain, logged, light = [], [], []
+    ce = with_overrides(c, ESTIMATOR_LOG_OVERRIDES)
+
+    def fly(conf: Config, path: Path | None, channels: str = "full") -> tuple[float, float]:
+        hook = _LoopCpu()
+        if path is None:
+            wall = simulate(conf, tick_hook=hook).summary["loop_wall_time_s"]
+            return wall, hook.seconds
+        with RunLog(path, channels=channels, rates={"camera": 0.0}, metadata={},
+                    config_toml="", layout=False) as log:
+            wall = simulate(conf, log=log, tick_hook=hook).summary["loop_wall_time_s"]
+        return wall, hook.seconds
+
+    runs: dict[str, list[tuple[float, float]]] = {
+        k: [] for k in ("plain", "full", "light", "e_plain", "e_full")}
     with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
         for i in range(repeats):
-            plain.append(simulate(c).summary["loop_wall_time_s"])
-            for channels, acc in (("full", logged), ("light", light)):
-                with RunLog(Path(tmp) / f"{channels}{i}.mcap", channels=channels,
-                            rates={"camera": 0.0}, metadata={}, config_toml="") as log:
-                    acc.append(simulate(c, log=log).summary["loop_wall_time_s"])
-        size = (Path(tmp) / "full0.mcap").stat().st_size
-    p, f, li = (statistics.median(x) for x in (plain, logged, light))
-    return {"unlogged_loop_s": round(p, 3), "full_log_loop_s": round(f, 3),
-            "light_log_loop_s": round(li, 3), "full_over_unlogged": round(f / p, 3),
-            "light_over_unlogged": round(li / p, 3), "full_log_mb": round(size / 1e6, 2)}
+            runs["plain"].append(fly(c, None))
+            runs["full"].append(fly(c, d / f"full{i}.mcap"))
+            runs["light"].append(fly(c, d / f"light{i}.mcap", "light"))
+            runs["e_plain"].append(fly(ce, None))
+            runs["e_full"].append(fly(ce, d / f"est{i}.mcap"))
+        size = (d / "full0.mcap").stat().st_size
+        e_size = (d / "est0.mcap").stat().st_size
+    med = statistics.median
+
+    def ratios(num: str, den: str, j: int = 0) -> list[float]:
+        return [a[j] / b[j] for a, b in zip(runs[num], runs[den], strict=True)]
+
+    def wall(k: str) -> float:
+        return round(med(r[0] for r in runs[k]), 3)
+
+    r_full, r_light, r_est = ratios("full", "plain"), ratios("light", "plain"), ratios(
+        "e_full", "e_plain")
+    return {"unlogged_loop_s": wall("plain"), "full_log_loop_s": wall("full"),
+            "light_log_loop_s": wall("light"),
+            "full_over_unlogged": round(med(r_full), 3),
+            "full_over_unlogged_spread": _spread(r_full),
+            "full_over_unlogged_cpu": round(med(ratios("full", "plain", 1)), 3),
+            "light_over_unlogged": round(med(r_light), 3),
+            "full_log_mb": round(size / 1e6, 2),
+            "estimators_unlogged_loop_s": wall("e_plain"),
+            "estimators_full_log_loop_s": wall("e_full"),
+            "estimators_ratio": round(med(r_est), 3),
+            "estimators_ratio_spread": _spread(r_est),
+            "estimators_ratio_cpu": round(med(ratios("e_full", "e_plain", 1)), 3),
+            "estimators_full_log_mb": round(e_size / 1e6, 2),
+            "estimators_config": ", ".join(f"{k}={v}" for k, v in
+                                           ESTIMATOR_LOG_OVERRIDES.items())}
 
 
 def _workers(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:

@@ -18,13 +18,18 @@ Usage (the simulation loop calls this; everything is in sim time, seconds -> ns)
         log.summary({"rmse_m": ..})
     # -> run.mcap and layout.json (Foxglove app-export layout) beside it
 
-Writer, chosen by measurement (2 cores, Python 3.11; see tests/test_runlog.py for the bench):
-``foxglove-sdk`` (Rust MCAP writer).  Per message: ``mcap.writer.Writer.add_message`` alone
-costs ~5 us of Python, plus ~2.5 us to build a protobuf message; the SDK's typed channels cost
-~3.5 us for a PoseInFrame all in, and ~1.2 us for pre-encoded bytes.  Our own numeric channels
-(``/drone/state``, ``/estimator/<name>``) are protobuf messages whose schema is generated at the
-first call (all fields ``double``, nested groups, packed vectors) and encoded with one
-``struct.pack`` (see :class:`FlatSchema`); they decode with any protobuf reader.
+Writer, chosen by measurement (figures in the README's Speed section; ``ag-uav bench``
+measures the logging cost): ``foxglove-sdk`` (Rust MCAP writer, LZ4 chunks) fed pre-encoded
+protobuf bytes through ``BaseChannel.log``; the pure-Python ``mcap`` writer and the SDK's typed
+message objects cost several times more per message.  The frequent messages are hand-encoded:
+PoseInFrame / FrameTransform as one ``struct.pack`` with memoised timestamp bytes; our own numeric
+channels (``/drone/state``, ``/estimator/<name>``) are protobuf messages whose schema is generated
+at the first call (all fields ``double``, nested groups, packed vectors) and encoded with one
+``struct.pack`` (see :class:`FlatSchema`), float64 numpy vectors going in as their raw bytes (a
+packed ``repeated double`` is exactly that); they decode with any protobuf reader.  The encoded
+messages of the per-tick channels wait in a list and reach the writer in one burst at each flush
+(and before any frame, scene or metadata write), so the control loop does not interleave with the
+writer's bookkeeping.
 
 Channels (Foxglove well-known schemas where one fits; groups in brackets):
   [tf]        ``/tf``                 foxglove.FrameTransforms world->base_link
@@ -53,7 +58,8 @@ camera), ``"none"`` (no file; every method returns at once), or an iterable of g
 Crash safety: use ``with`` (or call :meth:`RunLog.close`); SIGTERM/SIGINT close every open log
 and then behave as before (KeyboardInterrupt / exit status 128+signal); an ``atexit`` hook closes
 the rest.  The writer finishes its chunk and flushes to the OS every ``flush_wall_s`` of wall time
-or ``flush_sim_s`` of sim time, whichever comes first, so a SIGKILL loses at most that much;
+or ``flush_sim_s`` of sim time, whichever comes first (the buffered messages go in first), so
+a SIGKILL loses at most that much;
 ``ag_uav.viewing.recover`` turns a truncated file into a finished, indexed one.
 """
 
@@ -62,6 +68,7 @@ from __future__ import annotations
 import atexit
 import json
 import math
+import operator
 import os
 import platform
 import signal
@@ -101,7 +108,7 @@ _INF = float("inf")
 
 def ns(t: float) -> int:
     """Sim time in seconds -> integer nanoseconds (the MCAP log time; clamped at 0)."""
-    v = int(round(t * 1e9))
+    v = round(t * 1e9)
     return v if v > 0 else 0
 
 
@@ -176,10 +183,10 @@ class FlatSchema:
         prefixes: list[bytes] = []
         self.size = self._layout(tree, prefixes)
         self.n_values = len(prefixes)
-        fmt = "<" + "".join(f"{len(p)}sd" for p in prefixes)
-        self._struct = struct.Struct(fmt)
-        self._args: list[Any] = [None] * (2 * self.n_values)
-        self._args[0::2] = prefixes
+        #: the constant bytes before each value (tags, nested-message headers; ``b""`` inside a
+        #: packed vector): the encoded message is prefix_0, value_0, prefix_1, value_1, ...
+        self.prefixes = prefixes
+        self._packer = _Packer(prefixes)
         self.schema_data = self._descriptor_set()
 
     @staticmethod
@@ -248,6 +255,20 @@ class FlatSchema:
 
     def encode(self, values: Sequence[float]) -> bytes:
         """Encode the flat value list (length :attr:`n_values`)."""
+        return self._packer.pack(values)
+
+
+class _Packer:
+    """``pack(values)`` -> prefix_0 + double(value_0) + prefix_1 + ... in one ``struct.pack``."""
+
+    __slots__ = ("_struct", "_args")
+
+    def __init__(self, prefixes: Sequence[bytes]):
+        self._struct = struct.Struct("<" + "".join(f"{len(p)}sd" for p in prefixes))
+        self._args: list[Any] = [None] * (2 * len(prefixes))
+        self._args[0::2] = prefixes
+
+    def pack(self, values: Sequence[float]) -> bytes:
         args = self._args
         args[1::2] = values
         return self._struct.pack(*args)
@@ -270,23 +291,37 @@ def _rpy_deg(w: float, x: float, y: float, z: float) -> tuple[float, float, floa
     return math.atan2(sr, cr) * d, math.asin(sp) * d, math.atan2(sy, cy) * d
 
 
-def _yaw_quat(yaw: float) -> tuple[float, float, float, float]:
-    return (math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw))
-
-
 # Hand-encoded foxglove.PoseInFrame / foxglove.FrameTransform (protobuf wire format; the field
 # numbers are those of the schemas the SDK ships, checked in tests by decoding).  ~2x faster than
 # building the SDK's message objects, and these are the most frequent messages.
 _POSE = struct.Struct("<2sBdBdBd2sBdBdBdBd")  # Pose / translation+rotation: 67 bytes
 
 
+_TS_SEC: dict[int, bytes] = {}
+_TS_NSEC: dict[int, bytes] = {}
+_TS_CACHE_MAX = 20_000
+
+
 def _ts_pb(tn: int) -> bytes:
-    """google.protobuf.Timestamp body for ``tn`` ns (>= 0)."""
+    """google.protobuf.Timestamp body for ``tn`` ns (>= 0); both halves are memoised."""
     sec, nsec = divmod(tn, 1_000_000_000)
-    out = b"\x08" + _varint(sec) if sec else b""
-    if nsec:
-        out += b"\x10" + _varint(nsec)
-    return out
+    a = _TS_SEC.get(sec)
+    if a is None:
+        a = b"\x08" + _varint(sec) if sec else b""
+        if len(_TS_SEC) < _TS_CACHE_MAX:
+            _TS_SEC[sec] = a
+    b = _TS_NSEC.get(nsec)
+    if b is None:
+        b = b"\x10" + _varint(nsec) if nsec else b""
+        if len(_TS_NSEC) < _TS_CACHE_MAX:
+            _TS_NSEC[nsec] = b
+    return a + b
+
+
+def _ts_field(tn: int) -> bytes:
+    """Field 1 (``timestamp``) of PoseInFrame / FrameTransform: tag, length, Timestamp body."""
+    ts = _ts_pb(tn)
+    return b"\x0a" + _BYTE[len(ts)] + ts  # a Timestamp body is at most 12 bytes
 
 
 def _str_field(num: int, s: str) -> bytes:
@@ -295,6 +330,22 @@ def _str_field(num: int, s: str) -> bytes:
 
 
 _WORLD2 = _str_field(2, "world")
+_POSE_MID = _WORLD2 + b"\x1a\x43"  # PoseInFrame: frame_id "world", then the 67-byte pose
+_DEG = 57.29577951308232
+_D = struct.Struct("<d")
+_perf_counter = time.perf_counter
+_PACKD: dict[int, struct.Struct] = {}
+
+
+def _f8bytes(a: Any, k: int) -> bytes:
+    """``k`` little-endian doubles from ``a`` (NaN-padded / truncated), as a packed vector."""
+    if type(a) is np.ndarray and a.size == k and a.dtype.str == "<f8":
+        return a.tobytes()  # little-endian doubles: protobuf's packed encoding as they are
+    st = _PACKD.get(k)
+    if st is None:
+        st = _PACKD[k] = struct.Struct(f"<{k}d")
+    v = _flat(a)
+    return st.pack(*(v if len(v) == k else _fit(v, k)))
 
 
 def enc_pose_in_frame(ts: bytes, p: Sequence[float], q: Sequence[float]) -> bytes:
@@ -322,6 +373,27 @@ def enc_transform(ts: bytes, child3: bytes, p: Sequence[float], q: Sequence[floa
 _OPEN: weakref.WeakSet[RunLog] = weakref.WeakSet()
 _PREV_HANDLERS: dict[int, Any] = {}
 _HANDLERS_INSTALLED = False
+
+
+class _EstChan:
+    """One ``/estimator/<name>`` channel: its clock, writer, schema and encoding pieces."""
+
+    __slots__ = ("schema", "log", "topic", "n", "m", "keys", "next_t", "count", "fast",
+                 "pre_t", "hx", "hp", "hi", "nan_i", "tail")
+
+    def __init__(self, schema: FlatSchema, log: Any, topic: str, n: int, m: int,
+                 keys: tuple[str, ...]):
+        self.schema, self.log, self.topic = schema, log, topic
+        self.n, self.m, self.keys = n, m, keys
+        self.next_t = -_INF
+        self.count = 0
+        # value layout: t, x[n], p_diag[n], innovation[m], then the scalar tail
+        pre = schema.prefixes
+        self.fast = n > 0
+        self.pre_t, self.hx, self.hp = pre[0], pre[1], pre[1 + n] if n else b""
+        self.hi = pre[1 + 2 * n] if m else b""
+        self.nan_i = struct.pack(f"<{m}d", *([_NAN] * m))
+        self.tail = _Packer(pre[1 + 2 * n + m:])
 
 
 def _close_all() -> None:
@@ -399,6 +471,9 @@ class RunLog:
     :param flush_wall_s: finish the chunk and flush to the OS at least this often (wall time).
     :param flush_sim_s: ... and at least this often in sim time (bounds SIGKILL loss).
     :param layout: write ``layout.json`` beside the log.
+    :param chunk_size: the writer's chunk size in bytes (chunks end sooner, at each flush).
+    :param compression: chunk compression: ``"lz4"`` (default), a
+        ``foxglove.mcap.MCAPCompression`` member, or ``None`` for none.
     """
 
     def __init__(
@@ -413,6 +488,7 @@ class RunLog:
         flush_sim_s: float = 0.9,
         layout: bool = True,
         chunk_size: int = 1 << 20,
+        compression: Any = "lz4",
     ):
         self.path = Path(path)
         if isinstance(channels, str):
@@ -438,7 +514,16 @@ class RunLog:
         self.closed = not self.enabled
         self._next_tick = _INF
         self._t_last = 0.0
-        self.counts: dict[str, int] = {}
+        # next sim time each group is due (inf = off or closed): the hot paths test only this
+        self._next = {g: (-_INF if self._period[g] < _INF and self.enabled else _INF)
+                      for g in GROUPS}
+        self._counts: dict[str, int] = {}  # rare topics; the frequent ones count in _n_*
+        self._n_tf = self._n_pose = self._n_pose_est = self._n_state = self._n_gps = 0
+        self._est: dict[str, _EstChan] = {}
+        # encoded messages (log, bytes, log_time) not yet handed to the writer: they go in one
+        # burst at each flush (and before any other write), which keeps the writer's work out
+        # of the control loop's way; a SIGKILL loses them with the unfinished chunk
+        self._pending: list[tuple[Any, bytes, int]] = []
         if not self.enabled:
             return
 
@@ -454,7 +539,7 @@ class RunLog:
             allow_overwrite=True,
             context=self._ctx,
             writer_options=MCAPWriteOptions(
-                compression=MCAPCompression.Lz4,
+                compression=(MCAPCompression.Lz4 if compression == "lz4" else compression),
                 chunk_size=chunk_size,
                 compression_threads=0,
                 profile="",
@@ -469,22 +554,30 @@ class RunLog:
             return foxglove.Channel(topic, message_encoding="protobuf", schema=schema,
                                     context=ctx)
 
+        # the hot channels log through the SDK's BaseChannel.log (bytes, log_time) directly:
+        # the Python Channel.log wrapper only re-checks the encoding and the type
         self._ch_tf = raw("/tf", M.FrameTransforms.get_schema()) if en["tf"] else None
+        self._log_tf = self._ch_tf.base.log if en["tf"] else None
         if en["pose"]:
-            self._ch_pose = raw("/drone/pose", pose_schema)
-            self._ch_pose_est = raw("/drone/pose_est", pose_schema)
-            self._ch_pose_ref = raw("/drone/pose_ref", pose_schema)
-        self._ch_gps = raw("/gps", pose_schema) if en["gps"] else None
+            self._log_pose = raw("/drone/pose", pose_schema).base.log
+            self._log_pose_est = raw("/drone/pose_est", pose_schema).base.log
+            self._log_pose_ref = raw("/drone/pose_ref", pose_schema).base.log
+        self._log_gps = raw("/gps", pose_schema).base.log if en["gps"] else None
         self._child = {"base_link": _str_field(3, "base_link")}
-        self._ch_state = None  # created at the first tick (schema depends on ctrl keys)
+        self._tf_mid = _WORLD2 + self._child["base_link"]
+        self._log_state = None  # created at the first tick (schema depends on ctrl keys)
         self._state_schema: FlatSchema | None = None
         self._ctrl_keys: tuple[str, ...] = ()
+        self._ctrl_get: Any = None
+        self._ctrl_nan: list[float] = []
         self._n_motors = 0
-        self._est: dict[str, Any] = {}
         self._cam: dict[str, Any] = {}
         self._scene_ch: dict[str, Any] = {}
-        self._next = {g: -_INF for g in GROUPS}
-        self._next_est: dict[str, float] = {}
+        self._next_est: dict[str, float] = {}  # per-camera clocks
+        pe = self._period
+        self._p_tf, self._p_pose, self._p_state = (pe["tf"] - 1e-9, pe["pose"] - 1e-9,
+                                                   pe["state"] - 1e-9)
+        self._p_gps, self._p_est = pe["gps"] - 1e-9, pe["estimator"] - 1e-9
         self._tick_groups = [g for g in ("tf", "pose", "state") if en[g]]
         self._next_tick = -_INF if self._tick_groups else _INF
         self._last_true = (_NAN, _NAN, _NAN)
@@ -525,13 +618,37 @@ class RunLog:
 
     # ---------------------------------------------------------------- helpers
     def _count(self, topic: str) -> None:
-        self.counts[topic] = self.counts.get(topic, 0) + 1
+        self._counts[topic] = self._counts.get(topic, 0) + 1
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages written so far, per topic."""
+        out = dict(self._counts)
+        n_pose = self._n_pose
+        for topic, n in (("/tf", self._n_tf), ("/drone/pose", n_pose),
+                         ("/drone/pose_ref", n_pose), ("/drone/pose_est", self._n_pose_est),
+                         ("/drone/state", self._n_state), ("/gps", self._n_gps)):
+            if n:
+                out[topic] = out.get(topic, 0) + n
+        for ec in self._est.values():
+            if ec.count:
+                out[ec.topic] = ec.count
+        return out
+
+    def _drain(self) -> None:
+        """Hand the pending messages to the writer, in the order they were logged."""
+        pend = self._pending
+        if pend:
+            self._pending = []  # swapped first: a signal handler's close() drains only the rest
+            for log, msg, tn in pend:
+                log(msg, tn)
 
     def _maybe_flush(self, t: float) -> None:
         now = time.perf_counter()
         if now - self._last_flush_wall >= self._flush_wall_s or (
             t - self._last_flush_sim >= self._flush_sim_s
         ):
+            self._drain()
             self._writer.flush()
             self._last_flush_wall = now
             self._last_flush_sim = t
@@ -539,25 +656,28 @@ class RunLog:
     def flush(self) -> None:
         """Finish the current chunk and hand everything to the OS now."""
         if not self.closed:
+            self._drain()
             self._writer.flush()
             self._last_flush_wall = time.perf_counter()
 
     def want(self, group: str, t: float) -> bool:
-        """Would a message of ``group`` at sim time ``t`` be logged? (no side effects)"""
+        """Would a message of ``group`` at sim time ``t`` be logged? (no side effects)
+
+        For ``"estimator"`` this is the group (any estimator); :meth:`want_estimator` answers
+        for one estimator."""
         return not self.closed and self._period[group] < _INF and t >= self._next[group]
+
+    def want_estimator(self, name: str, t: float) -> bool:
+        """Would :meth:`estimator` log ``name`` at sim time ``t``? (no side effects)  Lets a
+        caller skip building the arguments (e.g. a covariance diagonal) when it would not."""
+        ec = self._est.get(name)
+        if ec is not None:
+            return t >= ec.next_t
+        return not self.closed and self._period["estimator"] < _INF
 
     def want_frame(self, t: float) -> bool:
         """True when a camera frame at sim time ``t`` would be logged: render only then."""
         return self.want("camera", t)
-
-    def _due(self, group: str, t: float) -> bool:
-        if t < self._next[group]:
-            return False
-        p = self._period[group]
-        if p == _INF:
-            return False
-        self._next[group] = t + p - 1e-9
-        return True
 
     def _ts(self, t_ns: int) -> Any:
         return self._M.Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)
@@ -587,12 +707,17 @@ class RunLog:
                                           for k in self._ctrl_keys])
         self._n_motors = n_motors
         self._state_schema = schema
-        self._ch_state = self._fg.Channel(
+        keys = self._ctrl_keys
+        # ctrl values in schema order; raises KeyError when one is missing (then the slow path)
+        self._ctrl_get = ((lambda d: (d[keys[0]],)) if len(keys) == 1
+                          else operator.itemgetter(*keys) if keys else (lambda d: ()))
+        self._ctrl_nan = [_NAN] * len(keys)
+        self._log_state = self._fg.Channel(
             "/drone/state", message_encoding="protobuf",
             schema=self._fg.Schema(name="ag_uav.DroneState", encoding="protobuf",
                                    data=self._state_schema.schema_data),
             context=self._ctx,
-        )
+        ).base.log
 
     def tick(
         self,
@@ -616,56 +741,101 @@ class RunLog:
             return
         self._t_last = t
         tn = ns(t)
-        ts = None
-        px, py, pz = float(p_true[0]), float(p_true[1]), float(p_true[2])
+        if type(p_true) is tuple and type(q_true_wxyz) is tuple:  # the loop's: plain floats
+            px, py, pz = p_true
+            qw, qx, qy, qz = q_true_wxyz
+        else:
+            px, py, pz = float(p_true[0]), float(p_true[1]), float(p_true[2])
+            qw, qx, qy, qz = (float(q_true_wxyz[0]), float(q_true_wxyz[1]),
+                              float(q_true_wxyz[2]), float(q_true_wxyz[3]))
         self._last_true = (px, py, pz)
-        q = (float(q_true_wxyz[0]), float(q_true_wxyz[1]), float(q_true_wxyz[2]),
-             float(q_true_wxyz[3]))
-        p = (px, py, pz)
-        qref = _yaw_quat(float(yaw_ref))
-        if self._ch_tf is not None and self._due("tf", t):
-            ts = _ts_pb(tn)
-            self._ch_tf.log(enc_transform(ts, self._child["base_link"], p, q), log_time=tn)
-            self._count("/tf")
-        if self._due("pose", t):
-            ts = ts or _ts_pb(tn)
-            self._ch_pose.log(enc_pose_in_frame(ts, p, q), log_time=tn)
-            self._ch_pose_ref.log(enc_pose_in_frame(ts, p_ref, qref), log_time=tn)
-            self._count("/drone/pose")
-            self._count("/drone/pose_ref")
+        nx = self._next
+        head = None
+        pack = _POSE.pack
+        ap = self._pending.append
+        if t >= nx["tf"]:
+            nx["tf"] = t + self._p_tf
+            head = _ts_field(tn)
+            body = head + self._tf_mid + pack(b"\x22\x1b", 9, px, 17, py, 25, pz,
+                                              b"\x2a\x24", 9, qx, 17, qy, 25, qz, 33, qw)
+            ap((self._log_tf, b"\x0a" + _varint(len(body)) + body, tn))
+            self._n_tf += 1
+        if t >= nx["pose"]:
+            nx["pose"] = t + self._p_pose
+            pre = (head or _ts_field(tn)) + _POSE_MID
+            ap((self._log_pose, pre + pack(b"\x0a\x1b", 9, px, 17, py, 25, pz,
+                                           b"\x12\x24", 9, qx, 17, qy, 25, qz, 33, qw), tn))
+            h = 0.5 * yaw_ref
+            ap((self._log_pose_ref, pre + pack(b"\x0a\x1b", 9, p_ref[0], 17, p_ref[1],
+                                               25, p_ref[2], b"\x12\x24", 9, 0.0, 17, 0.0,
+                                               25, math.sin(h), 33, math.cos(h)), tn))
+            self._n_pose += 1
             if p_est is not None:
-                self._ch_pose_est.log(enc_pose_in_frame(ts, p_est, q), log_time=tn)
-                self._count("/drone/pose_est")
-        if self._due("state", t):
-            ctrl = ctrl or {}
+                ap((self._log_pose_est, pre + pack(b"\x0a\x1b", 9, p_est[0], 17, p_est[1],
+                                                   25, p_est[2], b"\x12\x24", 9, qx, 17, qy,
+                                                   25, qz, 33, qw), tn))
+                self._n_pose_est += 1
+        if t >= nx["state"]:
+            nx["state"] = t + self._p_state
             if self._state_schema is None:
-                self._make_state_schema(ctrl, len(motors))
-            rx, ry, rz = float(p_ref[0]), float(p_ref[1]), float(p_ref[2])
+                self._make_state_schema(ctrl or {}, len(motors))
+            rx, ry, rz = p_ref[0], p_ref[1], p_ref[2]
             ex, ey, ez = px - rx, py - ry, pz - rz
             eh = math.sqrt(ex * ex + ey * ey)
+            vx, vy, vz = v_true[0], v_true[1], v_true[2]
+            # ZYX Euler angles (roll, pitch, yaw) in degrees, as _rpy_deg
+            sp = 2.0 * (qw * qy - qz * qx)
+            sp = 1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp)
+            vals = [t, px, py, pz, vx, vy, vz,
+                    math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
+                    * _DEG, math.asin(sp) * _DEG,
+                    math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+                    * _DEG,
+                    rx, ry, rz, v_ref[0], v_ref[1], v_ref[2], yaw_ref]
             if p_est is not None:
-                sx, sy, sz = float(p_est[0]), float(p_est[1]), float(p_est[2])
+                sx, sy, sz = p_est[0], p_est[1], p_est[2]
                 dx, dy, dz = sx - px, sy - py, sz - pz
-                est_v = (v_est[0], v_est[1], v_est[2]) if v_est is not None else (_NAN,) * 3
-                est = (sx, sy, sz, *est_v, dx, dy, dz, math.sqrt(dx * dx + dy * dy))
+                if v_est is not None:
+                    vals += (sx, sy, sz, v_est[0], v_est[1], v_est[2])
+                else:
+                    vals += (sx, sy, sz, _NAN, _NAN, _NAN)
+                vals += (ex, ey, ez, eh, math.sqrt(eh * eh + ez * ez),
+                         dx, dy, dz, math.sqrt(dx * dx + dy * dy))
             else:
-                est = (_NAN,) * 10
-            vx, vy, vz = float(v_true[0]), float(v_true[1]), float(v_true[2])
-            vals = [t, px, py, pz, vx, vy, vz, *_rpy_deg(*q), rx, ry, rz,
-                    v_ref[0], v_ref[1], v_ref[2], yaw_ref, *est[:6],
-                    ex, ey, ez, eh, math.sqrt(eh * eh + ez * ez), *est[6:],
-                    math.sqrt(vx * vx + vy * vy + vz * vz), 1.0 if spray else 0.0,
-                    wind[0], wind[1], wind[2]]
+                vals += (_NAN, _NAN, _NAN, _NAN, _NAN, _NAN,
+                         ex, ey, ez, eh, math.sqrt(eh * eh + ez * ez), _NAN, _NAN, _NAN, _NAN)
+            vals += (math.sqrt(vx * vx + vy * vy + vz * vz), 1.0 if spray else 0.0,
+                     wind[0], wind[1], wind[2])
             nm = self._n_motors
             if nm:
-                m = list(motors)
-                vals += m if len(m) == nm else (m + [_NAN] * nm)[:nm]
-            g = ctrl.get
-            vals += [g(k, _NAN) for k in self._ctrl_keys]
-            self._ch_state.log(self._state_schema.encode(vals), log_time=tn)
-            self._count("/drone/state")
-        self._next_tick = min(self._next[g] for g in self._tick_groups)
-        self._maybe_flush(t)
+                if len(motors) == nm:
+                    vals += motors
+                else:
+                    vals += _fit(list(motors), nm)
+            if ctrl:
+                try:
+                    vals += self._ctrl_get(ctrl)
+                except KeyError:  # a key missing this tick: NaN
+                    g = ctrl.get
+                    vals += [g(k, _NAN) for k in self._ctrl_keys]
+            else:
+                vals += self._ctrl_nan
+            ap((self._log_state, self._state_schema.encode(vals), tn))
+            self._n_state += 1
+        nt = nx["tf"]
+        if nx["pose"] < nt:
+            nt = nx["pose"]
+        if nx["state"] < nt:
+            nt = nx["state"]
+        self._next_tick = nt
+        now = _perf_counter()
+        if now - self._last_flush_wall >= self._flush_wall_s or (
+            t - self._last_flush_sim >= self._flush_sim_s
+        ):
+            self._drain()
+            self._writer.flush()
+            self._last_flush_wall = now
+            self._last_flush_sim = t
 
     SPRAY_FIELDS = ("t", "tank_l", "mass_kg", "flow_lps", "nozzles", "power_w", "energy_wh",
                     "battery_frac", "sortie", "ground")
@@ -698,13 +868,16 @@ class RunLog:
 
     def gps(self, t: float, fix_xyz: Sequence[float]) -> None:
         """A GPS fix (local ENU metres) -> ``/gps`` PoseInFrame."""
-        if self.closed or self._ch_gps is None or not self._due("gps", t):
+        if t < self._next["gps"]:  # inf when off or closed
             return
+        self._next["gps"] = t + self._p_gps
         tn = ns(t)
-        z = float(fix_xyz[2]) if len(fix_xyz) > 2 else 0.0
-        self._ch_gps.log(enc_pose_in_frame(_ts_pb(tn), (float(fix_xyz[0]), float(fix_xyz[1]), z),
-                                           (1.0, 0.0, 0.0, 0.0)), log_time=tn)
-        self._count("/gps")
+        z = fix_xyz[2] if len(fix_xyz) > 2 else 0.0
+        self._pending.append((self._log_gps, _ts_field(tn) + _POSE_MID
+                              + _POSE.pack(b"\x0a\x1b", 9, fix_xyz[0], 17, fix_xyz[1], 25, z,
+                                           b"\x12\x24", 9, 0.0, 17, 0.0, 25, 0.0, 33, 1.0),
+                              tn))
+        self._n_gps += 1
 
     def estimator(
         self,
@@ -722,44 +895,54 @@ class RunLog:
         ``pos`` is the estimator's position estimate (2 or 3 values); default ``x[:3]`` (pass it
         when the state is not ordered position-first).  ``err`` = pos - the last true position
         given to :meth:`tick`.  The schema is fixed at the first call per name (vector lengths,
-        ``extra`` keys); later missing values are written as NaN.
+        ``extra`` keys); later missing values are written as NaN.  float64 numpy vectors are
+        copied into the message as they are (a packed ``repeated double`` is their raw bytes).
         """
-        if self.closed or self._period["estimator"] == _INF:
+        ec = self._est.get(name)
+        if ec is None:
+            if self.closed or self._period["estimator"] == _INF:
+                return
+            xs = _flat(x)
+            ec = self._est[name] = self._make_est(name, len(xs), innovation, extra)
+        elif t < ec.next_t:  # inf once closed
             return
-        nxt = self._next_est.get(name, -_INF)
-        if t < nxt:
-            return
-        self._next_est[name] = t + self._period["estimator"] - 1e-9
-        xs = _flat(x)
-        st = self._est.get(name)
-        if st is None:
-            st = self._est[name] = self._make_est(name, len(xs), innovation, extra)
-        schema, ch, n, m, keys, topic = st
-        vals = [t]
-        vals += xs if len(xs) == n else _fit(xs, n)
-        pd = _flat(p_diag)
-        vals += pd if len(pd) == n else _fit(pd, n)
-        if m:
-            vals += _fit(_flat(innovation), m) if innovation is not None else [_NAN] * m
+        ec.next_t = t + self._p_est
+        n = ec.n
         if pos is None:
-            pv = _fit(xs[:3], 3)
-            two = len(xs) == 2
+            pl = _flat(x)[:3]
         else:
-            pl = _flat(pos)
-            pv = _fit(pl, 3)
-            two = len(pl) == 2
-        if two:
-            pv[2] = self._last_true[2]
+            pl = pos if len(pos) == 3 else _flat(pos)
         tx, ty, tz = self._last_true
-        dx, dy, dz = pv[0] - tx, pv[1] - ty, pv[2] - tz
-        vals += [*pv, dx, dy, dz, math.sqrt(dx * dx + dy * dy)]
-        if keys:
+        if len(pl) == 3:
+            px, py, pz = pl
+        else:
+            pf = _fit(list(pl), 2)
+            px, py, pz = pf[0], pf[1], (tz if len(pl) == 2 else _NAN)
+        dx, dy, dz = px - tx, py - ty, pz - tz
+        tail = [px, py, pz, dx, dy, dz, math.sqrt(dx * dx + dy * dy)]
+        if ec.keys:
             g = (extra or {}).get
-            vals += [g(k, _NAN) for k in keys]
-        ch.log(schema.encode(vals), log_time=ns(t))
-        self._count(topic)
+            tail += [g(k, _NAN) for k in ec.keys]
+        if ec.fast:
+            parts = [ec.pre_t, _D.pack(t), ec.hx, _f8bytes(x, n), ec.hp, _f8bytes(p_diag, n)]
+            if ec.m:
+                parts.append(ec.hi)
+                parts.append(_f8bytes(innovation, ec.m) if innovation is not None
+                             else ec.nan_i)
+            parts.append(ec.tail.pack(tail))
+            msg = b"".join(parts)
+        else:  # zero-length state vector: the generic flat encoding
+            vals = [t]
+            vals += _fit(_flat(x), n)
+            vals += _fit(_flat(p_diag), n)
+            if ec.m:
+                vals += (_fit(_flat(innovation), ec.m) if innovation is not None
+                         else [_NAN] * ec.m)
+            msg = ec.schema.encode(vals + tail)
+        self._pending.append((ec.log, msg, ns(t)))
+        ec.count += 1
 
-    def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> tuple[Any, ...]:
+    def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> _EstChan:
         m = len(_flat(innovation)) if innovation is not None else 0
         keys = tuple(extra or {})
         fields = [("t", 0), ("x", n), ("p_diag", n)]
@@ -781,7 +964,7 @@ class RunLog:
                                    data=schema.schema_data),
             context=self._ctx,
         )
-        return schema, ch, n, m, keys, topic
+        return _EstChan(schema, ch.base.log, topic, n, m, keys)
 
     # ---------------------------------------------------------------- scene
     def _scene_entities(self, t: float, entities: list[Any], topic: str) -> None:
@@ -790,6 +973,7 @@ class RunLog:
         ch = self._scene_ch.get(topic)
         if ch is None:
             ch = self._scene_ch[topic] = self._fc.SceneUpdateChannel(topic, context=self._ctx)
+        self._drain()
         ch.log(self._M.SceneUpdate(entities=entities), log_time=ns(t))
         self._count(topic)
         self._writer.flush()
@@ -926,6 +1110,7 @@ class RunLog:
                 base,
             )
         img, cal, base = ch
+        self._drain()
         fy = 0.5 * height / math.tan(math.radians(fovy_deg) / 2.0)
         fx = fy
         cx, cy = 0.5 * width, 0.5 * height
@@ -964,6 +1149,7 @@ class RunLog:
         """Final metrics -> metadata record ``summary`` and attachment ``summary.json``."""
         if self.closed:
             return
+        self._drain()
         self._writer.write_metadata("summary", {k: _meta_str(v) for k, v in summary.items()})
         self._writer.attach(log_time=ns(self._t_last), create_time=time.time_ns(),
                             name="summary.json", media_type="application/json",
@@ -991,7 +1177,12 @@ class RunLog:
             return
         self.closed = True
         self._next_tick = _INF
+        for g in self._next:
+            self._next[g] = _INF
+        for ec in self._est.values():
+            ec.next_t = _INF
         try:
+            self._drain()
             self._writer.close()
         finally:
             _OPEN.discard(self)

@@ -21,6 +21,7 @@ from mcap.reader import NonSeekingReader, make_reader
 from ag_uav.runlog import (
     FlatSchema,
     RunLog,
+    _rpy_deg,
     _str_field,
     _ts_pb,
     enc_pose_in_frame,
@@ -276,3 +277,93 @@ def test_synthetic_run_is_deterministic(tmp_path):
 
 def test_uses_mmap_module():  # keeps the child's imports honest on this platform
     assert hasattr(mmap, "mmap") and os.name == "posix"
+
+
+def test_estimator_vectors_as_arrays_or_lists_encode_the_same(tmp_path):
+    """float64 arrays go in as raw bytes, anything else through struct: same decoded values,
+    including a strided covariance diagonal and NaN padding / truncation of odd lengths."""
+    path = tmp_path / "run.mcap"
+    P = np.arange(36.0).reshape(6, 6) * 0.5
+    x = np.array([1.0, -2.0, 3.5, 0.25, -0.125, 9.0])
+    y = np.array([0.5, -0.75, 1.25])
+    with RunLog(path, metadata={}, config_toml="", layout=False) as log:
+        log.tick(0.0, **_tick_kwargs((1.0, -1.0, 2.0)))
+        log.estimator(0.0, "arr", x, np.diag(P), y, pos=(x[0], x[2], x[4]))
+        log.estimator(0.0, "lst", x.tolist(), np.diag(P).tolist(), y.tolist(),
+                      pos=(1.0, 3.5, -0.125))
+        # later calls: a short float32 state, a long diagonal, no innovation
+        log.estimator(0.2, "arr", x[:4].astype(np.float32), np.ones(8), None, pos=x[:3])
+    est = {}
+    for topic, _t, d in _decoded(path):
+        if topic.startswith("/estimator/"):
+            est.setdefault(topic, []).append(d)
+    a0, l0 = est["/estimator/arr"][0], est["/estimator/lst"][0]
+    assert a0.SerializeToString() == l0.SerializeToString()
+    assert list(a0.p_diag) == [0.0, 3.5, 7.0, 10.5, 14.0, 17.5]
+    assert list(a0.innovation) == [0.5, -0.75, 1.25]
+    assert a0.err.x == pytest.approx(0.0) and a0.err.y == pytest.approx(4.5)
+    assert a0.err.z == pytest.approx(-2.125) and a0.err.horiz == pytest.approx(4.5)
+    a1 = est["/estimator/arr"][1]
+    assert list(a1.x)[:4] == [1.0, -2.0, 3.5, 0.25] and all(math.isnan(v) for v in a1.x[4:])
+    assert list(a1.p_diag) == [1.0] * 6 and all(math.isnan(v) for v in a1.innovation)
+    assert a1.pos.y == -2.0
+
+
+def test_want_estimator_follows_each_estimators_clock(tmp_path):
+    with RunLog(tmp_path / "a.mcap", metadata={}, config_toml="", layout=False) as log:
+        assert log.want_estimator("kf", 0.0)  # unseen: would be logged
+        log.estimator(0.0, "kf", np.zeros(6), np.ones(6), np.zeros(3))
+        assert not log.want_estimator("kf", 0.05)  # full set: estimators at 10 Hz
+        assert log.want_estimator("kf", 0.1) and log.want_estimator("mckf", 0.05)
+        log.estimator(0.05, "kf", np.zeros(6), np.ones(6), np.zeros(3))  # skipped
+        assert log.counts["/estimator/kf"] == 1
+    assert not log.want_estimator("kf", 10.0) and not log.want_estimator("mckf", 10.0)
+    with RunLog(tmp_path / "b.mcap", channels=["state"], metadata={}, config_toml="",
+                layout=False) as log:
+        assert not log.want_estimator("kf", 0.0)
+
+
+def test_buffered_messages_precede_a_frame_and_counts_match_the_file(tmp_path):
+    """Hot-channel messages are handed to the writer in bursts: in order, before any frame or
+    scene message, and all of them on close."""
+    from mcap.reader import make_reader as mr
+
+    path = tmp_path / "run.mcap"
+    with RunLog(path, metadata={}, config_toml="", layout=False,
+                flush_sim_s=100.0, flush_wall_s=100.0) as log:
+        for k in range(30):
+            log.tick(k * 0.01, **_tick_kwargs((k * 0.01, 0.0, 2.0)))
+            log.gps(k * 0.01, (k * 0.01, 0.0, 2.0))
+        log.frame(0.3, "chase", b"\xff\xd8jpeg", 32, 24, 60.0)
+        log.tick(0.3, **_tick_kwargs((0.3, 0.0, 2.0)))
+        counts = log.counts
+    with open(path, "rb") as f:
+        order = [(c.topic, m.log_time) for _, c, m in
+                 mr(f).iter_messages(log_time_order=False)]
+    file_counts = {}
+    for topic, _ in order:
+        file_counts[topic] = file_counts.get(topic, 0) + 1
+    assert counts == file_counts and counts["/gps"] == 30 and counts["/drone/state"] == 7
+    cam = order.index(("/camera/chase", 300_000_000))
+    assert all(tn <= 300_000_000 for _, tn in order[:cam])
+    assert [tn for topic, tn in order if topic == "/drone/state"] == [
+        k * 50_000_000 for k in range(7)]
+    assert order[-1][1] == 300_000_000 and order[cam - 1][1] == 290_000_000
+
+
+def test_state_attitude_and_numpy_inputs(tmp_path):
+    """Roll/pitch/yaw of a tilted, yawed body, from numpy inputs and from the loop's tuples."""
+    path = tmp_path / "run.mcap"
+    q = np.array([0.9, 0.1, -0.2, 0.3])
+    q /= np.linalg.norm(q)
+    with RunLog(path, channels=["state"], metadata={}, config_toml="", layout=False) as log:
+        kw = _tick_kwargs((1.0, 2.0, 3.0))
+        log.tick(0.0, **(kw | {"q_true_wxyz": q, "p_true": np.array([1.0, 2.0, 3.0])}))
+        log.tick(0.05, **(kw | {"q_true_wxyz": tuple(q.tolist()), "p_true": (1.0, 2.0, 3.0)}))
+    st = [d for topic, _, d in _decoded(path) if topic == "/drone/state"]
+    expect = _rpy_deg(*q.tolist())
+    assert min(abs(a) for a in expect) > 3.0  # all three angles non-trivial
+    for d in st:
+        assert (d.rpy.roll, d.rpy.pitch, d.rpy.yaw) == pytest.approx(expect, abs=1e-12)
+        assert (d.pos.x, d.pos.y, d.pos.z) == (1.0, 2.0, 3.0)
+    assert len(st) == 2
