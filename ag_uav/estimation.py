@@ -171,7 +171,7 @@ class FilterBank:
                 # consistency record: tick index of this estimate, NIS, position covariance
                 self.cons[name].append((len(self.est[name]), float(getattr(f, "nis", np.nan)),
                                         f.P[self._pp].copy()))
-                if self.log is not None:
+                if self.log is not None and self.log.want_estimator(name, t):
                     x = f.x
                     self.log.estimator(t, name, x, np.diag(f.P), getattr(f, "y", None),
                                        pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
