@@ -10,7 +10,7 @@ compared with each other (not with figures from another machine or another run):
   ``KalmanFilter`` (fed column vectors, its native layout), MCKF, PCA-KF and PCA-MCKF in both
   PCA readings (hankel, channels), all with their default options (σ = 2, ``max_iter`` = 10,
   window 20).
-- **in-loop model** (what :mod:`ag_uav.estimation` runs: 3-D CV, 6 states, 3 measurements,
+- **in-loop model** (what :mod:`ag_uav.estimation` runs: 3-D CVB, 9 states, 3 measurements,
   predicted at 100 Hz, a fix every 10th tick): µs per ``predict()`` and per ``update(z)``
   separately (update = time of the predict+update loop − time of the predict-only loop), and
   µs of filter work per second of flight.
@@ -159,10 +159,11 @@ def bench_estimators(repeats: int = 5, n: int = 2000, seed: int = 0) -> dict[str
 
         # ------------------------------------------------------------- in-loop model
         dt = 1.0 / LOOP_PREDICT_HZ
-        lm = motion_model("cv", 3, dt, q=0.05, r=[1.0, 1.0, 0.04])
+        # the bank's model: CV + IMU input-bias states (cvb), RTK-class R, radar height
+        lm = motion_model("cvb", 3, dt, q=1e-4, q_bias=2e-4, r=[1e-4, 1e-4, 0.0025])
         _, Zl = _simulate(lm.F, lm.Q, lm.H, lm.R, n, rng)
         Zl_list = [z.copy() for z in Zl]
-        x0l, P0l = np.zeros(lm.n), np.diag([1.0, 4.0, 1.0, 4.0, 0.04, 4.0])
+        x0l, P0l = np.zeros(lm.n), np.diag([1e-4, 4.0, 0.005] * 2 + [0.0025, 4.0, 0.005])
         loop_makers = {
             name: (lambda name=name: estimators.make(
                 name, F=lm.F, H=lm.H, Q=lm.Q, R=lm.R, x0=x0l, P0=P0l))
@@ -194,7 +195,8 @@ def bench_estimators(repeats: int = 5, n: int = 2000, seed: int = 0) -> dict[str
                 if name != "filterpy_kf":
                     ref = loop["filterpy_kf"]
                     d["ratio_to_filterpy"] = round(d["us_per_flight_s"] / ref["us_per_flight_s"], 3)
-        loop["model"] = (f"3-D CV, 6 states, 3 measurements; predict {LOOP_PREDICT_HZ:g} Hz, "
+        loop["model"] = (f"3-D CVB (CV + input bias), 9 states, 3 measurements; predict "
+                         f"{LOOP_PREDICT_HZ:g} Hz, "
                          f"fix every {LOOP_FIX_EVERY} ticks")
         out["in_loop_model"] = loop
         out["n"], out["repeats"] = n, repeats
