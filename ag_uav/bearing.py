@@ -247,6 +247,8 @@ class BearingFeedback(FilterBank, Feedback):
             self._k_next += 1
             z = self.measure(p_true)
             self.n_meas += 1
+            if self.log is not None:
+                self.log.set_truth(p_true)
         if not self.initialised:
             self._init(p_true)
             z = None  # the first epoch's measurement is spent on nothing: we start at home

@@ -254,6 +254,7 @@ class EstimatorFeedback(FilterBank, Feedback):
             self.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
             if self.log is not None:
                 self.log.gps(t, z)
+                self.log.set_truth(p_true)
         if not self.initialised:
             if z is None:
                 return p_true, v_true  # no fix yet: nothing to fly on (only at t = 0)

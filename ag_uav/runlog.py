@@ -879,6 +879,12 @@ class RunLog:
                               tn))
         self._n_gps += 1
 
+    def set_truth(self, p_true: Sequence[float]) -> None:
+        """The true position at the time of the next ``estimator`` calls (their ``err``): the
+        estimator bank calls it before logging a fix's update, so that ``err`` is not measured
+        against a pose up to one state period old (at 5 m/s, 50 ms is 0.25 m)."""
+        self._last_true = (float(p_true[0]), float(p_true[1]), float(p_true[2]))
+
     def estimator(
         self,
         t: float,

@@ -531,7 +531,8 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
         axs[1].set_xticks(range(len(names)), names, rotation=30)
         axs[1].set_ylabel("RMSE [m]")
         for i, v in enumerate(rmse):
-            axs[1].text(i, v, f"{v:.2f}", ha="center", va="bottom", fontsize=8)
+            axs[1].text(i, v, f"{v:.2f}" if v >= 0.1 else f"{v:.3f}", ha="center",
+                        va="bottom", fontsize=8)
         fig.suptitle("Estimator comparison (error against the true position)")
         p = out / "estimators.png"
         fig.savefig(p, dpi=110, bbox_inches="tight")

@@ -190,6 +190,18 @@ def test_estimator_error_against_true_position(tmp_path):
     assert e.pos.z == 2.0 and e.extra.nis == 2.0 and list(e.innovation) == [0.5, 0.5]
 
 
+def test_estimator_error_against_the_truth_at_the_fix(tmp_path):
+    """Between state ticks the bank sets the truth at the fix: err is not against a stale pose
+    (a pose 50 ms old is 0.25 m behind at 5 m/s; the default mission's estimate is ~1 cm)."""
+    path = tmp_path / "run.mcap"
+    with RunLog(path, metadata={}, config_toml="", layout=False) as log:
+        log.tick(0.0, **_tick_kwargs((3.0, 4.0, 2.0)))
+        log.set_truth((3.25, 4.0, 2.0))      # the vehicle moved on since the last state tick
+        log.estimator(0.03, "kf", [3.26, 5.0, 4.0, 0.0], [1, 1, 1, 1], None, pos=(3.26, 4.0))
+    e = [d for topic, _, d in _decoded(path) if topic == "/estimator/kf"][0]
+    assert e.err.x == pytest.approx(0.01) and e.err.horiz == pytest.approx(0.01)
+
+
 _CHILD = textwrap.dedent("""
     import mmap, struct, sys, time
     sys.path.insert(0, {root!r})
