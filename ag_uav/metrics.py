@@ -68,12 +68,12 @@ def off_target(field, tracks, swath: float, buffer_m: float = 0.0) -> dict[str, 
     if not fps:
         return {"outside": 0.0, "holes": 0.0, "sprayed": 0.0}
     union = shapely.union_all(fps)
-    poly = field.polygon
-    outer = shapely.Polygon(poly.exterior.coords)
+    parts = list(field.parts)   # a multi-part field: every part with its own holes
+    outer = shapely.union_all([shapely.Polygon(p.exterior.coords) for p in parts])
     grown = outer.buffer(buffer_m, join_style="mitre") if buffer_m > 0 else outer
     outside = union.difference(grown).area
     holes = 0.0
-    for ring in poly.interiors:
+    for ring in (r for p in parts for r in p.interiors):
         h = shapely.Polygon(ring.coords)
         h = h.buffer(-buffer_m, join_style="mitre") if buffer_m > 0 else h
         if not h.is_empty:
