@@ -96,7 +96,9 @@ def test_controller_surfaces_at_half_alpha():
 def test_plot_controller_writes_figures(tmp_path):
     from ag_uav.controller_plots import plot_controller
 
-    paths, stats = plot_controller(None, tmp_path, {"controller.xy.alpha": 0.3})
+    paths, stats = plot_controller(None, tmp_path, {"controller.xy.alpha": 0.3,
+                                                    "controller.z.alpha": 0.5,
+                                                    "controller.z.cm": 0.7})
     assert sorted(p.name for p in paths) == ["fou_xy.png", "fou_z.png", "surfaces_xy.png",
                                              "surfaces_z.png"]
     assert all(p.stat().st_size > 1000 for p in paths)
