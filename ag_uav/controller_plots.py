@@ -62,6 +62,15 @@ def surface_stats(g: Any, reducer: str = "km", ctype: str = "it2-fpid") -> dict[
     return st
 
 
+def _quantize(path: Path, colors: int = 96) -> None:
+    """Palette PNG (small files for the docs); the figure is unchanged to the eye."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        q = im.convert("RGB").quantize(colors=colors)
+    q.save(path, optimize=True)
+
+
 def plot_fou(g: Any, title: str, path: Path) -> Path:
     import matplotlib
 
@@ -72,21 +81,22 @@ def plot_fou(g: Any, title: str, path: Path) -> Path:
 
     x = np.linspace(-1.0, 1.0, 401)
     up, lo = upper_memberships(x), lower_memberships(x, alpha=g.alpha)
-    fig, ax = plt.subplots(figsize=(5.2, 2.8))
+    fig, ax = plt.subplots(figsize=(6.0, 2.9))
     for k, s in enumerate(SET_NAMES):
         ax.fill_between(x, lo[s], up[s], color=f"C{k}", alpha=0.25)
         ax.plot(x, up[s], color=f"C{k}", lw=1.4, label=f"{s} upper")
         ax.plot(x, lo[s], color=f"C{k}", lw=1.0, ls="--", label=f"{s} lower")
     ax.set_xlabel("E or dE (normalised)")
     ax.set_ylabel("membership")
-    ax.set_title(f"{title}: footprint of uncertainty, α = {g.alpha:.3g} "
-                 f"(h_Z = {g.alpha:.3g}, h_N = h_P = {1 - g.alpha:.3g})", fontsize=8)
+    ax.set_title(f"{title}: footprint of uncertainty\nα = {g.alpha:.3g}: "
+                 f"h_Z = {g.alpha:.3g}, h_N = h_P = {1 - g.alpha:.3g}", fontsize=8)
     ax.set_ylim(0, 1.05)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=6, ncol=3, loc="upper center")
+    ax.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=80)
     plt.close(fig)
+    _quantize(path)
     return path
 
 
@@ -123,8 +133,9 @@ def plot_surfaces(g: Any, reducer: str, ctype: str, title: str, path: Path) -> P
         ax.set_xlabel("E", fontsize=7)
     fig.suptitle(f"{title}: Φ(E, dE), α = {g.alpha:.3g}, c_m = {g.cm:.3g}, ζ = {g.zeta:.3g}",
                  fontsize=8)
-    fig.savefig(path, dpi=90)
+    fig.savefig(path, dpi=72, bbox_inches="tight")
     plt.close(fig)
+    _quantize(path)
     return path
 
 
