@@ -103,3 +103,15 @@ def test_plot_controller_writes_figures(tmp_path):
                                              "surfaces_z.png"]
     assert all(p.stat().st_size > 1000 for p in paths)
     assert stats["xy"]["max|IT2-NT - T1|"] > 0.01 > stats["z"]["max|IT2-NT - T1|"]
+
+
+def test_cli_plot_controller(tmp_path, capsys):
+    from ag_uav.cli import main
+
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('[controller]\ntype = "t1-fpid"\n[controller.xy]\nalpha = 0.5\ncm = 0.7\n')
+    assert main(["plot", "--controller", str(cfg), "-o", str(tmp_path / "p")]) == 0
+    out = capsys.readouterr().out
+    assert "max|IT2-NT - T1| = 2.22e-16" in out or "max|IT2-NT - T1| = 0" in out
+    assert (tmp_path / "p" / "surfaces_z.png").is_file()
+    assert main(["plot", "--controller", "nope.toml"]) == 2
