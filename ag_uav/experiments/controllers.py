@@ -205,7 +205,8 @@ def paired_table(rows: list[dict[str, Any]], ctrls: list[str], conds: list[str]
                     sig = ""
                     if abs(m) > h:
                         sig = " better" if (m < 0) == lower else " worse"
-                    line.append(f"{pct:+.1f} ± {hp:.1f} %{sig} ({better}/{n})")
+                    nd = 3 if col == "coverage_fraction" else 1  # coverage differs by ~0.01 %
+                    line.append(f"{pct:+.{nd}f} ± {hp:.{nd}f} %{sig} ({better}/{n})")
                     recs.append({"condition": cond, "controller": c, "vs": ref, "metric": col,
                                  "diff": m, "diff_ci95": h, "ref_mean": mb, "pct": pct,
                                  "pct_ci95": hp, "n": n, "better": better})
