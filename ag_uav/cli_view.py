@@ -15,10 +15,27 @@ def _show(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
+    if args.controller is not None or args.run is None:
+        return _plot_controller(args)
     from .viewing import mcap_path, plot
 
     out = Path(args.out) if args.out else mcap_path(args.run).parent / "plots"
     for p in plot(args.run, out):
+        print(p)
+    return 0
+
+
+def _plot_controller(args: argparse.Namespace) -> int:
+    from .config import ConfigError, parse_set_items
+    from .controller_plots import plot_controller
+
+    if args.run is not None and args.controller is not None:
+        raise ConfigError("plot: give a run or --controller CONFIG, not both")
+    cfg = None if args.controller in (None, "default") else args.controller
+    paths, stats = plot_controller(cfg, args.out or "plots/controller", parse_set_items(args.set))
+    for axis, st in stats.items():
+        print(f"{axis}: " + ", ".join(f"{k} = {v:.3g}" for k, v in st.items()))
+    for p in paths:
         print(p)
     return 0
 
@@ -45,12 +62,20 @@ def register(sub) -> None:
     s.add_argument("run", help=run_help)
     s.set_defaults(func=_show)
 
-    p = sub.add_parser("plot", help="PNG plots of a run: map, errors, controller, estimators",
+    p = sub.add_parser("plot", help="PNG plots of a run (map, errors, controller, estimators) "
+                       "or of a controller config (--controller)",
                        description="Write PNG plots of a run: top-down map (field, path, true "
                                    "and estimated tracks, GPS fixes), errors over time, "
                                    "controller signals, estimator comparison.")
-    p.add_argument("run", help=run_help)
-    p.add_argument("-o", "--out", metavar="DIR", help="output folder (default: RUN/plots)")
+    p.add_argument("run", nargs="?", help=run_help)
+    p.add_argument("-o", "--out", metavar="DIR", help="output folder (default: RUN/plots, or "
+                   "plots/controller with --controller)")
+    p.add_argument("--controller", metavar="CONFIG", help="instead of a run: figures of a "
+                   "controller config (footprints of uncertainty; control surfaces of IT2 with "
+                   "each reducer, type-1 and PID, and their differences); \"default\" = the "
+                   "shipped config")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="with --controller: override a config key")
     p.set_defaults(func=_plot)
 
     v = sub.add_parser("video", help="MP4 from the logged camera frames",

@@ -168,14 +168,14 @@ class BatteryConfig:
 class AxisGains:
     """Gains of one position-axis controller (the keys used depend on ``controller.type``)."""
 
-    ke: float = _f(1.386, "IT2/T1-FPID: error scaling Ke (1/m)", gt=0)
-    kd: float = _f(1.392, "IT2/T1-FPID: error-rate scaling Kd (s/m)", gt=0)
-    k0: float = _f(5.058, "IT2/T1-FPID: PD-part output gain K0 (m/s^2)", ge=0)
-    k1: float = _f(2.38, "IT2/T1-FPID: PI-part output gain K1 (m/s^3)", ge=0)
-    alpha: float = _f(0.5, "IT2-FPID: lower-MF height parameter (h_Z = alpha, h_N = h_P = "
+    ke: float = _f(1.151, "IT2/T1-FPID: error scaling Ke (1/m)", gt=0)
+    kd: float = _f(1.103, "IT2/T1-FPID: error-rate scaling Kd (s/m)", gt=0)
+    k0: float = _f(5.465, "IT2/T1-FPID: PD-part output gain K0 (m/s^2)", ge=0)
+    k1: float = _f(2.943, "IT2/T1-FPID: PI-part output gain K1 (m/s^3)", ge=0)
+    alpha: float = _f(0.4638, "IT2-FPID: lower-MF height parameter (h_Z = alpha, h_N = h_P = "
                       "1 - alpha)", gt=0, le=1)
     zeta: float = _f(0.5, "IT2-FPID: weight of the zeta type reducer", ge=0, le=1)
-    cm: float = _f(0.7, "FPID: consequent of the off-diagonal rules", gt=0, le=1)
+    cm: float = _f(0.6447, "FPID: consequent of the off-diagonal rules", gt=0, le=1)
     reducer: str = _f("km", "IT2-FPID type reducer", choices=REDUCERS)
     kp: float = _f(2.2, "PID: proportional gain (1/s^2)", ge=0)
     ki: float = _f(0.3, "PID: integral gain (1/s^3)", ge=0)
@@ -197,10 +197,11 @@ class ControllerConfig:
     tilt_max_deg: float = _f(30.0, "tilt limit of the thrust vector (deg)", gt=0, lt=80)
     accel_feedforward: bool = _f(True, "add the reference acceleration to the command")
     # defaults: BB-BC tuned (examples/tune_default.toml: ITAE on 1 m steps with a soft 5 %
-    # overshoot bound + the first 35 s of the default mission, 20 x 20, seed 1)
+    # overshoot bound + the first 35 s of the default mission, 30 x 40, seed 1; gains, alpha, c_m)
     xy: AxisGains = field(default_factory=AxisGains, metadata={"help": "horizontal axes"})
-    z: AxisGains = field(default_factory=lambda: AxisGains(ke=2.626, kd=1.477, k0=7.815,
-                                                           k1=2.571),
+    z: AxisGains = field(default_factory=lambda: AxisGains(ke=2.188, kd=1.317, k0=7.983,
+                                                           k1=3.342, alpha=0.6106,
+                                                           cm=0.6388),
                          metadata={"help": "vertical axis"})
     attitude: AttitudeGains = field(default_factory=AttitudeGains,
                                     metadata={"help": "geometric attitude controller"})

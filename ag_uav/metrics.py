@@ -103,6 +103,10 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     cov, ovl = spray_coverage(res.field, tracks, cfg.mission.swath_m) if tracks else (0.0, 0.0)
     off = off_target(res.field, tracks, cfg.mission.swath_m, cfg.spray.offtarget_buffer_m)
     steps = np.diff(res.p_true, axis=0)
+    # motor effort: RMS rate of the rotor-thrust commands over the spraying part (N/s per rotor)
+    f_mis = np.asarray(res.motors, dtype=float)[mission]
+    motor_rate = (_rms(np.diff(f_mis, axis=0).ravel() * cfg.sim.control_hz)
+                  if len(f_mis) > 1 else None)
     path_len = float(np.sum(np.linalg.norm(steps, axis=1))) if n > 1 else 0.0
 
     end = np.asarray(plan.end, dtype=float)
@@ -147,6 +151,7 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
         "cross_track_rmse_m": r(_rms(ct_spray)),
         "cross_track_max_m": r(float(np.max(ct_spray)) if ct_spray.size else None),
         "altitude_rmse_m": r(alt),
+        "motor_rate_rms_nps": r(motor_rate),
         "coverage_fraction": r(cov, 5),
         "overlap_fraction": r(ovl, 5),
         "sprayed_area_m2": r(off["sprayed"], 1),

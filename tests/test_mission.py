@@ -72,6 +72,17 @@ def test_summary_has_the_documented_keys(default_run):
     json.dumps(res.summary)  # serialisable
 
 
+def test_motor_effort_metric(default_run):
+    """RMS rate of the rotor-thrust commands over the spray part, recomputed from the record."""
+    cfg, res = default_run
+    idx = np.flatnonzero(res.spray)
+    f = np.asarray(res.motors)[idx[0]:idx[-1] + 1]
+    rate = np.diff(f, axis=0) * cfg.sim.control_hz
+    assert res.summary["motor_rate_rms_nps"] == pytest.approx(
+        float(np.sqrt(np.mean(rate**2))), abs=1e-4)
+    assert 1.0 < res.summary["motor_rate_rms_nps"] < 500.0
+
+
 def test_same_seed_same_flight(default_run):
     cfg, res = default_run
     cfg2 = ag_uav.load_config()
