@@ -216,7 +216,7 @@ def test_small_tank_returns_to_base_and_resumes(small_tank_run):
     z, vz = res.p_true[:, 2], res.v_true[:, 2]
     for a in np.flatnonzero(np.diff(ground.astype(int)) == 1):
         i = a - 300 + int(np.flatnonzero(z[a - 300:a + 1] < 0.345)[0])
-        assert -0.35 < vz[i] < -0.2
+        assert -0.4 < vz[i] < -0.2  # measured -0.30 to -0.35 (gains of 2026-11)
     # the tank is refilled at each take-off: the mass jumps back up
     jumps = np.flatnonzero(np.diff(ser["mass_kg"]) > 0.3)
     assert len(jumps) == 2
