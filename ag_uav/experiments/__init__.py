@@ -20,3 +20,17 @@ def write_csv(path, rows) -> None:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
+
+
+def add_batch_arguments(p, out: str) -> None:
+    """The options of an experiment that runs as a batch job: ``--set``, ``--out``,
+    ``--workers``, ``--dask``, ``--resume``, ``--fresh``, ``--quiet``."""
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override any config key of the base config (TOML value)")
+    p.add_argument("--out", default=out, metavar="DIR", help="output folder")
+    p.add_argument("--workers", "-j", type=int, default=None, help="worker processes "
+                   "(default: CPU count)")
+    p.add_argument("--dask", default=None, metavar="ADDR", help='"local" or tcp://host:port')
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run")
+    p.add_argument("--fresh", action="store_true", help="discard an earlier run in --out")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")

@@ -77,16 +77,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="folder holding the controller_*.toml presets")
     p.add_argument("--gps-preset", default="rtk", help="GPS noise preset")
     p.add_argument("--estimator", default="pca-mckf", help="estimator flown on (no shadows)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override any config key of the base config (TOML value)")
-    p.add_argument("--out", default="runs/experiment-controllers", metavar="DIR",
-                   help="output folder")
-    p.add_argument("--workers", "-j", type=int, default=None, help="worker processes "
-                   "(default: CPU count)")
-    p.add_argument("--dask", default=None, metavar="ADDR", help='"local" or tcp://host:port')
-    p.add_argument("--resume", action="store_true", help="continue an interrupted run")
-    p.add_argument("--fresh", action="store_true", help="discard an earlier run in --out")
-    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    from . import add_batch_arguments
+
+    add_batch_arguments(p, "runs/experiment-controllers")
 
 
 def _split(s: str, allowed: dict[str, Any], what: str) -> list[str]:
