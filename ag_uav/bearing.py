@@ -37,13 +37,13 @@ Filter (``filter``): ``"mcc-ekf"`` (:class:`estimators.mccekf.MCCEKF`, kernel σ
 radar σ²)`` with ``r_var`` by default the noise's total variance (mixture: s²((1 − ϑ)γ₁ + ϑγ₂),
 the consistent Gaussian approximation; gaussian: s²γ₁); the same R for every filter.
 
-Prediction exactly as :class:`~ag_uav.estimation.EstimatorFeedback`: 3-D constant-velocity model
-``[x, vx, y, vy, z, vz]`` at the control rate, process noise ``estimator.q``, and with
-``estimator.imu`` the measured acceleration (mean over the last control period plus white noise
-``estimator.imu_sigma_mps2``) as a known input ``B a``. Initialisation at the first tick: the
-true position (plus ``init_offset_m``, default 0: a GPS-denied drone knows its take-off spot)
-with ``P0 = diag(init_sigma_m², init_sigma_m², init_sigma_m², 0.25, 0.25, 0.25)`` (position
-standard deviation 3 m by default).
+Prediction exactly as :class:`~ag_uav.estimation.EstimatorFeedback`: the ``estimator.model``
+motion model (``"cvb"``: constant velocity + IMU input-bias states, or ``"cv"``) at the control
+rate, process noise from the IMU's figures (``estimator.q``), and with ``estimator.imu`` the
+IMU's world-frame acceleration as a known input ``B a`` (:mod:`ag_uav.imu`). Initialisation at
+the first tick: the true position (plus ``init_offset_m``, default 0: a GPS-denied drone knows
+its take-off spot) with position variance ``init_sigma_m²`` (3 m by default), velocity variance
+0.25 and, for cvb, the bias states at the IMU's turn-on figures.
 
 Shadows (``shadow``) are further filters fed the very same bearings and scored only (common
 random numbers), as in :class:`~ag_uav.estimation.EstimatorFeedback`; ``scores()`` and
@@ -96,7 +96,7 @@ class BearingFeedback(FilterBank, Feedback):
 
     Parameters
     ----------
-    cfg : run config (``estimator.q``, ``imu``, ``imu_sigma_mps2``, ``sigma``, ``max_iter``;
+    cfg : run config (``estimator.q``, ``model``, ``imu``, ``[imu]``, ``sigma``, ``max_iter``;
         ``gps.radar_sigma_m``; ``sim.control_hz``; the field for the default landmarks).
     seed : bearing-noise stream (``for_config`` passes the run's ``"gps"`` stream: the bearing
         sensor replaces the GPS).

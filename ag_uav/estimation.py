@@ -8,19 +8,23 @@ every filter one control period ahead, and updates all of them with the very sam
 random numbers). With ``estimator.name = "true"`` the controller flies on the truth and the
 shadows are still scored.
 
-With ``estimator.imu`` (default) the prediction is driven by the measured acceleration (the mean
-acceleration over the control period plus white accelerometer noise), as in a loosely coupled
-GPS/INS: ``x̄ = F x + B a`` with ``B = [dt²/2, dt]`` per axis, so the estimate follows the
-vehicle's manoeuvres between fixes; without it, a GPS-only filter in the loop adds enough lag to
-make the position loop oscillate (measured: 5 m control error on the default mission).
+With ``estimator.imu`` (default) the prediction is driven by the IMU, as in a loosely coupled
+GNSS/INS: ``x̄ = F x + B â`` with ``B = [dt²/2, dt, 0]`` per axis and ``â = R̂ f̃ + g`` (the MEMS
+accelerometer's specific force rotated by the attitude estimate, :mod:`ag_uav.imu`; with
+``imu.model = "ideal"`` the mean acceleration over the control period plus white noise), so the
+estimate follows the vehicle's manoeuvres between fixes; without it, a GPS-only filter in the
+loop adds enough lag to make the position loop oscillate (measured: 5 m control error).
 
-Filters use a 3-D constant-velocity (or constant-acceleration) model predicted at the control
-rate (``dt = 1/control_hz``), state ``[x, vx, y, vy, z, vz]`` (see :mod:`estimators.models`),
-``R = r_scale · diag(GPS nominal error variance)``, floored at (1 cm)². By default the height
-channel of each fix comes from a radar altimeter (``gps.altitude_source = "radar"``, white noise
-``gps.radar_sigma_m``, height above the flat ground), as on spray drones, which cannot fly 3 m
-above a crop on a GPS vertical with metres of bias. They are initialised at
-the first fix with zero velocity and ``P0 = diag(R, 4 m²/s²)``.
+Filters use the ``estimator.model`` motion model predicted at the control rate
+(``dt = 1/control_hz``): by default ``"cvb"``, state ``[x, vx, bx, y, vy, by, z, vz, bz]`` with
+the IMU input's slow error ``b`` estimated (see :mod:`estimators.models`); Q from the IMU's
+figures (:func:`process_noise`). ``R = r_scale · diag(GPS nominal error variance)``, floored at
+(1 cm)², and with ``gps.r_from_fix_type`` switched to the variance of the fix type the receiver
+reports. By default the height channel of each fix comes from a radar altimeter
+(``gps.altitude_source = "radar"``, white noise ``gps.radar_sigma_m``, height above the flat
+ground), as on spray drones, which cannot fly 3 m above a crop on a GPS vertical with metres of
+bias. They are initialised at the first fix with zero velocity, ``P0 = diag(R, 4 m²/s²)`` and
+the bias states at the IMU's turn-on figures.
 
 Scores per estimator (over the mission ticks, like the tracking error): ``estimate_rmse_m``
 (horizontal |p̂ − p|), ``estimate_share`` (mean-square estimate error / mean-square tracking
