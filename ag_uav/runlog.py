@@ -1026,25 +1026,31 @@ class RunLog:
         plan_segments: list[tuple[str, Any, bool]],
         swath: float,
         altitude: float,
+        parts: list[tuple[Any, list[Any]]] | None = None,
     ) -> None:
         """Field polygon (filled + outline, holes as obstacles) and planned path -> ``/field``.
 
         ``plan_segments``: ``(kind, Nx2|Nx3 points, spray)``; spraying segments are drawn green,
-        the others (transits) grey.  Call once at the start.
+        the others (transits) grey.  ``parts``: ``[(outer, holes), ...]`` of a multi-part field
+        (replaces ``field_outer_xy`` / ``field_holes_xy``).  Call once at the start.
         """
         if self.closed or self._period["scene"] == _INF:
             return
         import shapely
 
         M = self._M
-        outer = np.asarray(field_outer_xy, dtype=float)[:, :2]
-        holes = [np.asarray(h, dtype=float)[:, :2] for h in (field_holes_xy or [])]
-        poly = shapely.Polygon(outer, holes)
+        if parts is None:
+            parts = [(field_outer_xy, field_holes_xy or [])]
+        outers = [np.asarray(o, dtype=float)[:, :2] for o, _ in parts]
+        holes = [np.asarray(h, dtype=float)[:, :2] for _, hs in parts for h in hs]
+        polys = [shapely.Polygon(o, [np.asarray(h, dtype=float)[:, :2] for h in hs])
+                 for o, (_, hs) in zip(outers, parts, strict=True)]
+        poly = shapely.union_all(polys)
         ts = self._ts(ns(t))
         field = M.SceneEntity(
             timestamp=ts, frame_id="world", id="field",
-            triangles=self._triangles([poly], -0.02, (0.55, 0.45, 0.25, 0.6)),
-            lines=self._loops([outer], 0.0, (0.9, 0.8, 0.3, 1.0))
+            triangles=self._triangles(polys, -0.02, (0.55, 0.45, 0.25, 0.6)),
+            lines=self._loops(outers, 0.0, (0.9, 0.8, 0.3, 1.0))
             + self._loops(holes, 0.0, (0.9, 0.2, 0.2, 1.0)),
             metadata=[M.KeyValuePair(key="swath_m", value=str(swath)),
                       M.KeyValuePair(key="altitude_m", value=str(altitude)),

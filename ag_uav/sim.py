@@ -141,8 +141,8 @@ def build_reference(cfg: Config, plan, *, spray: bool = True) -> Any:
 
 
 def field_outline(fld: Field) -> list[np.ndarray]:
-    """Closed rings of the field boundary and its holes (local metres)."""
-    return [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
+    """Closed rings of the field: every part's boundary and its holes (local metres)."""
+    return [np.asarray(r) for outer, holes in fld.rings() for r in (outer, *holes)]
 
 
 # -------------------------------------------------------------------------------------- result
@@ -413,7 +413,8 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     if log is not None:
         log.scene(0.0, outline[0], outline[1:],
                   [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],
-                  m.swath_m, m.altitude_m)
+                  m.swath_m, m.altitude_m,
+                  parts=[(np.asarray(o), [np.asarray(h) for h in hs]) for o, hs in fld.rings()])
     if feedback is None and cfg.estimator.source == "bearings":
         from .bearing import BearingFeedback
 

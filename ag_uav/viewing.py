@@ -351,13 +351,16 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
                                              edgecolor="none", zorder=1))
             ax.plot([], [], color=(0.3, 0.75, 1.0), lw=6, alpha=0.5, label="sprayed area")
     if field_scene is not None:
-        first_hole = True
-        for i, (pts, _col) in enumerate(_scene_lines(field_scene, "field")):
-            is_hole = i > 0
+        first_field = first_hole = True
+        for pts, col in _scene_lines(field_scene, "field"):
+            is_hole = col[0] > 0.8 and col[1] < 0.5   # the scene draws holes red, parts gold
+            lbl = None
+            if is_hole and first_hole:
+                lbl, first_hole = "obstacle", False
+            elif not is_hole and first_field:
+                lbl, first_field = "field", False
             ax.plot(pts[:, 0], pts[:, 1], color="darkgoldenrod" if not is_hole else "firebrick",
-                    lw=2, zorder=2, label=("field" if not is_hole else
-                                           ("obstacle" if first_hole else None)))
-            first_hole = first_hole and not is_hole
+                    lw=2, zorder=2, label=lbl)
         spray_lbl = transit_lbl = True
         for pts, col in _scene_lines(field_scene, "plan"):
             spray = col[1] > 0.7 and col[0] < 0.3

@@ -261,3 +261,19 @@ def test_example_farm_kml():
     assert sum(1 for s in p.segments if s.kind == "transit" and not s.spray) >= 1
     cov, _ = spray_coverage(south, p.spray_tracks(), p.swath)
     assert cov >= 0.98
+
+
+def test_a_multi_part_field_is_drawn_whole(tmp_path):
+    """The log's /field scene and the map outline every part (not just the first)."""
+    from ag_uav.run import fly
+    from ag_uav.viewing import _scene_lines, read_run
+
+    cfg = ag_uav.load_config(None, {"mission.field": "two-part", "sim.max_time_s": 3.0,
+                                    "log.render": False})
+    _, run_dir = fly(cfg, out_root=tmp_path, run_id="two")
+    d = read_run(run_dir, images=False)
+    lines = _scene_lines(d.scenes["/field"], "field")
+    outlines = [pts for pts, col in lines if col[1] > 0.5]       # gold: part boundaries
+    assert len(outlines) == 2
+    xs = sorted(float(np.mean(p[:, 0])) for p in outlines)
+    assert xs[0] < -20 < 20 < xs[1]                             # the two parts, 30 m apart
