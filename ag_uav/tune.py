@@ -224,7 +224,7 @@ def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".", name: st
             raise ConfigError(f"{where}: not a numeric config key")
         for v in (lo, hi):  # the config's own range checks, with the key's name
             d = copy.deepcopy(base)
-            set_dotted(d, key, v)
+            set_dotted(d, key, round(v) if _is_int_key(key) else v)
             config_from_dict(d)
         params.append(Param(key, lo, hi, log))
     sc_raw = data.get("scenarios")
@@ -274,8 +274,27 @@ def candidate_config(spec: TuneSpec, values: Sequence[float]) -> dict[str, Any]:
     """The base config dict with the parameter values (natural units) set."""
     d = copy.deepcopy(spec.base)
     for p, v in zip(spec.params, values, strict=True):
-        set_dotted(d, p.key, float(v))
+        set_dotted(d, p.key, round(float(v)) if _is_int_key(p.key) else float(v))
     return d
+
+
+def _is_int_key(key: str) -> bool:
+    """Whether the config key ``key`` (dotted) is an integer field (e.g. ``estimator.window``):
+    the optimisers search reals, the candidate gets the nearest integer."""
+    import dataclasses
+    import typing
+
+    from .config import Config
+
+    cls: Any = Config
+    for part in key.split("."):
+        hints = typing.get_type_hints(cls)
+        if part not in hints:
+            return False
+        cls = hints[part]
+        if not dataclasses.is_dataclass(cls):
+            break
+    return cls is int
 
 
 def _error_cost(t: np.ndarray, e: np.ndarray, metric: str, t0: float, dt: float) -> float:

@@ -180,3 +180,18 @@ def test_mission_fast_path_equals_simulate(tmp_path):
         assert np.array_equal(t, res.t) and np.array_equal(p_true, res.p_true)
         assert np.array_equal(p_ref, res.p_ref) and np.array_equal(motors, res.motors)
         assert crash is None and full == 8.0
+
+
+def test_integer_keys_get_integer_candidates():
+    """The optimisers search reals; an integer config key (estimator.window) gets the nearest
+    integer, so the candidate loads (it was refused as "expected an integer")."""
+    from ag_uav.config import config_from_dict
+    from ag_uav.tune import candidate_config, spec_from_dict
+
+    spec = spec_from_dict({"params": {"estimator.window": {"lo": 5, "hi": 30},
+                                      "controller.xy.ke": {"lo": 0.5, "hi": 3.0}},
+                           "scenarios": [{"kind": "step", "axis": "x"}]})
+    d = candidate_config(spec, [12.6, 1.25])
+    cfg = config_from_dict(d)
+    assert cfg.estimator.window == 13 and isinstance(cfg.estimator.window, int)
+    assert cfg.controller.xy.ke == 1.25
