@@ -77,7 +77,8 @@ REDUCERS = ("km", "nt", "bmm", "zeta")
 class MissionConfig:
     field: str = _f("default", "built-in field (default, l-shape, hole, two-part) or a lon/lat "
                     ".geojson/.kml/.kmz/.shp path; PATH#name=VALUE picks one feature")
-    swath_m: float = _f(6.0, "spray swath width (m)", gt=0)
+    swath_m: float = _f(6.0, "spray swath width (m); >= 0.5 (spray drones: 3-11 m; 0.01 m made "
+                        "the planner hang)", ge=0.5)
     headland_m: float = _f(6.0, "headland margin swept by laps along the boundary (m); 0 = none",
                            ge=0)
     direction_deg: float | str = _f("auto", "sweep direction in degrees from east "

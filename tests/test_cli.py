@@ -22,7 +22,7 @@ BOWTIE = {"type": "Polygon", "coordinates": [[[-117.0, 46.73], [-116.998, 46.731
 @pytest.mark.parametrize("toml, key, allowed", [
     ("[mission]\nswth_m = 5\n", "mission.swth_m", "unknown key"),
     ("[mission]\nswath_m = \"wide\"\n", "mission.swath_m", "expected a number"),
-    ("[mission]\nswath_m = -4.0\n", "mission.swath_m", "must be > 0"),
+    ("[mission]\nswath_m = -4.0\n", "mission.swath_m", "must be >= 0.5"),
     ("[mission]\nswath_m = 400.0\n", "mission.swath_m", "wider than the field"),
     ("[controller]\ntype = \"lqr\"\n", "controller.type", "allowed: it2-fpid, t1-fpid, pid"),
     ("[wind]\nturbulence = 3\n", "wind.turbulence", "expected a string"),
