@@ -318,6 +318,20 @@ def _scene_triangles(scene: Any, entity_id: str) -> list[np.ndarray]:
     return out
 
 
+def _grid(axs: Any) -> None:
+    for a in np.atleast_1d(axs).ravel():
+        a.grid(alpha=0.3)
+
+
+def _save(fig: Any, path: Path, dpi: int) -> Path:
+    """Write ``fig`` to ``path`` (tight bounding box) and close it; the path."""
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
 def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
     """PNG figures of a run: map, errors, controller, estimators (those with data)."""
     import matplotlib
@@ -418,10 +432,7 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
     else:
         ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
     ax.grid(alpha=0.3)
-    p = out / "map.png"
-    fig.savefig(p, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    paths.append(p)
+    paths.append(_save(fig, out / "map.png", 110))
 
     # --- spray job: tank, mass, battery, power
     if spr is not None and len(spr.t):
@@ -438,13 +449,9 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
         axs[2].plot(spr.t, spr["power_w"], color="tab:orange", lw=0.6, label="power [W]")
         axs[2].legend(fontsize=8)
         axs[2].set_xlabel("sim time [s]")
-        for a in axs:
-            a.grid(alpha=0.3)
+        _grid(axs)
         fig.suptitle("Spray job: tank and mass, battery, electrical power")
-        p = out / "spray.png"
-        fig.savefig(p, dpi=100, bbox_inches="tight")
-        plt.close(fig)
-        paths.append(p)
+        paths.append(_save(fig, out / "spray.png", 100))
 
     # --- errors over time
     if st is not None:
@@ -464,12 +471,8 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
         axs[1].set_xlabel("sim time [s]")
         if axs[1].lines:
             axs[1].legend(fontsize=8, ncol=4)
-        for a in axs:
-            a.grid(alpha=0.3)
-        p = out / "errors.png"
-        fig.savefig(p, dpi=110, bbox_inches="tight")
-        plt.close(fig)
-        paths.append(p)
+        _grid(axs)
+        paths.append(_save(fig, out / "errors.png", 110))
 
     # --- controller signals
     if st is not None:
@@ -502,13 +505,9 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
         a.set_ylabel("wind [m/s]")
         a.legend(fontsize=7, ncol=4, loc="upper right")
         a.set_xlabel("sim time [s]")
-        for a in axs:
-            a.grid(alpha=0.3)
+        _grid(axs)
         fig.suptitle("Controller internals, motor commands, wind")
-        p = out / "controller.png"
-        fig.savefig(p, dpi=100, bbox_inches="tight")
-        plt.close(fig)
-        paths.append(p)
+        paths.append(_save(fig, out / "controller.png", 100))
 
     # --- estimator comparison
     if ests or gps is not None:
@@ -537,10 +536,7 @@ def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
             axs[1].text(i, v, f"{v:.2f}" if v >= 0.1 else f"{v:.3f}", ha="center",
                         va="bottom", fontsize=8)
         fig.suptitle("Estimator comparison (error against the true position)")
-        p = out / "estimators.png"
-        fig.savefig(p, dpi=110, bbox_inches="tight")
-        plt.close(fig)
-        paths.append(p)
+        paths.append(_save(fig, out / "estimators.png", 110))
     return paths
 
 
