@@ -359,22 +359,30 @@ def _edge_cases(leaf: Leaf) -> list[Any]:
     return vals
 
 
+def through_api(leaf: Leaf, v: Any) -> bool:
+    """``config_from_dict`` on one key: accepted iff allowed (and the value lands), else the
+    one-line message; whether it was accepted."""
+    ok = allowed(leaf, v)
+    try:
+        cfg = C.config_from_dict(_nest(leaf.key, v))
+    except C.ConfigError as e:
+        assert not ok, f"refused a good value: {leaf.key} = {v!r}: {e}"
+        check_message(error_line(PREFIX + str(e), leaf.key), leaf, v)
+        return False
+    assert ok, f"accepted a bad value silently: {leaf.key} = {v!r}"
+    assert_lands(cfg, leaf, v)
+    return True
+
+
 def test_every_leaf_every_edge() -> None:
     """Deterministic sweep (the fuzz below samples): every key, every edge value."""
     n_ok = n_bad = 0
     for leaf in PLAIN:
         for v in _edge_cases(leaf):
-            ok = allowed(leaf, v)
-            try:
-                cfg = C.config_from_dict(_nest(leaf.key, v))
-            except C.ConfigError as e:
-                assert not ok, f"refused a good value: {leaf.key} = {v!r}: {e}"
-                check_message(error_line(PREFIX + str(e), leaf.key), leaf, v)
-                n_bad += 1
-            else:
-                assert ok, f"accepted a bad value silently: {leaf.key} = {v!r}"
-                assert_lands(cfg, leaf, v)
+            if through_api(leaf, v):
                 n_ok += 1
+            else:
+                n_bad += 1
     assert n_ok > 3 * len(PLAIN) and n_bad > 15 * len(PLAIN)
 
 
@@ -391,14 +399,7 @@ def test_every_leaf_value_accepted_iff_allowed(data: st.DataObject, tmp_path: Pa
     ok = allowed(leaf, v)
 
     # door 1: the Python API
-    try:
-        cfg = C.config_from_dict(_nest(leaf.key, v))
-    except C.ConfigError as e:
-        assert not ok, f"refused a good value: {leaf.key} = {v!r}: {e}"
-        check_message(error_line(PREFIX + str(e), leaf.key), leaf, v)
-    else:
-        assert ok, f"accepted a bad value silently: {leaf.key} = {v!r}"
-        assert_lands(cfg, leaf, v)
+    assert through_api(leaf, v) == ok
 
     # door 2: a TOML file
     path = tmp_path / "fuzz.toml"
