@@ -321,3 +321,11 @@ class EstimatorFeedback(FilterBank, Feedback):
                 "gps_fix_types": dict(counts) if counts else None,
                 "gps_rate_hz": self.gps.rate_hz,
                 "estimator_r_diag_m2": [round(float(v), 5) for v in self.r_diag]}
+
+
+class BatchEstimatorFeedback:
+    """The estimator banks of a whole engine batch (placeholder until the batched filters)."""
+
+    @classmethod
+    def try_batch(cls, feedbacks, n_max: int):
+        return None

@@ -21,19 +21,18 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import mujoco
 import numpy as np
 
-from controllers.attitude import GeometricAttitudeController, XMixer, quat_to_rot
+from controllers.attitude import GeometricAttitudeController, XMixer
 from controllers.cascade import PositionCascade
 from controllers.factory import make_controller
 
 from .config import AxisGains, Config
+from .engine import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
 from .field import Field, load_field
 from .plan import plan_coverage
 from .reference import Reference
 from .vehicle import G, Vehicle, build_vehicle
-from .wind import Wind
 
 #: Names of the seeded random streams; appending a name never changes the others' draws.
 STREAMS = ("wind", "gps", "estimator", "altimeter", "imu", "attitude", "spare4", "spare5")
@@ -163,25 +162,6 @@ class RunResult:
 
 
 # -------------------------------------------------------------------------------------- the loop
-@dataclass
-class LoopOutput:
-    t: np.ndarray
-    rec: np.ndarray              # (n, 21) see REC_COLUMNS
-    crash_reason: str | None
-    crash_time: float | None
-    wall_loop_s: float
-    vehicle: Vehicle
-    frames: int = 0
-    notes: list[str] = dataclasses.field(default_factory=list)
-    imu: np.ndarray | None = None         # (n, 9) measured f (3), gyro (3), attitude error (3)
-    imu_bias0: np.ndarray | None = None   # turn-on biases (accel m/s², gyro rad/s)
-    sprayer: Any = None
-
-
-REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
-               "spray", "f0", "f1", "f2", "f3", "wx", "wy", "wz")
-
-
 def fly_reference(cfg: Config, reference: Any, duration: float, *,
                   outline: list[np.ndarray] | None = None,
                   bounds: tuple[float, float, float, float] | None = None,
@@ -190,192 +170,10 @@ def fly_reference(cfg: Config, reference: Any, duration: float, *,
                   render: bool = False, streams: dict | None = None) -> LoopOutput:
     """Fly the vehicle along ``reference`` (``sample_all(times)`` → dict of pos, vel, acc, yaw,
     seg, spray arrays, as :meth:`ag_uav.reference.Reference.sample_all`) for
-    ``duration`` seconds of sim time. The core loop shared by missions and test scenarios."""
-    streams = streams or rng_streams(cfg.seed)
-    notes: list[str] = []
-    veh = build_vehicle(cfg, outline)
-    model = veh.model
-    data = mujoco.MjData(model)
-    start = reference.sample(0.0)
-    data.qpos[0] = start.pos[0]
-    data.qpos[1] = start.pos[1]
-    data.qpos[2] = veh.hover_z if cfg.sim.takeoff else start.pos[2]
-    data.qpos[3] = math.cos(start.yaw / 2)
-    data.qpos[6] = math.sin(start.yaw / 2)
-    if not cfg.sim.takeoff:
-        data.ctrl[:] = veh.mass * G / 4
-        data.act[:] = veh.mass * G / 4
-    mujoco.mj_forward(model, data)
-
-    fb = feedback or TrueFeedback()
-    cascade = make_cascade(cfg, veh)
-    imu = att = None
-    if fb.wants_imu:
-        from .imu import AttitudeError, ImuSensor
-
-        ss = seed_sequences(cfg.seed)
-        imu = ImuSensor(cfg.imu, cfg.sim.control_hz, ss["imu"])
-        att = AttitudeError(cfg.imu, cfg.sim.control_hz, ss["attitude"])
-        ia, ig = int(model.sensor("accel").adr[0]), int(model.sensor("gyro").adr[0])
-        sensordata = data.sensordata
-    imu_rec: list[tuple] = []
-    w = cfg.wind
-    wind = Wind(w.speed_mps, w.direction_deg, w.turbulence, rng=streams["wind"])
-    wmx, wmy, _ = wind.mean  # airspeed for the Dryden time scales: relative to the mean wind
-    c_lin = tuple(cfg.vehicle.drag_linear)
-    c_quad = tuple(cfg.vehicle.drag_quadratic)
-
-    dt = 1.0 / cfg.sim.control_hz
-    nsub = round(dt / model.opt.timestep)
-    n_ticks = int(math.ceil(min(duration, cfg.sim.max_time_s) / dt - 1e-9))
-    body = veh.body_id
-    xfrc = data.xfrc_applied[body]
-    qpos, qvel, ctrl = data.qpos, data.qvel, data.ctrl
-    ground, skids = veh.ground_geom, set(veh.skid_geoms)
-    cos_tilt_crash = math.cos(math.radians(80.0))
-    if bounds is None:
-        bounds = (start.pos[0] - 100, start.pos[1] - 100, start.pos[0] + 100,
-                  start.pos[1] + 100)
-    box = (bounds[0] - 100.0, bounds[1] - 100.0, bounds[2] + 100.0, bounds[3] + 100.0, 120.0)
-
-    rec: list[tuple] = []
-    crash_reason: str | None = None
-    crash_time: float | None = None
-    airborne = not cfg.sim.takeoff
-    frames = 0
-    renderer = None
-    if log is not None and render:
-        from .render import Renderer, RenderUnavailable
-
-        try:
-            renderer = Renderer(model, cfg.log.width, cfg.log.height, tuple(cfg.log.cameras))
-        except RenderUnavailable as e:
-            notes.append(f"no camera frames: {e}")
-            renderer = None
-
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=round(n_ticks * dt), unit="sim-s", desc="flying", leave=False,
-                   dynamic_ncols=True, mininterval=0.5)
-    bar_next = 1.0
-    # the reference on the control grid, precomputed as Python lists (cheap to index per tick)
-    tab = reference.sample_all(np.arange(n_ticks) * dt)
-    ref_p, ref_v, ref_a = tab["pos"].tolist(), tab["vel"].tolist(), tab["acc"].tolist()
-    ref_yaw, ref_seg = tab["yaw"].tolist(), tab["seg"].tolist()
-    ref_spray = tab["spray"].tolist()
-    sprayer = None  # spray job: tank, mass and energy per tick (ag_uav.spray)
-    if getattr(reference, "spray_job", None) is not None:
-        from .spray import Sprayer
-
-        sprayer = Sprayer(cfg, veh, data, cascade, tab, reference.spray_job, n_ticks, dt, log)
-    wall_loop = time.perf_counter()
-    for k in range(n_ticks):
-        t = k * dt
-        px, py, pz, qw, qx, qy, qz = qpos.tolist()
-        vx, vy, vz, wbx, wby, wbz = qvel.tolist()
-        R = quat_to_rot(qw, qx, qy, qz)
-        omega = (wbx, wby, wbz)
-        # ---- safety / crash detection
-        if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(pz)):
-            crash_reason, crash_time = "diverged: non-finite state", t
-            break
-        if R[8] < cos_tilt_crash:
-            crash_reason, crash_time = f"tilt > 80 deg at t={t:.2f}s", t
-            break
-        if px < box[0] or py < box[1] or px > box[2] or py > box[3] or pz > box[4]:
-            crash_reason, crash_time = f"left the bounding box at t={t:.2f}s", t
-            break
-        if pz > veh.hover_z + 0.3:
-            airborne = True
-        if airborne and data.ncon:
-            for i in range(data.ncon):
-                c = data.contact[i]
-                g1, g2 = int(c.geom1), int(c.geom2)
-                if ground not in (g1, g2):
-                    continue
-                other = g2 if g1 == ground else g1
-                speed = math.sqrt(vx * vx + vy * vy + vz * vz)
-                if other not in skids or speed > 1.0:
-                    crash_reason = (f"ground contact at {speed:.1f} m/s "
-                                    f"({model.geom(other).name}) at t={t:.2f}s")
-                    crash_time = t
-                    break
-            if crash_reason:
-                break
-        # ---- reference, feedback, control
-        rp, rv, yaw_ref, spray = ref_p[k], ref_v[k], ref_yaw[k], ref_spray[k]
-        if imu is not None:
-            sd = sensordata.tolist()
-            f_m, omega = imu.measure(sd[ia:ia + 3], sd[ig:ig + 3])
-            R = att.apply(R)
-            imu_rec.append((*f_m, *omega, *att.last))
-            p_fb, v_fb = fb.update(t, (px, py, pz), (vx, vy, vz), (f_m, R))
-        else:
-            p_fb, v_fb = fb.update(t, (px, py, pz), (vx, vy, vz))
-        if not airborne:
-            # on the skids: no horizontal position control until lift-off (as autopilots do);
-            # an estimate that is off by a metre must not tip the vehicle over on the ground
-            p_fb = (rp[0], rp[1], p_fb[2])
-            v_fb = (rv[0], rv[1], v_fb[2])
-        f = cascade.update(p_fb, v_fb, R, omega, rp, rv, ref_a[k], yaw_ref, dt)
-        if sprayer is not None:
-            f, spray = sprayer.step(k, t, pz, vx, vy, spray, f)
-        ctrl[0], ctrl[1], ctrl[2], ctrl[3] = f
-        # ---- wind as a drag force (zero-order hold over the control period)
-        ax_, ay_ = vx - wmx, vy - wmy
-        wx, wy, wz = wind.step(dt, pz if pz > 0.0 else 0.0, math.sqrt(ax_ * ax_ + ay_ * ay_))
-        rx, ry, rz = vx - wx, vy - wy, vz - wz
-        xfrc[0] = -c_lin[0] * rx - c_quad[0] * abs(rx) * rx
-        xfrc[1] = -c_lin[1] * ry - c_quad[1] * abs(ry) * ry
-        xfrc[2] = -c_lin[2] * rz - c_quad[2] * abs(rz) * rz
-        rec.append((px, py, pz, vx, vy, vz, rp[0], rp[1], rp[2], p_fb[0], p_fb[1], p_fb[2],
-                    ref_seg[k], spray, f[0], f[1], f[2], f[3], wx, wy, wz))
-        if log is not None:
-            if t >= log._next_tick:
-                log.tick(t, p_true=(px, py, pz), q_true_wxyz=(qw, qx, qy, qz),
-                         v_true=(vx, vy, vz), p_ref=rp, v_ref=rv, yaw_ref=yaw_ref,
-                         p_est=p_fb if fb.name != "true" else None, v_est=v_fb,
-                         ctrl=(_with_imu(cascade.internals(), imu_rec[-1] if imu_rec else None)
-                               if log.want("state", t) else None),
-                         motors=f, wind=(wx, wy, wz), spray=spray)
-            if renderer is not None and log.want_frame(t):
-                for cam in renderer.cameras:
-                    log.frame(t, cam, renderer.jpeg(data, cam), renderer.width, renderer.height,
-                              renderer.fovy(cam), pose=renderer.camera_pose(data, cam))
-                    frames += 1
-        mujoco.mj_step(model, data, nstep=nsub)
-        if tick_hook is not None:
-            tick_hook(t, data)
-        if bar is not None and t >= bar_next:
-            bar.update(1)
-            bar_next += 1.0
-    if bar is not None:
-        bar.close()
-    wall_loop = time.perf_counter() - wall_loop
-    if renderer is not None:
-        renderer.close()
-    arr = np.asarray(rec, dtype=float).reshape(-1, len(REC_COLUMNS))
-    out = LoopOutput(t=np.arange(len(arr)) * dt, rec=arr, crash_reason=crash_reason,
-                     crash_time=crash_time, wall_loop_s=wall_loop, vehicle=veh, frames=frames,
-                     notes=notes, sprayer=sprayer)
-    if imu is not None:
-        out.imu = np.asarray(imu_rec[:len(arr)], dtype=float).reshape(-1, 9)
-        out.imu_bias0 = imu.bias0
-    return out
-
-
-IMU_KEYS = ("imu.fx", "imu.fy", "imu.fz", "imu.wx", "imu.wy", "imu.wz", "imu.att_err_x",
-            "imu.att_err_y", "imu.att_err_z")
-
-
-def _with_imu(ctrl: dict[str, float], rec: tuple | None) -> dict[str, float]:
-    """The controller internals plus the IMU's reading (specific force m/s², gyro rad/s) and
-    the attitude estimate's error (rad) for the ``/drone/state`` log."""
-    if rec is not None:
-        ctrl.update(zip(IMU_KEYS, rec, strict=True))
-    return ctrl
+    ``duration`` seconds of sim time: the engine (:func:`ag_uav.engine.fly`) with one vehicle."""
+    return fly([Flight(cfg, reference, duration, outline=outline, bounds=bounds,
+                       feedback=feedback, log=log, render=render, tick_hook=tick_hook,
+                       streams=streams)], progress=progress)[0]
 
 
 def _cut_by_max_time(cfg: Config, ref: Reference, out: LoopOutput,
@@ -388,22 +186,49 @@ def _cut_by_max_time(cfg: Config, ref: Reference, out: LoopOutput,
             f"{ref.duration:.0f} s (raise sim.max_time_s)")
 
 
-def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
-             tick_hook: Callable[..., None] | None = None, log: Any = None) -> RunResult:
-    """Fly ``cfg``'s mission once and return the trajectory and the summary metrics.
+@dataclass
+class _Prepared:
+    cfg: Config
+    flight: Flight
+    fld: Field
+    plan: Any
+    ref: Any
+    fb: Feedback
+    log: Any
+    wall0: float
 
-    ``feedback``: the feedback seam (default: the config's estimator, or the true state).
-    ``log``: an open :class:`~ag_uav.runlog.RunLog` or None; with ``cfg.log.render`` camera
-    frames go into it. ``tick_hook(t, data)`` is called after every control tick.
-    """
-    from . import metrics
 
+_SETUP_CACHE: dict[str, tuple[Field, Any, Any]] = {}
+
+
+def mission_setup(cfg: Config) -> tuple[Field, Any, Any]:
+    """(field, plan, reference) of ``cfg``'s mission, cached: they depend on the mission keys
+    only (field, planner, speeds, spray job, vehicle mass), not on seeds, gains or filters, so a
+    batch of many runs on one field builds them once."""
+    import json
+    from dataclasses import asdict
+
+    key = json.dumps([asdict(cfg.mission), cfg.sim.takeoff, cfg.sim.hover_after_s,
+                      cfg.sim.control_hz, asdict(cfg.spray), asdict(cfg.battery),
+                      asdict(cfg.vehicle)], default=str, sort_keys=True)
+    hit = _SETUP_CACHE.get(key)
+    if hit is None:
+        fld = build_field(cfg)
+        plan = build_plan(cfg, fld)
+        ref = build_reference(cfg, plan)
+        if len(_SETUP_CACHE) > 8:
+            _SETUP_CACHE.clear()
+        hit = _SETUP_CACHE[key] = (fld, plan, ref)
+    return hit
+
+
+def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., None] | None,
+             log: Any) -> _Prepared:
+    """Everything one run needs before it flies: plan, reference, feedback, the flight."""
     wall0 = time.perf_counter()
     streams = rng_streams(cfg.seed)
-    fld = build_field(cfg)
-    plan = build_plan(cfg, fld)
+    fld, plan, ref = mission_setup(cfg)
     m = cfg.mission
-    ref = build_reference(cfg, plan)
     bounds = fld.bounds
     job = getattr(ref, "spray_job", None)
     if job is not None:  # the base may lie outside the field
@@ -429,9 +254,40 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     fb = feedback or TrueFeedback()
     if log is not None and hasattr(fb, "log"):
         fb.log = log
-    out = fly_reference(cfg, ref, ref.duration, outline=outline,
-                        bounds=bounds, feedback=fb, progress=progress, tick_hook=tick_hook,
-                        log=log, render=cfg.log.render, streams=streams)
+    flight = Flight(cfg, ref, ref.duration, outline=outline, bounds=bounds, feedback=fb,
+                    log=log, render=cfg.log.render, tick_hook=tick_hook, streams=streams)
+    return _Prepared(cfg, flight, fld, plan, ref, fb, log, wall0)
+
+
+def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
+             tick_hook: Callable[..., None] | None = None, log: Any = None) -> RunResult:
+    """Fly ``cfg``'s mission once and return the trajectory and the summary metrics: the
+    engine (:func:`ag_uav.engine.fly`) with one vehicle.
+
+    ``feedback``: the feedback seam (default: the config's estimator, or the true state).
+    ``log``: an open :class:`~ag_uav.runlog.RunLog` or None; with ``cfg.log.render`` camera
+    frames go into it. ``tick_hook(t, data)`` is called after every control tick.
+    """
+    prep = _prepare(cfg, feedback, tick_hook, log)
+    out = fly([prep.flight], progress=progress)[0]
+    return _finish(prep, out, batch=1)
+
+
+def simulate_many(cfgs: list[Config], *, progress: bool = False) -> list[RunResult]:
+    """Fly every config's mission in one lockstep batch (:func:`ag_uav.engine.fly`); the same
+    results as ``[simulate(c) for c in cfgs]`` (a run depends only on its config and seed).
+    All configs must share ``sim.control_hz`` and ``sim.timestep_s``."""
+    preps = [_prepare(c, None, None, None) for c in cfgs]
+    outs = fly([p.flight for p in preps], progress=progress)
+    return [_finish(p, o, batch=len(cfgs)) for p, o in zip(preps, outs, strict=True)]
+
+
+def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
+    """Metrics and the summary of one flown run."""
+    from . import metrics
+
+    cfg, fld, plan, ref, fb, log = prep.cfg, prep.fld, prep.plan, prep.ref, prep.fb, prep.log
+    m = cfg.mission
     arr = out.rec
     res = RunResult(
         summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
@@ -460,12 +316,14 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
         if fb.name in scores:
             summ["estimate_rmse_m"] = scores[fb.name]["estimate_rmse_m"]
             summ["estimate_update_us"] = scores[fb.name]["update_us"]
-    wall = time.perf_counter() - wall0
+    wall = time.perf_counter() - prep.wall0
+    loop_wall = out.wall_loop_s / batch  # this run's share of the batch's loop
     summ.update({
         "sim_time_s": round(sim_time, 3),
         "wall_time_s": round(wall, 3),
-        "loop_wall_time_s": round(out.wall_loop_s, 3),
-        "real_time_factor": round(sim_time / out.wall_loop_s, 1) if out.wall_loop_s > 0 else None,
+        "loop_wall_time_s": round(loop_wall, 3),
+        "real_time_factor": round(sim_time / loop_wall, 1) if loop_wall > 0 else None,
+        "batch_size": batch,
         "frames": out.frames,
         "notes": out.notes,
         "seed": cfg.seed,
