@@ -28,10 +28,10 @@ HAVE_NUMBA: bool = _numba is not None
 def njit(fn: F) -> F:
     """Compile ``fn`` with ``numba.njit(cache=True)``; without numba return it unchanged.
 
-    Without numba the function gets a ``py_func`` attribute pointing to itself, so callers and
-    tests can use ``kernel.py_func`` either way.
+    Without numba (or with ``NUMBA_DISABLE_JIT=1``) the function gets a ``py_func`` attribute
+    pointing to itself, so callers and tests can use ``kernel.py_func`` either way.
     """
-    if _numba is None:
-        fn.py_func = fn  # type: ignore[attr-defined]
-        return fn
-    return _numba.njit(cache=True)(fn)  # type: ignore[no-any-return]
+    out = fn if _numba is None else _numba.njit(cache=True)(fn)
+    if not hasattr(out, "py_func"):  # no numba, or NUMBA_DISABLE_JIT=1
+        out.py_func = fn
+    return out  # type: ignore[no-any-return]
