@@ -57,20 +57,22 @@ C_LIT, C_EJ, C_MINSOC, C_RANDRY, C_TLAND = range(12, 17)  # the sortie closed on
 S_MREFILL, S_MSPRAY = 17, 18  # liquid masses to set this tick (refill, then spray)
 _NS = 19
 # ---- columns of the integer state (int64, (N, _NI))
-I_CUR, I_OFF, I_LIM = range(3)  # current sortie, offset into the flat tables, ticks available
-_NI = 3
-# ---- per-row event flags (the kernel's output)
+# current sortie, offset into the flat tables, ticks available, this tick's event flags
+I_CUR, I_OFF, I_LIM, I_FLAGS = range(4)
+_NI = 4
+# ---- the event flags (bits of ist[:, I_FLAGS])
 F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
 
 
 @numba.njit(cache=True)
-def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, sortie_tab,
-                  ground_tab, rec, rec_on, on_out, reset_out, flags):  # pragma: no cover
+def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab, rec, rec_on,
+                  out):  # pragma: no cover
     """One control tick of :meth:`Sprayer.step` for every active row (see the module docstring).
 
     Returns the number of rows with an event flag (0 on most ticks), or ``-(i + 1)`` without
     touching anything when tick ``k`` is outside active row i's tables (the scalar code would
-    raise ``IndexError``)."""
+    raise ``IndexError``). ``tab``: (2, total) sortie and ground tables; ``out``: (2, N) nozzles
+    on and controller reset."""
     n = pz.shape[0]
     nf = f.shape[1]
     na = act.shape[1]
@@ -79,15 +81,15 @@ def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, sor
             return -(i + 1)
     nev = 0
     for i in range(n):
-        on_out[i] = False
-        reset_out[i] = False
-        flags[i] = 0
+        out[0, i] = False
+        out[1, i] = False
+        ist[i, I_FLAGS] = 0
         if not active[i]:
             continue
         j = ist[i, I_OFF] + k
         fl = 0
         # ---- sortie change: close the last one, refill and a fresh battery, open the new one
-        s = sortie_tab[j]
+        s = tab[0, j]
         if s != ist[i, I_CUR]:
             fl |= F_CHANGE
             if ist[i, I_CUR] >= 0:
@@ -111,9 +113,9 @@ def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, sor
             st[i, S_RANDRY] = np.nan
             st[i, S_TLAND] = np.nan
         # ---- on the ground at the base: motors off, controller reset
-        g = ground_tab[j] != 0
+        g = tab[1, j] != 0
         if g:
-            reset_out[i] = True
+            out[1, i] = True
             for c in range(nf):
                 f[i, c] = 0.0
             if math.isnan(st[i, S_TLAND]):
@@ -166,9 +168,9 @@ def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, sor
         rec[2, j] = p
         rec[3, j] = soc
         rec_on[j] = 1 if on else 0
-        on_out[i] = on
+        out[0, i] = on
         if fl:
-            flags[i] = fl
+            ist[i, I_FLAGS] = fl
             nev += 1
     return nev
 
@@ -258,8 +260,7 @@ class BatchSprayer:
         self._par = np.zeros((n, _NP))
         self._st = np.zeros((n, _NS))
         self._ist = np.zeros((n, _NI), np.int64)
-        self._sortie = np.zeros(total, np.int32)
-        self._ground = np.zeros(total, np.uint8)
+        self._tab = np.zeros((2, total), np.int32)  # sortie, ground
         self._rec = np.zeros((4, total))
         self._rec_on = np.zeros(total, np.uint8)
         for i, sp in enumerate(self.sprayers):
@@ -267,7 +268,7 @@ class BatchSprayer:
             nr = b - a
             self._par[i] = (sp.lpm, sp.rho, sp.h_min, sp.h_max, sp.k_p, sp.p_av, sp.cap_j,
                             sp.dt, sp.job.fill_l, sp.dry)
-            self._ist[i] = (sp.cur, a, min(nr, len(sp.sortie), len(sp.ground)))
+            self._ist[i] = (sp.cur, a, min(nr, len(sp.sortie), len(sp.ground)), 0)
             st = self._st[i]
             st[S_TANK], st[S_E], st[S_ETOT] = sp.tank, sp.energy_j, sp.energy_total_j
             st[S_LTOT], st[S_MSET] = sp.litres_total, sp.mass_set
@@ -281,8 +282,8 @@ class BatchSprayer:
                     per["min_soc"]
                 st[S_RANDRY] = _none_nan(per["ran_dry_s"])
                 st[S_TLAND] = _none_nan(per["t_land_s"])
-            self._sortie[a:b] = _table(sp.sortie, nr, np.int32)
-            self._ground[a:b] = _table(sp.ground, nr, np.uint8)
+            self._tab[0, a:b] = _table(sp.sortie, nr, np.int32)
+            self._tab[1, a:b] = _table(sp.ground, nr, np.int32)
             # the records so far, then each Sprayer's rec_* become views of its slice
             for r, name in enumerate(("rec_tank", "rec_mass", "rec_power", "rec_soc")):
                 self._rec[r, a:b] = np.frombuffer(getattr(sp, name), np.float64, count=nr)
@@ -292,9 +293,8 @@ class BatchSprayer:
             self._cascades.append(sp.cascade)
             sp.cascade = MassSink(i, set_mass)
         self._all = np.ones(n, bool)
-        self._on = np.zeros(n, bool)
-        self._reset = np.zeros(n, bool)
-        self._flags = np.zeros(n, np.int32)
+        self._out = np.zeros((2, n), bool)
+        self._on, self._reset = self._out[0], self._out[1]
         self._logged = [(i, sp) for i, sp in enumerate(self.sprayers)
                         if sp.log is not None and hasattr(sp.log, "spray_state")]
         if push_initial:
@@ -347,8 +347,7 @@ class BatchSprayer:
                 or f.shape[0] != n or act.ndim != 2 or act.shape[0] != n):
             raise ValueError(f"BatchSprayer.step: arrays must have a leading axis of {n}")
         nev = _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, self._par, self._st,
-                            self._ist, self._sortie, self._ground, self._rec, self._rec_on,
-                            self._on, self._reset, self._flags)
+                            self._ist, self._tab, self._rec, self._rec_on, self._out)
         if nev:
             if nev < 0:
                 i = -nev - 1
@@ -362,9 +361,9 @@ class BatchSprayer:
     def _events(self, t: float) -> None:
         """Sortie changes and liquid-mass updates of the rows the kernel flagged (Python, as
         :meth:`Sprayer.step` does them)."""
-        st, flags = self._st, self._flags
-        for i in np.flatnonzero(flags).tolist():
-            fl = int(flags[i])
+        st, ist = self._st, self._ist
+        for i in np.flatnonzero(ist[:, I_FLAGS]).tolist():
+            fl = int(ist[i, I_FLAGS])
             sp = self.sprayers[i]
             if fl & F_CHANGE:
                 if fl & F_CLOSE:
@@ -400,7 +399,7 @@ class BatchSprayer:
                                nozzles=on, power_w=float(rec[2, j]),
                                energy_wh=float(st[i, S_ETOT]) / 3600.0, soc=float(rec[3, j]),
                                sortie=int(self._ist[i, I_CUR]) + 1,
-                               ground=bool(self._ground[j]))
+                               ground=bool(self._tab[1, j]))
 
     # ------------------------------------------------------------------------------ the end
     def sync(self) -> None:
