@@ -95,11 +95,22 @@ class LoopOutput:
 
 # ------------------------------------------------------------------------------------ kernels
 @njit(cache=True)
-def _kinematics(S, iq, iv, act, p, v, quat, R, omega, box, cos_tilt, code):  # pragma: no cover
-    """State rows → p, v, quaternion, R (row-major body → world), body rates; crash codes."""
+def _tick_in(k, S, act, n_ticks, iq, iv, p, v, quat, R, omega, box, cos_tilt, code, airborne,
+             hover_z, low, ref_tab, ref_ids, rp, rv, ra, yaw, spray):  # pragma: no cover
+    """Start of tick ``k`` for every active vehicle: retire finished ones; state rows → p, v,
+    quaternion, R (row-major body → world), body rates; crash codes; the lift-off latch; the
+    near-ground flag (contacts are checked there); the reference row.
+
+    Returns flags: 1 some crash code set, 2 some vehicle near the ground, 4 some vehicle active.
+    """
+    flags = 0
     for i in range(S.shape[0]):
+        if act[i] and n_ticks[i] <= k:
+            act[i] = False
+        low[i] = False
         if not act[i]:
             continue
+        flags |= 4
         px, py, pz = S[i, iq], S[i, iq + 1], S[i, iq + 2]
         w, x, y, z = S[i, iq + 3], S[i, iq + 4], S[i, iq + 5], S[i, iq + 6]
         p[i, 0], p[i, 1], p[i, 2] = px, py, pz
@@ -120,18 +131,49 @@ def _kinematics(S, iq, iv, act, p, v, quat, R, omega, box, cos_tilt, code):  # p
         R[i, 7] = 2.0 * (yz + wx)
         R[i, 8] = 1.0 - 2.0 * (xx + yy)
         if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(pz)):
-            code[i] = 1
+            code[i] = _NONFINITE
         elif R[i, 8] < cos_tilt:
-            code[i] = 2
+            code[i] = _TILT
         elif (px < box[i, 0] or py < box[i, 1] or px > box[i, 2] or py > box[i, 3]
               or pz > box[i, 4]):
-            code[i] = 3
-        else:
-            code[i] = 0
+            code[i] = _BOX
+        if code[i] != 0:
+            flags |= 1
+            continue
+        if not airborne[i] and pz > hover_z[i] + 0.3:
+            airborne[i] = True
+        if airborne[i] and pz < hover_z[i] + 1.5:
+            low[i] = True
+            flags |= 2
+        row = ref_tab[ref_ids[i], k]
+        for j in range(3):
+            rp[i, j] = row[j]
+            rv[i, j] = row[3 + j]
+            ra[i, j] = row[6 + j]
+        yaw[i] = row[9]
+        spray[i] = row[11] > 0.5
+    return flags
 
 
 @njit(cache=True)
-def _record(rec, k, act, p, v, ref, pfb, spray, f, w):  # pragma: no cover
+def _hold_on_ground(act, airborne, pf, vf, rp, rv, p_out, v_out):  # pragma: no cover
+    """The fed-back state; on the skids before lift-off the horizontal part is the reference's
+    (no horizontal position control until the vehicle is airborne, as autopilots do)."""
+    for i in range(act.shape[0]):
+        if not act[i]:
+            continue
+        for j in range(3):
+            p_out[i, j] = pf[i, j]
+            v_out[i, j] = vf[i, j]
+        if not airborne[i]:
+            for j in range(2):
+                p_out[i, j] = rp[i, j]
+                v_out[i, j] = rv[i, j]
+
+
+@njit(cache=True)
+def _tick_out(rec, k, act, p, v, rp, pfb, ref_tab, ref_ids, spray, f, w,
+              flown):  # pragma: no cover
     """Row ``k`` of every active vehicle's record (see :data:`REC_COLUMNS`)."""
     for i in range(p.shape[0]):
         if not act[i]:
@@ -140,13 +182,24 @@ def _record(rec, k, act, p, v, ref, pfb, spray, f, w):  # pragma: no cover
         for j in range(3):
             r[j] = p[i, j]
             r[3 + j] = v[i, j]
-            r[6 + j] = ref[i, j]
+            r[6 + j] = rp[i, j]
             r[9 + j] = pfb[i, j]
             r[18 + j] = w[i, j]
-        r[12] = ref[i, 10]
+        r[12] = ref_tab[ref_ids[i], k, 10]
         r[13] = 1.0 if spray[i] else 0.0
         for j in range(4):
             r[14 + j] = f[i, j]
+        flown[i] = k + 1
+
+
+@njit(cache=True)
+def _imu_record(imu_rec, k, act, f_m, om, err):  # pragma: no cover
+    for i in range(act.shape[0]):
+        if act[i]:
+            for j in range(3):
+                imu_rec[i, k, j] = f_m[i, j]
+                imu_rec[i, k, 3 + j] = om[i, j]
+                imu_rec[i, k, 6 + j] = err[i, j]
 
 
 @njit(cache=True)
@@ -163,47 +216,6 @@ def _controls(U, f, xf, col, act):  # pragma: no cover
 
 
 # ------------------------------------------------------------------------------- per-vehicle
-class _RowData:
-    """What a per-vehicle consumer sees of the batch state (``act``: actuator states)."""
-
-    __slots__ = ("S", "i", "ia")
-
-    def __init__(self, S: np.ndarray, i: int, ia: int) -> None:
-        self.S, self.i, self.ia = S, i, ia
-
-    @property
-    def act(self) -> np.ndarray:
-        return self.S[self.i, self.ia:self.ia + 4]
-
-
-class _CascadeRow:
-    """Vehicle ``i`` of a batched cascade with the scalar cascade's writable face (``mass``,
-    ``attitude.J``, ``reset()``), for the spray job's mass updates."""
-
-    def __init__(self, bc: Any, i: int) -> None:
-        self._bc, self._i = bc, i
-        self.attitude = self
-
-    @property
-    def mass(self) -> float:
-        return float(self._bc.mass[self._i])
-
-    @mass.setter
-    def mass(self, m: float) -> None:
-        self._bc.mass[self._i] = m
-
-    @property
-    def J(self) -> tuple[float, float, float]:
-        return tuple(float(x) for x in self._bc.J[self._i])
-
-    @J.setter
-    def J(self, j: Sequence[float]) -> None:
-        self._bc.J[self._i] = j
-
-    def reset(self) -> None:
-        self._bc.reset_rows(np.array([self._i]))
-
-
 def _crash_text(code: int, t: float) -> str:
     if code == _NONFINITE:
         return "diverged: non-finite state"
@@ -243,7 +255,8 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
     """Fly every flight of ``flights`` in lockstep; one :class:`LoopOutput` per flight.
 
     All flights must share ``sim.control_hz`` and ``sim.timestep_s``. ``nthread``: MuJoCo's
-    rollout threads (default: the machine's cores, at most the batch size)."""
+    rollout threads (default: ``$AG_UAV_ENGINE_THREADS`` or the machine's cores, at most the
+    batch size; a single vehicle is stepped in this thread)."""
     from controllers.batched import BatchCascade
 
     from .sensors_batched import BatchAttitudeError, BatchImu, BatchWind
@@ -363,17 +376,17 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
     spr = None
     if any(s is not None for s in sprayers):
         from .spray import Sprayer
-        from .spray_batched import BatchSprayer
+        from .spray_batched import BatchSprayer, MassSink
 
         objs = []
+        set_mass = _mass_setter(bc)
         for i, s in enumerate(sprayers):
             if s is None:
                 raise ValueError("engine.fly: a batch mixes spray jobs and plain flights")
             cfg, veh, tab, job, n_i, log = s
-            objs.append(Sprayer(cfg, veh, _RowData(S, i, ia), _CascadeRow(bc, i), tab, job,
-                                n_i, dt, log))
+            objs.append(Sprayer(cfg, veh, None, MassSink(i, set_mass), tab, job, n_i, dt, log))
         sprayers = objs
-        spr = BatchSprayer.from_sprayers(objs, _mass_setter(bc))
+        spr = BatchSprayer.from_sprayers(objs, set_mass, push_initial=False)
 
     # feedback: all true, the batched estimator bank, or per-vehicle
     from .estimation import BatchEstimatorFeedback
@@ -413,6 +426,14 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
     R = np.zeros((N, 9))
     omega = np.zeros((N, 3))
     code = np.zeros(N, dtype=np.int8)
+    low = np.zeros(N, dtype=bool)
+    rp = np.zeros((N, 3))
+    rv = np.zeros((N, 3))
+    ra = np.zeros((N, 3))
+    yaw = np.zeros(N)
+    spray = np.zeros(N, dtype=bool)
+    p_fb = np.zeros((N, 3))
+    v_fb = np.zeros((N, 3))
     act = np.ones(N, dtype=bool)
     flown = np.zeros(N, dtype=np.int64)
     crash_reason: list[str | None] = [None] * N
@@ -421,15 +442,12 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
     S_out = np.empty((N, nsub, ns))
     sens_out = np.empty((N, nsub, m0.nsensordata))
     warm = np.zeros((N, m0.nv))
-    xf = np.zeros((N, 3))
-    airspeed = np.zeros(N)
-    alt = np.zeros(N)
     cos_tilt = math.cos(math.radians(80.0))
     skids = [set(v_.skid_geoms) for v_ in vehs]
     ground = [v_.ground_geom for v_ in vehs]
-    wm = wind.mean
-    if nthread is None:
-        nthread = min(os.cpu_count() or 1, N) if N > 1 else 0
+    if nthread is None:  # worker processes of a pool run one thread each (executor.THREAD_ENV)
+        nthread = int(os.environ.get("AG_UAV_ENGINE_THREADS", 0)) or (os.cpu_count() or 1)
+        nthread = min(nthread, N) if N > 1 else 0
     runner = _rollout.Rollout(nthread=nthread)
     thread_data = [mujoco.MjData(m0) for _ in range(max(nthread, 1))]
 
@@ -441,94 +459,89 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
                    dynamic_ncols=True, mininterval=0.5)
     bar_next = 1.0
     idx = np.arange(N)
+    # one vehicle: step its MjData directly (bit-identical to the rollout: same state, controls
+    # and zero warm start per control period; tested), which saves the rollout's overhead
+    direct = xfrc0 = None
+    mj_step, mj_getState = mujoco.mj_step, mujoco.mj_getState
+    if N == 1:
+        direct = mujoco.MjData(m0)
+        mujoco.mj_setState(m0, direct, S[0], STATE_SPEC)
+        xfrc0 = direct.xfrc_applied[body, :3]
     wall = time.perf_counter()
     try:
         for k in range(n_max):
             t = k * dt
-            ended = act & (n_ticks <= k)
-            if ended.any():
-                act &= ~ended
-            if not act.any():
-                break
-            _kinematics(S, iq, iv, act, p, v, quat, R, omega, box, cos_tilt, code)
-            # ---- safety / crash detection
-            if code.any():
-                for i in np.flatnonzero((code != 0) & act):
+            flags = _tick_in(k, S, act, n_ticks, iq, iv, p, v, quat, R, omega, box, cos_tilt,
+                             code, airborne, hover_z, low, ref_tab, ref_ids, rp, rv, ra, yaw,
+                             spray)
+            if flags & 1:  # ---- crashes
+                for i in np.flatnonzero(code):
                     crash_reason[i], crash_time[i] = _crash_text(int(code[i]), t), t
                     act[i] = False
                 code[:] = 0
-                if not act.any():
-                    break
-            up = act & ~airborne & (p[:, 2] > hover_z + 0.3)
-            if up.any():
-                airborne |= up
-            low = act & airborne & (p[:, 2] < hover_z + 1.5)
-            if low.any():
+            if flags & 2:  # ---- near the ground: real contacts
                 for i in np.flatnonzero(low):
                     why = _ground_contact(models[i], contact_data[i], S[i], ground[i],
                                           skids[i], v[i], t)
                     if why:
                         crash_reason[i], crash_time[i] = why, t
                         act[i] = False
-                if not act.any():
-                    break
-            ref = ref_tab[ref_ids, k]
-            rp, rv, ra = ref[:, 0:3], ref[:, 3:6], ref[:, 6:9]
-            spray = ref[:, 11] > 0.5
+            if not flags & 4 or ((flags & 3) and not act.any()):
+                break
             # ---- sensing, feedback
             Rc, om = R, omega
             imu_in = None
             if imu is not None:
-                f_m, om = imu.measure(sens[:, ias:ias + 3], sens[:, igs:igs + 3])
-                Rc = att.apply(R)
-                imu_rec[:, k, 0:3] = f_m
-                imu_rec[:, k, 3:6] = om
-                imu_rec[:, k, 6:9] = att.last
+                f_m, om = imu.measure(sens[:, ias:ias + 3], sens[:, igs:igs + 3], act)
+                Rc = att.apply(R, act)
+                _imu_record(imu_rec, k, act, f_m, om, att.last)
                 imu_in = (f_m, Rc)
             if all_true:
-                p_fb, v_fb = p, v
+                pf, vf = p, v
             elif bank is not None:
-                p_fb, v_fb = bank.update(k, t, p, v, imu_in, act)
+                pf, vf = bank.update(k, t, p, v, imu_in, act)
             else:
-                p_fb, v_fb = _per_vehicle_feedback(fbs, t, p, v, imu_in, act)
-            grounded = act & ~airborne
-            if grounded.any():
-                # on the skids: no horizontal position control until lift-off (as autopilots
-                # do); an estimate a metre off must not tip the vehicle over on the ground
-                p_fb = p_fb.copy()
-                v_fb = v_fb.copy()
-                p_fb[grounded, :2] = rp[grounded, :2]
-                v_fb[grounded, :2] = rv[grounded, :2]
-            f = bc.update(p_fb, v_fb, Rc, om, rp, rv, ra, ref[:, 9], dt, act)
+                pf, vf = _per_vehicle_feedback(fbs, t, p, v, imu_in, act)
+            # on the skids: no horizontal position control until lift-off (as autopilots do);
+            # an estimate a metre off must not tip the vehicle over on the ground
+            _hold_on_ground(act, airborne, pf, vf, rp, rv, p_fb, v_fb)
+            f = bc.update(p_fb, v_fb, Rc, om, rp, rv, ra, yaw, dt, active=act)
             if spr is not None:
-                spray, reset = spr.step(k, t, p[:, 2], v[:, 0], v[:, 1], spray, f,
-                                        S[:, ia:ia + 4], act)
+                on, reset = spr.step(k, t, p[:, 2], v[:, 0], v[:, 1], spray, f,
+                                     S[:, ia:ia + 4], act)
+                spray[:] = on
                 if reset.any():
                     bc.reset_rows(np.flatnonzero(reset))
             # ---- wind as a drag force (zero-order hold over the control period)
-            np.maximum(p[:, 2], 0.0, out=alt)
-            np.hypot(v[:, 0] - wm[:, 0], v[:, 1] - wm[:, 1], out=airspeed)
-            w = wind.step(dt, alt, airspeed, act)
-            wind.drag(v, w, c_lin, c_quad, xf)
-            _record(rec, k, act, p, v, ref, p_fb, spray, f, w)
-            flown[act] = k + 1
+            w, xf = wind.step_drag(dt, p[:, 2], v, c_lin, c_quad, act)
+            _tick_out(rec, k, act, p, v, rp, p_fb, ref_tab, ref_ids, spray, f, w, flown)
             if any_log:
                 for i in np.flatnonzero(act):
                     if logs[i] is not None:
                         frames[i] += _log_tick(logs[i], renderers[i], scratch[i], models[i],
                                                S[i], t, p[i], quat[i], v[i], rp[i], rv[i],
-                                               ref[i, 9], p_fb[i], v_fb[i], fbs[i], bc, i, f[i],
+                                               yaw[i], p_fb[i], v_fb[i], fbs[i], bc, i, f[i],
                                                w[i], spray[i],
                                                imu_rec[i, k] if imu_rec is not None else None)
             # ---- physics: one control period for every active vehicle
-            _controls(U, f, xf, xcol, act)
-            if act.all():
+            if direct is not None:
+                d0 = direct
+                d0.ctrl[:] = f[0]
+                xfrc0[:] = xf[0]
+                d0.qacc_warmstart[:] = 0.0
+                mj_step(m0, d0, nsub)
+                mj_getState(m0, d0, S[0], STATE_SPEC)
+                if imu is not None:
+                    sens[0] = d0.sensordata
+            elif act.all():
+                _controls(U, f, xf, xcol, act)
                 runner.rollout(models, thread_data, S, U,
                                control_spec=CTRL_SPEC, nstep=nsub, initial_warmstart=warm,
                                state=S_out, sensordata=sens_out, skip_checks=True)
                 S[:] = S_out[:, -1]
                 sens[:] = sens_out[:, -1]
             else:
+                _controls(U, f, xf, xcol, act)
                 ii = idx[act]
                 so = S_out[:len(ii)]
                 se = sens_out[:len(ii)]

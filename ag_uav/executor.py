@@ -36,6 +36,8 @@ THREAD_ENV = {
     "VECLIB_MAXIMUM_THREADS": "1",
     "BLIS_NUM_THREADS": "1",
     "LP_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+    "AG_UAV_ENGINE_THREADS": "1",
     "MUJOCO_GL": "egl",
 }
 

@@ -273,13 +273,46 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     return _finish(prep, out, batch=1)
 
 
-def simulate_many(cfgs: list[Config], *, progress: bool = False) -> list[RunResult]:
+def simulate_many(cfgs: list[Config], *, progress: bool = False,
+                  errors: str = "raise") -> list[Any]:
     """Fly every config's mission in one lockstep batch (:func:`ag_uav.engine.fly`); the same
     results as ``[simulate(c) for c in cfgs]`` (a run depends only on its config and seed).
-    All configs must share ``sim.control_hz`` and ``sim.timestep_s``."""
-    preps = [_prepare(c, None, None, None) for c in cfgs]
-    outs = fly([p.flight for p in preps], progress=progress)
-    return [_finish(p, o, batch=len(cfgs)) for p, o in zip(preps, outs, strict=True)]
+    All configs must share :func:`batch_key`.
+
+    ``errors="return"``: a run that cannot be set up (bad field, …) gives its exception in its
+    place instead of raising, and the others fly."""
+    preps: list[Any] = []
+    for c in cfgs:
+        try:
+            preps.append(_prepare(c, None, None, None))
+        except Exception as e:  # noqa: BLE001 - reported per run
+            if errors == "raise":
+                raise
+            preps.append(e)
+    ok = [p for p in preps if isinstance(p, _Prepared)]
+    outs = iter(fly([p.flight for p in ok], progress=progress)) if ok else iter(())
+    res: list[Any] = []
+    for p in preps:
+        if not isinstance(p, _Prepared):
+            res.append(p)
+            continue
+        out = next(outs)
+        try:
+            res.append(_finish(p, out, batch=len(ok)))
+        except Exception as e:  # noqa: BLE001
+            if errors == "raise":
+                raise
+            res.append(e)
+    return res
+
+
+def batch_key(cfg: Config) -> tuple:
+    """Configs with equal keys can fly in one engine batch (same control and physics rates,
+    same sensing and spray-job structure)."""
+    e = cfg.estimator
+    imu = ((e.source == "bearings" or e.name != "true" or bool(e.shadow))
+           and e.imu and cfg.imu.model == "mems")
+    return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled)
 
 
 def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
