@@ -116,6 +116,57 @@ def _predict_batch(x, P, fptr, fidx, fval, Q, u, pos, vel, hh, dt, active, use_u
 
 
 @njit
+def _predict_b3(x, P, Fb, Q, u, pos, vel, hh, dt, active, use_u):
+    """As :func:`_predict_batch` for F = blkdiag(Fb, …, Fb) with 3×3 blocks (the cvb model):
+    each 3×3 block P_ab of P becomes Fb P_ab Fbᵀ + Q_ab, unrolled on local floats."""
+    N, n = x.shape
+    na = n // 3
+    f00, f01, f02 = Fb[0, 0], Fb[0, 1], Fb[0, 2]
+    f10, f11, f12 = Fb[1, 0], Fb[1, 1], Fb[1, 2]
+    f20, f21, f22 = Fb[2, 0], Fb[2, 1], Fb[2, 2]
+    for i in range(N):
+        if not active[i]:
+            continue
+        Pi = P[i]
+        xi = x[i]
+        for a in range(na):
+            o = 3 * a
+            x0, x1, x2 = xi[o], xi[o + 1], xi[o + 2]
+            xi[o] = f00 * x0 + f01 * x1 + f02 * x2
+            xi[o + 1] = f10 * x0 + f11 * x1 + f12 * x2
+            xi[o + 2] = f20 * x0 + f21 * x1 + f22 * x2
+            for bb in range(na):
+                c = 3 * bb
+                p00, p01, p02 = Pi[o, c], Pi[o, c + 1], Pi[o, c + 2]
+                p10, p11, p12 = Pi[o + 1, c], Pi[o + 1, c + 1], Pi[o + 1, c + 2]
+                p20, p21, p22 = Pi[o + 2, c], Pi[o + 2, c + 1], Pi[o + 2, c + 2]
+                # G = Fb P_ab
+                g00 = f00 * p00 + f01 * p10 + f02 * p20
+                g01 = f00 * p01 + f01 * p11 + f02 * p21
+                g02 = f00 * p02 + f01 * p12 + f02 * p22
+                g10 = f10 * p00 + f11 * p10 + f12 * p20
+                g11 = f10 * p01 + f11 * p11 + f12 * p21
+                g12 = f10 * p02 + f11 * p12 + f12 * p22
+                g20 = f20 * p00 + f21 * p10 + f22 * p20
+                g21 = f20 * p01 + f21 * p11 + f22 * p21
+                g22 = f20 * p02 + f21 * p12 + f22 * p22
+                # G Fbᵀ + Q
+                Pi[o, c] = (g00 * f00 + g01 * f01 + g02 * f02) + Q[o, c]
+                Pi[o, c + 1] = (g00 * f10 + g01 * f11 + g02 * f12) + Q[o, c + 1]
+                Pi[o, c + 2] = (g00 * f20 + g01 * f21 + g02 * f22) + Q[o, c + 2]
+                Pi[o + 1, c] = (g10 * f00 + g11 * f01 + g12 * f02) + Q[o + 1, c]
+                Pi[o + 1, c + 1] = (g10 * f10 + g11 * f11 + g12 * f12) + Q[o + 1, c + 1]
+                Pi[o + 1, c + 2] = (g10 * f20 + g11 * f21 + g12 * f22) + Q[o + 1, c + 2]
+                Pi[o + 2, c] = (g20 * f00 + g21 * f01 + g22 * f02) + Q[o + 2, c]
+                Pi[o + 2, c + 1] = (g20 * f10 + g21 * f11 + g22 * f12) + Q[o + 2, c + 1]
+                Pi[o + 2, c + 2] = (g20 * f20 + g21 * f21 + g22 * f22) + Q[o + 2, c + 2]
+        if use_u:
+            for a in range(pos.shape[0]):
+                xi[pos[a]] += hh * u[i, a]
+                xi[vel[a]] += dt * u[i, a]
+
+
+@njit
 def _inv_small(S, Si):
     """Si = S⁻¹ for m ≤ 3 with the closed forms of :func:`estimators.kf.inv_small`."""
     m = S.shape[0]
@@ -725,6 +776,9 @@ class BatchFilter:
         self.dt = float(dt)
         self._hh = 0.5 * self.dt * self.dt
         self._fcsr = _csr(self.F)
+        Fb = np.ascontiguousarray(self.F[:3, :3])
+        blocks = self.n % 3 == 0 and np.array_equal(self.F, np.kron(np.eye(self.n // 3), Fb))
+        self._Fb = Fb if blocks else None  # cvb: 3×3 axis blocks (unrolled predict)
         self.nis = np.full(self.N, np.nan)
         self.y = np.zeros((self.N, self.m))
         self._ok = np.zeros(self.N, dtype=bool)
@@ -787,6 +841,10 @@ class BatchFilter:
             if uu.shape != self._u0.shape:
                 raise ValueError(f"u must have shape {self._u0.shape}, got {uu.shape}")
             use_u = True
+        if self._Fb is not None:
+            _predict_b3(self.x, self.P, self._Fb, self.Q, uu, self.pos_idx, self.vel_idx,
+                        self._hh, self.dt, act, use_u)
+            return
         ptr, idx, val = self._fcsr
         _predict_batch(self.x, self.P, ptr, idx, val, self.Q, uu, self.pos_idx, self.vel_idx,
                        self._hh, self.dt, act, use_u, self._tx, self._FP)
