@@ -558,8 +558,48 @@ def _pca_row(buf, pcs, z, Nw, L, r, mode, zf):
 
 
 @njit
-def _kf_update_batch(x, P, R, nis, y, H, z, mask, ok, buf, pcs, zf, Nw, L, r, mode, use_pca):
-    """KF (optionally PCA-KF) update of the masked rows; ok[i] = a fix was fused."""
+def _pca_batch(buf, pcs, zf, z, mask, Nw, L, r, mode):
+    """The PCA block of the masked rows: zf[i] = PCABlock(z[i]) (see :func:`_pca_row`)."""
+    for i in range(z.shape[0]):
+        if mask[i]:
+            _pca_row(buf[i], pcs[i], z[i], Nw, L, r, mode, zf[i])
+
+
+@njit
+def _pca_batch2(buf, pcs, zf, buf2, pcs2, zf2, z, mask, Nw, L, r, mode):
+    """:func:`_pca_batch` for two filters with the same PCA options (PCA-KF and PCA-MCKF of
+    one bank): where a row's two windows are equal (they see the same fixes) the block runs
+    once and its result (window, output) is copied; otherwise each runs on its own window.
+    The same deterministic function of the same inputs: bit-identical to running both."""
+    c = z.shape[1]
+    W = buf.shape[2]
+    for i in range(z.shape[0]):
+        if not mask[i]:
+            continue
+        same = pcs[i, 0] == pcs2[i, 0] and pcs[i, 1] == pcs2[i, 1]
+        if same:
+            for a in range(c):
+                for j in range(W):
+                    if buf[i, a, j] != buf2[i, a, j]:
+                        same = False
+                        break
+                if not same:
+                    break
+        _pca_row(buf[i], pcs[i], z[i], Nw, L, r, mode, zf[i])
+        if same:
+            for a in range(c):
+                for j in range(W):
+                    buf2[i, a, j] = buf[i, a, j]
+                zf2[i, a] = zf[i, a]
+            pcs2[i, 0] = pcs[i, 0]
+            pcs2[i, 1] = pcs[i, 1]
+        else:
+            _pca_row(buf2[i], pcs2[i], z[i], Nw, L, r, mode, zf2[i])
+
+
+@njit
+def _kf_update_batch(x, P, R, nis, y, H, z, mask, ok):
+    """KF update of the masked rows; ok[i] = a fix was fused."""
     N, n = x.shape
     m = H.shape[0]
     nu = np.empty(m)
@@ -576,9 +616,6 @@ def _kf_update_batch(x, P, R, nis, y, H, z, mask, ok, buf, pcs, zf, Nw, L, r, mo
         if not mask[i]:
             continue
         zi = z[i]
-        if use_pca:
-            _pca_row(buf[i], pcs[i], z[i], Nw, L, r, mode, zf[i])
-            zi = zf[i]
         v = _innovation(x[i], P[i], R[i], H, zi, nu, PHT, S, Si)
         if not math.isfinite(v):
             continue
@@ -593,9 +630,8 @@ def _kf_update_batch(x, P, R, nis, y, H, z, mask, ok, buf, pcs, zf, Nw, L, r, mo
 
 
 @njit
-def _mckf_update_batch(x, P, R, nis, y, H, z, mask, ok, kx, ky, fpar, ipar, ist, wy,
-                       buf, pcs, zf, Nw, L, r, mode, use_pca, rel):
-    """MCKF (optionally PCA-MCKF) update of the masked rows.
+def _mckf_update_batch(x, P, R, nis, y, H, z, mask, ok, kx, ky, fpar, ipar, ist, wy, rel):
+    """MCKF update of the masked rows.
 
     fpar[i] = (kernel_floor, eps², reject_weight, inflate, inflate_gate),
     ipar[i] = (max_iter, lockout_n, recovery 0/1/2 = None/"kf"/"inflate", inflate_jmax),
@@ -639,9 +675,6 @@ def _mckf_update_batch(x, P, R, nis, y, H, z, mask, ok, kx, ky, fpar, ipar, ist,
         if not mask[i]:
             continue
         zi = z[i]
-        if use_pca:
-            _pca_row(buf[i], pcs[i], z[i], Nw, L, r, mode, zf[i])
-            zi = zf[i]
         xb = x[i]
         Pb = P[i]
         Ri = R[i]
@@ -860,8 +893,11 @@ class BatchFilter:
         return self._ok
 
     def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
-        _kf_update_batch(self.x, self.P, self.R, self.nis, self.y, self.H, z, mask, self._ok,
-                         _NO_BUF, _NO_PCS, _NO_ZF, 3, 2, 1, 0, False)
+        self._fuse(z, mask)
+
+    def _fuse(self, z: np.ndarray, mask: np.ndarray) -> None:
+        """The filter's update proper (after the PCA block of the PCA classes)."""
+        _kf_update_batch(self.x, self.P, self.R, self.nis, self.y, self.H, z, mask, self._ok)
 
     def initialise(self, mask, x0: np.ndarray, P0: np.ndarray, reset_window: bool = False) -> None:
         """Set x, P of the masked rows (bool (N,) or indices) to x0 ((n,) or (N, n)) and P0
@@ -906,11 +942,6 @@ class BatchFilter:
 
     def _to(self, i: int, f: Any) -> None:
         """Class-specific state (hook)."""
-
-
-_NO_BUF = np.zeros((0, 1, 1))
-_NO_PCS = np.zeros((0, 2), dtype=np.int64)
-_NO_ZF = np.zeros((0, 1))
 
 
 class BatchKF(BatchFilter):
@@ -967,6 +998,11 @@ class _MCKFMixin:
     def recovered(self) -> np.ndarray:
         return self._ist[:, 3].astype(bool)
 
+    def _fuse(self, z: np.ndarray, mask: np.ndarray) -> None:
+        _mckf_update_batch(self.x, self.P, self.R, self.nis, self.y, self.H, z, mask, self._ok,
+                           self._kx, self._ky, self._fpar, self._ipar, self._ist, self.weights,
+                           REL_PIVOT)
+
     def _to_mckf(self, i: int, f: Any) -> None:
         f.n_rejected = int(self._ist[i, 0])
         f.n_iter = int(self._ist[i, 1])
@@ -1001,9 +1037,23 @@ class _PCAMixin:
             if f.z_filtered is not None:
                 self.z_filtered[i] = f.z_filtered
 
-    def _pca_args(self) -> tuple:
-        return (self._buf, self._pcs, self.z_filtered, self.window, self._L, self._r,
-                _PCA_MODE[self.pca_mode], True)
+    def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
+        self._pca(z, mask)
+        self._fuse(self.z_filtered, mask)  # type: ignore[attr-defined]
+
+    def _pca_key(self) -> tuple:
+        return (self.window, self._L, self._r, self.pca_mode, self.m)
+
+    def _pca(self, z: np.ndarray, mask: np.ndarray) -> None:
+        _pca_batch(self._buf, self._pcs, self.z_filtered, z, mask, self.window, self._L,
+                   self._r, _PCA_MODE[self.pca_mode])
+
+    def _pca2(self, other: _PCAMixin, z: np.ndarray, mask: np.ndarray) -> None:
+        """Run the PCA block of self and ``other`` (same options), once per row where their
+        windows are equal."""
+        _pca_batch2(self._buf, self._pcs, self.z_filtered, other._buf, other._pcs,
+                    other.z_filtered, z, mask, self.window, self._L, self._r,
+                    _PCA_MODE[self.pca_mode])
 
     def _reset_window(self, rows: np.ndarray) -> None:
         self._pcs[rows] = 0
@@ -1029,10 +1079,6 @@ class BatchMCKF(_MCKFMixin, BatchFilter):
     def _to(self, i: int, f: Any) -> None:
         self._to_mckf(i, f)
 
-    def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
-        _mckf_update_batch(self.x, self.P, self.R, self.nis, self.y, self.H, z, mask, self._ok,
-                           self._kx, self._ky, self._fpar, self._ipar, self._ist, self.weights,
-                           _NO_BUF, _NO_PCS, _NO_ZF, 3, 2, 1, 0, False, REL_PIVOT)
 
 
 class BatchPCAKF(_PCAMixin, BatchFilter):
@@ -1047,9 +1093,7 @@ class BatchPCAKF(_PCAMixin, BatchFilter):
     def _to(self, i: int, f: Any) -> None:
         self._to_pca(i, f)
 
-    def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
-        _kf_update_batch(self.x, self.P, self.R, self.nis, self.y, self.H, z, mask, self._ok,
-                         *self._pca_args())
+
 
 
 class BatchPCAMCKF(_PCAMixin, _MCKFMixin, BatchFilter):
@@ -1067,10 +1111,7 @@ class BatchPCAMCKF(_PCAMixin, _MCKFMixin, BatchFilter):
         self._to_mckf(i, f)
         self._to_pca(i, f)
 
-    def _update(self, z: np.ndarray, mask: np.ndarray) -> None:
-        _mckf_update_batch(self.x, self.P, self.R, self.nis, self.y, self.H, z, mask, self._ok,
-                           self._kx, self._ky, self._fpar, self._ipar, self._ist, self.weights,
-                           *self._pca_args(), REL_PIVOT)
+
 
 
 _BY_SCALAR: dict[type, type[BatchFilter]] = {
@@ -1089,10 +1130,25 @@ def batch_class(f: Any) -> type[BatchFilter]:
 
 class BatchBank:
     """name → batched filter, advanced together (the lockstep counterpart of
-    ``ag_uav.estimation.FilterBank._step_bank``: predict + IMU input, then update)."""
+    ``ag_uav.estimation.FilterBank._step_bank``: predict + IMU input, then update).
+
+    PCA filters with the same PCA options (PCA-KF and PCA-MCKF of the bank) are paired: their
+    blocks see the same fixes, so :meth:`update` runs the block once per row where the two
+    windows are equal (checked per row and update; results bit-identical to running both)."""
 
     def __init__(self, filters: Mapping[str, BatchFilter]) -> None:
         self.filters = dict(filters)
+        pca = [f for f in self.filters.values() if isinstance(f, _PCAMixin)]
+        self._pairs: list[tuple[Any, Any]] = []
+        used: set[int] = set()
+        for a, fa in enumerate(pca):
+            for b in range(a + 1, len(pca)):
+                fb = pca[b]
+                if a in used or b in used or fa.N != fb.N or fa._pca_key() != fb._pca_key():
+                    continue
+                self._pairs.append((fa, fb))
+                used.update((a, b))
+        self._paired = {id(f) for pair in self._pairs for f in pair}
 
     @classmethod
     def from_filters(cls, banks: Sequence[Mapping[str, Any]]) -> BatchBank:
@@ -1111,8 +1167,21 @@ class BatchBank:
             f.predict(u, active)
 
     def update(self, z: np.ndarray, mask: np.ndarray | None = None) -> dict[str, np.ndarray]:
-        """Update every filter; {name: ok copy}."""
-        return {k: f.update(z, mask).copy() for k, f in self.filters.items()}
+        """Update every filter with the same fixes z (N, m) on the rows of mask (default all),
+        as each filter's :meth:`BatchFilter.update`; returns {name: ok (N,) bool copy}."""
+        f0 = next(iter(self.filters.values()))
+        zz = np.ascontiguousarray(z, dtype=float)
+        if zz.shape != (f0.N, f0.m):
+            raise ValueError(f"z must have shape ({f0.N}, {f0.m}), got {zz.shape}")
+        mk = f0._all if mask is None else _rows(mask, f0.N)
+        for fa, fb in self._pairs:
+            fa._pca2(fb, zz, mk)
+            fa._fuse(fa.z_filtered, mk)
+            fb._fuse(fb.z_filtered, mk)
+        for f in self.filters.values():
+            if id(f) not in self._paired:
+                f._update(zz, mk)
+        return {k: f._ok.copy() for k, f in self.filters.items()}
 
     def initialise(self, mask, x0: np.ndarray, P0: np.ndarray) -> None:
         for f in self.filters.values():

@@ -311,3 +311,32 @@ def test_runs_without_numba():
     r = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True,
                        env={"PYTHONPATH": str(root), "PATH": "/usr/bin:/bin"}, timeout=120)
     assert r.returncode == 0, r.stderr
+
+
+def test_bank_shared_pca_bit_identical():
+    """BatchBank runs the PCA block once for the PCA-KF/PCA-MCKF pair where the windows are
+    equal: same bits as updating each filter on its own, also after the windows diverge."""
+    names = ("kf", "mckf", "pca-kf", "pca-mckf")
+    N, ticks = 8, 200
+    sc = _scenario(N, ticks, seed=5)
+    mk = [{k: _make(k, i) for k in names} for i in range(N)]
+    bank = BatchBank.from_filters(mk)
+    solo = {k: batch_class(mk[0][k]).from_filters([b[k] for b in mk]) for k in names}
+    assert len(bank._pairs) == 1
+    for t in range(ticks):
+        mask = sc["fix"][t]
+        bank.predict(sc["u"][t])
+        for f in solo.values():
+            f.predict(sc["u"][t])
+        if t == 60:  # rows 0-3 of PCA-KF alone get one more fix: windows differ from now on
+            extra = np.arange(N) < 4
+            bank["pca-kf"].update(sc["z"][t] + 1.0, extra)
+            solo["pca-kf"].update(sc["z"][t] + 1.0, extra)
+        ok = bank.update(sc["z"][t], mask)
+        for k, f in solo.items():
+            assert np.array_equal(f.update(sc["z"][t], mask), ok[k])
+    for k in names:
+        assert np.array_equal(bank[k].x, solo[k].x) and np.array_equal(bank[k].P, solo[k].P)
+        assert np.array_equal(bank[k].nis, solo[k].nis, equal_nan=True)
+    assert not np.array_equal(bank["pca-kf"]._buf[0], bank["pca-mckf"]._buf[0])
+    assert np.array_equal(bank["pca-kf"]._buf[5], bank["pca-mckf"]._buf[5])
