@@ -42,6 +42,16 @@ with no cross-row BLAS call, so vehicle i's results are bit-identical whatever N
 the other rows hold (determinism of the lockstep engine).  Without numba the same kernels run
 as (slow) Python (:mod:`estimators._jit`).
 
+Measured (``python -m estimators.batched``, cvb model, dim 3, window 10 hankel, a fix every
+10th tick, best of 3 on a loaded 2-core machine), µs per vehicle-tick::
+
+    N                          1       64      256
+    numpy-vectorised KF only   11.2    0.67    0.53
+    numba KF only              1.4     0.24    0.23
+    numba bank of all four     7.8     1.96    1.90
+
+First compile of the kernels ~7-11 s (cached by numba in ``__pycache__``), later loads 0.2 s.
+
 Equivalence with the scalar filters: to rounding of the summation order (tests: 1e-9 relative
 + absolute over hundreds of ticks with outliers, outages, recoveries and R switches).
 """
@@ -924,10 +934,11 @@ class BatchFilter:
         self.R[sel] = Ra
 
     def positions(self) -> np.ndarray:
-        """(N, axes) view-free copy of the position estimates."""
+        """(N, axes) copy of the position estimates."""
         return self.x[:, self.pos_idx]
 
     def velocities(self) -> np.ndarray:
+        """(N, axes) copy of the velocity estimates."""
         return self.x[:, self.vel_idx]
 
     def to_filter(self, i: int, f: Any) -> Any:
