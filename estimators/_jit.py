@@ -1,0 +1,30 @@
+"""``njit``: :func:`numba.njit` with ``cache=True`` when numba is installed, else the identity.
+
+The batched kernels of :mod:`estimators.batched` are written as plain Python loops over float64
+arrays so that they also run (slowly, for tests and small batches) on numpy alone: the package
+must stay importable with numpy/scipy only.  No ``fastmath``: the kernels must give the same
+floating-point results as the scalar filters (to rounding of the summation order) and
+bit-identical results per vehicle whatever the batch size.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["HAVE_NUMBA", "njit"]
+
+try:  # pragma: no cover - depends on the environment
+    import numba as _numba
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    _numba = None
+    HAVE_NUMBA = False
+
+
+def njit(func: Callable[..., Any]) -> Callable[..., Any]:
+    """Compile ``func`` with ``numba.njit(cache=True)``; without numba return it unchanged."""
+    if _numba is None:  # pragma: no cover
+        return func
+    return _numba.njit(cache=True)(func)
