@@ -64,10 +64,11 @@ DROP_KEYS = {"config", "run_dir"}
 
 
 def is_timing_column(name: str) -> bool:
-    """Columns that measure the machine, not the run (excluded from determinism checks)."""
+    """Columns that measure the machine (or how the run was scheduled: ``batch_size``, the size
+    of the lockstep chunk it flew in), not the run (excluded from determinism checks)."""
     n = name.lower()
     return ("wall" in n or "real_time_factor" in n or n.endswith(("_per_s", "_us"))
-            or "timing" in n)
+            or "timing" in n or n == "batch_size")
 
 
 # ------------------------------------------------------------------------------ spec / expand
@@ -355,7 +356,6 @@ def _json_default(o: Any) -> Any:
 def run_task(task: RunTask) -> dict[str, Any]:
     """Worker entry point: fly one run, return its row. Never raises: an exception inside the run
     becomes a row with ``status = "error"`` and the reason."""
-    row: dict[str, Any] = {"index": task.index, "run_id": task.run_id, **task.axis_values}
     t0 = time.perf_counter()
     try:
         cfg = config_from_dict(task.config)
@@ -371,18 +371,91 @@ def run_task(task: RunTask) -> dict[str, Any]:
 
             cfg.log.enabled = False
             res = simulate(cfg)
-        summ = flatten_summary(res.summary)
-        for k in task.axis_values:
-            summ.pop(k, None)
-        status = "crashed" if summ.get("crashed") else "ok"
-        row.update({"status": status, "crash_reason": summ.pop("crash_reason", None) or ""})
-        row.update(summ)
+        return _row(task, res, t0)
     except Exception as e:  # noqa: BLE001 - a failing run is a row, the batch goes on
-        msg = str(e).splitlines()[0] if str(e) else ""
-        row.update({"status": "error", "crash_reason": f"{type(e).__name__}: {msg}"[:300],
-                    "completed": False, "crashed": True,
-                    "wall_time_s": round(time.perf_counter() - t0, 3)})
+        return _error_row(task, e, t0)
+
+
+def run_chunk(tasks: list[RunTask]) -> list[dict[str, Any]]:
+    """Worker entry point: fly a chunk of runs as one lockstep engine batch
+    (:func:`ag_uav.sim.simulate_many`) and return their rows, in order. Never raises: a run that
+    cannot be set up is an error row; if the batch itself fails, the chunk falls back to one
+    run at a time so the failing run is isolated and the others still fly."""
+    if len(tasks) == 1 or any(t.logs_dir for t in tasks):
+        return [run_task(t) for t in tasks]
+    from .sim import simulate_many
+
+    t0 = time.perf_counter()
+    rows: list[dict[str, Any] | None] = [None] * len(tasks)
+    cfgs, where = [], []
+    for j, task in enumerate(tasks):
+        try:
+            cfg = config_from_dict(task.config)
+            cfg.log.enabled = False
+            cfgs.append(cfg)
+            where.append(j)
+        except Exception as e:  # noqa: BLE001
+            rows[j] = _error_row(task, e, t0)
+    try:
+        results = simulate_many(cfgs, errors="return") if cfgs else []
+    except Exception:  # noqa: BLE001 - isolate the failing run
+        return [run_task(t) for t in tasks]
+    for j, res in zip(where, results, strict=True):
+        rows[j] = (_error_row(tasks[j], res, t0) if isinstance(res, BaseException)
+                   else _row(tasks[j], res, t0))
+    return rows  # type: ignore[return-value]
+
+
+def _row(task: RunTask, res: Any, t0: float) -> dict[str, Any]:
+    row: dict[str, Any] = {"index": task.index, "run_id": task.run_id, **task.axis_values}
+    summ = flatten_summary(res.summary)
+    for k in task.axis_values:
+        summ.pop(k, None)
+    status = "crashed" if summ.get("crashed") else "ok"
+    row.update({"status": status, "crash_reason": summ.pop("crash_reason", None) or ""})
+    row.update(summ)
     return row
+
+
+def _error_row(task: RunTask, e: BaseException, t0: float) -> dict[str, Any]:
+    msg = str(e).splitlines()[0] if str(e) else ""
+    return {"index": task.index, "run_id": task.run_id, **task.axis_values, "status": "error",
+            "crash_reason": f"{type(e).__name__}: {msg}"[:300], "completed": False,
+            "crashed": True, "wall_time_s": round(time.perf_counter() - t0, 3)}
+
+
+#: bytes the engine keeps per vehicle and control tick (records, IMU, filter estimates, spray)
+ENGINE_BYTES_PER_TICK = 400
+#: memory one chunk's records may take (a worker holds one chunk at a time)
+CHUNK_BYTES = 384 * 2**20
+
+
+def plan_chunks(tasks: list[RunTask], workers: int, max_runs: int = 64,
+                budget_bytes: int = CHUNK_BYTES) -> list[list[int]]:
+    """Indices of ``tasks`` in lockstep chunks: runs that can share an engine batch
+    (:func:`ag_uav.sim.batch_key`), at most ``max_runs`` and about ``budget_bytes`` of records
+    per chunk (from each mission's length), and at least as many chunks as ``workers`` when
+    there are enough runs."""
+    from .sim import batch_key, mission_setup
+
+    groups: dict[Any, list[int]] = {}
+    ticks: dict[Any, int] = {}
+    for j, t in enumerate(tasks):
+        try:
+            cfg = config_from_dict(t.config)
+            key = batch_key(cfg)
+            ref = mission_setup(cfg)[2]
+            n = int(min(ref.duration, cfg.sim.max_time_s) * cfg.sim.control_hz) + 1
+        except Exception:  # noqa: BLE001 - a bad run flies alone (and becomes an error row)
+            key, n = ("alone", j), 1
+        groups.setdefault(key, []).append(j)
+        ticks[key] = max(ticks.get(key, 0), n)
+    chunks: list[list[int]] = []
+    for key, idx in groups.items():
+        size = max(1, min(max_runs, budget_bytes // max(ticks[key] * ENGINE_BYTES_PER_TICK, 1),
+                          -(-len(idx) // max(workers, 1))))
+        chunks += [idx[i:i + size] for i in range(0, len(idx), size)]
+    return chunks
 
 
 # ------------------------------------------------------------------------------------ journal
@@ -743,24 +816,28 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
     journal.open(fresh=fresh and not resume)
     n_bad = 0
     try:
-        for i, r in executor.map_unordered(run_task, todo, return_exceptions=True):
-            task = todo[i]
-            retry = False
-            if isinstance(r, BaseException):
-                # the machinery failed (worker died): a row now, re-run by --resume
-                retry = True
-                r = {"index": task.index, "run_id": task.run_id, **task.axis_values,
-                     "status": "error", "completed": False, "crashed": True,
-                     "crash_reason": f"worker failure: {type(r).__name__}: {r}"[:300]}
-            journal.append(task.config_hash, r, retry=retry)
-            rows_by_index[task.index] = r
-            n_bad += r.get("status") != "ok"
-            if on_row is not None:
-                on_row(r)
-            if bar is not None:
-                bar.update(1)
-                if n_bad:
-                    bar.set_postfix(failed=n_bad, refresh=False)
+        chunks = plan_chunks(todo, executor.workers) if todo else []
+        for c, rs in executor.map_unordered(run_chunk, [[todo[i] for i in ch] for ch in chunks],
+                                            return_exceptions=True):
+            for i, r in zip(chunks[c], rs if isinstance(rs, list) else [rs] * len(chunks[c]),
+                            strict=True):
+                task = todo[i]
+                retry = False
+                if isinstance(r, BaseException):
+                    # the machinery failed (worker died): a row now, re-run by --resume
+                    retry = True
+                    r = {"index": task.index, "run_id": task.run_id, **task.axis_values,
+                         "status": "error", "completed": False, "crashed": True,
+                         "crash_reason": f"worker failure: {type(r).__name__}: {r}"[:300]}
+                journal.append(task.config_hash, r, retry=retry)
+                rows_by_index[task.index] = r
+                n_bad += r.get("status") != "ok"
+                if on_row is not None:
+                    on_row(r)
+                if bar is not None:
+                    bar.update(1)
+                    if n_bad:
+                        bar.set_postfix(failed=n_bad, refresh=False)
     finally:
         if bar is not None:
             bar.close()

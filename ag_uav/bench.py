@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import statistics
 import time
 from collections.abc import Callable
@@ -250,7 +251,46 @@ def _estimators(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
 
 
 #: further sections, each fn(cfg, repeats, quick) -> dict merged into the output
-_EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers]
+def batched_rate(cfg: Config, n: int, sim_s: float) -> tuple[float, float]:
+    """Vehicle-sim-seconds and loop wall seconds of ``n`` missions of ``cfg`` (seeds 0…n-1,
+    cut at ``sim_s``) flown as one lockstep batch (:func:`ag_uav.sim.simulate_many`)."""
+    from .sim import simulate_many
+
+    cfgs = []
+    for i in range(n):
+        c = copy.deepcopy(cfg)
+        c.seed = i
+        c.log.enabled = False
+        c.log.render = False
+        c.sim.max_time_s = sim_s
+        cfgs.append(c)
+    res = simulate_many(cfgs)
+    sim = sum(r.summary["sim_time_s"] for r in res)
+    return sim, res[0].summary["loop_wall_time_s"] * n
+
+
+def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    """``batched`` (true state) and ``batched_estimators`` (:data:`ESTIMATOR_LOG_OVERRIDES`):
+    N missions in one engine batch, vehicle-sim-s per wall-s, against raw single-loop
+    stepping of the same model measured right before (the ratio is taken within the run)."""
+    n, sim_s = (16, 20.0) if quick else (64, 60.0)
+    ce = with_overrides(c, ESTIMATOR_LOG_OVERRIDES)
+    batched_rate(ce, 2, 1.0)  # load the compiled kernels outside the timed loops
+    out: dict[str, Any] = {}
+    for key, conf in (("batched", c), ("batched_estimators", ce)):
+        raw = _median_rate(lambda: raw_stepping(c, sim_s, 1), repeats)
+        rate = _median_rate(lambda conf=conf: batched_rate(conf, n, sim_s), repeats)
+        out[key] = {"vehicles": n, "mission_sim_s": sim_s,
+                    "sim_s_per_wall_s": round(rate, 1),
+                    "raw_per_step_sim_s_per_wall_s": round(raw, 1),
+                    "ratio_vs_raw": round(rate / raw, 3),
+                    "engine_threads": min(os.cpu_count() or 1, n)}
+    out["batched_estimators"]["config"] = ", ".join(
+        f"{k}={v}" for k, v in ESTIMATOR_LOG_OVERRIDES.items())
+    return out
+
+
+_EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers, _batched]
 
 
 def print_bench(out: dict[str, Any]) -> None:

@@ -552,10 +552,14 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
                 S[ii] = so[:, -1]
                 sens[ii] = se[:, -1]
             if any_hook:
-                for i in np.flatnonzero(act):
-                    if hooks[i] is not None:
-                        mujoco.mj_setState(models[i], scratch[i], S[i], STATE_SPEC)
-                        hooks[i](t, scratch[i])
+                if direct is not None:
+                    hooks[0](t, direct)  # the live MjData after the step
+                else:
+                    for i in np.flatnonzero(act):
+                        if hooks[i] is not None:
+                            mujoco.mj_setState(models[i], scratch[i], S[i], STATE_SPEC)
+                            mujoco.mj_setState(models[i], scratch[i], U[i, 0], CTRL_SPEC)
+                            hooks[i](t, scratch[i])
             if bar is not None and t >= bar_next:
                 bar.update(1)
                 bar_next += 1.0

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import Config
-from .sim import LoopOutput, fly_reference
+from .sim import LoopOutput
 
 
 @dataclass(frozen=True)
@@ -64,13 +64,28 @@ def step_response(cfg: Config, axis: int = 0, size: float = 1.0, duration: float
                                                                           LoopOutput]:
     """Step of ``size`` m on ``axis`` from hover at 3 m. Returns (t − t_step, response, output);
     the response is the axis position minus its start, for t ≥ t_step."""
-    c = hover_config(cfg, wind_speed)
+    return step_responses([cfg], axis, size, duration, t_step, wind_speed)[0]
+
+
+def step_responses(cfgs: list[Config], axis: int = 0, size: float = 1.0, duration: float = 8.0,
+                   t_step: float = 1.0, wind_speed: float = 0.0,
+                   ) -> list[tuple[np.ndarray, np.ndarray, LoopOutput]]:
+    """:func:`step_response` of every config, flown as one engine batch (same results)."""
+    from .engine import Flight, fly
+
     step = [0.0, 0.0, 0.0]
     step[axis] = size
-    ref = StepReference(step=step, t_step=t_step)
-    out = fly_reference(c, ref, duration + t_step)
-    sel = out.t >= t_step
-    return out.t[sel] - t_step, out.rec[sel, axis] - ref.p0[axis], out
+    flights, refs = [], []
+    for cfg in cfgs:
+        c = hover_config(cfg, wind_speed)
+        ref = StepReference(step=step, t_step=t_step)
+        refs.append(ref)
+        flights.append(Flight(c, ref, duration + t_step))
+    res = []
+    for ref, out in zip(refs, fly(flights), strict=True):
+        sel = out.t >= t_step
+        res.append((out.t[sel] - t_step, out.rec[sel, axis] - ref.p0[axis], out))
+    return res
 
 
 def step_metrics(t: np.ndarray, y: np.ndarray, size: float, band: float = 0.05) -> dict:

@@ -306,6 +306,20 @@ def simulate_many(cfgs: list[Config], *, progress: bool = False,
     return res
 
 
+def fly_many(cfgs: list[Config], *, progress: bool = False) -> list[Any]:
+    """The loop outputs (:class:`~ag_uav.engine.LoopOutput`, no metrics) of every config's
+    mission flown as one engine batch, or the exception of a run that could not be set up."""
+    preps: list[Any] = []
+    for c in cfgs:
+        try:
+            preps.append(_prepare(c, None, None, None))
+        except Exception as e:  # noqa: BLE001 - reported per run
+            preps.append(e)
+    ok = [p for p in preps if isinstance(p, _Prepared)]
+    outs = iter(fly([p.flight for p in ok], progress=progress)) if ok else iter(())
+    return [next(outs) if isinstance(p, _Prepared) else p for p in preps]
+
+
 def batch_key(cfg: Config) -> tuple:
     """Configs with equal keys can fly in one engine batch (same control and physics rates,
     same sensing and spray-job structure)."""

@@ -307,31 +307,52 @@ def _error_cost(t: np.ndarray, e: np.ndarray, metric: str, t0: float, dt: float)
 def scenario_cost(cfg: Config, sc: Scenario, metric: str, crash_penalty: float,
                   effort_weight: float, details: bool = False) -> dict[str, Any]:
     """Cost of one scenario for one config (and, with ``details``, step metrics / RMSE)."""
+    return scenario_costs([cfg], sc, metric, crash_penalty, effort_weight, details)[0]
+
+
+def scenario_costs(cfgs: list[Config], sc: Scenario, metric: str, crash_penalty: float,
+                   effort_weight: float, details: bool = False) -> list[dict[str, Any]]:
+    """:func:`scenario_cost` of every config, their flights flown as one engine batch."""
+    if sc.kind == "step":
+        from .scenarios import step_responses
+
+        trajs = []
+        for t_rel, y, out in step_responses(cfgs, axis=sc.axis, size=sc.size,
+                                            duration=sc.duration, t_step=sc.t_step,
+                                            wind_speed=sc.wind_speed):
+            sel = out.t >= sc.t_step
+            trajs.append((out.t[sel], out.rec[sel, 6:9] - out.rec[sel, 0:3], out.rec[:, 14:18],
+                          out.crash_reason, out.crash_time, sc.duration, (t_rel, y)))
+    else:
+        trajs = [(t, p_ref - p_true, motors, crash, crash_t, full, None)
+                 for t, p_true, p_ref, motors, crash, crash_t, full in mission_trajectories(
+                     [_mission_cfg(c, sc) for c in cfgs])]
+    return [_cost(cfgs[0], sc, tr, metric, crash_penalty, effort_weight, details)
+            for tr in trajs]
+
+
+def _mission_cfg(cfg: Config, sc: Scenario) -> Config:
+    c = copy.deepcopy(cfg)
+    c.sim.max_time_s = sc.max_time_s
+    c.log.enabled = False
+    return c
+
+
+def _cost(cfg: Config, sc: Scenario, traj: tuple, metric: str, crash_penalty: float,
+          effort_weight: float, details: bool) -> dict[str, Any]:
+    t, e, motors, crash, crash_t, full, step = traj
     dt = 1.0 / cfg.sim.control_hz
     info: dict[str, Any] = {}
     if sc.kind == "step":
-        from .scenarios import step_metrics, step_response
+        from .scenarios import step_metrics
 
-        t_rel, y, out = step_response(cfg, axis=sc.axis, size=sc.size, duration=sc.duration,
-                                      t_step=sc.t_step, wind_speed=sc.wind_speed)
-        rec = out.rec
-        sel = out.t >= sc.t_step
-        e = rec[sel, 6:9] - rec[sel, 0:3]
-        t = out.t[sel]
+        t_rel, y = step
         t0 = sc.t_step
-        full = sc.duration
-        crash, crash_t = out.crash_reason, out.crash_time
-        motors = rec[:, 14:18]
         sign = 1.0 if sc.size > 0 else -1.0
         if details and not crash:
             info = step_metrics(t_rel, sign * y, abs(sc.size))
         over = float(max(0.0, (np.max(sign * y) - abs(sc.size)) / abs(sc.size))) if len(y) else 0.0
     else:
-        c = copy.deepcopy(cfg)
-        c.sim.max_time_s = sc.max_time_s
-        c.log.enabled = False
-        t, p_true, p_ref, motors, crash, crash_t, full = mission_trajectory(c)
-        e = p_ref - p_true
         t0 = 0.0
         if details:
             dh = e[:, :2]
@@ -352,74 +373,84 @@ def scenario_cost(cfg: Config, sc: Scenario, metric: str, crash_penalty: float,
     return {"cost": cost, "crash": crash or "", **info}
 
 
-_MISSION_CACHE: dict[str, tuple[Any, Any, Any]] = {}
-
-
-def _mission_setup(cfg: Config) -> tuple[Any, Any, Any]:
-    """(field, reference, outline) of the mission, cached per process: the plan and the
-    reference depend on the mission keys only, not on the gains being tuned."""
-    key = json.dumps([asdict(cfg.mission), cfg.sim.takeoff, cfg.sim.hover_after_s,
-                      cfg.sim.control_hz, asdict(cfg.spray), asdict(cfg.battery),
-                      asdict(cfg.vehicle)], default=str)
-    hit = _MISSION_CACHE.get(key)
-    if hit is None:
-        from .sim import build_field, build_plan, build_reference, field_outline
-
-        fld = build_field(cfg)
-        ref = build_reference(cfg, build_plan(cfg, fld))
-        outline = field_outline(fld)
-        if len(_MISSION_CACHE) > 8:
-            _MISSION_CACHE.clear()
-        hit = _MISSION_CACHE[key] = (fld, ref, outline)
-    return hit
-
-
 def mission_trajectory(cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                              str | None, float | None, float]:
     """(t, p_true, p_ref, motors, crash_reason, crash_time, duration) of ``cfg``'s mission
-    (cut at ``sim.max_time_s``). With the true state fed back this flies the core loop on a
-    cached plan/reference (no metrics); with an estimator it goes through
-    :func:`ag_uav.sim.simulate`. Both give the same trajectory."""
-    from .sim import fly_reference, rng_streams, simulate
+    (cut at ``sim.max_time_s``): the engine's loop output on the cached plan and reference,
+    without the metrics."""
+    return mission_trajectories([cfg])[0]
 
-    if cfg.estimator.name == "true" and not cfg.estimator.shadow:
-        fld, ref, outline = _mission_setup(cfg)
-        out = fly_reference(cfg, ref, ref.duration, outline=outline, bounds=fld.bounds,
-                            streams=rng_streams(cfg.seed))
-        rec = out.rec
-        return (out.t, rec[:, 0:3], rec[:, 6:9], rec[:, 14:18], out.crash_reason,
-                out.crash_time, min(cfg.sim.max_time_s, ref.duration))
-    res = simulate(cfg)
-    full = min(cfg.sim.max_time_s, res.extra["reference"].duration)
-    return (res.t, res.p_true, res.p_ref, res.motors, res.summary.get("crash_reason"),
-            res.summary.get("crash_time_s"), full)
+
+def mission_trajectories(cfgs: list[Config]) -> list[tuple]:
+    """:func:`mission_trajectory` of every config, flown as one engine batch."""
+    from .sim import fly_many, mission_setup
+
+    out = []
+    for cfg, o in zip(cfgs, fly_many(cfgs), strict=True):
+        if isinstance(o, BaseException):
+            raise o
+        ref = mission_setup(cfg)[2]
+        rec = o.rec
+        out.append((o.t, rec[:, 0:3], rec[:, 6:9], rec[:, 14:18], o.crash_reason,
+                    o.crash_time, min(cfg.sim.max_time_s, ref.duration)))
+    return out
 
 
 def evaluate_candidate(task: dict[str, Any]) -> dict[str, Any]:
     """Worker entry point: total cost of one candidate over all scenarios. Never raises."""
-    spec: TuneSpec = task["spec"]
-    values = task["values"]
-    out: dict[str, Any] = {"parts": {}, "crash": ""}
+    return evaluate_candidates([task])[0]
+
+
+def evaluate_candidates(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Worker entry point: the total cost of every candidate of ``tasks`` (a chunk of one
+    population, same spec), each scenario flown by all of them as one engine batch. Never
+    raises: a candidate that fails gets the penalty (and the chunk falls back to one at a time
+    if the batch itself fails)."""
+    spec: TuneSpec = tasks[0]["spec"]
+    penalty = 2.0 * spec.crash_penalty * sum(s.weight for s in spec.scenarios)
+    outs: list[dict[str, Any]] = [{"parts": {}, "crash": "", "cost": 0.0} for _ in tasks]
+    cfgs: list[Config | None] = []
+    for task, out in zip(tasks, outs, strict=True):
+        try:
+            cfg = config_from_dict(candidate_config(spec, task["values"]))
+            cfg.seed = spec.noise_seed
+            cfg.log.enabled = False
+            cfgs.append(cfg)
+        except Exception as e:  # noqa: BLE001 - a failing candidate gets the penalty
+            out.update(cost=penalty, crash=f"{type(e).__name__}: {e}"[:300])
+            cfgs.append(None)
+    live = [i for i, c in enumerate(cfgs) if c is not None]
+    if not live:
+        return outs
+    details = tasks[0].get("details", False)
     try:
-        cfg = config_from_dict(candidate_config(spec, values))
-        cfg.seed = spec.noise_seed
-        cfg.log.enabled = False
-        total = 0.0
         for sc in spec.scenarios:
-            r = scenario_cost(cfg, sc, spec.metric, spec.crash_penalty, spec.effort_weight,
-                              details=task.get("details", False))
-            out["parts"][sc.name] = r
-            total += sc.weight * r["cost"]
-            if r["crash"] and not out["crash"]:
-                out["crash"] = f"{sc.name}: {r['crash']}"
-        out["cost"] = total
-    except Exception as e:  # noqa: BLE001 - a failing candidate gets the penalty
-        out["cost"] = 2.0 * spec.crash_penalty * sum(s.weight for s in spec.scenarios)
-        out["crash"] = f"{type(e).__name__}: {e}"[:300]
-    return out
+            rs = scenario_costs([cfgs[i] for i in live], sc, spec.metric, spec.crash_penalty,
+                                spec.effort_weight, details=details)
+            for i, r in zip(live, rs, strict=True):
+                out = outs[i]
+                out["parts"][sc.name] = r
+                out["cost"] += sc.weight * r["cost"]
+                if r["crash"] and not out["crash"]:
+                    out["crash"] = f"{sc.name}: {r['crash']}"
+    except Exception:  # noqa: BLE001 - isolate the failing candidate: one at a time
+        if len(tasks) == 1:
+            import traceback
+
+            err = traceback.format_exception_only(*__import__("sys").exc_info()[:2])[-1]
+            outs[0] = {"parts": {}, "cost": penalty, "crash": err.strip()[:300]}
+            return outs
+        return [evaluate_candidates([t])[0] for t in tasks]
+    return outs
 
 
-# ---------------------------------------------------------------------------------- the loop
+def chunk(items: list[Any], n_chunks: int) -> list[list[int]]:
+    """Indices of ``items`` in ``n_chunks`` contiguous, near-equal chunks (none empty)."""
+    n_chunks = max(1, min(n_chunks, len(items)))
+    bounds = np.linspace(0, len(items), n_chunks + 1).round().astype(int)
+    return [list(range(a, b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+
+
 def _atomic_write(path: Path, text: str) -> None:
     tmp = path.with_name(path.name + ".tmp")
     with tmp.open("w") as f:
@@ -557,23 +588,31 @@ def run_tune(spec: TuneSpec, out_dir: str | Path, executor: Executor | None = No
             tasks = [{"spec": spec, "values": [p.from_internal(v) for p, v in
                                                zip(spec.params, U[i], strict=True)]}
                      for i in todo]
-            for j, r in executor.map_unordered(evaluate_candidate, tasks, return_exceptions=True):
-                i = todo[j]
-                if isinstance(r, BaseException):
-                    r = {"cost": 2.0 * spec.crash_penalty * sum(s.weight for s in spec.scenarios),
-                         "crash": f"worker failure: {type(r).__name__}: {r}"[:300], "parts": {}}
-                    results[i] = r  # not journalled: re-evaluated on resume
-                else:
-                    results[i] = r
-                    cache[_xkey(U[i])] = r
-                    evf.write(json.dumps({"h": h, "iter": k, "i": i, "u": U[i].tolist(),
-                                         "result": r})
-                              + "\n")
-                    evf.flush()
-                    os.fsync(evf.fileno())
-                n_new += 1
-                if bar is not None:
-                    bar.update(1)
+            chunks = chunk(tasks, executor.workers)
+            for c, rs in executor.map_unordered(
+                    evaluate_candidates, [[tasks[j] for j in ch] for ch in chunks],
+                    return_exceptions=True):
+                if not isinstance(rs, list):
+                    rs = [rs] * len(chunks[c])
+                for j, r in zip(chunks[c], rs, strict=True):
+                    i = todo[j]
+                    if isinstance(r, BaseException):
+                        r = {"cost": 2.0 * spec.crash_penalty
+                             * sum(s.weight for s in spec.scenarios),
+                             "crash": f"worker failure: {type(r).__name__}: {r}"[:300],
+                             "parts": {}}
+                        results[i] = r  # not journalled: re-evaluated on resume
+                    else:
+                        results[i] = r
+                        cache[_xkey(U[i])] = r
+                        evf.write(json.dumps({"h": h, "iter": k, "i": i, "u": U[i].tolist(),
+                                             "result": r})
+                                  + "\n")
+                        evf.flush()
+                        os.fsync(evf.fileno())
+                    n_new += 1
+                    if bar is not None:
+                        bar.update(1)
             costs = [r["cost"] for r in results]  # type: ignore[index]
             opt.tell(costs)
             fin = np.array([c for c in costs if math.isfinite(c)])

@@ -6,11 +6,10 @@ turbulence), ``--runs`` times (seeds 0..runs-1). The seeds are shared across the
 run ``s`` of every estimator sees the same wind and GPS-noise draws (common random numbers), so
 the comparison is paired.
 
-Mission: by default a **40 m × 24 m rectangle** (6 m swath and headland, ~79 s of sim time) so
-that 400 missions fit in 10 minutes on 2 cores with the estimators in the loop (measured: 400
-missions in 233 s with ``--workers 2`` on a 2-core machine shared with other jobs); the default
-1 ha field (~485 s of sim time, ~3–5 s of wall time per mission with a filter in the loop) would
-take ~15–25 minutes there. ``--field default`` (or any field name / GeoJSON path) flies another.
+Mission: by default the **default 1.05 ha field** (~485 s of sim time per mission), the runs
+flown as lockstep engine batches (:func:`ag_uav.sim.simulate_many`; wall times in the README).
+``--field short`` flies a 40 m × 24 m rectangle (6 m swath and headland, ~79 s of sim time);
+any built-in field name or GeoJSON path flies another.
 
 Printed next to the paper's Webots column (Candan & Li, Table II: MCKF 7850 s / 0.198,
 KF 3250 s / 0.415, PCA-MCKF 9615 s / 0.113, PCA-KF 3580 s / 0.365): mission (task) time,
@@ -46,9 +45,9 @@ SHORT_FIELD = (40.0, 24.0)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=int, default=100, help="runs per estimator (seeds 0..runs-1)")
-    p.add_argument("--field", default="short",
-                   help='"short" (a 40 m x 24 m rectangle, ~80 s missions), a built-in field '
-                        "name (default, l-shape, hole) or a GeoJSON path")
+    p.add_argument("--field", default="default",
+                   help='a built-in field name (default: the 1.05 ha field; l-shape, hole), '
+                        '"short" (a 40 m x 24 m rectangle, ~80 s missions) or a GeoJSON path')
     p.add_argument("--gps-preset", default="coloured-impulsive", help="GPS noise preset")
     p.add_argument("--wind", type=float, default=3.0, help="mean wind speed (m/s)")
     p.add_argument("--turbulence", default="light", help="Dryden turbulence level")
