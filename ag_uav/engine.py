@@ -300,6 +300,7 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
     fbs, cascades, winds = [], [], []
     imus, atts = [], []
     tables: list[np.ndarray] = []
+    job_tabs: list[dict[str, np.ndarray]] = []
     ref_ids = np.empty(N, dtype=np.int64)
     ref_index: dict[int, int] = {}
     sprayers: list[Any] = [None] * N
@@ -340,23 +341,23 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
             imus.append(ImuSensor(cfg.imu, cfg.sim.control_hz, ss["imu"]))
             atts.append(AttitudeError(cfg.imu, cfg.sim.control_hz, ss["attitude"]))
         rid = ref_index.get(id(fl.reference))
-        tab = None
         if rid is None or len(tables[rid]) < n_ticks[i]:
             tab = fl.reference.sample_all(np.arange(n_ticks[i]) * dt)
             packed = np.column_stack([tab["pos"], tab["vel"], tab["acc"], tab["yaw"],
                                       tab["seg"], tab["spray"]]).astype(float)
+            # the spray job's per-tick tables (the same for every vehicle on this reference)
+            job_tab = {k: tab[k] for k in ("ground", "sortie") if k in tab}
             if rid is None:
                 rid = ref_index[id(fl.reference)] = len(tables)
                 tables.append(packed)
+                job_tabs.append(job_tab)
             else:
                 tables[rid] = packed
+                job_tabs[rid] = job_tab
         ref_ids[i] = rid
         if getattr(fl.reference, "spray_job", None) is not None:
-            from .spray import Sprayer
-
-            if tab is None:
-                tab = fl.reference.sample_all(np.arange(n_ticks[i]) * dt)
-            sprayers[i] = (cfg, veh, tab, fl.reference.spray_job, int(n_ticks[i]), fl.log)
+            sprayers[i] = (cfg, veh, job_tabs[rid], fl.reference.spray_job, int(n_ticks[i]),
+                           fl.log)
     wants_imu = [fb.wants_imu for fb in fbs]
     if any(wants_imu) and not all(wants_imu):
         raise ValueError("engine.fly: a batch mixes flights with and without the MEMS IMU")
@@ -578,12 +579,12 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
     outs = []
     for i in range(N):
         n = int(flown[i])
-        out = LoopOutput(t=np.arange(n) * dt, rec=rec[i, :n].copy(),
+        out = LoopOutput(t=np.arange(n) * dt, rec=rec[i, :n],
                          crash_reason=crash_reason[i], crash_time=crash_time[i],
                          wall_loop_s=wall, vehicle=vehs[i], frames=int(frames[i]),
                          notes=notes[i], sprayer=sprayers[i] if spr is not None else None)
         if imu is not None:
-            out.imu = imu_rec[i, :n].copy()
+            out.imu = imu_rec[i, :n]
             out.imu_bias0 = imu.bias0[i].copy()
         outs.append(out)
     return outs

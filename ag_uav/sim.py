@@ -273,14 +273,16 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     return _finish(prep, out, batch=1)
 
 
-def simulate_many(cfgs: list[Config], *, progress: bool = False,
-                  errors: str = "raise") -> list[Any]:
+def simulate_many(cfgs: list[Config], *, progress: bool = False, errors: str = "raise",
+                  reduce: Callable[[int, RunResult], Any] | None = None) -> list[Any]:
     """Fly every config's mission in one lockstep batch (:func:`ag_uav.engine.fly`); the same
     results as ``[simulate(c) for c in cfgs]`` (a run depends only on its config and seed).
     All configs must share :func:`batch_key`.
 
     ``errors="return"``: a run that cannot be set up (bad field, …) gives its exception in its
-    place instead of raising, and the others fly."""
+    place instead of raising, and the others fly. ``reduce(i, result)``: what to keep of run
+    ``i`` (e.g. its summary row), applied as soon as its metrics are done so that a big batch
+    does not hold every trajectory at once."""
     preps: list[Any] = []
     for c in cfgs:
         try:
@@ -292,17 +294,19 @@ def simulate_many(cfgs: list[Config], *, progress: bool = False,
     ok = [p for p in preps if isinstance(p, _Prepared)]
     outs = iter(fly([p.flight for p in ok], progress=progress)) if ok else iter(())
     res: list[Any] = []
-    for p in preps:
+    for i, p in enumerate(preps):
         if not isinstance(p, _Prepared):
             res.append(p)
             continue
         out = next(outs)
         try:
-            res.append(_finish(p, out, batch=len(ok)))
+            r = _finish(p, out, batch=len(ok))
+            res.append(reduce(i, r) if reduce is not None else r)
         except Exception as e:  # noqa: BLE001
             if errors == "raise":
                 raise
             res.append(e)
+        del out
     return res
 
 
@@ -326,7 +330,9 @@ def batch_key(cfg: Config) -> tuple:
     e = cfg.estimator
     imu = ((e.source == "bearings" or e.name != "true" or bool(e.shadow))
            and e.imu and cfg.imu.model == "mems")
-    return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled)
+    # the same filters (names, flown one first) share the batched bank
+    filters = (e.source, e.name, tuple(s for s in e.shadow if s != e.name), e.model)
+    return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled, filters)
 
 
 def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
