@@ -1,12 +1,15 @@
-"""The simulation loop: physics ↔ control ↔ sensors → estimator, then metrics.
+"""Missions end to end: config → plan → reference → the engine → metrics (and the log).
 
 Data flow (one way): config → plan (:mod:`ag_uav.plan`) → reference (:mod:`ag_uav.reference`) →
-simulate (this module: MuJoCo physics at ``sim.timestep_s``, control at ``sim.control_hz``) →
-metrics (:mod:`ag_uav.metrics`) and log (:mod:`ag_uav.runlog`).
+the engine (:mod:`ag_uav.engine`: N missions in lockstep, MuJoCo physics at ``sim.timestep_s``,
+control at ``sim.control_hz``) → metrics (:mod:`ag_uav.metrics`) and log (:mod:`ag_uav.runlog`).
+:func:`simulate` is the engine with one vehicle, :func:`simulate_many` with many.
 
 The **feedback seam** is :class:`Feedback`: each control tick it gets the true state and returns
 the position and velocity the controller flies on. :class:`TrueFeedback` passes the truth through;
-the estimator bank plugs in with the same interface (GPS fixes → filter → estimate).
+the estimator bank plugs in with the same interface (GPS fixes → filter → estimate); the engine
+runs a batch's estimator banks together (:class:`ag_uav.estimation.BatchEstimatorFeedback`) and
+any other feedback one vehicle at a time.
 
 Every random draw comes from a Generator spawned from the run seed (:func:`rng_streams`), one
 stream per consumer, so the same config and seed give the same run, serial or parallel.

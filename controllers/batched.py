@@ -631,6 +631,18 @@ class BatchCascade:
                      self._all if active is None else active, out)
         return out
 
+    @property
+    def J(self) -> np.ndarray:
+        """(N, 3) principal inertia of each vehicle (kg m²), a writable view of ``params``: the
+        gyroscopic term ``ω × Jω`` uses it (a draining tank changes it); the attitude gains
+        ``kR``, ``kw`` stay as built, as in :class:`GeometricAttitudeController`."""
+        return self.params[:, P_J:P_J + 3]
+
+    def reset_rows(self, rows: np.ndarray) -> None:
+        """:meth:`reset` for the vehicles ``rows`` only (index array or bool mask)."""
+        for k in range(3):
+            self.state[rows, k * AX_NS:(k + 1) * AX_NS] = 0.0
+
     def reset(self) -> None:
         """Forget every axis controller's integral and derivative memory (as
         :meth:`PositionCascade.reset`: the last command, thrust and tilt are kept)."""
