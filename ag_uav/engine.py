@@ -449,6 +449,8 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
     if nthread is None:  # worker processes of a pool run one thread each (executor.THREAD_ENV)
         nthread = int(os.environ.get("AG_UAV_ENGINE_THREADS", 0)) or (os.cpu_count() or 1)
         nthread = min(nthread, N) if N > 1 else 0
+    if nthread == 1:  # one thread: step in this one (a pool thread's hand-off costs ~20 %)
+        nthread = 0
     runner = _rollout.Rollout(nthread=nthread)
     thread_data = [mujoco.MjData(m0) for _ in range(max(nthread, 1))]
 
