@@ -24,6 +24,18 @@ def test_a_cycle_is_found():
     assert sorted(arch.cycles(g)) == [["a", "b", "c"], ["e"]]
 
 
+def test_a_function_local_relative_cycle_is_found(tmp_path):
+    pkg = tmp_path / "ag_uav"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text('"""a stage"""')
+    (pkg / "a.py").write_text("from .sub import b\n")
+    (pkg / "sub" / "b.py").write_text("def f():\n    from ..a import x\n")
+    g = arch.import_graph(pkg)
+    assert g["ag_uav.a"] == {"ag_uav.sub.b"} and g["ag_uav.sub.b"] == {"ag_uav.a"}
+    assert arch.cycles(g) == [["ag_uav.a", "ag_uav.sub.b"]]
+
+
 def test_no_import_cycles():
     found = arch.cycles(arch.import_graph())
     assert not found, "import cycles in ag_uav:\n" + "\n".join(" → ".join(c) for c in found)

@@ -47,39 +47,44 @@ def modules(package: Path = PACKAGE) -> dict[str, Path]:
     return out
 
 
-def imported_names(path: Path, module: str) -> list[tuple[str, int]]:
-    """Absolute dotted names ``path`` imports (every import statement, at any depth), with the
-    line; ``from X import a`` gives ``X`` and ``X.a`` (``a`` may be a submodule)."""
+def imported_names(path: Path, module: str) -> list[tuple[str, list[str], int]]:
+    """Every import statement of ``path`` (at any depth) as (absolute dotted module, the names
+    a ``from`` import takes from it, line)."""
     is_pkg = path.name == "__init__.py"
     pkg = module if is_pkg else module.rpartition(".")[0]
     out = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
         if isinstance(node, ast.Import):
-            out += [(a.name, node.lineno) for a in node.names]
+            out += [(a.name, [], node.lineno) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
                 up = pkg.split(".")
                 up = up[: len(up) - node.level + 1]
                 base = ".".join(up + ([base] if base else []))
-            out.append((base, node.lineno))
-            out += [(f"{base}.{a.name}", node.lineno) for a in node.names]
+            out.append((base, [a.name for a in node.names], node.lineno))
     return out
 
 
 def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
-    """Module → the modules of the package it imports. Importing ``a.b.c`` counts as importing
-    module ``a.b.c`` (the nearest enclosing module that exists); the implicit import of its
-    parent packages' ``__init__`` does not count (``from . import x`` in a package counts)."""
+    """Module → the modules of the package it imports. ``import a.b.c`` and ``from a.b.c import
+    x`` count as importing module ``a.b.c`` (the nearest enclosing module that exists), ``from
+    a.b import c`` with ``c`` a module as importing ``a.b.c``; the implicit import of the parent
+    packages' ``__init__`` does not count."""
     mods = modules(package)
     graph: dict[str, set[str]] = {m: set() for m in mods}
+
+    def nearest(name: str) -> str:
+        while name and name not in mods:
+            name = name.rpartition(".")[0]
+        return name
+
     for m, p in mods.items():
-        for name, _ in imported_names(p, m):
-            t = name
-            while t and t not in mods:
-                t = t.rpartition(".")[0]
-            if t and t != m:
-                graph[m].add(t)
+        for base, names, _ in imported_names(p, m):
+            targets = [f"{base}.{n}" for n in names if f"{base}.{n}" in mods]
+            if not names or len(targets) < len(names):
+                targets.append(nearest(base))
+            graph[m].update(t for t in targets if t and t != m)
     return graph
 
 
@@ -165,7 +170,7 @@ def section(package: Path = PACKAGE) -> str:
             if a != b and TOP not in (a, b):
                 uses.setdefault((a, b), []).append(f"{m[7:]} → {t[7:]}")
     forward = {(b, a) for (a, b) in uses if order[b] < order[a] and b not in SHARED}
-    backward = sorted(((a, b) for (a, b) in uses if order[b] > order[a] and a not in SHARED),
+    backward = sorted(((a, b) for (a, b) in uses if order[b] > order[a]),
                       key=lambda e: (order[e[0]], order[e[1]]))
     # transitive reduction of the forward (flow-order) edges
     succ: dict[str, set[str]] = {s: set() for s in STAGES}
