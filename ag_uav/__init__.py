@@ -19,8 +19,9 @@ __version__ = "0.1.0"
 
 
 def simulate(config: Config | None = None, **kwargs):
-    """Fly ``config`` once (no files written); returns a :class:`~ag_uav.sim.RunResult`."""
-    from .sim import simulate as _simulate
+    """Fly ``config`` once (no files written); returns a
+    :class:`~ag_uav.engine.missions.RunResult`."""
+    from .engine.missions import simulate as _simulate
 
     return _simulate(config if config is not None else default_config(), **kwargs)
 

@@ -118,7 +118,8 @@ class SimConfig:
 
 @dataclass
 class SprayConfig:
-    """Tank and application (ag_uav.spray). Defaults: the M350-class payload limit as the tank."""
+    """Tank and application (ag_uav.world.spray_job). Defaults: the M350-class payload limit as
+    the tank."""
 
     enabled: bool = _f(True, "model the tank, the flow and sorties (false: the sprayer is an "
                        "on/off flag only, the tank never empties)")
@@ -148,7 +149,7 @@ class SprayConfig:
 
 @dataclass
 class BatteryConfig:
-    """Energy model (ag_uav.spray.rotor_power): momentum theory with a figure of merit."""
+    """Energy model (ag_uav.world.spray_job.rotor_power): momentum theory with a figure of merit."""
 
     capacity_wh: float = _f(526.0, "usable battery energy (Wh); two DJI TB65 packs: "
                             "2 x 263 Wh", gt=0)
@@ -224,7 +225,7 @@ ESTIMATORS = ("true", "kf", "mckf", "pca-kf", "pca-mckf", "kf-bias", "kf-diff")
 
 @dataclass
 class GpsConfig:
-    preset: str = _f("rtk-m350", "GPS error preset (see ag_uav.gps)", choices=GPS_PRESETS)
+    preset: str = _f("rtk-m350", "GPS error preset (see ag_uav.vehicle.gps)", choices=GPS_PRESETS)
     rate_hz: float = _f(0.0, "fix rate (Hz); 0 = the preset's", ge=0, le=100)
     multipath_prob: float = _f(0.0, "extra multipath spikes: probability per fix", ge=0, le=1)
     multipath_amplitude_m: float = _f(5.0, "extra multipath spikes: amplitude (m)", ge=0)
@@ -237,13 +238,14 @@ class GpsConfig:
                               "spray drones) or the GPS's own vertical", choices=("radar", "gps"))
     radar_sigma_m: float = _f(0.05, "radar altimeter noise std (m), white", gt=0)
     overrides: dict[str, Any] = _f({}, "raw overrides of the preset's keys (rate_hz, latency_s, "
-                                   "axis_scale, components, outage), see ag_uav.gps")
+                                   "axis_scale, components, outage), see ag_uav.vehicle.gps")
 
 
 @dataclass
 class EstimatorConfig:
     source: str = _f("gps", "what the drone localises from: GPS fixes, or bearings to four "
-                     "field landmarks (GPS-denied; ag_uav.bearing)", choices=("gps", "bearings"))
+                     "field landmarks (GPS-denied; ag_uav.navigation.bearing)",
+                     choices=("gps", "bearings"))
     name: str = _f("pca-mckf", "what the controller flies on: true state or an estimator",
                    choices=ESTIMATORS)
     bearing_filter: str = _f("mcc-ekf", "source = bearings: the filter flown on",
@@ -258,8 +260,8 @@ class EstimatorConfig:
                     choices=("cv", "ca", "cvb"))
     q: float | str = _f("auto", "process noise: white acceleration (cv) or jerk (ca) PSD per "
                         "axis (m^2/s^3), or \"auto\": derived from the [imu] noise figures "
-                        "(ag_uav.imu.process_noise_psd); with imu = false the model alone must "
-                        "carry the manoeuvres (~2)", gt=0, choices=("auto",))
+                        "(ag_uav.vehicle.imu.process_noise_psd); with imu = false the model "
+                        "alone must carry the manoeuvres (~2)", gt=0, choices=("auto",))
     q_bias: float | str = _f("auto", "model cvb: PSD of the input-bias random walk per axis "
                              "(m^2/s^5), or \"auto\" (from [imu])", gt=0, choices=("auto",))
     r_scale: float = _f(1.0, "R = r_scale x the GPS preset's nominal error variance per axis",
@@ -280,7 +282,8 @@ class EstimatorConfig:
 
 @dataclass
 class ImuConfig:
-    """The MEMS IMU at the vehicle's ``imu`` site and the attitude estimate (see ag_uav.imu).
+    """The MEMS IMU at the vehicle's ``imu`` site and the attitude estimate (see
+    ag_uav.vehicle.imu).
 
     Defaults: TDK InvenSense ICM-42688-P class (a common flight-controller IMU): datasheet
     DS-000347 rev 1.8, Table 1-2. Residual biases are what is left after the flight controller's
@@ -514,8 +517,8 @@ def _build(cls: type, data: Any, prefix: str, base: Any = None) -> Any:
 
 
 def _check_gps_overrides(g: GpsConfig) -> None:
-    """``gps.overrides`` against the preset, by ``ag_uav.gps`` (the owner of those keys)."""
-    from . import gps
+    """``gps.overrides`` against the preset, by ``ag_uav.vehicle.gps`` (the owner of those keys)."""
+    from .vehicle import gps
 
     ov_rate = g.overrides.get("rate_hz")
     if g.rate_hz > 0 and ov_rate is not None and ov_rate != g.rate_hz:
@@ -532,9 +535,9 @@ def _check_gps_overrides(g: GpsConfig) -> None:
 
 def _check_field(name: str) -> None:
     """``mission.field`` names a built-in field or an existing field file (what
-    :func:`ag_uav.field.load_field` accepts, with an optional ``#KEY=VALUE`` feature selector),
-    so a typo fails at load, not at take-off."""
-    from .field import BUILTIN_FIELDS, FIELD_FILE_SUFFIXES
+    :func:`ag_uav.world.field.load_field` accepts, with an optional ``#KEY=VALUE`` feature
+    selector), so a typo fails at load, not at take-off."""
+    from .world.field import BUILTIN_FIELDS, FIELD_FILE_SUFFIXES
 
     if name.strip().lower().replace("_", "-") in BUILTIN_FIELDS:
         return

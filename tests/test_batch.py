@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from ag_uav.batch import (
+from ag_uav.config import Config, ConfigError
+from ag_uav.jobs.batch import (
     Journal,
     RunTask,
     expand,
@@ -27,8 +28,7 @@ from ag_uav.batch import (
     write_rect_field,
     write_report,
 )
-from ag_uav.config import Config, ConfigError
-from ag_uav.executor import DaskExecutor, LocalPoolExecutor, SerialExecutor
+from ag_uav.jobs.executor import DaskExecutor, LocalPoolExecutor, SerialExecutor
 
 ROOT = Path(__file__).resolve().parents[1]
 

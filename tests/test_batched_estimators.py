@@ -27,7 +27,8 @@ TOL = dict(rtol=1e-9, atol=1e-9)
 
 def _make(name: str, i: int, model: str = "cvb", mode: str = "hankel", recovery="kf",
           window: int = 10, sigma: float = 2.0):
-    """A scalar filter as ag_uav.estimation.make_filter builds it (options vary with i)."""
+    """A scalar filter as ag_uav.navigation.estimation.make_filter builds it (options vary with
+    i)."""
     params = {"model": model, "dim": 3, "dt": DT, "q": 0.05, "r": list(np.diag(R_MODES[i % 3]))}
     if model == "cvb":
         params["q_bias"] = 1e-4

@@ -1,5 +1,6 @@
-"""ag_uav.sensors_batched: the batched wind/drag, IMU and attitude-error models equal the scalar
-classes per vehicle (values and Generator consumption) and a row does not depend on the batch."""
+"""ag_uav.vehicle.sensors_batched: the batched wind/drag, IMU and attitude-error models equal the
+scalar classes per vehicle (values and Generator consumption) and a row does not depend on the
+batch."""
 
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ import numpy as np
 import pytest
 
 from ag_uav.config import ImuConfig
-from ag_uav.imu import AttitudeError, ImuSensor
-from ag_uav.sensors_batched import BatchAttitudeError, BatchImu, BatchWind, drag
-from ag_uav.wind import Wind, drag_force
+from ag_uav.vehicle.imu import AttitudeError, ImuSensor
+from ag_uav.vehicle.sensors_batched import BatchAttitudeError, BatchImu, BatchWind, drag
+from ag_uav.world.wind import Wind, drag_force
 
 TICKS = 2600          # > 2 wind blocks (1024 ticks each)
 DT = 0.01

@@ -1,5 +1,5 @@
-"""BatchSprayer (ag_uav.spray_batched): N Sprayers per control tick in one numba kernel equal the
-scalar Sprayer.step of each vehicle, bit for bit (issue 9, the lockstep engine)."""
+"""BatchSprayer (ag_uav.engine.spray_batched): N Sprayers per control tick in one numba kernel equal
+the scalar Sprayer.step of each vehicle, bit for bit (issue 9, the lockstep engine)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from ag_uav.config import load_config
-from ag_uav.sim import build_field, build_plan, build_reference
-from ag_uav.spray import Sprayer
-from ag_uav.spray_batched import BatchSprayer, MassSink
-from ag_uav.vehicle import build_vehicle
+from ag_uav.engine.missions import build_reference
+from ag_uav.engine.spray_batched import BatchSprayer, MassSink
+from ag_uav.engine.sprayer import Sprayer
+from ag_uav.vehicle.mjcf import build_vehicle
+from ag_uav.world.mission import build_field, build_plan
 
 NOLOG = {"log.enabled": False, "log.render": False}
 BODY = ("body_mass", "body_inertia", "body_ipos", "body_subtreemass")

@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ag_uav.experiments import bearing_tracking as bt
+from ag_uav.jobs.experiments import bearing_tracking as bt
 from estimators.bearing import (
     BearingModel,
     angle_residual,

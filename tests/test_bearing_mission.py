@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import ag_uav
-from ag_uav.bearing import BearingFeedback, default_landmarks
-from ag_uav.sim import build_field, simulate
+from ag_uav.engine.missions import simulate
+from ag_uav.navigation.bearing import BearingFeedback, default_landmarks
+from ag_uav.world.mission import build_field
 from estimators.bearing import angle_residual
 
 

@@ -9,7 +9,8 @@ acceptance leaves the value in the config unchanged and every other key at its d
 
 The only rules not in the metadata are written here once: the control rate divides the physics
 rate, ``mission.field`` is a built-in field or a GeoJSON file, and ``gps.overrides`` belongs to
-:func:`ag_uav.gps.validate_overrides` (fuzzed with overrides that are bad whatever the preset).
+:func:`ag_uav.vehicle.gps.validate_overrides` (fuzzed with overrides that are bad whatever the
+preset).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from hypothesis import strategies as st  # noqa: E402
 
 from ag_uav import cli  # noqa: E402
 from ag_uav import config as C  # noqa: E402
-from ag_uav.gps import available_presets, gps_preset  # noqa: E402
+from ag_uav.vehicle.gps import available_presets, gps_preset  # noqa: E402
 
 FUZZ = settings(max_examples=100, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
@@ -662,7 +663,7 @@ def test_known_gps_override_holes() -> None:
 @given(name=st.one_of(st.sampled_from(["default", "l-shape", "hole", "L_Shape", " hole "]),
                       st.text(max_size=10), st.text(max_size=6).map(lambda s: s + ".geojson")))
 def test_mission_field(name: str, capsys: pytest.CaptureFixture[str]) -> None:
-    from ag_uav.field import BUILTIN_FIELDS
+    from ag_uav.world.field import BUILTIN_FIELDS
 
     ok = name.strip().lower().replace("_", "-") in BUILTIN_FIELDS or (
         name.endswith(".geojson") and "\x00" not in name and Path(name).is_file())

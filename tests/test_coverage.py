@@ -1,10 +1,10 @@
-"""Tests for ag_uav.coverage against analytic areas."""
+"""Tests for ag_uav.analysis.coverage against analytic areas."""
 
 import numpy as np
 import pytest
 
-from ag_uav.coverage import spray_coverage
-from ag_uav.field import Field
+from ag_uav.analysis.coverage import spray_coverage
+from ag_uav.world.field import Field
 
 RECT = Field.from_coords([(0, 0), (100, 0), (100, 30), (0, 30)])
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import ag_uav
-from ag_uav.batch import RunTask, config_hash, run_chunk, run_task
-from ag_uav.engine import Flight, fly
-from ag_uav.sim import batch_key, simulate, simulate_many
+from ag_uav.engine.loop import Flight, fly
+from ag_uav.engine.missions import batch_key, simulate, simulate_many
+from ag_uav.jobs.batch import RunTask, config_hash, run_chunk, run_task
 
 
 def _cfg(seed: int, **over) -> ag_uav.Config:
@@ -74,7 +74,7 @@ def test_a_crash_leaves_the_batch_with_its_reason_and_the_others_go_on():
 def test_engine_refuses_mixed_rates():
     a = _cfg(0)
     b = _cfg(0, **{"sim.control_hz": 50.0})
-    from ag_uav.sim import mission_setup
+    from ag_uav.engine.missions import mission_setup
 
     ref = mission_setup(a)[2]
     with pytest.raises(ValueError, match="control_hz"):

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import ag_uav
-from ag_uav.estimation import EstimatorFeedback
-from ag_uav.sim import seed_sequences
+from ag_uav.navigation.estimation import EstimatorFeedback
+from ag_uav.seeds import seed_sequences
 
 
 def _cfg(**over):

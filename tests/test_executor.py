@@ -7,7 +7,7 @@ from concurrent.futures.process import BrokenProcessPool
 
 import pytest
 
-from ag_uav.executor import (
+from ag_uav.jobs.executor import (
     THREAD_ENV,
     LocalPoolExecutor,
     SerialExecutor,

@@ -8,7 +8,7 @@ import argparse
 import pytest
 
 from ag_uav.config import AxisGains, ConfigError
-from ag_uav.experiments import controllers as ex
+from ag_uav.jobs.experiments import controllers as ex
 
 
 def _args(tmp_path, **kw):
@@ -27,7 +27,7 @@ def _args(tmp_path, **kw):
 
 
 def test_spec_conditions_and_presets(tmp_path):
-    from ag_uav.batch import expand
+    from ag_uav.jobs.batch import expand
 
     spec, ctrls, conds = ex.build_spec(_args(tmp_path, runs=2))
     assert ctrls == list(ex.CONTROLLERS) and conds == ["nominal", "model-error"]
@@ -80,7 +80,7 @@ def test_paired_difference_and_counts():
 
 def test_controller_surfaces_at_half_alpha():
     """α = 0.5: NT and BMM equal the type-1 core, ζ = 0.5 halves it, only KM differs."""
-    from ag_uav.controller_plots import surface_stats, surfaces
+    from ag_uav.analysis.controller_plots import surface_stats, surfaces
 
     g = AxisGains(alpha=0.5, cm=0.7, zeta=0.5)
     st = surface_stats(g)
@@ -94,7 +94,7 @@ def test_controller_surfaces_at_half_alpha():
 
 
 def test_plot_controller_writes_figures(tmp_path):
-    from ag_uav.controller_plots import plot_controller
+    from ag_uav.analysis.controller_plots import plot_controller
 
     paths, stats = plot_controller(None, tmp_path, {"controller.xy.alpha": 0.3,
                                                     "controller.z.alpha": 0.5,

@@ -1,4 +1,4 @@
-"""Tests of ``ag-uav experiment numerical`` (ag_uav/experiments/numerical.py).
+"""Tests of ``ag-uav experiment numerical`` (ag_uav/jobs/experiments/numerical.py).
 
 The fast paths (fixed-gain KFs, batched PCA, batched MCKF) are checked against the library
 filters step by step; the command is run end to end on a tiny setup.
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import estimators
-from ag_uav.experiments import numerical as num
+from ag_uav.jobs.experiments import numerical as num
 
 TINY = num.Setup(max_steps=160)
 

@@ -1,11 +1,12 @@
-"""Tests for ag_uav.field: geodetic conversion, GeoJSON loading, validation, built-in fields."""
+"""Tests for ag_uav.world.field: geodetic conversion, GeoJSON loading, validation, built-in
+fields."""
 
 import math
 
 import numpy as np
 import pytest
 
-from ag_uav.field import (
+from ag_uav.world.field import (
     BUILTIN_FIELDS,
     WGS84_A,
     WGS84_E2,

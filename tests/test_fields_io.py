@@ -13,10 +13,10 @@ import shapely
 from shapely.geometry import LineString, Polygon
 
 import ag_uav
+from ag_uav.analysis.coverage import spray_coverage
 from ag_uav.cli import main
-from ag_uav.coverage import spray_coverage
-from ag_uav.field import Field, enu_to_lonlat, load_field
-from ag_uav.plan import plan_coverage
+from ag_uav.world.field import Field, enu_to_lonlat, load_field
+from ag_uav.world.plan import plan_coverage
 
 ORG = (46.7300, -117.0000, 0.0)
 
@@ -265,8 +265,8 @@ def test_example_farm_kml():
 
 def test_a_multi_part_field_is_drawn_whole(tmp_path):
     """The log's /field scene and the map outline every part (not just the first)."""
-    from ag_uav.run import fly
-    from ag_uav.viewing import _scene_lines, read_run
+    from ag_uav.analysis.viewing import _scene_lines, read_run
+    from ag_uav.jobs.run import fly
 
     cfg = ag_uav.load_config(None, {"mission.field": "two-part", "sim.max_time_s": 3.0,
                                     "log.render": False})

@@ -1,4 +1,4 @@
-"""Tests for ag_uav.gps: noise components, outages, presets and the GpsSensor."""
+"""Tests for ag_uav.vehicle.gps: noise components, outages, presets and the GpsSensor."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 import tomli_w
 from scipy import stats
 
-from ag_uav.gps import (
+from ag_uav.vehicle.gps import (
     AR1,
     AlphaStable,
     Gaussian,
@@ -605,8 +605,8 @@ def test_m350_filters_get_the_nominal_rtk_r_not_the_fix_type():
     """The loop's R comes from the nominal (RTK-fixed) variance, floored at (1 cm)^2; the episode
     levels (float: 0.2 m, DGPS: 0.85 m per axis) never reach it."""
     import ag_uav
-    from ag_uav.estimation import R_FLOOR, EstimatorFeedback
-    from ag_uav.sim import seed_sequences
+    from ag_uav.navigation.estimation import R_FLOOR, EstimatorFeedback
+    from ag_uav.seeds import seed_sequences
 
     cfg = ag_uav.load_config(None, {"gps.preset": "rtk-m350", "estimator.name": "kf"})
     ss = seed_sequences(cfg.seed)

@@ -12,8 +12,8 @@ from scipy.linalg import expm
 
 import ag_uav
 from ag_uav.config import ImuConfig
-from ag_uav.imu import DEG, AttitudeError, G, ImuSensor, accel_sigma, process_noise_psd
-from ag_uav.vehicle import build_vehicle
+from ag_uav.vehicle.imu import DEG, AttitudeError, G, ImuSensor, accel_sigma, process_noise_psd
+from ag_uav.vehicle.mjcf import build_vehicle
 from estimators.models import motion_model
 
 

@@ -156,7 +156,7 @@ def test_pf_resamples_only_below_ess_threshold_and_handles_bad_likelihoods():
 
 # --------------------------------------------------------------------------- Langevin experiment
 def test_langevin_jacobians_and_short_run():
-    from ag_uav.experiments import langevin as lg
+    from ag_uav.jobs.experiments import langevin as lg
 
     th = np.array([1.3, 5.2])
     eps = 1e-6

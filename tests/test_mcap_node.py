@@ -19,8 +19,8 @@ import shapely
 from mcap.reader import make_reader
 from PIL import Image
 
-from ag_uav.runlog import RunLog, synthetic_run
-from ag_uav.viewing import recover
+from ag_uav.analysis.viewing import recover
+from ag_uav.record.runlog import RunLog, synthetic_run
 
 NODE_DIR = Path(__file__).resolve().parent / "node"
 
@@ -103,7 +103,7 @@ def test_light_and_recovered_logs_pass_typescript_reader(node_checker, full_log,
 def test_real_flight_log_passes_foxglove_reader(node_checker, tmp_path):
     """A real (short) MuJoCo flight with GPS, estimators in the loop and EGL camera renders."""
     import ag_uav
-    from ag_uav.run import fly
+    from ag_uav.jobs.run import fly
 
     cfg = ag_uav.load_config(None, {"sim.max_time_s": 15.0, "gps.preset": "sbas",
                                     "estimator.name": "pca-mckf", "estimator.shadow": ["kf"],
@@ -127,8 +127,8 @@ _REAL_CHILD = """
 import mmap, struct, sys
 sys.path.insert(0, {root!r})
 import ag_uav
-from ag_uav.runlog import RunLog
-from ag_uav.sim import simulate
+from ag_uav.record.runlog import RunLog
+from ag_uav.engine.missions import simulate
 cfg = ag_uav.load_config(None, {{"log.render": False}})
 f = open({shm!r}, "r+b")
 mm = mmap.mmap(f.fileno(), 8)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import ag_uav
-from ag_uav.field import Field, load_field
+from ag_uav.world.field import Field, load_field
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Tests for ag_uav.plan: coverage of the nominal path, direction choice, validation."""
+"""Tests for ag_uav.world.plan: coverage of the nominal path, direction choice, validation."""
 
 import math
 
@@ -7,9 +7,9 @@ import pytest
 from shapely import affinity
 from shapely.geometry import LineString, Polygon
 
-from ag_uav.coverage import spray_coverage
-from ag_uav.field import BUILTIN_FIELDS, Field, load_field
-from ag_uav.plan import KINDS, plan_coverage
+from ag_uav.analysis.coverage import spray_coverage
+from ag_uav.world.field import BUILTIN_FIELDS, Field, load_field
+from ag_uav.world.plan import KINDS, plan_coverage
 
 SINGLE_PART = [n for n in BUILTIN_FIELDS if n != "two-part"]  # two-part: tests/test_fields_io.py
 

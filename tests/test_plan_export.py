@@ -10,12 +10,12 @@ import shapely
 from shapely.geometry import LineString
 
 import ag_uav
+from ag_uav.analysis.coverage import spray_coverage
 from ag_uav.cli import main
-from ag_uav.coverage import spray_coverage
-from ag_uav.field import Field, enu_to_lonlat, load_field, lonlat_to_enu
-from ag_uav.plan import plan_coverage
-from ag_uav.plan_export import plan_waypoints, write_plan
-from ag_uav.sim import build_plan
+from ag_uav.world.field import Field, enu_to_lonlat, load_field, lonlat_to_enu
+from ag_uav.world.mission import build_plan
+from ag_uav.world.plan import plan_coverage
+from ag_uav.world.plan_export import plan_waypoints, write_plan
 
 KML = "{http://www.opengis.net/kml/2.2}"
 ITEM_KEYS = {"autoContinue", "command", "doJumpId", "frame", "params", "type"}

@@ -1,13 +1,13 @@
-"""Tests for ag_uav.reference: smoothness, bounds, spray flags, cross-track."""
+"""Tests for ag_uav.world.reference: smoothness, bounds, spray flags, cross-track."""
 
 import math
 
 import numpy as np
 import pytest
 
-from ag_uav.field import Field, load_field
-from ag_uav.plan import plan_coverage
-from ag_uav.reference import Reference
+from ag_uav.world.field import Field, load_field
+from ag_uav.world.plan import plan_coverage
+from ag_uav.world.reference import Reference
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import io
 import numpy as np
 import pytest
 
-from ag_uav.render import Renderer, RenderUnavailable, optical_quat
+from ag_uav.record.render import Renderer, RenderUnavailable, optical_quat
 
 mujoco = pytest.importorskip("mujoco")
 from PIL import Image  # noqa: E402
@@ -106,9 +106,9 @@ def test_real_model_cameras_see_ground_and_drone():
     import numpy as np
 
     from ag_uav.config import Config
-    from ag_uav.render import Renderer, RenderUnavailable
-    from ag_uav.sim import build_field, field_outline
-    from ag_uav.vehicle import build_vehicle
+    from ag_uav.record.render import Renderer, RenderUnavailable
+    from ag_uav.vehicle.mjcf import build_vehicle
+    from ag_uav.world.mission import build_field, field_outline
 
     cfg = Config()
     veh = build_vehicle(cfg, field_outline(build_field(cfg)))

@@ -214,7 +214,7 @@ def test_pso_recovers_r_and_paper_fitness_collapses_to_lower_bound():
 def test_route_prediction_experiment_smoke(tmp_path):
     import argparse
 
-    from ag_uav.experiments import route_prediction as rp
+    from ag_uav.jobs.experiments import route_prediction as rp
 
     p = argparse.ArgumentParser()
     rp.add_arguments(p)
@@ -239,9 +239,9 @@ def test_locate_advances_when_a_corner_is_cut():
 
 # ------------------------------------------------------------------------------ mission side
 def test_route_feedback_bridges_an_outage_along_the_plan(tmp_path):
-    from ag_uav.batch import write_rect_field
     from ag_uav.config import load_config
-    from ag_uav.route import ROUTE_NAME, OutageGps, RouteConstrainedFeedback, plan_for
+    from ag_uav.jobs.batch import write_rect_field
+    from ag_uav.navigation.route import ROUTE_NAME, OutageGps, RouteConstrainedFeedback, plan_for
 
     fld = write_rect_field(tmp_path / "f.geojson", 60.0, 24.0)
     cfg = load_config(None, {"mission.field": str(fld), "gps.preset": "sbas",

@@ -18,7 +18,7 @@ import pytest
 from google.protobuf import descriptor_pb2, message_factory
 from mcap.reader import NonSeekingReader, make_reader
 
-from ag_uav.runlog import (
+from ag_uav.record.runlog import (
     FlatSchema,
     RunLog,
     _rpy_deg,
@@ -205,7 +205,7 @@ def test_estimator_error_against_the_truth_at_the_fix(tmp_path):
 _CHILD = textwrap.dedent("""
     import mmap, struct, sys, time
     sys.path.insert(0, {root!r})
-    from ag_uav.runlog import RunLog, synthetic_run
+    from ag_uav.record.runlog import RunLog, synthetic_run
     f = open({shm!r}, "r+b"); mm = mmap.mmap(f.fileno(), 8)
     with RunLog({path!r}, channels="full", metadata={{"child": 1}}, config_toml="x = 1") as log:
         def on_tick(t, p, q):
@@ -251,7 +251,7 @@ def test_sigterm_finishes_the_file(tmp_path):
 
 def test_sigkill_loses_at_most_one_sim_second_and_recovers(tmp_path):
     """SIGKILL at a random moment: a streaming read keeps everything up to >= t_kill - 1 s."""
-    from ag_uav.viewing import recover
+    from ag_uav.analysis.viewing import recover
 
     rng = np.random.default_rng(1234)
     t_kill_target = float(rng.uniform(2.0, 6.0))

@@ -1,5 +1,5 @@
-"""Spray jobs (ag_uav.spray): tank and flow, mass following the tank, battery energy, sorties with
-return to base, off-target area (issue 11, items 1-3)."""
+"""Spray jobs (ag_uav.world.spray_job): tank and flow, mass following the tank, battery energy,
+sorties with return to base, off-target area (issue 11, items 1-3)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,16 @@ import numpy as np
 import pytest
 import shapely
 
+from ag_uav.analysis.metrics import off_target
 from ag_uav.config import Config, ConfigError, load_config
-from ag_uav.field import Field
-from ag_uav.metrics import off_target
-from ag_uav.sim import make_cascade, simulate
-from ag_uav.spray import (
+from ag_uav.engine.missions import simulate
+from ag_uav.engine.sprayer import Sprayer
+from ag_uav.vehicle.cascade import make_cascade
+from ag_uav.vehicle.mjcf import G, build_vehicle
+from ag_uav.world.field import Field
+from ag_uav.world.spray_job import (
     SEG_GROUND,
     SEG_TRANSIT,
-    Sprayer,
     SprayJob,
     hover_endurance_min,
     hover_power,
@@ -26,7 +28,6 @@ from ag_uav.spray import (
     liquid_l_per_m,
     rotor_power_coeff,
 )
-from ag_uav.vehicle import G, build_vehicle
 
 FIELD_38HA = str(Path(__file__).resolve().parent.parent / "examples" / "field_38ha.geojson")
 NOLOG = {"log.enabled": False, "log.render": False}
@@ -61,8 +62,8 @@ def test_closed_loop_hover_energy_matches_the_model(fill_l):
     """Hover 60 s in still air (no take-off) with the tank empty / full: the energy integrated
     from the actual rotor thrusts in the loop equals the momentum-theory hover power of the
     mass within 0.5 %; empty, 526 Wh would last 55 min."""
-    from ag_uav.scenarios import StepReference, hover_config
-    from ag_uav.sim import fly_reference
+    from ag_uav.engine.missions import fly_reference
+    from ag_uav.engine.scenarios import StepReference, hover_config
 
     cfg = hover_config(load_config(None, {**NOLOG, "wind.speed_mps": 0.0}))
     ref = StepReference(step=(0.0, 0.0, 0.0), t_step=1e9)
@@ -121,7 +122,7 @@ def test_liquid_mass_set_at_run_time_equals_a_compiled_model():
 # ------------------------------------------------------------------------------ default mission
 @pytest.fixture(scope="module")
 def default_spray_run(tmp_path_factory):
-    from ag_uav.run import fly
+    from ag_uav.jobs.run import fly
 
     cfg = load_config(None, {"log.render": False})
     res, run_dir = fly(cfg, out_root=tmp_path_factory.mktemp("runs"), run_id="spray")
@@ -160,7 +161,7 @@ def test_default_mission_one_sortie_litres_energy_mass(default_spray_run):
 
 
 def test_mass_change_is_in_the_log(default_spray_run):
-    from ag_uav.viewing import plot, read_run
+    from ag_uav.analysis.viewing import plot, read_run
 
     _, res, run_dir = default_spray_run
     d = read_run(run_dir, images=False)
@@ -267,8 +268,9 @@ def test_small_battery_limits_the_sorties_and_keeps_the_reserve():
 def test_empty_tank_before_the_planned_return_is_flagged():
     """The planner plans 0.5 L tanks but only 0.3 L is put in each time: the actual tank runs
     dry before the planned return; the nozzles stop and the summary says so."""
-    from ag_uav.sim import build_field, build_plan, build_reference, field_outline, fly_reference
-    from ag_uav.spray import plan_job
+    from ag_uav.engine.missions import build_reference, fly_reference
+    from ag_uav.world.mission import build_field, build_plan, field_outline
+    from ag_uav.world.spray_job import plan_job
 
     cfg = load_config(None, {**NOLOG, "spray.tank_l": 0.5})
     fld = build_field(cfg)
@@ -315,8 +317,8 @@ def test_off_target_is_positive_when_flown_past_the_boundary(tmp_path):
     on a GPS whose error is a constant offset of several metres (a Gauss-Markov bias with a
     10^7 s time constant, as an uncorrected datum shift), so the whole pattern, headland laps
     included, is shifted over the edge."""
-    from ag_uav.run import fly
-    from ag_uav.viewing import plot
+    from ag_uav.analysis.viewing import plot
+    from ag_uav.jobs.run import fly
 
     cfg = load_config(None, {"log.render": False, "log.channels": "light",
                              "gps.preset": "perfect", "estimator.name": "kf",

@@ -17,7 +17,7 @@ import pytest
 import tomli_w
 
 from ag_uav.config import ConfigError, load_config
-from ag_uav.tune import (
+from ag_uav.jobs.tune import (
     default_values,
     evaluate_candidate,
     gains_toml,
@@ -167,9 +167,9 @@ def test_sigkill_then_resume_equals_uninterrupted(tmp_path):
 
 
 def test_mission_fast_path_equals_simulate(tmp_path):
-    from ag_uav.batch import write_rect_field
-    from ag_uav.sim import simulate
-    from ag_uav.tune import mission_trajectory
+    from ag_uav.engine.missions import simulate
+    from ag_uav.jobs.batch import write_rect_field
+    from ag_uav.jobs.tune import mission_trajectory
 
     f = write_rect_field(tmp_path / "f.geojson", 18.0, 12.0)
     cfg = load_config(None, {"mission.field": str(f), "mission.headland_m": 0.0,
@@ -186,7 +186,7 @@ def test_integer_keys_get_integer_candidates():
     """The optimisers search reals; an integer config key (estimator.window) gets the nearest
     integer, so the candidate loads (it was refused as "expected an integer")."""
     from ag_uav.config import config_from_dict
-    from ag_uav.tune import candidate_config, spec_from_dict
+    from ag_uav.jobs.tune import candidate_config, spec_from_dict
 
     spec = spec_from_dict({"params": {"estimator.window": {"lo": 5, "hi": 30},
                                       "controller.xy.ke": {"lo": 0.5, "hi": 3.0}},

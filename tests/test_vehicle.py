@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from ag_uav.config import Config
-from ag_uav.scenarios import StepReference, hover_config, step_metrics, step_response
-from ag_uav.sim import fly_reference
-from ag_uav.vehicle import G, build_vehicle
+from ag_uav.engine.missions import fly_reference
+from ag_uav.engine.scenarios import StepReference, hover_config, step_metrics, step_response
+from ag_uav.vehicle.mjcf import G, build_vehicle
 from controllers.attitude import XMixer
 
 

@@ -11,8 +11,8 @@ import shapely
 from mcap.reader import make_reader
 from PIL import Image
 
-from ag_uav import viewing
-from ag_uav.runlog import RunLog, synthetic_run
+from ag_uav.analysis import viewing
+from ag_uav.record.runlog import RunLog, synthetic_run
 
 
 def _fake_jpeg(k: int) -> bytes:

@@ -1,4 +1,4 @@
-"""Tests for ag_uav.wind: Dryden turbulence (MIL-F-8785C), mean wind, drag."""
+"""Tests for ag_uav.world.wind: Dryden turbulence (MIL-F-8785C), mean wind, drag."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
-from ag_uav.wind import (
+from ag_uav.world.wind import (
     KNOT,
     DrydenTurbulence,
     Wind,

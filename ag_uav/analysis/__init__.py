@@ -1,0 +1,1 @@
+"""What a flight means: metrics and coverage, plots, viewing logs, reports."""

@@ -1,0 +1,186 @@
+"""Per-run metrics from the recorded trajectory (numpy/shapely, after the loop).
+
+Definitions (all horizontal errors in the ENU x–y plane):
+
+- ``tracking_rmse_m``: RMS of |p_true − p_ref| (horizontal) over the mission, i.e. from the first
+  to the last tick with the sprayer on (take-off and the final hover are not part of it).
+- ``cross_track_rmse_m`` / ``cross_track_max_m``: distance of the true position to the planned
+  polyline of the active *spraying* segment (sweep legs and headland laps), over ticks with the
+  sprayer on. Turns and transits are not counted (the sprayer is off there).
+- ``altitude_rmse_m``: RMS of z_true − z_ref over the mission ticks.
+- ``coverage_fraction`` / ``overlap_fraction``: :func:`ag_uav.analysis.coverage.spray_coverage` of
+the true
+  track while spraying, with the swath footprint.
+- ``completed``: not crashed, the reference ran to its end, the vehicle ended within half a swath
+  of the path's end, and every leg was flown: while the leg was active the true track came within
+  one swath of both of its ends. (How *well* it was flown is what the errors and the coverage
+  say; a biased GPS makes a drone fly every leg, offset.)
+- ``off_target_m2`` (``off_target_outside_m2`` + ``off_target_holes_m2``): area of the sprayed
+  footprint (the same swath footprints as the coverage) farther than ``spray.offtarget_buffer_m``
+  outside the field's boundary, or farther than that inside a hole (an obstacle or a no-spray
+  zone); ``sprayed_area_m2`` is the footprint's whole area. :func:`off_target`.
+- With sorties (:mod:`ag_uav.world.spray_job`) the inserted transits, climbs, descents and the time
+on the
+  ground at the base (seg < 0) are left out of the tracking and altitude errors.
+- ``mission_time_s``: time at which the drone's own position (the one it flies on: truth or
+  estimate) first came within 0.5 m of the path's end after the last leg started, as an
+  autopilot's "waypoint reached" (None if never).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import shapely
+
+from ..config import Config
+from .coverage import footprints, spray_coverage
+
+
+def _rms(x: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(x * x))) if x.size else None
+
+
+def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index pairs of the True runs of a boolean array."""
+    m = np.concatenate([[False], mask.astype(bool), [False]])
+    d = np.flatnonzero(np.diff(m.astype(np.int8)))
+    return list(zip(d[::2].tolist(), d[1::2].tolist(), strict=True))
+
+
+def cross_track(res, plan) -> np.ndarray:
+    """Distance (m) of each spraying tick's true position to its planned segment (NaN elsewhere)."""
+    out = np.full(len(res.t), np.nan)
+    xy = res.p_true[:, :2]
+    for s in np.unique(res.seg[res.spray]):
+        if s < 0 or s >= len(plan.segments):
+            continue
+        idx = np.flatnonzero((res.seg == s) & res.spray)
+        line = shapely.LineString(plan.segments[s].points)
+        out[idx] = shapely.distance(shapely.points(xy[idx]), line)
+    return out
+
+
+def off_target(field, tracks, swath: float, buffer_m: float = 0.0) -> dict[str, float]:
+    """Sprayed area off the target: ``outside`` = footprint − (field exterior grown by
+    ``buffer_m``), ``holes`` = footprint ∩ (each hole shrunk by ``buffer_m``); plus ``sprayed``,
+    the footprint's area (m²). Footprints as :func:`ag_uav.analysis.coverage.footprints`."""
+    fps = footprints(tracks, swath) if tracks else []
+    if not fps:
+        return {"outside": 0.0, "holes": 0.0, "sprayed": 0.0}
+    union = shapely.union_all(fps)
+    parts = list(field.parts)   # a multi-part field: every part with its own holes
+    outer = shapely.union_all([shapely.Polygon(p.exterior.coords) for p in parts])
+    grown = outer.buffer(buffer_m, join_style="mitre") if buffer_m > 0 else outer
+    outside = union.difference(grown).area
+    holes = 0.0
+    for ring in (r for p in parts for r in p.interiors):
+        h = shapely.Polygon(ring.coords)
+        h = h.buffer(-buffer_m, join_style="mitre") if buffer_m > 0 else h
+        if not h.is_empty:
+            holes += union.intersection(h).area
+    return {"outside": float(outside), "holes": float(holes), "sprayed": float(union.area)}
+
+
+def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float | None,
+              reference=None) -> dict[str, Any]:
+    plan = res.plan
+    crashed = crash_reason is not None
+    n = len(res.t)
+    spray_idx = np.flatnonzero(res.spray)
+    if spray_idx.size:
+        mission = slice(int(spray_idx[0]), int(spray_idx[-1]) + 1)
+    else:
+        mission = slice(0, n)
+    on_plan = np.zeros(n, bool)
+    on_plan[mission] = True
+    on_plan &= res.seg >= 0  # sorties: not the base transits, climbs, descents, ground time
+    d_h = res.p_true[on_plan, :2] - res.p_ref[on_plan, :2]
+    tracking = _rms(np.hypot(d_h[:, 0], d_h[:, 1]))
+    alt = _rms(res.p_true[on_plan, 2] - res.p_ref[on_plan, 2])
+    ct = cross_track(res, plan)
+    ct_spray = ct[np.isfinite(ct)]
+    tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
+    cov, ovl = spray_coverage(res.field, tracks, cfg.mission.swath_m) if tracks else (0.0, 0.0)
+    off = off_target(res.field, tracks, cfg.mission.swath_m, cfg.spray.offtarget_buffer_m)
+    steps = np.diff(res.p_true, axis=0)
+    # motor effort: RMS rate of the rotor-thrust commands over the spraying part (N/s per rotor)
+    f_mis = np.asarray(res.motors, dtype=float)[mission]
+    motor_rate = (_rms(np.diff(f_mis, axis=0).ravel() * cfg.sim.control_hz)
+                  if len(f_mis) > 1 else None)
+    path_len = float(np.sum(np.linalg.norm(steps, axis=1))) if n > 1 else 0.0
+
+    end = np.asarray(plan.end, dtype=float)
+    dt = 1.0 / cfg.sim.control_hz
+    ref_done = reference is not None and n and res.t[-1] >= reference.duration - 1.5 * dt
+    final_err = float(np.hypot(*(res.p_true[-1, :2] - end))) if n else float("inf")
+    legs = [i for i, s in enumerate(plan.segments) if s.kind == "leg"]
+    legs_flown = 0
+    swath = cfg.mission.swath_m
+    for i in legs:
+        idx = np.flatnonzero(res.seg == i)
+        if not idx.size:
+            continue
+        pts = plan.segments[i].points
+        xy = res.p_true[idx, :2]
+        d0 = np.min(np.hypot(*(xy - pts[0]).T))
+        d1 = np.min(np.hypot(*(xy - pts[-1]).T))
+        if d0 < swath and d1 < swath:
+            legs_flown += 1
+    completed = bool(not crashed and ref_done and final_err < 0.5 * swath
+                     and legs_flown == len(legs))
+    mission_time = None
+    if n and legs:
+        last_leg_ticks = np.flatnonzero(res.seg == legs[-1])
+        if last_leg_ticks.size:
+            after = np.arange(last_leg_ticks[0], n)
+            dist = np.hypot(*(res.p_fb[after, :2] - end).T)
+            hit = np.flatnonzero(dist < 0.5)
+            if hit.size:
+                mission_time = float(res.t[after[hit[0]]])
+
+    def r(x: float | None, nd: int = 4) -> float | None:
+        return None if x is None else round(float(x), nd)
+
+    return {
+        "completed": completed,
+        "crashed": crashed,
+        "crash_reason": crash_reason,
+        "crash_time_s": r(crash_time, 3),
+        "mission_time_s": r(mission_time, 2),
+        "tracking_rmse_m": r(tracking),
+        "cross_track_rmse_m": r(_rms(ct_spray)),
+        "cross_track_max_m": r(float(np.max(ct_spray)) if ct_spray.size else None),
+        "altitude_rmse_m": r(alt),
+        "motor_rate_rms_nps": r(motor_rate),
+        "coverage_fraction": r(cov, 5),
+        "overlap_fraction": r(ovl, 5),
+        "sprayed_area_m2": r(off["sprayed"], 1),
+        "off_target_m2": r(off["outside"] + off["holes"], 2),
+        "off_target_outside_m2": r(off["outside"], 2),
+        "off_target_holes_m2": r(off["holes"], 2),
+        "path_length_m": r(path_len, 2),
+        "planned_path_length_m": r(plan.length, 2),
+        "legs": len(legs),
+        "legs_flown": legs_flown,
+        "final_position_error_m": r(final_err),
+        "field_area_m2": r(res.field.area, 1),
+        "sweep_direction_deg": r(plan.direction_deg, 2),
+    }
+
+
+def add_sortie_areas(summary: dict[str, Any], res, swath: float) -> None:
+    """Add ``area_m2`` (the union of the swath footprints sprayed in that sortie, as the
+    coverage computes them) to each row of ``summary["sortie_table"]``."""
+    import shapely
+
+    rows = summary.get("sortie_table") or []
+    sortie = res.extra.get("spray", {}).get("sortie")
+    if not rows or sortie is None:
+        return
+    runs = [(a, b) for a, b in contiguous_runs(res.spray) if b - a >= 2]
+    for i, row in enumerate(rows):
+        tracks = [res.p_true[a:b, :2] for a, b in runs if sortie[a] == i]
+        fps = footprints(tracks, swath)
+        row["area_m2"] = round(float(shapely.union_all(fps).area), 1) if fps else 0.0

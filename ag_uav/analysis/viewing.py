@@ -1,0 +1,788 @@
+"""Looking at a run after the fact, from its MCAP log alone.
+
+    show(run)            -> str          metadata, config, metrics, channels with counts and rates
+    plot(run, out_dir)   -> list[Path]   map.png (field, plan, sprayed area, true and estimated
+                                         tracks, GPS fixes), errors.png, controller.png,
+                                         estimators.png
+    video(run, out_mp4, camera=None) -> Path   MP4 from the logged JPEG frames (imageio-ffmpeg)
+    recover(in_path, out_path) -> int    rewrite a truncated log (killed run) into a finished,
+                                         indexed MCAP; returns the number of messages kept
+    write_foxglove_layout(path, ...)     Foxglove layout (app-export JSON: Layouts -> Import from
+                                         file) with 3D, camera images and plots
+    read_run(run)        -> RunData      decoded channels as numpy arrays (what the above use)
+
+``run`` is a run folder (``runs/<id>/``, containing ``run.mcap``) or the ``.mcap`` file itself.
+Everything reads with the ``mcap`` package (+ ``mcap-protobuf-support`` to decode); a file that
+was never finished (no footer) is read by streaming, so ``show``/``plot`` work on it too.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "RunData",
+    "read_run",
+    "show",
+    "plot",
+    "video",
+    "recover",
+    "write_foxglove_layout",
+    "mcap_path",
+]
+
+
+def mcap_path(run: str | Path) -> Path:
+    """The ``.mcap`` file of a run folder (``run.mcap``, else the only ``*.mcap``) or file."""
+    p = Path(run)
+    if p.is_dir():
+        if (p / "run.mcap").exists():
+            return p / "run.mcap"
+        found = sorted(p.glob("*.mcap"))
+        if not found:
+            raise FileNotFoundError(f"no .mcap file in {p}")
+        return found[0]
+    if not p.exists():
+        raise FileNotFoundError(p)
+    return p
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------------------------
+
+
+def _flatten(msg: Any, prefix: str = "", out: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Protobuf message -> {dotted field name: value}; nested messages recurse, repeated
+    numeric fields become lists; every declared field is present (defaults included)."""
+    if out is None:
+        out = {}
+    for f in msg.DESCRIPTOR.fields:
+        v = getattr(msg, f.name)
+        key = prefix + f.name
+        if f.message_type is not None and not _is_repeated(f):
+            _flatten(v, key + ".", out)
+        elif _is_repeated(f):
+            if f.message_type is None:
+                out[key] = list(v)
+        else:
+            out[key] = v
+    return out
+
+
+def _is_repeated(f: Any) -> bool:
+    rep = getattr(f, "is_repeated", None)
+    if rep is not None:
+        return bool(rep)
+    return f.label == f.LABEL_REPEATED
+
+
+@dataclass
+class Series:
+    """One numeric channel: ``t`` (s, log time) and ``fields`` {dotted name: array}."""
+
+    t: np.ndarray
+    fields: dict[str, np.ndarray]
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return self.fields[key]
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.fields
+
+
+@dataclass
+class RunData:
+    path: Path
+    finished: bool
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    attachments: dict[str, bytes] = field(default_factory=dict)
+    channels: dict[str, dict[str, Any]] = field(default_factory=dict)  # topic -> info
+    series: dict[str, Series] = field(default_factory=dict)  # numeric topics
+    scenes: dict[str, Any] = field(default_factory=dict)  # topic -> last decoded SceneUpdate
+    images: dict[str, list[tuple[float, bytes]]] = field(default_factory=dict)
+    t_start: float = math.nan
+    t_end: float = math.nan
+
+
+_SERIES_TOPICS = ("/drone/state", "/gps", "/drone/pose", "/drone/pose_est", "/drone/pose_ref",
+                  "/drone/spray")
+
+
+def _summary_json(d: RunData) -> dict[str, Any]:
+    """The run's ``summary.json`` attachment ({} if absent)."""
+    import json
+
+    raw = d.attachments.get("summary.json")
+    if not raw:
+        return {}
+    try:
+        return json.loads(raw)
+    except ValueError:
+        return {}
+
+
+def _sortie_of(st: Series, sp: Series | None) -> np.ndarray | None:
+    """Sortie number (1, 2, ...) at each ``/drone/state`` sample, from ``/drone/spray``."""
+    if sp is None or not len(sp.t) or "sortie" not in sp:
+        return None
+    i = np.clip(np.searchsorted(sp.t, st.t, side="right") - 1, 0, len(sp.t) - 1)
+    return sp["sortie"][i].astype(int)
+
+
+def _iter_raw(path: Path) -> tuple[bool, Any]:
+    """(finished, iterator of (schema, channel, message)) for a finished or truncated file."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    f = open(path, "rb")  # noqa: SIM115 - closed by the generator
+    try:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+    except (McapError, Exception):  # noqa: BLE001 - any failure: no usable footer
+        summary = None
+    if summary is not None:
+        def gen_indexed() -> Any:
+            try:
+                yield from reader.iter_messages(log_time_order=True)
+            finally:
+                f.close()
+        return True, gen_indexed()
+    f.seek(0)
+    return False, _stream_messages(f)
+
+
+def _stream_messages(f: Any) -> Any:
+    """Messages of an unfinished file in file order; stops quietly at the truncation."""
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    schemas: dict[int, Any] = {}
+    channels: dict[int, Any] = {}
+    try:
+        for rec in StreamReader(f, validate_crcs=True).records:
+            if isinstance(rec, Schema):
+                schemas[rec.id] = rec
+            elif isinstance(rec, Channel):
+                channels[rec.id] = rec
+            elif isinstance(rec, Message):
+                ch = channels.get(rec.channel_id)
+                if ch is not None:
+                    yield schemas.get(ch.schema_id), ch, rec
+    except Exception:  # noqa: BLE001 - truncated or corrupt tail: stop here
+        return
+    finally:
+        f.close()
+
+
+def _read_meta(path: Path, data: RunData) -> None:
+    """Metadata and attachments (indexed if finished, else by streaming)."""
+    from mcap.records import Attachment, Metadata
+    from mcap.stream_reader import StreamReader
+
+    with open(path, "rb") as f:
+        try:
+            for rec in StreamReader(f, validate_crcs=False).records:
+                if isinstance(rec, Metadata):
+                    data.metadata[rec.name] = dict(rec.metadata)
+                elif isinstance(rec, Attachment):
+                    data.attachments[rec.name] = bytes(rec.data)
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def read_run(run: str | Path, *, images: bool = True) -> RunData:
+    """Decode a run log: numeric channels to arrays, scenes, JPEG frames, metadata."""
+    from mcap_protobuf.decoder import DecoderFactory
+
+    path = mcap_path(run)
+    finished, it = _iter_raw(path)
+    data = RunData(path=path, finished=finished)
+    _read_meta(path, data)
+    factory = DecoderFactory()
+    decoders: dict[int, Any] = {}
+    rows: dict[str, list[tuple[float, dict[str, Any]]]] = {}
+    t0, t1 = math.inf, -math.inf
+    for schema, channel, message in it:
+        t = message.log_time * 1e-9
+        t0, t1 = min(t0, t), max(t1, t)
+        info = data.channels.setdefault(channel.topic, {
+            "schema": schema.name if schema is not None else "", "count": 0,
+            "encoding": channel.message_encoding, "t0": t, "t1": t, "bytes": 0})
+        info["count"] += 1
+        info["t1"] = t
+        info["bytes"] += len(message.data)
+        topic = channel.topic
+        numeric = topic in _SERIES_TOPICS or topic.startswith("/estimator/")
+        is_img = topic.startswith("/camera/") and not topic.endswith("/calibration")
+        is_scene = schema is not None and schema.name == "foxglove.SceneUpdate"
+        if not (numeric or is_img or is_scene):
+            continue
+        if is_img and not images:
+            continue
+        dec = decoders.get(channel.id)
+        if dec is None:
+            dec = decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+        msg = dec(message.data)
+        if is_img:
+            data.images.setdefault(topic, []).append((t, bytes(msg.data)))
+        elif is_scene:
+            data.scenes[topic] = msg
+        else:
+            rows.setdefault(topic, []).append((t, _flatten(msg)))
+    for topic, rs in rows.items():
+        keys = list(rs[0][1])
+        fields: dict[str, np.ndarray] = {}
+        for k in keys:
+            col = [r[1].get(k, math.nan) for r in rs]
+            try:
+                fields[k] = np.asarray(col, dtype=float)
+            except (TypeError, ValueError):
+                continue
+        data.series[topic] = Series(np.array([r[0] for r in rs]), fields)
+    if t0 <= t1:
+        data.t_start, data.t_end = t0, t1
+    return data
+
+
+# --------------------------------------------------------------------------------------------
+# show
+# --------------------------------------------------------------------------------------------
+
+
+def show(run: str | Path) -> str:
+    """A text report of a run from its MCAP alone."""
+    d = read_run(run, images=False)
+    lines = [f"run log: {d.path}  ({d.path.stat().st_size / 1e6:.2f} MB, "
+             f"{'finished, indexed' if d.finished else 'NOT finished (truncated?): try recover'})"]
+    if d.t_start == d.t_start:
+        lines.append(f"sim time: {d.t_start:.2f} .. {d.t_end:.2f} s")
+    for name in ("run", "versions", "summary"):
+        md = d.metadata.get(name)
+        if not md:
+            continue
+        lines.append(f"\n[{name}]")
+        w = max(len(k) for k in md)
+        lines += [f"  {k:<{w}}  {v}" for k, v in md.items()]
+    lines.append("\n[channels]")
+    lines.append(f"  {'topic':<32} {'schema':<26} {'count':>7} {'Hz':>7} {'KiB':>8}")
+    for topic, info in sorted(d.channels.items()):
+        span = info["t1"] - info["t0"]
+        hz = (info["count"] - 1) / span if span > 0 and info["count"] > 1 else math.nan
+        lines.append(f"  {topic:<32} {info['schema']:<26} {info['count']:>7} {hz:>7.2f} "
+                     f"{info['bytes'] / 1024:>8.1f}")
+    if d.attachments:
+        lines.append("\n[attachments]")
+        lines += [f"  {k}  ({len(v)} bytes)" for k, v in d.attachments.items()]
+    cfg = d.attachments.get("config.toml")
+    if cfg:
+        lines.append("\n[config.toml]")
+        lines += ["  " + ln for ln in cfg.decode("utf-8", "replace").splitlines()]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------------
+# plot
+# --------------------------------------------------------------------------------------------
+
+
+def _scene_lines(scene: Any, entity_id: str) -> list[tuple[np.ndarray, tuple[float, ...]]]:
+    out = []
+    for e in getattr(scene, "entities", []):
+        if e.id != entity_id:
+            continue
+        for ln in e.lines:
+            pts = np.array([[p.x, p.y] for p in ln.points]) if ln.points else np.zeros((0, 2))
+            closed = ln.type == 1  # LINE_LOOP
+            if closed and len(pts):
+                pts = np.vstack([pts, pts[:1]])
+            out.append((pts, (ln.color.r, ln.color.g, ln.color.b, ln.color.a)))
+    return out
+
+
+def _scene_triangles(scene: Any, entity_id: str) -> list[np.ndarray]:
+    out = []
+    for e in getattr(scene, "entities", []):
+        if e.id != entity_id:
+            continue
+        for tri in e.triangles:
+            pts = np.array([[p.x, p.y] for p in tri.points])
+            out += [pts[i:i + 3] for i in range(0, len(pts) - 2, 3)]
+    return out
+
+
+def _grid(axs: Any) -> None:
+    for a in np.atleast_1d(axs).ravel():
+        a.grid(alpha=0.3)
+
+
+def _save(fig: Any, path: Path, dpi: int) -> Path:
+    """Write ``fig`` to ``path`` (tight bounding box) and close it; the path."""
+    import matplotlib.pyplot as plt
+
+    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
+    """PNG figures of a run: map, errors, controller, estimators (those with data)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    d = read_run(run, images=False)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths: list[Path] = []
+    st = d.series.get("/drone/state")
+    gps = d.series.get("/gps")
+    ests = {k.split("/")[-1]: v for k, v in d.series.items() if k.startswith("/estimator/")}
+
+    # --- map
+    fig, ax = plt.subplots(figsize=(9, 7))
+    field_scene = d.scenes.get("/field")
+    sprayed_scene = d.scenes.get("/sprayed")
+    if field_scene is not None:
+        tris = _scene_triangles(field_scene, "field")
+        if tris:
+            tan = (0.85, 0.78, 0.6)
+            ax.add_collection(PolyCollection(tris, facecolor=tan, edgecolor=tan, lw=0.5,
+                                             zorder=0))
+    if sprayed_scene is not None:
+        tris = _scene_triangles(sprayed_scene, "sprayed")
+        if tris:
+            ax.add_collection(PolyCollection(tris, facecolor=(0.3, 0.75, 1.0, 0.35),
+                                             edgecolor="none", zorder=1))
+            ax.plot([], [], color=(0.3, 0.75, 1.0), lw=6, alpha=0.5, label="sprayed area")
+    if field_scene is not None:
+        first_field = first_hole = True
+        for pts, col in _scene_lines(field_scene, "field"):
+            is_hole = col[0] > 0.8 and col[1] < 0.5   # the scene draws holes red, parts gold
+            lbl = None
+            if is_hole and first_hole:
+                lbl, first_hole = "obstacle", False
+            elif not is_hole and first_field:
+                lbl, first_field = "field", False
+            ax.plot(pts[:, 0], pts[:, 1], color="darkgoldenrod" if not is_hole else "firebrick",
+                    lw=2, zorder=2, label=lbl)
+        spray_lbl = transit_lbl = True
+        for pts, col in _scene_lines(field_scene, "plan"):
+            spray = col[1] > 0.7 and col[0] < 0.3
+            lbl = None
+            if spray and spray_lbl:
+                lbl, spray_lbl = "planned path (spray)", False
+            elif not spray and transit_lbl:
+                lbl, transit_lbl = "planned path (transit)", False
+            ax.plot(pts[:, 0], pts[:, 1], color="forestgreen" if spray else "grey",
+                    ls="-" if spray else ":", lw=1.0, zorder=3, label=lbl)
+    if gps is not None and len(gps.t):
+        ax.scatter(gps["pose.position.x"], gps["pose.position.y"], s=4, color="orange",
+                   alpha=0.6, zorder=4, label="GPS fixes")
+    spr = d.series.get("/drone/spray")
+    summ = _summary_json(d)
+    sortie = _sortie_of(st, spr) if st is not None else None
+    if sprayed_scene is not None and field_scene is not None and summ.get("off_target_m2"):
+        _plot_off_target(ax, field_scene, sprayed_scene, summ)
+    if st is not None and sortie is not None and sortie.max() > 1:
+        # one colour per sortie; the track on the ground at the base is not drawn
+        ns = int(sortie.max())
+        cmap = plt.get_cmap("tab10" if ns <= 10 else "tab20")
+        for k in range(1, ns + 1):
+            m = sortie == k
+            x = np.where(m, st["pos.x"], np.nan)
+            y = np.where(m, st["pos.y"], np.nan)
+            ax.plot(x, y, color=cmap((k - 1) % cmap.N), lw=1.0, zorder=5,
+                    label=f"sortie {k}" if k <= 20 else None)
+    elif st is not None:
+        ax.plot(st["pos.x"], st["pos.y"], color="black", lw=1.2, zorder=5, label="true track")
+    if summ.get("base_xy") and (summ.get("sorties") or 0) > 1:
+        bx, by = summ["base_xy"]
+        ax.scatter([bx], [by], marker="*", s=260, color="crimson", edgecolor="k", zorder=8,
+                   label="base (refill, battery swap)")
+    if st is not None:
+        if np.isfinite(st["est.x"]).any():
+            ax.plot(st["est.x"], st["est.y"], color="royalblue", lw=1.0, ls="--", zorder=6,
+                    label="estimated track")
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    ax.set_xlabel("east x [m]")
+    ax.set_ylabel("north y [m]")
+    title = f"Top-down map: {d.path.parent.name}"
+    if summ.get("sorties"):
+        ns_ = int(summ["sorties"])
+        title += (f"\n{ns_} sortie{'s' if ns_ != 1 else ''}, "
+                  f"{summ.get('litres_sprayed_l', 0):.1f} L, "
+                  f"{summ.get('energy_wh', 0):.0f} Wh, coverage "
+                  f"{100 * (summ.get('coverage_fraction') or 0):.1f} %, off-target "
+                  f"{summ.get('off_target_m2') or 0:.0f} m²")
+    ax.set_title(title)
+    if sortie is not None and sortie.max() > 1:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, framealpha=0.85,
+                  ncol=2 if sortie.max() > 10 else 1)
+    else:
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
+    ax.grid(alpha=0.3)
+    paths.append(_save(fig, out / "map.png", 110))
+
+    # --- spray job: tank, mass, battery, power
+    if spr is not None and len(spr.t):
+        fig, axs = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+        axs[0].plot(spr.t, spr["tank_l"], color="tab:blue", lw=1.0, label="tank [L]")
+        axs[0].plot(spr.t, spr["mass_kg"], color="k", lw=1.0, label="vehicle mass [kg]")
+        axs[0].legend(fontsize=8)
+        axs[1].plot(spr.t, 100 * spr["battery_frac"], color="tab:green", lw=1.0,
+                    label="battery left [%]")
+        res = summ.get("config", {}).get("battery", {}).get("reserve_frac")
+        if res is not None:
+            axs[1].axhline(100 * float(res), color="firebrick", ls="--", lw=0.8, label="reserve")
+        axs[1].legend(fontsize=8)
+        axs[2].plot(spr.t, spr["power_w"], color="tab:orange", lw=0.6, label="power [W]")
+        axs[2].legend(fontsize=8)
+        axs[2].set_xlabel("sim time [s]")
+        _grid(axs)
+        fig.suptitle("Spray job: tank and mass, battery, electrical power")
+        paths.append(_save(fig, out / "spray.png", 100))
+
+    # --- errors over time
+    if st is not None:
+        fig, axs = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+        t = st.t
+        for k, c in (("err.x", "tab:red"), ("err.y", "tab:green"), ("err.z", "tab:blue")):
+            axs[0].plot(t, st[k], color=c, lw=0.9, label=k.replace("err.", "") + " (true - ref)")
+        axs[0].plot(t, st["err.horiz"], color="k", lw=1.2, label="horizontal")
+        axs[0].set_ylabel("tracking error [m]")
+        axs[0].legend(fontsize=8, ncol=4)
+        if np.isfinite(st["est_err.horiz"]).any():
+            axs[1].plot(t, st["est_err.horiz"], color="royalblue", lw=1.0,
+                        label="in-loop estimate (horizontal)")
+        for name, s in ests.items():
+            axs[1].plot(s.t, s["err.horiz"], lw=0.8, label=name)
+        axs[1].set_ylabel("estimation error [m]")
+        axs[1].set_xlabel("sim time [s]")
+        if axs[1].lines:
+            axs[1].legend(fontsize=8, ncol=4)
+        _grid(axs)
+        paths.append(_save(fig, out / "errors.png", 110))
+
+    # --- controller signals
+    if st is not None:
+        groups: dict[str, list[str]] = {}
+        for k in st.fields:
+            if k.startswith("ctrl."):
+                rest = k[5:]
+                g = rest.split(".")[0] if "." in rest else "ctrl"
+                groups.setdefault(g, []).append(k)
+        motors = sorted(k for k in st.fields if k == "motors")
+        n = len(groups) + 2
+        fig, axs = plt.subplots(n, 1, figsize=(10, 2.0 * n), sharex=True, squeeze=False)
+        axs = axs[:, 0]
+        for a, (g, keys) in zip(axs, groups.items(), strict=False):
+            for k in keys:
+                a.plot(st.t, st[k], lw=0.8, label=k[5:])
+            a.set_ylabel(g)
+            a.legend(fontsize=7, ncol=min(len(keys), 6), loc="upper right")
+        a = axs[len(groups)]
+        if motors:
+            m = _motor_matrix(d)
+            for j in range(m.shape[1]):
+                a.plot(st.t, m[:, j], lw=0.8, label=f"motor {j}")
+            a.legend(fontsize=7, ncol=4, loc="upper right")
+        a.set_ylabel("motors")
+        a = axs[-1]
+        for k, c in (("wind.x", "tab:red"), ("wind.y", "tab:green"), ("wind.z", "tab:blue")):
+            a.plot(st.t, st[k], color=c, lw=0.8, label=k)
+        a.plot(st.t, st["spray"], color="k", lw=0.8, ls=":", label="spray on")
+        a.set_ylabel("wind [m/s]")
+        a.legend(fontsize=7, ncol=4, loc="upper right")
+        a.set_xlabel("sim time [s]")
+        _grid(axs)
+        fig.suptitle("Controller internals, motor commands, wind")
+        paths.append(_save(fig, out / "controller.png", 100))
+
+    # --- estimator comparison
+    if ests or gps is not None:
+        fig, axs = plt.subplots(1, 2, figsize=(12, 4.5), gridspec_kw={"width_ratios": [3, 1]})
+        names, rmse = [], []
+        if gps is not None and st is not None and len(gps.t):
+            gx = gps["pose.position.x"] - np.interp(gps.t, st.t, st["pos.x"])
+            gy = gps["pose.position.y"] - np.interp(gps.t, st.t, st["pos.y"])
+            gh = np.hypot(gx, gy)
+            axs[0].plot(gps.t, gh, color="orange", lw=0.6, alpha=0.7, label="GPS fix")
+            names.append("GPS")
+            rmse.append(float(np.sqrt(np.nanmean(gh ** 2))))
+        for name, s in ests.items():
+            axs[0].plot(s.t, s["err.horiz"], lw=0.9, label=name)
+            names.append(name)
+            rmse.append(float(np.sqrt(np.nanmean(s["err.horiz"] ** 2))))
+        axs[0].set_xlabel("sim time [s]")
+        axs[0].set_ylabel("horizontal position error [m]")
+        axs[0].legend(fontsize=8)
+        axs[0].grid(alpha=0.3)
+        axs[1].bar(range(len(names)), rmse,
+                   color=["orange" if n == "GPS" else "tab:blue" for n in names])
+        axs[1].set_xticks(range(len(names)), names, rotation=30)
+        axs[1].set_ylabel("RMSE [m]")
+        for i, v in enumerate(rmse):
+            axs[1].text(i, v, f"{v:.2f}" if v >= 0.1 else f"{v:.3f}", ha="center",
+                        va="bottom", fontsize=8)
+        fig.suptitle("Estimator comparison (error against the true position)")
+        paths.append(_save(fig, out / "estimators.png", 110))
+    return paths
+
+
+def _plot_off_target(ax: Any, field_scene: Any, sprayed_scene: Any,
+                     summ: dict[str, Any]) -> None:
+    """Shade the sprayed area beyond the field (and its buffer) or over holes, in red."""
+    import shapely
+
+    sprayed = shapely.union_all([shapely.Polygon(t) for t in
+                                 _scene_triangles(sprayed_scene, "sprayed")]).buffer(0)
+    field = shapely.union_all([shapely.Polygon(t) for t in
+                               _scene_triangles(field_scene, "field")]).buffer(0)
+    buf = float(summ.get("config", {}).get("spray", {}).get("offtarget_buffer_m", 0.0) or 0.0)
+    rings = _scene_lines(field_scene, "field")
+    outer = shapely.Polygon(rings[0][0][:, :2]) if rings else field
+    off = sprayed.difference(outer.buffer(buf, join_style="mitre"))
+    for pts, _c in rings[1:]:
+        hole = shapely.Polygon(pts[:, :2]).buffer(-buf, join_style="mitre")
+        off = off.union(sprayed.intersection(hole))
+    geoms = getattr(off, "geoms", [off])
+    first = True
+    for g in geoms:
+        if g.is_empty or g.geom_type != "Polygon":
+            continue
+        x, y = g.exterior.xy
+        ax.fill(x, y, color="red", alpha=0.7, zorder=7, lw=0,
+                label="off-target spray" if first else None)
+        first = False
+
+
+def _motor_matrix(d: RunData) -> np.ndarray:
+    """Motor commands as (N, n_motors) (the flattened list column holds lists)."""
+    st = d.series["/drone/state"]
+    m = st.fields.get("motors")
+    if m is None:
+        return np.zeros((len(st.t), 0))
+    return np.atleast_2d(np.asarray(m, dtype=float)).reshape(len(st.t), -1)
+
+
+# --------------------------------------------------------------------------------------------
+# video
+# --------------------------------------------------------------------------------------------
+
+
+def video(run: str | Path, out_mp4: str | Path, camera: str | None = None,
+          fps: float | None = None) -> Path:
+    """Encode the logged JPEG frames of one camera into an MP4 (H.264 via imageio-ffmpeg).
+
+    ``camera``: the name used when logging (``/camera/<name>``); default the first camera.
+    ``fps``: default the logged frame rate in sim time (so the video plays in real time).
+    """
+    import imageio.v2 as imageio
+    from PIL import Image
+
+    d = read_run(run, images=True)
+    if not d.images:
+        raise ValueError(f"{d.path}: no camera frames were logged")
+    topic = f"/camera/{camera}" if camera else sorted(d.images)[0]
+    if topic not in d.images:
+        raise ValueError(f"no frames on {topic}; cameras: {sorted(d.images)}")
+    frames = d.images[topic]
+    if fps is None:
+        ts = np.array([f[0] for f in frames])
+        fps = (len(ts) - 1) / (ts[-1] - ts[0]) if len(ts) > 1 and ts[-1] > ts[0] else 10.0
+    out = Path(out_mp4)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    first = np.asarray(Image.open(io.BytesIO(frames[0][1])).convert("RGB"))
+    h, w = first.shape[:2]
+    # H.264 wants even sizes; macro_block_size=1 keeps the size (pad if odd)
+    pad_h, pad_w = h % 2, w % 2
+    writer = imageio.get_writer(str(out), fps=float(fps), codec="libx264", quality=7,
+                                macro_block_size=1, pixelformat="yuv420p")
+    try:
+        for _, jpg in frames:
+            img = np.asarray(Image.open(io.BytesIO(jpg)).convert("RGB"))
+            if pad_h or pad_w:
+                img = np.pad(img, ((0, pad_h), (0, pad_w), (0, 0)), mode="edge")
+            writer.append_data(img)
+    finally:
+        writer.close()
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# recover
+# --------------------------------------------------------------------------------------------
+
+
+def recover(in_path: str | Path, out_path: str | Path) -> int:
+    """Rewrite a truncated (or any) MCAP into a finished, indexed one; returns messages kept.
+
+    Everything in complete chunks survives (CRC-checked); the partial chunk at the cut is lost.
+    Schemas, channels, metadata and attachments are copied; message order is kept.
+    """
+    from mcap.records import Attachment, Channel, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader
+    from mcap.writer import CompressionType, Writer
+
+    in_path, out_path = Path(in_path), Path(out_path)
+    if in_path.resolve() == out_path.resolve():
+        raise ValueError("recover: output must differ from input")
+    n = 0
+    schema_map: dict[int, int] = {}
+    channel_map: dict[int, int] = {}
+    with open(in_path, "rb") as f, open(out_path, "wb") as g:
+        w = Writer(g, compression=CompressionType.ZSTD)
+        w.start(profile="", library="ag_uav.recover")
+        pending: dict[int, Any] = {}
+        try:
+            for rec in StreamReader(f, validate_crcs=True).records:
+                if isinstance(rec, Schema):
+                    if rec.id not in schema_map:
+                        schema_map[rec.id] = w.register_schema(rec.name, rec.encoding, rec.data)
+                elif isinstance(rec, Channel):
+                    if rec.id not in channel_map:
+                        pending[rec.id] = rec
+                elif isinstance(rec, Message):
+                    cid = channel_map.get(rec.channel_id)
+                    if cid is None:
+                        ch = pending.pop(rec.channel_id, None)
+                        if ch is None:
+                            continue
+                        cid = channel_map[ch.id] = w.register_channel(
+                            ch.topic, ch.message_encoding, schema_map.get(ch.schema_id, 0),
+                            dict(ch.metadata))
+                    w.add_message(cid, rec.log_time, rec.data, rec.publish_time, rec.sequence)
+                    n += 1
+                elif isinstance(rec, Metadata):
+                    w.add_metadata(rec.name, dict(rec.metadata))
+                elif isinstance(rec, Attachment):
+                    w.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type,
+                                     rec.data)
+        except Exception:  # noqa: BLE001 - the truncated tail ends the copy
+            pass
+        w.finish()
+    return n
+
+
+# --------------------------------------------------------------------------------------------
+# Foxglove layout
+# --------------------------------------------------------------------------------------------
+
+
+def _plot_cfg(title: str, paths: list[tuple[str, str]]) -> dict[str, Any]:
+    return {
+        "title": title,
+        "paths": [{"value": v, "enabled": True, "timestampMethod": "receiveTime", "label": lbl}
+                  for v, lbl in paths],
+        "showXAxisLabels": True, "showYAxisLabels": True, "showLegend": True,
+        "legendDisplay": "floating", "showPlotValuesInLegend": False, "isSynced": True,
+        "xAxisVal": "timestamp", "sidebarDimension": 240,
+    }
+
+
+def write_foxglove_layout(
+    path: str | Path,
+    *,
+    cameras: tuple[str, ...] | list[str] = ("chase", "down"),
+    estimators: tuple[str, ...] | list[str] = (),
+    ctrl_keys: tuple[str, ...] | list[str] = (),
+    n_motors: int = 4,
+    center: tuple[float, float] = (0.0, 0.0),
+    spray: bool = False,
+) -> Path:
+    """Write a Foxglove layout in app-export JSON (import with Layouts -> Import from file).
+
+    3D panel (field, plan, sprayed area, true/estimated/reference poses, GPS fixes, world
+    frame), one Image panel per camera, and plots: tracking and estimation errors, controller
+    outputs (``ctrl_keys`` ending in ``.u`` / ``.U`` first, up to 8), motor commands.
+    """
+    cfg: dict[str, Any] = {}
+    cfg["3D!aguav3d"] = {
+        "cameraState": {"distance": 80, "perspective": True, "phi": 55, "thetaOffset": 35,
+                        "targetOffset": [center[0], center[1], 0], "target": [0, 0, 0],
+                        "targetOrientation": [0, 0, 0, 1], "fovy": 45, "near": 0.5,
+                        "far": 5000},
+        "followMode": "follow-none",
+        "followTf": "world",
+        "scene": {"transforms": {"showLabel": False, "axisScale": 1.5}},
+        "transforms": {},
+        "topics": {
+            "/field": {"visible": True},
+            "/sprayed": {"visible": True},
+            "/drone/pose": {"visible": True, "type": "arrow", "color": "#ffffffff",
+                            "arrowScale": [1.5, 0.25, 0.25]},
+            "/drone/pose_est": {"visible": True, "type": "arrow", "color": "#4169e1ff",
+                                "arrowScale": [1.2, 0.2, 0.2]},
+            "/drone/pose_ref": {"visible": True, "type": "arrow", "color": "#22cc44ff",
+                                "arrowScale": [1.0, 0.15, 0.15]},
+            "/gps": {"visible": True, "type": "axis", "axisScale": 0.3},
+            **{f"/camera/{c}": {"visible": False} for c in cameras},
+        },
+        "layers": {"grid": {"visible": True, "layerId": "foxglove.Grid", "frameId": "world",
+                            "size": 200, "divisions": 40, "lineWidth": 1,
+                            "color": "#248eff33", "position": [center[0], center[1], -0.05],
+                            "rotation": [0, 0, 0], "order": 1}},
+        "publish": {"type": "point"},
+        "imageMode": {},
+    }
+    for c in cameras:
+        cfg[f"Image!cam{c}"] = {
+            "cameraState": {}, "followMode": "follow-pose", "scene": {}, "transforms": {},
+            "topics": {}, "layers": {}, "publish": {}, "imageMode": {
+                "imageTopic": f"/camera/{c}", "calibrationTopic": f"/camera/{c}/calibration"},
+        }
+    err_paths = [("/drone/state.err.horiz", "tracking error (horiz) [m]"),
+                 ("/drone/state.err.z", "tracking error z [m]"),
+                 ("/drone/state.est_err.horiz", "in-loop estimate error [m]")]
+    err_paths += [(f"/estimator/{e}.err.horiz", f"{e} error [m]") for e in estimators]
+    cfg["Plot!errors"] = _plot_cfg("errors", err_paths)
+    keys = sorted(ctrl_keys, key=lambda k: (not k.lower().endswith((".u",)), k))[:8]
+    cfg["Plot!ctrl"] = _plot_cfg("controller", [(f"/drone/state.ctrl.{k}", k) for k in keys]
+                                 or [("/drone/state.speed", "speed [m/s]")])
+    cfg["Plot!motors"] = _plot_cfg("motors", [(f"/drone/state.motors[{i}]", f"motor {i}")
+                                              for i in range(n_motors)])
+    cfg["Plot!pos"] = _plot_cfg("position vs reference", [
+        ("/drone/state.pos.x", "x"), ("/drone/state.ref.x", "x ref"),
+        ("/drone/state.pos.y", "y"), ("/drone/state.ref.y", "y ref"),
+        ("/drone/state.pos.z", "z"), ("/drone/state.ref.z", "z ref")])
+
+    def chain(items: list[Any], direction: str) -> Any:
+        if len(items) == 1:
+            return items[0]
+        return {"direction": direction, "first": items[0],
+                "second": chain(items[1:], direction),
+                "splitPercentage": 100.0 / len(items)}
+
+    cams = [f"Image!cam{c}" for c in cameras]
+    left = chain(["3D!aguav3d", chain(cams, "row")], "column") if cams else "3D!aguav3d"
+    if isinstance(left, dict):
+        left["splitPercentage"] = 62
+    plots = ["Plot!errors", "Plot!pos", "Plot!ctrl", "Plot!motors"]
+    if spray:  # spray job (ag_uav.world.spray_job): tank, mass, battery
+        cfg["Plot!spray"] = _plot_cfg("spray job", [
+            ("/drone/spray.tank_l", "tank [L]"), ("/drone/spray.mass_kg", "mass [kg]"),
+            ("/drone/spray.battery_frac", "battery left"), ("/drone/spray.sortie", "sortie")])
+        plots.append("Plot!spray")
+    right = chain(plots, "column")
+    layout = {
+        "configById": cfg,
+        "globalVariables": {},
+        "userNodes": {},
+        "playbackConfig": {"speed": 1.0},
+        "layout": {"direction": "row", "first": left, "second": right, "splitPercentage": 58},
+    }
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(layout, indent=1))
+    return p

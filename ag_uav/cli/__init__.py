@@ -1,0 +1,214 @@
+"""``ag-uav`` command line.
+
+Every command has ``--help``. A bad config prints one line naming the key, the value and what is
+allowed, and exits with code 2 (no traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from ..config import ConfigError
+
+
+def _add_config_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", "-c", metavar="FILE.toml", help="run config (TOML); defaults if "
+                   "omitted (see `ag-uav config`)")
+    p.add_argument("--seed", metavar="N", help="override the config's seed (an integer >= 0; "
+                   "checked like --set seed=N)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override one config key, e.g. --set wind.speed_mps=5 (TOML value)")
+
+
+def _overrides(args: argparse.Namespace) -> dict:
+    from ..config import parse_set_items
+
+    out = parse_set_items(args.set)
+    if getattr(args, "seed", None) is not None:  # read as TOML and checked by the config
+        out["seed"] = parse_set_items([f"seed={args.seed}"])["seed"]
+    return out
+
+
+def _load(args: argparse.Namespace):
+    from ..config import load_config
+
+    return load_config(args.config, _overrides(args))
+
+
+# -------------------------------------------------------------------------------------- commands
+def cmd_config(args: argparse.Namespace) -> int:
+    from ..config import config_toml_with_comments
+
+    cfg = _load(args)
+    if args.model_info:
+        from ..vehicle.mjcf import build_vehicle
+
+        print(json.dumps(build_vehicle(cfg).info(), indent=2))
+        return 0
+    print(config_toml_with_comments(cfg), end="")
+    return 0
+
+
+def cmd_fly(args: argparse.Namespace) -> int:
+    cfg = _load(args)  # before importing the simulator: a bad config fails fast
+    from ..jobs.run import fly
+
+    if args.no_render:
+        cfg.log.render = False
+    if args.no_log:
+        cfg.log.enabled = False
+    res, run_dir = fly(cfg, out_root=args.out, run_id=args.run_id, progress=not args.quiet)
+    from ..analysis.report import print_summary
+
+    print_summary(res.summary, run_dir)
+    return 0
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from ..config import load_config
+    from ..engine.missions import build_field, build_plan
+    from ..world.plan_export import write_plan
+
+    ov = _overrides(args)
+    if args.field:
+        ov["mission.field"] = args.field
+    cfg = load_config(args.config, ov)
+    fld = build_field(cfg)
+    plan = build_plan(cfg, fld)
+    origin = None
+    if args.origin:
+        try:
+            origin = tuple(float(v) for v in args.origin.split(","))
+            assert len(origin) in (2, 3)
+        except (ValueError, AssertionError):
+            raise ConfigError(f'--origin = "{args.origin}": expected LAT,LON[,H] in degrees '
+                              "(and metres)") from None
+    elif fld.origin is None:
+        raise ConfigError(f'mission.field = "{cfg.mission.field}": a field in local metres has '
+                          "no lon/lat; give --origin LAT,LON")
+    m = cfg.mission
+    try:
+        info = write_plan(plan, args.output, altitude=m.altitude_m, speed=m.speed_mps,
+                          origin=origin, simplify_m=args.simplify)
+    except ValueError as e:
+        raise ConfigError(f'-o = "{args.output}": {e}') from None
+    items = f", {info['items']} mission items" if "items" in info else ""
+    print(f"{args.output}: {info['format']}, {info['waypoints']} waypoints{items}, "
+          f"{info['spray_switches']} nozzle switches; {plan.summary()}")
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from ..jobs.bench import run_bench
+
+    cfg = _load(args)
+    out = run_bench(cfg, repeats=args.repeats, quick=args.quick)
+    if args.json:
+        print(json.dumps(out, indent=2))
+    else:
+        from ..jobs.bench import print_bench
+
+        print_bench(out)
+    return 0
+
+
+# ------------------------------------------------------------------------------------- parser
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="ag-uav",
+        description="Agricultural UAV simulator: fly coverage missions in MuJoCo under an "
+                    "interval type-2 fuzzy PID, with wind, noisy GPS and robust Kalman filters.")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+
+    f = sub.add_parser("fly", help="fly one mission; writes runs/<run-id>/summary.json (+ MCAP)",
+                       description="Fly the configured field once, print a summary table and "
+                                   "write runs/<run-id>/summary.json and run.mcap.")
+    _add_config_args(f)
+    f.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run "
+                   "folder (default: runs)")
+    f.add_argument("--run-id", help="run folder name (default: time-field-seed)")
+    f.add_argument("--no-render", action="store_true", help="no camera frames in the log")
+    f.add_argument("--no-log", action="store_true", help="no MCAP log (summary.json only)")
+    f.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    f.set_defaults(func=cmd_fly)
+
+    c = sub.add_parser("config", help="print the full default config (TOML, commented)",
+                       description="Print the resolved config (defaults, or --config with "
+                                   "overrides) as commented TOML.")
+    _add_config_args(c)
+    c.add_argument("--model-info", action="store_true",
+                   help="print the compiled vehicle's mass, inertia, rotor layout instead")
+    c.set_defaults(func=cmd_config)
+
+    pl = sub.add_parser("plan", help="write the coverage plan (lon/lat) without flying: "
+                        ".geojson, .kml or QGroundControl .plan",
+                        description="Plan coverage of FIELD (a built-in name or a .geojson/"
+                                    ".kml/.kmz/.shp file; PATH#name=VALUE picks one feature) "
+                                    "with the config's swath, headland and direction, and write "
+                                    "it in the format OUT's extension names.")
+    pl.add_argument("field", nargs="?", metavar="FIELD",
+                    help="field (default: the config's mission.field)")
+    _add_config_args(pl)
+    pl.add_argument("-o", "--output", required=True, metavar="OUT",
+                    help="output file: .geojson, .kml or .plan (QGroundControl)")
+    pl.add_argument("--origin", metavar="LAT,LON", help="geodetic origin for a field given in "
+                    "local metres (e.g. the built-in default)")
+    pl.add_argument("--simplify", type=float, default=0.2, metavar="M",
+                    help="thin turn and transit polylines to this tolerance (m; default 0.2)")
+    pl.set_defaults(func=cmd_plan)
+
+    b = sub.add_parser("bench", help="measure closed-loop sim speed against raw MuJoCo stepping",
+                       description="Measure, in one process and one run, the closed-loop speed "
+                                   "of the default mission (sim-s per wall-s) and raw MuJoCo "
+                                   "stepping of the same model, and their ratio.")
+    _add_config_args(b)
+    b.add_argument("--json", action="store_true", help="machine-readable output")
+    b.add_argument("--repeats", type=int, default=3, help="repeats per measurement (median)")
+    b.add_argument("--quick", action="store_true", help="shorter measurements")
+    b.set_defaults(func=cmd_bench)
+
+    _register_optional(sub)
+    return p
+
+
+def _register_optional(sub) -> None:
+    """Commands that live in other modules register themselves here (logging, batch, tuning)."""
+    import importlib
+
+    for mod in ("ag_uav.cli.view", "ag_uav.cli.experiments", "ag_uav.cli.batch"):
+        try:
+            m = importlib.import_module(mod)
+        except ModuleNotFoundError as e:
+            if e.name != mod:
+                raise
+            continue
+        m.register(sub)
+
+
+def main(argv: list[str] | None = None) -> int:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    t0 = time.perf_counter()
+    try:
+        return int(args.func(args) or 0)
+    except ConfigError as e:
+        print(f"ag-uav: config error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"ag-uav: interrupted after {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+    except FileNotFoundError as e:
+        print(f"ag-uav: {e}", file=sys.stderr)
+        return 2
+
+
+
+__all__ = ["main", "build_parser", "Path"]

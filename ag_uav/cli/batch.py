@@ -1,0 +1,124 @@
+"""``ag-uav batch`` and ``ag-uav tune``: headless runs on a process pool or Dask."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..config import ConfigError
+
+
+def _add_exec_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", "-j", type=int, default=None, metavar="N",
+                   help="parallel worker processes (default: CPU count; 1 = in this process)")
+    p.add_argument("--dask", metavar="ADDR", default=None,
+                   help='run on Dask distributed: "local" starts a LocalCluster of --workers '
+                        "single-threaded process workers; tcp://host:port uses a running "
+                        "scheduler")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted job in --out (finished work is not re-run)")
+    p.add_argument("--fresh", action="store_true",
+                   help="discard what --out holds from an earlier job and start over")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+
+def _executor(args: argparse.Namespace):
+    from ..jobs.executor import make_executor
+
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers = {args.workers}: must be >= 1")
+    if args.resume and args.fresh:
+        raise ConfigError("--resume and --fresh: choose one")
+    try:
+        return make_executor(args.workers, args.dask)
+    except (OSError, TimeoutError) as e:
+        raise ConfigError(f'--dask = "{args.dask}": cannot connect ({e})') from None
+
+
+def _load_spec(load_spec, path: str, what: str):
+    """``load_spec(path)``; a file that is not UTF-8 is a one-line ConfigError (not a
+    traceback)."""
+    try:
+        return load_spec(path)
+    except UnicodeDecodeError as e:
+        raise ConfigError(f'{what} spec = "{path}": not UTF-8 text (byte {e.start}); TOML files '
+                          "are UTF-8") from None
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from ..jobs.batch import expand, load_spec, print_table, run_batch, summary_rows
+
+    spec = _load_spec(load_spec, args.spec, "batch")
+    tasks = expand(spec)
+    out = Path(args.out or f"runs/batch-{spec.name}")
+    if args.dry_run:
+        print(f"batch {spec.name}: {len(tasks)} runs; axes: "
+              + "; ".join(f"{a.name} × {len(a.values)}" for a in spec.axes) + f"; out: {out}")
+        return 0
+    with _executor(args) as ex:
+        res = run_batch(spec, out, ex, resume=args.resume, fresh=args.fresh, logs=args.logs,
+                        progress=not args.quiet, report=not args.no_report, tasks=tasks)
+    group = [a.name for a in spec.axes if a.name != "seed" and len(a.values) > 1]
+    header, table = summary_rows(res.rows, group)
+    print_table(header, table, f"batch {spec.name}: {len(res.rows)} runs "
+                f"({res.n_run} run now, {res.n_skipped} resumed) in {res.wall_s:.1f} s "
+                f"on {res.executor}")
+    print(f"results: {out / 'results.csv'}" + ("" if args.no_report else
+                                                f"; report: {out / 'report.md'}"))
+    return 0
+
+
+def cmd_tune(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from ..jobs.tune import load_spec, run_tune
+
+    spec = _load_spec(load_spec, args.spec, "tune")
+    if args.optimizer and args.optimizer != spec.optimizer:
+        spec = dataclasses.replace(spec, optimizer=args.optimizer, optimizer_options={})
+    if args.pop is not None:
+        if args.pop < 2:
+            raise ConfigError(f"--pop = {args.pop}: must be >= 2")
+        spec = dataclasses.replace(spec, pop=args.pop)
+    if args.iters is not None and args.iters < 1:
+        raise ConfigError(f"--iters = {args.iters}: must be >= 1")
+    out = Path(args.out or f"runs/tune-{spec.name}")
+    with _executor(args) as ex:
+        res = run_tune(spec, out, ex, resume=args.resume, fresh=args.fresh, iters=args.iters,
+                       progress=not args.quiet)
+    print(f"best cost {res.best_cost:.6g} (default gains {res.default_cost:.6g}) after "
+          f"{res.iterations} iterations; {res.n_evals} evaluations in {res.wall_s:.1f} s")
+    print(f"gains: {out / 'best_gains.toml'}; plot: {out / 'convergence.png'}; "
+          f"table: {out / 'before_after.md'}")
+    return 0
+
+
+def register(sub) -> None:
+    b = sub.add_parser(
+        "batch", help="run a base config × axes (seeds, estimators, noise, wind, ...) in parallel",
+        description="Run every combination of a batch spec's axes on a process pool or Dask; "
+                    "write results.csv (one row per run), report.md and PNG figures, and print a "
+                    "summary table. See examples/batch.toml.")
+    b.add_argument("spec", metavar="SPEC.toml", help="batch spec: [base] and [axes]")
+    b.add_argument("--out", metavar="DIR", help="output folder (default: runs/batch-<name>)")
+    b.add_argument("--logs", action="store_true",
+                   help="write a light MCAP log per run under OUT/runs/")
+    b.add_argument("--no-report", action="store_true", help="results.csv only, no report")
+    b.add_argument("--dry-run", action="store_true",
+                   help="validate the spec and print the run count")
+    _add_exec_args(b)
+    b.set_defaults(func=cmd_batch)
+
+    t = sub.add_parser(
+        "tune", help="tune controller gains with BB-BC (or PSO) on simulated scenarios",
+        description="Minimise an ISE/ITAE cost over step responses and a short mission with "
+                    "BB-BC (or PSO), evaluating each population in parallel; checkpoint after "
+                    "every iteration; write best_gains.toml, convergence.png and a before/after "
+                    "table. See examples/tune.toml.")
+    t.add_argument("spec", metavar="SPEC.toml", help="tune spec: [params] bounds, [[scenarios]]")
+    t.add_argument("--out", metavar="DIR", help="output folder (default: runs/tune-<name>)")
+    t.add_argument("--optimizer", choices=("bbbc", "pso"), help="override the spec's optimizer")
+    t.add_argument("--iters", type=int, help="iterations in total (override the spec)")
+    t.add_argument("--pop", type=int, help="population size (override the spec)")
+    _add_exec_args(t)
+    t.set_defaults(func=cmd_tune)

@@ -1,0 +1,314 @@
+"""Missions end to end: config → world (field, plan, reference) → the engine → metrics (and the
+log).
+
+Data flow (one way): config → field and plan (:mod:`ag_uav.world.mission`) → reference
+(:mod:`ag_uav.world.reference`, with the spray job of :mod:`ag_uav.world.spray_job`) → the engine
+(:mod:`ag_uav.engine.loop`: N missions in lockstep, MuJoCo physics at ``sim.timestep_s``, control
+at ``sim.control_hz``) → metrics (:mod:`ag_uav.analysis.metrics`) and log
+(:mod:`ag_uav.record.runlog`). :func:`simulate` is the engine with one vehicle,
+:func:`simulate_many` with many.
+
+The **feedback seam** is :class:`~ag_uav.navigation.feedback.Feedback`: each control tick it gets
+the true state and returns the position and velocity the controller flies on.
+:class:`~ag_uav.navigation.feedback.TrueFeedback` passes the truth through; the estimator bank
+plugs in with the same interface (GPS fixes → filter → estimate); the engine runs a batch's
+estimator banks together (:class:`ag_uav.navigation.estimation.BatchEstimatorFeedback`, through
+:meth:`~ag_uav.navigation.feedback.Feedback.batch`) and any other feedback one vehicle at a time.
+
+Every random draw comes from a Generator spawned from the run seed
+(:func:`ag_uav.seeds.rng_streams`), one stream per consumer, so the same config and seed give
+the same run, serial or parallel.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..config import Config
+from ..navigation.feedback import Feedback, TrueFeedback
+from ..seeds import rng_streams, seed_sequences
+from ..vehicle.mjcf import build_vehicle
+from ..world.field import Field
+from ..world.mission import build_field, build_plan, field_outline
+from ..world.reference import Reference
+from .loop import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
+
+
+# ------------------------------------------------------------------------------------ building
+def build_reference(cfg: Config, plan, *, spray: bool = True) -> Any:
+    """The time-parameterised reference ``simulate`` flies along ``plan``. With
+    ``spray.enabled`` (and ``spray``) it carries the spray job (``.spray_job``: tank, battery,
+    sorties; :func:`ag_uav.world.spray_job.plan_job`), split into sorties where one tank or battery
+    does not do the job."""
+    m = cfg.mission
+    ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
+                    takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
+                    rate=cfg.sim.control_hz)
+    if spray and cfg.spray.enabled:
+        from ..world.spray_job import plan_job
+
+        ref, _job = plan_job(cfg, plan, ref, plan.field, dry_mass_kg=cfg.vehicle.mass_kg
+                             + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08)
+    return ref
+
+
+# -------------------------------------------------------------------------------------- result
+@dataclass
+class RunResult:
+    summary: dict[str, Any]
+    t: np.ndarray                # (n,) control-tick times (s)
+    p_true: np.ndarray           # (n, 3)
+    v_true: np.ndarray           # (n, 3)
+    p_ref: np.ndarray            # (n, 3)
+    p_fb: np.ndarray             # (n, 3) position the controller flew on
+    seg: np.ndarray              # (n,) active plan segment
+    spray: np.ndarray            # (n,) sprayer on
+    motors: np.ndarray           # (n, 4) rotor thrust commands (N)
+    field: Field | None = None
+    plan: Any = None
+    extra: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+# -------------------------------------------------------------------------------------- the loop
+def fly_reference(cfg: Config, reference: Any, duration: float, *,
+                  outline: list[np.ndarray] | None = None,
+                  bounds: tuple[float, float, float, float] | None = None,
+                  feedback: Feedback | None = None, progress: bool = False,
+                  tick_hook: Callable[..., None] | None = None, log: Any = None,
+                  render: bool = False, streams: dict | None = None) -> LoopOutput:
+    """Fly the vehicle along ``reference`` (``sample_all(times)`` → dict of pos, vel, acc, yaw,
+    seg, spray arrays, as :meth:`ag_uav.world.reference.Reference.sample_all`) for
+    ``duration`` seconds of sim time: the engine (:func:`ag_uav.engine.loop.fly`) with one
+    vehicle."""
+    return fly([Flight(cfg, reference, duration, outline=outline, bounds=bounds,
+                       feedback=feedback, log=log, render=render, tick_hook=tick_hook,
+                       streams=streams)], progress=progress)[0]
+
+
+def _cut_by_max_time(cfg: Config, ref: Reference, out: LoopOutput,
+                     summ: dict[str, Any]) -> str | None:
+    """The one-line reason when ``sim.max_time_s`` cut the mission short (else None)."""
+    if out.crash_reason is not None or ref.duration <= cfg.sim.max_time_s:
+        return None
+    return (f"cut by sim.max_time_s = {cfg.sim.max_time_s:g} s after "
+            f"{summ.get('legs_flown', 0)} of {summ.get('legs', 0)} legs; the plan needs "
+            f"{ref.duration:.0f} s (raise sim.max_time_s)")
+
+
+@dataclass
+class _Prepared:
+    cfg: Config
+    flight: Flight
+    fld: Field
+    plan: Any
+    ref: Any
+    fb: Feedback
+    log: Any
+    wall0: float
+
+
+_SETUP_CACHE: dict[str, tuple[Field, Any, Any]] = {}
+
+
+def mission_setup(cfg: Config) -> tuple[Field, Any, Any]:
+    """(field, plan, reference) of ``cfg``'s mission, cached: they depend on the mission keys
+    only (field, planner, speeds, spray job, vehicle mass), not on seeds, gains or filters, so a
+    batch of many runs on one field builds them once."""
+    import json
+    from dataclasses import asdict
+
+    key = json.dumps([asdict(cfg.mission), cfg.sim.takeoff, cfg.sim.hover_after_s,
+                      cfg.sim.control_hz, asdict(cfg.spray), asdict(cfg.battery),
+                      asdict(cfg.vehicle)], default=str, sort_keys=True)
+    hit = _SETUP_CACHE.get(key)
+    if hit is None:
+        fld = build_field(cfg)
+        plan = build_plan(cfg, fld)
+        ref = build_reference(cfg, plan)
+        if len(_SETUP_CACHE) > 8:
+            _SETUP_CACHE.clear()
+        hit = _SETUP_CACHE[key] = (fld, plan, ref)
+    return hit
+
+
+def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., None] | None,
+             log: Any) -> _Prepared:
+    """Everything one run needs before it flies: plan, reference, feedback, the flight."""
+    wall0 = time.perf_counter()
+    streams = rng_streams(cfg.seed)
+    fld, plan, ref = mission_setup(cfg)
+    m = cfg.mission
+    bounds = fld.bounds
+    job = getattr(ref, "spray_job", None)
+    if job is not None:  # the base may lie outside the field
+        bx, by = (float(v) for v in job.base_xy)
+        bounds = (min(bounds[0], bx), min(bounds[1], by), max(bounds[2], bx), max(bounds[3], by))
+    outline = field_outline(fld)
+    if log is not None:
+        log.scene(0.0, outline[0], outline[1:],
+                  [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],
+                  m.swath_m, m.altitude_m,
+                  parts=[(np.asarray(o), [np.asarray(h) for h in hs]) for o, hs in fld.rings()])
+    if feedback is None and cfg.estimator.source == "bearings":
+        from ..navigation.bearing import BearingFeedback
+
+        e = cfg.estimator
+        feedback = BearingFeedback.for_config(cfg, filter=e.bearing_filter,
+                                              noise_scale=e.bearing_noise_scale)
+    if feedback is None and (cfg.estimator.name != "true" or cfg.estimator.shadow):
+        from ..navigation.estimation import EstimatorFeedback
+
+        ss = seed_sequences(cfg.seed)
+        feedback = EstimatorFeedback(cfg, ss["gps"], ss["altimeter"], ss["imu"])
+    fb = feedback or TrueFeedback()
+    if log is not None and hasattr(fb, "log"):
+        fb.log = log
+    flight = Flight(cfg, ref, ref.duration, outline=outline, bounds=bounds, feedback=fb,
+                    log=log, render=cfg.log.render, tick_hook=tick_hook, streams=streams)
+    return _Prepared(cfg, flight, fld, plan, ref, fb, log, wall0)
+
+
+def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
+             tick_hook: Callable[..., None] | None = None, log: Any = None) -> RunResult:
+    """Fly ``cfg``'s mission once and return the trajectory and the summary metrics: the
+    engine (:func:`ag_uav.engine.loop.fly`) with one vehicle.
+
+    ``feedback``: the feedback seam (default: the config's estimator, or the true state).
+    ``log``: an open :class:`~ag_uav.record.runlog.RunLog` or None; with ``cfg.log.render`` camera
+    frames go into it. ``tick_hook(t, data)`` is called after every control tick.
+    """
+    prep = _prepare(cfg, feedback, tick_hook, log)
+    out = fly([prep.flight], progress=progress)[0]
+    return _finish(prep, out, batch=1)
+
+
+def simulate_many(cfgs: list[Config], *, progress: bool = False, errors: str = "raise",
+                  reduce: Callable[[int, RunResult], Any] | None = None) -> list[Any]:
+    """Fly every config's mission in one lockstep batch (:func:`ag_uav.engine.loop.fly`); the same
+    results as ``[simulate(c) for c in cfgs]`` (a run depends only on its config and seed).
+    All configs must share :func:`batch_key`.
+
+    ``errors="return"``: a run that cannot be set up (bad field, …) gives its exception in its
+    place instead of raising, and the others fly. ``reduce(i, result)``: what to keep of run
+    ``i`` (e.g. its summary row), applied as soon as its metrics are done so that a big batch
+    does not hold every trajectory at once."""
+    preps: list[Any] = []
+    for c in cfgs:
+        try:
+            preps.append(_prepare(c, None, None, None))
+        except Exception as e:  # noqa: BLE001 - reported per run
+            if errors == "raise":
+                raise
+            preps.append(e)
+    ok = [p for p in preps if isinstance(p, _Prepared)]
+    outs = iter(fly([p.flight for p in ok], progress=progress)) if ok else iter(())
+    res: list[Any] = []
+    for i, p in enumerate(preps):
+        if not isinstance(p, _Prepared):
+            res.append(p)
+            continue
+        out = next(outs)
+        try:
+            r = _finish(p, out, batch=len(ok))
+            res.append(reduce(i, r) if reduce is not None else r)
+        except Exception as e:  # noqa: BLE001
+            if errors == "raise":
+                raise
+            res.append(e)
+        del out
+    return res
+
+
+def fly_many(cfgs: list[Config], *, progress: bool = False) -> list[Any]:
+    """The loop outputs (:class:`~ag_uav.engine.loop.LoopOutput`, no metrics) of every config's
+    mission flown as one engine batch, or the exception of a run that could not be set up."""
+    preps: list[Any] = []
+    for c in cfgs:
+        try:
+            preps.append(_prepare(c, None, None, None))
+        except Exception as e:  # noqa: BLE001 - reported per run
+            preps.append(e)
+    ok = [p for p in preps if isinstance(p, _Prepared)]
+    outs = iter(fly([p.flight for p in ok], progress=progress)) if ok else iter(())
+    return [next(outs) if isinstance(p, _Prepared) else p for p in preps]
+
+
+def batch_key(cfg: Config) -> tuple:
+    """Configs with equal keys can fly in one engine batch (same control and physics rates,
+    same sensing and spray-job structure)."""
+    e = cfg.estimator
+    imu = ((e.source == "bearings" or e.name != "true" or bool(e.shadow))
+           and e.imu and cfg.imu.model == "mems")
+    # the same filters (names, flown one first) share the batched bank
+    filters = (e.source, e.name, tuple(s for s in e.shadow if s != e.name), e.model)
+    return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled, filters)
+
+
+def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
+    """Metrics and the summary of one flown run."""
+    from ..analysis import metrics
+
+    cfg, fld, plan, ref, fb, log = prep.cfg, prep.fld, prep.plan, prep.ref, prep.fb, prep.log
+    m = cfg.mission
+    arr = out.rec
+    res = RunResult(
+        summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
+        p_fb=arr[:, 9:12], seg=arr[:, 12].astype(int), spray=arr[:, 13].astype(bool),
+        motors=arr[:, 14:18], field=fld, plan=plan,
+        extra={"wind": arr[:, 18:21], "reference": ref, "vehicle": out.vehicle.info(),
+               "imu": out.imu, "imu_bias0": out.imu_bias0},
+    )
+    sim_time = float(len(out.t) / cfg.sim.control_hz)
+    summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
+                             reference=ref)
+    cut = _cut_by_max_time(cfg, ref, out, summ)
+    if cut:
+        summ["incomplete_reason"] = cut
+    if out.sprayer is not None:
+        summ.update(out.sprayer.summary(sim_time))
+        res.extra["spray"] = out.sprayer.series(len(out.t))
+        from ..analysis.metrics import add_sortie_areas
+
+        add_sortie_areas(summ, res, m.swath_m)
+    if hasattr(fb, "scores"):
+        sp = np.flatnonzero(res.spray)
+        mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))
+        scores = fb.scores(res.p_true, res.p_ref, mission)
+        summ["estimators"] = scores
+        if fb.name in scores:
+            summ["estimate_rmse_m"] = scores[fb.name]["estimate_rmse_m"]
+            summ["estimate_update_us"] = scores[fb.name]["update_us"]
+    wall = time.perf_counter() - prep.wall0
+    loop_wall = out.wall_loop_s / batch  # this run's share of the batch's loop
+    summ.update({
+        "sim_time_s": round(sim_time, 3),
+        "wall_time_s": round(wall, 3),
+        "loop_wall_time_s": round(loop_wall, 3),
+        "real_time_factor": round(sim_time / loop_wall, 1) if loop_wall > 0 else None,
+        "batch_size": batch,
+        "frames": out.frames,
+        "notes": out.notes,
+        "seed": cfg.seed,
+        "feedback": fb.name,
+        **fb.summary(),
+        "config": cfg.to_dict(),
+    })
+    res.summary = summ
+    if log is not None:
+        from ..analysis.metrics import contiguous_runs
+
+        tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
+        if tracks:
+            import shapely
+
+            foot = shapely.union_all([shapely.LineString(tr).simplify(0.1).buffer(
+                0.5 * m.swath_m, cap_style="flat") for tr in tracks])
+            log.sprayed(sim_time, [foot])
+        log.summary(summ)
+    return res

@@ -1,0 +1,445 @@
+"""N spray jobs in lockstep: :class:`~ag_uav.engine.sprayer.Sprayer`'s per-tick work over a batch.
+
+The lockstep engine advances N missions at once (leading batch axis N) at the control rate. The
+scalar :meth:`Sprayer.step <ag_uav.engine.sprayer.Sprayer.step>` costs several µs per vehicle-tick
+in Python; :class:`BatchSprayer` runs the per-tick arithmetic (sortie table, tank and flow, nozzle
+gating by height, power from the actuator states, energy, state of charge, per-tick records) in
+one compiled kernel (:func:`_spray_kernel`, numba, no fastmath, so the floating-point operations
+are those of the scalar code, in the same order) and does in Python only what happens on a few
+ticks, found from the kernel's per-row flags:
+
+* a sortie change: the finished sortie's dict gets its totals and ``t_end_s``, a new dict is
+  appended (the same keys, in the same order, as :meth:`Sprayer.step` writes);
+* a liquid mass change (a refill, or the tank down by the threshold of 1 g, or empty): the
+  scalar :meth:`Sprayer._set_mass <ag_uav.engine.sprayer.Sprayer._set_mass>` itself runs for that
+  vehicle, so the MjModel body updates are those of the scalar code; its cascade is replaced by a
+  :class:`MassSink`, which forwards the composite mass and the attitude inertia to the engine's
+  ``set_mass(i, total_mass_kg, J_xyz)`` callback;
+* the optional log (``log.spray_state`` every 0.1 s, as the scalar code).
+
+The per-sortie totals (litres, energy, minimum state of charge, ran-dry and landing times) are
+accumulated in the kernel's state and written into the Sprayers' ``per`` dicts when a sortie
+closes and by :meth:`BatchSprayer.finish`. The per-tick records live in one flat buffer per record
+(all vehicles, each at its own offset); each Sprayer's ``rec_*`` attributes are replaced by views
+of its slice while the batch runs (so their memory is not held twice), and :meth:`finish` puts
+plain ``array('d')`` / ``bytearray`` copies back, with the tank, energy and the other state, so that
+:meth:`Sprayer.summary <ag_uav.engine.sprayer.Sprayer.summary>` and :meth:`Sprayer.series
+<ag_uav.engine.sprayer.Sprayer.series>` work unchanged for each vehicle.
+
+``BatchSprayer.step(k, t, ...)`` for the active rows equals ``sprayers[i].step(k, t, pz[i],
+vx[i], vy[i], spray_ref[i], list(f[i]))`` with ``data.act = act[i]`` — bit for bit: the rotor
+commands, the nozzles, the records, the per-sortie dicts, the summaries and the ``set_mass``
+calls. Rows on the ground at the base get ``f = 0`` and ``reset = True``; the engine resets that
+vehicle's controller state (the scalar code calls ``cascade.reset()``).
+"""
+
+from __future__ import annotations
+
+import math
+from array import array
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numba
+import numpy as np
+
+from .sprayer import Sprayer
+
+SetMass = Callable[[int, float, tuple[float, float, float]], None]
+
+# ---- columns of the per-vehicle constants (float64, (N, _NP))
+P_LPM, P_RHO, P_HMIN, P_HMAX, P_KP, P_PAV, P_CAP, P_DT, P_FILL, P_DRY = range(10)
+_NP = 10
+# ---- columns of the float state (float64, (N, _NS)); NaN stands for None in ran-dry/landing
+S_TANK, S_E, S_ETOT, S_LTOT, S_MSET, S_GATED, S_DRY = range(7)
+S_LIT, S_EJ, S_MINSOC, S_RANDRY, S_TLAND = range(7, 12)  # the current sortie's totals
+C_LIT, C_EJ, C_MINSOC, C_RANDRY, C_TLAND = range(12, 17)  # the sortie closed on this tick
+S_MREFILL, S_MSPRAY = 17, 18  # liquid masses to set this tick (refill, then spray)
+_NS = 19
+# ---- columns of the integer state (int64, (N, _NI))
+# current sortie, offset into the flat tables, ticks available, this tick's event flags
+I_CUR, I_OFF, I_LIM, I_FLAGS = range(4)
+_NI = 4
+# ---- the event flags (bits of ist[:, I_FLAGS])
+F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
+
+
+@numba.njit(cache=True)
+def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab, rec, rec_on,
+                  out):  # pragma: no cover
+    """One control tick of :meth:`Sprayer.step` for every active row (see the module docstring).
+
+    Returns the number of rows with an event flag (0 on most ticks), or ``-(i + 1)`` without
+    touching anything when tick ``k`` is outside active row i's tables (the scalar code would
+    raise ``IndexError``). ``tab``: (2, total) sortie and ground tables; ``out``: (2, N) nozzles
+    on and controller reset."""
+    n = pz.shape[0]
+    nf = f.shape[1]
+    na = act.shape[1]
+    for i in range(n):
+        if active[i] and (k < 0 or k >= ist[i, I_LIM]):
+            return -(i + 1)
+    nev = 0
+    for i in range(n):
+        out[0, i] = False
+        out[1, i] = False
+        ist[i, I_FLAGS] = 0
+        if not active[i]:
+            continue
+        j = ist[i, I_OFF] + k
+        fl = 0
+        # ---- sortie change: close the last one, refill and a fresh battery, open the new one
+        s = tab[0, j]
+        if s != ist[i, I_CUR]:
+            fl |= F_CHANGE
+            if ist[i, I_CUR] >= 0:
+                fl |= F_CLOSE
+                st[i, C_LIT] = st[i, S_LIT]
+                st[i, C_EJ] = st[i, S_EJ]
+                st[i, C_MINSOC] = st[i, S_MINSOC]
+                st[i, C_RANDRY] = st[i, S_RANDRY]
+                st[i, C_TLAND] = st[i, S_TLAND]
+            ist[i, I_CUR] = s
+            if s > 0:
+                st[i, S_TANK] = par[i, P_FILL]
+                st[i, S_E] = 0.0
+                m = st[i, S_TANK] * par[i, P_RHO]
+                st[i, S_MREFILL] = m
+                st[i, S_MSET] = m
+                fl |= F_REFILL
+            st[i, S_LIT] = 0.0
+            st[i, S_EJ] = 0.0
+            st[i, S_MINSOC] = 1.0
+            st[i, S_RANDRY] = np.nan
+            st[i, S_TLAND] = np.nan
+        # ---- on the ground at the base: motors off, controller reset
+        g = tab[1, j] != 0
+        if g:
+            out[1, i] = True
+            for c in range(nf):
+                f[i, c] = 0.0
+            if math.isnan(st[i, S_TLAND]):
+                st[i, S_TLAND] = t
+        # ---- nozzles: the plan sprays, the tank is not empty, the height is within the band
+        dt = par[i, P_DT]
+        on = False
+        if spray_ref[i]:
+            if st[i, S_TANK] <= 0.0:
+                st[i, S_DRY] += dt
+                if math.isnan(st[i, S_RANDRY]):
+                    st[i, S_RANDRY] = t
+            elif par[i, P_HMIN] < pz[i] < par[i, P_HMAX]:
+                on = True
+            else:
+                st[i, S_GATED] += dt
+        if on:
+            tank = st[i, S_TANK]
+            dv = par[i, P_LPM] * math.sqrt(vx[i] * vx[i] + vy[i] * vy[i]) * dt
+            if dv > tank:
+                dv = tank
+            tank -= dv
+            st[i, S_TANK] = tank
+            st[i, S_LTOT] += dv
+            st[i, S_LIT] += dv
+            m_liq = tank * par[i, P_RHO]
+            if st[i, S_MSET] - m_liq >= 1e-3 or tank <= 0.0:
+                st[i, S_MSET] = m_liq
+                st[i, S_MSPRAY] = m_liq
+                fl |= F_MASS
+        # ---- electrical power of the actual rotor thrusts, energy, state of charge
+        p = par[i, P_PAV]
+        kp = par[i, P_KP]
+        for c in range(na):
+            a = act[i, c]
+            if a > 0.0:
+                p += kp * a * math.sqrt(a)
+        if g:
+            p = 0.0
+        e = p * dt
+        st[i, S_E] += e
+        st[i, S_ETOT] += e
+        st[i, S_EJ] += e
+        soc = 1.0 - st[i, S_E] / par[i, P_CAP]
+        if soc < st[i, S_MINSOC]:
+            st[i, S_MINSOC] = soc
+        tank = st[i, S_TANK]
+        rec[0, j] = tank
+        rec[1, j] = par[i, P_DRY] + tank * par[i, P_RHO]
+        rec[2, j] = p
+        rec[3, j] = soc
+        rec_on[j] = 1 if on else 0
+        out[0, i] = on
+        if fl:
+            ist[i, I_FLAGS] = fl
+            nev += 1
+    return nev
+
+
+def _none_nan(v: float | None) -> float:
+    return math.nan if v is None else float(v)
+
+
+def _nan_none(v: float) -> float | None:
+    return None if math.isnan(v) else float(v)
+
+
+class _JSink:
+    """``cascade.attitude`` of a :class:`MassSink`: setting ``J`` calls the engine's callback."""
+
+    __slots__ = ("_owner",)
+
+    def __init__(self, owner: MassSink):
+        self._owner = owner
+
+    @property
+    def J(self) -> tuple[float, float, float]:
+        return self._owner.J
+
+    @J.setter
+    def J(self, value: Sequence[float]) -> None:
+        o = self._owner
+        o.J = (float(value[0]), float(value[1]), float(value[2]))
+        o.set_mass(o.index, float(o.mass), o.J)
+
+
+class MassSink:
+    """Stands in for a Sprayer's cascade: :meth:`Sprayer._set_mass` writes ``cascade.mass`` and
+    then ``cascade.attitude.J``; the second write calls ``set_mass(index, mass, J)``.
+
+    The engine may pass ``MassSink(i, set_mass)`` as the ``cascade`` argument when it builds
+    Sprayer i (its ``__init__`` then pushes the initial mass straight to the callback; use
+    ``push_initial=False`` in :meth:`BatchSprayer.from_sprayers`). ``reset()`` does nothing (the
+    batch reports resets in ``step``'s ``reset`` array)."""
+
+    __slots__ = ("index", "set_mass", "mass", "J", "attitude")
+
+    def __init__(self, index: int, set_mass: SetMass):
+        self.index = int(index)
+        self.set_mass = set_mass
+        self.mass = math.nan
+        self.J: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+        self.attitude = _JSink(self)
+
+    def reset(self) -> None:
+        """No-op (the engine resets its own controller state from ``reset``)."""
+
+
+def _table(values: Sequence[Any], n: int, dtype: Any) -> np.ndarray:
+    """``values[:n]`` as an array of ``n`` (zero-padded; the padding is never read)."""
+    a = np.zeros(n, dtype)
+    m = min(n, len(values))
+    if m:
+        a[:m] = np.asarray(values[:m] if len(values) > m else values, dtype=dtype)
+    return a
+
+
+class BatchSprayer:
+    """The per-tick work of N :class:`~ag_uav.engine.sprayer.Sprayer` objects, advanced together.
+
+    Build with :meth:`from_sprayers`, call :meth:`step` once per control tick (after the
+    controller, before the rotor commands go to MuJoCo), then :meth:`finish` to write the state
+    and records back into the Sprayers. Vehicles may have different configs, jobs and table
+    lengths; ``active`` masks out the finished ones.
+    """
+
+    def __init__(self, sprayers: Sequence[Sprayer], set_mass: SetMass, *,
+                 push_initial: bool = True):
+        """See :meth:`from_sprayers`."""
+        self.sprayers: list[Sprayer] = list(sprayers)
+        self.set_mass = set_mass
+        n = len(self.sprayers)
+        self.n = n
+        self._finished = False
+        self._cascades: list[Any] = []
+        n_rec = [len(sp.rec_tank) for sp in self.sprayers]
+        off = np.zeros(n + 1, np.int64)
+        off[1:] = np.cumsum(n_rec)
+        total = int(off[-1])
+        self._off = off
+        self._n_rec = n_rec
+        self._par = np.zeros((n, _NP))
+        self._st = np.zeros((n, _NS))
+        self._ist = np.zeros((n, _NI), np.int64)
+        self._tab = np.zeros((2, total), np.int32)  # sortie, ground
+        self._rec = np.zeros((4, total))
+        self._rec_on = np.zeros(total, np.uint8)
+        for i, sp in enumerate(self.sprayers):
+            a, b = int(off[i]), int(off[i + 1])
+            nr = b - a
+            self._par[i] = (sp.lpm, sp.rho, sp.h_min, sp.h_max, sp.k_p, sp.p_av, sp.cap_j,
+                            sp.dt, sp.job.fill_l, sp.dry)
+            self._ist[i] = (sp.cur, a, min(nr, len(sp.sortie), len(sp.ground)), 0)
+            st = self._st[i]
+            st[S_TANK], st[S_E], st[S_ETOT] = sp.tank, sp.energy_j, sp.energy_total_j
+            st[S_LTOT], st[S_MSET] = sp.litres_total, sp.mass_set
+            st[S_GATED], st[S_DRY] = sp.gated_s, sp.dry_s
+            st[C_LIT:C_TLAND + 1] = math.nan
+            if sp.cur >= 0:  # wrapped mid-job: the current sortie's totals so far
+                if not sp.per:
+                    raise ValueError(f"sprayer {i}: sortie {sp.cur} without a per-sortie dict")
+                per = sp.per[-1]
+                st[S_LIT], st[S_EJ], st[S_MINSOC] = per["litres"], per["energy_j"], \
+                    per["min_soc"]
+                st[S_RANDRY] = _none_nan(per["ran_dry_s"])
+                st[S_TLAND] = _none_nan(per["t_land_s"])
+            self._tab[0, a:b] = _table(sp.sortie, nr, np.int32)
+            self._tab[1, a:b] = _table(sp.ground, nr, np.int32)
+            # the records so far, then each Sprayer's rec_* become views of its slice
+            for r, name in enumerate(("rec_tank", "rec_mass", "rec_power", "rec_soc")):
+                self._rec[r, a:b] = np.frombuffer(getattr(sp, name), np.float64, count=nr)
+                setattr(sp, name, memoryview(self._rec[r, a:b]))
+            self._rec_on[a:b] = np.frombuffer(sp.rec_on, np.uint8, count=nr)
+            sp.rec_on = memoryview(self._rec_on[a:b])
+            self._cascades.append(sp.cascade)
+            sp.cascade = MassSink(i, set_mass)
+        self._all = np.ones(n, bool)
+        self._out = np.zeros((2, n), bool)
+        self._on, self._reset = self._out[0], self._out[1]
+        self._logged = [(i, sp) for i, sp in enumerate(self.sprayers)
+                        if sp.log is not None and hasattr(sp.log, "spray_state")]
+        if push_initial:
+            for sp in self.sprayers:
+                if sp.mass_set >= 0.0:
+                    sp._set_mass(sp.mass_set)
+
+    @classmethod
+    def from_sprayers(cls, sprayers: Sequence[Sprayer], set_mass: SetMass, *,
+                      push_initial: bool = True) -> BatchSprayer:
+        """Wrap N scalar Sprayers (each built with its own vehicle model, ``data`` and job).
+
+        ``set_mass(i, total_mass_kg, (Jx, Jy, Jz))`` receives vehicle i's composite mass and
+        inertia (about the composite centre of mass) whenever its liquid mass changes; it is
+        what the scalar code writes to ``cascade.mass`` and ``cascade.attitude.J``. Each
+        Sprayer's cascade is replaced by a :class:`MassSink` until :meth:`finish`.
+        ``push_initial``: call ``set_mass`` once per vehicle now with its current mass (what
+        ``Sprayer.__init__`` gave its cascade); pass ``False`` when the Sprayers were built
+        with ``MassSink(i, set_mass)`` as their cascade (they already pushed it).
+
+        The Sprayers may already have stepped (the state, the current sortie's totals and the
+        records so far are taken over). ``job.fill_l`` is read here (later changes are not
+        seen). Each ``data.act`` is not read: ``step`` takes the actuator states as ``act``.
+        """
+        return cls(sprayers, set_mass, push_initial=push_initial)
+
+    # ------------------------------------------------------------------------------ per tick
+    def step(self, k: int, t: float, pz: np.ndarray, vx: np.ndarray, vy: np.ndarray,
+             spray_ref: np.ndarray, f: np.ndarray, act: np.ndarray,
+             active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """One control tick of every active vehicle: ``sprayers[i].step(k, t, pz[i], vx[i],
+        vy[i], spray_ref[i], list(f[i]))`` with ``data.act = act[i]``.
+
+        ``pz``, ``vx``, ``vy``: (N,) float64 height and ground velocity; ``spray_ref``: (N,)
+        bool, the plan sprays; ``f``: (N, 4) float64 rotor commands, set to 0 in place on the
+        rows on the ground; ``act``: (N, n_act) float64 actuator states (rotor thrusts after the
+        motor lag); ``active``: (N,) bool or ``None`` (all). Returns ``(on, reset)``: (N,) bool
+        nozzles on, and the rows whose controller must be reset (on the ground at the base);
+        both are buffers owned by the batch and overwritten by the next call (copy to keep).
+        Inactive rows are left alone (``on`` and ``reset`` False, ``f`` untouched).
+        Raises ``IndexError`` (before changing anything) when ``k`` is outside an active
+        vehicle's tables."""
+        if self._finished:
+            raise RuntimeError("BatchSprayer.step after finish()")
+        n = self.n
+        if active is None:
+            active = self._all
+        if (pz.shape != (n,) or vx.shape != (n,) or vy.shape != (n,)
+                or spray_ref.shape != (n,) or active.shape != (n,) or f.ndim != 2
+                or f.shape[0] != n or act.ndim != 2 or act.shape[0] != n):
+            raise ValueError(f"BatchSprayer.step: arrays must have a leading axis of {n}")
+        nev = _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, self._par, self._st,
+                            self._ist, self._tab, self._rec, self._rec_on, self._out)
+        if nev:
+            if nev < 0:
+                i = -nev - 1
+                raise IndexError(f"tick {k} is outside vehicle {i}'s tables "
+                                 f"({int(self._ist[i, I_LIM])} ticks)")
+            self._events(t)
+        if self._logged:
+            self._log(k, t, vx, vy, active)
+        return self._on, self._reset
+
+    def _events(self, t: float) -> None:
+        """Sortie changes and liquid-mass updates of the rows the kernel flagged (Python, as
+        :meth:`Sprayer.step` does them)."""
+        st, ist = self._st, self._ist
+        for i in np.flatnonzero(ist[:, I_FLAGS]).tolist():
+            fl = int(ist[i, I_FLAGS])
+            sp = self.sprayers[i]
+            if fl & F_CHANGE:
+                if fl & F_CLOSE:
+                    per = sp.per[-1]
+                    per["litres"] = float(st[i, C_LIT])
+                    per["energy_j"] = float(st[i, C_EJ])
+                    per["min_soc"] = float(st[i, C_MINSOC])
+                    per["ran_dry_s"] = _nan_none(st[i, C_RANDRY])
+                    per["t_land_s"] = _nan_none(st[i, C_TLAND])
+                    sp._close_sortie(t)
+                if fl & F_REFILL:
+                    sp._set_mass(float(st[i, S_MREFILL]))
+                s = int(self._ist[i, I_CUR])
+                sp.per.append({"sortie": s + 1, "t_takeoff_s": t, "litres": 0.0,
+                               "energy_j": 0.0, "min_soc": 1.0, "ran_dry_s": None,
+                               "t_land_s": None})
+            if fl & F_MASS:
+                sp._set_mass(float(st[i, S_MSPRAY]))
+
+    def _log(self, k: int, t: float, vx: np.ndarray, vy: np.ndarray,
+             active: np.ndarray) -> None:
+        """``log.spray_state`` every 0.1 s of the vehicles that have a log (as the scalar)."""
+        st, rec = self._st, self._rec
+        for i, sp in self._logged:
+            if not active[i] or not t >= sp._next_log:
+                continue
+            sp._next_log = t + 0.1 - 1e-9
+            j = int(self._off[i]) + k
+            on = bool(self._rec_on[j])
+            x, y = float(vx[i]), float(vy[i])
+            sp.log.spray_state(t, tank_l=float(st[i, S_TANK]), mass_kg=float(rec[1, j]),
+                               flow_lps=sp.lpm * math.sqrt(x * x + y * y) if on else 0.0,
+                               nozzles=on, power_w=float(rec[2, j]),
+                               energy_wh=float(st[i, S_ETOT]) / 3600.0, soc=float(rec[3, j]),
+                               sortie=int(self._ist[i, I_CUR]) + 1,
+                               ground=bool(self._tab[1, j]))
+
+    # ------------------------------------------------------------------------------ the end
+    def sync(self) -> None:
+        """Write the batch state into the Sprayers (tank, energy, totals, current sortie and its
+        dict); their ``rec_*`` are already views of the batch's records. ``summary`` and
+        ``series`` then work on them; the batch may go on stepping."""
+        st, ist = self._st, self._ist
+        for i, sp in enumerate(self.sprayers):
+            sp.tank = float(st[i, S_TANK])
+            sp.energy_j = float(st[i, S_E])
+            sp.energy_total_j = float(st[i, S_ETOT])
+            sp.litres_total = float(st[i, S_LTOT])
+            sp.mass_set = float(st[i, S_MSET])
+            sp.gated_s = float(st[i, S_GATED])
+            sp.dry_s = float(st[i, S_DRY])
+            sp.cur = int(ist[i, I_CUR])
+            if sp.cur >= 0 and sp.per:
+                per = sp.per[-1]
+                per["litres"] = float(st[i, S_LIT])
+                per["energy_j"] = float(st[i, S_EJ])
+                per["min_soc"] = float(st[i, S_MINSOC])
+                per["ran_dry_s"] = _nan_none(st[i, S_RANDRY])
+                per["t_land_s"] = _nan_none(st[i, S_TLAND])
+
+    def finish(self) -> list[Sprayer]:
+        """:meth:`sync`, then give each Sprayer plain copies of its records (``array('d')``,
+        ``bytearray``, as it had) and its own cascade back. The batch cannot step after this;
+        the Sprayers can (scalar) from where the batch left them. Returns the Sprayers."""
+        if self._finished:
+            return self.sprayers
+        self.sync()
+        for i, sp in enumerate(self.sprayers):
+            a, b = int(self._off[i]), int(self._off[i + 1])
+            for r, name in enumerate(("rec_tank", "rec_mass", "rec_power", "rec_soc")):
+                rec = array("d")
+                rec.frombytes(self._rec[r, a:b].tobytes())
+                setattr(sp, name, rec)
+            sp.rec_on = bytearray(self._rec_on[a:b].tobytes())
+            sp.cascade = self._cascades[i]
+        self._finished = True
+        self._rec = self._rec[:, :0]
+        self._rec_on = self._rec_on[:0]
+        return self.sprayers

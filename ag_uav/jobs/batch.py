@@ -1,0 +1,942 @@
+"""Headless batches: a base config times a product of axes, run on an :mod:`~ag_uav.jobs.executor`.
+
+Spec (TOML; ``ag-uav batch SPEC.toml``, see ``examples/batch.toml``)::
+
+    name = "wind-sweep"                 # optional; default: the file's stem
+    [base]                              # the base config: a config table, optionally on top of
+    config = "base.toml"                #   a config file (path relative to the spec)
+    wind.turbulence = "light"
+    [axes]                              # the product of these, in this order (last fastest)
+    "wind.speed_mps" = [0, 3, 6]        # a dotted config key and its values
+    seed = {range = [0, 20]}            # {range = [start, stop(, step)]}: integers, stop excluded
+    controller = ["default", "soft"]    # a preset axis: names of config fragments below
+    [presets.controller.soft]           # a fragment: config tables and/or dotted keys and/or
+    "controller.xy.k0" = 2.0            #   config = "fragment.toml" (e.g. `ag-uav tune` output)
+
+An axis is a *preset axis* when ``[presets.<axis>]`` exists (``controller`` always is; its
+preset ``default`` is the empty fragment). Every run's config is ``base ⊕ presets ⊕ axis keys``,
+validated with the usual one-line :class:`~ag_uav.config.ConfigError` before anything runs.
+
+Each finished run becomes one row (every scalar summary metric, the axis values, ``status`` =
+ok | crashed | error and ``crash_reason``) appended to ``journal.jsonl`` (flushed and fsynced per
+run). ``results.csv`` is regenerated from the journal, sorted by run index, so it never depends
+on scheduling. ``--resume`` skips the runs whose *config hash* is already in the journal (so a
+spec that grows — more seeds — reuses the finished runs). A run that raises, or whose worker
+process dies, is a row with status ``error`` and the reason; the batch goes on (rows lost to a
+dead worker are re-run by ``--resume``).
+
+Determinism: a run's row depends only on its config (seed included), never on the worker or the
+order; only the timing columns (:func:`is_timing_column`) differ between repeats.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import hashlib
+import itertools
+import json
+import math
+import os
+import re
+import time
+import tomllib
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..config import Config, ConfigError, config_from_dict
+from .executor import Executor, LocalPoolExecutor, SerialExecutor
+
+SPEC_KEYS = ("name", "description", "base", "axes", "presets")
+#: columns that lead results.csv, before the axis columns
+LEAD_COLUMNS = ("index", "run_id")
+#: summary metrics in display order (any other scalar metric follows, sorted by name)
+METRIC_ORDER = ("status", "crash_reason", "completed", "crashed", "crash_time_s", "mission_time_s",
+                "tracking_rmse_m", "estimate_rmse_m", "cross_track_rmse_m", "cross_track_max_m",
+                "altitude_rmse_m", "coverage_fraction", "overlap_fraction", "path_length_m",
+                "planned_path_length_m", "legs", "legs_flown", "final_position_error_m",
+                "field_area_m2", "sim_time_s", "wall_time_s", "loop_wall_time_s",
+                "real_time_factor")
+#: summary keys that are not row columns (the config is summarised by the axis values)
+DROP_KEYS = {"config", "run_dir"}
+
+
+def is_timing_column(name: str) -> bool:
+    """Columns that measure the machine (or how the run was scheduled: ``batch_size``, the size
+    of the lockstep chunk it flew in), not the run (excluded from determinism checks)."""
+    n = name.lower()
+    return ("wall" in n or "real_time_factor" in n or n.endswith(("_per_s", "_us"))
+            or "timing" in n or n == "batch_size")
+
+
+# ------------------------------------------------------------------------------ spec / expand
+@dataclass
+class Axis:
+    name: str                      # a dotted config key, or a preset-axis name
+    values: list[Any]
+    preset: bool = False
+
+
+@dataclass
+class BatchSpec:
+    name: str
+    base: dict[str, Any]
+    axes: list[Axis]
+    presets: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
+    description: str = ""
+    source: str | None = None      # the spec file, if any
+
+    @property
+    def n_runs(self) -> int:
+        return math.prod(len(a.values) for a in self.axes) if self.axes else 1
+
+
+@dataclass
+class RunTask:
+    index: int
+    run_id: str
+    axis_values: dict[str, Any]
+    config: dict[str, Any]         # the full validated config (Config.to_dict())
+    config_hash: str
+    logs_dir: str | None = None
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {_fmt(x)}" for k, x in v.items()) + "}"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return repr(v)
+
+
+def deep_merge(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    """``a`` updated recursively by ``b`` (new dict; tables merge, everything else replaces)."""
+    out = copy.deepcopy(a)
+    for k, v in b.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = deep_merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def set_dotted(d: dict[str, Any], key: str, value: Any) -> None:
+    """``d["a"]["b"]["c"] = value`` for ``key = "a.b.c"`` (creating tables)."""
+    parts = key.split(".")
+    node = d
+    for p in parts[:-1]:
+        nxt = node.get(p)
+        if not isinstance(nxt, dict):
+            nxt = {}
+            node[p] = nxt
+        node = nxt
+    node[parts[-1]] = copy.deepcopy(value)
+
+
+def get_dotted(d: dict[str, Any], key: str, default: Any = None) -> Any:
+    node: Any = d
+    for p in key.split("."):
+        if not isinstance(node, dict) or p not in node:
+            return default
+        node = node[p]
+    return node
+
+
+def _read_toml(path: Path, what: str) -> dict[str, Any]:
+    if not path.is_file():
+        raise ConfigError(f'{what} = "{path}": no such file')
+    try:
+        return tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f'{what} = "{path}": not valid TOML ({e})') from None
+
+
+def resolve_fragment(frag: Any, where: str, base_dir: Path) -> dict[str, Any]:
+    """A config fragment (table) → a nested config dict. ``config = "file.toml"`` loads a file
+    (relative to ``base_dir``) first; keys with dots are dotted config keys."""
+    if not isinstance(frag, dict):
+        raise ConfigError(f"{where} = {_fmt(frag)}: expected a table (config fragment)")
+    out: dict[str, Any] = {}
+    if "config" in frag:
+        p = frag["config"]
+        if not isinstance(p, str):
+            raise ConfigError(f"{where}.config = {_fmt(p)}: expected a path to a TOML file")
+        path = Path(p) if Path(p).is_absolute() else base_dir / p
+        out = _read_toml(path, f"{where}.config")
+    nested: dict[str, Any] = {}
+    for k, v in frag.items():
+        if k == "config":
+            continue
+        if "." in k:
+            set_dotted(nested, k, v)
+        else:
+            nested = deep_merge(nested, {k: v})
+    return deep_merge(out, nested)
+
+
+def _axis_values(name: str, raw: Any) -> list[Any]:
+    where = f"axes.{name}" if "." not in name else f'axes."{name}"'
+    if isinstance(raw, dict):
+        if set(raw) == {"range"}:
+            r = raw["range"]
+            if (not isinstance(r, list) or len(r) not in (2, 3)
+                    or not all(isinstance(x, int) and not isinstance(x, bool) for x in r)):
+                raise ConfigError(f"{where} = {_fmt(raw)}: range needs [start, stop] or "
+                                  "[start, stop, step] integers (stop excluded)")
+            vals = list(range(*r))
+        elif set(raw) == {"linspace"}:
+            r = raw["linspace"]
+            if (not isinstance(r, list) or len(r) != 3 or not isinstance(r[2], int)
+                    or r[2] < 1 or not all(isinstance(x, int | float) for x in r[:2])):
+                raise ConfigError(f"{where} = {_fmt(raw)}: linspace needs [start, stop, count]")
+            a, b, n = float(r[0]), float(r[1]), r[2]
+            vals = [a + (b - a) * i / (n - 1) if n > 1 else a for i in range(n)]
+        else:
+            raise ConfigError(f"{where} = {_fmt(raw)}: expected a list of values, "
+                              "{range = [start, stop]} or {linspace = [start, stop, count]}")
+    elif isinstance(raw, list):
+        vals = list(raw)
+    else:
+        vals = [raw]
+    if not vals:
+        raise ConfigError(f"{where} = {_fmt(raw)}: expected at least one value")
+    return vals
+
+
+def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".",
+                   name: str | None = None, source: str | None = None) -> BatchSpec:
+    """Validate a batch spec given as a (TOML-shaped) dict. Raises one-line ConfigError."""
+    base_dir = Path(base_dir)
+    if not isinstance(data, dict):
+        raise ConfigError(f"batch spec = {_fmt(data)}: expected a table")
+    for k in data:
+        if k not in SPEC_KEYS:
+            raise ConfigError(f"{k} = {_fmt(data[k])}: unknown key in a batch spec; allowed: "
+                              f"{', '.join(SPEC_KEYS)}")
+    nm = data.get("name", name or "batch")
+    if not isinstance(nm, str) or not re.fullmatch(r"[A-Za-z0-9_.-]+", nm):
+        raise ConfigError(f"name = {_fmt(nm)}: expected letters, digits, '_', '-', '.'")
+    base = resolve_fragment(data.get("base", {}), "base", base_dir)
+    presets_raw = data.get("presets", {})
+    if not isinstance(presets_raw, dict):
+        raise ConfigError(f"presets = {_fmt(presets_raw)}: expected tables "
+                          "[presets.<axis>.<name>]")
+    presets: dict[str, dict[str, dict[str, Any]]] = {"controller": {"default": {}}}
+    for axis, table in presets_raw.items():
+        if not isinstance(table, dict):
+            raise ConfigError(f"presets.{axis} = {_fmt(table)}: expected tables "
+                              f"[presets.{axis}.<name>]")
+        presets.setdefault(axis, {})
+        for pname, frag in table.items():
+            presets[axis][pname] = resolve_fragment(frag, f"presets.{axis}.{pname}", base_dir)
+    axes_raw = data.get("axes", {})
+    if not isinstance(axes_raw, dict):
+        raise ConfigError(f"axes = {_fmt(axes_raw)}: expected a table of key = [values]")
+    axes: list[Axis] = []
+    for key, raw in axes_raw.items():
+        vals = _axis_values(key, raw)
+        is_preset = key in presets_raw or key == "controller"
+        if is_preset:
+            for v in vals:
+                if not isinstance(v, str) or v not in presets[key]:
+                    raise ConfigError(f"axes.{key} = {_fmt(v)}: no preset of that name; "
+                                      f"defined: {', '.join(presets[key])}")
+        elif key == "mission.field":
+            vals = [_resolve_field(v, base_dir) for v in vals]
+        axes.append(Axis(key, vals, is_preset))
+    if "field" in base.get("mission", {}):
+        base["mission"]["field"] = _resolve_field(base["mission"]["field"], base_dir)
+    return BatchSpec(name=nm, base=base, axes=axes, presets=presets,
+                     description=str(data.get("description", "")), source=source)
+
+
+def _resolve_field(v: Any, base_dir: Path) -> Any:
+    """A GeoJSON path relative to the spec file becomes absolute (built-in names stay)."""
+    if isinstance(v, str) and v.lower().endswith((".geojson", ".json")):
+        p = Path(v)
+        if not p.is_absolute() and (base_dir / p).exists():
+            return str((base_dir / p).resolve())
+    return v
+
+
+def load_spec(path: str | Path) -> BatchSpec:
+    """Read and validate a batch spec file."""
+    p = Path(path)
+    data = _read_toml(p, "batch spec")
+    return spec_from_dict(data, base_dir=p.parent, name=data.get("name", p.stem), source=str(p))
+
+
+def config_hash(cfg_dict: dict[str, Any]) -> str:
+    """Stable hash of a full config dict (what makes a run a run)."""
+    blob = json.dumps(cfg_dict, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def expand(spec: BatchSpec) -> list[RunTask]:
+    """All runs of the spec, validated (one-line ConfigError naming the failing run)."""
+    from ..engine.missions import build_field, build_plan
+
+    tasks: list[RunTask] = []
+    names = [a.name for a in spec.axes]
+    width = max(4, len(str(spec.n_runs - 1)))
+    plans_ok: set[tuple[Any, ...]] = set()
+    for index, combo in enumerate(itertools.product(*[a.values for a in spec.axes])):
+        d = copy.deepcopy(spec.base)
+        for ax, v in zip(spec.axes, combo, strict=True):
+            if ax.preset:
+                d = deep_merge(d, spec.presets[ax.name][v])
+        for ax, v in zip(spec.axes, combo, strict=True):
+            if not ax.preset:
+                set_dotted(d, ax.name, v)
+        axis_values = dict(zip(names, combo, strict=True))
+        try:
+            cfg = config_from_dict(d)
+            m = cfg.mission
+            key = (m.field, m.swath_m, m.headland_m, m.direction_deg)
+            if key not in plans_ok:  # the field loads and the coverage plan exists
+                build_plan(cfg, build_field(cfg))
+                plans_ok.add(key)
+        except ConfigError as e:
+            where = ", ".join(f"{k}={v}" for k, v in axis_values.items())
+            raise ConfigError(f"{e} (run {index}{': ' + where if where else ''})") from None
+        cd = cfg.to_dict()
+        tasks.append(RunTask(index=index, run_id=f"{index:0{width}d}", axis_values=axis_values,
+                             config=cd, config_hash=config_hash(cd)))
+    return tasks
+
+
+# ------------------------------------------------------------------------------------- worker
+def flatten_summary(summary: dict[str, Any]) -> dict[str, Any]:
+    """Scalar columns of a run summary: nested tables become ``a.b`` keys, lists JSON."""
+    out: dict[str, Any] = {}
+
+    def walk(d: dict[str, Any], prefix: str) -> None:
+        for k, v in d.items():
+            if not prefix and k in DROP_KEYS:
+                continue
+            key = f"{prefix}{k}"
+            if isinstance(v, dict):
+                walk(v, key + ".")
+            elif isinstance(v, list | tuple):
+                out[key] = json.dumps(v, default=_json_default)
+            else:
+                out[key] = _scalar(v)
+
+    walk(summary, "")
+    return out
+
+
+def _scalar(v: Any) -> Any:
+    try:
+        import numpy as np
+
+        if isinstance(v, np.generic):
+            v = v.item()
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(v, float) and not math.isfinite(v):
+        return None if math.isnan(v) else v
+    return v
+
+
+def _json_default(o: Any) -> Any:
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def run_task(task: RunTask) -> dict[str, Any]:
+    """Worker entry point: fly one run, return its row. Never raises: an exception inside the run
+    becomes a row with ``status = "error"`` and the reason."""
+    t0 = time.perf_counter()
+    try:
+        cfg = config_from_dict(task.config)
+        if task.logs_dir:
+            from .run import fly
+
+            cfg.log.enabled = True
+            cfg.log.channels = "light"
+            cfg.log.render = False
+            res, _ = fly(cfg, out_root=task.logs_dir, run_id=task.run_id)
+        else:
+            from ..engine.missions import simulate
+
+            cfg.log.enabled = False
+            res = simulate(cfg)
+        return _row(task, res, t0)
+    except Exception as e:  # noqa: BLE001 - a failing run is a row, the batch goes on
+        return _error_row(task, e, t0)
+
+
+def run_chunk(tasks: list[RunTask]) -> list[dict[str, Any]]:
+    """Worker entry point: fly a chunk of runs as one lockstep engine batch
+    (:func:`ag_uav.engine.missions.simulate_many`) and return their rows, in order. Never raises: a
+    run that cannot be set up is an error row; if the batch itself fails, the chunk falls back to
+    one run at a time so the failing run is isolated and the others still fly."""
+    if len(tasks) == 1 or any(t.logs_dir for t in tasks):
+        return [run_task(t) for t in tasks]
+    from ..engine.missions import simulate_many
+
+    t0 = time.perf_counter()
+    rows: list[dict[str, Any] | None] = [None] * len(tasks)
+    cfgs, where = [], []
+    for j, task in enumerate(tasks):
+        try:
+            cfg = config_from_dict(task.config)
+            cfg.log.enabled = False
+            cfgs.append(cfg)
+            where.append(j)
+        except Exception as e:  # noqa: BLE001
+            rows[j] = _error_row(task, e, t0)
+    try:
+        results = simulate_many(cfgs, errors="return",
+                                reduce=lambda k, res: _row(tasks[where[k]], res, t0)
+                                ) if cfgs else []
+    except Exception:  # noqa: BLE001 - isolate the failing run
+        return [run_task(t) for t in tasks]
+    for j, res in zip(where, results, strict=True):
+        rows[j] = _error_row(tasks[j], res, t0) if isinstance(res, BaseException) else res
+    return rows  # type: ignore[return-value]
+
+
+def _row(task: RunTask, res: Any, t0: float) -> dict[str, Any]:
+    row: dict[str, Any] = {"index": task.index, "run_id": task.run_id, **task.axis_values}
+    summ = flatten_summary(res.summary)
+    for k in task.axis_values:
+        summ.pop(k, None)
+    status = "crashed" if summ.get("crashed") else "ok"
+    row.update({"status": status, "crash_reason": summ.pop("crash_reason", None) or ""})
+    row.update(summ)
+    return row
+
+
+def _error_row(task: RunTask, e: BaseException, t0: float) -> dict[str, Any]:
+    msg = str(e).splitlines()[0] if str(e) else ""
+    return {"index": task.index, "run_id": task.run_id, **task.axis_values, "status": "error",
+            "crash_reason": f"{type(e).__name__}: {msg}"[:300], "completed": False,
+            "crashed": True, "wall_time_s": round(time.perf_counter() - t0, 3)}
+
+
+#: bytes the engine keeps per vehicle and control tick: records, IMU and spray job, plus
+#: ``ENGINE_BYTES_PER_FILTER_TICK`` per filter of the bank (estimates, NEES/NIS records, the
+#: per-run objects); measured: ~22 MB per 48,500-tick mission with one filter, ~31 MB with four
+ENGINE_BYTES_PER_TICK = 420
+ENGINE_BYTES_PER_FILTER_TICK = 120
+#: memory one chunk's records may take (a worker holds one chunk at a time)
+CHUNK_BYTES = 384 * 2**20
+
+
+def plan_chunks(tasks: list[RunTask], workers: int, max_runs: int = 64,
+                budget_bytes: int = CHUNK_BYTES) -> list[list[int]]:
+    """Indices of ``tasks`` in lockstep chunks: runs that can share an engine batch
+    (:func:`ag_uav.engine.missions.batch_key`), at most ``max_runs`` and about ``budget_bytes`` of
+    records per chunk (from each mission's length), and at least as many chunks as ``workers`` when
+    there are enough runs."""
+    from ..engine.missions import batch_key, mission_setup
+
+    groups: dict[Any, list[int]] = {}
+    nbytes: dict[Any, int] = {}  # per run: the longest mission's engine memory
+    for j, t in enumerate(tasks):
+        try:
+            cfg = config_from_dict(t.config)
+            key = batch_key(cfg)
+            ref = mission_setup(cfg)[2]
+            e = cfg.estimator
+            n_filters = len({*([e.name] if e.name != "true" else []), *e.shadow})
+            n = (int(min(ref.duration, cfg.sim.max_time_s) * cfg.sim.control_hz) + 1) * (
+                ENGINE_BYTES_PER_TICK + ENGINE_BYTES_PER_FILTER_TICK * n_filters)
+        except Exception:  # noqa: BLE001 - a bad run flies alone (and becomes an error row)
+            key, n = ("alone", j), 1
+        groups.setdefault(key, []).append(j)
+        nbytes[key] = max(nbytes.get(key, 0), n)
+    chunks: list[list[int]] = []
+    for key, idx in groups.items():
+        size = max(1, min(max_runs, budget_bytes // max(nbytes[key], 1),
+                          -(-len(idx) // max(workers, 1))))
+        chunks += [idx[i:i + size] for i in range(0, len(idx), size)]
+    return chunks
+
+
+# ------------------------------------------------------------------------------------ journal
+class Journal:
+    """Append-only JSONL of finished runs, one line per run, flushed and fsynced per line.
+
+    Each line: ``{"hash": config_hash, "retry": bool, "row": {...}}``. A truncated last line
+    (the process was killed mid-write) is ignored on reading.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._f = None
+
+    def read(self) -> dict[str, dict[str, Any]]:
+        """config hash → row, for the lines that are final (not marked ``retry``)."""
+        done: dict[str, dict[str, Any]] = {}
+        if not self.path.exists():
+            return done
+        with self.path.open("r") as f:
+            for line in f:
+                try:
+                    rec = json.loads(line)
+                except json.JSONDecodeError:
+                    continue  # a torn last line
+                if not isinstance(rec, dict) or "hash" not in rec:
+                    continue
+                if rec.get("retry"):
+                    done.pop(rec["hash"], None)
+                else:
+                    done[rec["hash"]] = rec["row"]
+        return done
+
+    def open(self, fresh: bool = False) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if not fresh and self.path.exists():
+            self._repair()
+        self._f = self.path.open("w" if fresh else "a")
+
+    def _repair(self) -> None:
+        """Cut a torn last line so that the next append starts on a line of its own."""
+        data = self.path.read_bytes()
+        if data and not data.endswith(b"\n"):
+            cut = data.rfind(b"\n") + 1
+            with self.path.open("r+b") as f:
+                f.truncate(cut)
+
+    def append(self, h: str, row: dict[str, Any], retry: bool = False) -> None:
+        assert self._f is not None, "journal not open"
+        self._f.write(json.dumps({"hash": h, "retry": retry, "row": row},
+                                 default=_json_default) + "\n")
+        self._f.flush()
+        os.fsync(self._f.fileno())
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+
+
+# ------------------------------------------------------------------------------------ results
+def ordered_columns(rows: Sequence[dict[str, Any]], axis_names: Sequence[str]) -> list[str]:
+    keys: set[str] = set()
+    for r in rows:
+        keys.update(r)
+    cols = [c for c in LEAD_COLUMNS if c in keys] + [a for a in axis_names if a in keys]
+    cols += [c for c in METRIC_ORDER if c in keys and c not in cols]
+    cols += sorted(k for k in keys if k not in cols)
+    return cols
+
+
+def _csv_value(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(v)
+    return str(v)
+
+
+def write_results_csv(rows: Sequence[dict[str, Any]], path: str | Path,
+                      axis_names: Sequence[str] = ()) -> list[str]:
+    """Write rows sorted by run index (atomic replace); returns the columns."""
+    rows = sorted(rows, key=lambda r: r.get("index", 0))
+    cols = ordered_columns(rows, axis_names)
+    path = Path(path)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    with tmp.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        for r in rows:
+            w.writerow([_csv_value(r.get(c)) for c in cols])
+    tmp.replace(path)
+    return cols
+
+
+def read_results_csv(path: str | Path) -> list[dict[str, str]]:
+    with Path(path).open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+# ------------------------------------------------------------------------------------- stats
+def mean_ci(values: Iterable[Any], level: float = 0.95) -> tuple[float, float, int]:
+    """Mean and the half-width of its Student-t confidence interval over the finite values."""
+    xs = [float(v) for v in values if v is not None and v != "" and math.isfinite(float(v))]
+    n = len(xs)
+    if n == 0:
+        return math.nan, math.nan, 0
+    m = sum(xs) / n
+    if n == 1:
+        return m, math.nan, 1
+    from scipy import stats
+
+    s = math.sqrt(sum((x - m) ** 2 for x in xs) / (n - 1))
+    return m, float(stats.t.ppf(0.5 + level / 2, n - 1)) * s / math.sqrt(n), n
+
+
+def group_rows(rows: Sequence[dict[str, Any]], keys: Sequence[str]
+               ) -> dict[tuple[Any, ...], list[dict[str, Any]]]:
+    out: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+    for r in rows:
+        out.setdefault(tuple(r.get(k) for k in keys), []).append(r)
+    return out
+
+
+#: (column, label, scale, format) of the summary table
+SUMMARY_METRICS = (
+    ("mission_time_s", "mission time (s)", 1.0, "{:.1f}"),
+    ("tracking_rmse_m", "tracking RMSE (m)", 1.0, "{:.3f}"),
+    ("estimate_rmse_m", "estimate RMSE (m)", 1.0, "{:.3f}"),
+    ("cross_track_rmse_m", "cross-track RMSE (m)", 1.0, "{:.3f}"),
+    ("coverage_fraction", "coverage (%)", 100.0, "{:.2f}"),
+)
+
+
+def summary_rows(rows: Sequence[dict[str, Any]], group_keys: Sequence[str]
+                 ) -> tuple[list[str], list[list[str]]]:
+    """The batch summary table: per group, runs, ok/crashed/error and mean ± 95 % CI."""
+    metrics = [m for m in SUMMARY_METRICS if any(r.get(m[0]) not in (None, "") for r in rows)]
+    header = list(group_keys) + ["runs", "ok", "crashed", "error"] + [m[1] for m in metrics]
+    table = []
+    for key, rs in sorted(group_rows(rows, group_keys).items(), key=lambda kv: _natural(kv[0])):
+        line = [str(k) for k in key]
+        line += [str(len(rs)), str(sum(r.get("status") == "ok" for r in rs)),
+                 str(sum(r.get("status") == "crashed" for r in rs)),
+                 str(sum(r.get("status") == "error" for r in rs))]
+        for col, _, scale, fmt in metrics:
+            m, h, n = mean_ci(r.get(col) for r in rs if r.get("status") == "ok")
+            if n == 0:
+                line.append("–")
+            elif math.isnan(h):
+                line.append(fmt.format(m * scale))
+            else:
+                line.append(f"{fmt.format(m * scale)} ± {fmt.format(h * scale)}")
+        table.append(line)
+    return header, table
+
+
+def _natural(key: tuple[Any, ...]) -> tuple[tuple[int, float, str], ...]:
+    """Sort key: numbers numerically, then strings."""
+    out = []
+    for k in key:
+        x = _num(k)
+        out.append((0, x, "") if x is not None else (1, 0.0, str(k)))
+    return tuple(out)
+
+
+def print_table(header: Sequence[str], table: Sequence[Sequence[str]], title: str) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=title, header_style="bold")
+    for i, h in enumerate(header):
+        t.add_column(h, justify="left" if i == 0 else "right")
+    for line in table:
+        t.add_row(*line)
+    import sys
+
+    Console(width=None if sys.stdout.isatty() else 160).print(t)
+
+
+def markdown_table(header: Sequence[str], table: Sequence[Sequence[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(line) + " |" for line in table]
+    return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------------------------- report
+def _num(v: Any) -> float | None:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
+def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str | Path,
+                 info: dict[str, Any] | None = None) -> list[Path]:
+    """``report.md`` and PNG figures: RMSE distributions per estimator and noise case, tracking
+    vs estimate error, coverage. Returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    written: list[Path] = []
+    group_keys = [a.name for a in spec.axes if a.name != "seed" and len(a.values) > 1]
+    noise_key = "gps.preset" if "gps.preset" in group_keys else None
+    box_keys = [k for k in group_keys if k != noise_key]
+    ok = [r for r in rows if r.get("status") == "ok"]
+
+    def label(r: dict[str, Any]) -> str:
+        return " / ".join(str(r.get(k)) for k in box_keys) or "all"
+
+    # --- RMSE distributions per group, one column per noise case
+    metrics = [m for m in ("tracking_rmse_m", "estimate_rmse_m")
+               if any(_num(r.get(m)) is not None for r in ok)]
+    cases = sorted({str(r.get(noise_key)) for r in ok}) if noise_key else ["all"]
+    if metrics and ok:
+        fig, axs = plt.subplots(len(metrics), len(cases), squeeze=False,
+                                figsize=(max(5.0, 4.2 * len(cases)), 3.4 * len(metrics)))
+        for j, case in enumerate(cases):
+            sel = [r for r in ok if not noise_key or str(r.get(noise_key)) == case]
+            labels = sorted({label(r) for r in sel})
+            for i, m in enumerate(metrics):
+                data = [[_num(r.get(m)) for r in sel if label(r) == lb
+                         and _num(r.get(m)) is not None] for lb in labels]
+                ax = axs[i][j]
+                if any(data):
+                    ax.boxplot([d or [math.nan] for d in data], showmeans=True)
+                    ax.set_xticks(range(1, len(labels) + 1), labels, rotation=20, fontsize=8)
+                ax.set_ylabel(m.replace("_m", " (m)").replace("_", " "))
+                ax.set_title(f"{noise_key} = {case}" if noise_key else "RMSE distribution",
+                             fontsize=9)
+                ax.grid(alpha=0.3)
+        fig.tight_layout()
+        p = out / "rmse.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        written.append(p)
+    # --- tracking vs estimate error
+    pairs = [(r, _num(r.get("estimate_rmse_m")), _num(r.get("tracking_rmse_m"))) for r in ok]
+    pairs = [(r, e, t) for r, e, t in pairs if e is not None and t is not None]
+    if pairs:
+        fig, ax = plt.subplots(figsize=(5.5, 4.2))
+        for lb in sorted({label(r) for r, _, _ in pairs}):
+            xs = [e for r, e, _ in pairs if label(r) == lb]
+            ys = [t for r, _, t in pairs if label(r) == lb]
+            ax.scatter(xs, ys, s=12, label=lb, alpha=0.7)
+        lim = max(max(e for _, e, _ in pairs), max(t for _, _, t in pairs)) * 1.05
+        ax.plot([0, lim], [0, lim], "k--", lw=0.8, label="y = x")
+        ax.set_xlabel("estimate RMSE (m)")
+        ax.set_ylabel("tracking RMSE (m)")
+        ax.legend(fontsize=7)
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        p = out / "tracking_vs_estimate.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        written.append(p)
+    # --- coverage
+    cov = [(label(r), _num(r.get("coverage_fraction"))) for r in ok]
+    cov = [(lb, c) for lb, c in cov if c is not None]
+    if cov:
+        labels = sorted({lb for lb, _ in cov})
+        fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(labels) + 2), 3.6))
+        ax.boxplot([[100 * c for lb2, c in cov if lb2 == lb] for lb in labels], showmeans=True)
+        ax.set_xticks(range(1, len(labels) + 1), labels, rotation=20, fontsize=8)
+        ax.set_ylabel("spray coverage (%)")
+        ax.grid(alpha=0.3)
+        fig.tight_layout()
+        p = out / "coverage.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        written.append(p)
+    # --- markdown
+    header, table = summary_rows(rows, group_keys)
+    info = info or {}
+    md = [f"# Batch `{spec.name}`", ""]
+    if spec.description:
+        md += [spec.description, ""]
+    md += [f"- runs: {len(rows)} ({sum(r.get('status') == 'ok' for r in rows)} ok, "
+           f"{sum(r.get('status') == 'crashed' for r in rows)} crashed, "
+           f"{sum(r.get('status') == 'error' for r in rows)} error)"]
+    md += ["- axes: " + "; ".join(f"`{a.name}` × {len(a.values)}" for a in spec.axes)]
+    for k, v in info.items():
+        md.append(f"- {k}: {v}")
+    md += ["", "Mean ± 95 % confidence half-width (Student t) over the runs with status ok.", "",
+           markdown_table(header, table)]
+    bad = [r for r in rows if r.get("status") != "ok"]
+    if bad:
+        md += ["## Crashed / failed runs", "",
+               markdown_table(["index", "status", "reason"],
+                              [[str(r.get("index")), str(r.get("status")),
+                                str(r.get("crash_reason"))] for r in bad[:50]])]
+        if len(bad) > 50:
+            md.append(f"... and {len(bad) - 50} more (see results.csv)\n")
+    for p in written:
+        md += [f"![{p.stem}]({p.name})", ""]
+    rp = out / "report.md"
+    rp.write_text("\n".join(md))
+    written.insert(0, rp)
+    return written
+
+
+# ---------------------------------------------------------------------------------- run_batch
+@dataclass
+class BatchResult:
+    rows: list[dict[str, Any]]       # sorted by index
+    out_dir: Path
+    n_run: int                       # runs executed in this call
+    n_skipped: int                   # runs taken from the journal (--resume)
+    wall_s: float
+    executor: str
+    files: list[Path] = field(default_factory=list)
+
+
+def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = None, *,
+              resume: bool = False, fresh: bool = False, logs: bool = False,
+              progress: bool = True, report: bool = True,
+              tasks: list[RunTask] | None = None,
+              on_row: Callable[[dict[str, Any]], None] | None = None) -> BatchResult:
+    """Run every task of ``spec`` on ``executor`` (default: serial) into ``out_dir``.
+
+    ``resume``: skip runs already in ``out_dir/journal.jsonl``; ``fresh``: discard an existing
+    journal. With neither, an existing journal is an error (nothing is overwritten silently).
+    """
+    out = Path(out_dir)
+    tasks = tasks if tasks is not None else expand(spec)
+    journal = Journal(out / "journal.jsonl")
+    if journal.path.exists() and not (resume or fresh):
+        raise ConfigError(f'--out = "{out}": already holds a batch journal; use --resume to '
+                          "continue it or --fresh to start over")
+    out.mkdir(parents=True, exist_ok=True)
+    done = journal.read() if resume else {}
+    if logs:
+        for t in tasks:
+            t.logs_dir = str(out / "runs")
+    todo = [t for t in tasks if t.config_hash not in done]
+    rows_by_index: dict[int, dict[str, Any]] = {}
+    for t in tasks:
+        if t.config_hash in done:
+            rows_by_index[t.index] = _rebase_row(done[t.config_hash], t)
+    (out / "batch.json").write_text(json.dumps({
+        "name": spec.name, "source": spec.source, "n_runs": len(tasks),
+        "axes": {a.name: a.values for a in spec.axes}, "base": spec.base,
+        "presets": spec.presets}, indent=2, default=_json_default))
+    executor = executor or SerialExecutor()
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), unit="run",
+                   desc=f"batch {spec.name}", dynamic_ncols=True, smoothing=0.05)
+    t0 = time.perf_counter()
+    journal.open(fresh=fresh and not resume)
+    n_bad = 0
+    try:
+        chunks = plan_chunks(todo, executor.workers) if todo else []
+        for c, rs in executor.map_unordered(run_chunk, [[todo[i] for i in ch] for ch in chunks],
+                                            return_exceptions=True):
+            for i, r in zip(chunks[c], rs if isinstance(rs, list) else [rs] * len(chunks[c]),
+                            strict=True):
+                task = todo[i]
+                retry = False
+                if isinstance(r, BaseException):
+                    # the machinery failed (worker died): a row now, re-run by --resume
+                    retry = True
+                    r = {"index": task.index, "run_id": task.run_id, **task.axis_values,
+                         "status": "error", "completed": False, "crashed": True,
+                         "crash_reason": f"worker failure: {type(r).__name__}: {r}"[:300]}
+                journal.append(task.config_hash, r, retry=retry)
+                rows_by_index[task.index] = r
+                n_bad += r.get("status") != "ok"
+                if on_row is not None:
+                    on_row(r)
+                if bar is not None:
+                    bar.update(1)
+                    if n_bad:
+                        bar.set_postfix(failed=n_bad, refresh=False)
+    finally:
+        if bar is not None:
+            bar.close()
+        journal.close()
+        rows = [rows_by_index[k] for k in sorted(rows_by_index)]
+        write_results_csv(rows, out / "results.csv", [a.name for a in spec.axes])
+    wall = time.perf_counter() - t0
+    res = BatchResult(rows=rows, out_dir=out, n_run=len(todo), n_skipped=len(tasks) - len(todo),
+                      wall_s=wall, executor=executor.name, files=[out / "results.csv"])
+    if report:
+        res.files += write_report(rows, spec, out, info={
+            "executor": executor.name, "wall time (this call)": f"{wall:.1f} s",
+            "runs executed / resumed": f"{res.n_run} / {res.n_skipped}"})
+    return res
+
+
+def _rebase_row(row: dict[str, Any], task: RunTask) -> dict[str, Any]:
+    """A journal row under the current spec's index and axis values (same config hash)."""
+    r = dict(row)
+    r.update({"index": task.index, "run_id": task.run_id, **task.axis_values})
+    return r
+
+
+# ------------------------------------------------------------------------- geometry helper
+def write_rect_field(path: str | Path, width_m: float, height_m: float,
+                     lat0: float = 46.7300, lon0: float = -117.0000, name: str = "rect") -> Path:
+    """Write a ``width_m × height_m`` rectangular field (east × north) as a GeoJSON polygon about
+    (lat0, lon0): short missions for tests, benchmarks and quick experiments."""
+    from ..world.field import enu_to_lonlat
+
+    e = [0.0, width_m, width_m, 0.0, 0.0]
+    n = [0.0, 0.0, height_m, height_m, 0.0]
+    lon, lat = enu_to_lonlat(e, n, (lat0, lon0, 0.0))
+    ring = [[round(float(a), 10), round(float(b), 10)] for a, b in zip(lon, lat, strict=True)]
+    gj = {"type": "Feature", "properties": {"name": name},
+          "geometry": {"type": "Polygon", "coordinates": [ring]}}
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(gj))
+    return p
+
+
+# ---------------------------------------------------------------------------------- benchmark
+def _bench_task(cfg_dict: dict[str, Any]) -> float:
+    from ..engine.missions import simulate
+
+    res = simulate(config_from_dict(cfg_dict))
+    return float(res.summary["sim_time_s"])
+
+
+def bench_workers(cfg: Config, repeats: int = 1, quick: bool = False, *,
+                  n_runs: int | None = None, workers: Sequence[int] = (1, 2),
+                  mission_s: float | None = None) -> dict[str, Any]:
+    """Throughput of a batch of short missions on the local process pool with 1 and 2 workers
+    (pools started and warmed up before timing; best of ``repeats``).
+
+    Returns ``{"workers": {"runs": n, "mission_sim_s": ..., "runs_per_s_w1": ...,
+    "runs_per_s_w2": ..., "speedup_w2": ...}}``. The missions are ``cfg`` with seeds 0..n-1,
+    no log and ``sim.max_time_s`` capped at ``mission_s`` (default 30 s, 15 s with ``quick``).
+    """
+    c = copy.deepcopy(cfg)
+    c.log.enabled = False
+    cap = mission_s if mission_s is not None else (15.0 if quick else 30.0)
+    c.sim.max_time_s = min(c.sim.max_time_s, cap)
+    n = n_runs if n_runs is not None else (8 if quick else 16)
+    items = []
+    for s in range(n):
+        d = c.to_dict()
+        d["seed"] = s
+        items.append(d)
+    out: dict[str, Any] = {"runs": n, "mission_sim_s": cap, "cores": os.cpu_count()}
+    rates: dict[int, float] = {}
+    for w in workers:
+        best = 0.0
+        with LocalPoolExecutor(w) as ex:
+            ex.warm_up()
+            for _ in range(max(1, repeats)):
+                t0 = time.perf_counter()
+                sims = ex.map(_bench_task, items)
+                dt = time.perf_counter() - t0
+                best = max(best, n / dt)
+        rates[w] = best
+        out[f"runs_per_s_w{w}"] = round(best, 3)
+        out[f"sim_s_per_wall_s_w{w}"] = round(best * (sum(sims) / n), 1)
+    w0 = min(workers)
+    for w in workers:
+        if w != w0:
+            out[f"speedup_w{w}"] = round(rates[w] / rates[w0], 3)
+    return {"workers": out}
+
+
+__all__ = ["Axis", "BatchSpec", "RunTask", "BatchResult", "load_spec", "spec_from_dict", "expand",
+           "run_task", "run_batch", "Journal", "write_results_csv", "read_results_csv",
+           "write_report", "summary_rows", "mean_ci", "bench_workers", "write_rect_field",
+           "is_timing_column", "config_hash", "deep_merge", "set_dotted", "get_dotted"]

@@ -1,0 +1,314 @@
+"""``ag-uav bench``: speed figures measured in one process and one run.
+
+Closed-loop speed of the default mission (no log, no renders) against raw MuJoCo stepping of the
+very same compiled model, in sim-seconds per wall-second, and their ratio. Ratios taken in one run
+are what to quote: absolute figures move with machine load.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+import mujoco
+
+from ..config import Config
+from ..vehicle.mjcf import G, build_vehicle
+
+
+def _median_rate(fn: Callable[[], tuple[float, float]], repeats: int) -> float:
+    """Median of sim-seconds per wall-second over ``repeats`` calls of ``fn`` -> (sim_s, wall_s)."""
+    rates = []
+    for _ in range(repeats):
+        sim_s, wall_s = fn()
+        rates.append(sim_s / wall_s)
+    return statistics.median(rates)
+
+
+def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float, float]:
+    """Raw MuJoCo stepping of the mission's model: hover thrust, ``mj_step(m, d, nstep)`` in a
+    Python loop (nstep=1: one call per physics step)."""
+    veh = build_vehicle(cfg, _outline(cfg))
+    m = veh.model
+    d = mujoco.MjData(m)
+    d.qpos[2] = 3.0
+    d.ctrl[:] = veh.mass * G / 4
+    d.act[:] = veh.mass * G / 4
+    n_calls = int(sim_seconds / (m.opt.timestep * nstep))
+    step = mujoco.mj_step
+    t0 = time.perf_counter()
+    if nstep == 1:
+        for _ in range(n_calls):
+            step(m, d)
+    else:
+        for _ in range(n_calls):
+            step(m, d, nstep)
+    wall = time.perf_counter() - t0
+    return n_calls * nstep * m.opt.timestep, wall
+
+
+def _outline(cfg: Config):
+    import numpy as np
+
+    from ..engine.missions import build_field
+
+    fld = build_field(cfg)
+    return [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
+
+
+def closed_loop(cfg: Config) -> tuple[float, float, dict]:
+    from ..engine.missions import simulate
+
+    c = copy.deepcopy(cfg)
+    c.log.enabled = False
+    res = simulate(c)
+    s = res.summary
+    return s["sim_time_s"], s["loop_wall_time_s"], s
+
+
+def run_bench(cfg: Config, repeats: int = 3, quick: bool = False) -> dict[str, Any]:
+    out: dict[str, Any] = {"repeats": repeats}
+    c = with_overrides(cfg, TRUE_STATE_OVERRIDES)
+    if quick:
+        c.sim.max_time_s = min(c.sim.max_time_s, 60.0)
+    ce = with_overrides(c, ESTIMATOR_LOG_OVERRIDES)
+    last: dict = {}
+
+    def cl() -> tuple[float, float]:
+        sim_s, wall_s, s = closed_loop(c)
+        last.update(s)
+        return sim_s, wall_s
+
+    closed = _median_rate(cl, repeats)
+    sim_len = last.get("sim_time_s", 60.0)
+    nsub = round(1.0 / (c.sim.timestep_s * c.sim.control_hz))
+    raw1 = _median_rate(lambda: raw_stepping(c, sim_len, 1), repeats)
+    rawn = _median_rate(lambda: raw_stepping(c, sim_len, nsub), repeats)
+    out["closed_loop"] = {
+        "sim_s_per_wall_s": round(closed, 1),
+        "mission_sim_s": sim_len,
+        "completed": last.get("completed"),
+        "control_hz": c.sim.control_hz,
+        "timestep_s": c.sim.timestep_s,
+    }
+    out["raw_mujoco"] = {
+        "per_step_call_sim_s_per_wall_s": round(raw1, 1),
+        f"nstep{nsub}_call_sim_s_per_wall_s": round(rawn, 1),
+    }
+    single = _median_rate(lambda: closed_loop(ce)[:2], repeats)
+    out["single_estimators"] = {
+        "sim_s_per_wall_s": round(single, 1),
+        "config": ", ".join(f"{k}={v}" for k, v in ESTIMATOR_LOG_OVERRIDES.items()),
+        "ratio_vs_raw_per_step": round(single / raw1, 3),
+    }
+    out["ratio_closed_vs_raw_per_step"] = round(closed / raw1, 3)
+    out["ratio_closed_vs_raw_nstep"] = round(closed / rawn, 3)
+    out["logging"] = logging_cost(c, repeats)
+    for extra in _EXTRA:
+        try:
+            out.update(extra(c, repeats, quick))
+        except Exception as e:  # a failing extra must not hide the main figures
+            out[f"{extra.__name__}_error"] = f"{type(e).__name__}: {e}"
+    return out
+
+
+#: the true-state configuration the closed-loop, raw and logging ratios are measured on
+TRUE_STATE_OVERRIDES: dict[str, Any] = {"estimator.name": "true", "estimator.shadow": []}
+
+#: the estimator configuration the logging section also measures: RTK GNSS, PCA-MCKF in the loop,
+#: KF/MCKF/PCA-KF shadows (logs /gps and four /estimator/<name> channels on top of the state)
+ESTIMATOR_LOG_OVERRIDES: dict[str, Any] = {
+    "gps.preset": "rtk-m350",
+    "estimator.name": "pca-mckf",
+    "estimator.shadow": ["kf", "mckf", "pca-kf"],
+}
+
+
+def with_overrides(cfg: Config, overrides: dict[str, Any]) -> Config:
+    """``cfg`` with dotted-key ``overrides`` applied (validated like ``--set``)."""
+    from ..config import config_from_dict
+
+    data = cfg.to_dict()
+    for k, v in overrides.items():
+        node = data
+        parts = k.split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = copy.deepcopy(v)
+    return config_from_dict(data)
+
+
+def _spread(ratios: list[float]) -> dict[str, float]:
+    return {"min": round(min(ratios), 3), "max": round(max(ratios), 3)}
+
+
+class _LoopCpu:
+    """``tick_hook`` that samples the process CPU time every 64 ticks: the loop's CPU seconds
+    (first tick to the last sample), which a busy shared machine moves far less than wall time.
+    The same hook runs in the unlogged and the logged loops, so it cancels in their ratio."""
+
+    def __init__(self) -> None:
+        self.k = 0
+        self.first = self.last = 0.0
+
+    def __call__(self, t: float, data: Any) -> None:
+        k = self.k
+        self.k = k + 1
+        if k & 63 == 0:
+            self.last = time.process_time()
+            if k == 0:
+                self.first = self.last
+
+    @property
+    def seconds(self) -> float:
+        return self.last - self.first
+
+
+def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
+    """Loop wall time of the mission with the full MCAP channel set (no renders) and the light set
+    against the same loop unlogged, and the same for the estimator configuration
+    (:data:`ESTIMATOR_LOG_OVERRIDES` applied to ``cfg``).
+
+    Each repeat flies the unlogged loop and right after it the logged ones, so every ratio is
+    taken between neighbouring runs (a load change on a shared machine hits both); the ratios
+    are the medians of those per-repeat ratios, with their min and max as the spread.  The
+    ``*_cpu`` ratios are the same from the loop's process CPU time.
+    """
+    import tempfile
+    from pathlib import Path
+
+    from ..engine.missions import simulate
+    from ..record.runlog import RunLog
+
+    c = copy.deepcopy(cfg)
+    c.log.render = False
+    ce = with_overrides(c, ESTIMATOR_LOG_OVERRIDES)
+
+    def fly(conf: Config, path: Path | None, channels: str = "full") -> tuple[float, float]:
+        hook = _LoopCpu()
+        if path is None:
+            wall = simulate(conf, tick_hook=hook).summary["loop_wall_time_s"]
+            return wall, hook.seconds
+        with RunLog(path, channels=channels, rates={"camera": 0.0}, metadata={},
+                    config_toml="", layout=False) as log:
+            wall = simulate(conf, log=log, tick_hook=hook).summary["loop_wall_time_s"]
+        return wall, hook.seconds
+
+    runs: dict[str, list[tuple[float, float]]] = {
+        k: [] for k in ("plain", "full", "light", "e_plain", "e_full")}
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        for i in range(repeats):
+            runs["plain"].append(fly(c, None))
+            runs["full"].append(fly(c, d / f"full{i}.mcap"))
+            runs["light"].append(fly(c, d / f"light{i}.mcap", "light"))
+            runs["e_plain"].append(fly(ce, None))
+            runs["e_full"].append(fly(ce, d / f"est{i}.mcap"))
+        size = (d / "full0.mcap").stat().st_size
+        e_size = (d / "est0.mcap").stat().st_size
+    med = statistics.median
+
+    def ratios(num: str, den: str, j: int = 0) -> list[float]:
+        return [a[j] / b[j] for a, b in zip(runs[num], runs[den], strict=True)]
+
+    def wall(k: str) -> float:
+        return round(med(r[0] for r in runs[k]), 3)
+
+    r_full, r_light, r_est = ratios("full", "plain"), ratios("light", "plain"), ratios(
+        "e_full", "e_plain")
+    return {"unlogged_loop_s": wall("plain"), "full_log_loop_s": wall("full"),
+            "light_log_loop_s": wall("light"),
+            "full_over_unlogged": round(med(r_full), 3),
+            "full_over_unlogged_spread": _spread(r_full),
+            "full_over_unlogged_cpu": round(med(ratios("full", "plain", 1)), 3),
+            "light_over_unlogged": round(med(r_light), 3),
+            "full_log_mb": round(size / 1e6, 2),
+            "estimators_unlogged_loop_s": wall("e_plain"),
+            "estimators_full_log_loop_s": wall("e_full"),
+            "estimators_ratio": round(med(r_est), 3),
+            "estimators_ratio_spread": _spread(r_est),
+            "estimators_ratio_cpu": round(med(ratios("e_full", "e_plain", 1)), 3),
+            "estimators_full_log_mb": round(e_size / 1e6, 2),
+            "estimators_config": ", ".join(f"{k}={v}" for k, v in
+                                           ESTIMATOR_LOG_OVERRIDES.items())}
+
+
+def _workers(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    from .batch import bench_workers
+
+    return bench_workers(cfg, repeats=max(1, min(repeats, 2)), quick=quick)
+
+
+def _estimators(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    from .bench_estimators import bench_estimators
+
+    return {"estimators": bench_estimators(repeats=repeats, n=500 if quick else 2000)}
+
+
+#: further sections, each fn(cfg, repeats, quick) -> dict merged into the output
+def batched_rate(cfg: Config, n: int, sim_s: float) -> tuple[float, float]:
+    """Vehicle-sim-seconds and loop wall seconds of ``n`` missions of ``cfg`` (seeds 0…n-1,
+    cut at ``sim_s``) flown as one lockstep batch (:func:`ag_uav.engine.missions.simulate_many`)."""
+    from ..engine.missions import simulate_many
+
+    cfgs = []
+    for i in range(n):
+        c = copy.deepcopy(cfg)
+        c.seed = i
+        c.log.enabled = False
+        c.log.render = False
+        c.sim.max_time_s = sim_s
+        cfgs.append(c)
+    res = simulate_many(cfgs)
+    sim = sum(r.summary["sim_time_s"] for r in res)
+    return sim, res[0].summary["loop_wall_time_s"] * n
+
+
+def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    """``batched`` (true state) and ``batched_estimators`` (:data:`ESTIMATOR_LOG_OVERRIDES`):
+    N missions in one engine batch, vehicle-sim-s per wall-s, against raw single-loop
+    stepping of the same model measured right before (the ratio is taken within the run)."""
+    n, sim_s = (16, 20.0) if quick else (64, 60.0)
+    ce = with_overrides(c, ESTIMATOR_LOG_OVERRIDES)
+    batched_rate(ce, 2, 1.0)  # load the compiled kernels outside the timed loops
+    out: dict[str, Any] = {}
+    for key, conf in (("batched", c), ("batched_estimators", ce)):
+        raw = _median_rate(lambda: raw_stepping(c, sim_s, 1), repeats)
+        rate = _median_rate(lambda conf=conf: batched_rate(conf, n, sim_s), repeats)
+        out[key] = {"vehicles": n, "mission_sim_s": sim_s,
+                    "sim_s_per_wall_s": round(rate, 1),
+                    "raw_per_step_sim_s_per_wall_s": round(raw, 1),
+                    "ratio_vs_raw": round(rate / raw, 3),
+                    "engine_threads": min(os.cpu_count() or 1, n)}
+    out["batched_estimators"]["config"] = ", ".join(
+        f"{k}={v}" for k, v in ESTIMATOR_LOG_OVERRIDES.items())
+    return out
+
+
+_EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers, _batched]
+
+
+def print_bench(out: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title="ag-uav bench (one process, one run)")
+    t.add_column("measurement")
+    t.add_column("value", justify="right")
+
+    def walk(d: dict, prefix: str = "") -> None:
+        for k, v in d.items():
+            if isinstance(v, dict):
+                walk(v, f"{prefix}{k}.")
+            else:
+                if isinstance(v, float) and not math.isfinite(v):
+                    v = "n/a"
+                t.add_row(f"{prefix}{k}", str(v))
+
+    walk(out)
+    Console().print(t)

@@ -1,0 +1,753 @@
+"""Controller tuning: BB-BC (or PSO) over IT2-FPID gains on simulated scenarios.
+
+``ag-uav tune SPEC.toml`` (see ``examples/tune.toml``) minimises
+
+    J(x) = Σ_s w_s · J_s(x)
+
+over a box of config keys (``[params]``, e.g. ``"controller.xy.ke" = {lo = 0.1, hi = 10,
+log = true}``: ``log`` searches log10 of the value). Each scenario ``s`` is flown with the
+candidate's gains and the *same* run seed (``noise_seed``) for every candidate (common random
+numbers):
+
+- ``kind = "step"``: hover at 3 m, step of ``size`` m on ``axis`` (x, y or z) at ``t_step``
+  (:func:`ag_uav.engine.scenarios.step_response`); error e(t) = p_ref − p over the 3 axes after the
+  step;
+- ``kind = "mission"``: the base config's mission, cut at ``max_time_s`` of sim time (take-off and
+  the first leg(s)); error e(t) = p_ref − p_true over every tick.
+
+with ``J_s = ∫|e|² dt`` (ISE) or ``∫ (t − t0)|e| dt`` (ITAE), plus ``effort_weight · Σ|Δf|²``
+(rotor-thrust increments, N²). A crash (or a non-finite cost) costs
+``crash_penalty · (2 − t_crash / duration)`` — finite, and worse the earlier it happens — and
+every scenario cost is capped at ``crash_penalty``.
+
+Population members are evaluated in parallel on the :mod:`~ag_uav.jobs.executor` seam. After every
+iteration the optimiser state is checkpointed atomically (``checkpoint.json``); every evaluation is
+also appended to ``evals.jsonl`` (flushed per line), so ``--resume`` continues exactly where a
+killed run stopped — finished iterations and finished evaluations of the current one are not
+re-run, and the result equals an uninterrupted run (the optimiser RNG state is checkpointed; the
+cost is deterministic). The configured default gains are put in the initial population (member 0)
+so the tuned cost can never be worse than the default's.
+
+Outputs in ``--out``: ``best_gains.toml`` (a config fragment ``[controller.xy] ke = ...`` that
+``fly --config`` and batch presets accept), ``convergence.png``, ``before_after.md`` (default vs
+tuned on the same scenarios, also printed) and ``tune.json``.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import math
+import os
+import time
+import tomllib
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import Config, ConfigError, config_from_dict
+from .batch import get_dotted, resolve_fragment, set_dotted
+from .executor import Executor, SerialExecutor
+
+SPEC_KEYS = ("name", "description", "optimizer", "pop", "iters", "seed", "noise_seed", "metric",
+             "crash_penalty", "effort_weight", "include_default", "base", "params", "scenarios",
+             "optimizer_options")
+AXES = {"x": 0, "y": 1, "z": 2}
+OPTIMIZERS = ("bbbc", "pso")
+METRICS = ("ise", "itae")
+
+
+@dataclass
+class Param:
+    key: str
+    lo: float
+    hi: float
+    log: bool = False
+
+    def to_internal(self, v: float) -> float:
+        return math.log10(v) if self.log else v
+
+    def from_internal(self, u: float) -> float:
+        return float(10.0 ** u) if self.log else float(u)
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        return self.to_internal(self.lo), self.to_internal(self.hi)
+
+
+@dataclass
+class Scenario:
+    kind: str                      # "step" | "mission"
+    name: str
+    axis: int = 0
+    size: float = 1.0
+    duration: float = 6.0          # step: seconds after the step
+    t_step: float = 1.0
+    wind_speed: float = 0.0
+    max_time_s: float = 40.0       # mission: sim-time cut
+    weight: float = 1.0
+    overshoot_max: float = math.inf  # step: soft bound on the overshoot (fraction of the step)
+    overshoot_penalty: float = 0.0   # step: cost per unit fraction of overshoot beyond the bound
+
+
+@dataclass
+class TuneSpec:
+    name: str
+    base: dict[str, Any]
+    params: list[Param]
+    scenarios: list[Scenario]
+    optimizer: str = "bbbc"
+    pop: int = 20
+    iters: int = 20
+    seed: int = 0
+    noise_seed: int = 0
+    metric: str = "ise"
+    crash_penalty: float = 1000.0
+    effort_weight: float = 0.0
+    include_default: bool = True
+    optimizer_options: dict[str, Any] = field(default_factory=dict)
+    description: str = ""
+    source: str | None = None
+
+    def hash(self) -> str:
+        """What a checkpoint must match to be resumed (``iters`` may grow)."""
+        d = asdict(self)
+        for k in ("iters", "description", "source", "name"):
+            d.pop(k)
+        blob = json.dumps(d, sort_keys=True, default=str)
+        return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {_fmt(x)}" for k, x in v.items()) + "}"
+    return repr(v)
+
+
+def _num(v: Any, where: str, *, gt: float | None = None, ge: float | None = None) -> float:
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        raise ConfigError(f"{where} = {_fmt(v)}: expected a finite number")
+    if gt is not None and not v > gt:
+        raise ConfigError(f"{where} = {_fmt(v)}: must be > {gt}")
+    if ge is not None and not v >= ge:
+        raise ConfigError(f"{where} = {_fmt(v)}: must be >= {ge}")
+    return float(v)
+
+
+def _int(v: Any, where: str, lo: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+        raise ConfigError(f"{where} = {_fmt(v)}: expected an integer >= {lo}")
+    return v
+
+
+def _parse_scenario(i: int, s: Any) -> Scenario:
+    where = f"scenarios[{i}]"
+    if not isinstance(s, dict):
+        raise ConfigError(f"{where} = {_fmt(s)}: expected a table")
+    kind = s.get("kind")
+    allowed = {"step": {"kind", "name", "axis", "size", "duration", "t_step", "wind_speed",
+                        "weight", "overshoot_max", "overshoot_penalty"},
+               "mission": {"kind", "name", "max_time_s", "weight"}}
+    if kind not in allowed:
+        raise ConfigError(f"{where}.kind = {_fmt(kind)}: allowed: step, mission")
+    for k in s:
+        if k not in allowed[kind]:
+            raise ConfigError(f"{where}.{k} = {_fmt(s[k])}: unknown key for a {kind} scenario; "
+                              f"allowed: {', '.join(sorted(allowed[kind]))}")
+    weight = _num(s.get("weight", 1.0), f"{where}.weight", ge=0.0)
+    if kind == "step":
+        ax = s.get("axis", "x")
+        if ax not in AXES:
+            raise ConfigError(f"{where}.axis = {_fmt(ax)}: allowed: x, y, z")
+        size = _num(s.get("size", 1.0), f"{where}.size")
+        if size == 0.0:
+            raise ConfigError(f"{where}.size = 0.0: must be non-zero")
+        dur = _num(s.get("duration", 6.0), f"{where}.duration", gt=0.0)
+        ts = _num(s.get("t_step", 1.0), f"{where}.t_step", ge=0.0)
+        ws = _num(s.get("wind_speed", 0.0), f"{where}.wind_speed", ge=0.0)
+        name = s.get("name", f"step-{ax}")
+        om = (math.inf if "overshoot_max" not in s
+              else _num(s["overshoot_max"], f"{where}.overshoot_max", ge=0.0))
+        op = _num(s.get("overshoot_penalty", 0.0), f"{where}.overshoot_penalty", ge=0.0)
+        return Scenario("step", str(name), AXES[ax], size, dur, ts, ws, weight=weight,
+                        overshoot_max=om, overshoot_penalty=op)
+    mt = _num(s.get("max_time_s", 40.0), f"{where}.max_time_s", gt=0.0)
+    return Scenario("mission", str(s.get("name", "mission")), max_time_s=mt, weight=weight)
+
+
+def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".", name: str = "tune",
+                   source: str | None = None) -> TuneSpec:
+    """Validate a tune spec (TOML-shaped dict); one-line ConfigError on anything wrong."""
+    base_dir = Path(base_dir)
+    for k in data:
+        if k not in SPEC_KEYS:
+            raise ConfigError(f"{k} = {_fmt(data[k])}: unknown key in a tune spec; allowed: "
+                              f"{', '.join(SPEC_KEYS)}")
+    base = resolve_fragment(data.get("base", {}), "base", base_dir)
+    try:
+        base_cfg = config_from_dict(base)
+    except ConfigError as e:
+        raise ConfigError(f"base: {e}") from None
+    opt = data.get("optimizer", "bbbc")
+    if opt not in OPTIMIZERS:
+        raise ConfigError(f"optimizer = {_fmt(opt)}: allowed: {', '.join(OPTIMIZERS)}")
+    metric = data.get("metric", "ise")
+    if metric not in METRICS:
+        raise ConfigError(f"metric = {_fmt(metric)}: allowed: {', '.join(METRICS)}")
+    params_raw = data.get("params")
+    if not isinstance(params_raw, dict) or not params_raw:
+        raise ConfigError(f"params = {_fmt(params_raw)}: expected a table of "
+                          '"config.key" = {lo = .., hi = ..} (at least one)')
+    params: list[Param] = []
+    for key, b in params_raw.items():
+        where = f'params."{key}"'
+        if isinstance(b, list):
+            b = {"lo": b[0], "hi": b[1]} if len(b) == 2 else {"lo": None}
+        if not isinstance(b, dict) or set(b) - {"lo", "hi", "log"} or not {"lo", "hi"} <= set(b):
+            raise ConfigError(f"{where} = {_fmt(b)}: expected [lo, hi] or {{lo, hi, log}}")
+        lo = _num(b["lo"], f"{where}.lo")
+        hi = _num(b["hi"], f"{where}.hi")
+        if not hi > lo:
+            raise ConfigError(f"{where} = {_fmt(b)}: need lo < hi")
+        log = b.get("log", False)
+        if not isinstance(log, bool):
+            raise ConfigError(f"{where}.log = {_fmt(log)}: expected true or false")
+        if log and lo <= 0:
+            raise ConfigError(f"{where}.lo = {lo}: must be > 0 with log = true")
+        cur = get_dotted(base_cfg.to_dict(), key)
+        if isinstance(cur, bool) or not isinstance(cur, int | float):
+            raise ConfigError(f"{where}: not a numeric config key")
+        for v in (lo, hi):  # the config's own range checks, with the key's name
+            d = copy.deepcopy(base)
+            set_dotted(d, key, round(v) if _is_int_key(key) else v)
+            config_from_dict(d)
+        params.append(Param(key, lo, hi, log))
+    sc_raw = data.get("scenarios")
+    if not isinstance(sc_raw, list) or not sc_raw:
+        raise ConfigError(f"scenarios = {_fmt(sc_raw)}: expected at least one [[scenarios]]")
+    scenarios = [_parse_scenario(i, s) for i, s in enumerate(sc_raw)]
+    names = [s.name for s in scenarios]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"scenarios: duplicate names {names}; give each a distinct name")
+    oo = data.get("optimizer_options", {})
+    if not isinstance(oo, dict):
+        raise ConfigError(f"optimizer_options = {_fmt(oo)}: expected a table")
+    allowed_oo = {"bbbc": {"spread", "centre", "elitism"},
+                  "pso": {"inertia", "c1", "c2", "v_max"}}[opt]
+    for k in oo:
+        if k not in allowed_oo:
+            raise ConfigError(f"optimizer_options.{k} = {_fmt(oo[k])}: unknown for {opt}; "
+                              f"allowed: {', '.join(sorted(allowed_oo))}")
+    inc = data.get("include_default", True)
+    if not isinstance(inc, bool):
+        raise ConfigError(f"include_default = {_fmt(inc)}: expected true or false")
+    nm = data.get("name", name)
+    return TuneSpec(
+        name=str(nm), base=base, params=params, scenarios=scenarios, optimizer=opt,
+        pop=_int(data.get("pop", 20), "pop", 2), iters=_int(data.get("iters", 20), "iters", 1),
+        seed=_int(data.get("seed", 0), "seed", 0),
+        noise_seed=_int(data.get("noise_seed", 0), "noise_seed", 0), metric=metric,
+        crash_penalty=_num(data.get("crash_penalty", 1000.0), "crash_penalty", gt=0.0),
+        effort_weight=_num(data.get("effort_weight", 0.0), "effort_weight", ge=0.0),
+        include_default=inc, optimizer_options=dict(oo),
+        description=str(data.get("description", "")), source=source)
+
+
+def load_spec(path: str | Path) -> TuneSpec:
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f'tune spec = "{p}": no such file')
+    try:
+        data = tomllib.loads(p.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f'tune spec = "{p}": not valid TOML ({e})') from None
+    return spec_from_dict(data, base_dir=p.parent, name=p.stem, source=str(p))
+
+
+# ------------------------------------------------------------------------------------ the cost
+def candidate_config(spec: TuneSpec, values: Sequence[float]) -> dict[str, Any]:
+    """The base config dict with the parameter values (natural units) set."""
+    d = copy.deepcopy(spec.base)
+    for p, v in zip(spec.params, values, strict=True):
+        set_dotted(d, p.key, round(float(v)) if _is_int_key(p.key) else float(v))
+    return d
+
+
+def _is_int_key(key: str) -> bool:
+    """Whether the config key ``key`` (dotted) is an integer field (e.g. ``estimator.window``):
+    the optimisers search reals, the candidate gets the nearest integer."""
+    import dataclasses
+    import typing
+
+    from ..config import Config
+
+    cls: Any = Config
+    for part in key.split("."):
+        hints = typing.get_type_hints(cls)
+        if part not in hints:
+            return False
+        cls = hints[part]
+        if not dataclasses.is_dataclass(cls):
+            break
+    return cls is int
+
+
+def _error_cost(t: np.ndarray, e: np.ndarray, metric: str, t0: float, dt: float) -> float:
+    mag2 = np.einsum("ij,ij->i", e, e)
+    if metric == "ise":
+        return float(np.sum(mag2) * dt)
+    return float(np.sum((t - t0) * np.sqrt(mag2)) * dt)
+
+
+def scenario_cost(cfg: Config, sc: Scenario, metric: str, crash_penalty: float,
+                  effort_weight: float, details: bool = False) -> dict[str, Any]:
+    """Cost of one scenario for one config (and, with ``details``, step metrics / RMSE)."""
+    return scenario_costs([cfg], sc, metric, crash_penalty, effort_weight, details)[0]
+
+
+def scenario_costs(cfgs: list[Config], sc: Scenario, metric: str, crash_penalty: float,
+                   effort_weight: float, details: bool = False) -> list[dict[str, Any]]:
+    """:func:`scenario_cost` of every config, their flights flown as one engine batch."""
+    if sc.kind == "step":
+        from ..engine.scenarios import step_responses
+
+        trajs = []
+        for t_rel, y, out in step_responses(cfgs, axis=sc.axis, size=sc.size,
+                                            duration=sc.duration, t_step=sc.t_step,
+                                            wind_speed=sc.wind_speed):
+            sel = out.t >= sc.t_step
+            trajs.append((out.t[sel], out.rec[sel, 6:9] - out.rec[sel, 0:3], out.rec[:, 14:18],
+                          out.crash_reason, out.crash_time, sc.duration, (t_rel, y)))
+    else:
+        trajs = [(t, p_ref - p_true, motors, crash, crash_t, full, None)
+                 for t, p_true, p_ref, motors, crash, crash_t, full in mission_trajectories(
+                     [_mission_cfg(c, sc) for c in cfgs])]
+    return [_cost(cfgs[0], sc, tr, metric, crash_penalty, effort_weight, details)
+            for tr in trajs]
+
+
+def _mission_cfg(cfg: Config, sc: Scenario) -> Config:
+    c = copy.deepcopy(cfg)
+    c.sim.max_time_s = sc.max_time_s
+    c.log.enabled = False
+    return c
+
+
+def _cost(cfg: Config, sc: Scenario, traj: tuple, metric: str, crash_penalty: float,
+          effort_weight: float, details: bool) -> dict[str, Any]:
+    t, e, motors, crash, crash_t, full, step = traj
+    dt = 1.0 / cfg.sim.control_hz
+    info: dict[str, Any] = {}
+    if sc.kind == "step":
+        from ..engine.scenarios import step_metrics
+
+        t_rel, y = step
+        t0 = sc.t_step
+        sign = 1.0 if sc.size > 0 else -1.0
+        if details and not crash:
+            info = step_metrics(t_rel, sign * y, abs(sc.size))
+        over = float(max(0.0, (np.max(sign * y) - abs(sc.size)) / abs(sc.size))) if len(y) else 0.0
+    else:
+        t0 = 0.0
+        if details:
+            dh = e[:, :2]
+            info = {"tracking_rmse_m": float(np.sqrt(np.mean(np.sum(dh * dh, axis=1))))
+                    if len(t) else None,
+                    "altitude_rmse_m": float(np.sqrt(np.mean(e[:, 2] ** 2))) if len(t) else None}
+    cost = _error_cost(t, e, metric, t0, dt) if len(t) else math.inf
+    if sc.kind == "step" and over > sc.overshoot_max:
+        # a soft constraint: every unit fraction of overshoot beyond the bound costs this much
+        cost += sc.overshoot_penalty * (over - sc.overshoot_max)
+    if effort_weight > 0 and len(motors) > 1:
+        cost += effort_weight * float(np.sum(np.diff(motors, axis=0) ** 2))
+    if crash or not math.isfinite(cost):
+        frac = min(1.0, max(0.0, ((crash_t or 0.0) - t0) / full)) if crash else 0.0
+        cost = crash_penalty * (2.0 - frac)
+    else:
+        cost = min(cost, crash_penalty)
+    return {"cost": cost, "crash": crash or "", **info}
+
+
+def mission_trajectory(cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                             str | None, float | None, float]:
+    """(t, p_true, p_ref, motors, crash_reason, crash_time, duration) of ``cfg``'s mission
+    (cut at ``sim.max_time_s``): the engine's loop output on the cached plan and reference,
+    without the metrics."""
+    return mission_trajectories([cfg])[0]
+
+
+def mission_trajectories(cfgs: list[Config]) -> list[tuple]:
+    """:func:`mission_trajectory` of every config, flown as one engine batch."""
+    from ..engine.missions import fly_many, mission_setup
+
+    out = []
+    for cfg, o in zip(cfgs, fly_many(cfgs), strict=True):
+        if isinstance(o, BaseException):
+            raise o
+        ref = mission_setup(cfg)[2]
+        rec = o.rec
+        out.append((o.t, rec[:, 0:3], rec[:, 6:9], rec[:, 14:18], o.crash_reason,
+                    o.crash_time, min(cfg.sim.max_time_s, ref.duration)))
+    return out
+
+
+def evaluate_candidate(task: dict[str, Any]) -> dict[str, Any]:
+    """Worker entry point: total cost of one candidate over all scenarios. Never raises."""
+    return evaluate_candidates([task])[0]
+
+
+def evaluate_candidates(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Worker entry point: the total cost of every candidate of ``tasks`` (a chunk of one
+    population, same spec), each scenario flown by all of them as one engine batch. Never
+    raises: a candidate that fails gets the penalty (and the chunk falls back to one at a time
+    if the batch itself fails)."""
+    spec: TuneSpec = tasks[0]["spec"]
+    penalty = 2.0 * spec.crash_penalty * sum(s.weight for s in spec.scenarios)
+    outs: list[dict[str, Any]] = [{"parts": {}, "crash": "", "cost": 0.0} for _ in tasks]
+    cfgs: list[Config | None] = []
+    for task, out in zip(tasks, outs, strict=True):
+        try:
+            cfg = config_from_dict(candidate_config(spec, task["values"]))
+            cfg.seed = spec.noise_seed
+            cfg.log.enabled = False
+            cfgs.append(cfg)
+        except Exception as e:  # noqa: BLE001 - a failing candidate gets the penalty
+            out.update(cost=penalty, crash=f"{type(e).__name__}: {e}"[:300])
+            cfgs.append(None)
+    live = [i for i, c in enumerate(cfgs) if c is not None]
+    if not live:
+        return outs
+    details = tasks[0].get("details", False)
+    try:
+        for sc in spec.scenarios:
+            rs = scenario_costs([cfgs[i] for i in live], sc, spec.metric, spec.crash_penalty,
+                                spec.effort_weight, details=details)
+            for i, r in zip(live, rs, strict=True):
+                out = outs[i]
+                out["parts"][sc.name] = r
+                out["cost"] += sc.weight * r["cost"]
+                if r["crash"] and not out["crash"]:
+                    out["crash"] = f"{sc.name}: {r['crash']}"
+    except Exception:  # noqa: BLE001 - isolate the failing candidate: one at a time
+        if len(tasks) == 1:
+            import traceback
+
+            err = traceback.format_exception_only(*__import__("sys").exc_info()[:2])[-1]
+            outs[0] = {"parts": {}, "cost": penalty, "crash": err.strip()[:300]}
+            return outs
+        return [evaluate_candidates([t])[0] for t in tasks]
+    return outs
+
+
+def chunk(items: list[Any], n_chunks: int) -> list[list[int]]:
+    """Indices of ``items`` in ``n_chunks`` contiguous, near-equal chunks (none empty)."""
+    n_chunks = max(1, min(n_chunks, len(items)))
+    bounds = np.linspace(0, len(items), n_chunks + 1).round().astype(int)
+    return [list(range(a, b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    tmp.replace(path)
+
+
+def default_values(spec: TuneSpec) -> list[float]:
+    """The base config's current values of the tuned keys (the "before" gains)."""
+    d = config_from_dict(spec.base).to_dict()
+    return [float(get_dotted(d, p.key)) for p in spec.params]
+
+
+def _make_optimizer(spec: TuneSpec) -> Any:
+    from controllers.optim import BBBC, PSO
+
+    lo = [p.bounds[0] for p in spec.params]
+    hi = [p.bounds[1] for p in spec.params]
+    oo = dict(spec.optimizer_options)
+    if spec.optimizer == "pso":
+        if isinstance(oo.get("inertia"), list):
+            oo["inertia"] = tuple(oo["inertia"])
+            oo["max_iter"] = spec.iters
+        return PSO(lo, hi, pop=spec.pop, rng=spec.seed, **oo)
+    return BBBC(lo, hi, pop=spec.pop, rng=spec.seed, **oo)
+
+
+def _opt_from_state(state: dict[str, Any]) -> Any:
+    from controllers.optim import BBBC, PSO
+
+    return (PSO if state["kind"] == "pso" else BBBC).from_state(state)
+
+
+def _population(opt: Any) -> np.ndarray:
+    return opt.ask()
+
+
+def _set_member(opt: Any, i: int, u: np.ndarray) -> None:
+    if hasattr(opt, "population"):
+        opt.population[i] = u
+    else:
+        opt.x[i] = u
+
+
+def _xkey(u: Sequence[float]) -> str:
+    return json.dumps([float(v) for v in u])
+
+
+@dataclass
+class TuneResult:
+    best_values: list[float]
+    best_cost: float
+    default_values: list[float]
+    default_cost: float
+    history: list[float]
+    iterations: int
+    n_evals: int               # evaluations run in this call (cache hits and resumed excluded)
+    wall_s: float
+    out_dir: Path
+    files: list[Path] = field(default_factory=list)
+    before_after: list[list[str]] = field(default_factory=list)
+
+
+def run_tune(spec: TuneSpec, out_dir: str | Path, executor: Executor | None = None, *,
+             resume: bool = False, fresh: bool = False, iters: int | None = None,
+             progress: bool = True, outputs: bool = True,
+             on_iteration: Callable[[int, dict[str, Any]], None] | None = None) -> TuneResult:
+    """Run (or resume) the optimisation; see the module docstring."""
+    out = Path(out_dir)
+    ck_path = out / "checkpoint.json"
+    ev_path = out / "evals.jsonl"
+    if (ck_path.exists() or ev_path.exists()) and not (resume or fresh):
+        raise ConfigError(f'--out = "{out}": already holds a tuning checkpoint; use --resume to '
+                          "continue it or --fresh to start over")
+    out.mkdir(parents=True, exist_ok=True)
+    executor = executor or SerialExecutor()
+    n_iter = iters if iters is not None else spec.iters
+    h = spec.hash()
+    x0 = default_values(spec)
+    log_stats: list[dict[str, Any]] = []
+    cache: dict[str, dict[str, Any]] = {}
+    if resume and ck_path.exists():
+        ck = json.loads(ck_path.read_text())
+        if ck.get("spec_hash") != h:
+            raise ConfigError(f'--resume: "{ck_path}" was written for a different spec '
+                              "(params, scenarios or optimizer changed); use --fresh")
+        opt = _opt_from_state(ck["optimizer"])
+        log_stats = ck.get("iterations", [])
+    else:
+        if fresh:
+            for p in (ck_path, ev_path):
+                p.unlink(missing_ok=True)
+        opt = _make_optimizer(spec)
+        if spec.include_default:
+            u0 = np.array([p.to_internal(v) for p, v in zip(spec.params, x0, strict=True)])
+            lo = np.array([p.bounds[0] for p in spec.params])
+            hi = np.array([p.bounds[1] for p in spec.params])
+            _set_member(opt, 0, np.clip(u0, lo, hi))
+    # evaluations already journalled (resume: the current iteration's finished members)
+    if ev_path.exists():
+        _repair_jsonl(ev_path)
+        for line in ev_path.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if rec.get("h") == h:
+                cache[_xkey(rec["u"])] = rec["result"]
+    evf = ev_path.open("a")
+    t_start = time.perf_counter()
+    n_new = 0
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_iter * spec.pop, initial=opt.iteration * spec.pop, unit="eval",
+                   desc=f"tune {spec.name}", dynamic_ncols=True, smoothing=0.05)
+    try:
+        while opt.iteration < n_iter:
+            t_it = time.perf_counter()
+            U = _population(opt)
+            k = opt.iteration + 1
+            results: list[dict[str, Any] | None] = [None] * len(U)
+            todo = []
+            for i, u in enumerate(U):
+                hit = cache.get(_xkey(u))
+                if hit is not None:
+                    results[i] = hit
+                    if bar is not None:
+                        bar.update(1)
+                else:
+                    todo.append(i)
+            tasks = [{"spec": spec, "values": [p.from_internal(v) for p, v in
+                                               zip(spec.params, U[i], strict=True)]}
+                     for i in todo]
+            chunks = chunk(tasks, executor.workers)
+            for c, rs in executor.map_unordered(
+                    evaluate_candidates, [[tasks[j] for j in ch] for ch in chunks],
+                    return_exceptions=True):
+                if not isinstance(rs, list):
+                    rs = [rs] * len(chunks[c])
+                for j, r in zip(chunks[c], rs, strict=True):
+                    i = todo[j]
+                    if isinstance(r, BaseException):
+                        r = {"cost": 2.0 * spec.crash_penalty
+                             * sum(s.weight for s in spec.scenarios),
+                             "crash": f"worker failure: {type(r).__name__}: {r}"[:300],
+                             "parts": {}}
+                        results[i] = r  # not journalled: re-evaluated on resume
+                    else:
+                        results[i] = r
+                        cache[_xkey(U[i])] = r
+                        evf.write(json.dumps({"h": h, "iter": k, "i": i, "u": U[i].tolist(),
+                                             "result": r})
+                                  + "\n")
+                        evf.flush()
+                        os.fsync(evf.fileno())
+                    n_new += 1
+                    if bar is not None:
+                        bar.update(1)
+            costs = [r["cost"] for r in results]  # type: ignore[index]
+            opt.tell(costs)
+            fin = np.array([c for c in costs if math.isfinite(c)])
+            stat = {"iteration": k, "best_so_far": opt.best_f, "gen_min": float(fin.min()),
+                    "gen_median": float(np.median(fin)), "crashes": sum(
+                        bool(r["crash"]) for r in results),  # type: ignore[index]
+                    "wall_s": round(time.perf_counter() - t_it, 3)}
+            log_stats.append(stat)
+            ck = {"version": 1, "spec_hash": h, "spec_name": spec.name,
+                  "optimizer": opt.state_dict(), "iterations": log_stats,
+                  "default_values": x0}
+            _atomic_write(ck_path, json.dumps(ck))
+            if bar is not None:
+                bar.set_postfix(best=f"{opt.best_f:.4g}", refresh=False)
+            if on_iteration is not None:
+                on_iteration(k, stat)
+    finally:
+        evf.close()
+        if bar is not None:
+            bar.close()
+    wall = time.perf_counter() - t_start
+    best_u = opt.best_x
+    best = [p.from_internal(v) for p, v in zip(spec.params, best_u, strict=True)]
+    res = TuneResult(best_values=best, best_cost=float(opt.best_f), default_values=x0,
+                     default_cost=math.nan, history=list(opt.history), iterations=opt.iteration,
+                     n_evals=n_new, wall_s=wall, out_dir=out)
+    if outputs:
+        write_outputs(spec, res, executor, log_stats)
+    return res
+
+
+def _repair_jsonl(path: Path) -> None:
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        with path.open("r+b") as f:
+            f.truncate(data.rfind(b"\n") + 1)
+
+
+# ------------------------------------------------------------------------------------ outputs
+def gains_toml(spec: TuneSpec, values: Sequence[float], comment: str = "") -> str:
+    """The tuned keys as a TOML config fragment (``[controller.xy]`` ``ke = ...``)."""
+    import tomli_w
+
+    d: dict[str, Any] = {}
+    for p, v in zip(spec.params, values, strict=True):
+        set_dotted(d, p.key, float(v))
+    head = "".join(f"# {line}\n" for line in comment.splitlines()) if comment else ""
+    return head + tomli_w.dumps(d)
+
+
+def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
+                  log_stats: list[dict[str, Any]]) -> None:
+    """best_gains.toml, convergence.png, before_after.md (printed), tune.json."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = res.out_dir
+    # before/after on the same scenarios, with details
+    tasks = [{"spec": spec, "values": res.default_values, "details": True},
+             {"spec": spec, "values": res.best_values, "details": True}]
+    before, after = executor.map(evaluate_candidate, tasks)
+    res.default_cost = float(before["cost"])
+    gp = out / "best_gains.toml"
+    gp.write_text(gains_toml(spec, res.best_values, comment=(
+        f"ag-uav tune {spec.source or spec.name}: {spec.optimizer.upper()} {spec.pop} x "
+        f"{res.iterations}, {spec.metric.upper()} cost {res.best_cost:.6g} "
+        f"(default gains: {res.default_cost:.6g})\n"
+        "use: ag-uav fly --config best_gains.toml, or a batch preset {config = \"...\"}")))
+    # convergence
+    fig, ax = plt.subplots(figsize=(6, 3.8))
+    its = [s["iteration"] for s in log_stats]
+    ax.plot(its, [s["best_so_far"] for s in log_stats], "o-", ms=3, label="best so far")
+    ax.plot(its, [s["gen_min"] for s in log_stats], ".", ms=4, label="generation best")
+    ax.plot(its, [s["gen_median"] for s in log_stats], "--", lw=0.8, label="generation median")
+    ax.axhline(res.default_cost, color="k", lw=0.8, ls=":", label="default gains")
+    ax.set_yscale("log")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel(f"cost ({spec.metric.upper()})")
+    ax.set_title(f"{spec.optimizer.upper()} convergence: {spec.name}", fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    cp = out / "convergence.png"
+    fig.savefig(cp, dpi=110)
+    plt.close(fig)
+    # before/after table
+    header = ["scenario", "quantity", "default", "tuned"]
+    table: list[list[str]] = []
+    for p, a, b in zip(spec.params, res.default_values, res.best_values, strict=True):
+        table.append(["gains", p.key, f"{a:.4g}", f"{b:.4g}"])
+    for sc in spec.scenarios:
+        pb, pa = before["parts"].get(sc.name, {}), after["parts"].get(sc.name, {})
+        for key, val in pb.items():
+            if key == "crash":
+                if val or pa.get("crash"):
+                    table.append([sc.name, "crash", str(val or "-"), str(pa.get("crash") or "-")])
+                continue
+            table.append([sc.name, key, _f4(val), _f4(pa.get(key))])
+    table.append(["total", "cost", _f4(before["cost"]), _f4(after["cost"])])
+    from .batch import markdown_table, print_table
+
+    print_table(header, table, f"default vs tuned gains ({spec.metric.upper()}, same scenarios)")
+    md = [f"# Tuning `{spec.name}`", "",
+          f"- optimizer: {spec.optimizer.upper()}, population {spec.pop}, "
+          f"iterations {res.iterations}, seed {spec.seed}",
+          f"- cost: {spec.metric.upper()}, crash penalty {spec.crash_penalty:g}, "
+          f"noise seed {spec.noise_seed} (every candidate)",
+          f"- executor: {executor.name}; wall time (this call) {res.wall_s:.1f} s",
+          f"- best cost {res.best_cost:.6g}; default gains {res.default_cost:.6g}", "",
+          markdown_table(header, table), "![convergence](convergence.png)", ""]
+    bp = out / "before_after.md"
+    bp.write_text("\n".join(md))
+    jp = out / "tune.json"
+    jp.write_text(json.dumps({
+        "name": spec.name, "best": dict(zip([p.key for p in spec.params], res.best_values,
+                                            strict=True)),
+        "best_cost": res.best_cost, "default": dict(zip([p.key for p in spec.params],
+                                                        res.default_values, strict=True)),
+        "default_cost": res.default_cost, "history": res.history,
+        "iterations": log_stats, "wall_s": res.wall_s, "executor": executor.name}, indent=2))
+    res.files = [gp, cp, bp, jp]
+    res.before_after = table
+
+
+def _f4(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return "inf" if math.isinf(v) else f"{v:.4g}"
+    return str(v)
+
+
+__all__ = ["Param", "Scenario", "TuneSpec", "TuneResult", "load_spec", "spec_from_dict",
+           "run_tune", "evaluate_candidate", "scenario_cost", "candidate_config", "gains_toml",
+           "default_values"]

@@ -1,0 +1,2 @@
+"""What the controller flies on: the feedback seam (true state or an estimate), the estimator banks
+fed by GNSS, bearings or the planned route."""

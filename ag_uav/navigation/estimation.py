@@ -1,0 +1,574 @@
+"""The estimator bank in the loop: GPS fixes → filters → the estimate the controller flies on.
+
+:class:`EstimatorFeedback` plugs into the feedback seam of :mod:`ag_uav.engine.missions`. Every
+control tick it asks the :class:`~ag_uav.vehicle.gps.GpsSensor` for a fix (one arrives at the
+sensor's rate), predicts every filter one control period ahead, and updates all of them with the
+very same fix. The
+*primary* filter (``estimator.name``) is what the controller flies on; the *shadows*
+(``estimator.shadow``) see identical fixes and are only scored, so comparisons are fair (common
+random numbers). With ``estimator.name = "true"`` the controller flies on the truth and the
+shadows are still scored.
+
+With ``estimator.imu`` (default) the prediction is driven by the IMU, as in a loosely coupled
+GNSS/INS: ``x̄ = F x + B â`` with ``B = [dt²/2, dt, 0]`` per axis and ``â = R̂ f̃ + g`` (the MEMS
+accelerometer's specific force rotated by the attitude estimate, :mod:`ag_uav.vehicle.imu`; with
+``imu.model = "ideal"`` the mean acceleration over the control period plus white noise), so the
+estimate follows the vehicle's manoeuvres between fixes; without it, a GPS-only filter in the
+loop adds enough lag to make the position loop oscillate (measured: 5 m control error).
+
+Filters use the ``estimator.model`` motion model predicted at the control rate
+(``dt = 1/control_hz``): by default ``"cvb"``, state ``[x, vx, bx, y, vy, by, z, vz, bz]`` with
+the IMU input's slow error ``b`` estimated (see :mod:`estimators.models`); Q from the IMU's
+figures (:func:`process_noise`). ``R = r_scale · diag(GPS nominal error variance)``, floored at
+(1 cm)², and with ``gps.r_from_fix_type`` switched to the variance of the fix type the receiver
+reports. By default the height channel of each fix comes from a radar altimeter
+(``gps.altitude_source = "radar"``, white noise ``gps.radar_sigma_m``, height above the flat
+ground), as on spray drones, which cannot fly 3 m above a crop on a GPS vertical with metres of
+bias. They are initialised at the first fix with zero velocity, ``P0 = diag(R, 4 m²/s²)`` and
+the bias states at the IMU's turn-on figures.
+
+Scores per estimator (over the mission ticks, like the tracking error): ``estimate_rmse_m``
+(horizontal |p̂ − p|), ``estimate_share`` (mean-square estimate error / mean-square tracking
+error, horizontal: the part of the tracking error that the estimate explains if the two are
+uncorrelated; can exceed 1), and ``update_us`` (mean wall time of one ``update`` call).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+import estimators
+
+from ..config import Config, ConfigError
+from ..vehicle.gps import GpsSensor
+from ..vehicle.mjcf import G
+from .feedback import Feedback
+
+R_FLOOR = 1e-4
+
+
+def make_gps(cfg: Config, seed: np.random.SeedSequence) -> GpsSensor:
+    g = cfg.gps
+    ov: dict[str, Any] = dict(g.overrides)
+    if g.rate_hz > 0:
+        ov["rate_hz"] = g.rate_hz
+    if g.multipath_prob > 0:
+        comps = dict(ov.get("components", {})) if isinstance(ov.get("components"), dict) else {}
+        comps["multipath_extra"] = {"type": "spikes", "prob": g.multipath_prob,
+                                    "amplitude": g.multipath_amplitude_m}
+        if isinstance(ov.get("components"), list):
+            raise ConfigError("gps.multipath_prob: cannot be combined with a components list in "
+                              "gps.overrides; add the spikes to that list")
+        ov["components"] = comps
+    try:
+        return GpsSensor.from_preset(g.preset, seed, **ov)
+    except ValueError as e:
+        raise ConfigError(f"gps.overrides = {ov!r}: {e}") from None
+
+
+def process_noise(cfg: Config, model: str | None = None) -> tuple[float, float, float]:
+    """``(q, q_bias, bias_var0)`` of the bank's motion model: ``estimator.q`` (and ``q_bias``),
+    or with ``"auto"`` what the IMU's figures imply (:func:`ag_uav.vehicle.imu.process_noise_psd`);
+    without IMU aiding, ``q`` = 2 m²/s³ (the motion model alone must then carry the manoeuvres).
+    ``bias_var0`` is the initial variance of the ``"cvb"`` model's bias states. ``model``:
+    the motion model it is for (default ``estimator.model``)."""
+    from ..vehicle.imu import process_noise_psd
+
+    e = cfg.estimator
+    q, q_bias, var0 = process_noise_psd(cfg.imu, cfg.sim.control_hz,
+                                        bias_states=(model or e.model) == "cvb")
+    if not e.imu and isinstance(e.q, str):
+        q = 2.0
+    if not isinstance(e.q, str):
+        q = float(e.q)
+    if not isinstance(e.q_bias, str):
+        q_bias = float(e.q_bias)
+    return q, q_bias, var0
+
+
+def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
+    e = cfg.estimator
+    dt = 1.0 / cfg.sim.control_hz
+    q, q_bias, _ = process_noise(cfg)
+    params: dict[str, Any] = {"model": e.model, "dim": 3, "dt": dt, "q": q, "r": list(r_diag)}
+    if e.model == "cvb":
+        params["q_bias"] = q_bias
+    if "mckf" in name:
+        params.update(sigma=e.sigma, max_iter=e.max_iter,
+                      recovery=None if e.mckf_recovery == "none" else e.mckf_recovery)
+    if name.startswith("pca"):
+        params.update(window=e.window, mode=e.pca_mode)
+    return estimators.make(name, **params)
+
+
+class FilterBank:
+    """What every estimator feedback shares: each control tick, predict every filter of
+    ``self.filters`` one control period ahead (driven by the IMU's acceleration when
+    ``self.imu``), update all of them with the same measurement ``z`` (timed, logged), and
+    record each filter's position estimate for the scores.
+
+    Needs the attributes ``filters``, ``pos_idx``, ``vel_idx``, ``dt``, ``imu``, ``imu_sigma``,
+    ``imu_rng``, ``_v_prev``, ``est``, ``upd_ns``, ``n_upd``, ``log`` and ``primary``.
+    """
+
+    #: the loop passes the MEMS IMU's reading to ``update`` (``imu=(f̃, R̂)``)
+    wants_imu = False
+
+    def _setup_records(self) -> None:
+        """Per-filter records for the scores: estimates per tick, update costs, consistency."""
+        names = self.names
+        self.est: dict[str, list[tuple[float, float, float]]] = {n: [] for n in names}
+        self.upd_ns = dict.fromkeys(names, 0)
+        self.n_upd = dict.fromkeys(names, 0)
+        self.cons: dict[str, list[tuple[int, float, np.ndarray]]] = {n: [] for n in names}
+        self._pp = np.ix_(self.pos_idx, self.pos_idx)
+
+    def _setup_imu(self, cfg: Config, imu_seed) -> None:
+        self.imu = cfg.estimator.imu
+        self.wants_imu = self.imu and cfg.imu.model == "mems"
+        self.imu_sigma = cfg.imu.vibration_sigma_mps2
+        self.imu_rng = np.random.default_rng(imu_seed)
+        self._v_prev = None
+        self.dt = 1.0 / cfg.sim.control_hz
+
+    def _imu_accel(self, v_true, imu=None) -> list[float] | None:
+        """World-frame acceleration input of the prediction, or None without IMU aiding.
+
+        MEMS (``imu = (f̃, R̂)`` from the loop): ``â = R̂ f̃ + g``. Ideal: the mean acceleration
+        over the last control period (finite difference of the true velocity) plus white noise
+        (None on the first tick)."""
+        if not self.imu:
+            return None
+        if imu is not None:
+            f, R = imu
+            return [R[0] * f[0] + R[1] * f[1] + R[2] * f[2],
+                    R[3] * f[0] + R[4] * f[1] + R[5] * f[2],
+                    R[6] * f[0] + R[7] * f[1] + R[8] * f[2] - G]
+        pv = self._v_prev
+        self._v_prev = v_true
+        if pv is None:
+            return None
+        s, dt = self.imu_sigma, self.dt
+        n = self.imu_rng.standard_normal(3) if s > 0 else (0.0, 0.0, 0.0)
+        return [(v_true[i] - pv[i]) / dt + s * n[i] for i in range(3)]
+
+    def _step_bank(self, t: float, z, v_true, imu=None):
+        """Predict (+ IMU input ``B a``) and update every filter; the primary's (p, v)."""
+        pi, vi = self.pos_idx, self.vel_idx
+        a = self._imu_accel(v_true, imu)
+        dt = self.dt
+        hh = 0.5 * dt * dt
+        for name, f in self.filters.items():
+            f.predict()
+            if a is not None:
+                x = f.x
+                for i in range(3):
+                    x[pi[i]] += hh * a[i]
+                    x[vi[i]] += dt * a[i]
+            if z is not None:
+                t0 = time.perf_counter_ns()
+                f.update(z)
+                self.upd_ns[name] += time.perf_counter_ns() - t0
+                self.n_upd[name] += 1
+                # consistency record: tick index of this estimate, NIS, position covariance
+                self.cons[name].append((len(self.est[name]), float(getattr(f, "nis", np.nan)),
+                                        f.P[self._pp].copy()))
+                if self.log is not None and self.log.want_estimator(name, t):
+                    x = f.x
+                    self.log.estimator(t, name, x, np.diag(f.P), getattr(f, "y", None),
+                                       pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
+            x = f.x
+            self.est[name].append((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])))
+        if self.primary not in self.filters:
+            return None
+        x = self.filters[self.primary].x
+        return ((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])),
+                (float(x[vi[0]]), float(x[vi[1]]), float(x[vi[2]])))
+
+class EstimatorFeedback(FilterBank, Feedback):
+    """GPS + primary estimator (+ shadows) behind the feedback seam."""
+
+    def __init__(self, cfg: Config, seed: np.random.SeedSequence,
+                 altimeter_seed: np.random.SeedSequence | None = None,
+                 imu_seed: np.random.SeedSequence | None = None) -> None:
+        self.cfg = cfg
+        self.gps = make_gps(cfg, seed)
+        var = np.asarray(self.gps.variance, dtype=float).reshape(-1)
+        if var.size == 1:
+            var = np.repeat(var, 3)
+        var = np.where(np.isfinite(var), var, 1.0)  # alpha-stable: infinite variance
+        self.r_diag = np.maximum(cfg.estimator.r_scale * var, R_FLOOR)
+        self.radar = cfg.gps.altitude_source == "radar"
+        if self.radar:
+            self.radar_sigma = cfg.gps.radar_sigma_m
+            self.radar_rng = np.random.default_rng(altimeter_seed)
+            self.r_diag[2] = max(self.radar_sigma**2, R_FLOOR)
+        # R per reported fix type (RTK fixed / float / DGPS), when the preset has fix types
+        self.r_by_fix: dict[str, np.ndarray] = {}
+        if cfg.gps.r_from_fix_type and getattr(self.gps, "fix_types", ()):
+            for mode in self.gps.fix_types:
+                r = np.maximum(cfg.estimator.r_scale * np.asarray(self.gps.mode_variance(mode)),
+                               R_FLOOR)
+                if self.radar:
+                    r[2] = self.r_diag[2]
+                self.r_by_fix[mode] = np.diag(r)
+        self._r_mode: str | None = None
+        e = cfg.estimator
+        self.primary = e.name
+        self.name = e.name
+        names = ([e.name] if e.name != "true" else []) + [s for s in e.shadow if s != e.name]
+        self.names = names
+        self.filters = {n: make_filter(n, cfg, self.r_diag) for n in names}
+        mdl = next(iter(self.filters.values())).model if self.filters else None
+        self.pos_idx = list(mdl.pos_idx) if mdl is not None else [0, 2, 4]
+        self.vel_idx = list(mdl.vel_idx) if mdl is not None else [1, 3, 5]
+        self.n = mdl.n if mdl is not None else 6
+        self.initialised = False
+        self._setup_imu(cfg, imu_seed)
+        self._setup_records()
+        self.fixes: list[tuple[float, float, float, float]] = []
+        self.log = None
+
+    def _init(self, z: np.ndarray) -> None:
+        x0 = np.zeros(self.n)
+        x0[self.pos_idx] = z
+        P0 = np.eye(self.n) * 4.0
+        P0[self.pos_idx, self.pos_idx] = self.r_diag
+        if self.cfg.estimator.model == "cvb":   # bias states: the IMU's turn-on figures
+            bi = [i + 2 for i in self.pos_idx]
+            P0[bi, bi] = process_noise(self.cfg)[2]
+        for f in self.filters.values():
+            f.x = x0.copy()
+            f.P = P0.copy()
+        self.initialised = True
+
+    def update(self, t, p_true, v_true, imu=None):
+        z = self.gps.measure(t, p_true)
+        if z is not None and self.radar:
+            z[2] = p_true[2] + self.radar_sigma * self.radar_rng.standard_normal()
+        if z is not None and self.r_by_fix:
+            mode = self.gps.last_fix_type
+            if mode != self._r_mode and mode in self.r_by_fix:
+                self._r_mode = mode
+                for f in self.filters.values():
+                    f.R = self.r_by_fix[mode]
+        if z is not None:
+            self.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
+            if self.log is not None:
+                self.log.gps(t, z)
+                self.log.set_truth(p_true)
+        if not self.initialised:
+            if z is None:
+                return p_true, v_true  # no fix yet: nothing to fly on (only at t = 0)
+            self._init(z)
+            z = None
+        pv = self._step_bank(t, z, v_true, imu)
+        return (p_true, v_true) if pv is None else pv
+
+    def scores(self, p_true: np.ndarray, p_ref: np.ndarray, mission: slice) -> dict[str, Any]:
+        """Per-estimator scores over ``mission`` ticks (arrays aligned with the loop record).
+
+        ``estimate_rmse_m`` / ``estimate_max_m``: horizontal |p̂ − p|. ``nees_mean``: mean of
+        ``eᵀ P_pp⁻¹ e`` over the updates (3-D position error against the filter's position
+        covariance; a consistent filter gives 3). ``nis_mean``: mean normalised innovation
+        squared ``νᵀ S⁻¹ ν`` (3 when consistent; the PCA filters' ν is on the reconstructed
+        fix). ``update_us``: mean wall time of one ``update`` call."""
+        out: dict[str, Any] = {}
+        n = len(p_true)
+        d = p_true[mission, :2] - p_ref[mission, :2]
+        track_ms = float(np.mean(np.sum(d * d, axis=1))) if len(d) else float("nan")
+        lo, hi, _ = mission.indices(n)
+        for name in self.names:
+            est = np.asarray(self.est[name], dtype=float).reshape(-1, 3)
+            # the first tick (initialisation) records no estimate: align from the end
+            full = np.full((n, 3), np.nan)
+            m = min(len(est), n)
+            off = n - m
+            full[off:] = est[:m] if len(est) <= n else est[-n:]
+            e = full[mission, :2] - p_true[mission, :2]
+            ok = np.all(np.isfinite(e), axis=1)
+            e2 = np.sum(e[ok] ** 2, axis=1)
+            ms = float(np.mean(e2)) if ok.any() else float("nan")
+            nees, nis = _nees_nis(self.cons[name], full, p_true, off, lo, hi, n)
+            out[name] = {
+                "estimate_rmse_m": round(float(np.sqrt(ms)), 4),
+                "estimate_max_m": round(float(np.sqrt(np.max(e2))), 4) if e2.size else None,
+                "estimate_share": round(ms / track_ms, 4) if track_ms > 0 else None,
+                "nees_mean": round(float(np.mean(nees)), 3) if nees else None,
+                "nis_mean": round(float(np.nanmean(nis)), 3) if nis else None,
+                "update_us": round(self.upd_ns[name] / max(self.n_upd[name], 1) / 1e3, 2),
+                "updates": self.n_upd[name],
+                "flown": name == self.primary,
+            }
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        counts = getattr(self.gps, "fix_type_counts", None)
+        return {"gps_preset": self.cfg.gps.preset, "gps_fixes": len(self.fixes),
+                "gps_fix_types": dict(counts) if counts else None,
+                "gps_rate_hz": self.gps.rate_hz,
+                "estimator_r_diag_m2": [round(float(v), 5) for v in self.r_diag]}
+
+    @classmethod
+    def batch(cls, feedbacks: list[Any], n_max: int) -> BatchEstimatorFeedback | None:
+        """The engine batch's banks as one :class:`BatchEstimatorFeedback` (see
+        :meth:`BatchEstimatorFeedback.try_batch`), or None."""
+        return BatchEstimatorFeedback.try_batch(feedbacks, n_max)
+
+
+def _nees_nis(cons: Any, full: np.ndarray, p_true: np.ndarray, off: int, lo: int, hi: int,
+              n: int) -> tuple[list[float], list[float]]:
+    """NEES ``eᵀ P⁻¹ e`` and NIS of the updates whose tick lies in ``[lo, hi)``. ``cons``: the
+    consistency record, a list of ``(j, nis, P_pp)`` or an (M, 11) array of rows
+    ``[j, nis, P_pp (9)]``; ``j`` + ``off`` is the update's tick."""
+    if isinstance(cons, np.ndarray):
+        arr = cons
+    else:
+        arr = np.array([[j, nis_j, *np.asarray(P).ravel()] for j, nis_j, P in cons],
+                       dtype=float).reshape(-1, 11)
+    if not len(arr):
+        return [], []
+    k = off + arr[:, 0].astype(np.int64)
+    sel = (k >= lo) & (k < hi) & (k < n)
+    k, nis, P = k[sel], arr[sel, 1], arr[sel, 2:].reshape(-1, 3, 3)
+    ev = full[k] - p_true[k]
+    fin = np.all(np.isfinite(ev), axis=1)
+    ev, P = ev[fin], P[fin]
+    try:
+        nees = np.einsum("ij,ij->i", ev, np.linalg.solve(P, ev[:, :, None])[:, :, 0])
+    except np.linalg.LinAlgError:  # a singular P: skip that update, as one by one
+        vals = []
+        for e, Pi in zip(ev, P, strict=True):
+            try:
+                vals.append(float(e @ np.linalg.solve(Pi, e)))
+            except np.linalg.LinAlgError:
+                pass
+        nees = np.asarray(vals)
+    return nees.tolist(), nis.tolist()
+
+
+class BatchEstimatorFeedback:
+    """The estimator feedbacks of a whole engine batch, advanced together.
+
+    Wraps N :class:`EstimatorFeedback` objects (built per run as for one mission: GNSS sensor,
+    radar altimeter, R per fix type, filters) and runs their filters as one
+    :class:`estimators.batched.BatchBank` (numba kernels over the batch axis). Per tick: the
+    vehicles with a fix due ask their own :class:`~ag_uav.vehicle.gps.GpsSensor` (Python, at the fix
+    rate only), each filter predicts with the IMU input ``â = R̂ f̃ + g`` and the vehicles with
+    a fix update; the records (per-tick estimates, NEES/NIS inputs, update costs) are arrays
+    and go back into the per-run objects at :meth:`finish`, so :meth:`EstimatorFeedback.scores`
+    and ``summary`` work unchanged. Identical to the per-vehicle :class:`EstimatorFeedback`
+    (tests: 1e-9).
+    """
+
+    @classmethod
+    def try_batch(cls, feedbacks: list[Any], n_max: int) -> BatchEstimatorFeedback | None:
+        """The batched bank when every feedback is an :class:`EstimatorFeedback` with the same
+        filter names and IMU aiding, else None (the engine then uses them one by one)."""
+        if not feedbacks or not all(type(fb) is EstimatorFeedback for fb in feedbacks):
+            return None
+        f0 = feedbacks[0]
+        if not f0.names:
+            return None
+        if any(fb.names != f0.names or fb.primary != f0.primary or fb.imu != f0.imu
+               or fb.wants_imu != f0.wants_imu for fb in feedbacks):
+            return None
+        from estimators.batched import BatchBank
+
+        try:
+            bank = BatchBank.from_filters([fb.filters for fb in feedbacks])
+        except ValueError:
+            return None
+        return cls(feedbacks, bank, n_max)
+
+    def __init__(self, feedbacks: list[EstimatorFeedback], bank: Any, n_max: int) -> None:
+        self.fbs = feedbacks
+        self.bank = bank
+        self.N = N = len(feedbacks)
+        f0 = feedbacks[0]
+        self.names = list(f0.names)
+        self.primary = f0.primary
+        self.pos_idx = np.asarray(f0.pos_idx)
+        self.vel_idx = np.asarray(f0.vel_idx)
+        self.dt = f0.dt
+        self.ideal_imu = f0.imu and not f0.wants_imu
+        self.init = np.array([fb.initialised for fb in feedbacks], dtype=bool)
+        self.next_t = np.array([fb.gps._next_k * fb.gps.dt for fb in feedbacks])
+        self.every_tick = np.array([fb.gps.latency_s > 0.0 for fb in feedbacks], dtype=bool)
+        self.z = np.zeros((N, 3))
+        self.mask = np.zeros(N, dtype=bool)
+        self.u = np.zeros((N, 3))
+        self.p_out = np.zeros((N, 3))
+        self.v_out = np.zeros((N, 3))
+        n_fix = int(n_max * max(fb.gps.rate_hz for fb in feedbacks) * self.dt) + 4
+        self.est = {n: np.full((N, n_max, 3), np.nan) for n in self.names}
+        # per update: tick, NIS, position covariance (3×3) — the NEES/NIS record
+        self.cons = {n: np.zeros((N, n_fix, 11)) for n in self.names}
+        self.n_cons = np.zeros(N, dtype=np.int64)
+        self.upd_ns = dict.fromkeys(self.names, 0)
+        self.n_upd = dict.fromkeys(self.names, 0)
+        self.logs = [fb.log for fb in feedbacks]
+        self.any_log = any(lg is not None for lg in self.logs)
+
+    def _fix(self, i: int, t: float, p: np.ndarray) -> None:
+        """Vehicle ``i``'s GNSS (and radar) at ``t``: initialise at the first fix, else stage
+        the fix for this tick's update."""
+        fb = self.fbs[i]
+        pt = (float(p[0]), float(p[1]), float(p[2]))
+        z = fb.gps.measure(t, pt)
+        self.next_t[i] = fb.gps._next_k * fb.gps.dt
+        if z is None:
+            return
+        if fb.radar:
+            z[2] = pt[2] + fb.radar_sigma * fb.radar_rng.standard_normal()
+        if fb.r_by_fix:
+            mode = fb.gps.last_fix_type
+            if mode != fb._r_mode and mode in fb.r_by_fix:
+                fb._r_mode = mode
+                for bf in self.bank.filters.values():
+                    bf.R[i] = fb.r_by_fix[mode]
+        fb.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
+        if fb.log is not None:
+            fb.log.gps(t, z)
+            fb.log.set_truth(pt)
+        if not self.init[i]:
+            fb._init(z)  # sets the scalar filters' x, P: copy them into the batch
+            for name, bf in self.bank.filters.items():
+                bf.initialise([i], fb.filters[name].x, fb.filters[name].P)
+            self.init[i] = True
+            return
+        self.z[i] = z
+        self.mask[i] = True
+
+    def update(self, k: int, t: float, p: np.ndarray, v: np.ndarray, imu: tuple | None,
+               act: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One control tick of every active vehicle; returns the (p, v) the controllers fly on
+        (the primary filter's estimate; the truth before a vehicle's first fix)."""
+        due = act & ((t >= self.next_t - 1e-9) | self.every_tick)
+        self.mask[:] = False
+        if due.any():
+            for i in np.flatnonzero(due):
+                self._fix(int(i), t, p[i])
+        run = act & self.init
+        if imu is not None:
+            f_m, Rh = imu
+            _world_accel(Rh, f_m, G, self.u)
+            u = self.u
+        elif self.ideal_imu:
+            u = self._ideal_accel(v, run)
+        else:
+            u = None
+        mask = self.mask
+        any_fix = mask.any()
+        for name, bf in self.bank.filters.items():
+            bf.predict(u, run)
+            if any_fix:
+                t0 = time.perf_counter_ns()
+                bf.update(self.z, mask)
+                self.upd_ns[name] += time.perf_counter_ns() - t0
+                self.n_upd[name] += int(mask.sum())
+                _cons_record(self.cons[name], self.n_cons, k, mask, bf.nis, bf.P, self.pos_idx)
+            _est_record(self.est[name], k, run, bf.x, self.pos_idx)
+        if any_fix:
+            self.n_cons[mask] += 1
+            if self.any_log:
+                self._log(t, mask)
+        if self.primary not in self.bank.filters:
+            return p, v
+        bf = self.bank.filters[self.primary]
+        _primary_out(bf.x, self.pos_idx, self.vel_idx, run, p, v, self.p_out, self.v_out)
+        return self.p_out, self.v_out
+
+    def _ideal_accel(self, v: np.ndarray, run: np.ndarray) -> np.ndarray | None:
+        """The ideal IMU (``imu.model = "ideal"``), per vehicle as :meth:`FilterBank._imu_accel`."""
+        out = self.u
+        any_u = False
+        for i in np.flatnonzero(run):
+            a = self.fbs[i]._imu_accel(tuple(v[i].tolist()))
+            if a is None:
+                out[i] = 0.0
+            else:
+                out[i] = a
+                any_u = True
+        return out if any_u else None
+
+    def _log(self, t: float, mask: np.ndarray) -> None:
+        pi = self.pos_idx
+        for i in np.flatnonzero(mask):
+            log = self.logs[i]
+            if log is None:
+                continue
+            for name, bf in self.bank.filters.items():
+                if log.want_estimator(name, t):
+                    x = bf.x[i]
+                    y = bf.y[i] if getattr(bf, "y", None) is not None else None
+                    log.estimator(t, name, x, np.diag(bf.P[i]), y,
+                                  pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
+
+    def finish(self, flown: np.ndarray) -> None:
+        """Hand the records back to the per-run feedbacks (for their ``scores``/``summary``)
+        and the filters' final states to their scalar objects."""
+        for i, fb in enumerate(self.fbs):
+            n = int(flown[i])
+            nc = int(self.n_cons[i])
+            for name, bf in self.bank.filters.items():
+                fb.est[name] = self.est[name][i, :n]
+                fb.cons[name] = self.cons[name][i, :nc]
+                # the batch's update time, shared out over the updates it made
+                fb.upd_ns[name] = self.upd_ns[name] * nc / max(self.n_upd[name], 1)
+                fb.n_upd[name] = nc
+                bf.to_filter(i, fb.filters[name])
+            fb.initialised = bool(self.init[i])
+
+
+# ------------------------------------------------------------------------ kernels of the bank
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover
+    def njit(*a, **k):
+        return a[0] if a and callable(a[0]) else (lambda f: f)
+
+
+@njit(cache=True)
+def _world_accel(R, f, g, out):  # pragma: no cover
+    """â = R̂ f̃ + g (world frame, z up): the IMU input of the filters' prediction."""
+    for i in range(R.shape[0]):
+        for r in range(3):
+            out[i, r] = (R[i, 3 * r] * f[i, 0] + R[i, 3 * r + 1] * f[i, 1]
+                         + R[i, 3 * r + 2] * f[i, 2])
+        out[i, 2] -= g
+
+
+@njit(cache=True)
+def _est_record(est, k, run, x, pos):  # pragma: no cover
+    for i in range(run.shape[0]):
+        if run[i]:
+            for j in range(3):
+                est[i, k, j] = x[i, pos[j]]
+
+
+@njit(cache=True)
+def _cons_record(cons, n_cons, k, mask, nis, P, pos):  # pragma: no cover
+    for i in range(mask.shape[0]):
+        if mask[i]:
+            r = cons[i, n_cons[i]]
+            r[0] = k
+            r[1] = nis[i]
+            for a in range(3):
+                for b in range(3):
+                    r[2 + 3 * a + b] = P[i, pos[a], pos[b]]
+
+
+@njit(cache=True)
+def _primary_out(x, pos, vel, run, p, v, p_out, v_out):  # pragma: no cover
+    for i in range(run.shape[0]):
+        for j in range(3):
+            if run[i]:
+                p_out[i, j] = x[i, pos[j]]
+                v_out[i, j] = x[i, vel[j]]
+            else:
+                p_out[i, j] = p[i, j]
+                v_out[i, j] = v[i, j]

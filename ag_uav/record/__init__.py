@@ -1,0 +1,1 @@
+"""What a flight leaves behind: the MCAP run log and the camera renders that go into it."""

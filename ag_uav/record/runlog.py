@@ -1,0 +1,1335 @@
+"""Run log: one MCAP file per run that Foxglove and ``ag_uav.analysis.viewing`` can open.
+
+Usage (the simulation loop calls this; everything is in sim time, seconds -> ns)::
+
+    with RunLog(run_dir / "run.mcap", channels="full", metadata={...}, config_toml=txt) as log:
+        log.scene(0.0, outer_xy, holes_xy, plan_segments, swath=6.0, altitude=3.0)
+        for each 100 Hz control tick:
+            log.tick(t, p_true=p, q_true_wxyz=q, v_true=v, p_ref=r, v_ref=vr, yaw_ref=psi,
+                     p_est=pe, v_est=ve, ctrl={"x.E": .., "x.u": ..}, motors=[..], wind=w,
+                     spray=on)
+            if a GPS fix arrived:
+                log.gps(t, fix)
+                log.estimator(t, "mckf", x, p_diag, innovation, pos=x[:3])
+            if log.want_frame(t):                         # renders are costly: ask first
+                log.frame(t, "chase", r.jpeg(d, "chase"), r.width, r.height, r.fovy("chase"),
+                          pose=r.camera_pose(d, "chase"))
+        log.sprayed(t_end, sprayed_polygons)
+        log.summary({"rmse_m": ..})
+    # -> run.mcap and layout.json (Foxglove app-export layout) beside it
+
+Writer, chosen by measurement (figures in the README's Speed section; ``ag-uav bench``
+measures the logging cost): ``foxglove-sdk`` (Rust MCAP writer, LZ4 chunks) fed pre-encoded
+protobuf bytes through ``BaseChannel.log``; the pure-Python ``mcap`` writer and the SDK's typed
+message objects cost several times more per message.  The frequent messages are hand-encoded:
+PoseInFrame / FrameTransform as one ``struct.pack`` with memoised timestamp bytes; our own numeric
+channels (``/drone/state``, ``/estimator/<name>``) are protobuf messages whose schema is generated
+at the first call (all fields ``double``, nested groups, packed vectors) and encoded with one
+``struct.pack`` (see :class:`FlatSchema`), float64 numpy vectors going in as their raw bytes (a
+packed ``repeated double`` is exactly that); they decode with any protobuf reader.  The encoded
+messages of the per-tick channels wait in a list and reach the writer in one burst at each flush
+(and before any frame, scene or metadata write), so the control loop does not interleave with the
+writer's bookkeeping.
+
+Channels (Foxglove well-known schemas where one fits; groups in brackets):
+  [tf]        ``/tf``                 foxglove.FrameTransforms world->base_link
+                                      (and world->cam_<name> with each frame)
+  [pose]      ``/drone/pose``, ``/drone/pose_est``, ``/drone/pose_ref``  foxglove.PoseInFrame
+  [state]     ``/drone/state``        ag_uav.DroneState: pos, vel, rpy, ref, est, err, est_err,
+                                      speed, spray, wind, motors[], ctrl{...} (plots)
+              ``/drone/spray``        ag_uav.SprayState (spray jobs, ag_uav.world.spray_job):
+              tank_l, mass_kg,
+                                      flow_lps, nozzles, power_w, energy_wh, battery_frac, sortie,
+                                      ground
+  [gps]       ``/gps``                foxglove.PoseInFrame at each fix (3D + plots)
+  [estimator] ``/estimator/<name>``   ag_uav.EstimatorState: x[], p_diag[], innovation[], pos,
+                                      err (pos - last true position), extra{...}
+  [scene]     ``/field`` (field polygon + planned path), ``/sprayed`` (sprayed area),
+              foxglove.SceneUpdate (separate topics so a seek shows both)
+  [camera]    ``/camera/<name>`` foxglove.CompressedImage (JPEG) and
+              ``/camera/<name>/calibration`` foxglove.CameraCalibration
+  always      metadata records ``run`` and ``versions`` (and ``summary``), attachments
+              ``config.toml`` (and ``summary.json``)
+
+Channel sets: ``"full"`` (all groups; tf/pose 10 Hz, state 20 Hz, every GPS fix, each estimator at
+<= 10 Hz, camera 10 Hz), ``"light"`` (batch/tuning: pose/tf/state 5 Hz, GPS and estimators 1 Hz, no
+camera), ``"none"`` (no file; every method returns at once), or an iterable of group names.
+``rates`` overrides per group in Hz (``None`` = every call, ``0`` = group off).
+
+Crash safety: use ``with`` (or call :meth:`RunLog.close`); SIGTERM/SIGINT close every open log
+and then behave as before (KeyboardInterrupt / exit status 128+signal); an ``atexit`` hook closes
+the rest.  The writer finishes its chunk and flushes to the OS every ``flush_wall_s`` of wall time
+or ``flush_sim_s`` of sim time, whichever comes first (the buffered messages go in first), so
+a SIGKILL loses at most that much;
+``ag_uav.analysis.viewing.recover`` turns a truncated file into a finished, indexed one.
+"""
+
+from __future__ import annotations
+
+import atexit
+import json
+import math
+import operator
+import os
+import platform
+import signal
+import struct
+import threading
+import time
+import weakref
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "RunLog",
+    "FlatSchema",
+    "GROUPS",
+    "PRESETS",
+    "sanitize_name",
+    "ns",
+]
+
+GROUPS = ("tf", "pose", "state", "gps", "estimator", "scene", "camera")
+
+#: Default rates per channel set, Hz (None = every call).
+PRESETS: dict[str, dict[str, float | None]] = {
+    "full": {"tf": 10.0, "pose": 10.0, "state": 20.0, "gps": None, "estimator": 10.0,
+             "scene": None, "camera": 10.0},
+    "light": {"tf": 5.0, "pose": 5.0, "state": 5.0, "gps": 1.0, "estimator": 1.0,
+              "scene": None, "camera": 0.0},
+    "none": {g: 0.0 for g in GROUPS},
+}
+
+_NAN = float("nan")
+_INF = float("inf")
+
+
+def ns(t: float) -> int:
+    """Sim time in seconds -> integer nanoseconds (the MCAP log time; clamped at 0)."""
+    v = round(t * 1e9)
+    return v if v > 0 else 0
+
+
+def sanitize_name(key: str) -> str:
+    """A protobuf-safe field name: letters, digits and ``_``; not starting with a digit."""
+    out = "".join(c if (c.isascii() and (c.isalnum() or c == "_")) else "_" for c in key)
+    if not out or out[0].isdigit():
+        out = "f_" + out
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Fixed-layout protobuf messages (all doubles) encoded with one struct.pack
+# --------------------------------------------------------------------------------------------
+
+
+_BYTE = [bytes((i,)) for i in range(128)]
+
+
+def _varint(v: int) -> bytes:
+    """Protobuf base-128 varint of a non-negative int."""
+    if v < 0x80:
+        return _BYTE[v]
+    out = []
+    while v >= 0x80:
+        out.append((v & 0x7F) | 0x80)
+        v >>= 7
+    out.append(v)
+    return bytes(out)
+
+
+class FlatSchema:
+    """A protobuf message of ``double`` fields, nested groups and fixed-length packed vectors.
+
+    ``fields`` is a list of ``(path, n)``: ``path`` is dotted (``"ref.x"`` makes a nested message
+    ``ref`` with field ``x``), ``n`` is ``0`` for a scalar ``double`` or the length of a packed
+    ``repeated double``.  Fields of one group must be contiguous.  Every field is always written
+    (proto3 readers accept explicit defaults), so the encoded size is fixed and the whole message
+    is one ``struct`` with constant byte prefixes (tag, nested-message headers) before each value:
+    ``encode(values)`` takes the flat list of values (vectors expanded) in field order.
+    """
+
+    def __init__(self, full_name: str, fields: Sequence[tuple[str, int]]):
+        self.full_name = full_name
+        self.fields = [(p, int(n)) for p, n in fields]
+        # Tree of groups: dict name -> (subtree | n)
+        tree: dict[str, Any] = {}
+        closed: set[tuple[str, ...]] = set()
+        open_path: tuple[str, ...] = ()
+        for path, n in self.fields:
+            parts = tuple(sanitize_name(p) for p in path.split("."))
+            grp = parts[:-1]
+            # close groups that are no longer a prefix
+            common = 0
+            while common < min(len(open_path), len(grp)) and open_path[common] == grp[common]:
+                common += 1
+            for k in range(common + 1, len(open_path) + 1):
+                closed.add(open_path[:k])
+            for k in range(1, len(grp) + 1):
+                if grp[:k] in closed:
+                    raise ValueError(f"fields of group {'.'.join(grp[:k])!r} are not contiguous")
+            open_path = grp
+            node = tree
+            for g in grp:
+                node = node.setdefault(g, {})
+                if not isinstance(node, dict):
+                    raise ValueError(f"{path!r}: {g!r} is both a field and a group")
+            if parts[-1] in node:
+                raise ValueError(f"duplicate field {path!r}")
+            node[parts[-1]] = n
+        self.tree = tree
+        prefixes: list[bytes] = []
+        self.size = self._layout(tree, prefixes)
+        self.n_values = len(prefixes)
+        #: the constant bytes before each value (tags, nested-message headers; ``b""`` inside a
+        #: packed vector): the encoded message is prefix_0, value_0, prefix_1, value_1, ...
+        self.prefixes = prefixes
+        self._packer = _Packer(prefixes)
+        self.schema_data = self._descriptor_set()
+
+    @staticmethod
+    def _size(node: dict[str, Any]) -> int:
+        size = 0
+        for i, (_, v) in enumerate(node.items(), start=1):
+            tag = len(_varint(i << 3))
+            if isinstance(v, dict):
+                sub = FlatSchema._size(v)
+                size += tag + len(_varint(sub)) + sub
+            elif v == 0:
+                size += tag + 8
+            else:
+                size += tag + len(_varint(8 * v)) + 8 * v
+        return size
+
+    def _layout(self, node: dict[str, Any], prefixes: list[bytes], head: bytes = b"") -> int:
+        """Append one prefix per value; ``head`` = pending headers of groups opened here."""
+        pending = head
+        for i, (_, v) in enumerate(node.items(), start=1):
+            if isinstance(v, dict):
+                sub = self._size(v)
+                pending += _varint((i << 3) | 2) + _varint(sub)
+                if sub == 0:
+                    continue
+                self._layout(v, prefixes, pending)
+                pending = b""
+            elif v == 0:
+                prefixes.append(pending + _varint((i << 3) | 1))
+                pending = b""
+            else:
+                prefixes.append(pending + _varint((i << 3) | 2) + _varint(8 * v))
+                prefixes.extend([b""] * (v - 1))
+                pending = b""
+        if pending:  # only empty groups here: cannot hold the header; disallowed
+            raise ValueError("empty group in schema")
+        return self._size(node)
+
+    def _descriptor_set(self) -> bytes:
+        from google.protobuf import descriptor_pb2
+
+        pkg, _, name = self.full_name.rpartition(".")
+        fdp = descriptor_pb2.FileDescriptorProto(
+            name=f"{self.full_name.replace('.', '/')}.proto", package=pkg, syntax="proto3"
+        )
+        fdp_msg = fdp.message_type.add(name=name)
+        F = descriptor_pb2.FieldDescriptorProto
+
+        def fill(msg: Any, node: dict[str, Any], type_name: str) -> None:
+            for i, (key, v) in enumerate(node.items(), start=1):
+                if isinstance(v, dict):
+                    sub_name = "".join(w.capitalize() for w in key.split("_")) + "Msg"
+                    sub = msg.nested_type.add(name=sub_name)
+                    fill(sub, v, f"{type_name}.{sub_name}")
+                    msg.field.add(name=key, number=i, label=F.LABEL_OPTIONAL,
+                                  type=F.TYPE_MESSAGE, type_name=f"{type_name}.{sub_name}")
+                elif v == 0:
+                    msg.field.add(name=key, number=i, label=F.LABEL_OPTIONAL,
+                                  type=F.TYPE_DOUBLE)
+                else:
+                    msg.field.add(name=key, number=i, label=F.LABEL_REPEATED,
+                                  type=F.TYPE_DOUBLE)
+
+        fill(fdp_msg, self.tree, f".{self.full_name}")
+        return descriptor_pb2.FileDescriptorSet(file=[fdp]).SerializeToString()
+
+    def encode(self, values: Sequence[float]) -> bytes:
+        """Encode the flat value list (length :attr:`n_values`)."""
+        return self._packer.pack(values)
+
+
+class _Packer:
+    """``pack(values)`` -> prefix_0 + double(value_0) + prefix_1 + ... in one ``struct.pack``."""
+
+    __slots__ = ("_struct", "_args")
+
+    def __init__(self, prefixes: Sequence[bytes]):
+        self._struct = struct.Struct("<" + "".join(f"{len(p)}sd" for p in prefixes))
+        self._args: list[Any] = [None] * (2 * len(prefixes))
+        self._args[0::2] = prefixes
+
+    def pack(self, values: Sequence[float]) -> bytes:
+        args = self._args
+        args[1::2] = values
+        return self._struct.pack(*args)
+
+
+# --------------------------------------------------------------------------------------------
+# Small geometry helpers (plain floats: faster than numpy for 3-vectors)
+# --------------------------------------------------------------------------------------------
+
+
+def _rpy_deg(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
+    """ZYX Euler angles (roll, pitch, yaw) in degrees from a unit quaternion (w, x, y, z)."""
+    sr = 2.0 * (w * x + y * z)
+    cr = 1.0 - 2.0 * (x * x + y * y)
+    sp = 2.0 * (w * y - z * x)
+    sp = 1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp)
+    sy = 2.0 * (w * z + x * y)
+    cy = 1.0 - 2.0 * (y * y + z * z)
+    d = 57.29577951308232
+    return math.atan2(sr, cr) * d, math.asin(sp) * d, math.atan2(sy, cy) * d
+
+
+# Hand-encoded foxglove.PoseInFrame / foxglove.FrameTransform (protobuf wire format; the field
+# numbers are those of the schemas the SDK ships, checked in tests by decoding).  ~2x faster than
+# building the SDK's message objects, and these are the most frequent messages.
+_POSE = struct.Struct("<2sBdBdBd2sBdBdBdBd")  # Pose / translation+rotation: 67 bytes
+
+
+_TS_SEC: dict[int, bytes] = {}
+_TS_NSEC: dict[int, bytes] = {}
+_TS_CACHE_MAX = 20_000
+
+
+def _ts_pb(tn: int) -> bytes:
+    """google.protobuf.Timestamp body for ``tn`` ns (>= 0); both halves are memoised."""
+    sec, nsec = divmod(tn, 1_000_000_000)
+    a = _TS_SEC.get(sec)
+    if a is None:
+        a = b"\x08" + _varint(sec) if sec else b""
+        if len(_TS_SEC) < _TS_CACHE_MAX:
+            _TS_SEC[sec] = a
+    b = _TS_NSEC.get(nsec)
+    if b is None:
+        b = b"\x10" + _varint(nsec) if nsec else b""
+        if len(_TS_NSEC) < _TS_CACHE_MAX:
+            _TS_NSEC[nsec] = b
+    return a + b
+
+
+def _ts_field(tn: int) -> bytes:
+    """Field 1 (``timestamp``) of PoseInFrame / FrameTransform: tag, length, Timestamp body."""
+    ts = _ts_pb(tn)
+    return b"\x0a" + _BYTE[len(ts)] + ts  # a Timestamp body is at most 12 bytes
+
+
+def _str_field(num: int, s: str) -> bytes:
+    b = s.encode()
+    return _varint((num << 3) | 2) + _varint(len(b)) + b
+
+
+_WORLD2 = _str_field(2, "world")
+_POSE_MID = _WORLD2 + b"\x1a\x43"  # PoseInFrame: frame_id "world", then the 67-byte pose
+_DEG = 57.29577951308232
+_D = struct.Struct("<d")
+_perf_counter = time.perf_counter
+_PACKD: dict[int, struct.Struct] = {}
+
+
+def _f8bytes(a: Any, k: int) -> bytes:
+    """``k`` little-endian doubles from ``a`` (NaN-padded / truncated), as a packed vector."""
+    if type(a) is np.ndarray and a.size == k and a.dtype.str == "<f8":
+        return a.tobytes()  # little-endian doubles: protobuf's packed encoding as they are
+    st = _PACKD.get(k)
+    if st is None:
+        st = _PACKD[k] = struct.Struct(f"<{k}d")
+    v = _flat(a)
+    return st.pack(*(v if len(v) == k else _fit(v, k)))
+
+
+def enc_pose_in_frame(ts: bytes, p: Sequence[float], q: Sequence[float]) -> bytes:
+    """foxglove.PoseInFrame in frame ``world``; ``ts`` from :func:`_ts_pb`, ``q`` = wxyz."""
+    body = _POSE.pack(b"\x0a\x1b", 9, p[0], 17, p[1], 25, p[2],
+                      b"\x12\x24", 9, q[1], 17, q[2], 25, q[3], 33, q[0])
+    return b"\x0a" + _varint(len(ts)) + ts + _WORLD2 + b"\x1a\x43" + body
+
+
+def enc_transform(ts: bytes, child3: bytes, p: Sequence[float], q: Sequence[float]) -> bytes:
+    """One foxglove.FrameTransform world->child, wrapped as FrameTransforms.transforms[i].
+
+    ``child3`` = ``_str_field(3, child)``; concatenate several for one FrameTransforms message.
+    """
+    body = (b"\x0a" + _varint(len(ts)) + ts + _WORLD2 + child3
+            + _POSE.pack(b"\x22\x1b", 9, p[0], 17, p[1], 25, p[2],
+                         b"\x2a\x24", 9, q[1], 17, q[2], 25, q[3], 33, q[0]))
+    return b"\x0a" + _varint(len(body)) + body
+
+
+# --------------------------------------------------------------------------------------------
+# Open-log registry: close on SIGTERM/SIGINT and at exit
+# --------------------------------------------------------------------------------------------
+
+_OPEN: weakref.WeakSet[RunLog] = weakref.WeakSet()
+_PREV_HANDLERS: dict[int, Any] = {}
+_HANDLERS_INSTALLED = False
+
+
+class _EstChan:
+    """One ``/estimator/<name>`` channel: its clock, writer, schema and encoding pieces."""
+
+    __slots__ = ("schema", "log", "topic", "n", "m", "keys", "next_t", "count", "fast",
+                 "pre_t", "hx", "hp", "hi", "nan_i", "tail")
+
+    def __init__(self, schema: FlatSchema, log: Any, topic: str, n: int, m: int,
+                 keys: tuple[str, ...]):
+        self.schema, self.log, self.topic = schema, log, topic
+        self.n, self.m, self.keys = n, m, keys
+        self.next_t = -_INF
+        self.count = 0
+        # value layout: t, x[n], p_diag[n], innovation[m], then the scalar tail
+        pre = schema.prefixes
+        self.fast = n > 0
+        self.pre_t, self.hx, self.hp = pre[0], pre[1], pre[1 + n] if n else b""
+        self.hi = pre[1 + 2 * n] if m else b""
+        self.nan_i = struct.pack(f"<{m}d", *([_NAN] * m))
+        self.tail = _Packer(pre[1 + 2 * n + m:])
+
+
+def _close_all() -> None:
+    for log in list(_OPEN):
+        try:
+            log.close()
+        except Exception:  # noqa: BLE001 - closing the others matters more
+            pass
+
+
+def _on_signal(signum: int, frame: Any) -> None:
+    _close_all()
+    prev = _PREV_HANDLERS.get(signum)
+    if callable(prev):
+        prev(signum, frame)
+        return
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
+    raise SystemExit(128 + signum)
+
+
+def _install_handlers() -> None:
+    global _HANDLERS_INSTALLED
+    if _HANDLERS_INSTALLED or threading.current_thread() is not threading.main_thread():
+        return
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        try:
+            prev = signal.getsignal(sig)
+            if prev is _on_signal:
+                continue
+            signal.signal(sig, _on_signal)
+            _PREV_HANDLERS[sig] = prev
+        except (ValueError, OSError):  # not allowed here: rely on context manager / atexit
+            pass
+    atexit.register(_close_all)
+    _HANDLERS_INSTALLED = True
+
+
+# --------------------------------------------------------------------------------------------
+# RunLog
+# --------------------------------------------------------------------------------------------
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version(), "platform": platform.platform()}
+    from importlib.metadata import PackageNotFoundError, version
+
+    for pkg in ("ag-uav", "mujoco", "numpy", "scipy", "foxglove-sdk", "mcap"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            pass
+    return out
+
+
+def _meta_str(v: Any) -> str:
+    if isinstance(v, str):
+        return v
+    try:
+        return json.dumps(v, default=str)
+    except (TypeError, ValueError):
+        return str(v)
+
+
+class RunLog:
+    """MCAP run log (context manager).  See the module docstring for channels and usage.
+
+    :param path: the ``.mcap`` file to write (parent folders are created); a Foxglove layout
+        ``layout.json`` is written beside it.
+    :param channels: ``"full"``, ``"light"``, ``"none"`` or an iterable of group names
+        (:data:`GROUPS`; unnamed groups are off, named ones use the ``full`` rates).
+    :param rates: per-group rate overrides in Hz (``None`` = every call, ``0`` = off).
+    :param metadata: run metadata (seed, scenario, ...) -> MCAP metadata record ``run``.
+    :param config_toml: the resolved config -> attachment ``config.toml``.
+    :param flush_wall_s: finish the chunk and flush to the OS at least this often (wall time).
+    :param flush_sim_s: ... and at least this often in sim time (bounds SIGKILL loss).
+    :param layout: write ``layout.json`` beside the log.
+    :param chunk_size: the writer's chunk size in bytes (chunks end sooner, at each flush).
+    :param compression: chunk compression: ``"lz4"`` (default), a
+        ``foxglove.mcap.MCAPCompression`` member, or ``None`` for none.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        channels: str | Iterable[str] = "full",
+        rates: dict[str, float | None] | None = None,
+        metadata: dict[str, Any] | None = None,
+        config_toml: str = "",
+        flush_wall_s: float = 1.0,
+        flush_sim_s: float = 0.9,
+        layout: bool = True,
+        chunk_size: int = 1 << 20,
+        compression: Any = "lz4",
+    ):
+        self.path = Path(path)
+        if isinstance(channels, str):
+            if channels not in PRESETS:
+                raise ValueError(f"channels must be one of {list(PRESETS)} or a list of groups")
+            base = dict(PRESETS[channels])
+        else:
+            names = set(channels)
+            bad = names - set(GROUPS)
+            if bad:
+                raise ValueError(f"unknown channel groups {sorted(bad)}; known: {GROUPS}")
+            base = {g: (PRESETS["full"][g] if g in names else 0.0) for g in GROUPS}
+        for g, r in (rates or {}).items():
+            if g not in GROUPS:
+                raise ValueError(f"unknown channel group {g!r}; known: {GROUPS}")
+            base[g] = r
+        self.rates = base
+        # period per group: 0.0 = every call, inf = off
+        self._period = {
+            g: (0.0 if r is None else (_INF if r <= 0 else 1.0 / float(r))) for g, r in base.items()
+        }
+        self.enabled = any(p < _INF for p in self._period.values())
+        self.closed = not self.enabled
+        self._next_tick = _INF
+        self._t_last = 0.0
+        # next sim time each group is due (inf = off or closed): the hot paths test only this
+        self._next = {g: (-_INF if self._period[g] < _INF and self.enabled else _INF)
+                      for g in GROUPS}
+        self._counts: dict[str, int] = {}  # rare topics; the frequent ones count in _n_*
+        self._n_tf = self._n_pose = self._n_pose_est = self._n_state = self._n_gps = 0
+        self._est: dict[str, _EstChan] = {}
+        # encoded messages (log, bytes, log_time) not yet handed to the writer: they go in one
+        # burst at each flush (and before any other write), which keeps the writer's work out
+        # of the control loop's way; a SIGKILL loses them with the unfinished chunk
+        self._pending: list[tuple[Any, bytes, int]] = []
+        if not self.enabled:
+            return
+
+        import foxglove
+        from foxglove import channels as fc
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+        self._fg = foxglove
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._ctx = foxglove.Context()
+        self._writer = foxglove.open_mcap(
+            str(self.path),
+            allow_overwrite=True,
+            context=self._ctx,
+            writer_options=MCAPWriteOptions(
+                compression=(MCAPCompression.Lz4 if compression == "lz4" else compression),
+                chunk_size=chunk_size,
+                compression_threads=0,
+                profile="",
+            ),
+        )
+        ctx = self._ctx
+        en = {g: self._period[g] < _INF for g in GROUPS}
+        M = foxglove.messages
+        pose_schema = M.PoseInFrame.get_schema()
+
+        def raw(topic: str, schema: Any) -> Any:
+            return foxglove.Channel(topic, message_encoding="protobuf", schema=schema,
+                                    context=ctx)
+
+        # the hot channels log through the SDK's BaseChannel.log (bytes, log_time) directly:
+        # the Python Channel.log wrapper only re-checks the encoding and the type
+        self._ch_tf = raw("/tf", M.FrameTransforms.get_schema()) if en["tf"] else None
+        self._log_tf = self._ch_tf.base.log if en["tf"] else None
+        if en["pose"]:
+            self._log_pose = raw("/drone/pose", pose_schema).base.log
+            self._log_pose_est = raw("/drone/pose_est", pose_schema).base.log
+            self._log_pose_ref = raw("/drone/pose_ref", pose_schema).base.log
+        self._log_gps = raw("/gps", pose_schema).base.log if en["gps"] else None
+        self._child = {"base_link": _str_field(3, "base_link")}
+        self._tf_mid = _WORLD2 + self._child["base_link"]
+        self._log_state = None  # created at the first tick (schema depends on ctrl keys)
+        self._state_schema: FlatSchema | None = None
+        self._ctrl_keys: tuple[str, ...] = ()
+        self._ctrl_get: Any = None
+        self._ctrl_nan: list[float] = []
+        self._n_motors = 0
+        self._cam: dict[str, Any] = {}
+        self._scene_ch: dict[str, Any] = {}
+        self._next_est: dict[str, float] = {}  # per-camera clocks
+        pe = self._period
+        self._p_tf, self._p_pose, self._p_state = (pe["tf"] - 1e-9, pe["pose"] - 1e-9,
+                                                   pe["state"] - 1e-9)
+        self._p_gps, self._p_est = pe["gps"] - 1e-9, pe["estimator"] - 1e-9
+        self._tick_groups = [g for g in ("tf", "pose", "state") if en[g]]
+        self._next_tick = -_INF if self._tick_groups else _INF
+        self._last_true = (_NAN, _NAN, _NAN)
+        self._flush_wall_s = float(flush_wall_s)
+        self._flush_sim_s = float(flush_sim_s)
+        self._last_flush_wall = time.perf_counter()
+        self._last_flush_sim = -_INF
+        self._fc = fc
+        self._M = foxglove.messages
+
+        md = {k: _meta_str(v) for k, v in (metadata or {}).items()}
+        md.setdefault("channels", channels if isinstance(channels, str) else ",".join(channels))
+        md.setdefault("rates_hz", json.dumps(self.rates))
+        md.setdefault("created_utc", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
+        self._writer.write_metadata("run", md)
+        self._writer.write_metadata("versions", _versions())
+        if config_toml:
+            self._writer.attach(log_time=0, create_time=time.time_ns(), name="config.toml",
+                                media_type="application/toml",
+                                data=config_toml.encode("utf-8"))
+        self._layout = layout
+        self._write_layout()
+        _OPEN.add(self)
+        _install_handlers()
+
+    # ---------------------------------------------------------------- context manager
+    def __enter__(self) -> RunLog:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # last resort; close() is idempotent
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001
+            pass
+
+    # ---------------------------------------------------------------- helpers
+    def _count(self, topic: str) -> None:
+        self._counts[topic] = self._counts.get(topic, 0) + 1
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages written so far, per topic."""
+        out = dict(self._counts)
+        n_pose = self._n_pose
+        for topic, n in (("/tf", self._n_tf), ("/drone/pose", n_pose),
+                         ("/drone/pose_ref", n_pose), ("/drone/pose_est", self._n_pose_est),
+                         ("/drone/state", self._n_state), ("/gps", self._n_gps)):
+            if n:
+                out[topic] = out.get(topic, 0) + n
+        for ec in self._est.values():
+            if ec.count:
+                out[ec.topic] = ec.count
+        return out
+
+    def _drain(self) -> None:
+        """Hand the pending messages to the writer, in the order they were logged."""
+        pend = self._pending
+        if pend:
+            self._pending = []  # swapped first: a signal handler's close() drains only the rest
+            for log, msg, tn in pend:
+                log(msg, tn)
+
+    def _maybe_flush(self, t: float) -> None:
+        now = time.perf_counter()
+        if now - self._last_flush_wall >= self._flush_wall_s or (
+            t - self._last_flush_sim >= self._flush_sim_s
+        ):
+            self._drain()
+            self._writer.flush()
+            self._last_flush_wall = now
+            self._last_flush_sim = t
+
+    def flush(self) -> None:
+        """Finish the current chunk and hand everything to the OS now."""
+        if not self.closed:
+            self._drain()
+            self._writer.flush()
+            self._last_flush_wall = time.perf_counter()
+
+    def want(self, group: str, t: float) -> bool:
+        """Would a message of ``group`` at sim time ``t`` be logged? (no side effects)
+
+        For ``"estimator"`` this is the group (any estimator); :meth:`want_estimator` answers
+        for one estimator."""
+        return not self.closed and self._period[group] < _INF and t >= self._next[group]
+
+    def want_estimator(self, name: str, t: float) -> bool:
+        """Would :meth:`estimator` log ``name`` at sim time ``t``? (no side effects)  Lets a
+        caller skip building the arguments (e.g. a covariance diagonal) when it would not."""
+        ec = self._est.get(name)
+        if ec is not None:
+            return t >= ec.next_t
+        return not self.closed and self._period["estimator"] < _INF
+
+    def want_frame(self, t: float) -> bool:
+        """True when a camera frame at sim time ``t`` would be logged: render only then."""
+        return self.want("camera", t)
+
+    def _ts(self, t_ns: int) -> Any:
+        return self._M.Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)
+
+    # ---------------------------------------------------------------- per-tick data
+    def _make_state_schema(self, ctrl: dict[str, float], n_motors: int) -> None:
+        fields: list[tuple[str, int]] = [("t", 0)]
+        fields += [(f"pos.{a}", 0) for a in "xyz"]
+        fields += [(f"vel.{a}", 0) for a in "xyz"]
+        fields += [("rpy.roll", 0), ("rpy.pitch", 0), ("rpy.yaw", 0)]
+        fields += [(f"ref.{a}", 0) for a in ("x", "y", "z", "vx", "vy", "vz", "yaw")]
+        fields += [(f"est.{a}", 0) for a in ("x", "y", "z", "vx", "vy", "vz")]
+        fields += [(f"err.{a}", 0) for a in ("x", "y", "z", "horiz", "norm")]
+        fields += [(f"est_err.{a}", 0) for a in ("x", "y", "z", "horiz")]
+        fields += [("speed", 0), ("spray", 0)]
+        fields += [(f"wind.{a}", 0) for a in "xyz"]
+        if n_motors:
+            fields.append(("motors", n_motors))
+        # ctrl keys: dots make nested groups (kept contiguous, first-appearance order)
+        self._ctrl_keys = tuple(_tree_order(list(ctrl)))
+        try:
+            schema = FlatSchema("ag_uav.DroneState",
+                                fields + [(f"ctrl.{k}", 0) for k in self._ctrl_keys])
+        except ValueError:  # e.g. "a" and "a.b" both given: flatten the names
+            schema = FlatSchema("ag_uav.DroneState",
+                                fields + [(f"ctrl.{k.replace('.', '_')}", 0)
+                                          for k in self._ctrl_keys])
+        self._n_motors = n_motors
+        self._state_schema = schema
+        keys = self._ctrl_keys
+        # ctrl values in schema order; raises KeyError when one is missing (then the slow path)
+        self._ctrl_get = ((lambda d: (d[keys[0]],)) if len(keys) == 1
+                          else operator.itemgetter(*keys) if keys else (lambda d: ()))
+        self._ctrl_nan = [_NAN] * len(keys)
+        self._log_state = self._fg.Channel(
+            "/drone/state", message_encoding="protobuf",
+            schema=self._fg.Schema(name="ag_uav.DroneState", encoding="protobuf",
+                                   data=self._state_schema.schema_data),
+            context=self._ctx,
+        ).base.log
+
+    def tick(
+        self,
+        t: float,
+        *,
+        p_true: Sequence[float],
+        q_true_wxyz: Sequence[float],
+        v_true: Sequence[float],
+        p_ref: Sequence[float],
+        v_ref: Sequence[float],
+        yaw_ref: float,
+        p_est: Sequence[float] | None = None,
+        v_est: Sequence[float] | None = None,
+        ctrl: dict[str, float] | None = None,
+        motors: Sequence[float] = (),
+        wind: Sequence[float] = (0.0, 0.0, 0.0),
+        spray: bool = False,
+    ) -> None:
+        """Call every control tick; decimates internally (cheap when nothing is due)."""
+        if t < self._next_tick:
+            return
+        self._t_last = t
+        tn = ns(t)
+        if type(p_true) is tuple and type(q_true_wxyz) is tuple:  # the loop's: plain floats
+            px, py, pz = p_true
+            qw, qx, qy, qz = q_true_wxyz
+        else:
+            px, py, pz = float(p_true[0]), float(p_true[1]), float(p_true[2])
+            qw, qx, qy, qz = (float(q_true_wxyz[0]), float(q_true_wxyz[1]),
+                              float(q_true_wxyz[2]), float(q_true_wxyz[3]))
+        self._last_true = (px, py, pz)
+        nx = self._next
+        head = None
+        pack = _POSE.pack
+        ap = self._pending.append
+        if t >= nx["tf"]:
+            nx["tf"] = t + self._p_tf
+            head = _ts_field(tn)
+            body = head + self._tf_mid + pack(b"\x22\x1b", 9, px, 17, py, 25, pz,
+                                              b"\x2a\x24", 9, qx, 17, qy, 25, qz, 33, qw)
+            ap((self._log_tf, b"\x0a" + _varint(len(body)) + body, tn))
+            self._n_tf += 1
+        if t >= nx["pose"]:
+            nx["pose"] = t + self._p_pose
+            pre = (head or _ts_field(tn)) + _POSE_MID
+            ap((self._log_pose, pre + pack(b"\x0a\x1b", 9, px, 17, py, 25, pz,
+                                           b"\x12\x24", 9, qx, 17, qy, 25, qz, 33, qw), tn))
+            h = 0.5 * yaw_ref
+            ap((self._log_pose_ref, pre + pack(b"\x0a\x1b", 9, p_ref[0], 17, p_ref[1],
+                                               25, p_ref[2], b"\x12\x24", 9, 0.0, 17, 0.0,
+                                               25, math.sin(h), 33, math.cos(h)), tn))
+            self._n_pose += 1
+            if p_est is not None:
+                ap((self._log_pose_est, pre + pack(b"\x0a\x1b", 9, p_est[0], 17, p_est[1],
+                                                   25, p_est[2], b"\x12\x24", 9, qx, 17, qy,
+                                                   25, qz, 33, qw), tn))
+                self._n_pose_est += 1
+        if t >= nx["state"]:
+            nx["state"] = t + self._p_state
+            if self._state_schema is None:
+                self._make_state_schema(ctrl or {}, len(motors))
+            rx, ry, rz = p_ref[0], p_ref[1], p_ref[2]
+            ex, ey, ez = px - rx, py - ry, pz - rz
+            eh = math.sqrt(ex * ex + ey * ey)
+            vx, vy, vz = v_true[0], v_true[1], v_true[2]
+            # ZYX Euler angles (roll, pitch, yaw) in degrees, as _rpy_deg
+            sp = 2.0 * (qw * qy - qz * qx)
+            sp = 1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp)
+            vals = [t, px, py, pz, vx, vy, vz,
+                    math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
+                    * _DEG, math.asin(sp) * _DEG,
+                    math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+                    * _DEG,
+                    rx, ry, rz, v_ref[0], v_ref[1], v_ref[2], yaw_ref]
+            if p_est is not None:
+                sx, sy, sz = p_est[0], p_est[1], p_est[2]
+                dx, dy, dz = sx - px, sy - py, sz - pz
+                if v_est is not None:
+                    vals += (sx, sy, sz, v_est[0], v_est[1], v_est[2])
+                else:
+                    vals += (sx, sy, sz, _NAN, _NAN, _NAN)
+                vals += (ex, ey, ez, eh, math.sqrt(eh * eh + ez * ez),
+                         dx, dy, dz, math.sqrt(dx * dx + dy * dy))
+            else:
+                vals += (_NAN, _NAN, _NAN, _NAN, _NAN, _NAN,
+                         ex, ey, ez, eh, math.sqrt(eh * eh + ez * ez), _NAN, _NAN, _NAN, _NAN)
+            vals += (math.sqrt(vx * vx + vy * vy + vz * vz), 1.0 if spray else 0.0,
+                     wind[0], wind[1], wind[2])
+            nm = self._n_motors
+            if nm:
+                if len(motors) == nm:
+                    vals += motors
+                else:
+                    vals += _fit(list(motors), nm)
+            if ctrl:
+                try:
+                    vals += self._ctrl_get(ctrl)
+                except KeyError:  # a key missing this tick: NaN
+                    g = ctrl.get
+                    vals += [g(k, _NAN) for k in self._ctrl_keys]
+            else:
+                vals += self._ctrl_nan
+            ap((self._log_state, self._state_schema.encode(vals), tn))
+            self._n_state += 1
+        nt = nx["tf"]
+        if nx["pose"] < nt:
+            nt = nx["pose"]
+        if nx["state"] < nt:
+            nt = nx["state"]
+        self._next_tick = nt
+        now = _perf_counter()
+        if now - self._last_flush_wall >= self._flush_wall_s or (
+            t - self._last_flush_sim >= self._flush_sim_s
+        ):
+            self._drain()
+            self._writer.flush()
+            self._last_flush_wall = now
+            self._last_flush_sim = t
+
+    SPRAY_FIELDS = ("t", "tank_l", "mass_kg", "flow_lps", "nozzles", "power_w", "energy_wh",
+                    "battery_frac", "sortie", "ground")
+
+    def spray_state(self, t: float, *, tank_l: float, mass_kg: float, flow_lps: float,
+                    nozzles: bool, power_w: float, energy_wh: float, soc: float, sortie: int,
+                    ground: bool) -> None:
+        """Spray job state (ag_uav.world.spray_job) -> ``/drone/spray`` (``ag_uav.SprayState``:
+        tank, vehicle mass, flow, nozzles on, electrical power, energy used, battery fraction left,
+        sortie number, on the ground at the base). Logged at the ``state`` group's rate."""
+        if self.closed or self._period["state"] == _INF:
+            return
+        nxt = getattr(self, "_next_spray", -_INF)
+        if t < nxt:
+            return
+        self._next_spray = t + self._period["state"] - 1e-9
+        if getattr(self, "_ch_spray", None) is None:
+            self._spray_schema = FlatSchema("ag_uav.SprayState",
+                                            [(k, 0) for k in self.SPRAY_FIELDS])
+            self._ch_spray = self._fg.Channel(
+                "/drone/spray", message_encoding="protobuf",
+                schema=self._fg.Schema(name="ag_uav.SprayState", encoding="protobuf",
+                                       data=self._spray_schema.schema_data),
+                context=self._ctx)
+            self._write_layout()
+        vals = [t, tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w, energy_wh, soc,
+                float(sortie), 1.0 if ground else 0.0]
+        self._ch_spray.log(self._spray_schema.encode(vals), log_time=ns(t))
+        self._count("/drone/spray")
+
+    def gps(self, t: float, fix_xyz: Sequence[float]) -> None:
+        """A GPS fix (local ENU metres) -> ``/gps`` PoseInFrame."""
+        if t < self._next["gps"]:  # inf when off or closed
+            return
+        self._next["gps"] = t + self._p_gps
+        tn = ns(t)
+        z = fix_xyz[2] if len(fix_xyz) > 2 else 0.0
+        self._pending.append((self._log_gps, _ts_field(tn) + _POSE_MID
+                              + _POSE.pack(b"\x0a\x1b", 9, fix_xyz[0], 17, fix_xyz[1], 25, z,
+                                           b"\x12\x24", 9, 0.0, 17, 0.0, 25, 0.0, 33, 1.0),
+                              tn))
+        self._n_gps += 1
+
+    def set_truth(self, p_true: Sequence[float]) -> None:
+        """The true position at the time of the next ``estimator`` calls (their ``err``): the
+        estimator bank calls it before logging a fix's update, so that ``err`` is not measured
+        against a pose up to one state period old (at 5 m/s, 50 ms is 0.25 m)."""
+        self._last_true = (float(p_true[0]), float(p_true[1]), float(p_true[2]))
+
+    def estimator(
+        self,
+        t: float,
+        name: str,
+        x: Sequence[float],
+        p_diag: Sequence[float],
+        innovation: Sequence[float] | None = None,
+        extra: dict[str, float] | None = None,
+        *,
+        pos: Sequence[float] | None = None,
+    ) -> None:
+        """One estimator's state after an update -> ``/estimator/<name>``.
+
+        ``pos`` is the estimator's position estimate (2 or 3 values); default ``x[:3]`` (pass it
+        when the state is not ordered position-first).  ``err`` = pos - the last true position
+        given to :meth:`tick`.  The schema is fixed at the first call per name (vector lengths,
+        ``extra`` keys); later missing values are written as NaN.  float64 numpy vectors are
+        copied into the message as they are (a packed ``repeated double`` is their raw bytes).
+        """
+        ec = self._est.get(name)
+        if ec is None:
+            if self.closed or self._period["estimator"] == _INF:
+                return
+            xs = _flat(x)
+            ec = self._est[name] = self._make_est(name, len(xs), innovation, extra)
+        elif t < ec.next_t:  # inf once closed
+            return
+        ec.next_t = t + self._p_est
+        n = ec.n
+        if pos is None:
+            pl = _flat(x)[:3]
+        else:
+            pl = pos if len(pos) == 3 else _flat(pos)
+        tx, ty, tz = self._last_true
+        if len(pl) == 3:
+            px, py, pz = pl
+        else:
+            pf = _fit(list(pl), 2)
+            px, py, pz = pf[0], pf[1], (tz if len(pl) == 2 else _NAN)
+        dx, dy, dz = px - tx, py - ty, pz - tz
+        tail = [px, py, pz, dx, dy, dz, math.sqrt(dx * dx + dy * dy)]
+        if ec.keys:
+            g = (extra or {}).get
+            tail += [g(k, _NAN) for k in ec.keys]
+        if ec.fast:
+            parts = [ec.pre_t, _D.pack(t), ec.hx, _f8bytes(x, n), ec.hp, _f8bytes(p_diag, n)]
+            if ec.m:
+                parts.append(ec.hi)
+                parts.append(_f8bytes(innovation, ec.m) if innovation is not None
+                             else ec.nan_i)
+            parts.append(ec.tail.pack(tail))
+            msg = b"".join(parts)
+        else:  # zero-length state vector: the generic flat encoding
+            vals = [t]
+            vals += _fit(_flat(x), n)
+            vals += _fit(_flat(p_diag), n)
+            if ec.m:
+                vals += (_fit(_flat(innovation), ec.m) if innovation is not None
+                         else [_NAN] * ec.m)
+            msg = ec.schema.encode(vals + tail)
+        self._pending.append((ec.log, msg, ns(t)))
+        ec.count += 1
+
+    def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> _EstChan:
+        m = len(_flat(innovation)) if innovation is not None else 0
+        keys = tuple(extra or {})
+        fields = [("t", 0), ("x", n), ("p_diag", n)]
+        if m:
+            fields.append(("innovation", m))
+        fields += [(f"pos.{a}", 0) for a in "xyz"]
+        fields += [(f"err.{a}", 0) for a in ("x", "y", "z", "horiz")]
+        fields += [(f"extra.{k}", 0) for k in keys]
+        try:
+            schema = FlatSchema("ag_uav.EstimatorState", fields)
+        except ValueError:
+            keys = ()
+            schema = FlatSchema("ag_uav.EstimatorState", [f for f in fields
+                                                           if not f[0].startswith("extra.")])
+        topic = f"/estimator/{sanitize_name(name)}"
+        ch = self._fg.Channel(
+            topic, message_encoding="protobuf",
+            schema=self._fg.Schema(name="ag_uav.EstimatorState", encoding="protobuf",
+                                   data=schema.schema_data),
+            context=self._ctx,
+        )
+        return _EstChan(schema, ch.base.log, topic, n, m, keys)
+
+    # ---------------------------------------------------------------- scene
+    def _scene_entities(self, t: float, entities: list[Any], topic: str) -> None:
+        if self.closed or self._period["scene"] == _INF:
+            return
+        ch = self._scene_ch.get(topic)
+        if ch is None:
+            ch = self._scene_ch[topic] = self._fc.SceneUpdateChannel(topic, context=self._ctx)
+        self._drain()
+        ch.log(self._M.SceneUpdate(entities=entities), log_time=ns(t))
+        self._count(topic)
+        self._writer.flush()
+
+    def _triangles(self, polys: list[Any], z: float, rgba: tuple[float, ...]) -> list[Any]:
+        """Fill shapely polygons with a TriangleListPrimitive (constrained Delaunay)."""
+        import shapely
+
+        M = self._M
+        pts: list[Any] = []
+        for poly in polys:
+            if poly.is_empty:
+                continue
+            tris = shapely.constrained_delaunay_triangles(poly)
+            for tri in getattr(tris, "geoms", [tris]):
+                if tri.is_empty:
+                    continue
+                c = list(tri.exterior.coords)[:3]
+                pts += [M.Point3(x=float(a), y=float(b), z=z) for a, b in c]
+        if not pts:
+            return []
+        return [M.TriangleListPrimitive(points=pts, color=M.Color(r=rgba[0], g=rgba[1],
+                                                                  b=rgba[2], a=rgba[3]))]
+
+    def _loops(self, rings: list[np.ndarray], z: float, rgba: tuple[float, ...],
+               thickness: float = 3.0) -> list[Any]:
+        M = self._M
+        out = []
+        for ring in rings:
+            ring = np.asarray(ring, dtype=float)
+            if len(ring) < 2:
+                continue
+            out.append(M.LinePrimitive(
+                type=M.LinePrimitiveLineType.LineLoop, thickness=thickness, scale_invariant=True,
+                points=[M.Point3(x=float(a), y=float(b), z=z) for a, b in ring[:, :2]],
+                color=M.Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])))
+        return out
+
+    def scene(
+        self,
+        t: float,
+        field_outer_xy: Any,
+        field_holes_xy: list[Any],
+        plan_segments: list[tuple[str, Any, bool]],
+        swath: float,
+        altitude: float,
+        parts: list[tuple[Any, list[Any]]] | None = None,
+    ) -> None:
+        """Field polygon (filled + outline, holes as obstacles) and planned path -> ``/field``.
+
+        ``plan_segments``: ``(kind, Nx2|Nx3 points, spray)``; spraying segments are drawn green,
+        the others (transits) grey.  ``parts``: ``[(outer, holes), ...]`` of a multi-part field
+        (replaces ``field_outer_xy`` / ``field_holes_xy``).  Call once at the start.
+        """
+        if self.closed or self._period["scene"] == _INF:
+            return
+        import shapely
+
+        M = self._M
+        if parts is None:
+            parts = [(field_outer_xy, field_holes_xy or [])]
+        outers = [np.asarray(o, dtype=float)[:, :2] for o, _ in parts]
+        holes = [np.asarray(h, dtype=float)[:, :2] for _, hs in parts for h in hs]
+        polys = [shapely.Polygon(o, [np.asarray(h, dtype=float)[:, :2] for h in hs])
+                 for o, (_, hs) in zip(outers, parts, strict=True)]
+        poly = shapely.union_all(polys)
+        ts = self._ts(ns(t))
+        field = M.SceneEntity(
+            timestamp=ts, frame_id="world", id="field",
+            triangles=self._triangles(polys, -0.02, (0.55, 0.45, 0.25, 0.6)),
+            lines=self._loops(outers, 0.0, (0.9, 0.8, 0.3, 1.0))
+            + self._loops(holes, 0.0, (0.9, 0.2, 0.2, 1.0)),
+            metadata=[M.KeyValuePair(key="swath_m", value=str(swath)),
+                      M.KeyValuePair(key="altitude_m", value=str(altitude)),
+                      M.KeyValuePair(key="area_m2", value=f"{poly.area:.1f}")],
+        )
+        lines = []
+        for _kind, pts, spray in plan_segments:
+            pts = np.asarray(pts, dtype=float)
+            if len(pts) < 2:
+                continue
+            z = pts[:, 2] if pts.shape[1] > 2 else np.full(len(pts), float(altitude))
+            col = (0.1, 0.85, 0.2, 1.0) if spray else (0.6, 0.6, 0.6, 0.8)
+            lines.append(M.LinePrimitive(
+                type=M.LinePrimitiveLineType.LineStrip, thickness=2.0, scale_invariant=True,
+                points=[M.Point3(x=float(a), y=float(b), z=float(c))
+                        for (a, b), c in zip(pts[:, :2], z, strict=True)],
+                color=M.Color(r=col[0], g=col[1], b=col[2], a=col[3])))
+        plan = M.SceneEntity(timestamp=ts, frame_id="world", id="plan", lines=lines)
+        self._scene_entities(t, [field, plan], "/field")
+
+    def sprayed(self, t: float, polygons_xy: list[Any]) -> None:
+        """Sprayed area (shapely Polygon/MultiPolygon or Nx2 rings) -> ``/sprayed``."""
+        if self.closed or self._period["scene"] == _INF:
+            return
+        import shapely
+
+        polys: list[Any] = []
+        for p in polygons_xy:
+            if isinstance(p, shapely.MultiPolygon):
+                polys += list(p.geoms)
+            elif isinstance(p, shapely.Polygon):
+                polys.append(p)
+            else:
+                polys.append(shapely.Polygon(np.asarray(p, dtype=float)[:, :2]))
+        ent = self._M.SceneEntity(
+            timestamp=self._ts(ns(t)), frame_id="world", id="sprayed",
+            triangles=self._triangles(polys, 0.0, (0.1, 0.7, 1.0, 0.45)),
+            lines=self._loops([np.asarray(p.exterior.coords) for p in polys], 0.01,
+                              (0.1, 0.7, 1.0, 1.0), 1.0),
+        )
+        self._scene_entities(t, [ent], "/sprayed")
+
+    # ---------------------------------------------------------------- camera
+    def frame(
+        self,
+        t: float,
+        camera: str,
+        jpeg: bytes,
+        width: int,
+        height: int,
+        fovy_deg: float,
+        pose: tuple[Sequence[float], Sequence[float]] | None = None,
+    ) -> None:
+        """A JPEG frame -> ``/camera/<camera>`` (+ its CameraCalibration each frame, so a seek
+        always finds one).  ``pose`` = (position, quaternion wxyz) of the camera's optical frame
+        (z forward, x right, y down; :meth:`ag_uav.record.render.Renderer.camera_pose`) ->
+        ``/tf``."""
+        if self.closed or not self._due_cam(camera, t):
+            return
+        M = self._M
+        tn = ns(t)
+        ts = self._ts(tn)
+        frame_id = f"cam_{sanitize_name(camera)}"
+        ch = self._cam.get(camera)
+        if ch is None:
+            base = f"/camera/{sanitize_name(camera)}"
+            ch = self._cam[camera] = (
+                self._fc.CompressedImageChannel(base, context=self._ctx),
+                self._fc.CameraCalibrationChannel(base + "/calibration", context=self._ctx),
+                base,
+            )
+        img, cal, base = ch
+        self._drain()
+        fy = 0.5 * height / math.tan(math.radians(fovy_deg) / 2.0)
+        fx = fy
+        cx, cy = 0.5 * width, 0.5 * height
+        img.log(M.CompressedImage(timestamp=ts, frame_id=frame_id, data=bytes(jpeg),
+                                  format="jpeg"), log_time=tn)
+        cal.log(M.CameraCalibration(
+            timestamp=ts, frame_id=frame_id, width=int(width), height=int(height),
+            distortion_model="plumb_bob", D=[0.0] * 5,
+            K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+            R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]), log_time=tn)
+        self._count(base)
+        self._count(base + "/calibration")
+        if pose is not None and self._ch_tf is not None:
+            self._ch_tf.log(enc_transform(_ts_pb(tn), _str_field(3, frame_id), pose[0], pose[1]),
+                            log_time=tn)
+            self._count("/tf")
+        self._maybe_flush(t)
+
+    def _due_cam(self, camera: str, t: float) -> bool:
+        """Camera rate is per camera; ``want_frame`` checks the group clock."""
+        p = self._period["camera"]
+        if p == _INF:
+            return False
+        key = "camera:" + camera
+        if t < self._next_est.get(key, -_INF):
+            return False
+        self._next_est[key] = t + p - 1e-9
+        # the group clock is the earliest of the cameras' clocks
+        self._next["camera"] = min(v for k, v in self._next_est.items()
+                                   if k.startswith("camera:"))
+        return True
+
+    # ---------------------------------------------------------------- end
+    def summary(self, summary: dict[str, Any]) -> None:
+        """Final metrics -> metadata record ``summary`` and attachment ``summary.json``."""
+        if self.closed:
+            return
+        self._drain()
+        self._writer.write_metadata("summary", {k: _meta_str(v) for k, v in summary.items()})
+        self._writer.attach(log_time=ns(self._t_last), create_time=time.time_ns(),
+                            name="summary.json", media_type="application/json",
+                            data=json.dumps(summary, default=str, indent=1).encode())
+
+    def _write_layout(self) -> None:
+        """``layout.json`` beside the log, for the channels seen so far."""
+        if not self._layout:
+            return
+        try:
+            from ..analysis.viewing import write_foxglove_layout
+
+            cams = tuple(self._cam) or (("chase", "down") if self._period["camera"] < _INF
+                                        else ())
+            write_foxglove_layout(self.path.parent / "layout.json", cameras=cams,
+                                  estimators=tuple(sanitize_name(n) for n in self._est),
+                                  ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4,
+                                  spray=getattr(self, "_ch_spray", None) is not None)
+        except Exception:  # noqa: BLE001 - a missing layout never stops a run
+            pass
+
+    def close(self) -> None:
+        """Finish the file (summary, indexes, footer).  Idempotent; safe in signal handlers."""
+        if self.closed:
+            return
+        self.closed = True
+        self._next_tick = _INF
+        for g in self._next:
+            self._next[g] = _INF
+        for ec in self._est.values():
+            ec.next_t = _INF
+        try:
+            self._drain()
+            self._writer.close()
+        finally:
+            _OPEN.discard(self)
+        self._write_layout()
+
+
+def _flat(a: Any) -> list[float]:
+    """A flat list of floats from a numpy array, list or tuple (cheap for ndarrays)."""
+    if isinstance(a, np.ndarray):
+        return a.ravel().tolist()
+    if isinstance(a, list):
+        return a
+    return list(a)
+
+
+def _fit(a: list[float], k: int) -> list[float]:
+    """``a`` truncated or NaN-padded to length ``k`` (always a new list)."""
+    if len(a) >= k:
+        return list(a[:k])
+    return list(a) + [_NAN] * (k - len(a))
+
+
+def _tree_order(keys: list[str]) -> list[str]:
+    """Order dotted keys so that every group is contiguous (first-appearance order)."""
+    tree: dict[str, Any] = {}
+    for k in keys:
+        node = tree
+        for part in k.split(".")[:-1]:
+            node = node.setdefault(part + ".", {})
+        node[k.split(".")[-1]] = k
+    out: list[str] = []
+
+    def walk(node: dict[str, Any]) -> None:
+        for v in node.values():
+            if isinstance(v, dict):
+                walk(v)
+            else:
+                out.append(v)
+
+    walk(tree)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# Synthetic run (tests, demos, benchmarks): a drone flying a lawnmower over a small field
+# --------------------------------------------------------------------------------------------
+
+
+def lawnmower_plan(
+    width: float = 60.0, height: float = 40.0, swath: float = 8.0, altitude: float = 3.0
+) -> list[tuple[str, np.ndarray, bool]]:
+    """Boustrophedon legs along x over ``[0, width] x [0, height]`` with transits between."""
+    segs: list[tuple[str, np.ndarray, bool]] = []
+    ys = np.arange(swath / 2, height, swath)
+    prev = None
+    for i, y in enumerate(ys):
+        xa, xb = (2.0, width - 2.0) if i % 2 == 0 else (width - 2.0, 2.0)
+        leg = np.array([[xa, y, altitude], [xb, y, altitude]])
+        if prev is not None:
+            segs.append(("transit", np.array([prev, leg[0]]), False))
+        segs.append(("leg", leg, True))
+        prev = leg[1]
+    return segs
+
+
+def synthetic_run(
+    log: RunLog,
+    duration: float = 30.0,
+    *,
+    dt: float = 0.01,
+    gps_hz: float = 10.0,
+    speed: float = 4.0,
+    seed: int = 0,
+    estimators: Sequence[str] = ("kf", "mckf"),
+    on_tick: Any = None,
+) -> int:
+    """Drive ``log`` like the simulation would: ticks at ``1/dt``, GPS fixes, estimators.
+
+    ``on_tick(t, p, q_wxyz)`` is called after each tick (e.g. to pose a body and render).
+    Returns the tick count.  Deterministic for a given ``seed``.
+    """
+    rng = np.random.default_rng(seed)
+    plan = lawnmower_plan()
+    outer = np.array([[0, 0], [60, 0], [60, 40], [0, 40]], dtype=float)
+    hole = np.array([[28, 18], [32, 18], [32, 22], [28, 22]], dtype=float)
+    log.scene(0.0, outer, [hole], plan, swath=8.0, altitude=3.0)
+    pts = np.concatenate([s[1] for s in plan])
+    seg_len = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    s_cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+    n = int(round(duration / dt))
+    gps_every = max(1, int(round(1.0 / (gps_hz * dt))))
+    lag = np.zeros(3)
+    est = {name: np.zeros(6) for name in estimators}
+    wind = np.array([2.0, 0.5, 0.0])
+    for k in range(n):
+        t = k * dt
+        s = min(speed * t, s_cum[-1] - 1e-6)
+        i = int(np.searchsorted(s_cum, s, side="right") - 1)
+        i = min(i, len(seg_len) - 1)
+        u = (s - s_cum[i]) / max(seg_len[i], 1e-9)
+        d = (pts[i + 1] - pts[i]) / max(seg_len[i], 1e-9)
+        p_ref = pts[i] + u * (pts[i + 1] - pts[i])
+        v_ref = speed * d
+        yaw = math.atan2(d[1], d[0])
+        lag = 0.97 * lag + 0.03 * rng.normal(0.0, 0.3, 3)
+        p = p_ref + lag
+        v = v_ref + rng.normal(0.0, 0.05, 3)
+        q = (math.cos(yaw / 2), 0.02, -0.03, math.sin(yaw / 2))
+        qn = math.sqrt(sum(c * c for c in q))
+        q = tuple(c / qn for c in q)
+        e = p_ref - p
+        ctrl = {}
+        for ax, ev in zip(("x", "y", "z"), e, strict=True):
+            ctrl[f"{ax}.E"] = float(np.clip(0.3 * ev, -1, 1))
+            ctrl[f"{ax}.dE"] = float(np.clip(0.1 * ev, -1, 1))
+            ctrl[f"{ax}.U"] = 0.5 * ctrl[f"{ax}.E"]
+            ctrl[f"{ax}.I"] = 0.01 * t
+            ctrl[f"{ax}.u"] = 2.0 * ev
+        motors = [0.5 + 0.01 * math.sin(t + j) for j in range(4)]
+        p_est = next(iter(est.values()))[:3] if est else None
+        log.tick(t, p_true=p, q_true_wxyz=q, v_true=v, p_ref=p_ref, v_ref=v_ref, yaw_ref=yaw,
+                 p_est=p_est, v_est=v, ctrl=ctrl, motors=motors, wind=wind,
+                 spray=plan[min(i, len(plan) - 1)][2])
+        if k % gps_every == 0:
+            fix = p + rng.normal(0.0, 0.8, 3) * np.array([1, 1, 0.5])
+            log.gps(t, fix)
+            for j, (name, x) in enumerate(est.items()):
+                a = 0.3 + 0.2 * j
+                innov = fix - x[:3]
+                x[:3] += a * innov
+                x[3:] = v
+                log.estimator(t, name, x, np.full(6, 0.5 / (1 + j)), innov,
+                              {"nis": float(innov @ innov)}, pos=x[:3])
+        if on_tick is not None:
+            on_tick(t, p, q)
+    return n

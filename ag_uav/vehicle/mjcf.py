@@ -1,0 +1,120 @@
+"""The vehicle: MJCF quadrotor compiled from ``models/quad.xml`` with the config applied (MjSpec).
+
+``build_vehicle(cfg)`` returns the compiled ``MjModel`` plus the facts the controllers need
+(mass, principal inertia, rotor layout, thrust limit) so that nothing downstream re-reads XML.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from ..config import Config
+
+MODEL_DIR = Path(__file__).resolve().parents[2] / "models"
+MODEL_XML = MODEL_DIR / "quad.xml"
+ROTORS = ("fr", "fl", "rl", "rr")
+G = 9.81
+
+
+@dataclass
+class Vehicle:
+    model: mujoco.MjModel
+    mass: float                      # total, with payload (kg)
+    inertia: tuple[float, float, float]  # body-axis diagonal of the inertia tensor (kg m²)
+    rotor_xy: list[tuple[float, float]]  # rotor positions about the centre of mass (m)
+    spin: list[int]                  # +1: yaw reaction torque +k f (rotor spins clockwise)
+    k_yaw: float
+    f_max: float                     # per-rotor thrust limit (N)
+    body_id: int
+    ground_geom: int
+    skid_geoms: tuple[int, ...]
+    hover_z: float                   # z of the body frame resting on the skids (m)
+
+    def info(self) -> dict:
+        return {
+            "mass_kg": round(self.mass, 4),
+            "inertia_kgm2": [round(v, 4) for v in self.inertia],
+            "rotor_xy_m": [[round(a, 4), round(b, 4)] for a, b in self.rotor_xy],
+            "thrust_max_per_rotor_N": round(self.f_max, 3),
+            "thrust_to_weight": round(4 * self.f_max / (self.mass * G), 3),
+            "yaw_torque_coeff_m": self.k_yaw,
+            "timestep_s": float(self.model.opt.timestep),
+        }
+
+
+def build_vehicle(cfg: Config, field_outline: list[np.ndarray] | None = None) -> Vehicle:
+    """Compile the MJCF with the config applied.
+
+    ``field_outline``: optional closed polylines (local ENU metres) drawn on the ground as thin,
+    non-colliding strips (field boundary and obstacles), so renders show the field.
+    """
+    spec = mujoco.MjSpec.from_file(str(MODEL_XML))
+    v = cfg.vehicle
+    spec.option.timestep = cfg.sim.timestep_s
+    f_max = v.thrust_to_weight * v.mass_kg * G / 4.0
+    # scale the dry mass of the airframe geoms so the total equals mass_kg, payload in the tank
+    body = spec.body("drone")
+    geoms = [g for g in body.geoms]
+    dry = sum(g.mass for g in geoms if g.name != "tank")
+    for g in geoms:
+        if g.name == "tank":
+            g.mass = max(v.payload_kg, 1e-3)
+        else:
+            g.mass = g.mass * v.mass_kg / dry
+    # the tank's liquid: its own body welded under the airframe at the tank (no joint), massless
+    # here; ag_uav.engine.sprayer.Sprayer sets its mass and inertia at run time as the tank drains
+    liq = body.add_body(name="liquid", pos=list(spec.geom("tank").pos))
+    liq.explicitinertial = True
+    liq.mass = 1e-6
+    liq.inertia = [1e-9, 1e-9, 1e-9]
+    for a in spec.actuators:
+        a.ctrlrange = [0.0, f_max]
+        a.dynprm[0] = v.motor_tau_s
+        sign = 1.0 if a.gear[5] > 0 else -1.0
+        a.gear[5] = sign * v.yaw_torque_coeff_m
+    if field_outline:
+        mat = spec.add_material(name="boundary", rgba=[0.95, 0.95, 0.2, 1.0])
+        for k, line in enumerate(field_outline):
+            pts = np.asarray(line, dtype=float)
+            for i in range(len(pts) - 1):
+                (x0, y0), (x1, y1) = pts[i], pts[i + 1]
+                if math.hypot(x1 - x0, y1 - y0) < 1e-6:
+                    continue
+                spec.worldbody.add_geom(
+                    name=f"edge_{k}_{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                    fromto=[x0, y0, 0.02, x1, y1, 0.02], size=[0.12, 0, 0],
+                    contype=0, conaffinity=0, material="boundary", group=1)
+        del mat
+    model = spec.compile()
+    # MuJoCo's clipping planes are relative to the model extent, which the field geoms make
+    # ~100 m: pin them in metres (5 cm near, 800 m far) or the cameras clip the ground and the drone
+    ext = float(model.stat.extent)
+    model.vis.map.znear = 0.05 / ext
+    model.vis.map.zfar = 800.0 / ext
+    body_id = model.body("drone").id
+    # inertia tensor in body axes from the principal moments and their frame
+    I_p = np.diag(model.body_inertia[body_id])
+    Rq = np.zeros(9)
+    mujoco.mju_quat2Mat(Rq, model.body_iquat[body_id])
+    Rq = Rq.reshape(3, 3)
+    I_body = Rq @ I_p @ Rq.T
+    com = model.body_ipos[body_id]
+    rotor_xy, spin = [], []
+    for r in ROTORS:
+        s = model.site(f"rotor_{r}")
+        rotor_xy.append((float(s.pos[0] - com[0]), float(s.pos[1] - com[1])))
+        act = model.actuator(f"thrust_{r}")
+        spin.append(1 if act.gear[5] > 0 else -1)
+    skids = tuple(model.geom(n).id for n in ("skid_l", "skid_r"))
+    skid_bottom = -(model.geom("skid_l").pos[2] - model.geom("skid_l").size[0])
+    return Vehicle(
+        model=model, mass=float(model.body_subtreemass[body_id]),
+        inertia=(float(I_body[0, 0]), float(I_body[1, 1]), float(I_body[2, 2])),
+        rotor_xy=rotor_xy, spin=spin, k_yaw=v.yaw_torque_coeff_m, f_max=f_max, body_id=body_id,
+        ground_geom=model.geom("ground").id, skid_geoms=skids, hover_z=float(skid_bottom) + 0.002,
+    )

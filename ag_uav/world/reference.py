@@ -1,0 +1,623 @@
+"""Time-parameterised flight reference along a :class:`~ag_uav.world.plan.CoveragePlan`.
+
+Construction (all precomputed once; the per-tick lookup is an index plus one fused interpolation):
+
+1. **Geometry.** Waypoints = optional vertical climb from the start point (``z0`` → ``altitude``),
+   then the plan's polyline at ``altitude``. At each vertex with deflection φ:
+   φ ≥ ``stop_angle_deg`` → a *stop* (rest-to-rest through the corner, the way spray drones fly
+   square headland corners); otherwise a circular *fillet* tangent to both edges, with tangent
+   length t = min(ℓ_in/2, ℓ_out/2, t_dev), t_dev = e·tan(φ/2)/(sec(φ/2) − 1) so the fillet stays
+   within ``max_deviation`` = e of the corner, radius r = t / tan(φ/2). Densely sampled plan arcs
+   (U-turn semicircles) thus become chains of arcs of their own radius.
+2. **Speed along arc length s.** v_lim(s) = min(cap, sqrt(a_lat/κ(s))), 0 at stops and ends, with
+   a_lat = ``lat_frac``·a; a forward and a backward pass with tangential acceleration
+   a_t = a (lines) or a·sqrt(1 − lat_frac²) (arcs) give the fastest profile with
+   |a| = sqrt(a_t² + a_n²) ≤ a (piecewise-constant s̈ on a ds grid, v² linear in s; the classic
+   "forward–backward" time-optimal profile along a fixed path, e.g. Verscheure et al. 2009).
+   Each stop has a dwell ``dwell`` ≥ ``jerk_window``.
+3. **Jerk limiting.** The raw trajectory p_raw(t) = P(s(t)) has continuous velocity but steps in
+   acceleration (profile switches, curvature steps at arc ends). It is smoothed by a moving
+   average of width W = ``jerk_window``: p_W(t) = (1/W)∫_{t−W/2}^{t+W/2} p_raw, so
+   v_W = (p_raw(t+W/2) − p_raw(t−W/2))/W and a_W = (v_raw(t+W/2) − v_raw(t−W/2))/W: a_W is the
+   mean of a_raw over the window, so |a_W| ≤ sup|a_raw| ≤ a, and |jerk| ≤ 2a/W. The price is a
+   cut inside curves of ≈ a_n W²/24 (< 1 cm here). Because every stop has a dwell ≥ W, p_W still
+   passes exactly through each stop corner at rest, so the velocity stays continuous there.
+4. **Outputs** on a grid at ``rate`` Hz (v_W, a_W in closed form from the piecewise-quadratic
+   s(t); p_W by trapezoidal integration on a dt/5 grid; P, T interpolated on a 5 cm s-grid). The
+   realised max |a| is checked and, should it exceed ``a_max`` (grid effects), the internal limit
+   is scaled down and the profile rebuilt.
+5. **Yaw** = travel heading (continuous through filleted turns and U-turn arcs; at a stop the
+   heading change is spread by a raised-cosine ramp of width ≥ (π/2)|Δψ|/``yaw_rate_max``
+   centred on the dwell). The start climb and the end hover hold the adjacent heading.
+
+The sprayer flag is the plan segment's ``spray`` (legs and headland laps on; turns, transits,
+climb and end hover off); ``seg`` is the plan segment index, −1 during the climb and end hover.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .plan import CoveragePlan
+
+__all__ = ["RefSample", "Reference"]
+
+
+class RefSample(NamedTuple):
+    """Reference at one time. ``pos``/``vel``/``acc`` are read-only (3,) arrays (views)."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    acc: np.ndarray
+    yaw: float
+    yaw_rate: float
+    spray: bool
+    seg: int
+
+
+def _unit(v: np.ndarray) -> tuple[np.ndarray, float]:
+    n = float(np.linalg.norm(v))
+    return (v / n if n > 0 else v * 0.0), n
+
+
+class Reference:
+    """Smooth, flyable reference along a coverage plan (see module docstring).
+
+    Args:
+        plan: the coverage plan.
+        speed: cruise speed (m/s).
+        altitude: spray altitude (m above the ground plane z = 0).
+        a_max: bound on |acceleration| (m/s²), horizontal and vertical alike.
+        takeoff: start on the ground at ``z0`` below the plan start and climb first.
+        climb_speed: vertical speed cap for the climb (m/s).
+        hover_time: hover at the end (s).
+        z0: ground height of the start (m).
+        rate: output grid rate (Hz); ``sample`` interpolates linearly between grid points.
+        jerk_window: moving-average width W of the time law (s); jerk ≤ ~2·a_max/W.
+        stop_angle_deg: corners turning by at least this much are flown rest-to-rest.
+        max_deviation: largest distance a corner fillet may cut from the plan (m).
+        lat_frac: share of ``a_max`` given to centripetal acceleration in curves.
+        yaw_rate_max: yaw rate used to size the yaw ramps at stops (rad/s).
+        ds: arc-length grid step (m).
+        landing: end with a vertical descent to ``z_land`` at ``climb_speed`` (a sortie that
+            returns to its base); the descent, like the climb, has ``seg`` −1 and no spray.
+        z_land: height the landing descends to (m); a little below the body height resting on
+            the skids, so the vehicle settles at a low vertical speed.
+        land_speed: vertical speed cap of the last ``flare_height`` metres of the landing (m/s);
+            above that the descent runs at ``climb_speed``, with a stop in between.
+        seg_speeds: optional per-plan-segment speed caps (m/s; None = ``speed``), e.g. a faster
+            transit to and from the base.
+    """
+
+    def __init__(
+        self,
+        plan: CoveragePlan,
+        speed: float = 5.0,
+        altitude: float = 3.0,
+        a_max: float = 1.5,
+        takeoff: bool = True,
+        climb_speed: float = 1.5,
+        hover_time: float = 5.0,
+        z0: float = 0.0,
+        rate: float = 100.0,
+        jerk_window: float = 0.3,
+        stop_angle_deg: float = 60.0,
+        max_deviation: float = 0.25,
+        lat_frac: float = 0.7,
+        yaw_rate_max: float = math.radians(90.0),
+        ds: float = 0.05,
+        landing: bool = False,
+        z_land: float = 0.0,
+        land_speed: float = 0.3,
+        flare_height: float = 0.6,
+        seg_speeds: list[float | None] | None = None,
+    ):
+        for nm, val in (("speed", speed), ("a_max", a_max), ("rate", rate),
+                        ("climb_speed", climb_speed), ("ds", ds)):
+            if not (math.isfinite(val) and val > 0):
+                raise ValueError(f"{nm} must be > 0, got {val}")
+        if jerk_window < 0 or hover_time < 0:
+            raise ValueError("jerk_window and hover_time must be ≥ 0")
+        self.plan = plan
+        self.speed = float(speed)
+        self.altitude = float(altitude)
+        self.a_max = float(a_max)
+        self.rate = float(rate)
+        self.dt = 1.0 / self.rate
+        self._sub = 5
+        step = 2.0 * self.dt / self._sub
+        self.window = round(float(jerk_window) / step) * step
+        self.dwell = max(1.2 * self.window, 0.2)
+        self.hover_time = float(hover_time)
+        self.lat_frac = float(lat_frac)
+        self.yaw_rate_max = float(yaw_rate_max)
+        self._ds = float(ds)
+        self._landing = bool(landing)
+        self._z_land = float(z_land)
+        self._land_speed = float(land_speed)
+        self._flare = float(flare_height)
+        self._seg_speeds = seg_speeds
+        self._build_geometry(takeoff, float(z0), float(climb_speed),
+                             math.radians(stop_angle_deg), float(max_deviation))
+        a_int = self.a_max
+        for _ in range(6):
+            self._build_time_law(a_int)
+            self._build_outputs()
+            amax = float(np.max(np.linalg.norm(self._acc, axis=1)))
+            if amax <= self.a_max * (1.0 + 1e-6):
+                break
+            a_int *= 0.995 * self.a_max / amax
+        self.a_internal = a_int
+        self._finalise()
+
+    # ------------------------------------------------------------------ geometry
+    def _build_geometry(self, takeoff, z0, climb_speed, stop_angle, max_dev):
+        plan = self.plan
+        pts: list[np.ndarray] = []
+        eseg: list[int] = []
+        ecap: list[float] = []
+        s0 = plan.segments[0].points[0]
+        if takeoff:
+            pts += [np.array([s0[0], s0[1], z0]), np.array([s0[0], s0[1], self.altitude])]
+            eseg.append(-1)
+            ecap.append(climb_speed)
+        else:
+            pts.append(np.array([s0[0], s0[1], self.altitude]))
+        speeds = self._seg_speeds or [None] * len(plan.segments)
+        for j, seg in enumerate(plan.segments):
+            cap_j = self.speed if speeds[j] is None else float(speeds[j])
+            for q in seg.points:
+                p = np.array([q[0], q[1], self.altitude])
+                if np.linalg.norm(p - pts[-1]) > 1e-6:
+                    pts.append(p)
+                    eseg.append(j)
+                    ecap.append(cap_j)
+        if self._landing:
+            z_flare = self._z_land + self._flare
+            if pts[-1][2] > z_flare + 1e-6:
+                pts.append(np.array([pts[-1][0], pts[-1][1], z_flare]))
+                eseg.append(-1)
+                ecap.append(climb_speed)
+            pts.append(np.array([pts[-1][0], pts[-1][1], self._z_land]))
+            eseg.append(-1)
+            ecap.append(self._land_speed)
+        P = np.array(pts)
+        n = len(P)
+        if n < 2:
+            raise ValueError("plan path is degenerate")
+        # primitives: ("line", a, b, seg, cap, stop_at_end) / ("arc", A, C, r, phi, u_in, ...)
+        prims: list[tuple] = []
+        cur = P[0]
+        n_stops = 0
+        for i in range(1, n - 1):
+            u_in, l_in = _unit(P[i] - P[i - 1])
+            u_out, l_out = _unit(P[i + 1] - P[i])
+            phi = math.acos(max(-1.0, min(1.0, float(u_in @ u_out))))
+            if phi < 1e-7:
+                prims.append(("line", cur, P[i], eseg[i - 1], ecap[i - 1], False))
+                cur = P[i]
+                continue
+            if phi >= stop_angle or u_in[2] != 0.0 or u_out[2] != 0.0:
+                prims.append(("line", cur, P[i], eseg[i - 1], ecap[i - 1], True))
+                cur = P[i]
+                n_stops += 1
+                continue
+            half = 0.5 * phi
+            t_dev = max_dev * math.tan(half) / (1.0 / math.cos(half) - 1.0)
+            t = min(0.5 * l_in, 0.5 * l_out, t_dev)
+            r = t / math.tan(half)
+            a_pt = P[i] - t * u_in
+            prims.append(("line", cur, a_pt, eseg[i - 1], ecap[i - 1], False))
+            bis, _ = _unit(u_out - u_in)
+            c = P[i] + bis * (r / math.cos(half))
+            prims.append(("arc", a_pt, c, r, phi, u_in, eseg[i - 1], eseg[i],
+                          min(ecap[i - 1], ecap[i])))
+            cur = P[i] + t * u_out
+        prims.append(("line", cur, P[-1], eseg[-1], ecap[-1], True))
+        self.n_stops = n_stops
+
+        # dense arc-length samples; every primitive contributes both end points (duplicates at
+        # junctions carry the tangent/curvature of each side).
+        S, PP, TT, KK, CAP, SEG, STOP = [], [], [], [], [], [], []
+        s_acc = 0.0
+        ds = self._ds
+        for pr in prims:
+            if pr[0] == "line":
+                _, a, b, sg, cap, stop = pr
+                u, ln = _unit(b - a)
+                if ln < 1e-9:
+                    if stop and STOP:
+                        STOP[-1] = True
+                    continue
+                m = max(2, math.ceil(ln / ds))
+                f = np.linspace(0.0, 1.0, m + 1)
+                S.append(s_acc + f * ln)
+                PP.append(a + f[:, None] * (b - a))
+                TT.append(np.repeat(u[None], m + 1, axis=0))
+                KK.append(np.zeros((m + 1, 3)))
+                CAP.append(np.full(m + 1, cap))
+                SEG.append(np.full(m + 1, sg))
+                st = np.zeros(m + 1, bool)
+                st[-1] = stop
+                STOP.append(st)
+                s_acc += ln
+            else:
+                _, a, c, r, phi, u_in, sg0, sg1, cap = pr
+                ln = r * phi
+                m = max(2, math.ceil(ln / ds))
+                th = np.linspace(0.0, phi, m + 1)
+                e1 = (a - c) / r
+                cth, sth = np.cos(th)[:, None], np.sin(th)[:, None]
+                pos = c + r * (cth * e1 + sth * u_in)
+                S.append(s_acc + th * r)
+                PP.append(pos)
+                TT.append(-sth * e1 + cth * u_in)
+                KK.append((c - pos) / (r * r))
+                CAP.append(np.full(m + 1, cap))
+                SEG.append(np.where(th < 0.5 * phi, sg0, sg1))
+                STOP.append(np.zeros(m + 1, bool))
+                s_acc += ln
+        self._s = np.concatenate(S)
+        self._P = np.concatenate(PP)
+        self._T = np.concatenate(TT)
+        self._K = np.concatenate(KK)
+        self._cap = np.concatenate(CAP)
+        self._seg_s = np.concatenate(SEG).astype(int)
+        stop = np.concatenate(STOP)
+        stop[0] = True
+        stop[-1] = True
+        self._stop = stop
+        self.length = float(self._s[-1])
+
+        # heading along s (unwrapped), jump-free part and the jumps at stops
+        txy = self._T[:, :2]
+        nrm = np.hypot(txy[:, 0], txy[:, 1])
+        psi = np.full(len(nrm), np.nan)
+        ok = nrm > 1e-6
+        psi[ok] = np.arctan2(txy[ok, 1], txy[ok, 0])
+        if not np.any(ok):
+            psi[:] = 0.0
+        else:  # fill vertical parts (climb) with the nearest following/previous heading
+            idx = np.where(ok, np.arange(len(psi)), len(psi))
+            nxt = np.minimum.accumulate(idx[::-1])[::-1]
+            fill = ~ok & (nxt < len(psi))
+            psi[fill] = psi[nxt[fill]]
+            idx2 = np.where(ok | fill, np.arange(len(psi)), -1)
+            prv = np.maximum.accumulate(idx2)
+            psi[np.isnan(psi)] = psi[prv[np.isnan(psi)]]
+        psi = np.unwrap(psi)
+        # jumps happen only across zero-length (duplicate) intervals at stop vertices
+        dpsi = np.diff(psi)
+        dsv = np.diff(self._s)
+        jump = (dsv < 1e-12) & (np.abs(dpsi) > 1e-9)
+        jump_idx = np.where(jump)[0]
+        self._jump_s = self._s[jump_idx]
+        self._jump_d = dpsi[jump_idx]
+        corr = np.concatenate([[0.0], np.cumsum(np.where(jump, dpsi, 0.0))])
+        self._psi_smooth = psi - corr
+        self._psi0 = float(psi[0])
+
+    # ------------------------------------------------------------------ time law
+    def _build_time_law(self, a_int: float):
+        s, K, cap, stop = self._s, self._K, self._cap, self._stop
+        kap = np.linalg.norm(K, axis=1)
+        a_lat = self.lat_frac * a_int
+        with np.errstate(divide="ignore"):
+            vlim = np.minimum(cap, np.where(kap > 1e-12, np.sqrt(a_lat / np.maximum(kap, 1e-300)),
+                                            np.inf))
+        vlim[stop] = 0.0
+        ds = np.diff(s)
+        curved = (kap[:-1] > 1e-12) | (kap[1:] > 1e-12)
+        at = np.where(curved, a_int * math.sqrt(max(1.0 - self.lat_frac**2, 0.01)), a_int)
+        vl = vlim.tolist()
+        ds.tolist()
+        two_a_ds = (2.0 * at * ds).tolist()
+        n = len(vl)
+        v = [0.0] * n
+        v[0] = 0.0
+        for i in range(n - 1):
+            w = v[i] * v[i] + two_a_ds[i]
+            lim = vl[i + 1]
+            v[i + 1] = lim if lim * lim <= w else math.sqrt(w)
+        for i in range(n - 2, -1, -1):
+            w = v[i + 1] * v[i + 1] + two_a_ds[i]
+            if v[i] * v[i] > w:
+                v[i] = math.sqrt(w)
+        v_arr = np.array(v)
+        # per-interval acceleration and duration
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dv2 = v_arr[1:] ** 2 - v_arr[:-1] ** 2
+            acc = np.where(ds > 0, dv2 / (2.0 * np.maximum(ds, 1e-300)), 0.0)
+            vsum = v_arr[:-1] + v_arr[1:]
+            dur = np.where(ds > 0, 2.0 * ds / np.maximum(vsum, 1e-300), 0.0)
+        bad = (ds > 0) & (vsum < 1e-9)
+        if np.any(bad):  # two stops one grid step apart: rest-to-rest at a_t
+            dur[bad] = 2.0 * np.sqrt(ds[bad] / at[bad])
+            acc[bad] = 0.0
+        dwell = np.where(stop[:-1], self.dwell, 0.0)
+        dwell[0] = self.window  # rest before the first move
+        # knots: node i reached at tk[i]; departs at tk[i] + dwell[i]
+        tk = np.concatenate([[0.0], np.cumsum(dwell + dur)])
+        self._tk = tk
+        self._tdep = tk[:-1] + dwell
+        self._v = v_arr
+        self._acc_i = acc
+        # integral of s over time, at knots
+        tau = dur
+        seg_int = (s[:-1] * (dwell + tau) + v_arr[:-1] * tau**2 / 2 + acc * tau**3 / 6)
+        self._Sk = np.concatenate([[0.0], np.cumsum(seg_int)])
+        self._t_end_raw = float(tk[-1])
+        self.duration = self._t_end_raw + 0.5 * self.window + self.hover_time
+
+    def _raw(self, t: np.ndarray):
+        """s, ṡ and ∫s dt of the un-smoothed time law (vectorised; clamps outside)."""
+        tk, s = self._tk, self._s
+        t = np.asarray(t, float)
+        i = np.clip(np.searchsorted(tk, t, side="right") - 1, 0, len(tk) - 2)
+        tc = np.clip(t, 0.0, None)
+        tau = np.clip(tc - self._tdep[i], 0.0, None)
+        dur = tk[i + 1] - self._tdep[i]
+        tau = np.minimum(tau, dur)
+        si, vi, ai = s[i], self._v[i], self._acc_i[i]
+        pos = si + vi * tau + 0.5 * ai * tau**2
+        vel = vi + ai * tau
+        dw = np.minimum(tc - tk[i], self._tdep[i] - tk[i])
+        integ = self._Sk[i] + si * dw + si * tau + vi * tau**2 / 2 + ai * tau**3 / 6
+        # beyond the end: at rest at s_end
+        after = t > tk[-1]
+        if np.any(after):
+            pos = np.where(after, s[-1], pos)
+            vel = np.where(after, 0.0, vel)
+            integ = np.where(after, self._Sk[-1] + s[-1] * (t - tk[-1]), integ)
+        before = t < 0
+        if np.any(before):
+            pos = np.where(before, s[0], pos)
+            vel = np.where(before, 0.0, vel)
+            integ = np.where(before, s[0] * t, integ)
+        return pos, vel, integ
+
+    def _smoothed(self, t: np.ndarray):
+        w = self.window
+        if w <= 0:
+            pos, vel, _ = self._raw(t)
+            i = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self._tk) - 2)
+            moving = (t > self._tdep[i]) & (t <= self._tk[-1])
+            return pos, vel, np.where(moving, self._acc_i[i], 0.0)
+        p1, v1, i1 = self._raw(t + 0.5 * w)
+        p0, v0, i0 = self._raw(t - 0.5 * w)
+        return (i1 - i0) / w, (p1 - p0) / w, (v1 - v0) / w
+
+    def _interp_s(self, sq: np.ndarray):
+        s = self._s
+        i = np.clip(np.searchsorted(s, sq, side="right") - 1, 0, len(s) - 2)
+        h = s[i + 1] - s[i]
+        f = np.where(h > 0, (sq - s[i]) / np.where(h > 0, h, 1.0), 0.0)
+        f = np.clip(f, 0.0, 1.0)[:, None]
+        return i, f
+
+    # ------------------------------------------------------------------ outputs
+    def _path_at(self, sq: np.ndarray):
+        """Position P(s) and unit tangent T(s) by interpolation on the s-grid."""
+        i, f = self._interp_s(np.clip(sq, 0.0, self.length))
+        P = self._P[i] + f * (self._P[i + 1] - self._P[i])
+        T = self._T[i] + f * (self._T[i + 1] - self._T[i])
+        T /= np.maximum(np.linalg.norm(T, axis=1, keepdims=True), 1e-12)
+        return P, T
+
+    def _build_outputs(self):
+        """Box-filter the raw 3-D trajectory p_raw(t) = P(s(t)) over the window W:
+        p_W = (1/W)∫p_raw, v_W = (p_raw(t+W/2) − p_raw(t−W/2))/W,
+        a_W = (v_raw(t+W/2) − v_raw(t−W/2))/W. Hence |a_W| ≤ sup|a_raw| ≤ a and |jerk| ≤ 2a/W."""
+        n = int(math.floor(self.duration * self.rate + 1e-9)) + 1
+        t = np.arange(n) * self.dt
+        self._t = t
+        w = self.window
+        if w <= 0:
+            sr, vr, _ = self._raw(t)
+            P, T = self._path_at(sr)
+            i, f = self._interp_s(np.clip(sr, 0.0, self.length))
+            K = self._K[i] + f * (self._K[i + 1] - self._K[i])
+            j = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self._tk) - 2)
+            moving = (t > self._tdep[j]) & (t <= self._tk[-1])
+            ar = np.where(moving, self._acc_i[j], 0.0)
+            self._sw = np.clip(sr, 0.0, self.length)
+            self._i = i
+            self._pos, self._vel = P, vr[:, None] * T
+            self._acc = ar[:, None] * T + (vr**2)[:, None] * K
+            return
+        h = 0.5 * w
+        sp, vp, _ = self._raw(t + h)
+        sm, vm, _ = self._raw(t - h)
+        Pp, Tp = self._path_at(sp)
+        Pm, Tm = self._path_at(sm)
+        self._vel = (Pp - Pm) / w
+        self._acc = (vp[:, None] * Tp - vm[:, None] * Tm) / w
+        # p_W by trapezoidal integration on a fine grid (dt/m; W/2 is a whole number of steps)
+        m = self._sub
+        dtf = self.dt / m
+        nh = int(round(h / dtf))
+        tf = (np.arange(-nh, (n - 1) * m + nh + 1)) * dtf
+        sf, _, _ = self._raw(tf)
+        Pf, _ = self._path_at(sf)
+        cum = np.vstack([np.zeros((1, 3)), np.cumsum(0.5 * (Pf[1:] + Pf[:-1]) * dtf, axis=0)])
+        k = np.arange(n) * m + nh
+        self._pos = (cum[k + nh] - cum[k - nh]) / (2 * nh * dtf)
+        # progress (for segment, spray and yaw): the box-averaged arc length
+        sw, _, _ = self._smoothed(t)
+        sw = np.clip(sw, 0.0, self.length)
+        self._sw = sw
+        self._i, _ = self._interp_s(sw)
+
+    def _finalise(self):
+        t, sw, i = self._t, self._sw, self._i
+        # segment index and spray
+        seg = self._seg_s[i].copy()
+        seg[sw >= self.length - 1e-9] = -1
+        spray_of = np.array([s.spray for s in self.plan.segments] + [False], bool)
+        spray = spray_of[seg]  # seg == -1 picks the trailing False
+        # yaw: smooth part + raised-cosine ramps at stops
+        f = np.clip((sw - self._s[i]) / np.maximum(self._s[i + 1] - self._s[i], 1e-12), 0, 1)
+        yaw = self._psi_smooth[i] + f * (self._psi_smooth[i + 1] - self._psi_smooth[i])
+        if len(self._jump_s):
+            # time at the middle of each stop's dwell (raw time law, symmetric under smoothing)
+            node = np.searchsorted(self._s, self._jump_s, side="left")
+            tmid = 0.5 * (self._tk[node] + self._tdep[node])
+            for tm, d in zip(tmid.tolist(), self._jump_d.tolist(), strict=True):
+                wk = max(0.5, 0.5 * math.pi * abs(d) / self.yaw_rate_max)
+                j0 = max(0, int((tm - 0.5 * wk) * self.rate))
+                j1 = min(len(t), int((tm + 0.5 * wk) * self.rate) + 2)
+                x = np.clip((t[j0:j1] - (tm - 0.5 * wk)) / wk, 0.0, 1.0)
+                yaw[j0:j1] += d * (0.5 - 0.5 * np.cos(math.pi * x))
+                yaw[j1:] += d
+        yaw_rate = np.gradient(yaw, self.dt) if len(yaw) > 1 else np.zeros(1)
+        self._yaw_u = yaw
+        self._yaw_rate = yaw_rate
+        self._seg = seg
+        self._spray = spray
+        R = np.hstack([self._pos, self._vel, self._acc])
+        D = np.vstack([np.diff(R, axis=0), np.zeros((1, 9))])
+        R.setflags(write=False)
+        D.setflags(write=False)
+        self._R, self._D = R, D
+        self._n = len(t)
+        yw = (yaw + math.pi) % (2 * math.pi) - math.pi
+        self._yaw_l = yw.tolist()
+        self._yawu_l = yaw.tolist()
+        self._yr_l = yaw_rate.tolist()
+        self._spray_l = spray.tolist()
+        self._seg_l = seg.tolist()
+        self.max_acc = float(np.max(np.linalg.norm(self._acc, axis=1)))
+        self.max_speed = float(np.max(np.linalg.norm(self._vel, axis=1)))
+        jerk = np.diff(self._acc, axis=0) / self.dt
+        self.max_jerk = float(np.max(np.linalg.norm(jerk, axis=1))) if len(jerk) else 0.0
+
+    # ------------------------------------------------------------------ public API
+    @property
+    def times(self) -> np.ndarray:
+        """Output grid times (s)."""
+        return self._t
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self._R[:, 0:3]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        return self._R[:, 3:6]
+
+    @property
+    def accelerations(self) -> np.ndarray:
+        return self._R[:, 6:9]
+
+    @property
+    def yaws(self) -> np.ndarray:
+        """Yaw on the grid, wrapped to [-π, π)."""
+        return np.asarray(self._yaw_l)
+
+    @property
+    def spray_flags(self) -> np.ndarray:
+        return self._spray
+
+    @property
+    def seg_indices(self) -> np.ndarray:
+        return self._seg
+
+    @property
+    def initial_position(self) -> np.ndarray:
+        return self._R[0, 0:3].copy()
+
+    def sample(self, t: float) -> RefSample:
+        """Reference at time ``t`` (s); clamps to [0, duration]. Linear interpolation between
+        grid points for pos/vel/acc/yaw; nearest grid point for spray/seg/yaw_rate."""
+        x = t * self.rate
+        if x <= 0.0:
+            i, f = 0, 0.0
+        elif x >= self._n - 1:
+            i, f = self._n - 1, 0.0
+        else:
+            i = int(x)
+            f = x - i
+        if f > 1.0 - 1e-6:  # snap to the grid (times accumulated as t += dt drift slightly)
+            i, f = i + 1, 0.0
+        if f < 1e-6:
+            row = self._R[i]
+            yaw = self._yaw_l[i]
+        else:
+            row = self._R[i] + f * self._D[i]
+            yu = self._yawu_l[i] + f * (self._yawu_l[i + 1] - self._yawu_l[i])
+            yaw = (yu + math.pi) % (2 * math.pi) - math.pi
+        j = i + 1 if f >= 0.5 else i
+        return RefSample(row[0:3], row[3:6], row[6:9], yaw, self._yr_l[j], self._spray_l[j],
+                         self._seg_l[j])
+
+    def sample_all(self, times) -> dict[str, np.ndarray]:
+        """Vectorised :meth:`sample`: dict of arrays pos (N,3), vel, acc, yaw, yaw_rate, spray,
+        seg."""
+        x = np.clip(np.asarray(times, float) * self.rate, 0.0, self._n - 1)
+        i = np.minimum(np.floor(x).astype(int), self._n - 1)
+        f = (x - i)[:, None]
+        row = self._R[i] + f * self._D[i]
+        j = np.minimum(np.where(f[:, 0] >= 0.5, i + 1, i), self._n - 1)
+        i1 = np.minimum(i + 1, self._n - 1)
+        yu = self._yaw_u[i] + f[:, 0] * (self._yaw_u[i1] - self._yaw_u[i])
+        return {
+            "pos": row[:, 0:3],
+            "vel": row[:, 3:6],
+            "acc": row[:, 6:9],
+            "yaw": (yu + math.pi) % (2 * math.pi) - math.pi,
+            "yaw_rate": self._yaw_rate[j],
+            "spray": self._spray[j],
+            "seg": self._seg[j],
+        }
+
+    def cross_track(self, points_xy, seg_idx) -> np.ndarray:
+        """Signed horizontal distance (m) of ``points_xy`` (N, 2+) from the planned polyline of
+        segment ``seg_idx`` (int, or (N,) ints); positive = left of the direction of travel.
+        NaN where ``seg_idx`` is −1 (climb / end hover)."""
+        return cross_track(self.plan, points_xy, seg_idx)
+
+    def spray_stretches(self) -> list[np.ndarray]:
+        """The reference's own spraying stretches (xy polylines), e.g. for a nominal coverage."""
+        sp = self._spray
+        out = []
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], sp.astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if b - a >= 1:
+                out.append(self._R[a:b, 0:2])
+        return out
+
+    def summary(self) -> str:
+        return (f"reference: {self.duration:.1f} s, path {self.length:.0f} m, "
+                f"max |v| {self.max_speed:.2f} m/s, max |a| {self.max_acc:.3f} m/s², "
+                f"max |j| {self.max_jerk:.2f} m/s³, {self.n_stops} stops")
+
+
+def cross_track(plan: CoveragePlan, points_xy, seg_idx) -> np.ndarray:
+    """Signed distance of points to the polyline of plan segment(s) ``seg_idx`` (left > 0)."""
+    q = np.atleast_2d(np.asarray(points_xy, float))[:, :2]
+    n = len(q)
+    segs = np.broadcast_to(np.asarray(seg_idx, int), (n,))
+    out = np.full(n, np.nan)
+    for k in np.unique(segs):
+        if k < 0 or k >= len(plan.segments):
+            continue
+        m = segs == k
+        pts = plan.segments[int(k)].points
+        a, b = pts[:-1], pts[1:]
+        ab = b - a
+        l2 = np.einsum("ij,ij->i", ab, ab)
+        l2 = np.where(l2 > 0, l2, 1.0)
+        qq = q[m][:, None, :]
+        tpar = np.clip(np.einsum("nij,ij->ni", qq - a[None], ab) / l2, 0.0, 1.0)
+        proj = a[None] + tpar[..., None] * ab[None]
+        d = qq - proj
+        dist2 = np.einsum("nij,nij->ni", d, d)
+        j = np.argmin(dist2, axis=1)
+        r = np.arange(len(j))
+        cr = ab[j, 0] * (qq[r, 0, 1] - a[j, 1]) - ab[j, 1] * (qq[r, 0, 0] - a[j, 0])
+        out[m] = np.sign(cr) * np.sqrt(dist2[r, j])
+    return out
+

@@ -1,0 +1,438 @@
+"""Spray jobs: tank and application, battery energy, and sorties (return to base, refill, resume).
+
+**Application.** The nozzles deliver the application rate R (L/ha) over the swath w (m) at the
+ground speed v (m/s): flow q = R · w · v / 10⁴ (L/s), i.e. R·w/10⁴ litres per metre of sprayed
+track, whatever the speed (constant-rate control, as spray drones do with a flow meter). They
+are on only while the plan sprays, the tank is not empty and the height above ground is within
+[``spray.min_height_m``, ``spray.max_height_m``] (off on the ground and above the maximum).
+
+**Mass.** The liquid is its own MuJoCo body (``liquid``, welded under the airframe at the tank,
+built in :mod:`ag_uav.vehicle.mjcf`); each change of ≥ 1 g sets ``model.body_mass``,
+``model.body_inertia`` (a box of liquid of the tank's footprint) and ``model.body_subtreemass``
+(used by ``mj_comPos`` for the subtree centre of mass; ``mj_setConst`` is not needed and would
+overwrite ``data`` with ``qpos0``). The autopilot knows its payload (spray drones weigh the tank or
+count the flow): the position cascade's mass and the attitude loop's inertia follow the tank.
+
+**Energy.** Momentum theory (Leishman, *Principles of Helicopter Aerodynamics*, 2nd ed., §2.3
+and §2.6): the ideal induced power of a rotor of disc area A in air of density ρ giving thrust T
+is T^{3/2}/sqrt(2ρA); with a figure of merit FM (here: rotor FM × motor/ESC efficiency, electrical
+to induced power) the electrical power is
+
+    P_i = T_i^{3/2} / (FM · sqrt(2 ρ A)),     P = Σ_i P_i + P_avionics,
+
+integrated every control tick over the four *actual* rotor thrusts (the actuator states after the
+motor lag). Forward flight at 5–8 m/s is treated like hover (translational lift lowers the
+induced power, parasite drag raises it; neither is modelled), so the figures are hover-class.
+
+Calibration (DJI M350 RTK: 6.47 kg with two TB65 batteries, 2 × 263 Wh = 526 Wh, max flight
+time 55 min without payload, DJI spec sheet; 2110s propellers, D = 0.533 m, A = πD²/4 =
+0.2231 m²; ρ = 1.225 kg/m³): per rotor T = 6.47·9.81/4 = 15.87 N, ideal P = 85.5 W, 342 W for
+four. 526 Wh over 55 min is 574 W; with 25 W of avionics (an estimate) the rotors take 549 W,
+so FM = 342/549 = 0.623 (:func:`implied_figure_of_merit`; a plausible product of a rotor FM of
+~0.75 and a motor/ESC efficiency of ~0.83). At the 9.2 kg maximum take-off mass the same model
+gives 33 min (P ∝ m^{3/2}). I recall DJI quoting ~31 min at full payload for the M300 RTK (the
+M350's predecessor, same TB60-class energy) but could not confirm it here: treat the loaded figure
+as unverified. The m^{3/2} scaling itself checks against a published pair: DJI's AGRAS T40 spec
+page (dji.com/support/product/t40) gives 18 min hover at 50 kg and 7 min at 90 kg on the same
+30,000 mAh battery; 18·(50/90)^{3/2} = 7.45 min, 6 % above the published 7 min.
+
+**Sorties** (:func:`plan_job`; transits go around holes, :func:`transit_path`). The planner walks
+the single-sortie reference (the coverage plan flown as today) on its control grid with the
+predicted tank use (R·w/10⁴ per metre sprayed) and the predicted energy (hover power of the current
+mass × (1 + ``battery.plan_margin``) × time, plus the way home: the distance to the base at
+``spray.transit_speed_mps`` plus acceleration and the descent; the margin covers what manoeuvres
+cost above hover, +2–3 % measured). The sortie ends at the last tick where (a) the tank still holds
+``spray.plan_margin`` of its volume and (b) the energy used plus the way home leaves
+``battery.reserve_frac`` of the capacity. There the drone stops, flies to the base, lands (a
+deliberate phase: the last 0.6 m at 0.3 m/s, the skids touch at ~0.3 m/s, within the crash
+detector's 1 m/s for the skids; then motors off), is refilled and gets a fresh battery
+(``spray.service_s``), takes off, flies back to the cut point and resumes. A job that fits one
+battery and one tank is flown exactly as the plain mission (no base visit). The loop then
+integrates the actual flow, mass and energy (:class:`ag_uav.engine.sprayer.Sprayer`); the summary
+compares actual with planned and flags a battery below the reserve or a tank that ran dry before the
+planned return.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..config import Config, ConfigError
+from .reference import Reference, RefSample
+
+G = 9.81
+#: seg index of the inserted transits to and from the base, and of the time on the ground there
+SEG_TRANSIT = -2
+SEG_GROUND = -3
+#: the liquid body's box (half sizes, m): the tank geom's footprint in models/quad.xml
+TANK_HALF = (0.10, 0.08, 0.06)
+
+
+# ------------------------------------------------------------------------------ energy model
+def rotor_power_coeff(figure_of_merit: float, rotor_diameter_m: float,
+                      air_density: float) -> float:
+    """k in P = k · T^{3/2} (W per N^{3/2}): k = 1 / (FM · sqrt(2 ρ A)), A = π D²/4."""
+    area = math.pi * rotor_diameter_m ** 2 / 4.0
+    return 1.0 / (figure_of_merit * math.sqrt(2.0 * air_density * area))
+
+
+def hover_power(mass_kg: float, k: float, avionics_w: float, n_rotors: int = 4) -> float:
+    """Electrical hover power (W) of ``n_rotors`` sharing the weight: n·k·(m g/n)^{3/2} + P_av."""
+    t = mass_kg * G / n_rotors
+    return n_rotors * k * t ** 1.5 + avionics_w
+
+
+def implied_figure_of_merit(capacity_wh: float = 526.0, hover_min: float = 55.0,
+                            mass_kg: float = 6.47, rotor_diameter_m: float = 0.533,
+                            air_density: float = 1.225, avionics_w: float = 25.0) -> float:
+    """The FM for which ``capacity_wh`` hovers ``mass_kg`` for ``hover_min`` minutes."""
+    p_total = capacity_wh / (hover_min / 60.0)
+    area = math.pi * rotor_diameter_m ** 2 / 4.0
+    ideal = 4.0 * (mass_kg * G / 4.0) ** 1.5 / math.sqrt(2.0 * air_density * area)
+    return ideal / (p_total - avionics_w)
+
+
+def hover_endurance_min(cfg: Config, mass_kg: float) -> float:
+    """Minutes the full battery hovers ``mass_kg`` (no reserve)."""
+    b = cfg.battery
+    k = rotor_power_coeff(b.figure_of_merit, b.rotor_diameter_m, b.air_density_kgm3)
+    return 60.0 * b.capacity_wh / hover_power(mass_kg, k, b.avionics_w)
+
+
+def base_point(cfg: Config, field, takeoff_xy) -> np.ndarray:
+    """``spray.base``, or the field corner (exterior vertex) nearest the take-off point."""
+    if not isinstance(cfg.spray.base, str):
+        return np.asarray(cfg.spray.base, float)
+    ext = np.asarray(field.exterior, float)[:, :2]
+    d = np.hypot(*(ext - np.asarray(takeoff_xy, float)[:2]).T)
+    return ext[int(np.argmin(d))].copy()
+
+
+def liquid_l_per_m(cfg: Config) -> float:
+    """Litres per metre of sprayed track: R · w / 10⁴."""
+    return cfg.spray.rate_l_per_ha * cfg.mission.swath_m / 1e4
+
+
+# ------------------------------------------------------------------------------ the job
+@dataclass
+class Sortie:
+    """One planned sortie: its time span in the job reference and the predicted use."""
+
+    index: int
+    t_start: float               # take-off (s, job time)
+    t_end: float                 # landing at the base, or the end of the job
+    cut_xy: list[float] | None   # where it stopped spraying to go home (None: the job's end)
+    litres: float                # predicted litres sprayed
+    energy_wh: float             # predicted battery energy used
+    returns: bool                # lands at the base at the end
+
+
+@dataclass
+class SprayJob:
+    """The sortie plan of a spray job (what :class:`ChainedReference` flies)."""
+
+    base_xy: np.ndarray
+    sorties: list[Sortie]
+    fill_l: float
+    dry_mass_kg: float
+    service_s: float
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "base_xy": [round(float(v), 3) for v in self.base_xy],
+            "sorties_planned": len(self.sorties),
+            "litres_planned": round(sum(s.litres for s in self.sorties), 4),
+            "energy_planned_wh": round(sum(s.energy_wh for s in self.sorties), 2),
+        }
+
+
+class ChainedReference:
+    """Sorties flown one after another, with ``service_s`` on the ground between them.
+
+    Same interface as :class:`~ag_uav.world.reference.Reference` for the loop (``sample``,
+    ``sample_all``, ``duration``); ``sample_all`` adds ``sortie`` (int) and ``ground`` (bool:
+    landed at the base, motors off). Plan-segment indices are mapped back to the original plan's,
+    so a leg split between two sorties keeps its index; inserted transits have seg
+    :data:`SEG_TRANSIT`, the time on the ground :data:`SEG_GROUND`, climbs and descents −1.
+    """
+
+    def __init__(self, pieces: list[tuple[Reference, np.ndarray]], service_s: float,
+                 job: SprayJob):
+        self.pieces = pieces
+        self.service_s = float(service_s)
+        self.job = job
+        self.spray_job = job
+        t0 = []
+        t = 0.0
+        for i, (ref, _m) in enumerate(pieces):
+            t0.append(t)
+            t += ref.duration + (self.service_s if i < len(pieces) - 1 else 0.0)
+        self.t0 = np.array(t0)
+        self.duration = float(t)
+        self.rate = pieces[0][0].rate
+
+    def _map(self, seg: np.ndarray, m: np.ndarray) -> np.ndarray:
+        out = np.where(seg >= 0, m[np.clip(seg, 0, len(m) - 1)], seg)
+        return out.astype(int)
+
+    def sample_all(self, times) -> dict[str, np.ndarray]:
+        t = np.asarray(times, float)
+        n = len(t)
+        out = {"pos": np.zeros((n, 3)), "vel": np.zeros((n, 3)), "acc": np.zeros((n, 3)),
+               "yaw": np.zeros(n), "yaw_rate": np.zeros(n), "spray": np.zeros(n, bool),
+               "seg": np.zeros(n, int), "sortie": np.zeros(n, int), "ground": np.zeros(n, bool)}
+        piece = np.clip(np.searchsorted(self.t0, t, side="right") - 1, 0, len(self.pieces) - 1)
+        for i, (ref, m) in enumerate(self.pieces):
+            sel = np.flatnonzero(piece == i)
+            if not sel.size:
+                continue
+            tl = t[sel] - self.t0[i]
+            tab = ref.sample_all(np.minimum(tl, ref.duration))
+            for key in ("pos", "vel", "acc", "yaw", "yaw_rate", "spray"):
+                out[key][sel] = tab[key]
+            seg = self._map(tab["seg"], m)
+            last = i == len(self.pieces) - 1
+            on_ground = (tl > ref.duration) & (not last)
+            seg[on_ground] = SEG_GROUND
+            out["seg"][sel] = seg
+            out["ground"][sel] = on_ground
+            out["sortie"][sel] = i
+        # the ground hold: at rest where the sortie landed
+        g = out["ground"]
+        out["vel"][g] = 0.0
+        out["acc"][g] = 0.0
+        out["yaw_rate"][g] = 0.0
+        out["spray"][g] = False
+        return out
+
+    def sample(self, t: float) -> RefSample:
+        tab = self.sample_all(np.array([t]))
+        return RefSample(tab["pos"][0], tab["vel"][0], tab["acc"][0], float(tab["yaw"][0]),
+                         float(tab["yaw_rate"][0]), bool(tab["spray"][0]), int(tab["seg"][0]))
+
+
+def _split_at(points: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Split polyline ``points`` at its point nearest to ``q``: (head to it, tail from it)."""
+    a, b = points[:-1], points[1:]
+    ab = b - a
+    l2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
+    tp = np.clip(np.einsum("ij,ij->i", q[None, :2] - a, ab) / l2, 0.0, 1.0)
+    proj = a + tp[:, None] * ab
+    j = int(np.argmin(np.hypot(*(proj - q[None, :2]).T)))
+    p = proj[j]
+    head = np.vstack([points[:j + 1], p[None]])
+    tail = np.vstack([p[None], points[j + 1:]])
+    return head, tail
+
+
+def transit_path(a, b, field, clearance: float) -> np.ndarray:
+    """Shortest polyline from ``a`` to ``b`` around the field's holes (obstacles), through their
+    corners grown by ``clearance`` and never closer than ``clearance``/2 to a hole: a visibility
+    graph (Lozano-Pérez & Wesley 1979) searched with Dijkstra. A straight line when nothing is
+    in the way."""
+    import heapq
+
+    import shapely
+
+    a = np.asarray(a, float)[:2]
+    b = np.asarray(b, float)[:2]
+    holes = [shapely.Polygon(h) for h in getattr(field, "holes", [])]
+    if not holes:
+        return np.array([a, b])
+    grown = [h.buffer(clearance, join_style="mitre") for h in holes]
+    # the no-fly test uses half the clearance, so that end points on a leg that passes a hole at
+    # half a swath still see the corners (which are at the full clearance)
+    solid = shapely.union_all([h.buffer(0.5 * clearance, join_style="mitre") for h in holes])
+
+    def visible(p, q) -> bool:
+        return not shapely.LineString([p, q]).intersects(solid)
+
+    if visible(a, b):
+        return np.array([a, b])
+    nodes = [a, b]
+    for g in grown:
+        for poly in getattr(g, "geoms", [g]):
+            nodes += [np.asarray(c) for c in list(poly.exterior.coords)[:-1]]
+    n = len(nodes)
+    dist = [math.inf] * n
+    prev = [-1] * n
+    dist[0] = 0.0
+    heap = [(0.0, 0)]
+    while heap:
+        d, i = heapq.heappop(heap)
+        if d > dist[i]:
+            continue
+        if i == 1:
+            break
+        for j in range(n):
+            if j == i:
+                continue
+            w = float(np.hypot(*(nodes[j] - nodes[i])))
+            if d + w < dist[j] and visible(nodes[i], nodes[j]):
+                dist[j] = d + w
+                prev[j] = i
+                heapq.heappush(heap, (d + w, j))
+    if prev[1] < 0:  # boxed in: fly straight
+        return np.array([a, b])
+    path = [1]
+    while path[-1] != 0:
+        path.append(prev[path[-1]])
+    return np.array([nodes[i] for i in reversed(path)])
+
+
+def _seg(kind: str, pts, spray: bool):
+    from .plan import Segment
+
+    return Segment(kind, np.asarray(pts, float), spray)
+
+
+def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
+             z_land: float) -> tuple[Any, SprayJob]:
+    """Split the mission into sorties (see the module docstring).
+
+    Returns ``(reference, job)``: ``ref`` itself (with ``spray_job`` set) when one sortie does
+    the job, else a :class:`ChainedReference`. Raises :class:`ConfigError` when the tank or the
+    battery cannot make any progress from the base.
+    """
+    sp, b, m = cfg.spray, cfg.battery, cfg.mission
+    k_p = rotor_power_coeff(b.figure_of_merit, b.rotor_diameter_m, b.air_density_kgm3)
+    rho = sp.density_kg_per_l
+    fill = sp.tank_l
+    lpm = liquid_l_per_m(cfg)
+    base = base_point(cfg, field, plan.start)
+    dt = 1.0 / cfg.sim.control_hz
+    e_cap = b.capacity_wh * 3600.0  # J
+    e_use = e_cap * (1.0 - b.reserve_frac)
+    v_tr = sp.transit_speed_mps
+    a_max = m.accel_max_mps2
+    climb = 1.5  # Reference's default climb speed (m/s)
+
+    t = np.arange(int(math.floor(ref.duration / dt)) + 1) * dt
+    tab = ref.sample_all(t)
+    pos, seg, spray = tab["pos"], tab["seg"], tab["spray"]
+    speed = np.hypot(tab["vel"][:, 0], tab["vel"][:, 1])
+    litres_cum = np.concatenate([[0.0], np.cumsum(np.where(spray, speed, 0.0) * dt * lpm)])[:-1]
+    n = len(t)
+
+    def t_way(d: np.ndarray | float) -> np.ndarray | float:
+        """Predicted time (s) of a transit of d metres plus a descent or climb and dwells."""
+        return (np.asarray(d) / v_tr + v_tr / a_max + (m.altitude_m - z_land - 0.6) / climb
+                + 0.6 / 0.3 + climb / a_max + 3.0)  # the last 0.6 m at 0.3 m/s (Reference)
+
+    def power(litres_left: np.ndarray | float) -> np.ndarray | float:
+        mass = dry_mass_kg + np.asarray(litres_left) * rho
+        return (4.0 * k_p * (mass * G / 4.0) ** 1.5 + b.avionics_w) * (1.0 + b.plan_margin)
+
+    d_home = np.hypot(*(pos[:, :2] - base[None]).T)
+    i0 = 0
+    cuts: list[tuple[int, float, float]] = []  # (tick of the cut, litres, energy J)
+    e_pre = 0.0
+    while True:
+        if len(cuts) >= sp.max_sorties:
+            raise ConfigError(f"spray.max_sorties = {sp.max_sorties}: the job needs more sorties "
+                              f"(one {fill:g} L tank sprays {fill / lpm:.0f} m of track)")
+        left = fill - (litres_cum[i0:] - litres_cum[i0])
+        p = power(np.maximum(left, 0.0))
+        e_run = e_pre + np.concatenate([[0.0], np.cumsum(p[:-1] * dt)])
+        e_home = power(np.maximum(left, 0.0)) * t_way(d_home[i0:])
+        ok = (left >= fill * sp.plan_margin) & (e_run + e_home <= e_use)
+        # the job's end: no way home needed (the pilot collects the drone where it hovers)
+        if left[-1] >= 0.0 and e_run[-1] <= e_use:
+            cuts.append((n - 1, float(left[0] - left[-1]), float(e_run[-1])))
+            break
+        bad = int(np.argmin(ok))  # first tick that fails
+        k = i0 + bad - 1
+        while k > i0 and seg[k] < 0:
+            k -= 1
+        if k <= i0 + 1:
+            what = ("spray.tank_l" if left[bad] < fill * sp.plan_margin
+                    else "battery.capacity_wh")
+            val = sp.tank_l if what == "spray.tank_l" else b.capacity_wh
+            raise ConfigError(f"{what} = {val}: too small to spray from the base and come back "
+                              f"(sortie {len(cuts) + 1})")
+        kk = k - i0
+        cuts.append((k, float(left[0] - left[kk]), float(e_run[kk] + e_home[kk])))
+        i0 = k
+        # next sortie: climb at the base and transit out to the cut point, at the full tank
+        e_pre = float(power(fill) * t_way(d_home[k]))
+    job = SprayJob(base_xy=base, sorties=[], fill_l=fill, dry_mass_kg=dry_mass_kg,
+                   service_s=sp.service_s)
+    if len(cuts) == 1:
+        job.sorties.append(Sortie(0, 0.0, ref.duration, None, cuts[0][1], cuts[0][2] / 3600.0,
+                                  False))
+        ref.spray_job = job
+        return ref, job
+
+    # build one Reference per sortie on a sub-plan (transit in, the plan from the resume point to
+    # the cut point, transit out, a short nudge that turns it towards the next resume point)
+    segs = plan.segments
+    pieces: list[tuple[Reference, np.ndarray]] = []
+    resume: tuple[int, np.ndarray] | None = None  # (segment, point)
+    land_xy = base
+    clear = 0.5 * m.swath_m  # transits keep half a swath from the holes (obstacles)
+    t_acc = 0.0
+    for si, (k, litres, e_j) in enumerate(cuts):
+        last = si == len(cuts) - 1
+        sub: list = []
+        gmap: list[int] = []
+        speeds: list[float | None] = []
+        if resume is None:
+            j_from = 0
+            first_pts = None
+        else:
+            j_from, q = resume
+            start_xy = land_xy
+            sub.append(_seg("transit", transit_path(start_xy, q[:2], field, clear), False))
+            gmap.append(SEG_TRANSIT)
+            speeds.append(v_tr)
+            _, first_pts = _split_at(segs[j_from].points, q)
+        if last:
+            j_to, last_pts = len(segs) - 1, None
+            cut_q = None
+        else:
+            j_to = int(seg[k])
+            cut_q = pos[k, :2].copy()
+        for j in range(j_from, j_to + 1):
+            pts = segs[j].points
+            if j == j_from and first_pts is not None:
+                pts = first_pts
+            if j == j_to and not last:
+                if j == j_from and first_pts is not None:
+                    pts, _ = _split_at(first_pts, cut_q)
+                else:
+                    pts, _ = _split_at(pts, cut_q)
+                last_pts = pts
+            if len(pts) >= 2 and float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) > 1e-6:
+                sub.append(dataclasses.replace(segs[j], points=np.asarray(pts, float)))
+                gmap.append(j)
+                speeds.append(None)
+        if not last:
+            end_xy = np.asarray(last_pts[-1], float)
+            # transit home, then a 0.5 m nudge towards the next resume point so that the drone
+            # lands (and takes off again) facing the way it will fly
+            u = end_xy - base
+            nu = float(np.hypot(*u))
+            u = u / nu if nu > 1e-9 else np.array([1.0, 0.0])
+            land_xy = base + 0.5 * u
+            sub.append(_seg("transit", transit_path(end_xy, base, field, clear), False))
+            sub.append(_seg("transit", [base, land_xy], False))
+            gmap += [SEG_TRANSIT, SEG_TRANSIT]
+            speeds += [v_tr, 0.5]
+            resume = (j_to, end_xy)
+        subplan = dataclasses.replace(plan, segments=sub)
+        r = Reference(subplan, speed=m.speed_mps, altitude=m.altitude_m, a_max=a_max,
+                      takeoff=cfg.sim.takeoff or si > 0,
+                      hover_time=cfg.sim.hover_after_s if last else 0.0,
+                      rate=cfg.sim.control_hz, landing=not last, z_land=z_land,
+                      seg_speeds=speeds)
+        pieces.append((r, np.asarray(gmap, int)))
+        job.sorties.append(Sortie(si, t_acc, t_acc + r.duration,
+                                  None if last else [float(v) for v in cut_q], litres,
+                                  e_j / 3600.0, not last))
+        t_acc += r.duration + sp.service_s
+    return ChainedReference(pieces, sp.service_s, job), job
