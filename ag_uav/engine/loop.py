@@ -521,7 +521,9 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
             _tick_out(rec, k, act, p, v, rp, p_fb, ref_tab, ref_ids, spray, f, w, flown)
             if any_log:
                 for i in np.flatnonzero(act):
-                    if logs[i] is not None:
+                    lg = logs[i]
+                    if lg is not None and (t >= lg._next_tick or (renderers[i] is not None
+                                                                  and lg.want_frame(t))):
                         frames[i] += _log_tick(logs[i], renderers[i], scratch[i], models[i],
                                                S[i], t, p[i], quat[i], v[i], rp[i], rv[i],
                                                yaw[i], p_fb[i], v_fb[i], fbs[i], bc, i, f[i],

@@ -503,10 +503,11 @@ class BatchEstimatorFeedback:
                 continue
             for name, bf in self.bank.filters.items():
                 if log.want_estimator(name, t):
-                    x = bf.x[i]
+                    x = bf.x[i]  # float64 vectors go into the message as raw bytes
                     y = bf.y[i] if getattr(bf, "y", None) is not None else None
-                    log.estimator(t, name, x, np.diag(bf.P[i]), y,
-                                  pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
+                    xl = x.tolist()
+                    log.estimator(t, name, x, np.diagonal(bf.P[i]).copy(), y,
+                                  pos=(xl[pi[0]], xl[pi[1]], xl[pi[2]]))
 
     def finish(self, flown: np.ndarray) -> None:
         """Hand the records back to the per-run feedbacks (for their ``scores``/``summary``)
