@@ -54,10 +54,8 @@ from numba import njit
 from numpy.typing import NDArray
 
 from ..world.wind import (
-    FT_PER_M,
     H_MAX_M,
     H_MIN_M,
-    M_PER_FT,
     V_MIN,
     Wind,
     _second_order_coeffs,
@@ -87,55 +85,18 @@ _I, _LEN, _TURB, _BLOCK = range(4)
 
 
 @njit(cache=True)
-def _p3(x: float) -> float:
-    """:func:`ag_uav.world.wind._p3` (same operations)."""
-    if x < 0.5:
-        term = x * x * x / 6.0
-        s = term
-        k = 3
-        while term > 1e-18 * s:
-            k += 1
-            term *= x / k
-            s += term
-        return math.exp(-x) * s
-    return 1.0 - math.exp(-x) * (1.0 + x + 0.5 * x * x)
-
-
-@njit(cache=True)
 def _second_order_into(theta: float, fs: np.ndarray, i: int, c: int) -> None:
-    """:func:`ag_uav.world.wind._second_order_coeffs` written into ``fs[i, c:c+7]``."""
-    e = math.exp(-theta)
-    f11 = e * (1.0 + theta)
-    f12 = e * theta
-    f21 = -f12
-    f22 = e * (1.0 - theta)
-    e2 = e * e
-    x = 2.0 * theta
-    q11 = _p3(x)
-    q12 = 2.0 * theta * theta * e2
-    q22 = -math.expm1(-x) + e2 * (x - 2.0 * theta * theta)
-    l11 = math.sqrt(q11)
-    l21 = q12 / l11
-    d = q22 - l21 * l21
-    l22 = math.sqrt(d if d > 0.0 else 0.0)
-    fs[i, c] = f11
-    fs[i, c + 1] = f12
-    fs[i, c + 2] = f21
-    fs[i, c + 3] = f22
-    fs[i, c + 4] = l11
-    fs[i, c + 5] = l21
-    fs[i, c + 6] = l22
+    """:func:`ag_uav.world.wind._second_order_coeffs` (the same function, compiled) written into
+    ``fs[i, c:c+7]``."""
+    co = _second_order_coeffs(theta)
+    for j in range(7):
+        fs[i, c + j] = co[j]
 
 
 @njit(cache=True)
 def _update_row(fs: np.ndarray, i: int, dt: float, h: float, V: float) -> None:
     """:meth:`ag_uav.world.wind.DrydenTurbulence._update` for row ``i`` (h already clamped)."""
-    hf = h * FT_PER_M
-    base = 0.177 + 0.000823 * hf
-    sw = 0.1 * fs[i, _W20]
-    su = sw / base**0.4
-    l_u = hf / base**1.2 * M_PER_FT
-    l_w = hf * M_PER_FT
+    su, sw, l_u, l_w, _ = dryden_parameters(fs[i, _W20], h)
     fs[i, _SU] = su
     fs[i, _SW] = sw
     fs[i, _LU] = l_u

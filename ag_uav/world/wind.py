@@ -58,6 +58,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+try:  # plain Python functions that numba kernels may also call (ag_uav.vehicle.sensors_batched)
+    from numba.extending import register_jitable
+except ImportError:  # pragma: no cover
+    def register_jitable(f):
+        return f
+
 __all__ = [
     "FT_PER_M",
     "KNOT",
@@ -86,6 +92,7 @@ V_MIN = 1.0
 _SQRT3_2 = math.sqrt(3.0) / 2.0
 
 
+@register_jitable
 def dryden_parameters(w20: float, altitude_m: float) -> tuple[float, float, float, float, float]:
     """MIL-F-8785C low-altitude Dryden parameters.
 
@@ -105,6 +112,7 @@ def dryden_parameters(w20: float, altitude_m: float) -> tuple[float, float, floa
     return sigma_u, sigma_w, l_u_ft * M_PER_FT, h * M_PER_FT, h_m
 
 
+@register_jitable
 def _p3(x: float) -> float:
     """Regularised lower incomplete gamma P(3, x) = 1 - e^{-x}(1 + x + x^2/2), cancellation-free."""
     if x < 0.5:
@@ -119,6 +127,7 @@ def _p3(x: float) -> float:
     return 1.0 - math.exp(-x) * (1.0 + x + 0.5 * x * x)
 
 
+@register_jitable
 def _second_order_coeffs(theta: float) -> tuple[float, float, float, float, float, float, float]:
     """Exact discretisation of the normalised 2nd-order Dryden state for step theta = V dt / L.
 
