@@ -19,9 +19,12 @@ Per vehicle and per tick, exactly :meth:`controllers.cascade.PositionCascade.upd
 * :class:`controllers.attitude.XMixer` allocation with its saturation priority (yaw scaled
   down, then the collective shifted, then clipping).
 
-The kernel repeats the scalar code's floating-point operations in the same order, so its results
-equal the scalar classes' to rounding (tests: 1e-12), and a vehicle's row does not depend on the
-other rows (identical bits whatever the batch size or the neighbours).
+The fuzzy cores (:func:`controllers.fuzzy.t1_phi`, :func:`~controllers.fuzzy.it2_phi`),
+:func:`~controllers.attitude.thrust_attitude` and :func:`~controllers.attitude.geometric_torque`
+are the scalar classes' own pure float functions, compiled here with numba; the axis law and the
+mixer repeat the scalar code's floating-point operations in the same order. So the kernel's
+results equal the scalar classes' to rounding (tests: 1e-12), and a vehicle's row does not depend
+on the other rows (identical bits whatever the batch size or the neighbours).
 
 Why numba
 ---------
