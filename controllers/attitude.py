@@ -18,6 +18,7 @@ import math
 from collections.abc import Sequence
 
 Mat3 = tuple[float, float, float, float, float, float, float, float, float]
+Vec3 = tuple[float, float, float]
 
 
 def quat_to_rot(w: float, x: float, y: float, z: float) -> Mat3:
@@ -76,6 +77,36 @@ def thrust_attitude(ax: float, ay: float, az: float, yaw: float, mass: float, g:
     return R_d, fn, math.atan2(fh, fz)
 
 
+def geometric_torque(R: Mat3, omega: Sequence[float], R_d: Mat3, J: Sequence[float],
+                     kR: Sequence[float], kw: Sequence[float]) -> tuple[Vec3, Vec3]:
+    """The law of :class:`GeometricAttitudeController`: ``(τ, e_R)`` for attitude R, body rates
+    omega, target R_d, inertia J and gains kR, kw (pure float code, also compiled for
+    :mod:`controllers.batched`)."""
+    r = R
+    d = R_d
+    # M = R_dᵀ R  (only the off-diagonal entries are needed for vee(M − Mᵀ))
+    m01 = d[0] * r[1] + d[3] * r[4] + d[6] * r[7]
+    m02 = d[0] * r[2] + d[3] * r[5] + d[6] * r[8]
+    m10 = d[1] * r[0] + d[4] * r[3] + d[7] * r[6]
+    m12 = d[1] * r[2] + d[4] * r[5] + d[7] * r[8]
+    m20 = d[2] * r[0] + d[5] * r[3] + d[8] * r[6]
+    m21 = d[2] * r[1] + d[5] * r[4] + d[8] * r[7]
+    ex = 0.5 * (m21 - m12)
+    ey = 0.5 * (m02 - m20)
+    ez = 0.5 * (m10 - m01)
+    wx, wy, wz = omega[0], omega[1], omega[2]
+    Jx, Jy, Jz = J[0], J[1], J[2]
+    # ω × Jω
+    gx = wy * Jz * wz - wz * Jy * wy
+    gy = wz * Jx * wx - wx * Jz * wz
+    gz = wx * Jy * wy - wy * Jx * wx
+    return (
+        (-kR[0] * ex - kw[0] * wx + gx, -kR[1] * ey - kw[1] * wy + gy,
+         -kR[2] * ez - kw[2] * wz + gz),
+        (ex, ey, ez),
+    )
+
+
 class GeometricAttitudeController:
     """PD attitude control on SO(3) (Lee et al. 2010) with gyroscopic compensation.
 
@@ -99,31 +130,8 @@ class GeometricAttitudeController:
 
     def update(self, R: Mat3, omega: Sequence[float], R_d: Mat3) -> tuple[float, float, float]:
         """Body torques (τx, τy, τz) in N m for attitude R, body rates omega, target R_d."""
-        r = R
-        d = R_d
-        # M = R_dᵀ R  (only the off-diagonal entries are needed for vee(M − Mᵀ))
-        m01 = d[0] * r[1] + d[3] * r[4] + d[6] * r[7]
-        m02 = d[0] * r[2] + d[3] * r[5] + d[6] * r[8]
-        m10 = d[1] * r[0] + d[4] * r[3] + d[7] * r[6]
-        m12 = d[1] * r[2] + d[4] * r[5] + d[7] * r[8]
-        m20 = d[2] * r[0] + d[5] * r[3] + d[8] * r[6]
-        m21 = d[2] * r[1] + d[5] * r[4] + d[8] * r[7]
-        ex = 0.5 * (m21 - m12)
-        ey = 0.5 * (m02 - m20)
-        ez = 0.5 * (m10 - m01)
-        self.eR = (ex, ey, ez)
-        wx, wy, wz = omega[0], omega[1], omega[2]
-        Jx, Jy, Jz = self.J
-        kR, kw = self.kR, self.kw
-        # ω × Jω
-        gx = wy * Jz * wz - wz * Jy * wy
-        gy = wz * Jx * wx - wx * Jz * wz
-        gz = wx * Jy * wy - wy * Jx * wx
-        return (
-            -kR[0] * ex - kw[0] * wx + gx,
-            -kR[1] * ey - kw[1] * wy + gy,
-            -kR[2] * ez - kw[2] * wz + gz,
-        )
+        tau, self.eR = geometric_torque(R, omega, R_d, self.J, self.kR, self.kw)
+        return tau
 
 
 class XMixer:

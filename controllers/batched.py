@@ -19,9 +19,12 @@ Per vehicle and per tick, exactly :meth:`controllers.cascade.PositionCascade.upd
 * :class:`controllers.attitude.XMixer` allocation with its saturation priority (yaw scaled
   down, then the collective shifted, then clipping).
 
-The kernel repeats the scalar code's floating-point operations in the same order, so its results
-equal the scalar classes' to rounding (tests: 1e-12), and a vehicle's row does not depend on the
-other rows (identical bits whatever the batch size or the neighbours).
+The fuzzy cores (:func:`controllers.fuzzy.t1_phi`, :func:`~controllers.fuzzy.it2_phi`),
+:func:`~controllers.attitude.thrust_attitude` and :func:`~controllers.attitude.geometric_torque`
+are the scalar classes' own pure float functions, compiled here with numba; the axis law and the
+mixer repeat the scalar code's floating-point operations in the same order. So the kernel's
+results equal the scalar classes' to rounding (tests: 1e-12), and a vehicle's row does not depend
+on the other rows (identical bits whatever the batch size or the neighbours).
 
 Why numba
 ---------
@@ -62,10 +65,10 @@ from typing import Any
 import numpy as np
 
 from ._jit import njit
-from .attitude import GeometricAttitudeController, XMixer
+from .attitude import GeometricAttitudeController, XMixer, geometric_torque, thrust_attitude
 from .cascade import PositionCascade
 from .fpid import FPID, IT2FPID
-from .fuzzy import IT2FuzzyPD, T1FuzzyPD
+from .fuzzy import IT2FuzzyPD, T1FuzzyPD, it2_phi, t1_phi
 from .pid import PID
 
 __all__ = ["AX_NP", "AX_NS", "NP", "NS", "TYPE_CODES", "BatchCascade", "cascade_step"]
@@ -108,108 +111,13 @@ _STATE_COL = {"E": S_E, "dE": S_DE, "U": S_U, "integral": S_I, "u": S_UOUT}
 
 
 # ======================================================================== compiled kernel
-@njit
-def _cons(cm: float, k: int) -> float:
-    """Consequent ``(-1, -c_m, 0, c_m, 1)[k]``."""
-    if k == 0:
-        return -1.0
-    if k == 1:
-        return -cm
-    if k == 2:
-        return 0.0
-    if k == 3:
-        return cm
-    return 1.0
-
-
-@njit
-def _phi(P: np.ndarray, i: int, b: int, kind: int, E: float, dE: float) -> float:
-    """Fuzzy PD core Φ(E, dE) of axis block ``b`` of vehicle ``i`` (T1FuzzyPD / IT2FuzzyPD)."""
-    if E > 1.0:
-        E = 1.0
-    elif E < -1.0:
-        E = -1.0
-    if dE > 1.0:
-        dE = 1.0
-    elif dE < -1.0:
-        dE = -1.0
-    cm = P[i, b + A_CM]
-    if kind == _T1:
-        if E < 0.0:
-            a0 = -E
-            a1 = 1.0 + E
-            p = 0
-        else:
-            a0 = 1.0 - E
-            a1 = E
-            p = 1
-        if dE < 0.0:
-            b0 = -dE
-            b1 = 1.0 + dE
-        else:
-            b0 = 1.0 - dE
-            b1 = dE
-            p += 1
-        return (a0 * b0 * _cons(cm, p) + (a0 * b1 + a1 * b0) * _cons(cm, p + 1)
-                + a1 * b1 * _cons(cm, p + 2))
-    if E < 0.0:
-        a0 = -E
-        a1 = 1.0 + E
-        ha0 = P[i, b + A_HN1]
-        ha1 = P[i, b + A_HZ1]
-        p = 0
-    else:
-        a0 = 1.0 - E
-        a1 = E
-        ha0 = P[i, b + A_HZ1]
-        ha1 = P[i, b + A_HP1]
-        p = 1
-    if dE < 0.0:
-        b0 = -dE
-        b1 = 1.0 + dE
-        hb0 = P[i, b + A_HN2]
-        hb1 = P[i, b + A_HZ2]
-    else:
-        b0 = 1.0 - dE
-        b1 = dE
-        hb0 = P[i, b + A_HZ2]
-        hb1 = P[i, b + A_HP2]
-        p += 1
-    y0 = _cons(cm, p)
-    y1 = _cons(cm, p + 1)
-    y2 = _cons(cm, p + 2)
-    u01 = a0 * b1
-    u10 = a1 * b0
-    U0 = a0 * b0
-    U1 = u01 + u10
-    U2 = a1 * b1
-    L0 = ha0 * hb0 * U0
-    L1 = ha0 * hb1 * u01 + ha1 * hb0 * u10
-    L2 = ha1 * hb1 * U2
-    code = int(P[i, b + A_RED])
-    if code == 0:  # exact KM
-        uy0 = U0 * y0
-        uy1 = U1 * y1
-        uy2 = U2 * y2
-        ly0 = L0 * y0
-        ly1 = L1 * y1
-        ly2 = L2 * y2
-        c1 = (uy0 + ly1 + ly2) / (U0 + L1 + L2)
-        c2 = (uy0 + uy1 + ly2) / (U0 + U1 + L2)
-        d1 = (ly0 + uy1 + uy2) / (L0 + U1 + U2)
-        d2 = (ly0 + ly1 + uy2) / (L0 + L1 + U2)
-        yl = c1 if c1 < c2 else c2
-        yr = d1 if d1 > d2 else d2
-        return 0.5 * (yl + yr)
-    sl = L0 * y0 + L1 * y1 + L2 * y2
-    su = U0 * y0 + U1 * y1 + U2 * y2
-    dl = L0 + L1 + L2
-    if code == 1:  # Nie-Tan
-        return (sl + su) / (dl + 1.0)
-    if code == 2:  # BMM
-        return 0.5 * (sl / dl + su)
-    z = P[i, b + A_ZETA]
-    return (z * sl + (1.0 - z) * su) / (dl + 1.0)
+# The scalar classes' pure float functions, compiled for the kernel (the classes keep calling the
+# Python originals): one implementation of the fuzzy cores, the thrust vectoring and the attitude
+# law.
+_t1_phi = njit(t1_phi)
+_it2_phi = njit(it2_phi)
+_thrust_attitude = njit(thrust_attitude)
+_geometric_torque = njit(geometric_torque)
 
 
 @njit
@@ -239,7 +147,14 @@ def _axis(P: np.ndarray, S: np.ndarray, i: int, k: int, error: float, meas: floa
             dE = 1.0
         elif dE < -1.0:
             dE = -1.0
-        U = _phi(P, i, b, kind, E, dE)
+        cm = P[i, b + A_CM]
+        y = (-1.0, -cm, 0.0, cm, 1.0)
+        if kind == _T1:
+            U = _t1_phi(E, dE, y)
+        else:
+            U = _it2_phi(E, dE, y, P[i, b + A_HN1], P[i, b + A_HZ1], P[i, b + A_HP1],
+                         P[i, b + A_HN2], P[i, b + A_HZ2], P[i, b + A_HP2],
+                         int(P[i, b + A_RED]), P[i, b + A_ZETA])
         S[i, s + S_E] = E
         S[i, s + S_DE] = dE
         S[i, s + S_U] = U
@@ -325,53 +240,17 @@ def _vehicle(P: np.ndarray, S: np.ndarray, i: int, p: np.ndarray, v: np.ndarray,
     S[i, S_ACMD] = ax
     S[i, S_ACMD + 1] = ay
     S[i, S_ACMD + 2] = az
-    # thrust_attitude
-    mass = P[i, P_MASS]
-    g = P[i, P_G]
-    fx, fy, fz = mass * ax, mass * ay, mass * (az + g)
-    fz_min = 0.2 * mass * g
-    if fz < fz_min:
-        fz = fz_min
-    fh = math.hypot(fx, fy)
-    fh_max = fz * math.tan(P[i, P_TILT])
-    if fh > fh_max:
-        sc = fh_max / fh
-        fx *= sc
-        fy *= sc
-        fh = fh_max
-    fn = math.sqrt(fx * fx + fy * fy + fz * fz)
-    b3x, b3y, b3z = fx / fn, fy / fn, fz / fn
-    cx, cy = math.cos(yaw), math.sin(yaw)
-    b2x, b2y, b2z = -b3z * cy, b3z * cx, b3x * cy - b3y * cx
-    n2 = math.sqrt(b2x * b2x + b2y * b2y + b2z * b2z)
-    b2x, b2y, b2z = b2x / n2, b2y / n2, b2z / n2
-    b1x = b2y * b3z - b2z * b3y
-    b1y = b2z * b3x - b2x * b3z
-    b1z = b2x * b3y - b2y * b3x
-    # R_d = (b1x, b2x, b3x, b1y, b2y, b3y, b1z, b2z, b3z)
-    S[i, S_TILT] = math.atan2(fh, fz)
-    T = fn * (b3x * R[i, 2] + b3y * R[i, 5] + b3z * R[i, 8])
+    R_d, fn, tilt = _thrust_attitude(ax, ay, az, yaw, P[i, P_MASS], P[i, P_G], P[i, P_TILT])
+    S[i, S_TILT] = tilt
+    r = R[i]
+    T = fn * (R_d[2] * r[2] + R_d[5] * r[5] + R_d[8] * r[8])
     if T < 0.0:
         T = 0.0
     S[i, S_THRUST] = T
-    # GeometricAttitudeController.update (d = R_d, r = R)
-    m01 = b1x * R[i, 1] + b1y * R[i, 4] + b1z * R[i, 7]
-    m02 = b1x * R[i, 2] + b1y * R[i, 5] + b1z * R[i, 8]
-    m10 = b2x * R[i, 0] + b2y * R[i, 3] + b2z * R[i, 6]
-    m12 = b2x * R[i, 2] + b2y * R[i, 5] + b2z * R[i, 8]
-    m20 = b3x * R[i, 0] + b3y * R[i, 3] + b3z * R[i, 6]
-    m21 = b3x * R[i, 1] + b3y * R[i, 4] + b3z * R[i, 7]
-    ex = 0.5 * (m21 - m12)
-    ey = 0.5 * (m02 - m20)
-    ez = 0.5 * (m10 - m01)
-    wx, wy, wz = omega[i, 0], omega[i, 1], omega[i, 2]
-    Jx, Jy, Jz = P[i, P_J], P[i, P_J + 1], P[i, P_J + 2]
-    gx = wy * Jz * wz - wz * Jy * wy
-    gy = wz * Jx * wx - wx * Jz * wz
-    gz = wx * Jy * wy - wy * Jx * wx
-    tx = -P[i, P_KR] * ex - P[i, P_KW] * wx + gx
-    ty = -P[i, P_KR + 1] * ey - P[i, P_KW + 1] * wy + gy
-    tz = -P[i, P_KR + 2] * ez - P[i, P_KW + 2] * wz + gz
+    tau, _ = _geometric_torque(r, omega[i], R_d, (P[i, P_J], P[i, P_J + 1], P[i, P_J + 2]),
+                               (P[i, P_KR], P[i, P_KR + 1], P[i, P_KR + 2]),
+                               (P[i, P_KW], P[i, P_KW + 1], P[i, P_KW + 2]))
+    tx, ty, tz = tau
     S[i, S_TAU] = tx
     S[i, S_TAU + 1] = ty
     S[i, S_TAU + 2] = tz

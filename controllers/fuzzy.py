@@ -45,8 +45,10 @@ __all__ = [
     "IT2FuzzyPD",
     "T1FuzzyPD",
     "heights_from_alpha",
+    "it2_phi",
     "km_reduce",
     "small_signal_gain",
+    "t1_phi",
 ]
 
 REDUCERS = ("km", "nt", "bmm", "zeta")
@@ -165,6 +167,114 @@ def _memberships_np(x: np.ndarray, h: Heights3) -> tuple[np.ndarray, ...]:
     return (n, z, p), h
 
 
+# ------------------------------------------------------------ scalar cores (pure float functions)
+# The classes below call them; :mod:`controllers.batched` compiles the same functions with numba
+# for its kernel (one implementation, the same floating-point operations in the same order).
+
+
+def t1_phi(E: float, dE: float, y: tuple[float, ...]) -> float:
+    """Type-1 core Φ(E, dE) (:class:`T1FuzzyPD`) for consequents ``y = (-1, -c_m, 0, c_m, 1)``."""
+    if E > 1.0:
+        E = 1.0
+    elif E < -1.0:
+        E = -1.0
+    if dE > 1.0:
+        dE = 1.0
+    elif dE < -1.0:
+        dE = -1.0
+    if E < 0.0:
+        a0 = -E
+        a1 = 1.0 + E
+        p = 0
+    else:
+        a0 = 1.0 - E
+        a1 = E
+        p = 1
+    if dE < 0.0:
+        b0 = -dE
+        b1 = 1.0 + dE
+    else:
+        b0 = 1.0 - dE
+        b1 = dE
+        p += 1
+    # Σ f̄ = 1 (partition of unity), so no division is needed.
+    return a0 * b0 * y[p] + (a0 * b1 + a1 * b0) * y[p + 1] + a1 * b1 * y[p + 2]
+
+
+def it2_phi(E: float, dE: float, y: tuple[float, ...], hn1: float, hz1: float, hp1: float,
+            hn2: float, hz2: float, hp2: float, code: int, zeta: float) -> float:
+    """IT2 core Φ(E, dE) (:class:`IT2FuzzyPD`): consequents ``y = (-1, -c_m, 0, c_m, 1)``,
+    lower-MF heights (h_N, h_Z, h_P) of E then of dE, reducer ``code`` (0 km, 1 nt, 2 bmm,
+    3 zeta) and ζ (read by "zeta" only)."""
+    if E > 1.0:
+        E = 1.0
+    elif E < -1.0:
+        E = -1.0
+    if dE > 1.0:
+        dE = 1.0
+    elif dE < -1.0:
+        dE = -1.0
+    # Two active sets per input: "low" (a0, height ha0) and "high" (a1, ha1).
+    if E < 0.0:
+        a0 = -E
+        a1 = 1.0 + E
+        ha0 = hn1
+        ha1 = hz1
+        p = 0
+    else:
+        a0 = 1.0 - E
+        a1 = E
+        ha0 = hz1
+        ha1 = hp1
+        p = 1
+    if dE < 0.0:
+        b0 = -dE
+        b1 = 1.0 + dE
+        hb0 = hn2
+        hb1 = hz2
+    else:
+        b0 = 1.0 - dE
+        b1 = dE
+        hb0 = hz2
+        hb1 = hp2
+        p += 1
+    y0 = y[p]
+    y1 = y[p + 1]
+    y2 = y[p + 2]
+    # Upper firing of the three consequent groups (Σ = 1) ...
+    u01 = a0 * b1
+    u10 = a1 * b0
+    U0 = a0 * b0
+    U1 = u01 + u10
+    U2 = a1 * b1
+    # ... and lower firing.
+    L0 = ha0 * hb0 * U0
+    L1 = ha0 * hb1 * u01 + ha1 * hb0 * u10
+    L2 = ha1 * hb1 * U2
+    if code == 0:  # exact KM: switch after group 0 or after group 1
+        uy0 = U0 * y0
+        uy1 = U1 * y1
+        uy2 = U2 * y2
+        ly0 = L0 * y0
+        ly1 = L1 * y1
+        ly2 = L2 * y2
+        c1 = (uy0 + ly1 + ly2) / (U0 + L1 + L2)
+        c2 = (uy0 + uy1 + ly2) / (U0 + U1 + L2)
+        d1 = (ly0 + uy1 + uy2) / (L0 + U1 + U2)
+        d2 = (ly0 + ly1 + uy2) / (L0 + L1 + U2)
+        yl = c1 if c1 < c2 else c2
+        yr = d1 if d1 > d2 else d2
+        return 0.5 * (yl + yr)
+    sl = L0 * y0 + L1 * y1 + L2 * y2
+    su = U0 * y0 + U1 * y1 + U2 * y2
+    dl = L0 + L1 + L2
+    if code == 1:  # Nie-Tan
+        return (sl + su) / (dl + 1.0)
+    if code == 2:  # BMM, m = n = 0.5
+        return 0.5 * (sl / dl + su)
+    return (zeta * sl + (1.0 - zeta) * su) / (dl + 1.0)  # zeta-weighted
+
+
 class _FuzzyPDBase:
     """Shared bits of the type-1 and IT2 PD cores."""
 
@@ -208,32 +318,7 @@ class T1FuzzyPD(_FuzzyPDBase):
         super().__init__(cm)
 
     def __call__(self, E: float, dE: float) -> float:
-        if E > 1.0:
-            E = 1.0
-        elif E < -1.0:
-            E = -1.0
-        if dE > 1.0:
-            dE = 1.0
-        elif dE < -1.0:
-            dE = -1.0
-        if E < 0.0:
-            a0 = -E
-            a1 = 1.0 + E
-            p = 0
-        else:
-            a0 = 1.0 - E
-            a1 = E
-            p = 1
-        if dE < 0.0:
-            b0 = -dE
-            b1 = 1.0 + dE
-        else:
-            b0 = 1.0 - dE
-            b1 = dE
-            p += 1
-        y = self._y
-        # Σ f̄ = 1 (partition of unity), so no division is needed.
-        return a0 * b0 * y[p] + (a0 * b1 + a1 * b0) * y[p + 1] + a1 * b1 * y[p + 2]
+        return t1_phi(E, dE, self._y)
 
     def phi_grid(self, E: np.ndarray, dE: np.ndarray) -> np.ndarray:
         E, dE = np.broadcast_arrays(
@@ -320,76 +405,8 @@ class IT2FuzzyPD(_FuzzyPDBase):
         return small_signal_gain(self.reducer, self.cm, hz, hp, self.zeta)
 
     def __call__(self, E: float, dE: float) -> float:
-        if E > 1.0:
-            E = 1.0
-        elif E < -1.0:
-            E = -1.0
-        if dE > 1.0:
-            dE = 1.0
-        elif dE < -1.0:
-            dE = -1.0
-        # Two active sets per input: "low" (a0, height ha0) and "high" (a1, ha1).
-        if E < 0.0:
-            a0 = -E
-            a1 = 1.0 + E
-            ha0 = self._hn1
-            ha1 = self._hz1
-            p = 0
-        else:
-            a0 = 1.0 - E
-            a1 = E
-            ha0 = self._hz1
-            ha1 = self._hp1
-            p = 1
-        if dE < 0.0:
-            b0 = -dE
-            b1 = 1.0 + dE
-            hb0 = self._hn2
-            hb1 = self._hz2
-        else:
-            b0 = 1.0 - dE
-            b1 = dE
-            hb0 = self._hz2
-            hb1 = self._hp2
-            p += 1
-        y = self._y
-        y0 = y[p]
-        y1 = y[p + 1]
-        y2 = y[p + 2]
-        # Upper firing of the three consequent groups (Σ = 1) ...
-        u01 = a0 * b1
-        u10 = a1 * b0
-        U0 = a0 * b0
-        U1 = u01 + u10
-        U2 = a1 * b1
-        # ... and lower firing.
-        L0 = ha0 * hb0 * U0
-        L1 = ha0 * hb1 * u01 + ha1 * hb0 * u10
-        L2 = ha1 * hb1 * U2
-        code = self._code
-        if code == 0:  # exact KM: switch after group 0 or after group 1
-            uy0 = U0 * y0
-            uy1 = U1 * y1
-            uy2 = U2 * y2
-            ly0 = L0 * y0
-            ly1 = L1 * y1
-            ly2 = L2 * y2
-            c1 = (uy0 + ly1 + ly2) / (U0 + L1 + L2)
-            c2 = (uy0 + uy1 + ly2) / (U0 + U1 + L2)
-            d1 = (ly0 + uy1 + uy2) / (L0 + U1 + U2)
-            d2 = (ly0 + ly1 + uy2) / (L0 + L1 + U2)
-            yl = c1 if c1 < c2 else c2
-            yr = d1 if d1 > d2 else d2
-            return 0.5 * (yl + yr)
-        sl = L0 * y0 + L1 * y1 + L2 * y2
-        su = U0 * y0 + U1 * y1 + U2 * y2
-        dl = L0 + L1 + L2
-        if code == 1:  # Nie-Tan
-            return (sl + su) / (dl + 1.0)
-        if code == 2:  # BMM, m = n = 0.5
-            return 0.5 * (sl / dl + su)
-        z = self.zeta  # zeta-weighted
-        return (z * sl + (1.0 - z) * su) / (dl + 1.0)
+        return it2_phi(E, dE, self._y, self._hn1, self._hz1, self._hp1, self._hn2, self._hz2,
+                       self._hp2, self._code, self.zeta)
 
     # ----------------------------------------------------------------- numpy version
     def firing(self, E: np.ndarray, dE: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

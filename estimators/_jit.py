@@ -23,8 +23,11 @@ except ImportError:  # pragma: no cover
     HAVE_NUMBA = False
 
 
-def njit(func: Callable[..., Any]) -> Callable[..., Any]:
-    """Compile ``func`` with ``numba.njit(cache=True)``; without numba return it unchanged."""
+def njit(func: Callable[..., Any] | None = None, **options: Any) -> Any:
+    """Compile ``func`` with ``numba.njit(cache=True, **options)``; without numba return it
+    unchanged.  Use as ``@njit`` or ``@njit(inline="always")``."""
+    if func is None:
+        return lambda f: njit(f, **options)
     if _numba is None:  # pragma: no cover
         return func
-    return _numba.njit(cache=True)(func)
+    return _numba.njit(cache=True, **options)(func)
