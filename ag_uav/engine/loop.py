@@ -453,6 +453,10 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
     if nthread == 1:  # one thread: step in this one (a pool thread's hand-off costs ~20 %)
         nthread = 0
     runner = _rollout.Rollout(nthread=nthread)
+    # four contiguous chunks of vehicles per thread: at N = 64 on 2 threads this measured
+    # ~1000 vehicle-sim-s/s against 950-985 with one chunk per thread (uneven vehicles: some on
+    # the ground, with contacts) and 630 k vs 715 k vehicle-steps/s with the default chunking
+    n_chunks = 4 * max(nthread, 1)
     thread_data = [mujoco.MjData(m0) for _ in range(max(nthread, 1))]
 
     bar = None
@@ -543,7 +547,8 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
                 _controls(U, f, xf, xcol, act)
                 runner.rollout(models, thread_data, S, U,
                                control_spec=CTRL_SPEC, nstep=nsub, initial_warmstart=warm,
-                               state=S_out, sensordata=sens_out, skip_checks=True)
+                               state=S_out, sensordata=sens_out, skip_checks=True,
+                               chunk_size=-(-N // n_chunks))
                 S[:] = S_out[:, -1]
                 sens[:] = sens_out[:, -1]
             else:
@@ -554,7 +559,7 @@ def fly(flights: Sequence[Flight], *, progress: bool = False,
                 runner.rollout([models[i] for i in ii], thread_data, S[ii],
                                U[ii], control_spec=CTRL_SPEC, nstep=nsub,
                                initial_warmstart=warm[:len(ii)], state=so, sensordata=se,
-                               skip_checks=True)
+                               skip_checks=True, chunk_size=-(-len(ii) // n_chunks))
                 S[ii] = so[:, -1]
                 sens[ii] = se[:, -1]
             if any_hook:

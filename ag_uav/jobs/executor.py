@@ -249,7 +249,7 @@ class LocalPoolExecutor(Executor):
 def _warm(_: int) -> int:
     import time
 
-    import ag_uav.engine.loop.missions  # noqa: F401 - import the heavy modules once per worker
+    import ag_uav.engine.missions  # noqa: F401 - import the heavy modules once per worker
 
     time.sleep(0.05)
     return os.getpid()
