@@ -99,9 +99,9 @@ def test_unknown_camera_and_unavailable_backend(monkeypatch):
 
 
 def test_real_model_cameras_see_ground_and_drone():
-    """Regression: MuJoCo's clip planes are relative to the model extent, which the field
-    outline geoms make ~100 m; unpinned, the down camera saw only sky and the chase camera lost
-    the drone and the near ground."""
+    """Regression: MuJoCo's clip planes are relative to the model extent; unpinned, the down
+    camera saw only sky and the chase camera lost the drone and the near ground. The field
+    outline is scenery drawn into the scene, not part of the physics model."""
     import mujoco
     import numpy as np
 
@@ -111,13 +111,14 @@ def test_real_model_cameras_see_ground_and_drone():
     from ag_uav.world.mission import build_field, field_outline
 
     cfg = Config()
-    veh = build_vehicle(cfg, field_outline(build_field(cfg)))
+    veh = build_vehicle(cfg)
+    scenery = field_outline(build_field(cfg))
     d = mujoco.MjData(veh.model)
     d.qpos[:3] = (20.0, 30.0, 3.0)
     d.qpos[3] = 1.0
     mujoco.mj_forward(veh.model, d)
     try:
-        r = Renderer(veh.model, 160, 120, ("chase", "down"))
+        r = Renderer(veh.model, 160, 120, ("chase", "down"), scenery=scenery)
     except RenderUnavailable as e:
         pytest.skip(str(e))
     down, chase = r.rgb(d, "down"), r.rgb(d, "chase")
@@ -131,3 +132,42 @@ def test_real_model_cameras_see_ground_and_drone():
     empty = hidden.rgb(d, "chase")
     hidden.close()
     assert np.abs(chase[50:70, 70:90].astype(int) - empty[50:70, 70:90]).mean() > 10
+
+
+def test_scenery_is_drawn_for_the_cameras_and_is_not_in_the_physics_model():
+    """The field boundary is decor in the camera's scene: a down camera over a boundary edge sees
+    yellow strips with ``scenery`` and none without, and the physics model of two fields is the
+    same size (one MjData layout serves a batch over fields)."""
+    import mujoco
+    import numpy as np
+
+    from ag_uav.config import Config
+    from ag_uav.record.render import Renderer, RenderUnavailable
+    from ag_uav.vehicle.mjcf import build_vehicle
+    from ag_uav.world.mission import build_field, field_outline
+
+    cfg = Config()
+    veh = build_vehicle(cfg)
+    outline = field_outline(build_field(cfg))
+    a, b = np.asarray(outline[0])[:2]
+    d = mujoco.MjData(veh.model)
+    d.qpos[:2] = (a[:2] + b[:2]) / 2
+    d.qpos[2], d.qpos[3] = 4.0, 1.0
+    mujoco.mj_forward(veh.model, d)
+    try:
+        with_ = Renderer(veh.model, 160, 120, ("down",), scenery=outline)
+    except RenderUnavailable as e:
+        pytest.skip(str(e))
+    without = Renderer(veh.model, 160, 120, ("down",))
+    img_w, img_0 = with_.rgb(d, "down").astype(int), without.rgb(d, "down").astype(int)
+    with_.close()
+    without.close()
+
+    def yellow(img):
+        return int(((img[..., 0] > 180) & (img[..., 1] > 180) & (img[..., 2] < 120)).sum())
+
+    assert yellow(img_w) > 50 and yellow(img_0) == 0
+    other = Config()
+    other.mission.field = "hole"
+    m2 = build_vehicle(other).model
+    assert (m2.ngeom, m2.nbody, m2.nq) == (veh.model.ngeom, veh.model.nbody, veh.model.nq)

@@ -33,7 +33,7 @@ def _median_rate(fn: Callable[[], tuple[float, float]], repeats: int) -> float:
 def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float, float]:
     """Raw MuJoCo stepping of the mission's model: hover thrust, ``mj_step(m, d, nstep)`` in a
     Python loop (nstep=1: one call per physics step)."""
-    veh = build_vehicle(cfg, _outline(cfg))
+    veh = build_vehicle(cfg)
     m = veh.model
     d = mujoco.MjData(m)
     d.qpos[2] = 3.0
@@ -50,15 +50,6 @@ def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float
             step(m, d, nstep)
     wall = time.perf_counter() - t0
     return n_calls * nstep * m.opt.timestep, wall
-
-
-def _outline(cfg: Config):
-    import numpy as np
-
-    from ..engine.missions import build_field
-
-    fld = build_field(cfg)
-    return [np.asarray(fld.exterior)] + [np.asarray(h) for h in fld.holes]
 
 
 def closed_loop(cfg: Config) -> tuple[float, float, dict]:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import io
 import math
 import os
+from collections.abc import Sequence
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 if os.environ["MUJOCO_GL"].lower() == "egl":
@@ -75,6 +76,33 @@ def optical_quat(cam_xmat: np.ndarray) -> np.ndarray:
     return _quat_mul(q, _FLIP_X)
 
 
+#: scenery strips: half-width (m), height above the ground (m), colour
+STRIP_RADIUS, STRIP_Z, STRIP_RGBA = 0.12, 0.02, np.array([0.95, 0.95, 0.2, 1.0], np.float32)
+
+
+def _strips(lines: Sequence[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(from, to) 3-D points of every non-degenerate edge of the closed ``lines``."""
+    out = []
+    for line in lines:
+        pts = np.asarray(line, dtype=float)
+        for a, b in zip(pts[:-1], pts[1:], strict=True):
+            if math.hypot(b[0] - a[0], b[1] - a[1]) >= 1e-6:
+                out.append((np.array([a[0], a[1], STRIP_Z]), np.array([b[0], b[1], STRIP_Z])))
+    return out
+
+
+def _add_strips(scene: mujoco.MjvScene, strips: list[tuple[np.ndarray, np.ndarray]]) -> None:
+    """Append the scenery capsules to ``scene`` after ``mjv_updateScene`` (decor geoms)."""
+    capsule = int(mujoco.mjtGeom.mjGEOM_CAPSULE)
+    zero, eye = np.zeros(3), np.eye(3).ravel()
+    for a, b in strips[:scene.maxgeom - scene.ngeom]:
+        g = scene.geoms[scene.ngeom]
+        mujoco.mjv_initGeom(g, capsule, zero, zero, eye, STRIP_RGBA)
+        mujoco.mjv_connector(g, capsule, STRIP_RADIUS, a, b)
+        g.category = int(mujoco.mjtCatBit.mjCAT_DECOR)
+        scene.ngeom += 1
+
+
 class Renderer:
     """JPEG frames from named MJCF cameras.
 
@@ -82,13 +110,19 @@ class Renderer:
     :param width, height: image size in pixels.
     :param cameras: camera names that must exist in the model.
     :param fast: shadows, reflections, skybox and MSAA off (quick on a CPU rasteriser).
+    :param scenery: closed polylines (local ENU metres: the field boundary, holes, obstacles)
+        drawn on the ground as thin yellow strips. They are decor added to the camera's scene
+        each frame, not geoms of the physics model, so the model a vehicle flies with does not
+        depend on its field.
     :raises RenderUnavailable: no GL context (reason in the message).
     :raises ValueError: unknown camera name.
     """
 
     def __init__(self, model: mujoco.MjModel, width: int = 320, height: int = 240,
-                 cameras: tuple[str, ...] | list[str] = ("chase", "down"), fast: bool = True):
+                 cameras: tuple[str, ...] | list[str] = ("chase", "down"), fast: bool = True,
+                 scenery: Sequence[np.ndarray] = ()):
         self.width, self.height = int(width), int(height)
+        self._strips = _strips(scenery)
         self.model = model
         self.cam_ids: dict[str, int] = {}
         for name in cameras:
@@ -106,7 +140,8 @@ class Renderer:
             vis.quality.offsamples = 0
         _ensure_backend()
         try:
-            self._r = mujoco.Renderer(model, height=self.height, width=self.width)
+            self._r = mujoco.Renderer(model, height=self.height, width=self.width,
+                                      max_geom=10_000 + len(self._strips))
         except Exception as e:  # noqa: BLE001 - any GL failure means "no frames"
             msg = " ".join(str(e).split())[:200]
             raise RenderUnavailable(
@@ -134,6 +169,7 @@ class Renderer:
         """(height, width, 3) uint8 image from ``camera`` (needs ``mj_forward``/``mj_step``
         to have run so that camera poses are current)."""
         self._r.update_scene(data, camera=self.cam_ids[camera], scene_option=self._opt)
+        _add_strips(self._r.scene, self._strips)
         return self._r.render()
 
     def jpeg(self, data: mujoco.MjData, camera: str, quality: int = 80) -> bytes:

@@ -676,6 +676,11 @@ class RunLog:
             return t >= ec.next_t
         return not self.closed and self._period["estimator"] < _INF
 
+    def due(self, t: float) -> bool:
+        """True when :meth:`tick` at sim time ``t`` would log something (no side effects): the
+        engine builds a tick's arguments only then."""
+        return t >= self._next_tick
+
     def want_frame(self, t: float) -> bool:
         """True when a camera frame at sim time ``t`` would be logged: render only then."""
         return self.want("camera", t)

@@ -6,7 +6,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,11 +46,13 @@ class Vehicle:
         }
 
 
-def build_vehicle(cfg: Config, field_outline: list[np.ndarray] | None = None) -> Vehicle:
+def build_vehicle(cfg: Config) -> Vehicle:
     """Compile the MJCF with the config applied.
 
-    ``field_outline``: optional closed polylines (local ENU metres) drawn on the ground as thin,
-    non-colliding strips (field boundary and obstacles), so renders show the field.
+    The physics model depends on the vehicle and simulation keys only, never on the field: the
+    field outline and other scenery are drawn into the cameras' scene by
+    :class:`ag_uav.record.render.Renderer` (``scenery=``), so every vehicle of an engine batch,
+    whatever field it flies, has a model of the same sizes (one ``MjData`` layout per batch).
     """
     spec = mujoco.MjSpec.from_file(str(MODEL_XML))
     v = cfg.vehicle
@@ -77,22 +78,9 @@ def build_vehicle(cfg: Config, field_outline: list[np.ndarray] | None = None) ->
         a.dynprm[0] = v.motor_tau_s
         sign = 1.0 if a.gear[5] > 0 else -1.0
         a.gear[5] = sign * v.yaw_torque_coeff_m
-    if field_outline:
-        mat = spec.add_material(name="boundary", rgba=[0.95, 0.95, 0.2, 1.0])
-        for k, line in enumerate(field_outline):
-            pts = np.asarray(line, dtype=float)
-            for i in range(len(pts) - 1):
-                (x0, y0), (x1, y1) = pts[i], pts[i + 1]
-                if math.hypot(x1 - x0, y1 - y0) < 1e-6:
-                    continue
-                spec.worldbody.add_geom(
-                    name=f"edge_{k}_{i}", type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                    fromto=[x0, y0, 0.02, x1, y1, 0.02], size=[0.12, 0, 0],
-                    contype=0, conaffinity=0, material="boundary", group=1)
-        del mat
     model = spec.compile()
-    # MuJoCo's clipping planes are relative to the model extent, which the field geoms make
-    # ~100 m: pin them in metres (5 cm near, 800 m far) or the cameras clip the ground and the drone
+    # MuJoCo's clipping planes are relative to the model extent: pin them in metres (5 cm near,
+    # 800 m far) so the cameras neither clip the ground and the drone nor the field's far edge
     ext = float(model.stat.extent)
     model.vis.map.znear = 0.05 / ext
     model.vis.map.zfar = 800.0 / ext

@@ -1,0 +1,151 @@
+"""Observers: what watches a flight without changing it (logs, camera renders, tick hooks).
+
+Every observer sees the batch through one :class:`TickView`, for one vehicle or many alike:
+the engine's per-vehicle arrays (:class:`~ag_uav.engine.stages.Batch`) and, on demand,
+:meth:`TickView.data`: a MuJoCo ``MjData`` of vehicle ``i`` set to its current physics state and
+this tick's commands, with ``mj_forward`` run (positions, camera poses and sensors up to date).
+Nothing is built unless an observer asks for it.
+
+Two moments per tick: :meth:`Observer.tick` before the physics step (the state at ``t`` and the
+commands chosen for it: what the log records and the cameras see) and :meth:`Observer.stepped`
+after it (the state at ``t + dt``: what a tick hook ``hook(t, data)`` gets).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from .physics import STATE_SPEC
+from .stages import IMU_KEYS, Batch, Control, Sensing
+
+
+class TickView:
+    """The batch as observers see it at one moment (see the module docstring)."""
+
+    def __init__(self, b: Batch, models: Sequence[mujoco.MjModel], body: int) -> None:
+        self.b, self.models, self.body = b, list(models), body
+        self.k, self.t = 0, 0.0
+        self._scratch: dict[int, mujoco.MjData] = {}
+        self._fresh: set[int] = set()
+
+    def at(self, k: int, t: float) -> TickView:
+        self.k, self.t = k, t
+        self._fresh.clear()
+        return self
+
+    def data(self, i: int) -> mujoco.MjData:
+        """Vehicle ``i``'s ``MjData`` now (a scratch copy; changing it changes nothing)."""
+        d = self._scratch.get(i)
+        if d is None:
+            d = self._scratch[i] = mujoco.MjData(self.models[i])
+        if i not in self._fresh:
+            m = self.models[i]
+            mujoco.mj_setState(m, d, self.b.S[i], STATE_SPEC)
+            d.ctrl[:] = self.b.f[i]
+            d.xfrc_applied[self.body, :3] = self.b.xf[i]
+            mujoco.mj_forward(m, d)
+            self._fresh.add(i)
+        return d
+
+
+class Observer:
+    """Watches vehicle ``i``; both moments are optional."""
+
+    i: int
+
+    def tick(self, view: TickView) -> None:
+        """Before the physics step of the tick at ``view.t``."""
+
+    def stepped(self, view: TickView) -> None:
+        """After the physics step of the tick at ``view.t``."""
+
+    def close(self) -> None:
+        """Release what the observer holds (renderers)."""
+
+
+class HookObserver(Observer):
+    """``hook(t, data)`` after every control tick: ``data`` is the vehicle's state after the
+    step (``data.time`` = t + dt) with the commands held over it."""
+
+    def __init__(self, i: int, hook: Callable[..., None]) -> None:
+        self.i, self.hook = i, hook
+        self._data = _LazyData()
+
+    def stepped(self, view: TickView) -> None:
+        self.hook(view.t, self._data.bind(view, self.i))
+
+
+class _LazyData:
+    """An ``MjData`` stand-in that builds the view's data on first attribute access, so a hook
+    that never looks at ``data`` costs nothing."""
+
+    __slots__ = ("_view", "_i")
+
+    def bind(self, view: TickView, i: int) -> _LazyData:
+        self._view, self._i = view, i
+        return self
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._view.data(self._i), name)
+
+    def unwrap(self) -> mujoco.MjData:
+        return self._view.data(self._i)
+
+
+class LogObserver(Observer):
+    """Vehicle ``i``'s run log (:class:`ag_uav.record.runlog.RunLog`): the state, reference,
+    estimate, controller internals, motors, wind and spray at the log's rate, and camera
+    frames (:class:`ag_uav.record.render.Renderer`) when a frame is due."""
+
+    def __init__(self, i: int, log: Any, renderer: Any, feedback: Any, control: Control,
+                 sensing: Sensing) -> None:
+        self.i, self.log, self.renderer = i, log, renderer
+        self.fb, self.control, self.sensing = feedback, control, sensing
+        self.frames = 0
+        self._est = feedback.name != "true"
+
+    def tick(self, view: TickView) -> None:
+        log, t = self.log, view.t
+        if log.due(t):
+            self._record(view)
+        if self.renderer is not None and log.want_frame(t):
+            self._frames(view)
+
+    def _record(self, view: TickView) -> None:
+        b, i, t = view.b, self.i, view.t
+        ctrl = None
+        if self.log.want("state", t):
+            ctrl = self.control.bc.internals(i)
+            row = self.sensing.row(i, view.k)
+            if row is not None:
+                ctrl.update(zip(IMU_KEYS, row.tolist(), strict=True))
+        self.log.tick(t, p_true=tuple(b.p[i].tolist()), q_true_wxyz=tuple(b.quat[i].tolist()),
+                      v_true=tuple(b.v[i].tolist()), p_ref=tuple(b.rp[i].tolist()),
+                      v_ref=tuple(b.rv[i].tolist()), yaw_ref=float(b.yaw[i]),
+                      p_est=tuple(b.p_fb[i].tolist()) if self._est else None,
+                      v_est=tuple(b.v_fb[i].tolist()), ctrl=ctrl, motors=b.f[i].tolist(),
+                      wind=tuple(b.w[i].tolist()), spray=bool(b.spray[i]))
+
+    def _frames(self, view: TickView) -> None:
+        d, r = view.data(self.i), self.renderer
+        for cam in r.cameras:
+            self.log.frame(view.t, cam, r.jpeg(d, cam), r.width, r.height, r.fovy(cam),
+                           pose=r.camera_pose(d, cam))
+            self.frames += 1
+
+    def close(self) -> None:
+        if self.renderer is not None:
+            self.renderer.close()
+
+
+def frames_of(observers: Sequence[Observer], n: int) -> np.ndarray:
+    """Camera frames written per vehicle."""
+    out = np.zeros(n, dtype=np.int64)
+    for ob in observers:
+        if isinstance(ob, LogObserver):
+            out[ob.i] += ob.frames
+    return out

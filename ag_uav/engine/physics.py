@@ -1,0 +1,188 @@
+"""The physics stage: one control period of MuJoCo for every active vehicle of a batch.
+
+One interface, two steppers:
+
+* :class:`DirectStepper` steps one vehicle's own ``MjData`` with ``mj_step`` (no rollout
+  overhead);
+* :class:`RolloutStepper` steps many with ``mujoco.rollout`` on a persistent thread pool, one
+  ``MjModel`` per vehicle (mass, payload, motor lag and drag may differ per vehicle).
+
+Both start every control period from the vehicle's full physics state with a zero warm start
+and hold the rotor commands and the applied force over the period, so they give the same bits
+(tested). The rollout runs with ``skip_checks=True`` for speed, which makes it the engine's job
+to hand each model scratch data made for a model of the same sizes: vehicles are grouped by
+:func:`model_signature` and each group gets its own per-thread ``MjData``; data of another
+signature is refused with a clear error rather than stepped (memory safety).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+
+import mujoco
+import numpy as np
+from mujoco import rollout as _rollout
+
+from .kernels import controls
+
+STATE_SPEC = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+CTRL_SPEC = int(mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_XFRC_APPLIED)
+
+#: four contiguous chunks of vehicles per thread: at N = 64 on 2 threads this measured ~1000
+#: vehicle-sim-s/s against 950-985 with one chunk per thread (uneven vehicles: some on the
+#: ground, with contacts)
+CHUNKS_PER_THREAD = 4
+
+
+def model_signature(model: mujoco.MjModel) -> tuple[int, ...]:
+    """Every size field of ``model`` (``nq``, ``nv``, ``ngeom``, ``nsensordata``, …): two models
+    with equal signatures have ``MjData`` of the same layout."""
+    return tuple(getattr(model, k) for k in sorted(dir(model))
+                 if k.startswith("n") and isinstance(getattr(model, k, None), int))
+
+
+def check_data(model: mujoco.MjModel, data: mujoco.MjData, what: str = "data") -> None:
+    """Raise ``ValueError`` unless ``data`` was made for a model of ``model``'s sizes."""
+    if data.model is not model and model_signature(data.model) != model_signature(model):
+        raise ValueError(f"engine physics: {what} was made for a model of other sizes "
+                         f"(nq/nv/ngeom {data.model.nq}/{data.model.nv}/{data.model.ngeom} "
+                         f"vs {model.nq}/{model.nv}/{model.ngeom}); refusing to step it")
+
+
+def default_threads(n: int) -> int:
+    """Rollout threads for ``n`` vehicles: ``$AG_UAV_ENGINE_THREADS`` or the machine's cores, at
+    most ``n``; 0 (step in the caller's thread) for one vehicle or one thread, since a pool
+    thread's hand-off costs ~20 %."""
+    nthread = int(os.environ.get("AG_UAV_ENGINE_THREADS", 0)) or (os.cpu_count() or 1)
+    nthread = min(nthread, n) if n > 1 else 0
+    return 0 if nthread == 1 else nthread
+
+
+class Stepper:
+    """Advances the full physics state ``S`` (N, ns) and the sensor readings ``sens``
+    (N, nsensordata) of the active rows by one control period of ``nsub`` steps, holding the
+    rotor commands ``f`` (N, 4) and the applied force ``xf`` (N, 3)."""
+
+    def step(self, S: np.ndarray, sens: np.ndarray, f: np.ndarray, xf: np.ndarray,
+             act: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def controls(self, i: int) -> np.ndarray:
+        """Vehicle ``i``'s control vector of the last period (``CTRL_SPEC`` layout)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release threads and buffers."""
+
+
+class DirectStepper(Stepper):
+    """One vehicle, its own ``MjData``, ``mj_step(m, d, nsub)`` per control period."""
+
+    def __init__(self, model: mujoco.MjModel, body: int, nsub: int, S0: np.ndarray) -> None:
+        self.model, self.nsub = model, nsub
+        self.data = mujoco.MjData(model)
+        mujoco.mj_setState(model, self.data, S0, STATE_SPEC)
+        self._xfrc = self.data.xfrc_applied[body, :3]
+        self._u = np.empty(mujoco.mj_stateSize(model, CTRL_SPEC))
+
+    def step(self, S, sens, f, xf, act) -> None:
+        m, d = self.model, self.data
+        d.ctrl[:] = f[0]
+        self._xfrc[:] = xf[0]
+        d.qacc_warmstart[:] = 0.0
+        mujoco.mj_step(m, d, self.nsub)
+        mujoco.mj_getState(m, d, S[0], STATE_SPEC)
+        sens[0] = d.sensordata
+
+    def controls(self, i: int) -> np.ndarray:
+        mujoco.mj_getState(self.model, self.data, self._u, CTRL_SPEC)
+        return self._u
+
+
+class RolloutStepper(Stepper):
+    """Many vehicles through ``mujoco.rollout``: one call per model signature group (one group
+    when the models share their sizes, as an engine batch's vehicles do)."""
+
+    def __init__(self, models: Sequence[mujoco.MjModel], body: int, nsub: int,
+                 nthread: int) -> None:
+        self.models, self.nsub = list(models), nsub
+        m0 = self.models[0]
+        self.ns = mujoco.mj_stateSize(m0, STATE_SPEC)
+        N = len(self.models)
+        self.xcol = m0.nu + 6 * body
+        self.runner = _rollout.Rollout(nthread=nthread)
+        self.n_chunks = CHUNKS_PER_THREAD * max(nthread, 1)
+        sigs = [model_signature(m) for m in self.models]
+        self.groups: list[tuple[np.ndarray, list[mujoco.MjData]]] = []
+        for sig in dict.fromkeys(sigs):
+            rows = np.array([i for i, s in enumerate(sigs) if s == sig])
+            mg = self.models[rows[0]]
+            data = [mujoco.MjData(mg) for _ in range(max(nthread, 1))]
+            for i in rows:
+                check_data(self.models[i], data[0], "rollout thread data")
+            self.groups.append((rows, data))
+        self.U = np.zeros((N, nsub, mujoco.mj_stateSize(m0, CTRL_SPEC)))
+        self.S_out = np.empty((N, nsub, self.ns))
+        self.sens_out = np.empty((N, nsub, m0.nsensordata))
+        self.warm = np.zeros((N, m0.nv))
+
+    def step(self, S, sens, f, xf, act) -> None:
+        controls(self.U, f, xf, self.xcol, act)
+        if len(self.groups) == 1 and act.all():
+            self._run(self.models, self.groups[0][1], S, self.U, S, sens, None)
+            return
+        for rows, data in self.groups:
+            ii = rows[act[rows]]
+            if len(ii):
+                self._run([self.models[i] for i in ii], data, S[ii], self.U[ii], S, sens, ii)
+
+    def _run(self, models, data, S0, U, S, sens, ii) -> None:
+        n = len(models)
+        so, se = self.S_out[:n], self.sens_out[:n]
+        self.runner.rollout(models, data, S0, U, control_spec=CTRL_SPEC, nstep=self.nsub,
+                            initial_warmstart=self.warm[:n], state=so, sensordata=se,
+                            skip_checks=True, chunk_size=-(-n // self.n_chunks))
+        if ii is None:
+            S[:] = so[:, -1]
+            sens[:] = se[:, -1]
+        else:
+            S[ii] = so[:, -1]
+            sens[ii] = se[:, -1]
+
+    def controls(self, i: int) -> np.ndarray:
+        return self.U[i, 0]
+
+    def close(self) -> None:
+        self.runner.close()
+
+
+def make_stepper(models: Sequence[mujoco.MjModel], body: int, nsub: int, S: np.ndarray,
+                 nthread: int | None) -> Stepper:
+    """The direct stepper for one vehicle, the rollout stepper for more."""
+    if len(models) == 1:
+        return DirectStepper(models[0], body, nsub, S[0])
+    if nthread is None:
+        nthread = default_threads(len(models))
+    return RolloutStepper(models, body, nsub, 0 if nthread == 1 else nthread)
+
+
+def ground_contact(model: mujoco.MjModel, data: mujoco.MjData, s: np.ndarray, ground: int,
+                   skids: set[int], vel: np.ndarray, t: float) -> str | None:
+    """Ground contact other than the skids, or any at more than 1 m/s (a crash), else None."""
+    mujoco.mj_setState(model, data, s, STATE_SPEC)
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_collision(model, data)
+    if not data.ncon:
+        return None
+    speed = math.sqrt(float(vel[0]) ** 2 + float(vel[1]) ** 2 + float(vel[2]) ** 2)
+    for c in data.contact[:data.ncon]:
+        g1, g2 = int(c.geom1), int(c.geom2)
+        if ground not in (g1, g2):
+            continue
+        other = g2 if g1 == ground else g1
+        if other not in skids or speed > 1.0:
+            return (f"ground contact at {speed:.1f} m/s ({model.geom(other).name}) "
+                    f"at t={t:.2f}s")
+    return None

@@ -1,0 +1,254 @@
+"""The engine's stages: each owns its state and advances the whole batch by one control tick.
+
+A tick, in order (:func:`ag_uav.engine.loop.fly`): :class:`Guard` (state rows → pose, crash and
+ground checks, the reference row) → :class:`Sensing` (MEMS IMU, attitude estimate) →
+:class:`Feedback` (truth, the batched estimator bank or a per-vehicle adapter) →
+:class:`Control` (the batched cascade) → :class:`Spraying` (the spray job) →
+:class:`Disturbance` (wind and drag) → :class:`Recorder` → observers (logs, renders, hooks)
+→ physics (:mod:`ag_uav.engine.physics`). The stages share one :class:`Batch` of per-vehicle
+arrays (leading axis N); each law they run is a batched kernel that never mixes rows.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from .kernels import BOX, NONFINITE, hold_on_ground, imu_record, tick_in, tick_out
+from .physics import ground_contact
+
+#: the loop record's columns (one row per control tick)
+REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
+               "spray", "f0", "f1", "f2", "f3", "wx", "wy", "wz")
+#: the MEMS IMU record's keys in the log (measured f, gyro, attitude error)
+IMU_KEYS = ("imu.fx", "imu.fy", "imu.fz", "imu.wx", "imu.wy", "imu.wz", "imu.att_err_x",
+            "imu.att_err_y", "imu.att_err_z")
+
+
+@dataclass
+class Batch:
+    """The per-vehicle arrays every stage reads and writes (row i = vehicle i)."""
+
+    dt: float
+    S: np.ndarray                 # (N, ns) full physics state
+    sens: np.ndarray              # (N, nsensordata)
+    n_ticks: np.ndarray           # (N,) ticks each flight flies
+    airborne: np.ndarray          # (N,) lift-off latch
+    hover_z: np.ndarray           # (N,)
+    box: np.ndarray               # (N, 5) bounding box x0, y0, x1, y1, z_max
+    ref_tab: np.ndarray           # (n_refs, n_max, 12) reference rows
+    ref_ids: np.ndarray           # (N,) row of ref_tab
+    notes: list[list[str]]
+    act: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        N = len(self.S)
+        z3 = lambda: np.zeros((N, 3))  # noqa: E731
+        self.act = np.ones(N, dtype=bool)
+        self.p, self.v, self.omega = z3(), z3(), z3()
+        self.rp, self.rv, self.ra = z3(), z3(), z3()
+        self.p_fb, self.v_fb = z3(), z3()
+        self.quat, self.R = np.zeros((N, 4)), np.zeros((N, 9))
+        self.yaw = np.zeros(N)
+        self.spray = np.zeros(N, dtype=bool)
+        self.code = np.zeros(N, dtype=np.int8)
+        self.low = np.zeros(N, dtype=bool)
+        self.flown = np.zeros(N, dtype=np.int64)
+        self.f = np.zeros((N, 4))
+        self.xf, self.w = z3(), z3()
+        self.Rc, self.om = self.R, self.omega      # what the controller flies on
+        self.imu_in: tuple | None = None
+        self.crash_reason: list[str | None] = [None] * N
+        self.crash_time: list[float | None] = [None] * N
+
+    @property
+    def n(self) -> int:
+        return len(self.S)
+
+    @property
+    def n_max(self) -> int:
+        return self.ref_tab.shape[1]
+
+
+def _crash_text(code: int, t: float) -> str:
+    if code == NONFINITE:
+        return "diverged: non-finite state"
+    if code == BOX:
+        return f"left the bounding box at t={t:.2f}s"
+    return f"tilt > 80 deg at t={t:.2f}s"
+
+
+class Guard:
+    """Start of a tick: state rows → pose; non-finite, tilt, bounding box and ground contacts
+    end a vehicle's flight with its reason; the reference row of every active vehicle."""
+
+    COS_TILT = math.cos(math.radians(80.0))
+
+    def __init__(self, b: Batch, vehicles: Sequence[Any], iq: int, iv: int) -> None:
+        self.b, self.iq, self.iv = b, iq, iv
+        self.models = [v.model for v in vehicles]
+        self.contact_data = [mujoco.MjData(m) for m in self.models]
+        self.skids = [set(v.skid_geoms) for v in vehicles]
+        self.ground = [v.ground_geom for v in vehicles]
+
+    def start(self, k: int, t: float) -> bool:
+        """False when no vehicle is left to fly."""
+        b = self.b
+        flags = tick_in(k, b.S, b.act, b.n_ticks, self.iq, self.iv, b.p, b.v, b.quat, b.R,
+                        b.omega, b.box, self.COS_TILT, b.code, b.airborne, b.hover_z, b.low,
+                        b.ref_tab, b.ref_ids, b.rp, b.rv, b.ra, b.yaw, b.spray)
+        if flags & 1:
+            for i in np.flatnonzero(b.code):
+                self._end(i, _crash_text(int(b.code[i]), t), t)
+            b.code[:] = 0
+        if flags & 2:
+            for i in np.flatnonzero(b.low):
+                why = ground_contact(self.models[i], self.contact_data[i], b.S[i],
+                                     self.ground[i], self.skids[i], b.v[i], t)
+                if why:
+                    self._end(i, why, t)
+        return bool(flags & 4) and not ((flags & 3) and not b.act.any())
+
+    def _end(self, i: int, why: str, t: float) -> None:
+        b = self.b
+        b.crash_reason[i], b.crash_time[i] = why, t
+        b.act[i] = False
+
+
+class Sensing:
+    """The MEMS IMU (accelerometer and gyro from MuJoCo's sensors, with their errors) and the
+    attitude estimate the controller flies on; without the IMU, the true attitude and rates."""
+
+    def __init__(self, b: Batch, imu: Any, att: Any, accel_adr: int, gyro_adr: int) -> None:
+        self.b, self.imu, self.att = b, imu, att
+        self.ia, self.ig = accel_adr, gyro_adr
+        self.rec = np.zeros((b.n, b.n_max, 9)) if imu is not None else None
+
+    def step(self, k: int) -> None:
+        b = self.b
+        if self.imu is None:
+            return
+        sens = b.sens
+        f_m, b.om = self.imu.measure(sens[:, self.ia:self.ia + 3], sens[:, self.ig:self.ig + 3],
+                                     b.act)
+        b.Rc = self.att.apply(b.R, b.act)
+        imu_record(self.rec, k, b.act, f_m, b.om, self.att.last)
+        b.imu_in = (f_m, b.Rc)
+
+    def row(self, i: int, k: int) -> np.ndarray | None:
+        return None if self.rec is None else self.rec[i, k]
+
+
+class Feedback:
+    """What the controller flies on: the truth, one batched object for the whole batch
+    (:meth:`ag_uav.navigation.feedback.Feedback.batch`) or each vehicle's feedback in turn.
+    On the skids the horizontal part is the reference's (no horizontal position control before
+    lift-off, as autopilots do: an estimate a metre off must not tip the vehicle over)."""
+
+    def __init__(self, b: Batch, feedbacks: Sequence[Any], all_true: bool) -> None:
+        self.b, self.fbs, self.all_true = b, list(feedbacks), all_true
+        self.bank = None
+        if not all_true:
+            self.bank = type(self.fbs[0]).batch(self.fbs, b.n_max)
+            notes = [getattr(fb, "batch_note", None) for fb in self.fbs]
+            if self.bank is None and (len(self.fbs) > 1 or any(notes)):
+                self._say_per_vehicle()
+
+    def _say_per_vehicle(self) -> None:
+        why = next((n for n in (getattr(fb, "batch_note", None) for fb in self.fbs) if n),
+                   f"{type(self.fbs[0]).__name__} has no batched form")
+        msg = f"feedback flies one vehicle at a time: {why}"
+        warnings.warn(msg, RuntimeWarning, stacklevel=4)
+        for notes in self.b.notes:
+            notes.append(msg)
+
+    def step(self, k: int, t: float) -> None:
+        b = self.b
+        if self.all_true:
+            pf, vf = b.p, b.v
+        elif self.bank is not None:
+            pf, vf = self.bank.update(k, t, b.p, b.v, b.imu_in, b.act)
+        else:
+            pf, vf = self._per_vehicle(t)
+        hold_on_ground(b.act, b.airborne, pf, vf, b.rp, b.rv, b.p_fb, b.v_fb)
+
+    def _per_vehicle(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        b = self.b
+        p_fb, v_fb = b.p.copy(), b.v.copy()
+        for i in np.flatnonzero(b.act):
+            pt = (float(b.p[i, 0]), float(b.p[i, 1]), float(b.p[i, 2]))
+            vt = (float(b.v[i, 0]), float(b.v[i, 1]), float(b.v[i, 2]))
+            if b.imu_in is not None:
+                f_m, Rc = b.imu_in
+                pf, vf = self.fbs[i].update(t, pt, vt, (f_m[i].tolist(), tuple(Rc[i].tolist())))
+            else:
+                pf, vf = self.fbs[i].update(t, pt, vt)
+            p_fb[i], v_fb[i] = pf, vf
+        return p_fb, v_fb
+
+    def finish(self) -> None:
+        if self.bank is not None:
+            self.bank.finish(self.b.flown)
+
+
+class Control:
+    """The batched flight-controller cascade (:class:`controllers.batched.BatchCascade`)."""
+
+    def __init__(self, b: Batch, cascade: Any) -> None:
+        self.b, self.bc = b, cascade
+
+    def step(self) -> None:
+        b = self.b
+        b.f = self.bc.update(b.p_fb, b.v_fb, b.Rc, b.om, b.rp, b.rv, b.ra, b.yaw, b.dt,
+                             active=b.act)
+
+    def set_mass(self, i: int, total: float, J: Sequence[float]) -> None:
+        """The spray job's mass changes reach the controller's model of the vehicle."""
+        self.bc.mass[i] = total
+        self.bc.J[i] = J
+
+
+class Spraying:
+    """The spray job (:class:`ag_uav.engine.spray_batched.BatchSprayer`): nozzles, tank, battery
+    and sorties; a vehicle landed at the base gets zero thrust and a reset controller."""
+
+    def __init__(self, b: Batch, sprayer: Any, control: Control, act_adr: int) -> None:
+        self.b, self.spr, self.control, self.ia = b, sprayer, control, act_adr
+
+    def step(self, k: int, t: float) -> None:
+        b = self.b
+        on, reset = self.spr.step(k, t, b.p[:, 2], b.v[:, 0], b.v[:, 1], b.spray, b.f,
+                                  b.S[:, self.ia:self.ia + 4], b.act)
+        b.spray[:] = on
+        if reset.any():
+            self.control.bc.reset_rows(np.flatnonzero(reset))
+
+
+class Disturbance:
+    """Wind (mean + Dryden turbulence) as a drag force, held over the control period."""
+
+    def __init__(self, b: Batch, wind: Any, c_lin: np.ndarray, c_quad: np.ndarray) -> None:
+        self.b, self.wind, self.c_lin, self.c_quad = b, wind, c_lin, c_quad
+
+    def step(self) -> None:
+        b = self.b
+        b.w, b.xf = self.wind.step_drag(b.dt, b.p[:, 2], b.v, self.c_lin, self.c_quad, b.act)
+
+
+class Recorder:
+    """Row ``k`` of every active vehicle's record (:data:`REC_COLUMNS`), as arrays."""
+
+    def __init__(self, b: Batch) -> None:
+        self.b = b
+        self.rec = np.zeros((b.n, b.n_max, len(REC_COLUMNS)))
+
+    def step(self, k: int) -> None:
+        b = self.b
+        tick_out(self.rec, k, b.act, b.p, b.v, b.rp, b.p_fb, b.ref_tab, b.ref_ids, b.spray,
+                 b.f, b.w, b.flown)
