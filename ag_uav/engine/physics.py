@@ -10,9 +10,9 @@ One interface, two steppers:
 Both start every control period from the vehicle's full physics state with a zero warm start
 and hold the rotor commands and the applied force over the period, so they give the same bits
 (tested). The rollout runs with ``skip_checks=True`` for speed, which makes it the engine's job
-to hand each model scratch data made for a model of the same sizes: vehicles are grouped by
-:func:`model_signature` and each group gets its own per-thread ``MjData``; data of another
-signature is refused with a clear error rather than stepped (memory safety).
+to hand every model scratch data made for a model of the same sizes: a batch's models must share
+:func:`model_signature` (the field is scenery, not physics, so they do), and models or data of
+other sizes are refused with a clear error rather than stepped (memory safety).
 """
 
 from __future__ import annotations
@@ -46,9 +46,11 @@ def model_signature(model: mujoco.MjModel) -> tuple[int, ...]:
 def check_data(model: mujoco.MjModel, data: mujoco.MjData, what: str = "data") -> None:
     """Raise ``ValueError`` unless ``data`` was made for a model of ``model``'s sizes."""
     if data.model is not model and model_signature(data.model) != model_signature(model):
+        d = data.model
         raise ValueError(f"engine physics: {what} was made for a model of other sizes "
-                         f"(nq/nv/ngeom {data.model.nq}/{data.model.nv}/{data.model.ngeom} "
-                         f"vs {model.nq}/{model.nv}/{model.ngeom}); refusing to step it")
+                         f"(nq/nv/nbody/ngeom {d.nq}/{d.nv}/{d.nbody}/{d.ngeom} vs "
+                         f"{model.nq}/{model.nv}/{model.nbody}/{model.ngeom}); one batch "
+                         "needs one model layout, refusing to step it")
 
 
 def default_threads(n: int) -> int:
@@ -69,10 +71,6 @@ class Stepper:
              act: np.ndarray) -> None:
         raise NotImplementedError
 
-    def controls(self, i: int) -> np.ndarray:
-        """Vehicle ``i``'s control vector of the last period (``CTRL_SPEC`` layout)."""
-        raise NotImplementedError
-
     def close(self) -> None:
         """Release threads and buffers."""
 
@@ -85,7 +83,6 @@ class DirectStepper(Stepper):
         self.data = mujoco.MjData(model)
         mujoco.mj_setState(model, self.data, S0, STATE_SPEC)
         self._xfrc = self.data.xfrc_applied[body, :3]
-        self._u = np.empty(mujoco.mj_stateSize(model, CTRL_SPEC))
 
     def step(self, S, sens, f, xf, act) -> None:
         m, d = self.model, self.data
@@ -96,52 +93,41 @@ class DirectStepper(Stepper):
         mujoco.mj_getState(m, d, S[0], STATE_SPEC)
         sens[0] = d.sensordata
 
-    def controls(self, i: int) -> np.ndarray:
-        mujoco.mj_getState(self.model, self.data, self._u, CTRL_SPEC)
-        return self._u
-
 
 class RolloutStepper(Stepper):
-    """Many vehicles through ``mujoco.rollout``: one call per model signature group (one group
-    when the models share their sizes, as an engine batch's vehicles do)."""
+    """Many vehicles through ``mujoco.rollout``, one call per control period. The models must
+    share their sizes (:func:`model_signature`: an engine batch's vehicles do, since the field
+    is scenery); models of other sizes are refused, never stepped on data made for another."""
 
     def __init__(self, models: Sequence[mujoco.MjModel], body: int, nsub: int,
                  nthread: int) -> None:
         self.models, self.nsub = list(models), nsub
         m0 = self.models[0]
-        self.ns = mujoco.mj_stateSize(m0, STATE_SPEC)
+        self.data = [mujoco.MjData(m0) for _ in range(max(nthread, 1))]
+        for i, m in enumerate(self.models):
+            check_data(m, self.data[0], f"the rollout's data (vehicle 0's layout, vehicle {i})")
         N = len(self.models)
         self.xcol = m0.nu + 6 * body
         self.runner = _rollout.Rollout(nthread=nthread)
         self.n_chunks = CHUNKS_PER_THREAD * max(nthread, 1)
-        sigs = [model_signature(m) for m in self.models]
-        self.groups: list[tuple[np.ndarray, list[mujoco.MjData]]] = []
-        for sig in dict.fromkeys(sigs):
-            rows = np.array([i for i, s in enumerate(sigs) if s == sig])
-            mg = self.models[rows[0]]
-            data = [mujoco.MjData(mg) for _ in range(max(nthread, 1))]
-            for i in rows:
-                check_data(self.models[i], data[0], "rollout thread data")
-            self.groups.append((rows, data))
         self.U = np.zeros((N, nsub, mujoco.mj_stateSize(m0, CTRL_SPEC)))
-        self.S_out = np.empty((N, nsub, self.ns))
+        self.S_out = np.empty((N, nsub, mujoco.mj_stateSize(m0, STATE_SPEC)))
         self.sens_out = np.empty((N, nsub, m0.nsensordata))
         self.warm = np.zeros((N, m0.nv))
+        self.idx = np.arange(N)
 
     def step(self, S, sens, f, xf, act) -> None:
         controls(self.U, f, xf, self.xcol, act)
-        if len(self.groups) == 1 and act.all():
-            self._run(self.models, self.groups[0][1], S, self.U, S, sens, None)
+        if act.all():
+            self._run(self.models, S, self.U, S, sens, None)
             return
-        for rows, data in self.groups:
-            ii = rows[act[rows]]
-            if len(ii):
-                self._run([self.models[i] for i in ii], data, S[ii], self.U[ii], S, sens, ii)
+        ii = self.idx[act]
+        self._run([self.models[i] for i in ii], S[ii], self.U[ii], S, sens, ii)
 
-    def _run(self, models, data, S0, U, S, sens, ii) -> None:
+    def _run(self, models, S0, U, S, sens, ii) -> None:
         n = len(models)
         so, se = self.S_out[:n], self.sens_out[:n]
-        self.runner.rollout(models, data, S0, U, control_spec=CTRL_SPEC, nstep=self.nsub,
+        self.runner.rollout(models, self.data, S0, U, control_spec=CTRL_SPEC, nstep=self.nsub,
                             initial_warmstart=self.warm[:n], state=so, sensordata=se,
                             skip_checks=True, chunk_size=-(-n // self.n_chunks))
         if ii is None:
@@ -150,9 +136,6 @@ class RolloutStepper(Stepper):
         else:
             S[ii] = so[:, -1]
             sens[ii] = se[:, -1]
-
-    def controls(self, i: int) -> np.ndarray:
-        return self.U[i, 0]
 
     def close(self) -> None:
         self.runner.close()
