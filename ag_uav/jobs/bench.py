@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import copy
 import math
-import os
 import statistics
 import time
 from collections.abc import Callable
@@ -260,13 +259,73 @@ def batched_rate(cfg: Config, n: int, sim_s: float) -> tuple[float, float]:
     return sim, res[0].summary["loop_wall_time_s"] * n
 
 
+def physics_alone(cfg: Config, n: int, sim_s: float, nthread: int,
+                  chunk_size: int | None = None) -> tuple[float, float]:
+    """Vehicle-sim-seconds and wall seconds of MuJoCo alone stepping ``n`` hovering copies of
+    ``cfg``'s model as the engine does: ``mujoco.rollout`` on ``nthread`` threads, one call per
+    control period (``nsub`` steps, zero warm start, the final state and sensors kept)."""
+    import numpy as np
+    from mujoco import rollout
+
+    from ..engine.physics import CTRL_SPEC, STATE_SPEC
+
+    veh = build_vehicle(cfg)
+    m = veh.model
+    models = [m] + [copy.copy(m) for _ in range(n - 1)]
+    d = mujoco.MjData(m)
+    d.qpos[2], d.qpos[3] = 3.0, 1.0
+    d.ctrl[:] = d.act[:] = veh.mass * G / 4
+    mujoco.mj_forward(m, d)
+    S = np.empty((n, mujoco.mj_stateSize(m, STATE_SPEC)))
+    mujoco.mj_getState(m, d, S[0], STATE_SPEC)
+    S[1:] = S[0]
+    nsub = round(1.0 / (cfg.sim.timestep_s * cfg.sim.control_hz))
+    U = np.zeros((n, nsub, mujoco.mj_stateSize(m, CTRL_SPEC)))
+    U[:, :, :m.nu] = veh.mass * G / 4
+    so = np.empty((n, nsub, S.shape[1]))
+    se = np.empty((n, nsub, m.nsensordata))
+    warm = np.zeros((n, m.nv))
+    data = [mujoco.MjData(m) for _ in range(max(nthread, 1))]
+    periods = int(round(sim_s * cfg.sim.control_hz))
+    runner = rollout.Rollout(nthread=nthread)
+    try:
+        t0 = time.perf_counter()
+        for _ in range(periods):
+            runner.rollout(models, data, S, U, control_spec=CTRL_SPEC, nstep=nsub,
+                           initial_warmstart=warm, state=so, sensordata=se, skip_checks=True,
+                           chunk_size=chunk_size)
+            S[:] = so[:, -1]
+        wall = time.perf_counter() - t0
+    finally:
+        runner.close()
+    return n * periods * nsub * m.opt.timestep, wall
+
+
+def best_physics(cfg: Config, n: int, sim_s: float, nthread: int, repeats: int
+                 ) -> tuple[float, int | None]:
+    """MuJoCo alone at its best chunking (rollout's default, or 1, 2, 4, 8 chunks per thread,
+    each tried on a quarter of ``sim_s``): (vehicle-sim-s per wall-s, chunk size)."""
+    sizes: list[int | None] = [None] + sorted({max(1, -(-n // (k * max(nthread, 1))))
+                                               for k in (1, 2, 4, 8)})
+    trial = {c: _median_rate(lambda c=c: physics_alone(cfg, n, sim_s / 4, nthread, c), 1)
+             for c in sizes}
+    best = max(trial, key=trial.__getitem__)
+    return _median_rate(lambda: physics_alone(cfg, n, sim_s, nthread, best), repeats), best
+
+
 def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     """``batched`` (true state) and ``batched_estimators`` (:data:`ESTIMATOR_LOG_OVERRIDES`):
-    N missions in one engine batch, vehicle-sim-s per wall-s, against raw single-loop
-    stepping of the same model measured right before (the ratio is taken within the run)."""
+    N missions in one engine batch, vehicle-sim-s per wall-s, against what the engine drives:
+    MuJoCo alone stepping the same vehicles on the same threads at its best chunking
+    (``ratio_vs_physics``), and against raw single-loop stepping (``ratio_vs_raw``), both
+    measured in this run."""
+    from ..engine.physics import default_threads
+
     n, sim_s = (16, 20.0) if quick else (64, 60.0)
+    threads = default_threads(n)
     ce = with_overrides(c, ESTIMATOR_LOG_OVERRIDES)
     batched_rate(ce, 2, 1.0)  # load the compiled kernels outside the timed loops
+    physics, chunk = best_physics(c, n, sim_s, threads, repeats)
     out: dict[str, Any] = {}
     for key, conf in (("batched", c), ("batched_estimators", ce)):
         raw = _median_rate(lambda: raw_stepping(c, sim_s, 1), repeats)
@@ -275,7 +334,10 @@ def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
                     "sim_s_per_wall_s": round(rate, 1),
                     "raw_per_step_sim_s_per_wall_s": round(raw, 1),
                     "ratio_vs_raw": round(rate / raw, 3),
-                    "engine_threads": min(os.cpu_count() or 1, n)}
+                    "physics_sim_s_per_wall_s": round(physics, 1),
+                    "physics_chunk_size": chunk if chunk is not None else "rollout default",
+                    "ratio_vs_physics": round(rate / physics, 3),
+                    "engine_threads": threads}
     out["batched_estimators"]["config"] = ", ".join(
         f"{k}={v}" for k, v in ESTIMATOR_LOG_OVERRIDES.items())
     return out
