@@ -34,6 +34,7 @@ import math
 import sys
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,7 +44,7 @@ import numpy as np
 from ..config import Config
 from ..vehicle.mjcf import Vehicle, build_vehicle
 from .observers import HookObserver, LogObserver, Observer, TickView, frames_of
-from .physics import STATE_SPEC, make_stepper
+from .physics import STATE_SPEC, default_threads, make_stepper
 from .stages import (
     REC_COLUMNS,
     Batch,
@@ -58,6 +59,11 @@ from .stages import (
 
 __all__ = ["REC_COLUMNS", "Flight", "LoopOutput", "fly"]
 
+#: fewest vehicles per lane for the batch to be split into one lane per thread
+LANE_MIN = 8
+#: split big batches into lanes unless asked otherwise (see ``ag-uav bench``: lanes against one
+#: engine on the rollout's thread pool)
+LANES_BY_DEFAULT = False
 #: first-tick time above which the numba kernels are taken to have been compiled (not loaded)
 COMPILE_THRESHOLD_S = 3.0
 _announced = False
@@ -283,23 +289,60 @@ def _renderer(b: Batch, i: int, fl: Flight, veh: Vehicle) -> Any:
 
 
 # ------------------------------------------------------------------------------------ engine
-@dataclass
 class _Engine:
-    """The built stages of one :func:`fly` call."""
+    """The built stages of one lane of a :func:`fly` call and its tick, in the flow's order."""
 
-    b: Batch
-    guard: Guard
-    sensing: Sensing
-    feedback: Feedback
-    control: Control
-    spraying: Spraying | None
-    disturbance: Disturbance
-    recorder: Recorder
-    observers: list[Observer]
-    view: TickView
-    stepper: Any
-    sprayers: list[Any]
-    vehicles: list[Vehicle]
+    def __init__(self, b: Batch, guard: Guard, sensing: Sensing, feedback: Feedback,
+                 control: Control, spraying: Spraying | None, disturbance: Disturbance,
+                 observers: list[Observer], view: TickView, stepper: Any,
+                 sprayers: list[Any], vehicles: list[Vehicle]) -> None:
+        self.b, self.guard, self.sensing, self.feedback = b, guard, sensing, feedback
+        self.control, self.spraying, self.disturbance = control, spraying, disturbance
+        self.recorder = Recorder(b)
+        self.observers, self.view, self.stepper = observers, view, stepper
+        self.sprayers, self.vehicles = sprayers, vehicles
+        self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
+        self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
+
+    def before_physics(self, k: int, t: float) -> bool:
+        """Guard, sense, feed back, control, spray, disturb, record, observe; False when no
+        vehicle of this lane is left to fly."""
+        if k >= self.b.n_max or not self.guard.start(k, t):
+            return False
+        self.sensing.step(k)
+        self.feedback.step(k, t)
+        self.control.step()
+        if self.spraying is not None:
+            self.spraying.step(k, t)
+        self.disturbance.step()
+        self.recorder.step(k)
+        if self.pre_obs:
+            self._observe(self.pre_obs, "tick", k, t)
+        return True
+
+    def physics(self) -> None:
+        b = self.b
+        self.stepper.step(b.S, b.sens, b.f, b.xf, b.act)
+
+    def after_physics(self, k: int, t: float) -> None:
+        if self.post_obs:
+            self._observe(self.post_obs, "stepped", k, t)
+
+    def _observe(self, obs: list[Observer], moment: str, k: int, t: float) -> None:
+        view, act = self.view.at(k, t), self.b.act
+        for ob in obs:
+            if act[ob.i]:
+                getattr(ob, moment)(view)
+
+    def close(self) -> None:
+        self.stepper.close()
+        for ob in self.observers:
+            ob.close()
+
+    def finish(self) -> None:
+        if self.spraying is not None:
+            self.spraying.spr.finish()
+        self.feedback.finish()
 
 
 def _build(flights: Sequence[Flight], nthread: int | None) -> _Engine:
@@ -308,7 +351,6 @@ def _build(flights: Sequence[Flight], nthread: int | None) -> _Engine:
     from ..navigation.feedback import TrueFeedback
     from ..vehicle.cascade import make_cascade
 
-    _check_rates(flights)
     vehs = _vehicles(flights)
     m0 = vehs[0].model
     dt = 1.0 / flights[0].cfg.sim.control_hz
@@ -326,50 +368,56 @@ def _build(flights: Sequence[Flight], nthread: int | None) -> _Engine:
     stepper = make_stepper([v.model for v in vehs], body, round(dt / m0.opt.timestep), b.S,
                            nthread)
     return _Engine(b, Guard(b, vehs, iq, iq + m0.nq), sensing, feedback, control, spraying,
-                   disturbance, Recorder(b), observers, TickView(b, [v.model for v in vehs],
-                                                                 body),
-                   stepper, sprayers, vehs)
+                   disturbance, observers, TickView(b, [v.model for v in vehs], body), stepper,
+                   sprayers, vehs)
 
 
-def _run(e: _Engine, bar: Any) -> tuple[float, float]:
-    """Every tick until no vehicle is left; (loop wall seconds, compile seconds of tick 0)."""
-    b, dt = e.b, e.b.dt
-    start, sense, feed = e.guard.start, e.sensing.step, e.feedback.step
-    control, disturb, record = e.control.step, e.disturbance.step, e.recorder.step
-    spray = e.spraying.step if e.spraying is not None else None
-    step, S, sens = e.stepper.step, b.S, b.sens
-    pre = [ob for ob in e.observers if type(ob).tick is not Observer.tick]
-    post = [ob for ob in e.observers if type(ob).stepped is not Observer.stepped]
+def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
+    """Every tick until no vehicle is left; (loop wall seconds, compile seconds of tick 0).
+
+    With several lanes (disjoint parts of the batch, each a whole engine over its rows) the
+    physics of every lane but the last runs in a worker thread (MuJoCo releases the GIL) while
+    this thread runs the next lane's stages: the Python tick overlaps the physics. Rows never
+    mix, so the lanes change nothing in the results."""
+    dt = lanes[0].b.dt
+    n_max = max(e.b.n_max for e in lanes)
+    pool = ThreadPoolExecutor(len(lanes) - 1) if len(lanes) > 1 else None
+    alive = [True] * len(lanes)
     wall = time.perf_counter()
     compile_s, bar_next = 0.0, 1.0
-    for k in range(b.n_max):
-        t = k * dt
-        if not start(k, t):
-            break
-        sense(k)
-        feed(k, t)
-        control()
-        if spray is not None:
-            spray(k, t)
-        disturb()
-        record(k)
-        if pre:
-            view = e.view.at(k, t)
-            for ob in pre:
-                if b.act[ob.i]:
-                    ob.tick(view)
-        step(S, sens, b.f, b.xf, b.act)
-        if post:
-            view = e.view.at(k, t)
-            for ob in post:
-                if b.act[ob.i]:
-                    ob.stepped(view)
-        if k == 0:
-            compile_s, wall = _first_tick(wall)
-        if bar is not None and t >= bar_next:
-            bar.update(1)
-            bar_next += 1.0
+    try:
+        for k in range(n_max):
+            t = k * dt
+            if not _tick(lanes, alive, pool, k, t):
+                break
+            if k == 0:
+                compile_s, wall = _first_tick(wall)
+            if bar is not None and t >= bar_next:
+                bar.update(1)
+                bar_next += 1.0
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return time.perf_counter() - wall, compile_s
+
+
+def _tick(lanes: list[_Engine], alive: list[bool], pool: Any, k: int, t: float) -> bool:
+    """One tick of every lane that still flies; False when none does."""
+    futures = []
+    last = len(lanes) - 1
+    for j, e in enumerate(lanes):
+        alive[j] = alive[j] and e.before_physics(k, t)
+        if not alive[j]:
+            continue
+        if j < last:
+            futures.append((e, pool.submit(e.physics)))
+        else:
+            e.physics()
+            e.after_physics(k, t)
+    for e, fut in futures:
+        fut.result()
+        e.after_physics(k, t)
+    return any(alive)
 
 
 def _first_tick(wall0: float) -> tuple[float, float]:
@@ -405,32 +453,52 @@ def _outputs(e: _Engine, wall: float, compile_s: float) -> list[LoopOutput]:
     return outs
 
 
-def fly(flights: Sequence[Flight], *, progress: bool = False,
-        nthread: int | None = None) -> list[LoopOutput]:
+def _lanes(flights: list[Flight], nthread: int | None, lanes: int | None) -> list[_Engine]:
+    """The batch as ``lanes`` engines over contiguous parts (default: one per thread when each
+    gets at least :data:`LANE_MIN` vehicles), each stepping its physics in one thread; or one
+    engine whose rollout uses ``nthread`` threads."""
+    n = len(flights)
+    threads = default_threads(n) if nthread is None else nthread
+    if lanes is None:
+        lanes = threads if LANES_BY_DEFAULT and threads > 1 and n >= LANE_MIN * threads else 1
+    lanes = max(1, min(lanes, n))
+    if lanes == 1:
+        return [_build(flights, threads)]
+    cuts = np.linspace(0, n, lanes + 1).round().astype(int)
+    return [_build(flights[a:b], 0) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+
+
+def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | None = None,
+        lanes: int | None = None) -> list[LoopOutput]:
     """Fly every flight of ``flights`` in lockstep; one :class:`LoopOutput` per flight.
 
-    All flights must share ``sim.control_hz`` and ``sim.timestep_s``. ``nthread``: MuJoCo's
-    rollout threads (default: ``$AG_UAV_ENGINE_THREADS`` or the machine's cores, at most the
-    batch size; a single vehicle is stepped in this thread)."""
+    All flights must share ``sim.control_hz`` and ``sim.timestep_s``. ``nthread``: threads
+    (default: ``$AG_UAV_ENGINE_THREADS`` or the machine's cores, at most the batch size; a
+    single vehicle is stepped in this thread). ``lanes``: engines the batch is split into, whose
+    physics overlaps the next lane's Python tick (default: one per thread for batches of at least
+    :data:`LANE_MIN` vehicles per thread; 1: one engine, the rollout on ``nthread`` threads)."""
     flights = list(flights)
     if not flights:
         return []
-    e = _build(flights, nthread)
+    _check_rates(flights)
+    engines = _lanes(flights, nthread, lanes)
+    b0 = engines[0].b
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=round(e.b.n_max * e.b.dt), unit="sim-s", desc="flying", leave=False,
+        n_max = max(e.b.n_max for e in engines)
+        bar = tqdm(total=round(n_max * b0.dt), unit="sim-s", desc="flying", leave=False,
                    dynamic_ncols=True, mininterval=0.5)
     try:
-        wall, compile_s = _run(e, bar)
+        wall, compile_s = _run(engines, bar)
     finally:
-        e.stepper.close()
+        for e in engines:
+            e.close()
         if bar is not None:
             bar.close()
-        for ob in e.observers:
-            ob.close()
-    if e.spraying is not None:
-        e.spraying.spr.finish()
-    e.feedback.finish()
-    return _outputs(e, wall, compile_s)
+    outs: list[LoopOutput] = []
+    for e in engines:
+        e.finish()
+        outs += _outputs(e, wall, compile_s)
+    return outs

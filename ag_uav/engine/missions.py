@@ -23,6 +23,7 @@ the same run, serial or parallel.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -247,7 +248,24 @@ def batch_key(cfg: Config) -> tuple:
            and e.imu and cfg.imu.model == "mems")
     # the same filters (names, flown one first) share the batched bank
     filters = (e.source, e.name, tuple(s for s in e.shadow if s != e.name), e.model)
-    return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled, filters)
+    return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled, filters,
+            model_layout(cfg))
+
+
+_LAYOUTS: dict[str, str] = {}
+
+
+def model_layout(cfg: Config) -> str:
+    """The sizes of ``cfg``'s compiled physics model (:func:`ag_uav.engine.physics.
+    model_signature`; it depends on the vehicle and sim keys, not the field): one engine batch
+    steps models of one layout only."""
+    from .physics import model_signature
+
+    key = repr(cfg.vehicle) + repr(cfg.sim)
+    if key not in _LAYOUTS:
+        sig = repr(model_signature(build_vehicle(cfg).model)).encode()
+        _LAYOUTS[key] = hashlib.sha1(sig).hexdigest()[:12]
+    return _LAYOUTS[key]
 
 
 def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
