@@ -74,18 +74,14 @@ def _integrate(prm: np.ndarray, st: np.ndarray, dI: float, K: float, u_rest: flo
     u = u_rest + K * I
     umax = prm[A_UMAX]
     umin = prm[A_UMIN]
+    # conditional integration: drop this tick's step where it drives further into saturation
+    if (u > umax and K * (I - I_old) > 0.0) or (u < umin and K * (I - I_old) < 0.0):
+        I = I_old  # noqa: E741
+        u = u_rest + K * I
     if u > umax:
-        if K * (I - I_old) > 0.0:  # integration drives further into saturation
-            I = I_old  # noqa: E741
-            u = u_rest + K * I
-        if u > umax:
-            u = umax
+        u = umax
     elif u < umin:
-        if K * (I - I_old) < 0.0:
-            I = I_old  # noqa: E741
-            u = u_rest + K * I
-        if u < umin:
-            u = umin
+        u = umin
     st[S_I] = I
     st[S_UOUT] = u
     return u
