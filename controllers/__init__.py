@@ -6,7 +6,7 @@ Depends on numpy (and nothing from ``ag_uav`` or ``mujoco``). Hot paths (``updat
 
 from .factory import CONTROLLERS, make_controller
 from .fpid import FPID, IT2FPID, PAPER_TABLE_I, equivalent_pid
-from .fuzzy import REDUCERS, IT2FuzzyPD, T1FuzzyPD, heights_from_alpha, km_reduce, small_signal_gain
+from .fuzzy import REDUCERS, IT2FuzzyPD, T1FuzzyPD, heights_from_alpha, small_signal_gain
 from .optim import BBBC, PSO, OptimResult, bbbc_minimize, pso_minimize
 from .pid import PID
 
@@ -25,7 +25,6 @@ __all__ = [
     "bbbc_minimize",
     "equivalent_pid",
     "heights_from_alpha",
-    "km_reduce",
     "make_controller",
     "pso_minimize",
     "small_signal_gain",

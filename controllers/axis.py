@@ -37,7 +37,8 @@ import math
 import numpy as np
 
 from ._jit import njit
-from .fuzzy import it2_phi, t1_phi
+from .fuzzy import it2_phi_jit as _it2_phi
+from .fuzzy import t1_phi_jit as _t1_phi
 
 __all__ = ["AX_NP", "AX_NS", "ControllerBase", "axis_step"]
 
@@ -54,9 +55,6 @@ AX_NS = 10
 
 _DERIVATIVE_MODES = ("error", "measurement")
 
-# the fuzzy cores, compiled (the core objects of controllers.fuzzy call the same functions)
-_t1_phi = njit(t1_phi)
-_it2_phi = njit(it2_phi)
 
 
 @njit
