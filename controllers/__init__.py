@@ -1,12 +1,16 @@
 """Standalone controller library: IT2 / type-1 fuzzy PID, PID, and BB-BC / PSO tuners.
 
-Depends on numpy (and nothing from ``ag_uav`` or ``mujoco``). Hot paths (``update``,
-``Φ``) use plain Python floats so that a control tick costs a few microseconds.
+Depends on numpy and numba (optional: :mod:`controllers._jit`), nothing from ``ag_uav`` or
+``mujoco``. Each control law is written once, as a compiled function on one controller's (or one
+vehicle's) parameter and state arrays: the axis law in :mod:`controllers.axis`, thrust vectoring,
+attitude and mixer in :mod:`controllers.attitude`, the cascade row in :mod:`controllers.cascade`.
+The classes (``PID``, ``FPID``, ``IT2FPID``, ``PositionCascade``, ...) are thin shells that call
+them on their own arrays; :mod:`controllers.batched` calls them row by row.
 """
 
 from .factory import CONTROLLERS, make_controller
 from .fpid import FPID, IT2FPID, PAPER_TABLE_I, equivalent_pid
-from .fuzzy import REDUCERS, IT2FuzzyPD, T1FuzzyPD, heights_from_alpha, km_reduce, small_signal_gain
+from .fuzzy import REDUCERS, IT2FuzzyPD, T1FuzzyPD, heights_from_alpha, small_signal_gain
 from .optim import BBBC, PSO, OptimResult, bbbc_minimize, pso_minimize
 from .pid import PID
 
@@ -25,7 +29,6 @@ __all__ = [
     "bbbc_minimize",
     "equivalent_pid",
     "heights_from_alpha",
-    "km_reduce",
     "make_controller",
     "pso_minimize",
     "small_signal_gain",

@@ -1,7 +1,11 @@
 """Inner loops of the multirotor cascade: thrust vectoring, attitude control and the X mixer.
 
-Everything here runs once per control tick, so it is written with plain Python floats (numpy calls
-on 3-vectors cost about 1 µs each; see ``../shared/specs/vehicle_and_speed.md``).
+The laws are compiled functions (numba via :mod:`controllers._jit`), each written once:
+:func:`thrust_attitude`, :func:`geometric_torque` and its row form :func:`attitude_step`, and the
+mixer :func:`mix_step`. The classes :class:`GeometricAttitudeController` and :class:`XMixer` are
+thin shells that call them on their own small parameter/state blocks; the cascade row
+(:func:`controllers.cascade.vehicle_step`) and the batch kernel (:mod:`controllers.batched`) call
+the same functions on slices of a vehicle's row.
 
 Frames: world ENU (x east, y north, z up), body FLU (x forward, y left, z up). A rotation matrix
 ``R`` maps body to world and is stored row-major as a 9-tuple ``(r00, r01, r02, r10, ...)``.
@@ -16,6 +20,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+
+import numpy as np
+
+from ._jit import njit
 
 Mat3 = tuple[float, float, float, float, float, float, float, float, float]
 Vec3 = tuple[float, float, float]
@@ -41,6 +49,7 @@ def rot_to_euler(R: Mat3) -> tuple[float, float, float]:
     return roll, pitch, yaw
 
 
+@njit
 def thrust_attitude(ax: float, ay: float, az: float, yaw: float, mass: float, g: float,
                     tilt_max: float) -> tuple[Mat3, float, float]:
     """Desired attitude and collective thrust for a desired acceleration (world frame).
@@ -77,11 +86,11 @@ def thrust_attitude(ax: float, ay: float, az: float, yaw: float, mass: float, g:
     return R_d, fn, math.atan2(fh, fz)
 
 
+@njit
 def geometric_torque(R: Mat3, omega: Sequence[float], R_d: Mat3, J: Sequence[float],
                      kR: Sequence[float], kw: Sequence[float]) -> tuple[Vec3, Vec3]:
     """The law of :class:`GeometricAttitudeController`: ``(τ, e_R)`` for attitude R, body rates
-    omega, target R_d, inertia J and gains kR, kw (pure float code, also compiled for
-    :mod:`controllers.batched`)."""
+    omega, target R_d, inertia J and gains kR, kw (any indexables of floats)."""
     r = R
     d = R_d
     # M = R_dᵀ R  (only the off-diagonal entries are needed for vee(M − Mᵀ))
@@ -107,31 +116,177 @@ def geometric_torque(R: Mat3, omega: Sequence[float], R_d: Mat3, J: Sequence[flo
     )
 
 
+# --- attitude block: parameters J (3), kR (3), kw (3); state τ (3), e_R (3) -----------------------
+ATT_J, ATT_KR, ATT_KW, ATT_NP = 0, 3, 6, 9
+ATT_TAU, ATT_ER, ATT_NS = 0, 3, 6
+# --- mixer block: parameters Ainv (16, row-major), f_max; state: saturated flag ---------------
+MIX_AINV, MIX_FMAX, MIX_NP = 0, 16, 17
+MIX_SAT, MIX_NS = 0, 1
+
+
+@njit
+def attitude_step(prm: np.ndarray, st: np.ndarray, R: Sequence[float], omega: Sequence[float],
+                  R_d: Sequence[float]) -> tuple[float, float, float]:
+    """:func:`geometric_torque` on an attitude block (``prm``: J, kR, kw; ``st``: τ, e_R written
+    here); returns τ."""
+    tau, eR = geometric_torque(R, omega, R_d, prm[ATT_J:ATT_J + 3], prm[ATT_KR:ATT_KR + 3],
+                               prm[ATT_KW:ATT_KW + 3])
+    st[ATT_TAU] = tau[0]
+    st[ATT_TAU + 1] = tau[1]
+    st[ATT_TAU + 2] = tau[2]
+    st[ATT_ER] = eR[0]
+    st[ATT_ER + 1] = eR[1]
+    st[ATT_ER + 2] = eR[2]
+    return tau
+
+
+@njit
+def _alloc(a: np.ndarray, T: float, tx: float, ty: float, tz: float) -> tuple[float, ...]:
+    """Rotor thrusts ``Ainv [T, τx, τy, τz]ᵀ`` (``a``: Ainv row-major)."""
+    return (a[0] * T + a[1] * tx + a[2] * ty + a[3] * tz,
+            a[4] * T + a[5] * tx + a[6] * ty + a[7] * tz,
+            a[8] * T + a[9] * tx + a[10] * ty + a[11] * tz,
+            a[12] * T + a[13] * tx + a[14] * ty + a[15] * tz)
+
+
+@njit
+def _yaw_frac(s: float, a: float, b: float, fmax: float) -> float:
+    """One rotor's bound on the kept yaw fraction ``s`` (yaw-free thrust a, full thrust b)."""
+    d = b - a
+    if d > 0.0 and b > fmax:
+        x = (fmax - a) / d
+        if x < s:
+            s = x
+    elif d < 0.0 and b < 0.0:
+        x = -a / d
+        if x < s:
+            s = x
+    return s
+
+
+@njit
+def _clip0(v: float, fmax: float) -> float:
+    """``min(fmax, max(0.0, v))``."""
+    x = v if v > 0.0 else 0.0
+    return x if x < fmax else fmax
+
+
+@njit
+def mix_step(prm: np.ndarray, st: np.ndarray, T: float, tx: float, ty: float, tz: float,
+             out: np.ndarray) -> None:
+    """The X mixer with its saturation priority (:class:`XMixer`) on a mixer block (``prm``:
+    Ainv, f_max; ``st``: saturated flag written here); writes the four rotor thrusts to ``out``.
+
+    Not saturated: ``f = Ainv [T, τ]``. Otherwise, with ``g`` the yaw-free allocation: if ``g``
+    fits ``[0, f_max]``, keep the largest yaw fraction s that fits (``g + s (f − g)``, linear in
+    τz); else if its spread fits, shift the collective; else clip ``g`` to ``[0, f_max]``.
+    """
+    a = prm[MIX_AINV:MIX_AINV + 16]
+    fmax = prm[MIX_FMAX]
+    f0, f1, f2, f3 = _alloc(a, T, tx, ty, tz)
+    lo = min(min(f0, f1), min(f2, f3))
+    hi = max(max(f0, f1), max(f2, f3))
+    sat = lo < 0.0 or hi > fmax
+    st[MIX_SAT] = 1.0 if sat else 0.0
+    if sat:
+        g0, g1, g2, g3 = _alloc(a, T, tx, ty, 0.0)  # 1. drop yaw
+        lo0 = min(min(g0, g1), min(g2, g3))
+        hi0 = max(max(g0, g1), max(g2, g3))
+        if lo0 >= 0.0 and hi0 <= fmax:
+            s = _yaw_frac(1.0, g0, f0, fmax)
+            s = _yaw_frac(s, g1, f1, fmax)
+            s = _yaw_frac(s, g2, f2, fmax)
+            s = _yaw_frac(s, g3, f3, fmax)
+            f0 = g0 + s * (f0 - g0)
+            f1 = g1 + s * (f1 - g1)
+            f2 = g2 + s * (f2 - g2)
+            f3 = g3 + s * (f3 - g3)
+        elif hi0 - lo0 <= fmax:  # 2. shift the collective to keep roll/pitch
+            shift = -lo0 if lo0 < 0.0 else fmax - hi0
+            f0 = g0 + shift
+            f1 = g1 + shift
+            f2 = g2 + shift
+            f3 = g3 + shift
+        else:  # 3. roll/pitch alone exceed the range: clip
+            f0 = _clip0(g0, fmax)
+            f1 = _clip0(g1, fmax)
+            f2 = _clip0(g2, fmax)
+            f3 = _clip0(g3, fmax)
+    out[0] = f0
+    out[1] = f1
+    out[2] = f2
+    out[3] = f3
+
+
+@njit
+def _attitude_call(prm: np.ndarray, st: np.ndarray, x: np.ndarray) -> tuple[float, float, float]:
+    """:func:`attitude_step` with R, ω, R_d packed in ``x`` (9 + 3 + 9)."""
+    return attitude_step(prm, st, x[0:9], x[9:12], x[12:21])
+
+
+def _vec3(arr: np.ndarray) -> Vec3:
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
 class GeometricAttitudeController:
     """PD attitude control on SO(3) (Lee et al. 2010) with gyroscopic compensation.
 
     ``τ = J (−ω_n² e_R − 2ζω_n e_ω) + ω × Jω`` per body axis, with
     ``e_R = ½ vee(R_dᵀR − RᵀR_d)`` and ``e_ω = ω`` (the set point's angular rate is taken as zero,
-    which is what a cascade with a slower outer loop needs).
+    which is what a cascade with a slower outer loop needs). Law: :func:`attitude_step`.
 
     Parameters
     ----------
     inertia: principal moments (Jx, Jy, Jz) in kg m² (body axes).
     wn: natural frequencies (rad/s) for roll, pitch, yaw.
     zeta: damping ratios for roll, pitch, yaw.
+
+    ``J`` (writable: a draining tank changes it; the gains ``kR``, ``kw`` stay as built), ``kR``,
+    ``kw`` and ``eR`` (last attitude error) live in the blocks ``_p`` (ATT_NP,) and ``_s``
+    (ATT_NS,), which a :class:`~controllers.cascade.PositionCascade` adopts.
     """
 
     def __init__(self, inertia: Sequence[float], wn: Sequence[float] = (9.0, 9.0, 3.0),
                  zeta: Sequence[float] = (0.9, 0.9, 0.9)) -> None:
-        self.J = tuple(float(v) for v in inertia)
-        self.kR = tuple(j * w * w for j, w in zip(self.J, wn, strict=True))
-        self.kw = tuple(2.0 * j * z * w for j, z, w in zip(self.J, zeta, wn, strict=True))
-        self.eR = (0.0, 0.0, 0.0)
+        J = tuple(float(v) for v in inertia)
+        self._p = np.zeros(ATT_NP)
+        self._s = np.zeros(ATT_NS)
+        self._x = np.zeros(21)
+        self._p[ATT_J:ATT_J + 3] = J
+        self._p[ATT_KR:ATT_KR + 3] = [j * w * w for j, w in zip(J, wn, strict=True)]
+        self._p[ATT_KW:ATT_KW + 3] = [2.0 * j * z * w for j, z, w in zip(J, zeta, wn, strict=True)]
+
+    @property
+    def J(self) -> Vec3:
+        """Principal inertia (kg m²); writable."""
+        return _vec3(self._p[ATT_J:ATT_J + 3])
+
+    @J.setter
+    def J(self, value: Sequence[float]) -> None:
+        self._p[ATT_J:ATT_J + 3] = [float(v) for v in value]
+
+    @property
+    def kR(self) -> Vec3:
+        """Attitude gains J ω_n²."""
+        return _vec3(self._p[ATT_KR:ATT_KR + 3])
+
+    @property
+    def kw(self) -> Vec3:
+        """Rate gains 2 J ζ ω_n."""
+        return _vec3(self._p[ATT_KW:ATT_KW + 3])
+
+    @property
+    def eR(self) -> Vec3:
+        """Last attitude error e_R."""
+        return _vec3(self._s[ATT_ER:ATT_ER + 3])
 
     def update(self, R: Mat3, omega: Sequence[float], R_d: Mat3) -> tuple[float, float, float]:
         """Body torques (τx, τy, τz) in N m for attitude R, body rates omega, target R_d."""
-        tau, self.eR = geometric_torque(R, omega, R_d, self.J, self.kR, self.kw)
-        return tau
+        x = self._x
+        x[0:9] = R
+        x[9:12] = omega
+        x[12:21] = R_d
+        return _attitude_call(self._p, self._s, x)
 
 
 class XMixer:
@@ -143,13 +298,11 @@ class XMixer:
 
     Saturation priority (as in PX4's and Betaflight's mixers): roll/pitch first, then collective
     thrust, then yaw. Yaw torque is scaled down until the rotors fit, then the collective is
-    shifted, then the result is clipped to ``[0, f_max]``.
+    shifted, then the result is clipped to ``[0, f_max]`` (law: :func:`mix_step`).
     """
 
     def __init__(self, positions: Sequence[Sequence[float]], spin: Sequence[int], k_yaw: float,
                  f_max: float) -> None:
-        import numpy as np  # only at construction
-
         A = np.array([
             [1.0, 1.0, 1.0, 1.0],
             [p[1] for p in positions],
@@ -157,37 +310,33 @@ class XMixer:
             [s * k_yaw for s in spin],
         ])
         self.A = A
-        self.Ainv = tuple(tuple(float(v) for v in row) for row in np.linalg.inv(A))
-        self.f_max = float(f_max)
-        self.saturated = False
+        self._p = np.zeros(MIX_NP)
+        self._s = np.zeros(MIX_NS)
+        self._out = np.zeros(4)
+        self._p[MIX_AINV:MIX_AINV + 16] = np.linalg.inv(A).ravel()
+        self.f_max = f_max
 
-    def _alloc(self, T: float, tx: float, ty: float, tz: float) -> list[float]:
-        return [r[0] * T + r[1] * tx + r[2] * ty + r[3] * tz for r in self.Ainv]
+    @property
+    def Ainv(self) -> tuple[tuple[float, ...], ...]:
+        """Inverse allocation (4 × 4, rows per rotor)."""
+        return tuple(tuple(r) for r in self._p[MIX_AINV:MIX_AINV + 16].reshape(4, 4).tolist())
+
+    @property
+    def f_max(self) -> float:
+        """Rotor thrust limit (N); writable."""
+        return float(self._p[MIX_FMAX])
+
+    @f_max.setter
+    def f_max(self, value: float) -> None:
+        self._p[MIX_FMAX] = float(value)
+
+    @property
+    def saturated(self) -> bool:
+        """Whether the last :meth:`mix` saturated."""
+        return bool(self._s[MIX_SAT] != 0.0)
 
     def mix(self, T: float, tx: float, ty: float, tz: float) -> list[float]:
         """Rotor thrusts (N) for collective ``T`` (N) and body torques (N m)."""
-        fmax = self.f_max
-        f = self._alloc(T, tx, ty, tz)
-        lo, hi = min(f), max(f)
-        self.saturated = lo < 0.0 or hi > fmax
-        if not self.saturated:
-            return f
-        # 1. drop yaw
-        fy = self._alloc(T, tx, ty, 0.0)
-        lo0, hi0 = min(fy), max(fy)
-        if lo0 >= 0.0 and hi0 <= fmax:
-            # largest yaw fraction that still fits (the allocation is linear in tz)
-            s = 1.0
-            for a, b in zip(fy, f, strict=True):
-                d = b - a
-                if d > 0.0 and b > fmax:
-                    s = min(s, (fmax - a) / d)
-                elif d < 0.0 and b < 0.0:
-                    s = min(s, -a / d)
-            return [a + s * (b - a) for a, b in zip(fy, f, strict=True)]
-        # 2. shift the collective to keep roll/pitch
-        if hi0 - lo0 <= fmax:
-            shift = -lo0 if lo0 < 0.0 else fmax - hi0
-            return [v + shift for v in fy]
-        # 3. roll/pitch alone exceed the range: clip
-        return [min(fmax, max(0.0, v)) for v in fy]
+        out = self._out
+        mix_step(self._p, self._s, T, tx, ty, tz, out)
+        return out.tolist()

@@ -1,10 +1,33 @@
 """The multirotor cascade: position controller per axis → acceleration → thrust and attitude →
-attitude loop → X mixer.
+attitude loop → X mixer; :func:`vehicle_step` is its one implementation, on one vehicle's
+parameter row and state row.
 
-Any object with ``update(error, dt, ...) -> float`` can be the per-axis position controller
-(``IT2FPID``, ``FPID`` or ``PID``).
-Their output is a commanded acceleration (m/s²) in the world frame, to which the reference
-acceleration is added as feed-forward. Plain Python floats throughout (hot path).
+Per tick (:func:`vehicle_step`):
+
+* per world axis ``k``: ``e = p_ref − p``, error rate ``v_ref − v`` (used as the derivative:
+  an estimated position jumps at every GPS fix), the axis law
+  :func:`controllers.axis.axis_step` (PID, type-1 FPID or IT2-FPID);
+* :func:`command_step`: clip each axis output to ``±a_limit``, add ``ff·a_ref``;
+  :func:`controllers.attitude.thrust_attitude` (tilt limit, ``f_z ≥ 0.2 m g``); collective
+  ``T = |f| (R_d e3)·(R e3)`` floored at 0;
+* :func:`controllers.attitude.attitude_step` (geometric attitude torques);
+* :func:`controllers.attitude.mix_step` (X mixer with its saturation priority).
+
+:class:`PositionCascade` is the scalar shell (a batch of one): it owns one row and adopts its
+axis controllers', attitude controller's and mixer's blocks (they become views of the row), so
+one compiled call advances the whole cascade. Axis controllers of other classes (any object
+with ``update(error, dt, measurement, error_rate) -> float``), or an attitude controller / mixer
+of a subclass, are called through their own ``update`` / ``mix`` and the rest of the row runs
+compiled. :class:`controllers.batched.BatchCascade` stacks the rows of N cascades.
+
+Row layouts
+-----------
+``params`` (NP,): the three axis parameter blocks (``AX_NP`` each, :mod:`controllers.axis`), then
+mass, g, tilt_max, feed-forward factor (1/0), a_limit, the attitude block (J, kR, kw) and the
+mixer block (Ainv row-major, f_max) (:mod:`controllers.attitude`).
+``state`` (NS,): the three axis state blocks (``AX_NS`` each), then the commanded acceleration
+(3), collective thrust, tilt, R_d (9, row-major), the attitude block (τ, e_R) and the mixer block
+(saturated flag).
 """
 
 from __future__ import annotations
@@ -13,7 +36,65 @@ import math
 from collections.abc import Sequence
 from typing import Any, Protocol
 
-from .attitude import GeometricAttitudeController, Mat3, XMixer, thrust_attitude
+import numpy as np
+
+from ._jit import njit
+from .attitude import (
+    ATT_ER,
+    ATT_J,
+    ATT_KR,
+    ATT_KW,
+    ATT_NP,
+    ATT_NS,
+    ATT_TAU,
+    MIX_AINV,
+    MIX_FMAX,
+    MIX_NP,
+    MIX_NS,
+    MIX_SAT,
+    GeometricAttitudeController,
+    Mat3,
+    XMixer,
+    attitude_step,
+    mix_step,
+    thrust_attitude,
+)
+from .axis import AX_NP, AX_NS, ControllerBase, axis_step
+from .fpid import FPID, IT2FPID
+from .pid import PID
+
+__all__ = ["NP", "NS", "PositionCascade", "command_step", "vehicle_step"]
+
+#: Axis controller classes the compiled row runs itself (exact classes).
+ROW_AXES: tuple[type, ...] = (PID, FPID, IT2FPID)
+
+# --- params row ---------------------------------------------------------------------------------
+P_MASS = 3 * AX_NP
+P_G = P_MASS + 1
+P_TILT = P_MASS + 2
+P_FF = P_MASS + 3
+P_ALIM = P_MASS + 4
+P_ATT = P_MASS + 5  # attitude block
+P_J = P_ATT + ATT_J  # 3
+P_KR = P_ATT + ATT_KR  # 3
+P_KW = P_ATT + ATT_KW  # 3
+P_MIX = P_ATT + ATT_NP  # mixer block
+P_AINV = P_MIX + MIX_AINV  # 16, row-major
+P_FMAX = P_MIX + MIX_FMAX
+NP = P_MIX + MIX_NP
+# --- state row ----------------------------------------------------------------------------------
+S_ACMD = 3 * AX_NS  # 3
+S_THRUST = S_ACMD + 3
+S_TILT = S_ACMD + 4
+S_RD = S_ACMD + 5  # 9
+S_ATT = S_RD + 9  # attitude block
+S_TAU = S_ATT + ATT_TAU  # 3
+S_ER = S_ATT + ATT_ER  # 3
+S_MIX = S_ATT + ATT_NS  # mixer block
+S_SAT = S_MIX + MIX_SAT
+NS = S_MIX + MIX_NS
+# --- packed inputs of the scalar shell ----------------------------------------------------------
+X_P, X_V, X_R, X_W, X_PR, X_VR, X_AR, X_YAW, NX = 0, 3, 6, 15, 18, 21, 24, 27, 28
 
 
 class AxisController(Protocol):
@@ -21,6 +102,95 @@ class AxisController(Protocol):
                error_rate: float | None = None) -> float: ...
 
     def reset(self) -> None: ...
+
+
+@njit
+def _clip(u: float, lim: float) -> float:
+    """``u`` clipped to ``[−lim, lim]``."""
+    if u > lim:
+        u = lim
+    elif u < -lim:
+        u = -lim
+    return u
+
+
+@njit
+def command_step(prm: np.ndarray, st: np.ndarray, ux: float, uy: float, uz: float,
+                 R: np.ndarray, a_ref: np.ndarray, yaw: float) -> tuple[float, Any]:
+    """Axis outputs → acceleration command → (collective T, R_d); stores the command, tilt,
+    R_d and T in the state row."""
+    lim = prm[P_ALIM]
+    ff = prm[P_FF]
+    ax = _clip(ux, lim) + ff * a_ref[0]
+    ay = _clip(uy, lim) + ff * a_ref[1]
+    az = _clip(uz, lim) + ff * a_ref[2]
+    st[S_ACMD] = ax
+    st[S_ACMD + 1] = ay
+    st[S_ACMD + 2] = az
+    R_d, fn, tilt = thrust_attitude(ax, ay, az, yaw, prm[P_MASS], prm[P_G], prm[P_TILT])
+    st[S_TILT] = tilt
+    for j in range(9):
+        st[S_RD + j] = R_d[j]
+    # collective thrust: the desired force projected on the current body z axis
+    T = fn * (R_d[2] * R[2] + R_d[5] * R[5] + R_d[8] * R[8])
+    if T < 0.0:
+        T = 0.0
+    st[S_THRUST] = T
+    return T, R_d
+
+
+@njit
+def vehicle_step(prm: np.ndarray, st: np.ndarray, p: np.ndarray, v: np.ndarray, R: np.ndarray,
+                 omega: np.ndarray, p_ref: np.ndarray, v_ref: np.ndarray, a_ref: np.ndarray,
+                 yaw: float, dt: float, out: np.ndarray) -> None:
+    """One control tick of one vehicle's row (module docstring); rotor thrusts to ``out`` (4,).
+
+    ``prm`` (NP,), ``st`` (NS,) advanced in place; ``p, v, omega, p_ref, v_ref, a_ref`` (3,),
+    ``R`` (9,) row-major body → world. The caller checks dt > 0.
+    """
+    u0 = axis_step(prm[0:AX_NP], st[0:AX_NS], p_ref[0] - p[0], p[0], True, v_ref[0] - v[0],
+                   True, dt)
+    u1 = axis_step(prm[AX_NP:2 * AX_NP], st[AX_NS:2 * AX_NS], p_ref[1] - p[1], p[1], True,
+                   v_ref[1] - v[1], True, dt)
+    u2 = axis_step(prm[2 * AX_NP:3 * AX_NP], st[2 * AX_NS:3 * AX_NS], p_ref[2] - p[2], p[2],
+                   True, v_ref[2] - v[2], True, dt)
+    T, R_d = command_step(prm, st, u0, u1, u2, R, a_ref, yaw)
+    tx, ty, tz = attitude_step(prm[P_ATT:P_ATT + ATT_NP], st[S_ATT:S_ATT + ATT_NS], R, omega, R_d)
+    mix_step(prm[P_MIX:P_MIX + MIX_NP], st[S_MIX:S_MIX + MIX_NS], T, tx, ty, tz, out)
+
+
+@njit
+def _vehicle_call(prm: np.ndarray, st: np.ndarray, x: np.ndarray, dt: float,
+                  out: np.ndarray) -> None:
+    """:func:`vehicle_step` with the inputs packed in ``x`` (the scalar shell's call)."""
+    vehicle_step(prm, st, x[X_P:X_P + 3], x[X_V:X_V + 3], x[X_R:X_R + 9], x[X_W:X_W + 3],
+                 x[X_PR:X_PR + 3], x[X_VR:X_VR + 3], x[X_AR:X_AR + 3], x[X_YAW], dt, out)
+
+
+@njit
+def _command_call(prm: np.ndarray, st: np.ndarray, x: np.ndarray, ux: float, uy: float,
+                  uz: float) -> float:
+    """:func:`command_step` with the inputs packed in ``x``; returns T."""
+    T, _ = command_step(prm, st, ux, uy, uz, x[X_R:X_R + 9], x[X_AR:X_AR + 3], x[X_YAW])
+    return T
+
+
+def _field(col: int, doc: str) -> property:
+    def get(self: PositionCascade) -> float:
+        return float(self._P[col])
+
+    def set_(self: PositionCascade, value: float) -> None:
+        self._P[col] = float(value)
+
+    return property(get, set_, doc=doc)
+
+
+def _last(lo: int, n: int, doc: str) -> property:
+    def get(self: PositionCascade) -> Any:
+        s = self._S
+        return float(s[lo]) if n == 1 else tuple(s[lo:lo + n].tolist())
+
+    return property(get, doc=doc)
 
 
 class PositionCascade:
@@ -37,26 +207,71 @@ class PositionCascade:
 
     The error rate fed to each axis controller is ``v_ref − v`` (the fed-back velocity), not a
     finite difference of the position error: an estimated position jumps at every GPS fix.
+
+    The cascade owns one parameter row and one state row (module docstring; ``_P``, ``_S``) and
+    adopts the blocks of its axis controllers, attitude controller and mixer: they become views
+    of the row (an object adopted by a second cascade follows the second one). Writable:
+    ``mass``, ``g``, ``tilt_max``, ``ff``, ``a_limit`` and the sub-objects' attributes (e.g.
+    ``attitude.J``). Last tick: ``a_cmd``, ``thrust``, ``tilt``, ``R_d``, ``torque``.
     """
+
+    mass = _field(P_MASS, "Vehicle mass (kg).")
+    g = _field(P_G, "Gravity (m/s²).")
+    tilt_max = _field(P_TILT, "Tilt limit of the thrust vector (rad).")
+    ff = _field(P_FF, "Feed-forward factor on the reference acceleration (1/0).")
+    a_limit = _field(P_ALIM, "Bound on each axis' commanded acceleration (m/s²).")
+    a_cmd = _last(S_ACMD, 3, "Last commanded acceleration (m/s²).")
+    thrust = _last(S_THRUST, 1, "Last collective thrust (N).")
+    tilt = _last(S_TILT, 1, "Last commanded tilt (rad).")
+    R_d = _last(S_RD, 9, "Last desired attitude (row-major).")
+    torque = _last(S_TAU, 3, "Last body torques (N m).")
 
     def __init__(self, axes: Sequence[AxisController], mass: float, g: float,
                  attitude: GeometricAttitudeController, mixer: XMixer,
                  tilt_max: float = math.radians(30.0), accel_feedforward: bool = True,
                  a_limit: float = 6.0) -> None:
         self.axes = list(axes)
-        self.mass = mass
-        self.g = g
+        if len(self.axes) != 3:
+            raise ValueError(f"expected 3 axis controllers, got {len(self.axes)}")
         self.attitude = attitude
         self.mixer = mixer
+        self._P = np.zeros(NP)
+        self._S = np.zeros(NS)
+        self._S[S_RD:S_RD + 9] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+        self._x = np.zeros(NX)
+        self._out = np.zeros(4)
+        self.mass = mass
+        self.g = g
         self.tilt_max = tilt_max
         self.ff = 1.0 if accel_feedforward else 0.0
         self.a_limit = a_limit
-        self.a_cmd = (0.0, 0.0, 0.0)
-        self.thrust = 0.0
-        self.tilt = 0.0
-        self.R_d: Mat3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
-        self.torque = (0.0, 0.0, 0.0)
+        self._adopt(copy=True)
         self._internal_keys: list | None = None
+
+    def _blocks(self) -> list[tuple[Any, type, slice, slice]]:
+        return [(a, ControllerBase, slice(k * AX_NP, (k + 1) * AX_NP),
+                 slice(k * AX_NS, (k + 1) * AX_NS)) for k, a in enumerate(self.axes)] + [
+            (self.attitude, GeometricAttitudeController, slice(P_ATT, P_ATT + ATT_NP),
+             slice(S_ATT, S_ATT + ATT_NS)),
+            (self.mixer, XMixer, slice(P_MIX, P_MIX + MIX_NP), slice(S_MIX, S_MIX + MIX_NS))]
+
+    def _adopt(self, copy: bool) -> None:
+        """Make the sub-objects' blocks views of this row (copying their values in first)."""
+        for obj, cls, ps, ss in self._blocks():
+            if isinstance(obj, cls):
+                if copy:
+                    self._P[ps] = obj._p
+                    self._S[ss] = obj._s
+                obj._p = self._P[ps]
+                obj._s = self._S[ss]
+        self._compiled = (all(type(a) in ROW_AXES for a in self.axes)
+                          and type(self.attitude) is GeometricAttitudeController
+                          and type(self.mixer) is XMixer)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickled / deep-copied: adopt the (copied) sub-objects again."""
+        self.__dict__.update(state)
+        self._adopt(copy=False)
 
     def reset(self) -> None:
         for a in self.axes:
@@ -70,30 +285,32 @@ class PositionCascade:
         ``p``, ``v``: position and velocity used for feedback (true or estimated), world frame.
         ``R``: body → world rotation (row-major 9-tuple); ``omega``: body rates (rad/s).
         """
-        lim = self.a_limit
-        ff = self.ff
-        acc = []
-        for i in range(3):
-            e = p_ref[i] - p[i]
-            u = self.axes[i].update(e, dt, p[i], v_ref[i] - v[i])
-            if u > lim:
-                u = lim
-            elif u < -lim:
-                u = -lim
-            acc.append(u + ff * a_ref[i])
-        self.a_cmd = (acc[0], acc[1], acc[2])
-        R_d, f_norm, tilt = thrust_attitude(acc[0], acc[1], acc[2], yaw_ref, self.mass, self.g,
-                                            self.tilt_max)
-        self.R_d = R_d
-        self.tilt = tilt
-        # collective thrust: the desired force projected on the current body z axis
-        T = f_norm * (R_d[2] * R[2] + R_d[5] * R[5] + R_d[8] * R[8])
-        if T < 0.0:
-            T = 0.0
-        self.thrust = T
-        tx, ty, tz = self.attitude.update(R, omega, R_d)
-        self.torque = (tx, ty, tz)
-        return self.mixer.mix(T, tx, ty, tz)
+        if not dt > 0.0:
+            raise ValueError(f"dt must be > 0, got {dt}")
+        x = self._x
+        x[X_P:X_P + 3] = p
+        x[X_V:X_V + 3] = v
+        x[X_R:X_R + 9] = R
+        x[X_W:X_W + 3] = omega
+        x[X_PR:X_PR + 3] = p_ref
+        x[X_VR:X_VR + 3] = v_ref
+        x[X_AR:X_AR + 3] = a_ref
+        x[X_YAW] = yaw_ref
+        if self._compiled:
+            _vehicle_call(self._P, self._S, x, dt, self._out)
+            return self._out.tolist()
+        return self._update_objects(x, R, omega, dt)
+
+    def _update_objects(self, x: np.ndarray, R: Mat3, omega: Sequence[float],
+                        dt: float) -> list[float]:
+        """The same tick through the sub-objects' own ``update`` / ``mix`` (other classes)."""
+        xs = x.tolist()
+        u = [a.update(xs[X_PR + k] - xs[X_P + k], dt, xs[X_P + k],
+                      xs[X_VR + k] - xs[X_V + k]) for k, a in enumerate(self.axes)]
+        T = _command_call(self._P, self._S, x, u[0], u[1], u[2])
+        tau = self.attitude.update(R, omega, self.R_d)
+        self._S[S_TAU:S_TAU + 3] = tau
+        return self.mixer.mix(T, tau[0], tau[1], tau[2])
 
     def internals(self) -> dict[str, Any]:
         """Per-tick values for logs: per-axis controller state, command, thrust, tilt."""

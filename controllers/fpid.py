@@ -15,14 +15,34 @@ Candan & Li's agricultural-UAV paper, Table I)::
 Near the origin Φ ≈ G_E E + G_dE dE, which gives the equivalent linear PID (see
 :func:`equivalent_pid`): Kp = K0 Ke G_E + K1 Kd G_dE, Ki = K1 Ke G_E, Kd = K0 Kd G_dE.
 The controller is odd in (Ke, Kd, K0, K1) jointly; tune with positive bounds.
+The law is computed by :func:`controllers.axis.axis_step` (one implementation shared with
+:class:`controllers.pid.PID`, the cascade and the batch kernel).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
+from .axis import (
+    A_CM,
+    A_G0,
+    A_G1,
+    A_G2,
+    A_G3,
+    A_HN1,
+    A_HP2,
+    A_RED,
+    A_ZETA,
+    KIND_IT2,
+    KIND_T1,
+    S_DE,
+    S_E,
+    S_U,
+    ControllerBase,
+    param,
+    state,
+)
 from .fuzzy import IT2FuzzyPD, T1FuzzyPD
-from .pid import ControllerBase
 
 __all__ = ["FPID", "IT2FPID", "PAPER_TABLE_I", "equivalent_pid"]
 
@@ -63,13 +83,22 @@ def equivalent_pid(
 
 
 class _FuzzyPID(ControllerBase):
-    """Shared implementation of the fuzzy PID law around a core ``Φ(E, dE) -> float``.
+    """Shared shell of the fuzzy PID law around a core ``Φ(E, dE)`` (the law itself is
+    :func:`controllers.axis.axis_step`; the core's parameters are copied into the parameter
+    block at construction).
 
-    Attributes set by :meth:`update` (for logging): ``e, de, E, dE, U, integral, u`` and the
+    Attributes after :meth:`update` (for logging): ``e, de, E, dE, U, integral, u`` and the
     two parts ``u_pd = K0 U`` and ``u_pi = K1 I``.
     """
 
     core: IT2FuzzyPD | T1FuzzyPD
+    Ke = param(A_G0, "Input scaling of the error.")
+    Kd = param(A_G1, "Input scaling of the error's derivative.")
+    K0 = param(A_G2, "Output gain of the PD part K0·U.")
+    K1 = param(A_G3, "Output gain of the PI part K1·∫U.")
+    E = state(S_E, "Last scaled, clipped error E.")
+    dE = state(S_DE, "Last scaled, clipped derivative dE.")
+    U = state(S_U, "Last core output U = Φ(E, dE).")
 
     def _init_gains(
         self,
@@ -82,21 +111,29 @@ class _FuzzyPID(ControllerBase):
         u_limit: float | tuple[float, float] | None,
         d_tau: float,
     ) -> None:
-        self.Ke = float(Ke)
-        self.Kd = float(Kd)
-        self.K0 = float(K0)
-        self.K1 = float(K1)
+        self._init_blocks()
+        core = self.core
+        self._p[A_CM] = core.cm
+        if isinstance(core, IT2FuzzyPD):
+            self._p[A_RED] = float(core._code)
+            self._p[A_ZETA] = core.zeta
+            self._p[A_HN1:A_HP2 + 1] = (*core.heights_e, *core.heights_de)
+        self.Ke = Ke
+        self.Kd = Kd
+        self.K0 = K0
+        self.K1 = K1
         self._init_common(derivative, i_limit, u_limit, d_tau)
         self.reset()
 
-    def reset(self, integral: float = 0.0) -> None:
-        """Clear derivative memory; set the integral state I (default 0)."""
-        self._reset_derivative()
-        self.integral = float(integral)
-        self.e = self.de = self.E = self.dE = self.U = 0.0
-        self.u_pd = 0.0
-        self.u_pi = self.K1 * self.integral
-        self.u = 0.0
+    @property
+    def u_pd(self) -> float:
+        """Last PD part K0·U."""
+        return self.K0 * self.U
+
+    @property
+    def u_pi(self) -> float:
+        """Last PI part K1·I."""
+        return self.K1 * self.integral
 
     def small_signal_gains(self) -> tuple[float, float]:
         """(G_E, G_dE) of the core at the origin (closed form when available)."""
@@ -112,34 +149,6 @@ class _FuzzyPID(ControllerBase):
         """(Kp, Ki, Kd) of the linearisation at the origin; see :func:`equivalent_pid`."""
         return equivalent_pid(self.Ke, self.Kd, self.K0, self.K1, self.small_signal_gains())
 
-    def update(self, error: float, dt: float, measurement: float | None = None,
-               error_rate: float | None = None) -> float:
-        """One control tick; returns the (clamped) control output u."""
-        de = self._derivative(error, dt, measurement, error_rate)
-        E = self.Ke * error
-        if E > 1.0:
-            E = 1.0
-        elif E < -1.0:
-            E = -1.0
-        dE = self.Kd * de
-        if dE > 1.0:
-            dE = 1.0
-        elif dE < -1.0:
-            dE = -1.0
-        U = self.core(E, dE)
-        u_pd = self.K0 * U
-        I, u = self._integrate(dt * U, self.K1, u_pd)
-        self.integral = I
-        self.e = error
-        self.de = de
-        self.E = E
-        self.dE = dE
-        self.U = U
-        self.u_pd = u_pd
-        self.u_pi = self.K1 * I
-        self.u = u
-        return u
-
 
 class IT2FPID(_FuzzyPID):
     """Interval type-2 fuzzy PID (one axis).
@@ -154,6 +163,8 @@ class IT2FPID(_FuzzyPID):
     u_limit : output clamp, a symmetric bound or (lower, upper); conditional integration.
     d_tau : time constant of a first-order low-pass on the derivative (0: none).
     """
+
+    _KIND = KIND_IT2
 
     def __init__(
         self,
@@ -186,6 +197,8 @@ class FPID(_FuzzyPID):
 
     Parameters as :class:`IT2FPID`; the core has only ``cm`` (small-signal slope c_m).
     """
+
+    _KIND = KIND_T1
 
     def __init__(
         self,

@@ -40,13 +40,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ._jit import njit
+
 __all__ = [
     "REDUCERS",
     "IT2FuzzyPD",
     "T1FuzzyPD",
     "heights_from_alpha",
     "it2_phi",
-    "km_reduce",
     "small_signal_gain",
     "t1_phi",
 ]
@@ -90,47 +91,6 @@ def _resolve_heights(
     )
 
 
-def km_reduce(
-    y: Sequence[float], f_lower: Sequence[float], f_upper: Sequence[float]
-) -> tuple[float, float]:
-    """Exact Karnik–Mendel type reduction by enumerating every switch point.
-
-    Generic reference implementation (any number of rules, pure Python):
-    sort the consequents ascending, then
-
-        y_l = min_{k=0..n} [Σ_{i<k} f̄_i y_i + Σ_{i>=k} f_i y_i] / [Σ_{i<k} f̄_i + Σ_{i>=k} f_i]
-        y_r = max_{k=0..n} [Σ_{i<k} f_i y_i + Σ_{i>=k} f̄_i y_i] / [Σ_{i<k} f_i + Σ_{i>=k} f̄_i]
-
-    Switch points with a zero denominator are skipped. Returns (y_l, y_r).
-    """
-    rows = sorted(zip(y, f_lower, f_upper, strict=True), key=lambda r: r[0])
-    if not rows:
-        raise ValueError("no rules")
-    y_l = np.inf
-    y_r = -np.inf
-    n = len(rows)
-    for k in range(n + 1):
-        nl = dl = nr = dr = 0.0
-        for i, (yi, lo, up) in enumerate(rows):
-            if i < k:
-                nl += up * yi
-                dl += up
-                nr += lo * yi
-                dr += lo
-            else:
-                nl += lo * yi
-                dl += lo
-                nr += up * yi
-                dr += up
-        if dl > 0.0:
-            y_l = min(y_l, nl / dl)
-        if dr > 0.0:
-            y_r = max(y_r, nr / dr)
-    if not np.isfinite(y_l) or not np.isfinite(y_r):
-        raise ValueError("no rule fires")
-    return float(y_l), float(y_r)
-
-
 def small_signal_gain(
     reducer: str,
     cm: float = 0.7,
@@ -168,8 +128,8 @@ def _memberships_np(x: np.ndarray, h: Heights3) -> tuple[np.ndarray, ...]:
 
 
 # ------------------------------------------------------------ scalar cores (pure float functions)
-# The classes below call them; :mod:`controllers.batched` compiles the same functions with numba
-# for its kernel (one implementation, the same floating-point operations in the same order).
+# The one implementation of each core: the classes below call them; :mod:`controllers.axis`
+# compiles the same functions with numba for the axis law, and :func:`_grid` for ``phi_grid``.
 
 
 def t1_phi(E: float, dE: float, y: tuple[float, ...]) -> float:
@@ -275,6 +235,23 @@ def it2_phi(E: float, dE: float, y: tuple[float, ...], hn1: float, hz1: float, h
     return (zeta * sl + (1.0 - zeta) * su) / (dl + 1.0)  # zeta-weighted
 
 
+#: The cores compiled (the axis law :func:`controllers.axis.axis_step` and :func:`_grid` call
+#: these; the core objects call the Python functions: the same operations, the same bits).
+t1_phi_jit = njit(t1_phi)
+it2_phi_jit = njit(it2_phi)
+
+
+@njit
+def _grid(E: np.ndarray, dE: np.ndarray, y: tuple[float, ...], h: np.ndarray, code: int,
+          zeta: float, out: np.ndarray) -> None:
+    """Φ over flat arrays: :func:`t1_phi` (``code`` −1) or :func:`it2_phi` (heights ``h``)."""
+    for k in range(E.shape[0]):
+        if code < 0:
+            out[k] = t1_phi_jit(E[k], dE[k], y)
+        else:
+            out[k] = it2_phi_jit(E[k], dE[k], y, h[0], h[1], h[2], h[3], h[4], h[5], code, zeta)
+
+
 class _FuzzyPDBase:
     """Shared bits of the type-1 and IT2 PD cores."""
 
@@ -292,9 +269,17 @@ class _FuzzyPDBase:
         s = np.array([-1, 0, 1])
         return np.asarray(self._y)[s[:, None] + s[None, :] + 2]
 
+    def _grid_args(self) -> tuple[np.ndarray, int, float]:
+        return np.ones(6), -1, 0.5
+
     def phi_grid(self, E: np.ndarray, dE: np.ndarray) -> np.ndarray:
-        """Vectorised Φ over broadcast arrays E, dE (numpy; for plots and tests)."""
-        raise NotImplementedError
+        """Φ over broadcast arrays E, dE (for plots): the scalar core, compiled, per point."""
+        E, dE = np.broadcast_arrays(np.asarray(E, float), np.asarray(dE, float))
+        out = np.empty(E.size)
+        h, code, zeta = self._grid_args()
+        _grid(np.ascontiguousarray(E).ravel(), np.ascontiguousarray(dE).ravel(), self._y, h,
+              code, zeta, out)
+        return out.reshape(E.shape)
 
     def small_signal_gains(self, eps: float = 1e-8) -> tuple[float, float]:
         """Numerical (∂Φ/∂E, ∂Φ/∂dE) at the origin by central differences.
@@ -319,18 +304,6 @@ class T1FuzzyPD(_FuzzyPDBase):
 
     def __call__(self, E: float, dE: float) -> float:
         return t1_phi(E, dE, self._y)
-
-    def phi_grid(self, E: np.ndarray, dE: np.ndarray) -> np.ndarray:
-        E, dE = np.broadcast_arrays(
-            np.clip(np.asarray(E, float), -1, 1), np.clip(np.asarray(dE, float), -1, 1)
-        )
-        (mu_e, _), (mu_d, _) = _memberships_np(E, (1, 1, 1)), _memberships_np(dE, (1, 1, 1))
-        tab = self.consequents()
-        num = np.zeros(E.shape)
-        for i in range(3):
-            for j in range(3):
-                num += mu_e[i] * mu_d[j] * tab[i, j]
-        return num
 
 
 class IT2FuzzyPD(_FuzzyPDBase):
@@ -408,7 +381,7 @@ class IT2FuzzyPD(_FuzzyPDBase):
         return it2_phi(E, dE, self._y, self._hn1, self._hz1, self._hp1, self._hn2, self._hz2,
                        self._hp2, self._code, self.zeta)
 
-    # ----------------------------------------------------------------- numpy version
+    # ------------------------------------------------ rule-level view (figures and checks)
     def firing(self, E: np.ndarray, dE: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """All nine rules: (y, f_lower, f_upper) with shapes (9,), (9, *S), (9, *S)."""
         E, dE = np.broadcast_arrays(
@@ -428,35 +401,5 @@ class IT2FuzzyPD(_FuzzyPDBase):
                 fl.append(h_e[i] * h_d[j] * up)
         return np.array(ys), np.array(fl), np.array(fu)
 
-    def phi_grid(self, E: np.ndarray, dE: np.ndarray) -> np.ndarray:
-        """Vectorised Φ over broadcast arrays (KM by enumeration of all 10 switch points)."""
-        y, fl, fu = self.firing(E, dE)
-        shape = fl.shape[1:]
-        fl = fl.reshape(9, -1)
-        fu = fu.reshape(9, -1)
-        yc = y[:, None]
-        if self.reducer == "km":
-            order = np.argsort(y, kind="stable")
-            ys, ls, us = yc[order], fl[order], fu[order]
-            idx = np.arange(9)[:, None]
-            y_l = np.full(fl.shape[1], np.inf)
-            y_r = np.full(fl.shape[1], -np.inf)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                for k in range(10):
-                    w_l = np.where(idx < k, us, ls)
-                    w_r = np.where(idx < k, ls, us)
-                    v_l = (w_l * ys).sum(0) / w_l.sum(0)
-                    v_r = (w_r * ys).sum(0) / w_r.sum(0)
-                    y_l = np.fmin(y_l, v_l)
-                    y_r = np.fmax(y_r, v_r)
-            out = 0.5 * (y_l + y_r)
-        else:
-            sl, su = (fl * yc).sum(0), (fu * yc).sum(0)
-            dl, du = fl.sum(0), fu.sum(0)
-            if self.reducer == "nt":
-                out = (sl + su) / (dl + du)
-            elif self.reducer == "bmm":
-                out = 0.5 * sl / dl + 0.5 * su / du
-            else:
-                out = (self.zeta * sl + (1.0 - self.zeta) * su) / (dl + du)
-        return out.reshape(shape)
+    def _grid_args(self) -> tuple[np.ndarray, int, float]:
+        return np.array([*self.heights_e, *self.heights_de]), self._code, self.zeta

@@ -1,18 +1,26 @@
-"""BatchCascade (controllers.batched) against N scalar PositionCascade objects."""
+"""BatchCascade (controllers.batched) against N scalar PositionCascade objects: both call the same
+row function (controllers.cascade.vehicle_step), so every row equals its scalar cascade bit for
+bit."""
 
 from __future__ import annotations
 
+import copy
+import json
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from controllers import FPID, IT2FPID, PID, REDUCERS
 from controllers.attitude import GeometricAttitudeController, XMixer, quat_to_rot
-from controllers.batched import NP, NS, P_MASS, BatchCascade, cascade_step
+from controllers.axis import AX_NS, S_I
+from controllers.batched import NP, NS, P_MASS, BatchCascade
 from controllers.cascade import PositionCascade
 
-TOL = 1e-12
 ROTORS = [(0.2, -0.2), (-0.2, 0.2), (0.2, 0.2), (-0.2, -0.2)]
 SPIN = [1, 1, -1, -1]
 
@@ -77,19 +85,16 @@ def inputs(n: int, ticks: int, seed: int, scale: float = 1.0):
 
 
 def close(a, b) -> bool:
-    return abs(a - b) <= TOL * (1.0 + abs(b))
+    """Bit for bit (NaN never occurs here)."""
+    return a == b
 
 
-def check(cascades, ticks=300, seed=1, scale=1.0, dt=0.01, bc=None, step=None):
+def check(cascades, ticks=300, seed=1, scale=1.0, dt=0.01, bc=None):
     bc = BatchCascade.from_cascades(cascades) if bc is None else bc
     n = len(cascades)
     sat = 0
     for p, v, R, w, pr, vr, ar, yaw in inputs(n, ticks, seed, scale):
-        if step is None:
-            f = bc.update(p, v, R, w, pr, vr, ar, yaw, dt)
-        else:
-            f = np.zeros((n, 4))
-            step(bc.params, bc.state, p, v, R, w, pr, vr, ar, yaw, dt, np.ones(n, bool), f)
+        f = bc.update(p, v, R, w, pr, vr, ar, yaw, dt)
         for i, c in enumerate(cascades):
             fs = c.update(p[i], v[i], tuple(R[i]), w[i], pr[i], vr[i], ar[i], yaw[i], dt)
             assert all(close(x, y) for x, y in zip(f[i], fs, strict=True)), (i, f[i], fs)
@@ -208,10 +213,33 @@ def test_mass_change_and_views():
     assert np.all(bc.params[:, P_MASS] == 2.0)
 
 
-def test_python_fallback_kernel():
-    """The kernel's pure-Python version (what runs without numba) gives the same results."""
+_NO_JIT = """
+import json, sys
+sys.path[:0] = [sys.argv[1]]
+from test_batched_controllers import inputs, make_cascades
+cs = make_cascades(["pid", "t1", "it2", ("it2", "pid", "t1")], seed=16)
+out = []
+for p, v, R, w, pr, vr, ar, yaw in inputs(len(cs), 15, seed=1, scale=5.0):
+    out.append([c.update(p[i], v[i], tuple(R[i]), w[i], pr[i], vr[i], ar[i], yaw[i], 0.01)
+                for i, c in enumerate(cs)])
+print(json.dumps([[[float(x) for x in f] for f in row] for row in out]))
+"""
+
+
+def test_without_numba_the_same_functions_run_as_python():
+    """NUMBA_DISABLE_JIT=1 (what runs where numba is missing): the same row functions as
+    Python give the compiled results to rounding (libm vs Python's math)."""
+    tests = Path(__file__).resolve().parent
+    env = dict(os.environ, NUMBA_DISABLE_JIT="1",
+               PYTHONPATH=os.pathsep.join([str(tests.parent), os.environ.get("PYTHONPATH", "")]))
+    res = subprocess.run([sys.executable, "-c", _NO_JIT, str(tests)], env=env, check=True,
+                         capture_output=True, text=True, timeout=300)
+    py = json.loads(res.stdout)
     cs = make_cascades(["pid", "t1", "it2", ("it2", "pid", "t1")], seed=16)
-    check(cs, ticks=15, scale=5.0, step=getattr(cascade_step, "py_func", cascade_step))
+    for k, (p, v, R, w, pr, vr, ar, yaw) in enumerate(inputs(len(cs), 15, seed=1, scale=5.0)):
+        for i, c in enumerate(cs):
+            f = c.update(p[i], v[i], tuple(R[i]), w[i], pr[i], vr[i], ar[i], yaw[i], 0.01)
+            np.testing.assert_allclose(py[k][i], f, rtol=1e-12, atol=1e-12)
 
 
 def test_refusals():
@@ -232,3 +260,35 @@ def test_refusals():
         bc.update(p, v, R, w, pr, vr, ar, yaw, 0.0)
     with pytest.raises(ValueError, match="batch size"):
         bc.update(p, v, R, w, pr, vr, ar, np.zeros(2), 0.01)
+
+
+def test_sub_objects_share_the_cascade_row():
+    """The cascade adopts its axis controllers, attitude controller and mixer: writes through
+    them (a draining tank's J) reach the row, a deep copy is adopted again, and a cascade of
+    other classes (here subclasses, run through their own update / mix) gives the same bits."""
+    class SubPID(PID):
+        pass
+
+    class SubMixer(XMixer):
+        pass
+
+    cs = make_cascades(["pid"] * 2, seed=18)
+    a = cs[0]
+    b = PositionCascade([SubPID(x.Kp, x.Ki, x.Kd, derivative=x.derivative, i_limit=x.i_limit,
+                                u_limit=x.u_limit, d_tau=x.d_tau) for x in a.axes], a.mass, a.g,
+                        GeometricAttitudeController(a.attitude.J), SubMixer(ROTORS, SPIN, 0.016,
+                                                                            a.mixer.f_max),
+                        tilt_max=a.tilt_max, accel_feedforward=a.ff == 1.0, a_limit=a.a_limit)
+    b.attitude._p[:] = a.attitude._p  # same gains
+    a.attitude.J = b.attitude.J = (0.03, 0.04, 0.05)
+    c = copy.deepcopy(a)
+    for p, v, R, w, pr, vr, ar, yaw in inputs(1, 100, seed=19, scale=3.0):
+        args = (p[0], v[0], tuple(R[0]), w[0], pr[0], vr[0], ar[0], yaw[0], 0.01)
+        fa, fb, fc = a.update(*args), b.update(*args), c.update(*args)
+        assert fa == fb == fc
+        assert a.internals() == b.internals() == c.internals()
+    assert a.axes[2].integral == a._S[2 * AX_NS + S_I]
+    assert c.axes[2].integral == c._S[2 * AX_NS + S_I]
+    assert BatchCascade.from_cascades([a]).J[0].tolist() == [0.03, 0.04, 0.05]
+    with pytest.raises(ValueError, match="PID, FPID and IT2FPID"):
+        BatchCascade.from_cascades([b])

@@ -1,12 +1,14 @@
 """Oracles for the fast fuzzy PD cores: scikit-fuzzy (type-1 core, IT2 firing strengths) and
-pyit2fls (Nie–Tan and BMM type reducers; KM/EIASC are in test_fuzzy.py)."""
+pyit2fls (Nie–Tan and BMM type reducers; KM/EIASC are in test_fuzzy.py); KM by the
+hand-written enumeration of tests/oracles/controllers_ref.py."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from oracles.controllers_ref import km_reduce
 
-from controllers.fuzzy import IT2FuzzyPD, T1FuzzyPD, heights_from_alpha, km_reduce
+from controllers.fuzzy import IT2FuzzyPD, T1FuzzyPD, heights_from_alpha
 from controllers.fuzzy_sets import (
     SkfuzzyT1FPD,
     firing_strengths,
