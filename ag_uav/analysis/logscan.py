@@ -106,8 +106,9 @@ class ScanReport:
     def intact(self) -> bool:
         return not self.damage and self.cut_at is None and not self.orphans
 
-    def describe(self) -> str:
-        """One line: what was skipped (empty when nothing was)."""
+    def describe(self, counts: bool = True) -> str:
+        """One line: what was skipped, then (``counts``) the messages kept and lost; empty
+        when nothing was skipped."""
         parts = []
         bad = [d for d in self.damage if d.what.startswith("chunk")]
         if bad:
@@ -124,8 +125,8 @@ class ScanReport:
                          "a killed run?)")
         if self.orphans:
             parts.append(f"{self.orphans} messages on channels announced in lost chunks")
-        if not parts:
-            return ""
+        if not parts or not counts:
+            return "; ".join(parts)
         lost = self.lost
         tail = (f"{self.messages} messages kept, {lost} lost" if lost is not None
                 else f"{self.messages} messages kept, the rest lost")

@@ -31,6 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from .logscan import LogError, NotMcapError
+
 __all__ = [
     "RunData",
     "read_run",
@@ -41,6 +43,8 @@ __all__ = [
     "write_foxglove_layout",
     "mcap_path",
     "skipped_line",
+    "LogError",
+    "NotMcapError",
 ]
 
 
@@ -252,7 +256,7 @@ def show(run: str | Path) -> str:
     lines = [f"run log: {d.path}  ({d.path.stat().st_size / 1e6:.2f} MB, {state})"]
     skipped = skipped_line(d)
     if skipped:
-        lines.append(f"skipped: {skipped} (try recover)")
+        lines.append(f"damaged: {skipped} (`ag-uav recover` keeps the rest)")
     if d.t_start == d.t_start:
         lines.append(f"sim time: {d.t_start:.2f} .. {d.t_end:.2f} s")
     for name in ("run", "versions", "summary"):
@@ -667,17 +671,17 @@ def recover(in_path: str | Path, out_path: str | Path) -> Any:
 
     src, out = mcap_path(in_path), Path(out_path)
     if out.is_dir():
-        raise LogError(f"recover: OUT = {out} is a folder; give the new file's name, e.g. "
+        raise LogError(f"OUT = {out} is a folder; give the new file's name, e.g. "
                        f"{out / 'recovered.mcap'}")
     if out.exists() and os.path.samefile(out, src):
-        raise LogError(f"recover: OUT must differ from IN ({src}); the input is kept as it is")
+        raise LogError(f"OUT must differ from IN ({src}); the input is kept as it is")
     scan = LogScan(src)
     with atomic_path(out) as tmp:
         with open(tmp, "wb") as g:
             _copy_records(scan, g)
         if scan.report.messages == 0:
             tmp.unlink()
-            raise LogError(f"recover: no intact message in {src}; nothing written"
+            raise LogError(f"no intact message in {src}; nothing written"
                            + (f" ({scan.report.describe()})" if scan.report.describe() else ""))
     return scan.report
 

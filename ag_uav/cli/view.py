@@ -90,10 +90,10 @@ def _recover(args: argparse.Namespace) -> int:
 
     rep = recover(args.input, args.output)
     line = f"recovered {rep.messages} messages into {args.output}"
-    skipped = rep.describe()
-    if skipped:
+    if not rep.intact:
         lost = rep.lost
-        line += (f"; {lost} lost" if lost is not None else "; some lost") + f" ({skipped})"
+        line += (f", {lost} lost" if lost is not None else ", the rest lost") + \
+            f": {rep.describe(counts=False)}"
     print(line, file=sys.stderr)
     return 0
 
