@@ -122,7 +122,7 @@ class ScanReport:
                                                 for d in other[:3]))
         if self.cut_at is not None:
             parts.append(f"the file ends inside a record at byte {self.cut_at} (cut short: "
-                         "a killed run?)")
+                         "a killed run or a full disk?)")
         if self.orphans:
             parts.append(f"{self.orphans} messages on channels announced in lost chunks")
         if not parts or not counts:

@@ -622,7 +622,7 @@ def video(run: str | Path | RunData, out_mp4: str | Path, camera: str | None = N
     import imageio.v2 as imageio
     from PIL import Image
 
-    from ..record.atomic import atomic_path
+    from ..record.atomic import atomic_path, silent_write_failure
     from .logscan import LogError
 
     if fps is not None and not (math.isfinite(fps) and fps > 0):
@@ -638,7 +638,8 @@ def video(run: str | Path | RunData, out_mp4: str | Path, camera: str | None = N
     pad_h, pad_w = h % 2, w % 2
     with atomic_path(out) as tmp:
         writer = imageio.get_writer(str(tmp), fps=float(fps), codec="libx264", quality=7,
-                                    macro_block_size=1, pixelformat="yuv420p")
+                                    macro_block_size=1, pixelformat="yuv420p",
+                                    ffmpeg_log_level="quiet")
         try:
             for _, jpg in frames:
                 img = np.asarray(Image.open(io.BytesIO(jpg)).convert("RGB"))
@@ -647,7 +648,32 @@ def video(run: str | Path | RunData, out_mp4: str | Path, camera: str | None = N
                 writer.append_data(img)
         finally:
             writer.close()
+        if not _mp4_complete(tmp):  # ffmpeg's exit status is not reported: check the file
+            raise silent_write_failure(out, "ffmpeg did not finish the video")
     return out
+
+
+def _mp4_complete(path: Path) -> bool:
+    """Whether ``path`` is a whole MP4: top-level boxes (32-bit big-endian size, then the
+    4-character type; size 1 = a 64-bit size follows; ISO/IEC 14496-12 section 4.2) that tile
+    the file exactly, with an ``mdat`` and the ``moov`` ffmpeg writes last."""
+    import struct
+
+    seen, pos = set(), 0
+    size = path.stat().st_size if path.exists() else 0
+    if size == 0:
+        return False
+    with open(path, "rb") as f:
+        while pos + 8 <= size:
+            f.seek(pos)
+            n, kind = struct.unpack(">I4s", f.read(8))
+            if n == 1:
+                (n,) = struct.unpack(">Q", f.read(8))
+            if n < 8:
+                return False
+            seen.add(kind)
+            pos += n
+    return pos == size > 0 and {b"moov", b"mdat"} <= seen
 
 
 # --------------------------------------------------------------------------------------------

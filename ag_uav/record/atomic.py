@@ -15,6 +15,7 @@ can print one line naming the path (:func:`disk_error_line`).
                                          an MCAP writer); renamed onto ``path`` on success
     with atomic_open(path, "w") as fh:   a file object on the temporary file
     disk_error_line(err)                 "PATH: No space left on device"
+    silent_write_failure(path, detail)   an OSError for a writer that failed without one
 
 The temporary name is ``.<name>.<random>.tmp<suffix>`` (hidden, and it keeps the suffix, so a
 writer that picks its format from the extension still sees ``.png`` or ``.mp4``).
@@ -23,14 +24,16 @@ writer that picks its format from the extension still sees ``.png`` or ``.mp4``)
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import secrets
+import shutil
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
 __all__ = ["atomic_path", "atomic_open", "atomic_write_text", "atomic_write_bytes",
-           "disk_error_line", "temp_name"]
+           "disk_error_line", "temp_name", "silent_write_failure"]
 
 
 def temp_name(path: str | os.PathLike[str]) -> Path:
@@ -117,3 +120,16 @@ def disk_error_line(err: OSError) -> str:
     the error names no file)."""
     what = err.strerror or str(err)
     return what if err.filename is None else f"{err.filename}: {what}"
+
+
+def silent_write_failure(path: str | os.PathLike[str], detail: str) -> OSError:
+    """An :class:`OSError` naming ``path`` for a writer that failed without an OS error (an
+    SDK's generic error, a subprocess's exit): ENOSPC when ``path``'s folder has less than
+    1 MiB free (the likely cause), else EIO with ``detail``."""
+    p = Path(path)
+    try:
+        full = shutil.disk_usage(p.parent if p.parent.exists() else ".").free < (1 << 20)
+    except OSError:
+        full = False
+    code = errno.ENOSPC if full else errno.EIO
+    return OSError(code, f"{os.strerror(code)} ({detail})", str(p))

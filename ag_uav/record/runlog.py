@@ -74,7 +74,6 @@ import operator
 import os
 import platform
 import re
-import shutil
 import signal
 import struct
 import threading
@@ -85,6 +84,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .atomic import silent_write_failure
 
 __all__ = [
     "RunLog",
@@ -502,7 +503,6 @@ class RunLog:
         compression: Any = "lz4",
     ):
         self.path = Path(path)
-        self._chunk_size = int(chunk_size)
         self._write_failed = False  # the writer failed once (disk full): close() quietly
         if isinstance(channels, str):
             if channels not in PRESETS:
@@ -1226,20 +1226,16 @@ class RunLog:
     def write_error(self, exc: BaseException) -> OSError | None:
         """``exc`` as an :class:`OSError` naming the log if it is the MCAP writer failing to
         write, else None.  The SDK reports an I/O failure as ``RuntimeError("FoxgloveError:
-        MCAP error: I/O error ...")`` without the OS error; a folder with less free space than
-        a chunk is taken as full (ENOSPC), anything else is EIO.  After this the log is marked
-        failed: :meth:`close` then finishes quietly, leaving the file as written so far (every
-        complete chunk is readable; ``ag-uav recover`` indexes it)."""
+        MCAP error: I/O error ...")`` without the OS error
+        (:func:`~ag_uav.record.atomic.silent_write_failure` tells a full disk from the rest).
+        After this the log is marked failed: :meth:`close` then finishes quietly, leaving the
+        file as written so far (every complete chunk is readable; ``ag-uav recover`` indexes
+        it)."""
         if not isinstance(exc, RuntimeError) or "FoxgloveError" not in str(exc):
             return None
         self._write_failed = True
-        try:
-            full = shutil.disk_usage(self.path.parent).free < max(self._chunk_size, 1 << 20)
-        except OSError:
-            full = False
-        code = errno.ENOSPC if full else errno.EIO
-        return OSError(code, f"{os.strerror(code)} (the run log stops at its last complete "
-                             "chunk; `ag-uav recover` indexes it)", str(self.path))
+        return silent_write_failure(self.path, "the run log stops at its last complete chunk; "
+                                               "`ag-uav recover` indexes it")
 
 
 def _flat(a: Any) -> list[float]:
