@@ -110,10 +110,11 @@ def junk(tmp_path_factory) -> dict[str, Path]:
     (d / "empty.mcap").write_bytes(b"")
     (d / "random.mcap").write_bytes(np.random.default_rng(7).bytes(4096))
     (d / "text.mcap").write_text("not a log\n")
+    (d / "magic.mcap").write_bytes(b"\x89MCAP0\r\n" + np.random.default_rng(8).bytes(4096))
     return {p.stem: p for p in d.iterdir()}
 
 
-@pytest.mark.parametrize("kind", ["empty", "random", "text"])
+@pytest.mark.parametrize("kind", ["empty", "random", "text", "magic"])
 @pytest.mark.parametrize("tool", ["show", "plot", "video", "recover"])
 def test_a_file_that_is_not_mcap_is_refused(capsys, tmp_path, junk, kind, tool):
     args = {"show": [], "plot": ["-o", tmp_path / "plots"], "video": ["-o", tmp_path / "v.mp4"],
@@ -122,7 +123,8 @@ def test_a_file_that_is_not_mcap_is_refused(capsys, tmp_path, junk, kind, tool):
     line = _one_line(err)
     assert rc == 2 and out == ""
     assert str(junk[kind]) in line
-    assert ("empty file" if kind == "empty" else "not an MCAP file") in line
+    magic = "no intact message" if tool == "recover" else "nothing readable"
+    assert {"empty": "empty file", "magic": magic}.get(kind, "not an MCAP file") in line
     assert list(tmp_path.iterdir()) == []  # nothing written
 
 

@@ -226,6 +226,10 @@ def read_run(run: str | Path, *, images: bool = True) -> RunData:
             data.scenes[topic], scene_t[topic] = msg, t
         else:
             rows.setdefault(topic, []).append((t, _flatten(msg)))
+    if not (data.metadata or data.attachments or scan.channels):
+        why = scan.report.describe(counts=False)
+        raise LogError(f"{path}: nothing readable in this MCAP file" + (f" ({why})" if why
+                                                                        else ""))
     data.finished = scan.report.finished
     data.series = {topic: _series(rs) for topic, rs in rows.items()}
     for frames in data.images.values():
@@ -707,8 +711,9 @@ def recover(in_path: str | Path, out_path: str | Path) -> Any:
             _copy_records(scan, g)
         if scan.report.messages == 0:
             tmp.unlink()
+            why = scan.report.describe(counts=False)
             raise LogError(f"no intact message in {src}; nothing written"
-                           + (f" ({scan.report.describe()})" if scan.report.describe() else ""))
+                           + (f" ({why})" if why else ""))
     return scan.report
 
 
