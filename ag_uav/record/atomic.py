@@ -89,10 +89,10 @@ def atomic_path(path: str | os.PathLike[str], *, mkdir: bool = True) -> Iterator
 def atomic_open(path: str | os.PathLike[str], mode: str = "w", *, fsync: bool = True,
                 **kw: Any) -> Iterator[IO[Any]]:
     """``open(tmp, mode)`` for writing; flushed (and fsync'ed), closed, then renamed."""
-    if not any(c in mode for c in "wx"):
-        raise ValueError(f"atomic_open: mode {mode!r} is not a write mode")
+    if "w" not in mode:
+        raise ValueError(f"atomic_open: mode {mode!r}: only 'w' modes (the file is replaced)")
     with atomic_path(path) as tmp:
-        fh = open(tmp, mode.replace("x", "w"), **kw)  # noqa: SIM115 - closed just below
+        fh = open(tmp, mode, **kw)  # noqa: SIM115 - closed just below
         try:
             yield fh
             fh.flush()
