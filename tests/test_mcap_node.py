@@ -95,7 +95,7 @@ def test_light_and_recovered_logs_pass_typescript_reader(node_checker, full_log,
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(full_log.read_bytes()[: int(full_log.stat().st_size * 0.5)])
     fixed = tmp_path / "fixed.mcap"
-    n = recover(cut, fixed)
+    n = recover(cut, fixed).messages
     out = node_checker(fixed)
     assert out["indexed"]["messages"] == n > 0
 
@@ -176,6 +176,6 @@ def test_sigkill_of_a_real_flight_loses_under_a_sim_second(node_checker, tmp_pat
     print(f"killed at sim t = {t_kill:.2f} s; last message kept at {max(times):.2f} s")
     assert times and max(times) >= t_kill - 1.0, (max(times, default=None), t_kill)
     out = tmp_path / "recovered.mcap"
-    assert recover(path, out) == len(times)
+    assert recover(path, out).messages == len(times)
     res = node_checker(out)
     assert res["indexed"]["decoded"] == res["indexed"]["messages"] == len(times)

@@ -269,7 +269,7 @@ def test_sigkill_loses_at_most_one_sim_second_and_recovers(tmp_path):
             pass
     assert times and max(times) >= t_kill - 1.0, (max(times, default=None), t_kill)
     out = tmp_path / "recovered.mcap"
-    n = recover(path, out)
+    n = recover(path, out).messages
     assert n == len(times)
     with open(out, "rb") as f:
         r = make_reader(f)

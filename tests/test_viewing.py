@@ -81,7 +81,7 @@ def test_video_from_logged_frames(run_dir, tmp_path):
     meta = next(gen)
     assert tuple(meta["size"]) == (64, 48)
     gen.close()
-    with pytest.raises(ValueError):
+    with pytest.raises(viewing.LogError, match="cameras: chase"):
         viewing.video(run_dir, tmp_path / "x.mp4", camera="nope")
 
 
@@ -93,17 +93,19 @@ def test_recover_truncated_log(run_dir, tmp_path):
         make_reader(f).get_summary()
     assert "NOT finished" in viewing.show(cut)
     out = tmp_path / "fixed.mcap"
-    n = viewing.recover(cut, out)
+    rep = viewing.recover(cut, out)
+    n = rep.messages
     with open(run_dir / "run.mcap", "rb") as f:
         total = make_reader(f).get_summary().statistics.message_count
     assert 0 < n < total
+    assert rep.cut_at is not None and rep.lost is None and "cut short" in rep.describe()
     with open(out, "rb") as f:
         r = make_reader(f)
         assert r.get_summary().statistics.message_count == n
         assert sum(1 for _ in r.iter_messages()) == n
         assert {a.name for a in r.iter_attachments()} >= {"config.toml"}
     assert "finished, indexed" in viewing.show(out)
-    with pytest.raises(ValueError):
+    with pytest.raises(viewing.LogError, match="must differ"):
         viewing.recover(out, out)
 
 

@@ -71,6 +71,21 @@ def _quantize(path: Path, colors: int = 96) -> None:
     q.save(path, optimize=True)
 
 
+def _save_png(fig: Any, path: Path, **kw: Any) -> Path:
+    """Save ``fig`` as a palette PNG at ``path``, atomically (ag_uav.record.atomic); close it."""
+    import matplotlib.pyplot as plt
+
+    from ..record.atomic import atomic_path
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", **kw)
+            _quantize(tmp)
+    finally:
+        plt.close(fig)
+    return Path(path)
+
+
 def plot_fou(g: Any, title: str, path: Path) -> Path:
     import matplotlib
 
@@ -94,10 +109,7 @@ def plot_fou(g: Any, title: str, path: Path) -> Path:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.01, 0.5))
     fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    _quantize(path)
-    return path
+    return _save_png(fig, path, dpi=80)
 
 
 def plot_surfaces(g: Any, reducer: str, ctype: str, title: str, path: Path) -> Path:
@@ -133,10 +145,7 @@ def plot_surfaces(g: Any, reducer: str, ctype: str, title: str, path: Path) -> P
         ax.set_xlabel("E", fontsize=7)
     fig.suptitle(f"{title}: Φ(E, dE), α = {g.alpha:.3g}, c_m = {g.cm:.3g}, ζ = {g.zeta:.3g}",
                  fontsize=8)
-    fig.savefig(path, dpi=72, bbox_inches="tight")
-    plt.close(fig)
-    _quantize(path)
-    return path
+    return _save_png(fig, path, dpi=72, bbox_inches="tight")
 
 
 def plot_controller(config_path: str | None, out: str | Path,

@@ -5,15 +5,18 @@
                                          tracks, GPS fixes), errors.png, controller.png,
                                          estimators.png
     video(run, out_mp4, camera=None) -> Path   MP4 from the logged JPEG frames (imageio-ffmpeg)
-    recover(in_path, out_path) -> int    rewrite a truncated log (killed run) into a finished,
-                                         indexed MCAP; returns the number of messages kept
+    recover(in_path, out_path) -> ScanReport   rewrite a truncated or damaged log into a
+                                         finished, indexed MCAP; messages kept and lost
     write_foxglove_layout(path, ...)     Foxglove layout (app-export JSON: Layouts -> Import from
                                          file) with 3D, camera images and plots
     read_run(run)        -> RunData      decoded channels as numpy arrays (what the above use)
 
 ``run`` is a run folder (``runs/<id>/``, containing ``run.mcap``) or the ``.mcap`` file itself.
-Everything reads with the ``mcap`` package (+ ``mcap-protobuf-support`` to decode); a file that
-was never finished (no footer) is read by streaming, so ``show``/``plot`` work on it too.
+Everything reads with the ``mcap`` package (+ ``mcap-protobuf-support`` to decode), chunk by
+chunk in file order (:mod:`ag_uav.analysis.logscan`): a file that was never finished (no footer),
+was cut short or has damaged chunks is read as far as it is intact, and what was skipped is
+reported (:func:`skipped_line`); an empty or non-MCAP file raises ``NotMcapError``.  Every output
+(plots, video, recovered log, layout) is written atomically (:mod:`ag_uav.record.atomic`).
 """
 
 from __future__ import annotations
@@ -21,11 +24,14 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .logscan import LogError, NotMcapError
 
 __all__ = [
     "RunData",
@@ -36,6 +42,9 @@ __all__ = [
     "recover",
     "write_foxglove_layout",
     "mcap_path",
+    "skipped_line",
+    "LogError",
+    "NotMcapError",
 ]
 
 
@@ -110,6 +119,8 @@ class RunData:
     images: dict[str, list[tuple[float, bytes]]] = field(default_factory=dict)
     t_start: float = math.nan
     t_end: float = math.nan
+    report: Any = None  # logscan.ScanReport: what was skipped
+    undecodable: int = 0  # messages in intact chunks that did not decode
 
 
 _SERIES_TOPICS = ("/drone/state", "/gps", "/drone/pose", "/drone/pose_est", "/drone/pose_ref",
@@ -137,119 +148,104 @@ def _sortie_of(st: Series, sp: Series | None) -> np.ndarray | None:
     return sp["sortie"][i].astype(int)
 
 
-def _iter_raw(path: Path) -> tuple[bool, Any]:
-    """(finished, iterator of (schema, channel, message)) for a finished or truncated file."""
-    from mcap.exceptions import McapError
-    from mcap.reader import make_reader
-
-    f = open(path, "rb")  # noqa: SIM115 - closed by the generator
-    try:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-    except (McapError, Exception):  # noqa: BLE001 - any failure: no usable footer
-        summary = None
-    if summary is not None:
-        def gen_indexed() -> Any:
-            try:
-                yield from reader.iter_messages(log_time_order=True)
-            finally:
-                f.close()
-        return True, gen_indexed()
-    f.seek(0)
-    return False, _stream_messages(f)
-
-
-def _stream_messages(f: Any) -> Any:
-    """Messages of an unfinished file in file order; stops quietly at the truncation."""
-    from mcap.records import Channel, Message, Schema
-    from mcap.stream_reader import StreamReader
-
-    schemas: dict[int, Any] = {}
-    channels: dict[int, Any] = {}
-    try:
-        for rec in StreamReader(f, validate_crcs=True).records:
-            if isinstance(rec, Schema):
-                schemas[rec.id] = rec
-            elif isinstance(rec, Channel):
-                channels[rec.id] = rec
-            elif isinstance(rec, Message):
-                ch = channels.get(rec.channel_id)
-                if ch is not None:
-                    yield schemas.get(ch.schema_id), ch, rec
-    except Exception:  # noqa: BLE001 - truncated or corrupt tail: stop here
-        return
-    finally:
-        f.close()
-
-
-def _read_meta(path: Path, data: RunData) -> None:
-    """Metadata and attachments (indexed if finished, else by streaming)."""
-    from mcap.records import Attachment, Metadata
-    from mcap.stream_reader import StreamReader
-
-    with open(path, "rb") as f:
+def _series(rows: list[tuple[float, dict[str, Any]]]) -> Series:
+    """Rows ``(t, {field: value})`` of one topic -> a :class:`Series` in time order."""
+    order = np.argsort(np.array([r[0] for r in rows]), kind="stable")
+    rows = [rows[i] for i in order]
+    fields: dict[str, np.ndarray] = {}
+    for k in rows[0][1]:
+        col = [r[1].get(k, math.nan) for r in rows]
         try:
-            for rec in StreamReader(f, validate_crcs=False).records:
-                if isinstance(rec, Metadata):
-                    data.metadata[rec.name] = dict(rec.metadata)
-                elif isinstance(rec, Attachment):
-                    data.attachments[rec.name] = bytes(rec.data)
-        except Exception:  # noqa: BLE001
-            pass
+            fields[k] = np.asarray(col, dtype=float)
+        except (TypeError, ValueError):
+            continue
+    return Series(np.array([r[0] for r in rows]), fields)
+
+
+def _note(data: RunData, topic: str, schema: Any, channel: Any, message: Any) -> float:
+    """Count ``message`` in ``data.channels``; its log time in s."""
+    t = message.log_time * 1e-9
+    info = data.channels.get(topic)
+    if info is None:
+        info = data.channels[topic] = {
+            "schema": schema.name if schema is not None else "", "count": 0,
+            "encoding": channel.message_encoding, "t0": t, "t1": t, "bytes": 0}
+    info["count"] += 1
+    info["t0"], info["t1"] = min(info["t0"], t), max(info["t1"], t)
+    info["bytes"] += len(message.data)
+    return t
 
 
 def read_run(run: str | Path, *, images: bool = True) -> RunData:
-    """Decode a run log: numeric channels to arrays, scenes, JPEG frames, metadata."""
+    """Decode a run log: numeric channels to arrays, scenes, JPEG frames, metadata.
+
+    The file is read chunk by chunk (:class:`~ag_uav.analysis.logscan.LogScan`): damaged chunks
+    and a cut tail are skipped and described in ``RunData.report``; an empty or non-MCAP file
+    raises :class:`~ag_uav.analysis.logscan.NotMcapError`.
+    """
+    from mcap.records import Attachment, Message, Metadata
     from mcap_protobuf.decoder import DecoderFactory
 
+    from .logscan import LogScan
+
     path = mcap_path(run)
-    finished, it = _iter_raw(path)
-    data = RunData(path=path, finished=finished)
-    _read_meta(path, data)
+    scan = LogScan(path)
+    data = RunData(path=path, finished=False, report=scan.report)
     factory = DecoderFactory()
     decoders: dict[int, Any] = {}
     rows: dict[str, list[tuple[float, dict[str, Any]]]] = {}
-    t0, t1 = math.inf, -math.inf
-    for schema, channel, message in it:
-        t = message.log_time * 1e-9
-        t0, t1 = min(t0, t), max(t1, t)
-        info = data.channels.setdefault(channel.topic, {
-            "schema": schema.name if schema is not None else "", "count": 0,
-            "encoding": channel.message_encoding, "t0": t, "t1": t, "bytes": 0})
-        info["count"] += 1
-        info["t1"] = t
-        info["bytes"] += len(message.data)
+    scene_t: dict[str, float] = {}
+    for rec in scan.records():
+        if isinstance(rec, Metadata):
+            data.metadata[rec.name] = dict(rec.metadata)
+        elif isinstance(rec, Attachment):
+            data.attachments[rec.name] = bytes(rec.data)
+        if not isinstance(rec, Message):
+            continue
+        channel = scan.channels[rec.channel_id]
+        schema = scan.schemas.get(channel.schema_id)
         topic = channel.topic
+        t = _note(data, topic, schema, channel, rec)
         numeric = topic in _SERIES_TOPICS or topic.startswith("/estimator/")
-        is_img = topic.startswith("/camera/") and not topic.endswith("/calibration")
+        is_img = images and topic.startswith("/camera/") and not topic.endswith("/calibration")
         is_scene = schema is not None and schema.name == "foxglove.SceneUpdate"
-        if not (numeric or is_img or is_scene):
+        if not (numeric or is_img or is_scene) or (is_scene and t < scene_t.get(topic, -1.0)):
             continue
-        if is_img and not images:
+        try:
+            dec = decoders.get(channel.id)
+            if dec is None:
+                dec = decoders[channel.id] = factory.decoder_for(channel.message_encoding,
+                                                                 schema)
+            msg = dec(rec.data)
+        except Exception:  # noqa: BLE001 - undecodable despite an intact chunk: skip it
+            data.undecodable += 1
             continue
-        dec = decoders.get(channel.id)
-        if dec is None:
-            dec = decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
-        msg = dec(message.data)
         if is_img:
             data.images.setdefault(topic, []).append((t, bytes(msg.data)))
         elif is_scene:
-            data.scenes[topic] = msg
+            data.scenes[topic], scene_t[topic] = msg, t
         else:
             rows.setdefault(topic, []).append((t, _flatten(msg)))
-    for topic, rs in rows.items():
-        keys = list(rs[0][1])
-        fields: dict[str, np.ndarray] = {}
-        for k in keys:
-            col = [r[1].get(k, math.nan) for r in rs]
-            try:
-                fields[k] = np.asarray(col, dtype=float)
-            except (TypeError, ValueError):
-                continue
-        data.series[topic] = Series(np.array([r[0] for r in rs]), fields)
-    if t0 <= t1:
-        data.t_start, data.t_end = t0, t1
+    if not (data.metadata or data.attachments or scan.channels):
+        why = scan.report.describe(counts=False)
+        raise LogError(f"{path}: nothing readable in this MCAP file" + (f" ({why})" if why
+                                                                        else ""))
+    data.finished = scan.report.finished
+    data.series = {topic: _series(rs) for topic, rs in rows.items()}
+    for frames in data.images.values():
+        frames.sort(key=lambda f: f[0])
+    if data.channels:
+        data.t_start = min(i["t0"] for i in data.channels.values())
+        data.t_end = max(i["t1"] for i in data.channels.values())
     return data
+
+
+def skipped_line(d: RunData) -> str:
+    """What reading the log had to skip, in one line ("" if nothing)."""
+    parts = [d.report.describe()] if d.report is not None else []
+    if d.undecodable:
+        parts.append(f"{d.undecodable} messages could not be decoded")
+    return "; ".join(p for p in parts if p)
 
 
 # --------------------------------------------------------------------------------------------
@@ -260,8 +256,11 @@ def read_run(run: str | Path, *, images: bool = True) -> RunData:
 def show(run: str | Path) -> str:
     """A text report of a run from its MCAP alone."""
     d = read_run(run, images=False)
-    lines = [f"run log: {d.path}  ({d.path.stat().st_size / 1e6:.2f} MB, "
-             f"{'finished, indexed' if d.finished else 'NOT finished (truncated?): try recover'})"]
+    state = "finished, indexed" if d.finished else "NOT finished (truncated?): try recover"
+    lines = [f"run log: {d.path}  ({d.path.stat().st_size / 1e6:.2f} MB, {state})"]
+    skipped = skipped_line(d)
+    if skipped:
+        lines.append(f"damaged: {skipped} (`ag-uav recover` keeps the rest)")
     if d.t_start == d.t_start:
         lines.append(f"sim time: {d.t_start:.2f} .. {d.t_end:.2f} s")
     for name in ("run", "versions", "summary"):
@@ -327,20 +326,39 @@ def _save(fig: Any, path: Path, dpi: int) -> Path:
     """Write ``fig`` to ``path`` (tight bounding box) and close it; the path."""
     import matplotlib.pyplot as plt
 
-    fig.savefig(path, dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
+    from ..record.atomic import atomic_path
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=path.suffix[1:] or "png")
+    finally:
+        plt.close(fig)
     return path
 
 
-def plot(run: str | Path, out_dir: str | Path) -> list[Path]:
-    """PNG figures of a run: map, errors, controller, estimators (those with data)."""
+def _data(run: str | Path | RunData, images: bool) -> RunData:
+    """``run`` read (a run folder or .mcap file), or ``run`` itself if already read."""
+    return run if isinstance(run, RunData) else read_run(run, images=images)
+
+
+def plot(run: str | Path | RunData, out_dir: str | Path) -> list[Path]:
+    """PNG figures of a run: map, errors, controller, estimators (those with data).
+
+    ``run``: a run folder, its ``.mcap`` or a :class:`RunData` already read.  Each figure is
+    written atomically; a log with nothing to draw raises
+    :class:`~ag_uav.analysis.logscan.LogError`."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
 
-    d = read_run(run, images=False)
+    from .logscan import LogError
+
+    d = _data(run, images=False)
+    if not d.series and not d.scenes:
+        raise LogError(f"{d.path}: nothing to plot (no readable state, GPS, estimator or scene "
+                       "messages)")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: list[Path] = []
@@ -581,43 +599,85 @@ def _motor_matrix(d: RunData) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def video(run: str | Path, out_mp4: str | Path, camera: str | None = None,
+def _frames(d: RunData, camera: str | None) -> list[tuple[float, bytes]]:
+    """The logged frames of ``camera`` (default the first camera); LogError if none."""
+    from .logscan import LogError
+
+    if not d.images:
+        raise LogError(f"{d.path}: no camera frames in this log (flown with --no-render, "
+                       "log.render = false or a channel set without cameras)")
+    names = sorted(t.removeprefix("/camera/") for t in d.images)
+    topic = f"/camera/{camera}" if camera else f"/camera/{names[0]}"
+    if topic not in d.images:
+        raise LogError(f"--camera = {camera!r}: no frames of that camera in {d.path}; "
+                       f"cameras: {', '.join(names)}")
+    return d.images[topic]
+
+
+def video(run: str | Path | RunData, out_mp4: str | Path, camera: str | None = None,
           fps: float | None = None) -> Path:
     """Encode the logged JPEG frames of one camera into an MP4 (H.264 via imageio-ffmpeg).
 
     ``camera``: the name used when logging (``/camera/<name>``); default the first camera.
     ``fps``: default the logged frame rate in sim time (so the video plays in real time).
+    The MP4 is written atomically.  No frames, an unknown camera or ``fps`` not > 0 raise
+    :class:`~ag_uav.analysis.logscan.LogError`.
     """
     import imageio.v2 as imageio
     from PIL import Image
 
-    d = read_run(run, images=True)
-    if not d.images:
-        raise ValueError(f"{d.path}: no camera frames were logged")
-    topic = f"/camera/{camera}" if camera else sorted(d.images)[0]
-    if topic not in d.images:
-        raise ValueError(f"no frames on {topic}; cameras: {sorted(d.images)}")
-    frames = d.images[topic]
+    from ..record.atomic import atomic_path, silent_write_failure
+    from .logscan import LogError
+
+    if fps is not None and not (math.isfinite(fps) and fps > 0):
+        raise LogError(f"--fps = {fps:g}: must be > 0 (or 0 for the logged rate)")
+    frames = _frames(_data(run, images=True), camera)
     if fps is None:
         ts = np.array([f[0] for f in frames])
         fps = (len(ts) - 1) / (ts[-1] - ts[0]) if len(ts) > 1 and ts[-1] > ts[0] else 10.0
     out = Path(out_mp4)
-    out.parent.mkdir(parents=True, exist_ok=True)
     first = np.asarray(Image.open(io.BytesIO(frames[0][1])).convert("RGB"))
     h, w = first.shape[:2]
     # H.264 wants even sizes; macro_block_size=1 keeps the size (pad if odd)
     pad_h, pad_w = h % 2, w % 2
-    writer = imageio.get_writer(str(out), fps=float(fps), codec="libx264", quality=7,
-                                macro_block_size=1, pixelformat="yuv420p")
-    try:
-        for _, jpg in frames:
-            img = np.asarray(Image.open(io.BytesIO(jpg)).convert("RGB"))
-            if pad_h or pad_w:
-                img = np.pad(img, ((0, pad_h), (0, pad_w), (0, 0)), mode="edge")
-            writer.append_data(img)
-    finally:
-        writer.close()
+    with atomic_path(out) as tmp:
+        writer = imageio.get_writer(str(tmp), fps=float(fps), codec="libx264", quality=7,
+                                    macro_block_size=1, pixelformat="yuv420p",
+                                    ffmpeg_log_level="quiet")
+        try:
+            for _, jpg in frames:
+                img = np.asarray(Image.open(io.BytesIO(jpg)).convert("RGB"))
+                if pad_h or pad_w:
+                    img = np.pad(img, ((0, pad_h), (0, pad_w), (0, 0)), mode="edge")
+                writer.append_data(img)
+        finally:
+            writer.close()
+        if not _mp4_complete(tmp):  # ffmpeg's exit status is not reported: check the file
+            raise silent_write_failure(out, "ffmpeg did not finish the video")
     return out
+
+
+def _mp4_complete(path: Path) -> bool:
+    """Whether ``path`` is a whole MP4: top-level boxes (32-bit big-endian size, then the
+    4-character type; size 1 = a 64-bit size follows; ISO/IEC 14496-12 section 4.2) that tile
+    the file exactly, with an ``mdat`` and the ``moov`` ffmpeg writes last."""
+    import struct
+
+    seen, pos = set(), 0
+    size = path.stat().st_size if path.exists() else 0
+    if size == 0:
+        return False
+    with open(path, "rb") as f:
+        while pos + 8 <= size:
+            f.seek(pos)
+            n, kind = struct.unpack(">I4s", f.read(8))
+            if n == 1:
+                (n,) = struct.unpack(">Q", f.read(8))
+            if n < 8:
+                return False
+            seen.add(kind)
+            pos += n
+    return pos == size > 0 and {b"moov", b"mdat"} <= seen
 
 
 # --------------------------------------------------------------------------------------------
@@ -625,54 +685,64 @@ def video(run: str | Path, out_mp4: str | Path, camera: str | None = None,
 # --------------------------------------------------------------------------------------------
 
 
-def recover(in_path: str | Path, out_path: str | Path) -> int:
-    """Rewrite a truncated (or any) MCAP into a finished, indexed one; returns messages kept.
+def recover(in_path: str | Path, out_path: str | Path) -> Any:
+    """Rewrite a truncated or damaged MCAP (or a run folder's) into a finished, indexed one.
 
-    Everything in complete chunks survives (CRC-checked); the partial chunk at the cut is lost.
-    Schemas, channels, metadata and attachments are copied; message order is kept.
+    Every intact chunk survives (CRC-checked, read by
+    :class:`~ag_uav.analysis.logscan.LogScan`); a damaged chunk and the partial chunk at a cut
+    are lost.  Schemas, channels, metadata and attachments are copied; message order is kept.
+    The output is written atomically.  Returns the scan's
+    :class:`~ag_uav.analysis.logscan.ScanReport` (``messages`` kept, ``lost``, what was
+    skipped).  An output equal to the input or a folder, a non-MCAP input, or a log with no
+    intact message raise :class:`~ag_uav.analysis.logscan.LogError`.
     """
-    from mcap.records import Attachment, Channel, Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader
+    from ..record.atomic import atomic_path
+    from .logscan import LogError, LogScan
+
+    src, out = mcap_path(in_path), Path(out_path)
+    if out.is_dir():
+        raise LogError(f"OUT = {out} is a folder; give the new file's name, e.g. "
+                       f"{out / 'recovered.mcap'}")
+    if out.exists() and os.path.samefile(out, src):
+        raise LogError(f"OUT must differ from IN ({src}); the input is kept as it is")
+    scan = LogScan(src)
+    with atomic_path(out) as tmp:
+        with open(tmp, "wb") as g:
+            _copy_records(scan, g)
+        if scan.report.messages == 0:
+            tmp.unlink()
+            why = scan.report.describe(counts=False)
+            raise LogError(f"no intact message in {src}; nothing written"
+                           + (f" ({why})" if why else ""))
+    return scan.report
+
+
+def _copy_records(scan: Any, g: Any) -> None:
+    """Write what ``scan`` reads into a new MCAP on ``g`` (channels as their messages come)."""
+    from mcap.records import Attachment, Message, Metadata
     from mcap.writer import CompressionType, Writer
 
-    in_path, out_path = Path(in_path), Path(out_path)
-    if in_path.resolve() == out_path.resolve():
-        raise ValueError("recover: output must differ from input")
-    n = 0
+    w = Writer(g, compression=CompressionType.ZSTD)
+    w.start(profile="", library="ag_uav.recover")
     schema_map: dict[int, int] = {}
     channel_map: dict[int, int] = {}
-    with open(in_path, "rb") as f, open(out_path, "wb") as g:
-        w = Writer(g, compression=CompressionType.ZSTD)
-        w.start(profile="", library="ag_uav.recover")
-        pending: dict[int, Any] = {}
-        try:
-            for rec in StreamReader(f, validate_crcs=True).records:
-                if isinstance(rec, Schema):
-                    if rec.id not in schema_map:
-                        schema_map[rec.id] = w.register_schema(rec.name, rec.encoding, rec.data)
-                elif isinstance(rec, Channel):
-                    if rec.id not in channel_map:
-                        pending[rec.id] = rec
-                elif isinstance(rec, Message):
-                    cid = channel_map.get(rec.channel_id)
-                    if cid is None:
-                        ch = pending.pop(rec.channel_id, None)
-                        if ch is None:
-                            continue
-                        cid = channel_map[ch.id] = w.register_channel(
-                            ch.topic, ch.message_encoding, schema_map.get(ch.schema_id, 0),
-                            dict(ch.metadata))
-                    w.add_message(cid, rec.log_time, rec.data, rec.publish_time, rec.sequence)
-                    n += 1
-                elif isinstance(rec, Metadata):
-                    w.add_metadata(rec.name, dict(rec.metadata))
-                elif isinstance(rec, Attachment):
-                    w.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type,
-                                     rec.data)
-        except Exception:  # noqa: BLE001 - the truncated tail ends the copy
-            pass
-        w.finish()
-    return n
+    for rec in scan.records():
+        if isinstance(rec, Message):
+            cid = channel_map.get(rec.channel_id)
+            if cid is None:
+                ch = scan.channels[rec.channel_id]
+                sch = scan.schemas.get(ch.schema_id)
+                if sch is not None and sch.id not in schema_map:
+                    schema_map[sch.id] = w.register_schema(sch.name, sch.encoding, sch.data)
+                cid = channel_map[ch.id] = w.register_channel(
+                    ch.topic, ch.message_encoding, schema_map.get(ch.schema_id, 0),
+                    dict(ch.metadata))
+            w.add_message(cid, rec.log_time, rec.data, rec.publish_time, rec.sequence)
+        elif isinstance(rec, Metadata):
+            w.add_metadata(rec.name, dict(rec.metadata))
+        elif isinstance(rec, Attachment):
+            w.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
+    w.finish()
 
 
 # --------------------------------------------------------------------------------------------
@@ -782,7 +852,6 @@ def write_foxglove_layout(
         "playbackConfig": {"speed": 1.0},
         "layout": {"direction": "row", "first": left, "second": right, "splitPercentage": 58},
     }
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(layout, indent=1))
-    return p
+    from ..record.atomic import atomic_write_text
+
+    return atomic_write_text(path, json.dumps(layout, indent=1), fsync=False)

@@ -1,13 +1,16 @@
 """``ag-uav`` command line.
 
 Every command has ``--help``. A bad config prints one line naming the key, the value and what is
-allowed, and exits with code 2 (no traceback).
+allowed, and exits with code 2 (no traceback).  A file that cannot be written (a full disk, no
+permission) prints one line naming it and exits with code 1; outputs are written atomically
+(:mod:`ag_uav.record.atomic`), so a failed write leaves no partial file.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -62,9 +65,19 @@ def cmd_fly(args: argparse.Namespace) -> int:
         cfg.log.render = False
     if args.no_log:
         cfg.log.enabled = False
-    res, run_dir = fly(cfg, out_root=args.out, run_id=args.run_id, progress=not args.quiet)
     from ..analysis.report import print_summary
+    from ..jobs.run import RunOutputError
 
+    try:
+        res, run_dir = fly(cfg, out_root=args.out, run_id=args.run_id, progress=not args.quiet)
+    except RunOutputError as e:  # flown, but an output failed: the summary goes to the terminal
+        print_summary(e.result.summary, e.run_dir)
+        if not e.summary_written:
+            from ..jobs.run import summary_json
+
+            print("summary.json could not be written; here it is:")
+            print(summary_json(e.result.summary))
+        raise
     print_summary(res.summary, run_dir)
     return 0
 
@@ -74,6 +87,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from ..engine.missions import build_field, build_plan
     from ..world.plan_export import write_plan
 
+    if not (math.isfinite(args.simplify) and args.simplify >= 0):
+        raise ConfigError(f"--simplify = {args.simplify:g}: must be a tolerance >= 0 (metres; "
+                          "0 keeps every point)")
     ov = _overrides(args)
     if args.field:
         ov["mission.field"] = args.field
@@ -208,6 +224,11 @@ def main(argv: list[str] | None = None) -> int:
     except FileNotFoundError as e:
         print(f"ag-uav: {e}", file=sys.stderr)
         return 2
+    except OSError as e:  # a full disk, no permission, a read-only folder: one line naming it
+        from ..record.atomic import disk_error_line
+
+        print(f"ag-uav: {disk_error_line(e)}", file=sys.stderr)
+        return 1
 
 
 

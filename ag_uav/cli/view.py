@@ -3,10 +3,37 @@
 from __future__ import annotations
 
 import argparse
+import functools
+import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 
+def _tool(fn: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+    """A log tool's command: a file it cannot use (empty, not MCAP, nothing to draw, an unknown
+    camera, ...) is one line on stderr and exit 2, not a traceback."""
+    @functools.wraps(fn)
+    def run(args: argparse.Namespace) -> int:
+        from ..analysis.logscan import LogError
+
+        try:
+            return fn(args)
+        except LogError as e:
+            print(f"ag-uav {args.cmd}: {e}", file=sys.stderr)
+            return 2
+    return run
+
+
+def _warn_skipped(args: argparse.Namespace, d) -> None:
+    from ..analysis.viewing import skipped_line
+
+    line = skipped_line(d)
+    if line:
+        print(f"ag-uav {args.cmd}: warning: {d.path}: {line}", file=sys.stderr)
+
+
+@_tool
 def _show(args: argparse.Namespace) -> int:
     from ..analysis.viewing import show
 
@@ -14,13 +41,16 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
+@_tool
 def _plot(args: argparse.Namespace) -> int:
     if args.controller is not None or args.run is None:
         return _plot_controller(args)
-    from ..analysis.viewing import mcap_path, plot
+    from ..analysis.viewing import mcap_path, plot, read_run
 
     out = Path(args.out) if args.out else mcap_path(args.run).parent / "plots"
-    for p in plot(args.run, out):
+    d = read_run(args.run, images=False)
+    _warn_skipped(args, d)
+    for p in plot(d, out):
         print(p)
     return 0
 
@@ -40,18 +70,31 @@ def _plot_controller(args: argparse.Namespace) -> int:
     return 0
 
 
+@_tool
 def _video(args: argparse.Namespace) -> int:
-    from ..analysis.viewing import video
+    from ..analysis.logscan import LogError
+    from ..analysis.viewing import read_run, video
 
-    print(video(args.run, args.out, camera=args.camera, fps=args.fps or None))
+    fps = args.fps
+    if not (math.isfinite(fps) and fps >= 0):
+        raise LogError(f"--fps = {fps:g}: must be > 0 (or 0 for the logged rate)")
+    d = read_run(args.run, images=True)
+    _warn_skipped(args, d)
+    print(video(d, args.out, camera=args.camera, fps=fps or None))
     return 0
 
 
+@_tool
 def _recover(args: argparse.Namespace) -> int:
     from ..analysis.viewing import recover
 
-    n = recover(args.input, args.output)
-    print(f"recovered {n} messages into {args.output}", file=sys.stderr)
+    rep = recover(args.input, args.output)
+    line = f"recovered {rep.messages} messages into {args.output}"
+    if not rep.intact:
+        lost = rep.lost
+        line += (f", {lost} lost" if lost is not None else ", the rest lost") + \
+            f": {rep.describe(counts=False)}"
+    print(line, file=sys.stderr)
     return 0
 
 
@@ -89,8 +132,10 @@ def register(sub) -> None:
                         "logged rate, i.e. real time")
     v.set_defaults(func=_video)
 
-    r = sub.add_parser("recover", help="turn a truncated MCAP (killed run) into an indexed one",
-                       description="Rewrite a truncated MCAP log into a finished, indexed file.")
-    r.add_argument("input", metavar="IN")
-    r.add_argument("output", metavar="OUT")
+    r = sub.add_parser("recover", help="turn a truncated or damaged MCAP into an indexed one",
+                       description="Rewrite a truncated (killed run) or damaged MCAP log into a "
+                                   "finished, indexed file: every intact chunk is kept "
+                                   "(CRC-checked); the messages kept and lost are reported.")
+    r.add_argument("input", metavar="IN", help=run_help)
+    r.add_argument("output", metavar="OUT", help="the new .mcap file (not IN)")
     r.set_defaults(func=_recover)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import time
@@ -30,33 +31,74 @@ def _json_default(o: Any) -> Any:
     raise TypeError(type(o))
 
 
+def summary_json(summary: dict) -> str:
+    """A run summary as the JSON text of ``summary.json``."""
+    return json.dumps(summary, indent=2, default=_json_default)
+
+
 def write_summary(summary: dict, path: Path) -> None:
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(summary, indent=2, default=_json_default))
-    tmp.replace(path)
+    """``summary.json``, written atomically (:mod:`ag_uav.record.atomic`)."""
+    from ..record.atomic import atomic_write_text
+
+    atomic_write_text(path, summary_json(summary))
+
+
+class RunOutputError(OSError):
+    """The flight finished but an output could not be written (summary.json, the end of the
+    log): ``result`` and ``run_dir`` hold what was flown, ``summary_written`` says whether
+    ``summary.json`` made it to disk.  Same errno, message and file name as the cause."""
+
+    def __init__(self, err: OSError, result: RunResult, run_dir: Path, summary_written: bool):
+        super().__init__(err.errno, err.strerror or str(err), err.filename)
+        self.result, self.run_dir, self.summary_written = result, run_dir, summary_written
+
+
+def _open_log(cfg: Config, run_dir: Path):
+    if not (cfg.log.enabled and cfg.log.channels != "none"):
+        return None
+    from .. import __version__
+    from ..record.runlog import RunLog
+
+    rates = {"camera": cfg.log.render_hz if cfg.log.render else 0.0}
+    return RunLog(run_dir / "run.mcap", channels=cfg.log.channels, rates=rates,
+                  metadata={"run_id": run_dir.name, "seed": cfg.seed,
+                            "ag_uav": __version__, "field": cfg.mission.field,
+                            "estimator": cfg.estimator.name},
+                  config_toml=cfg.to_toml())
 
 
 def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None,
         progress: bool = False, feedback=None) -> tuple[RunResult, Path]:
-    """Fly ``cfg`` once into ``out_root/run_id``; returns the result and the run folder."""
+    """Fly ``cfg`` once into ``out_root/run_id``; returns the result and the run folder.
+
+    A log that cannot be written mid-flight (disk full) stops the flight with an
+    :class:`OSError` naming it (the log stays readable up to its last complete chunk); a
+    finished flight whose log end or ``summary.json`` cannot be written raises
+    :class:`RunOutputError`, which carries the result."""
     run_dir = Path(out_root) / (run_id or default_run_id(cfg))
     run_dir.mkdir(parents=True, exist_ok=True)
-    log = None
-    if cfg.log.enabled and cfg.log.channels != "none":
-        from .. import __version__
-        from ..record.runlog import RunLog
-
-        rates = {"camera": cfg.log.render_hz if cfg.log.render else 0.0}
-        log = RunLog(run_dir / "run.mcap", channels=cfg.log.channels, rates=rates,
-                     metadata={"run_id": run_dir.name, "seed": cfg.seed,
-                               "ag_uav": __version__, "field": cfg.mission.field,
-                               "estimator": cfg.estimator.name},
-                     config_toml=cfg.to_toml())
+    log = _open_log(cfg, run_dir)
     try:
         res = simulate(cfg, feedback=feedback, progress=progress, log=log)
-    finally:
+    except BaseException as e:
+        err = log.write_error(e) if log is not None else None
         if log is not None:
+            with contextlib.suppress(Exception):  # the first error is the one to report
+                log.close()
+        if err is not None:
+            raise err from None
+        raise
+    log_err = None
+    if log is not None:
+        try:
             log.close()
+        except OSError as e:
+            log_err = e
     res.summary["run_dir"] = str(run_dir)
-    write_summary(res.summary, run_dir / "summary.json")
+    try:
+        write_summary(res.summary, run_dir / "summary.json")
+    except OSError as e:
+        raise RunOutputError(e, res, run_dir, False) from None
+    if log_err is not None:
+        raise RunOutputError(log_err, res, run_dir, True) from None
     return res, run_dir

@@ -67,11 +67,13 @@ a SIGKILL loses at most that much;
 from __future__ import annotations
 
 import atexit
+import errno
 import json
 import math
 import operator
 import os
 import platform
+import re
 import signal
 import struct
 import threading
@@ -82,6 +84,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .atomic import silent_write_failure
 
 __all__ = [
     "RunLog",
@@ -397,6 +401,13 @@ class _EstChan:
         self.tail = _Packer(pre[1 + 2 * n + m:])
 
 
+def _os_error(e: OSError, path: Path) -> OSError:
+    """The SDK's OSError (errno only in its text, "... (os error 28)") with errno and path."""
+    m = re.search(r"os error (\d+)", str(e))
+    code = e.errno if e.errno is not None else (int(m.group(1)) if m else errno.EIO)
+    return OSError(code, os.strerror(code), str(path))
+
+
 def _close_all() -> None:
     for log in list(_OPEN):
         try:
@@ -492,6 +503,7 @@ class RunLog:
         compression: Any = "lz4",
     ):
         self.path = Path(path)
+        self._write_failed = False  # the writer failed once (disk full): close() quietly
         if isinstance(channels, str):
             if channels not in PRESETS:
                 raise ValueError(f"channels must be one of {list(PRESETS)} or a list of groups")
@@ -535,17 +547,20 @@ class RunLog:
         self._fg = foxglove
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._ctx = foxglove.Context()
-        self._writer = foxglove.open_mcap(
-            str(self.path),
-            allow_overwrite=True,
-            context=self._ctx,
-            writer_options=MCAPWriteOptions(
-                compression=(MCAPCompression.Lz4 if compression == "lz4" else compression),
-                chunk_size=chunk_size,
-                compression_threads=0,
-                profile="",
-            ),
-        )
+        try:
+            self._writer = foxglove.open_mcap(
+                str(self.path),
+                allow_overwrite=True,
+                context=self._ctx,
+                writer_options=MCAPWriteOptions(
+                    compression=(MCAPCompression.Lz4 if compression == "lz4" else compression),
+                    chunk_size=chunk_size,
+                    compression_threads=0,
+                    profile="",
+                ),
+            )
+        except OSError as e:  # the SDK's: "Read-only file system (os error 30)", no file name
+            raise _os_error(e, self.path) from None
         ctx = self._ctx
         en = {g: self._period[g] < _INF for g in GROUPS}
         M = foxglove.messages
@@ -1203,9 +1218,29 @@ class RunLog:
         try:
             self._drain()
             self._writer.close()
+        except RuntimeError as e:  # the SDK's writer errors: an OSError naming the file
+            err = self.write_error(e)
+            if err is None:
+                raise
+            if not self._write_failed:
+                raise err from None
         finally:
             _OPEN.discard(self)
         self._write_layout()
+
+    def write_error(self, exc: BaseException) -> OSError | None:
+        """``exc`` as an :class:`OSError` naming the log if it is the MCAP writer failing to
+        write, else None.  The SDK reports an I/O failure as ``RuntimeError("FoxgloveError:
+        MCAP error: I/O error ...")`` without the OS error
+        (:func:`~ag_uav.record.atomic.silent_write_failure` tells a full disk from the rest).
+        After this the log is marked failed: :meth:`close` then finishes quietly, leaving the
+        file as written so far (every complete chunk is readable; ``ag-uav recover`` indexes
+        it)."""
+        if not isinstance(exc, RuntimeError) or "FoxgloveError" not in str(exc):
+            return None
+        self._write_failed = True
+        return silent_write_failure(self.path, "the run log stops at its last complete chunk; "
+                                               "`ag-uav recover` indexes it")
 
 
 def _flat(a: Any) -> list[float]:

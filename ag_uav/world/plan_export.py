@@ -313,7 +313,8 @@ def write_plan(plan: CoveragePlan, path: str | Path, *, altitude: float, speed: 
     """Write ``plan`` to ``path`` in the format its extension names (:data:`PLAN_SUFFIXES`).
 
     Returns a summary: format, waypoints, nozzle switches, mission items (``.plan``), bytes.
-    Raises ValueError for an unknown extension or a field without a geodetic origin."""
+    Raises ValueError for an unknown extension, a field without a geodetic origin or a
+    negative ``simplify_m``; the file is written atomically (an OSError names it)."""
     p = Path(path)
     suf = p.suffix.lower()
     if suf not in PLAN_SUFFIXES:
@@ -321,6 +322,8 @@ def write_plan(plan: CoveragePlan, path: str | Path, *, altitude: float, speed: 
                          f"{', '.join(PLAN_SUFFIXES)}")
     if not (math.isfinite(altitude) and altitude > 0 and math.isfinite(speed) and speed > 0):
         raise ValueError(f"altitude ({altitude}) and speed ({speed}) must be > 0")
+    if not (math.isfinite(simplify_m) and simplify_m >= 0):
+        raise ValueError(f"simplify_m ({simplify_m}) must be >= 0")
     kw = {"altitude": float(altitude), "speed": float(speed), "origin": origin,
           "simplify_m": simplify_m}
     wps = plan_waypoints(plan, origin, simplify_m)
@@ -337,7 +340,8 @@ def write_plan(plan: CoveragePlan, path: str | Path, *, altitude: float, speed: 
     else:
         text = json.dumps(plan_to_geojson(plan, **kw)) + "\n"
         info["format"] = "GeoJSON"
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(text, encoding="utf-8")
+    from ..record.atomic import atomic_write_text  # no partial or 0-byte plan on a full disk
+
+    atomic_write_text(p, text)
     info["bytes"] = p.stat().st_size
     return info
