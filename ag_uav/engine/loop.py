@@ -303,6 +303,7 @@ class _Engine:
         self.sprayers, self.vehicles = sprayers, vehicles
         self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
         self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
+        self._pre_next = -math.inf  # the earliest time a pre-physics observer is due
 
     def before_physics(self, k: int, t: float) -> bool:
         """Guard, sense, feed back, control, spray, disturb, record, observe; False when no
@@ -316,8 +317,9 @@ class _Engine:
             self.spraying.step(k, t)
         self.disturbance.step()
         self.recorder.step(k)
-        if self.pre_obs:
+        if self.pre_obs and t >= self._pre_next:
             self._observe(self.pre_obs, "tick", k, t)
+            self._pre_next = min(ob.next_time() for ob in self.pre_obs)
         return True
 
     def physics(self) -> None:

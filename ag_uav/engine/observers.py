@@ -13,6 +13,7 @@ after it (the state at ``t + dt``: what a tick hook ``hook(t, data)`` gets).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -53,9 +54,14 @@ class TickView:
 
 
 class Observer:
-    """Watches vehicle ``i``; both moments are optional."""
+    """Watches vehicle ``i``; both moments are optional. :meth:`next_time` lets the engine skip
+    the call on ticks where the observer has nothing to do."""
 
     i: int
+
+    def next_time(self) -> float:
+        """The earliest sim time of a tick :meth:`tick` must see (default: every tick)."""
+        return -math.inf
 
     def tick(self, view: TickView) -> None:
         """Before the physics step of the tick at ``view.t``."""
@@ -107,6 +113,9 @@ class LogObserver(Observer):
         self.fb, self.control, self.sensing = feedback, control, sensing
         self.frames = 0
         self._est = feedback.name != "true"
+
+    def next_time(self) -> float:
+        return self.log.next_due(frames=self.renderer is not None)
 
     def tick(self, view: TickView) -> None:
         log, t = self.log, view.t

@@ -696,6 +696,14 @@ class RunLog:
         engine builds a tick's arguments only then."""
         return t >= self._next_tick
 
+    def next_due(self, frames: bool = False) -> float:
+        """The earliest sim time at which :meth:`tick` (or, with ``frames``, a camera frame)
+        would log something (``inf`` when nothing will): the engine calls the log only then."""
+        nxt = self._next_tick
+        if frames and not self.closed and self._period["camera"] < _INF:
+            nxt = min(nxt, self._next["camera"])
+        return nxt
+
     def want_frame(self, t: float) -> bool:
         """True when a camera frame at sim time ``t`` would be logged: render only then."""
         return self.want("camera", t)
