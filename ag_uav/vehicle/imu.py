@@ -45,7 +45,8 @@ blocks from the vehicle's own Generator: :func:`imu_error_block` (bias walk + wh
 axes) and :func:`gauss_markov_block` (``δθ``). The per-tick law is a compiled row function,
 :func:`imu_row` (``f̃ = f + e_k``) and :func:`attitude_row` (``R̂ = Exp(δθ_k) R``, Rodrigues),
 which :class:`ImuSensor` / :class:`AttitudeError` call on their own one-row arrays (a batch of
-one) and :mod:`ag_uav.vehicle.sensors_batched` row by row. The independent reference is
+one) and the loops over rows :func:`imu_rows` / :func:`attitude_rows` (run by
+:mod:`ag_uav.vehicle.sensors_batched`) call row by row. The independent reference is
 ``tests/oracles/imu_ref.py``.
 """
 
@@ -71,8 +72,10 @@ G = 9.81
 UG = 1e-6 * G                # one micro-g in m/s²
 DEG = math.pi / 180.0
 
-__all__ = ["AttitudeError", "ImuSensor", "accel_sigma", "attitude_row", "block_used_up",
-           "gauss_markov_block", "gyro_sigma", "imu_error_block", "imu_row", "process_noise_psd"]
+__all__ = ["AttitudeError", "ImuSensor", "accel_sigma", "attitude_row", "attitude_rows",
+           "block_used_up",
+           "gauss_markov_block", "gyro_sigma", "imu_error_block", "imu_row", "imu_rows",
+           "process_noise_psd", "rows_need"]
 
 
 def accel_sigma(cfg: ImuConfig, rate_hz: float) -> float:
@@ -195,6 +198,48 @@ def attitude_row(R: np.ndarray, dth: np.ndarray, ist: np.ndarray, i: int, out: n
         for col in range(3):
             out[i, 3 * r + col] = (er[0] * R[i, col] + er[1] * R[i, 3 + col]
                                    + er[2] * R[i, 6 + col])
+
+
+# ---- the loops of ag_uav.vehicle.sensors_batched over rows live here, beside the row law:
+# numba's cache of a function is renewed only when its own file changes.
+
+
+@njit(cache=True)
+def rows_need(active: np.ndarray, ist: np.ndarray) -> int:
+    """Number of active rows whose sample buffer is used up (ist[:, 0] = next, [:, 1] = len)."""
+    need = 0
+    for i in range(ist.shape[0]):
+        if active[i] and block_used_up(ist, i):
+            need += 1
+    return need
+
+
+@njit(cache=True)
+def imu_rows(f: np.ndarray, w: np.ndarray, active: np.ndarray, err: np.ndarray,
+             ist: np.ndarray, f_out: np.ndarray, w_out: np.ndarray) -> int:
+    """:func:`imu_row` of every active row; returns 0, or (nothing done) the number of active
+    rows whose block is used up."""
+    need = rows_need(active, ist)
+    if need:
+        return need
+    for i in range(f.shape[0]):
+        if active[i]:
+            imu_row(f, w, err, ist, i, f_out, w_out)
+    return 0
+
+
+@njit(cache=True)
+def attitude_rows(R: np.ndarray, active: np.ndarray, dth: np.ndarray, ist: np.ndarray,
+                  out: np.ndarray, last: np.ndarray) -> int:
+    """:func:`attitude_row` of every active row; returns 0, or (nothing done) the number of
+    active rows whose block is used up."""
+    need = rows_need(active, ist)
+    if need:
+        return need
+    for i in range(R.shape[0]):
+        if active[i]:
+            attitude_row(R, dth, ist, i, out, last)
+    return 0
 
 
 class ImuSensor:

@@ -1,33 +1,46 @@
 """Batched wind + drag, MEMS IMU and attitude-error models for the lockstep engine.
 
 The lockstep engine advances ``N`` missions at once (leading batch axis ``N``) at the control
-rate.  This module holds, for the whole batch, the per-tick sensor/disturbance models that
-:func:`ag_uav.engine.missions.fly_reference` runs per vehicle:
+rate.  This module runs, for the whole batch, the per-tick sensor/disturbance models of
+:mod:`ag_uav.engine.loop`:
 
-* :class:`BatchWind` -- :class:`ag_uav.world.wind.Wind` (mean wind + Dryden turbulence, exact
-  discretisation, coefficient refresh when V or h drift by ``rel_tol``) and the drag force
-  ``F = -c_lin r - c_quad |r| r``, ``r = v - w`` (:func:`ag_uav.world.wind.drag_force`);
-* :class:`BatchImu` -- :class:`ag_uav.vehicle.imu.ImuSensor` (turn-on bias + random walk + white
-noise);
-* :class:`BatchAttitudeError` -- :class:`ag_uav.vehicle.imu.AttitudeError` (``R_hat = Exp(dtheta)
-R``,
-  world-frame Gauss-Markov ``dtheta``).
+* :class:`BatchWind` -- ``N`` :class:`ag_uav.world.wind.Wind` (mean wind + Dryden turbulence)
+  and the drag force ``F = -c_lin r - c_quad |r| r``, ``r = v - w``;
+* :class:`BatchImu` -- ``N`` :class:`ag_uav.vehicle.imu.ImuSensor` (turn-on bias + random walk
+  + white noise);
+* :class:`BatchAttitudeError` -- ``N`` :class:`ag_uav.vehicle.imu.AttitudeError`
+  (``R_hat = Exp(dtheta) R``, world-frame Gauss-Markov ``dtheta``).
 
-The equations are those of the scalar classes (see their docstrings); nothing is re-modelled.
+Where the laws live (issue 17: each law written once).  Nothing is modelled here: each law is
+one compiled row function, which the per-vehicle object calls on its own one-row arrays and a
+loop over rows, beside it, calls row by row --
+
+* wind: :func:`ag_uav.world.wind.wind_row` (over :func:`~ag_uav.world.wind.gust_row`, the
+  Dryden filters and their coefficient refresh), looped by :func:`~ag_uav.world.wind.wind_rows`
+  and :func:`~ag_uav.world.wind.wind_drag_rows`; drag: :func:`ag_uav.world.wind.drag_axis`;
+* IMU: :func:`ag_uav.vehicle.imu.imu_row` (looped by :func:`~ag_uav.vehicle.imu.imu_rows`) on
+  the errors of :func:`ag_uav.vehicle.imu.imu_error_block`;
+* attitude error: :func:`ag_uav.vehicle.imu.attitude_row` (looped by
+  :func:`~ag_uav.vehicle.imu.attitude_rows`) on the ``dtheta`` of
+  :func:`ag_uav.vehicle.imu.gauss_markov_block`.
+
+This module adds the batch: the row state of ``N`` vehicles stacked, the refills, ``active``
+and the engine's per-tick entry points (:meth:`BatchWind.step_drag`, :meth:`BatchImu.measure`,
+:meth:`BatchAttitudeError.apply`).  The independent references the laws are tested against are
+in ``tests/oracles/``.
 
 Reproducibility contract
 ------------------------
-Every vehicle keeps its **own** numpy Generator -- the one of the scalar object the batch was
-built from (shared, not copied).  Random numbers are drawn per vehicle, in the same blocks, in
-the same order and at the same tick as the scalar class draws them (a block is refilled lazily,
-on the first tick that needs it, and only for a vehicle that is active that tick).  So a
-vehicle's outputs depend only on its own Generator: they equal the scalar class's (to rounding;
-in practice bit for bit with glibc's libm) and are bit-identical alone or in any batch.  The
-per-tick arithmetic runs in ``numba`` kernels (``@njit(cache=True)``, no fastmath) that loop
-over the rows independently.
+Every vehicle keeps its **own** numpy Generator -- the one of the per-vehicle object the batch
+was built from (shared, not copied).  Random numbers are drawn per vehicle, in the same blocks,
+in the same order and at the same tick as the per-vehicle object draws them (a block is refilled
+lazily, on the first tick that needs it, and only for a vehicle that is active that tick).  So a
+vehicle's outputs depend only on its own Generator: they equal the per-vehicle object's bit for
+bit (the same compiled row function on the same numbers) and are bit-identical alone or in any
+batch.  The kernels (``@njit(cache=True)``, no fastmath) loop over the rows independently.
 
-Once a batch is built from scalar objects, those objects must not be stepped any more (they
-share the Generators; their own state is left where it was).
+Once a batch is built from per-vehicle objects, those objects must not be stepped any more
+(they share the Generators; their own state is left where it was).
 
 Outputs are written into arrays owned by the batch and returned; they are overwritten on the
 next call (copy them to keep them).  Inputs must be float64 numpy arrays of the documented
@@ -59,127 +72,23 @@ from ..world.wind import (
     WF_MY,
     WI_TURB,
     Wind,
-    drag_axis,
-    needs_draws,
+    drag_rows,
     refill_row,
-    wind_row,
+    wind_drag_rows,
+    wind_rows,
 )
 from .imu import (
     AttitudeError,
     ImuSensor,
-    attitude_row,
-    block_used_up,
+    attitude_rows,
     gauss_markov_block,
     imu_error_block,
-    imu_row,
+    imu_rows,
 )
-
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover - numba is a dependency; the kernels run as Python
-    def njit(*args, **kwargs):
-        return args[0] if args and callable(args[0]) else (lambda f: f)
 
 __all__ = ["BatchAttitudeError", "BatchImu", "BatchWind", "drag"]
 
 F64 = NDArray[np.float64]
-
-
-# ============================================================================ numba kernels
-
-
-@njit(cache=True)
-def _wind_need(active: np.ndarray, ist: np.ndarray) -> int:
-    """Number of active rows whose draw buffer cannot serve this tick."""
-    need = 0
-    for i in range(ist.shape[0]):
-        if active[i] and needs_draws(ist, i):
-            need += 1
-    return need
-
-
-@njit(cache=True)
-def _wind_kernel(dt: float, altitude: np.ndarray, airspeed: np.ndarray, active: np.ndarray,
-                 fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, out: np.ndarray) -> int:
-    need = _wind_need(active, ist)
-    if need:
-        return need
-    for i in range(fs.shape[0]):
-        if active[i]:
-            wx, wy, wz = wind_row(fs, ist, buf, i, dt, altitude[i], airspeed[i])
-            out[i, 0] = wx
-            out[i, 1] = wy
-            out[i, 2] = wz
-    return 0
-
-
-@njit(cache=True)
-def _wind_drag_kernel(dt: float, z: np.ndarray, v: np.ndarray, c_lin: np.ndarray,
-                      c_quad: np.ndarray, active: np.ndarray, fs: np.ndarray, ist: np.ndarray,
-                      buf: np.ndarray, out: np.ndarray, force: np.ndarray) -> int:
-    need = _wind_need(active, ist)
-    if need:
-        return need
-    for i in range(fs.shape[0]):
-        if not active[i]:
-            continue
-        vx = v[i, 0]
-        vy = v[i, 1]
-        vz = v[i, 2]
-        pz = z[i]
-        ax = vx - fs[i, WF_MX]
-        ay = vy - fs[i, WF_MY]
-        wx, wy, wz = wind_row(fs, ist, buf, i, dt, pz if pz > 0.0 else 0.0,
-                              math.sqrt(ax * ax + ay * ay))
-        out[i, 0] = wx
-        out[i, 1] = wy
-        out[i, 2] = wz
-        force[i, 0] = drag_axis(vx - wx, c_lin[i, 0], c_quad[i, 0])
-        force[i, 1] = drag_axis(vy - wy, c_lin[i, 1], c_quad[i, 1])
-        force[i, 2] = drag_axis(vz - wz, c_lin[i, 2], c_quad[i, 2])
-    return 0
-
-
-@njit(cache=True)
-def _drag_kernel(v: np.ndarray, wind: np.ndarray, c_lin: np.ndarray, c_quad: np.ndarray,
-                 out: np.ndarray) -> None:
-    for i in range(v.shape[0]):
-        for j in range(3):
-            out[i, j] = drag_axis(v[i, j] - wind[i, j], c_lin[i, j], c_quad[i, j])
-
-
-@njit(cache=True)
-def _rows_need(active: np.ndarray, ist: np.ndarray) -> int:
-    """Number of active rows whose sample buffer is used up (ist[:, 0] = next, [:, 1] = len)."""
-    need = 0
-    for i in range(ist.shape[0]):
-        if active[i] and block_used_up(ist, i):
-            need += 1
-    return need
-
-
-@njit(cache=True)
-def _imu_kernel(f: np.ndarray, w: np.ndarray, active: np.ndarray, err: np.ndarray,
-                ist: np.ndarray, f_out: np.ndarray, w_out: np.ndarray) -> int:
-    need = _rows_need(active, ist)
-    if need:
-        return need
-    for i in range(f.shape[0]):
-        if active[i]:
-            imu_row(f, w, err, ist, i, f_out, w_out)
-    return 0
-
-
-@njit(cache=True)
-def _att_kernel(R: np.ndarray, active: np.ndarray, dth: np.ndarray, ist: np.ndarray,
-                out: np.ndarray, last: np.ndarray) -> int:
-    need = _rows_need(active, ist)
-    if need:
-        return need
-    for i in range(R.shape[0]):
-        if active[i]:
-            attitude_row(R, dth, ist, i, out, last)
-    return 0
 
 
 # ============================================================================ classes
@@ -207,7 +116,7 @@ def drag(v: F64, wind: F64, c_lin: F64, c_quad: F64, out: F64 | None = None) -> 
     """
     if out is None:
         out = np.empty((v.shape[0], 3))
-    _drag_kernel(v, wind, c_lin, c_quad, out)
+    drag_rows(v, wind, c_lin, c_quad, out)
     return out
 
 
@@ -276,7 +185,7 @@ class BatchWind:
         """
         act = _active(active, self._ones)
         dt = float(dt)
-        while _wind_kernel(dt, altitude, airspeed, act, self._fs, self._ist, self._buf,
+        while wind_rows(dt, altitude, airspeed, act, self._fs, self._ist, self._buf,
                            self.wind):
             self._refill(act)
         return self.wind
@@ -293,7 +202,7 @@ class BatchWind:
         """
         act = _active(active, self._ones)
         dt = float(dt)
-        while _wind_drag_kernel(dt, z, v, c_lin, c_quad, act, self._fs, self._ist, self._buf,
+        while wind_drag_rows(dt, z, v, c_lin, c_quad, act, self._fs, self._ist, self._buf,
                                 self.wind, self.force):
             self._refill(act)
         return self.wind, self.force
@@ -346,7 +255,7 @@ class BatchImu:
         ``f``, ``w``: MuJoCo's exact readings ``(N, 3)`` (accelerometer, gyro sensordata).
         """
         act = _active(active, self._ones)
-        while _imu_kernel(f, w, act, self._err, self._ist, self.f_meas, self.w_meas):
+        while imu_rows(f, w, act, self._err, self._ist, self.f_meas, self.w_meas):
             self._refill(act)
         return self.f_meas, self.w_meas
 
@@ -394,7 +303,7 @@ class BatchAttitudeError:
     def apply(self, R: F64, active: NDArray[np.bool_] | None = None) -> F64:
         """``R_hat = Exp(dtheta) R`` per vehicle; ``R`` and the result are row-major ``(N, 9)``."""
         act = _active(active, self._ones)
-        while _att_kernel(R, act, self._dth, self._ist, self.R_hat, self.last):
+        while attitude_rows(R, act, self._dth, self._ist, self.R_hat, self.last):
             self._refill(act)
         return self.R_hat
 

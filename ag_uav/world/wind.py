@@ -56,7 +56,8 @@ rotated gusts) over :func:`gust_row` (clamps, coefficient refresh by :func:`_ref
 V or h drift by more than ``rel_tol`` relative or dt changes, the exact discretised filters),
 numba-compiled (``cache=True``, no fastmath).  :meth:`Wind.step` and
 :meth:`DrydenTurbulence.step` call them on their own one-row arrays (a batch of one);
-:class:`ag_uav.vehicle.sensors_batched.BatchWind` calls the same functions row by row.  The
+:class:`ag_uav.vehicle.sensors_batched.BatchWind` runs the loops over rows below
+(:func:`wind_rows`, :func:`wind_drag_rows`), which call the same functions.  The
 drag law is :func:`drag_axis` (one axis), used by :func:`drag_force` and the batch kernels.
 Gaussian numbers come from the vehicle's Generator in blocks of ``block`` (5 per tick, refilled
 by :func:`refill_row` only when fewer than 5 are left), so a vehicle's wind depends only on its
@@ -90,9 +91,12 @@ __all__ = [
     "drag_axis",
     "drag_force",
     "dryden_parameters",
+    "drag_rows",
     "gust_row",
     "refill_row",
+    "wind_drag_rows",
     "wind_row",
+    "wind_rows",
 ]
 
 M_PER_FT = 0.3048
@@ -289,6 +293,78 @@ def refill_row(rng: np.random.Generator, ist: np.ndarray, buf: np.ndarray, i: in
         buf[i, :m] = rng.standard_normal(m)
         ist[i, WI_I] = 0
         ist[i, WI_LEN] = m
+
+
+# ============================================================================ over a batch
+# The loops of ag_uav.vehicle.sensors_batched.BatchWind live here, beside the row law: numba's
+# cache of a function is renewed only when its own file changes.
+
+
+@njit(cache=True)
+def wind_rows_need(active: np.ndarray, ist: np.ndarray) -> int:
+    """Number of active rows whose draw buffer cannot serve this tick."""
+    need = 0
+    for i in range(ist.shape[0]):
+        if active[i] and needs_draws(ist, i):
+            need += 1
+    return need
+
+
+@njit(cache=True)
+def wind_rows(dt: float, altitude: np.ndarray, airspeed: np.ndarray, active: np.ndarray,
+              fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, out: np.ndarray) -> int:
+    """:func:`wind_row` of every active row into ``out`` (N, 3); returns 0, or (nothing done)
+    the number of active rows that need draws first (:func:`refill_row`)."""
+    need = wind_rows_need(active, ist)
+    if need:
+        return need
+    for i in range(fs.shape[0]):
+        if active[i]:
+            wx, wy, wz = wind_row(fs, ist, buf, i, dt, altitude[i], airspeed[i])
+            out[i, 0] = wx
+            out[i, 1] = wy
+            out[i, 2] = wz
+    return 0
+
+
+@njit(cache=True)
+def wind_drag_rows(dt: float, z: np.ndarray, v: np.ndarray, c_lin: np.ndarray,
+                   c_quad: np.ndarray, active: np.ndarray, fs: np.ndarray, ist: np.ndarray,
+                   buf: np.ndarray, out: np.ndarray, force: np.ndarray) -> int:
+    """:func:`wind_rows` at altitude ``max(z, 0)`` and airspeed ``|v_xy - mean_xy|`` (the
+    engine's per-tick inputs), and the drag ``force`` (N, 3) of ``r = v - wind``
+    (:func:`drag_axis`)."""
+    need = wind_rows_need(active, ist)
+    if need:
+        return need
+    for i in range(fs.shape[0]):
+        if not active[i]:
+            continue
+        vx = v[i, 0]
+        vy = v[i, 1]
+        vz = v[i, 2]
+        pz = z[i]
+        ax = vx - fs[i, WF_MX]
+        ay = vy - fs[i, WF_MY]
+        wx, wy, wz = wind_row(fs, ist, buf, i, dt, pz if pz > 0.0 else 0.0,
+                              math.sqrt(ax * ax + ay * ay))
+        out[i, 0] = wx
+        out[i, 1] = wy
+        out[i, 2] = wz
+        force[i, 0] = drag_axis(vx - wx, c_lin[i, 0], c_quad[i, 0])
+        force[i, 1] = drag_axis(vy - wy, c_lin[i, 1], c_quad[i, 1])
+        force[i, 2] = drag_axis(vz - wz, c_lin[i, 2], c_quad[i, 2])
+    return 0
+
+
+@njit(cache=True)
+def drag_rows(v: np.ndarray, wind: np.ndarray, c_lin: np.ndarray, c_quad: np.ndarray,
+              out: np.ndarray) -> None:
+    """:func:`drag_axis` of every row and axis: ``out = -c_lin r - c_quad |r| r``,
+    ``r = v - wind``."""
+    for i in range(v.shape[0]):
+        for j in range(3):
+            out[i, j] = drag_axis(v[i, j] - wind[i, j], c_lin[i, j], c_quad[i, j])
 
 
 def _new_row(w20: float, rel_tol: float, block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
