@@ -1,5 +1,6 @@
 """BatchSprayer (ag_uav.engine.spray_batched): N Sprayers per control tick in one numba kernel equal
-the scalar Sprayer.step of each vehicle, bit for bit (issue 9, the lockstep engine)."""
+the plain-Python reference tick (tests/oracles/sprayer_ref.py) of each vehicle, bit for bit
+(issue 9, the lockstep engine; issue 17: the kernel is the product's only per-tick law)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from array import array
 import mujoco
 import numpy as np
 import pytest
+from oracles import sprayer_ref
 
 from ag_uav.config import load_config
 from ag_uav.engine.missions import build_reference
@@ -140,7 +142,8 @@ def _fly_scalar(case: Case, inp: dict) -> dict:
             continue
         act[:] = inp["act"][k]
         r0 = casc.resets
-        f, on = sp.step(k, k * case.dt, pz[k], vx[k], vy[k], spray[k], list(f_in[k]))
+        f, on = sprayer_ref.step(sp, k, k * case.dt, pz[k], vx[k], vy[k], spray[k],
+                                 list(f_in[k]))
         out["f"][k] = f
         out["on"][k] = on
         out["reset"][k] = casc.resets > r0
@@ -271,8 +274,8 @@ def test_wrap_mid_job_and_hand_back(cases):
         for k in ks:
             if _active(case, k):
                 sp.data.act[:] = inp["act"][k]
-                sp.step(k, k * case.dt, float(inp["pz"][k]), float(inp["vx"][k]),
-                        float(inp["vy"][k]), bool(inp["spray"][k]), list(inp["f"][k]))
+                sprayer_ref.step(sp, k, k * case.dt, float(inp["pz"][k]), float(inp["vx"][k]),
+                                 float(inp["vy"][k]), bool(inp["spray"][k]), list(inp["f"][k]))
 
     scalar_ticks(range(k1))
     batch = BatchSprayer.from_sprayers([sp], lambda i, m, J: calls.append((m, J)),

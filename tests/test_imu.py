@@ -8,6 +8,7 @@ import math
 import mujoco
 import numpy as np
 import pytest
+from oracles.imu_ref import AttitudeRef, ImuRef
 from scipy.linalg import expm
 
 import ag_uav
@@ -99,11 +100,59 @@ def test_gauss_markov_attitude_error_has_its_variance_and_correlation():
     c = ImuConfig(tilt_error_deg=0.5, yaw_error_deg=2.0, attitude_error_tau_s=2.0)
     am = AttitudeError(c, 100.0, np.random.SeedSequence(5), block=200000)
     am.apply(np.eye(3).ravel())
-    x = am._dth / DEG
+    x = am._dth[0] / DEG
     np.testing.assert_allclose(x.std(axis=0), [0.5, 0.5, 2.0], rtol=0.1)
     lag = 200  # one correlation time: autocorrelation e^-1
     r = np.mean([np.corrcoef(x[:-lag, i], x[lag:, i])[0, 1] for i in range(3)])
     assert r == pytest.approx(math.exp(-1.0), abs=0.05)
+
+
+# the default, a noisy/walking IMU, large biases and attitude errors, a long correlation time;
+# small and odd blocks cross many refills
+REF_CFGS = [ImuConfig(),
+            ImuConfig(accel_noise_density_ug=150.0, vibration_sigma_mps2=0.3, accel_bias_rw=1e-2,
+                      gyro_bias_rw=5e-2),
+            ImuConfig(accel_bias_mg=20.0, gyro_bias_dps=0.5, tilt_error_deg=1.0,
+                      yaw_error_deg=3.0, attitude_error_tau_s=2.0),
+            ImuConfig(gyro_noise_density_mdps=10.0, attitude_error_tau_s=300.0)]
+
+
+@pytest.mark.parametrize("case", range(4))
+def test_imu_sensor_equals_the_reference_error_model(case):
+    """ImuSensor.measure (the compiled imu_row on its block of imu_error_block) against
+    tests/oracles/imu_ref.py: turn-on bias, random walk and white noise per axis; the same
+    Generator use."""
+    cfg, block = REF_CFGS[case], (4096, 97, 256, 1000)[case]
+    imu = ImuSensor(cfg, 100.0, np.random.SeedSequence(30 + case), block=block)
+    ref = ImuRef(cfg, 100.0, np.random.SeedSequence(30 + case), block=block)
+    np.testing.assert_allclose(imu.bias0, ref.bias0, rtol=1e-15, atol=0)
+    rng = np.random.default_rng(case)
+    f = [0.0, 0.0, G] + rng.standard_normal((1500, 3))
+    w = 0.3 * rng.standard_normal((1500, 3))
+    for k in range(1500):
+        got, exp = imu.measure(f[k], w[k]), ref.measure(f[k], w[k])
+        np.testing.assert_allclose(got[0] + got[1], exp[0] + exp[1], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(imu.bias, ref.bias, rtol=0, atol=1e-15)
+    assert np.abs(imu.bias - imu.bias0).max() > (1e-6 if cfg.accel_bias_rw < 1e-2 else 1e-3)
+    assert imu.rng.bit_generator.state == ref.rng.bit_generator.state
+
+
+@pytest.mark.parametrize("case", range(4))
+def test_attitude_error_equals_the_reference_model(case):
+    """AttitudeError.apply (the compiled attitude_row on gauss_markov_block's δθ) against
+    tests/oracles/imu_ref.py (a Python Gauss-Markov recursion, scipy's rotation vector)."""
+    cfg, block = REF_CFGS[case], (4096, 97, 256, 1000)[case]
+    am = AttitudeError(cfg, 100.0, np.random.SeedSequence(40 + case), block=block)
+    ref = AttitudeRef(cfg, 100.0, np.random.SeedSequence(40 + case), block=block)
+    np.testing.assert_allclose(am.last, ref.last, rtol=1e-15, atol=0)
+    t = np.arange(1500) * 0.01
+    for k in range(1500):
+        cy, sy = math.cos(0.7 * t[k]), math.sin(0.7 * t[k])
+        R = [cy, -sy, 0.0, sy, cy, 0.0, 0.0, 0.0, 1.0]
+        np.testing.assert_allclose(am.apply(R), ref.apply(R), rtol=0, atol=1e-14)
+        np.testing.assert_allclose(am.last, ref.last, rtol=0, atol=1e-15)
+    assert np.abs(am.last).max() > 1e-3
+    assert am.rng.bit_generator.state == ref.rng.bit_generator.state
 
 
 def test_cvb_model_is_the_exact_discretisation():

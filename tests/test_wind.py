@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from oracles.wind_ref import WindRef, milspec
 from scipy.linalg import expm
 
 from ag_uav.world.wind import (
@@ -153,22 +154,51 @@ def test_direction_convention_meteorological_from():
     assert wx == pytest.approx(-s / math.sqrt(2)) and wy == pytest.approx(-s / math.sqrt(2))
 
 
-class _Stub:
-    def __init__(self, g):
-        self.g = g
-
-    def step(self, dt, h, v):
-        return self.g
-
-
 def test_gust_frame_u_downwind_v_left_w_up():
+    """Wind - mean = u e_u + v e_v + w e_w with the gusts of a DrydenTurbulence on the same seed:
+    e_u downwind, e_v 90 deg left of it, e_w up."""
     w = Wind(4.0, 90.0, "mean", np.random.default_rng(0))  # air moves west (-x)
-    w.turbulence = _Stub((1.0, 0.0, 0.0))
-    assert w.step(0.01, 3, 0) == pytest.approx((-5.0, 0.0, 0.0), abs=1e-12)
-    w.turbulence = _Stub((0.0, 1.0, 0.0))  # left of west-going air is south (-y)
-    assert w.step(0.01, 3, 0) == pytest.approx((-4.0, -1.0, 0.0), abs=1e-12)
-    w.turbulence = _Stub((0.0, 0.0, 1.0))
-    assert w.step(0.01, 3, 0) == pytest.approx((-4.0, 0.0, 1.0), abs=1e-12)
+    t = DrydenTurbulence(4.0, np.random.default_rng(0))
+    gusts = []
+    for k in range(300):
+        h, v = 3.0 + 0.05 * k, 2.0 + 0.01 * k
+        wx, wy, wz = w.step(0.01, h, v)
+        u, gv, gw = t.step(0.01, h, v)
+        # e_u = (-1, 0, 0); left of west-going air is south: e_v = (0, -1, 0) (cos 90 deg ~ 6e-17)
+        assert (wx, wy, wz) == pytest.approx((-4.0 - u, -gv, gw), rel=0, abs=1e-14)
+        gusts.append((u, gv, gw))
+    assert np.all(np.abs(gusts).max(axis=0) > 0.05)  # every component was exercised
+
+
+# (mean speed, direction, turbulence, seed): the default, aircraft presets, an explicit W20, calm
+REF_SPECS = [(3.0, 240.0, "light", 1), (3.0, 30.0, "mean", 2), (6.0, 250.0, "moderate", 3),
+             (1.0, 10.0, "severe", 4), (0.0, 90.0, 1.7, 5), (2.0, 0.0, "none", 6)]
+
+
+@pytest.mark.parametrize("spec", REF_SPECS)
+def test_wind_equals_the_reference_from_the_formulas(spec):
+    """Wind.step (the compiled wind_row) against tests/oracles/wind_ref.py (plain Python from the
+    MIL-F-8785C formulas, Q from scipy's incomplete gamma): clamps below 3 m, above 1000 ft and
+    under 1 m/s, refreshes on drift and on a dt change, block refills; the same Generator use."""
+    speed, direction, turb, seed = spec
+    w = Wind(speed, direction, turb, np.random.default_rng(seed))
+    ref = WindRef(speed, direction, w.w20, np.random.default_rng(seed))
+    rng = np.random.default_rng(100 + seed)
+    n = 3000  # > 2 blocks of 1024 steps
+    alt = 15.0 + 14.0 * np.sin(0.003 * np.arange(n)) + 0.05 * rng.standard_normal(n)
+    alt[1000:1010] = 400.0
+    alt[1500:1600:7] = -2.0
+    spd = 6.0 + 6.5 * np.sin(0.002 * np.arange(n))
+    got = np.array([w.step(0.01 if k < 2000 else 0.02, alt[k], spd[k]) for k in range(n)])
+    exp = np.array([ref.step(0.01 if k < 2000 else 0.02, alt[k], spd[k]) for k in range(n)])
+    np.testing.assert_allclose(got, exp, rtol=0, atol=1e-11)
+    if w.turbulence is not None:
+        assert np.abs(got[:, 2]).max() > 0.1
+        assert w.turbulence.rng.bit_generator.state == ref.rng.bit_generator.state
+        _, _, lu, lw = milspec(w.w20, ref.at[1])  # at the height of the last refresh
+        assert (w.turbulence.L_u, w.turbulence.L_w) == pytest.approx((lu, lw), rel=1e-14)
+    else:
+        np.testing.assert_array_equal(got, np.tile(w.mean, (n, 1)))
 
 
 def test_wind_mean_equals_mean_wind_and_gust_std():

@@ -1,21 +1,23 @@
-"""N spray jobs in lockstep: :class:`~ag_uav.engine.sprayer.Sprayer`'s per-tick work over a batch.
+"""N spray jobs in lockstep: the per-tick law of a spray job, over a batch of
+:class:`~ag_uav.engine.sprayer.Sprayer` objects.
 
-The lockstep engine advances N missions at once (leading batch axis N) at the control rate. The
-scalar :meth:`Sprayer.step <ag_uav.engine.sprayer.Sprayer.step>` costs several µs per vehicle-tick
-in Python; :class:`BatchSprayer` runs the per-tick arithmetic (sortie table, tank and flow, nozzle
-gating by height, power from the actuator states, energy, state of charge, per-tick records) in
-one compiled kernel (:func:`_spray_kernel`, numba, no fastmath, so the floating-point operations
-are those of the scalar code, in the same order) and does in Python only what happens on a few
-ticks, found from the kernel's per-row flags:
+The lockstep engine advances N missions at once (leading batch axis N) at the control rate.
+The per-tick law (sortie table, tank and flow, nozzle gating by height, power from the actuator
+states, energy, state of charge, per-tick records) is written once, in the compiled kernel
+:func:`_spray_kernel` (numba, no fastmath) that :class:`BatchSprayer` runs over all rows; one
+vehicle is a batch of one. The Sprayer keeps the setup, the liquid body
+(:meth:`Sprayer._set_mass <ag_uav.engine.sprayer.Sprayer._set_mass>`) and the reports. The
+independent plain-Python reference of the tick is ``tests/oracles/sprayer_ref.py``
+(``tests/test_batched_spray.py`` compares them bit for bit). Python does only what happens on a
+few ticks, found from the kernel's per-row flags:
 
 * a sortie change: the finished sortie's dict gets its totals and ``t_end_s``, a new dict is
-  appended (the same keys, in the same order, as :meth:`Sprayer.step` writes);
+  appended (keys ``sortie, t_takeoff_s, litres, energy_j, min_soc, ran_dry_s, t_land_s``);
 * a liquid mass change (a refill, or the tank down by the threshold of 1 g, or empty): the
-  scalar :meth:`Sprayer._set_mass <ag_uav.engine.sprayer.Sprayer._set_mass>` itself runs for that
-  vehicle, so the MjModel body updates are those of the scalar code; its cascade is replaced by a
-  :class:`MassSink`, which forwards the composite mass and the attitude inertia to the engine's
-  ``set_mass(i, total_mass_kg, J_xyz)`` callback;
-* the optional log (``log.spray_state`` every 0.1 s, as the scalar code).
+  Sprayer's :meth:`~ag_uav.engine.sprayer.Sprayer._set_mass` runs for that vehicle (the MjModel
+  body updates); its cascade is replaced by a :class:`MassSink`, which forwards the composite
+  mass and the attitude inertia to the engine's ``set_mass(i, total_mass_kg, J_xyz)`` callback;
+* the optional log (``log.spray_state`` every 0.1 s).
 
 The per-sortie totals (litres, energy, minimum state of charge, ran-dry and landing times) are
 accumulated in the kernel's state and written into the Sprayers' ``per`` dicts when a sortie
@@ -26,11 +28,8 @@ plain ``array('d')`` / ``bytearray`` copies back, with the tank, energy and the 
 :meth:`Sprayer.summary <ag_uav.engine.sprayer.Sprayer.summary>` and :meth:`Sprayer.series
 <ag_uav.engine.sprayer.Sprayer.series>` work unchanged for each vehicle.
 
-``BatchSprayer.step(k, t, ...)`` for the active rows equals ``sprayers[i].step(k, t, pz[i],
-vx[i], vy[i], spray_ref[i], list(f[i]))`` with ``data.act = act[i]`` — bit for bit: the rotor
-commands, the nozzles, the records, the per-sortie dicts, the summaries and the ``set_mass``
-calls. Rows on the ground at the base get ``f = 0`` and ``reset = True``; the engine resets that
-vehicle's controller state (the scalar code calls ``cascade.reset()``).
+Rows on the ground at the base get ``f = 0`` and ``reset = True``; the engine resets that
+vehicle's controller state.
 """
 
 from __future__ import annotations
@@ -67,12 +66,12 @@ F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
 @numba.njit(cache=True)
 def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab, rec, rec_on,
                   out):  # pragma: no cover
-    """One control tick of :meth:`Sprayer.step` for every active row (see the module docstring).
+    """One control tick of the spray job for every active row: the per-tick law (module docstring;
+    its plain-Python reference is ``tests/oracles/sprayer_ref.py``).
 
     Returns the number of rows with an event flag (0 on most ticks), or ``-(i + 1)`` without
-    touching anything when tick ``k`` is outside active row i's tables (the scalar code would
-    raise ``IndexError``). ``tab``: (2, total) sortie and ground tables; ``out``: (2, N) nozzles
-    on and controller reset."""
+    touching anything when tick ``k`` is outside active row i's tables. ``tab``: (2, total)
+    sortie and ground tables; ``out``: (2, N) nozzles on and controller reset."""
     n = pz.shape[0]
     nf = f.shape[1]
     na = act.shape[1]
@@ -305,11 +304,11 @@ class BatchSprayer:
     @classmethod
     def from_sprayers(cls, sprayers: Sequence[Sprayer], set_mass: SetMass, *,
                       push_initial: bool = True) -> BatchSprayer:
-        """Wrap N scalar Sprayers (each built with its own vehicle model, ``data`` and job).
+        """Wrap N Sprayers (each built with its own vehicle model, ``data`` and job).
 
         ``set_mass(i, total_mass_kg, (Jx, Jy, Jz))`` receives vehicle i's composite mass and
         inertia (about the composite centre of mass) whenever its liquid mass changes; it is
-        what the scalar code writes to ``cascade.mass`` and ``cascade.attitude.J``. Each
+        what :meth:`Sprayer._set_mass` writes to ``cascade.mass`` and ``cascade.attitude.J``. Each
         Sprayer's cascade is replaced by a :class:`MassSink` until :meth:`finish`.
         ``push_initial``: call ``set_mass`` once per vehicle now with its current mass (what
         ``Sprayer.__init__`` gave its cascade); pass ``False`` when the Sprayers were built
@@ -325,8 +324,7 @@ class BatchSprayer:
     def step(self, k: int, t: float, pz: np.ndarray, vx: np.ndarray, vy: np.ndarray,
              spray_ref: np.ndarray, f: np.ndarray, act: np.ndarray,
              active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """One control tick of every active vehicle: ``sprayers[i].step(k, t, pz[i], vx[i],
-        vy[i], spray_ref[i], list(f[i]))`` with ``data.act = act[i]``.
+        """One control tick of every active vehicle (:func:`_spray_kernel`).
 
         ``pz``, ``vx``, ``vy``: (N,) float64 height and ground velocity; ``spray_ref``: (N,)
         bool, the plan sprays; ``f``: (N, 4) float64 rotor commands, set to 0 in place on the
@@ -359,8 +357,7 @@ class BatchSprayer:
         return self._on, self._reset
 
     def _events(self, t: float) -> None:
-        """Sortie changes and liquid-mass updates of the rows the kernel flagged (Python, as
-        :meth:`Sprayer.step` does them)."""
+        """Sortie changes and liquid-mass updates of the rows the kernel flagged (Python)."""
         st, ist = self._st, self._ist
         for i in np.flatnonzero(ist[:, I_FLAGS]).tolist():
             fl = int(ist[i, I_FLAGS])
@@ -385,7 +382,7 @@ class BatchSprayer:
 
     def _log(self, k: int, t: float, vx: np.ndarray, vy: np.ndarray,
              active: np.ndarray) -> None:
-        """``log.spray_state`` every 0.1 s of the vehicles that have a log (as the scalar)."""
+        """``log.spray_state`` every 0.1 s of the vehicles that have a log."""
         st, rec = self._st, self._rec
         for i, sp in self._logged:
             if not active[i] or not t >= sp._next_log:
@@ -427,7 +424,7 @@ class BatchSprayer:
     def finish(self) -> list[Sprayer]:
         """:meth:`sync`, then give each Sprayer plain copies of its records (``array('d')``,
         ``bytearray``, as it had) and its own cascade back. The batch cannot step after this;
-        the Sprayers can (scalar) from where the batch left them. Returns the Sprayers."""
+        a new batch can take them over from where this one left them. Returns the Sprayers."""
         if self._finished:
             return self.sprayers
         self.sync()

@@ -1,7 +1,13 @@
-"""The spray job's loop part: per-tick tank, mass and energy of one flight (:class:`Sprayer`; the
-batched form is :mod:`ag_uav.engine.spray_batched`). The job itself (application, energy model,
-sorties) is planned before the flight by :mod:`ag_uav.world.spray_job`, whose docstring has the
-physics."""
+"""The spray job's loop part: the tank, mass and energy of one flight (:class:`Sprayer`). The job
+itself (application, energy model, sorties) is planned before the flight by
+:mod:`ag_uav.world.spray_job`, whose docstring has the physics.
+
+:class:`Sprayer` holds one flight's setup and state, sets the liquid body's mass and inertia
+(:meth:`Sprayer._set_mass`) and reports (:meth:`Sprayer.summary`, :meth:`Sprayer.series`). The
+per-tick law (sortie table, nozzle gating by height, flow, tank, power, energy, state of charge,
+records) is written once, in :func:`ag_uav.engine.spray_batched._spray_kernel`, which
+:class:`~ag_uav.engine.spray_batched.BatchSprayer` runs over N Sprayers (one vehicle is a batch
+of one). The independent reference of that tick is ``tests/oracles/sprayer_ref.py``."""
 
 from __future__ import annotations
 
@@ -16,8 +22,12 @@ from ..world.spray_job import TANK_HALF, SprayJob, liquid_l_per_m, rotor_power_c
 
 
 class Sprayer:
-    """Per-tick tank, mass and energy of a spray job (one object per flight; see the module
-    docstring). ``step`` is called once per control tick after the cascade."""
+    """Tank, mass and energy of a spray job (one object per flight; see the module docstring).
+
+    ``cascade`` receives the composite mass and inertia (``cascade.mass``,
+    ``cascade.attitude.J``) whenever the liquid mass is set; ``data`` (a ``MjData``, or
+    ``None``) is kept for the per-tick reference in ``tests/oracles``, which reads the actuator
+    states from it. :class:`~ag_uav.engine.spray_batched.BatchSprayer` advances it per tick."""
 
     def __init__(self, cfg: Config, veh, data, cascade, tab: dict[str, np.ndarray],
                  job: SprayJob, n_ticks: int, dt: float, log: Any = None):
@@ -89,76 +99,6 @@ class Sprayer:
         self.cascade.mass = total
         self.cascade.attitude.J = (Ix + li[0] + dz2, Iy + li[1] + dz2, Iz + li[2])
         self.mass_set = m_liq
-
-    def step(self, k: int, t: float, pz: float, vx: float, vy: float, spray_ref: bool,
-             f: list[float]) -> tuple[list[float], bool]:
-        """One control tick: (rotor commands, nozzles on). On the ground at the base the motors
-        are off and the controller is reset; the first tick of a sortie refills and swaps."""
-        s = self.sortie[k]
-        if s != self.cur:
-            if self.cur >= 0:
-                self._close_sortie(t)
-            self.cur = s
-            if s > 0:  # refilled and a fresh battery at the base
-                self.tank = self.job.fill_l
-                self.energy_j = 0.0
-                self._set_mass(self.tank * self.rho)
-            self.per.append({"sortie": s + 1, "t_takeoff_s": t, "litres": 0.0, "energy_j": 0.0,
-                             "min_soc": 1.0, "ran_dry_s": None, "t_land_s": None})
-        if self.ground[k]:
-            self.cascade.reset()
-            f = [0.0, 0.0, 0.0, 0.0]
-            per = self.per[-1]
-            if per["t_land_s"] is None:
-                per["t_land_s"] = t
-        on = False
-        if spray_ref:
-            if self.tank <= 0.0:
-                self.dry_s += self.dt
-                if self.per[-1]["ran_dry_s"] is None:
-                    self.per[-1]["ran_dry_s"] = t
-            elif self.h_min < pz < self.h_max:
-                on = True
-            else:
-                self.gated_s += self.dt
-        if on:
-            dv = self.lpm * math.sqrt(vx * vx + vy * vy) * self.dt
-            if dv > self.tank:
-                dv = self.tank
-            self.tank -= dv
-            self.litres_total += dv
-            self.per[-1]["litres"] += dv
-            m_liq = self.tank * self.rho
-            if self.mass_set - m_liq >= 1e-3 or self.tank <= 0.0:
-                self._set_mass(m_liq)
-        # electrical power of the actual rotor thrusts (actuator states after the motor lag)
-        p = self.p_av
-        kp = self.k_p
-        for a in self.data.act.tolist():
-            if a > 0.0:
-                p += kp * a * math.sqrt(a)
-        if self.ground[k]:
-            p = 0.0  # powered down for the swap
-        e = p * self.dt
-        self.energy_j += e
-        self.energy_total_j += e
-        self.per[-1]["energy_j"] += e
-        soc = 1.0 - self.energy_j / self.cap_j
-        if soc < self.per[-1]["min_soc"]:
-            self.per[-1]["min_soc"] = soc
-        self.rec_tank[k] = self.tank
-        self.rec_mass[k] = self.dry + self.tank * self.rho
-        self.rec_power[k] = p
-        self.rec_soc[k] = soc
-        self.rec_on[k] = on
-        log = self.log
-        if log is not None and t >= self._next_log and hasattr(log, "spray_state"):
-            self._next_log = t + 0.1 - 1e-9
-            log.spray_state(t, tank_l=self.tank, mass_kg=self.dry + self.tank * self.rho,
-                            flow_lps=self.lpm * math.sqrt(vx * vx + vy * vy) if on else 0.0,
-                            nozzles=on, power_w=p, energy_wh=self.energy_total_j / 3600.0,
-                            soc=soc, sortie=s + 1, ground=self.ground[k])
-        return f, on
 
     def _close_sortie(self, t: float) -> None:
         per = self.per[-1]

@@ -39,6 +39,15 @@ states; :func:`process_noise_psd` derives their noise from the ``[imu]`` figures
 ``imu.model = "ideal"`` keeps the earlier idealisation for comparison: the mean acceleration over
 the control period (finite difference of the true world-frame velocity) plus white noise
 ``σ_vib``, the true attitude and no gyro errors.
+
+**Where the law lives** (issue 17: each law written once). The error sequences are drawn in
+blocks from the vehicle's own Generator: :func:`imu_error_block` (bias walk + white noise, six
+axes) and :func:`gauss_markov_block` (``δθ``). The per-tick law is a compiled row function,
+:func:`imu_row` (``f̃ = f + e_k``) and :func:`attitude_row` (``R̂ = Exp(δθ_k) R``, Rodrigues),
+which :class:`ImuSensor` / :class:`AttitudeError` call on their own one-row arrays (a batch of
+one) and the loops over rows :func:`imu_rows` / :func:`attitude_rows` (run by
+:mod:`ag_uav.vehicle.sensors_batched`) call row by row. The independent reference is
+``tests/oracles/imu_ref.py``.
 """
 
 from __future__ import annotations
@@ -49,11 +58,24 @@ import numpy as np
 
 from ..config import ImuConfig
 
+try:  # numba is a dependency; without it the row functions run as plain Python (slowly)
+    from numba import njit
+    from numba.extending import register_jitable
+except ImportError:  # pragma: no cover
+    def njit(*args, **kwargs):
+        return args[0] if args and callable(args[0]) else (lambda f: f)
+
+    def register_jitable(f):
+        return f
+
 G = 9.81
 UG = 1e-6 * G                # one micro-g in m/s²
 DEG = math.pi / 180.0
 
-__all__ = ["AttitudeError", "ImuSensor", "accel_sigma", "gyro_sigma", "process_noise_psd"]
+__all__ = ["AttitudeError", "ImuSensor", "accel_sigma", "attitude_row", "attitude_rows",
+           "block_used_up",
+           "gauss_markov_block", "gyro_sigma", "imu_error_block", "imu_row", "imu_rows",
+           "process_noise_psd", "rows_need"]
 
 
 def accel_sigma(cfg: ImuConfig, rate_hz: float) -> float:
@@ -103,8 +125,22 @@ def process_noise_psd(cfg: ImuConfig, rate_hz: float, bias_states: bool = False,
     return max(sa * sa * dt + 2.0 * tau * (sb * sb + srw2 + st * st), 1e-8), 0.0, bias_var0
 
 
-def _gauss_markov_block(rng: np.random.Generator, x0: np.ndarray, n: int, phi: float,
-                        sigma: np.ndarray) -> np.ndarray:
+def imu_error_block(rng: np.random.Generator, bias: np.ndarray, n: int, sigma_rw: np.ndarray,
+                    sigma_white: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The next ``n`` samples of the six IMU errors (accel m/s², gyro rad/s), from ``rng``.
+
+    ``e_k = b_k + σ_white ξ'_k`` with the bias walk ``b_k+1 = b_k + σ_rw ξ_k`` started at
+    ``bias`` (``σ_rw`` already holds the √dt). Draws ``n × 6`` steps, then ``n × 6`` white
+    numbers. Returns ``(e (n, 6), the bias after the block, b_k (n, 6))``.
+    """
+    steps = rng.standard_normal((n, 6)) * sigma_rw
+    b = bias + np.cumsum(steps, axis=0) - steps   # the bias in force at sample k
+    white = rng.standard_normal((n, 6)) * sigma_white
+    return b + white, b[-1] + steps[-1], b
+
+
+def gauss_markov_block(rng: np.random.Generator, x0: np.ndarray, n: int, phi: float,
+                       sigma: np.ndarray) -> np.ndarray:
     """``n`` steps of ``x_k+1 = φ x_k + σ √(1−φ²) ξ`` (exact discretisation), rows k = 1..n."""
     from scipy.signal import lfilter
 
@@ -113,12 +149,106 @@ def _gauss_markov_block(rng: np.random.Generator, x0: np.ndarray, n: int, phi: f
     return out
 
 
+@register_jitable
+def block_used_up(ist: np.ndarray, i: int) -> bool:
+    """Row ``i`` has no unread sample left (``ist[i] = (next sample, samples buffered)``)."""
+    return ist[i, 0] >= ist[i, 1]
+
+
+@njit(cache=True)
+def imu_row(f: np.ndarray, w: np.ndarray, err: np.ndarray, ist: np.ndarray, i: int,
+            f_out: np.ndarray, w_out: np.ndarray) -> None:
+    """One IMU sample of row ``i``: ``f_out[i] = f[i] + e_k[:3]``, ``w_out[i] = w[i] + e_k[3:]``
+    with ``k = ist[i, 0]``, the next unread error of ``err[i]`` (the caller refills first when
+    :func:`block_used_up`)."""
+    k = ist[i, 0]
+    ist[i, 0] = k + 1
+    for j in range(3):
+        f_out[i, j] = f[i, j] + err[i, k, j]
+        w_out[i, j] = w[i, j] + err[i, k, 3 + j]
+
+
+@njit(cache=True)
+def attitude_row(R: np.ndarray, dth: np.ndarray, ist: np.ndarray, i: int, out: np.ndarray,
+                 last: np.ndarray) -> None:
+    """One attitude estimate of row ``i``: ``out[i] = Exp(δθ_k) R[i]`` (row-major 3×3, ``Exp`` by
+    Rodrigues about the world axes), ``last[i] = δθ_k``, ``k = ist[i, 0]`` the next unread
+    sample of ``dth[i]`` (the caller refills first when :func:`block_used_up`)."""
+    k = ist[i, 0]
+    ist[i, 0] = k + 1
+    x0 = dth[i, k, 0]
+    x1 = dth[i, k, 1]
+    x2 = dth[i, k, 2]
+    last[i, 0] = x0
+    last[i, 1] = x1
+    last[i, 2] = x2
+    th = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    ths = th if th > 1e-12 else 1.0
+    kx = x0 / ths
+    ky = x1 / ths
+    kz = x2 / ths
+    s = math.sin(th)
+    c = math.cos(th)
+    v = 1.0 - c
+    E = ((c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s),
+         (ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s),
+         (kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v))
+    for r in range(3):
+        er = E[r]
+        for col in range(3):
+            out[i, 3 * r + col] = (er[0] * R[i, col] + er[1] * R[i, 3 + col]
+                                   + er[2] * R[i, 6 + col])
+
+
+# ---- the loops of ag_uav.vehicle.sensors_batched over rows live here, beside the row law:
+# numba's cache of a function is renewed only when its own file changes.
+
+
+@njit(cache=True)
+def rows_need(active: np.ndarray, ist: np.ndarray) -> int:
+    """Number of active rows whose sample buffer is used up (ist[:, 0] = next, [:, 1] = len)."""
+    need = 0
+    for i in range(ist.shape[0]):
+        if active[i] and block_used_up(ist, i):
+            need += 1
+    return need
+
+
+@njit(cache=True)
+def imu_rows(f: np.ndarray, w: np.ndarray, active: np.ndarray, err: np.ndarray,
+             ist: np.ndarray, f_out: np.ndarray, w_out: np.ndarray) -> int:
+    """:func:`imu_row` of every active row; returns 0, or (nothing done) the number of active
+    rows whose block is used up."""
+    need = rows_need(active, ist)
+    if need:
+        return need
+    for i in range(f.shape[0]):
+        if active[i]:
+            imu_row(f, w, err, ist, i, f_out, w_out)
+    return 0
+
+
+@njit(cache=True)
+def attitude_rows(R: np.ndarray, active: np.ndarray, dth: np.ndarray, ist: np.ndarray,
+                  out: np.ndarray, last: np.ndarray) -> int:
+    """:func:`attitude_row` of every active row; returns 0, or (nothing done) the number of
+    active rows whose block is used up."""
+    need = rows_need(active, ist)
+    if need:
+        return need
+    for i in range(R.shape[0]):
+        if active[i]:
+            attitude_row(R, dth, ist, i, out, last)
+    return 0
+
+
 class ImuSensor:
     """MEMS accelerometer + gyro errors on MuJoCo's exact readings (module docstring).
 
     ``measure(f, w)`` takes the noiseless specific force and body rate (3-sequences) and returns
-    the measured ones as lists. Errors are drawn in blocks of ``block`` samples from one
-    Generator (``seed``), so a run's IMU depends only on its seed.
+    the measured ones as lists (:func:`imu_row` on this sensor's one-row arrays). Errors are
+    drawn in blocks of ``block`` samples (:func:`imu_error_block`) from one Generator
+    (``seed``), so a run's IMU depends only on its seed.
     """
 
     def __init__(self, cfg: ImuConfig, rate_hz: float, seed: np.random.SeedSequence | int,
@@ -133,43 +263,46 @@ class ImuSensor:
         self.sigma_rw = rw * math.sqrt(self.dt)
         self.bias0 = self.rng.standard_normal(6) * np.array(
             [cfg.accel_bias_mg * 1e-3 * G] * 3 + [cfg.gyro_bias_dps * DEG] * 3)
-        self._bias = self.bias0.copy()
-        self._err: list[list[float]] = []
-        self._i = 0
+        self._bias = self.bias0.copy()                  # the bias after the buffered block
+        self._err = np.zeros((1, block, 6))             # the buffered errors e_k
+        self._ist = np.zeros((1, 2), dtype=np.int64)    # next sample, samples buffered
+        self._io = np.zeros((4, 1, 3))                  # f, w in; f, w out
+        self._last_bias_block = np.zeros((0, 6))
         self.bias_log: list[np.ndarray] = []   # the bias at the start of every block
 
     def _refill(self) -> None:
         n = self.block
-        steps = self.rng.standard_normal((n, 6)) * self.sigma_rw
-        bias = self._bias + np.cumsum(steps, axis=0) - steps   # bias in force at sample k
-        self._bias = bias[-1] + steps[-1]
+        err, self._bias, bias = imu_error_block(self.rng, self._bias, n, self.sigma_rw,
+                                                self.sigma_white)
         self.bias_log.append(bias[0].copy())
-        white = self.rng.standard_normal((n, 6)) * self.sigma_white
         self._last_bias_block = bias
-        self._err = (bias + white).tolist()
-        self._i = 0
+        self._err[0, :n] = err
+        self._ist[0] = 0, n
 
     def measure(self, f, w) -> tuple[list[float], list[float]]:
-        if self._i >= len(self._err):
+        if block_used_up(self._ist, 0):
             self._refill()
-        e = self._err[self._i]
-        self._i += 1
-        return ([f[0] + e[0], f[1] + e[1], f[2] + e[2]],
-                [w[0] + e[3], w[1] + e[4], w[2] + e[5]])
+        io = self._io
+        io[0, 0] = f
+        io[1, 0] = w
+        imu_row(io[0], io[1], self._err, self._ist, 0, io[2], io[3])
+        return io[2, 0].tolist(), io[3, 0].tolist()
 
     @property
     def bias(self) -> np.ndarray:
         """The bias (accel m/s², gyro rad/s) of the last sample returned."""
-        if not self._err:
+        if self._ist[0, 1] == 0:
             return self.bias0.copy()
-        return self._last_bias_block[max(self._i - 1, 0)].copy()
+        return self._last_bias_block[max(int(self._ist[0, 0]) - 1, 0)].copy()
 
 
 class AttitudeError:
     """The attitude estimate ``R̂ = Exp(δθ) · R`` with a Gauss–Markov ``δθ`` (module docstring).
 
-    ``apply(R)`` takes a row-major 3×3 rotation as a 9-sequence and returns ``R̂`` the same way;
-    ``last`` is the last ``δθ`` (rad, about the world x, y (tilt) and z (yaw) axes).
+    ``apply(R)`` takes a row-major 3×3 rotation as a 9-sequence and returns ``R̂`` the same way
+    (:func:`attitude_row` on this object's one-row arrays); ``last`` is the last ``δθ`` (rad,
+    about the world x, y (tilt) and z (yaw) axes). ``δθ`` is drawn in blocks of ``block``
+    samples (:func:`gauss_markov_block`).
     """
 
     def __init__(self, cfg: ImuConfig, rate_hz: float, seed: np.random.SeedSequence | int,
@@ -179,39 +312,26 @@ class AttitudeError:
         self.phi = math.exp(-1.0 / (rate_hz * cfg.attitude_error_tau_s))
         self.block = block
         self._x = self.rng.standard_normal(3) * self.sigma     # stationary start
-        self._rot: list[list[float]] = []
-        self._dth: np.ndarray | None = None
-        self._i = 0
-        self.last = self._x.copy()
+        self._dth = np.zeros((1, block, 3))                    # the buffered δθ_k
+        self._ist = np.zeros((1, 2), dtype=np.int64)           # next sample, samples buffered
+        self._last = self._x.copy()[None, :]
+        self._io = np.zeros((2, 1, 9))                         # R in, R̂ out
+
+    @property
+    def last(self) -> np.ndarray:
+        """The last ``δθ`` (rad, world x, y, z; the stationary start before the first apply)."""
+        return self._last[0].copy()
 
     def _refill(self) -> None:
-        x = _gauss_markov_block(self.rng, self._x, self.block, self.phi, self.sigma)
+        x = gauss_markov_block(self.rng, self._x, self.block, self.phi, self.sigma)
         self._x = x[-1].copy()
-        self._dth = x
-        # Exp(δθ) by Rodrigues, row-major, for the whole block
-        th = np.linalg.norm(x, axis=1)
-        th_s = np.where(th > 1e-12, th, 1.0)
-        k = x / th_s[:, None]
-        s, c = np.sin(th), np.cos(th)
-        kx, ky, kz = k[:, 0], k[:, 1], k[:, 2]
-        v = 1.0 - c
-        E = np.stack([c + kx * kx * v, kx * ky * v - kz * s, kx * kz * v + ky * s,
-                      ky * kx * v + kz * s, c + ky * ky * v, ky * kz * v - kx * s,
-                      kz * kx * v - ky * s, kz * ky * v + kx * s, c + kz * kz * v], axis=1)
-        self._rot = E.tolist()
-        self._i = 0
+        self._dth[0, :self.block] = x
+        self._ist[0] = 0, self.block
 
     def apply(self, R) -> tuple[float, ...]:
-        if self._i >= len(self._rot):
+        if block_used_up(self._ist, 0):
             self._refill()
-        E = self._rot[self._i]
-        self.last = self._dth[self._i]
-        self._i += 1
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = E
-        e0, e1, e2, e3, e4, e5, e6, e7, e8 = R
-        return (r0 * e0 + r1 * e3 + r2 * e6, r0 * e1 + r1 * e4 + r2 * e7,
-                r0 * e2 + r1 * e5 + r2 * e8,
-                r3 * e0 + r4 * e3 + r5 * e6, r3 * e1 + r4 * e4 + r5 * e7,
-                r3 * e2 + r4 * e5 + r5 * e8,
-                r6 * e0 + r7 * e3 + r8 * e6, r6 * e1 + r7 * e4 + r8 * e7,
-                r6 * e2 + r7 * e5 + r8 * e8)
+        io = self._io
+        io[0, 0] = R
+        attitude_row(io[0], self._dth, self._ist, 0, io[1], self._last)
+        return tuple(io[1, 0].tolist())

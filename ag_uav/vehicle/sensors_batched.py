@@ -1,33 +1,46 @@
 """Batched wind + drag, MEMS IMU and attitude-error models for the lockstep engine.
 
 The lockstep engine advances ``N`` missions at once (leading batch axis ``N``) at the control
-rate.  This module holds, for the whole batch, the per-tick sensor/disturbance models that
-:func:`ag_uav.engine.missions.fly_reference` runs per vehicle:
+rate.  This module runs, for the whole batch, the per-tick sensor/disturbance models of
+:mod:`ag_uav.engine.loop`:
 
-* :class:`BatchWind` -- :class:`ag_uav.world.wind.Wind` (mean wind + Dryden turbulence, exact
-  discretisation, coefficient refresh when V or h drift by ``rel_tol``) and the drag force
-  ``F = -c_lin r - c_quad |r| r``, ``r = v - w`` (:func:`ag_uav.world.wind.drag_force`);
-* :class:`BatchImu` -- :class:`ag_uav.vehicle.imu.ImuSensor` (turn-on bias + random walk + white
-noise);
-* :class:`BatchAttitudeError` -- :class:`ag_uav.vehicle.imu.AttitudeError` (``R_hat = Exp(dtheta)
-R``,
-  world-frame Gauss-Markov ``dtheta``).
+* :class:`BatchWind` -- ``N`` :class:`ag_uav.world.wind.Wind` (mean wind + Dryden turbulence)
+  and the drag force ``F = -c_lin r - c_quad |r| r``, ``r = v - w``;
+* :class:`BatchImu` -- ``N`` :class:`ag_uav.vehicle.imu.ImuSensor` (turn-on bias + random walk
+  + white noise);
+* :class:`BatchAttitudeError` -- ``N`` :class:`ag_uav.vehicle.imu.AttitudeError`
+  (``R_hat = Exp(dtheta) R``, world-frame Gauss-Markov ``dtheta``).
 
-The equations are those of the scalar classes (see their docstrings); nothing is re-modelled.
+Where the laws live (issue 17: each law written once).  Nothing is modelled here: each law is
+one compiled row function, which the per-vehicle object calls on its own one-row arrays and a
+loop over rows, beside it, calls row by row --
+
+* wind: :func:`ag_uav.world.wind.wind_row` (over :func:`~ag_uav.world.wind.gust_row`, the
+  Dryden filters and their coefficient refresh), looped by :func:`~ag_uav.world.wind.wind_rows`
+  and :func:`~ag_uav.world.wind.wind_drag_rows`; drag: :func:`ag_uav.world.wind.drag_axis`;
+* IMU: :func:`ag_uav.vehicle.imu.imu_row` (looped by :func:`~ag_uav.vehicle.imu.imu_rows`) on
+  the errors of :func:`ag_uav.vehicle.imu.imu_error_block`;
+* attitude error: :func:`ag_uav.vehicle.imu.attitude_row` (looped by
+  :func:`~ag_uav.vehicle.imu.attitude_rows`) on the ``dtheta`` of
+  :func:`ag_uav.vehicle.imu.gauss_markov_block`.
+
+This module adds the batch: the row state of ``N`` vehicles stacked, the refills, ``active``
+and the engine's per-tick entry points (:meth:`BatchWind.step_drag`, :meth:`BatchImu.measure`,
+:meth:`BatchAttitudeError.apply`).  The independent references the laws are tested against are
+in ``tests/oracles/``.
 
 Reproducibility contract
 ------------------------
-Every vehicle keeps its **own** numpy Generator -- the one of the scalar object the batch was
-built from (shared, not copied).  Random numbers are drawn per vehicle, in the same blocks, in
-the same order and at the same tick as the scalar class draws them (a block is refilled lazily,
-on the first tick that needs it, and only for a vehicle that is active that tick).  So a
-vehicle's outputs depend only on its own Generator: they equal the scalar class's (to rounding;
-in practice bit for bit with glibc's libm) and are bit-identical alone or in any batch.  The
-per-tick arithmetic runs in ``numba`` kernels (``@njit(cache=True)``, no fastmath) that loop
-over the rows independently.
+Every vehicle keeps its **own** numpy Generator -- the one of the per-vehicle object the batch
+was built from (shared, not copied).  Random numbers are drawn per vehicle, in the same blocks,
+in the same order and at the same tick as the per-vehicle object draws them (a block is refilled
+lazily, on the first tick that needs it, and only for a vehicle that is active that tick).  So a
+vehicle's outputs depend only on its own Generator: they equal the per-vehicle object's bit for
+bit (the same compiled row function on the same numbers) and are bit-identical alone or in any
+batch.  The kernels (``@njit(cache=True)``, no fastmath) loop over the rows independently.
 
-Once a batch is built from scalar objects, those objects must not be stepped any more (they
-share the Generators; their own state is left where it was).
+Once a batch is built from per-vehicle objects, those objects must not be stepped any more
+(they share the Generators; their own state is left where it was).
 
 Outputs are written into arrays owned by the batch and returned; they are overwritten on the
 next call (copy them to keep them).  Inputs must be float64 numpy arrays of the documented
@@ -50,261 +63,32 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
 from ..world.wind import (
-    H_MAX_M,
-    H_MIN_M,
-    V_MIN,
+    WF_LU,
+    WF_LW,
+    WF_MX,
+    WF_MY,
+    WI_TURB,
     Wind,
-    _second_order_coeffs,
-    dryden_parameters,
+    drag_rows,
+    refill_row,
+    wind_drag_rows,
+    wind_rows,
 )
-from .imu import AttitudeError, ImuSensor, _gauss_markov_block
+from .imu import (
+    AttitudeError,
+    ImuSensor,
+    attitude_rows,
+    gauss_markov_block,
+    imu_error_block,
+    imu_rows,
+)
 
 __all__ = ["BatchAttitudeError", "BatchImu", "BatchWind", "drag"]
 
 F64 = NDArray[np.float64]
-
-_SQRT3_2 = math.sqrt(3.0) / 2.0
-
-# ---- BatchWind float state columns (one row per vehicle)
-_V, _H, _DT, _TOLV, _TOLH, _SU, _SW, _A, _B = range(9)
-_VC = 9       # 7 coefficients (f11, f12, f21, f22, l11, l21, l22) of the lateral filter
-_WC = 16      # 7 coefficients of the vertical filter
-_LU, _LW, _RELTOL, _W20 = 23, 24, 25, 26
-_Z = 27       # 5 filter states zu, zv1, zv2, zw1, zw2
-_EX, _EY, _MX, _MY = 32, 33, 34, 35
-_NF = 36
-# ---- BatchWind int state columns
-_I, _LEN, _TURB, _BLOCK = range(4)
-
-
-# ============================================================================ numba kernels
-
-
-@njit(cache=True)
-def _second_order_into(theta: float, fs: np.ndarray, i: int, c: int) -> None:
-    """:func:`ag_uav.world.wind._second_order_coeffs` (the same function, compiled) written into
-    ``fs[i, c:c+7]``."""
-    co = _second_order_coeffs(theta)
-    for j in range(7):
-        fs[i, c + j] = co[j]
-
-
-@njit(cache=True)
-def _update_row(fs: np.ndarray, i: int, dt: float, h: float, V: float) -> None:
-    """:meth:`ag_uav.world.wind.DrydenTurbulence._update` for row ``i`` (h already clamped)."""
-    su, sw, l_u, l_w, _ = dryden_parameters(fs[i, _W20], h)
-    fs[i, _SU] = su
-    fs[i, _SW] = sw
-    fs[i, _LU] = l_u
-    fs[i, _LW] = l_w
-    theta_u = V * dt / l_u
-    fs[i, _A] = math.exp(-theta_u)
-    fs[i, _B] = math.sqrt(-math.expm1(-2.0 * theta_u))
-    _second_order_into(theta_u, fs, i, _VC)
-    _second_order_into(V * dt / l_w, fs, i, _WC)
-    fs[i, _V] = V
-    fs[i, _H] = h
-    fs[i, _DT] = dt
-    fs[i, _TOLV] = fs[i, _RELTOL] * V
-    fs[i, _TOLH] = fs[i, _RELTOL] * h
-
-
-@njit(cache=True)
-def _wind_row(fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, i: int, dt: float,
-              altitude: float, airspeed: float, out: np.ndarray) -> None:
-    """:meth:`ag_uav.world.wind.Wind.step` for row ``i`` (the buffer holds >= 5 unread normals)."""
-    if ist[i, _TURB] == 0:
-        out[i, 0] = fs[i, _MX]
-        out[i, 1] = fs[i, _MY]
-        out[i, 2] = 0.0
-        return
-    V = airspeed if airspeed > V_MIN else V_MIN
-    h = altitude if altitude > H_MIN_M else H_MIN_M
-    if h > H_MAX_M:
-        h = H_MAX_M
-    if (abs(V - fs[i, _V]) > fs[i, _TOLV] or abs(h - fs[i, _H]) > fs[i, _TOLH]
-            or dt != fs[i, _DT]):
-        _update_row(fs, i, dt, h, V)
-    k = ist[i, _I]
-    n0 = buf[i, k]
-    n1 = buf[i, k + 1]
-    n2 = buf[i, k + 2]
-    n3 = buf[i, k + 3]
-    n4 = buf[i, k + 4]
-    ist[i, _I] = k + 5
-    zu = fs[i, _A] * fs[i, _Z] + fs[i, _B] * n0
-    z1 = fs[i, _Z + 1]
-    z2 = fs[i, _Z + 2]
-    c = _VC
-    zv1 = fs[i, c] * z1 + fs[i, c + 1] * z2 + fs[i, c + 4] * n1
-    zv2 = fs[i, c + 2] * z1 + fs[i, c + 3] * z2 + fs[i, c + 5] * n1 + fs[i, c + 6] * n2
-    z1 = fs[i, _Z + 3]
-    z2 = fs[i, _Z + 4]
-    c = _WC
-    zw1 = fs[i, c] * z1 + fs[i, c + 1] * z2 + fs[i, c + 4] * n3
-    zw2 = fs[i, c + 2] * z1 + fs[i, c + 3] * z2 + fs[i, c + 5] * n3 + fs[i, c + 6] * n4
-    fs[i, _Z] = zu
-    fs[i, _Z + 1] = zv1
-    fs[i, _Z + 2] = zv2
-    fs[i, _Z + 3] = zw1
-    fs[i, _Z + 4] = zw2
-    su = fs[i, _SU]
-    u = su * zu
-    v = su * (0.5 * zv1 + _SQRT3_2 * zv2)
-    w = fs[i, _SW] * (0.5 * zw1 + _SQRT3_2 * zw2)
-    ex = fs[i, _EX]
-    ey = fs[i, _EY]
-    out[i, 0] = fs[i, _MX] + u * ex - v * ey
-    out[i, 1] = fs[i, _MY] + u * ey + v * ex
-    out[i, 2] = w
-
-
-@njit(cache=True)
-def _wind_need(active: np.ndarray, ist: np.ndarray) -> int:
-    """Number of active turbulent rows whose buffer cannot serve this tick."""
-    need = 0
-    for i in range(ist.shape[0]):
-        if active[i] and ist[i, _TURB] != 0 and ist[i, _I] + 5 > ist[i, _LEN]:
-            need += 1
-    return need
-
-
-@njit(cache=True)
-def _wind_kernel(dt: float, altitude: np.ndarray, airspeed: np.ndarray, active: np.ndarray,
-                 fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, out: np.ndarray) -> int:
-    need = _wind_need(active, ist)
-    if need:
-        return need
-    for i in range(fs.shape[0]):
-        if active[i]:
-            _wind_row(fs, ist, buf, i, dt, altitude[i], airspeed[i], out)
-    return 0
-
-
-@njit(cache=True)
-def _wind_drag_kernel(dt: float, z: np.ndarray, v: np.ndarray, c_lin: np.ndarray,
-                      c_quad: np.ndarray, active: np.ndarray, fs: np.ndarray, ist: np.ndarray,
-                      buf: np.ndarray, out: np.ndarray, force: np.ndarray) -> int:
-    need = _wind_need(active, ist)
-    if need:
-        return need
-    for i in range(fs.shape[0]):
-        if not active[i]:
-            continue
-        vx = v[i, 0]
-        vy = v[i, 1]
-        vz = v[i, 2]
-        pz = z[i]
-        ax = vx - fs[i, _MX]
-        ay = vy - fs[i, _MY]
-        _wind_row(fs, ist, buf, i, dt, pz if pz > 0.0 else 0.0, math.sqrt(ax * ax + ay * ay),
-                  out)
-        rx = vx - out[i, 0]
-        ry = vy - out[i, 1]
-        rz = vz - out[i, 2]
-        force[i, 0] = -c_lin[i, 0] * rx - c_quad[i, 0] * abs(rx) * rx
-        force[i, 1] = -c_lin[i, 1] * ry - c_quad[i, 1] * abs(ry) * ry
-        force[i, 2] = -c_lin[i, 2] * rz - c_quad[i, 2] * abs(rz) * rz
-    return 0
-
-
-@njit(cache=True)
-def _drag_kernel(v: np.ndarray, wind: np.ndarray, c_lin: np.ndarray, c_quad: np.ndarray,
-                 out: np.ndarray) -> None:
-    for i in range(v.shape[0]):
-        for j in range(3):
-            r = v[i, j] - wind[i, j]
-            out[i, j] = -c_lin[i, j] * r - c_quad[i, j] * abs(r) * r
-
-
-@njit(cache=True)
-def _rows_need(active: np.ndarray, ist: np.ndarray) -> int:
-    """Number of active rows whose sample buffer is used up (ist[:, 0] = next, [:, 1] = len)."""
-    need = 0
-    for i in range(ist.shape[0]):
-        if active[i] and ist[i, 0] >= ist[i, 1]:
-            need += 1
-    return need
-
-
-@njit(cache=True)
-def _imu_kernel(f: np.ndarray, w: np.ndarray, active: np.ndarray, err: np.ndarray,
-                ist: np.ndarray, f_out: np.ndarray, w_out: np.ndarray) -> int:
-    need = _rows_need(active, ist)
-    if need:
-        return need
-    for i in range(f.shape[0]):
-        if not active[i]:
-            continue
-        k = ist[i, 0]
-        ist[i, 0] = k + 1
-        f_out[i, 0] = f[i, 0] + err[i, k, 0]
-        f_out[i, 1] = f[i, 1] + err[i, k, 1]
-        f_out[i, 2] = f[i, 2] + err[i, k, 2]
-        w_out[i, 0] = w[i, 0] + err[i, k, 3]
-        w_out[i, 1] = w[i, 1] + err[i, k, 4]
-        w_out[i, 2] = w[i, 2] + err[i, k, 5]
-    return 0
-
-
-@njit(cache=True)
-def _att_kernel(R: np.ndarray, active: np.ndarray, dth: np.ndarray, ist: np.ndarray,
-                out: np.ndarray, last: np.ndarray) -> int:
-    need = _rows_need(active, ist)
-    if need:
-        return need
-    for i in range(R.shape[0]):
-        if not active[i]:
-            continue
-        k = ist[i, 0]
-        ist[i, 0] = k + 1
-        x0 = dth[i, k, 0]
-        x1 = dth[i, k, 1]
-        x2 = dth[i, k, 2]
-        last[i, 0] = x0
-        last[i, 1] = x1
-        last[i, 2] = x2
-        # Exp(dtheta) by Rodrigues, as AttitudeError._refill
-        th = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
-        ths = th if th > 1e-12 else 1.0
-        kx = x0 / ths
-        ky = x1 / ths
-        kz = x2 / ths
-        s = math.sin(th)
-        c = math.cos(th)
-        vv = 1.0 - c
-        r0 = c + kx * kx * vv
-        r1 = kx * ky * vv - kz * s
-        r2 = kx * kz * vv + ky * s
-        r3 = ky * kx * vv + kz * s
-        r4 = c + ky * ky * vv
-        r5 = ky * kz * vv - kx * s
-        r6 = kz * kx * vv - ky * s
-        r7 = kz * ky * vv + kx * s
-        r8 = c + kz * kz * vv
-        e0 = R[i, 0]
-        e1 = R[i, 1]
-        e2 = R[i, 2]
-        e3 = R[i, 3]
-        e4 = R[i, 4]
-        e5 = R[i, 5]
-        e6 = R[i, 6]
-        e7 = R[i, 7]
-        e8 = R[i, 8]
-        out[i, 0] = r0 * e0 + r1 * e3 + r2 * e6
-        out[i, 1] = r0 * e1 + r1 * e4 + r2 * e7
-        out[i, 2] = r0 * e2 + r1 * e5 + r2 * e8
-        out[i, 3] = r3 * e0 + r4 * e3 + r5 * e6
-        out[i, 4] = r3 * e1 + r4 * e4 + r5 * e7
-        out[i, 5] = r3 * e2 + r4 * e5 + r5 * e8
-        out[i, 6] = r6 * e0 + r7 * e3 + r8 * e6
-        out[i, 7] = r6 * e1 + r7 * e4 + r8 * e7
-        out[i, 8] = r6 * e2 + r7 * e5 + r8 * e8
-    return 0
 
 
 # ============================================================================ classes
@@ -332,7 +116,7 @@ def drag(v: F64, wind: F64, c_lin: F64, c_quad: F64, out: F64 | None = None) -> 
     """
     if out is None:
         out = np.empty((v.shape[0], 3))
-    _drag_kernel(v, wind, c_lin, c_quad, out)
+    drag_rows(v, wind, c_lin, c_quad, out)
     return out
 
 
@@ -340,7 +124,9 @@ class BatchWind:
     """``N`` :class:`ag_uav.world.wind.Wind` objects stepped together (module docstring).
 
     Build with :meth:`from_winds`.  ``mean`` is the mean wind ``(N, 3)`` (ENU, m/s),
-    ``turbulent`` a bool ``(N,)`` (False: the vehicle's wind is its mean, no draws).
+    ``turbulent`` a bool ``(N,)`` (False: the vehicle's wind is its mean, no draws).  Row ``i``
+    of the state is ``winds[i]``'s wind row (:mod:`ag_uav.world.wind`), stepped by the same
+    :func:`~ag_uav.world.wind.wind_row`.
     """
 
     def __init__(self, fs: F64, ist: NDArray[np.int64], buf: F64,
@@ -353,67 +139,40 @@ class BatchWind:
         self.n = n
         self._ones = np.ones(n, dtype=np.bool_)
         self.mean: F64 = np.zeros((n, 3))
-        self.mean[:, 0] = fs[:, _MX]
-        self.mean[:, 1] = fs[:, _MY]
-        self.turbulent: NDArray[np.bool_] = ist[:, _TURB] != 0
+        self.mean[:, 0] = fs[:, WF_MX]
+        self.mean[:, 1] = fs[:, WF_MY]
+        self.turbulent: NDArray[np.bool_] = ist[:, WI_TURB] != 0
         self.wind: F64 = self.mean.copy()   # last output (N, 3)
         self.force: F64 = np.zeros((n, 3))  # last drag force of step_drag (N, 3)
 
     @classmethod
     def from_winds(cls, winds: Sequence[Wind]) -> BatchWind:
-        """Take over ``winds`` (their current state and Generators; do not step them after)."""
+        """Take over ``winds`` (their current rows, copied, and their Generators, shared; do not
+        step them after)."""
         _nonempty(winds, "BatchWind.from_winds")
         n = len(winds)
-        fs = np.zeros((n, _NF))
-        ist = np.zeros((n, 4), dtype=np.int64)
-        rngs: list[np.random.Generator | None] = []
-        blocks = [w.turbulence._block if w.turbulence is not None else 0 for w in winds]
-        buf = np.zeros((n, max(max(blocks), 5)))
+        fs = np.concatenate([w._fs for w in winds])
+        ist = np.concatenate([w._ist for w in winds])
+        buf = np.zeros((n, max(max(w._buf.shape[1] for w in winds), 5)))
         for i, w in enumerate(winds):
-            fs[i, _EX], fs[i, _EY] = w._ex, w._ey
-            fs[i, _MX], fs[i, _MY] = w.mean[0], w.mean[1]
-            fs[i, _W20] = w.w20
-            t = w.turbulence
-            if t is None:
-                rngs.append(None)
-                continue
-            rngs.append(t.rng)
-            ist[i, _TURB] = 1
-            ist[i, _BLOCK] = t._block
-            fs[i, _RELTOL] = t.rel_tol
-            fs[i, _V], fs[i, _H], fs[i, _DT] = t._V, t._h, t._dt
-            fs[i, _TOLV], fs[i, _TOLH] = t._tolV, t._toll
-            fs[i, _SU], fs[i, _SW], fs[i, _A], fs[i, _B] = t._su, t._sw, t._a, t._b
-            fs[i, _VC:_VC + 7] = t._v_coef
-            fs[i, _WC:_WC + 7] = t._w_coef
-            fs[i, _LU], fs[i, _LW] = t.L_u, t.L_w
-            fs[i, _Z:_Z + 5] = (t._zu, t._zv1, t._zv2, t._zw1, t._zw2)
-            m = len(t._buf)
-            if m > buf.shape[1]:
-                buf = np.concatenate([buf, np.zeros((n, m - buf.shape[1]))], axis=1)
-            buf[i, :m] = t._buf
-            ist[i, _I], ist[i, _LEN] = t._i, m
+            buf[i, :w._buf.shape[1]] = w._buf[0]
+        rngs = [w.turbulence.rng if w.turbulence is not None else None for w in winds]
         return cls(fs, ist, buf, rngs)
 
     @property
     def L_u(self) -> F64:
         """Current longitudinal/lateral scale length per vehicle (m; 0 before the first step)."""
-        return self._fs[:, _LU].copy()
+        return self._fs[:, WF_LU].copy()
 
     @property
     def L_w(self) -> F64:
         """Current vertical scale length per vehicle (m)."""
-        return self._fs[:, _LW].copy()
+        return self._fs[:, WF_LW].copy()
 
     def _refill(self, active: NDArray[np.bool_]) -> None:
-        """DrydenTurbulence._refill for the active turbulent rows whose buffer is used up."""
-        ist = self._ist
-        rows = np.flatnonzero(active & self.turbulent & (ist[:, _I] + 5 > ist[:, _LEN]))
-        for i in rows:
-            m = int(ist[i, _BLOCK])
-            self._buf[i, :m] = self._rngs[i].standard_normal(m)
-            ist[i, _I] = 0
-            ist[i, _LEN] = m
+        """:func:`~ag_uav.world.wind.refill_row` for the active rows that need draws."""
+        for i in np.flatnonzero(active & self.turbulent):
+            refill_row(self._rngs[i], self._ist, self._buf, int(i))
 
     def step(self, dt: float, altitude: F64, airspeed: F64,
              active: NDArray[np.bool_] | None = None) -> F64:
@@ -421,19 +180,19 @@ class BatchWind:
 
         Row ``i`` is ``winds[i].step(dt, altitude[i], airspeed[i])``; ``altitude`` and
         ``airspeed`` are ``(N,)`` float64 (height above ground, speed relative to the air for
-        the frozen-turbulence time scales -- ``fly_reference`` passes ``max(pz, 0)`` and the
-        horizontal speed relative to the *mean* wind).
+        the frozen-turbulence time scales -- the engine passes ``max(pz, 0)`` and the
+        horizontal speed relative to the *mean* wind, see :meth:`step_drag`).
         """
         act = _active(active, self._ones)
         dt = float(dt)
-        while _wind_kernel(dt, altitude, airspeed, act, self._fs, self._ist, self._buf,
+        while wind_rows(dt, altitude, airspeed, act, self._fs, self._ist, self._buf,
                            self.wind):
             self._refill(act)
         return self.wind
 
     def step_drag(self, dt: float, z: F64, v: F64, c_lin: F64, c_quad: F64,
                   active: NDArray[np.bool_] | None = None) -> tuple[F64, F64]:
-        """Wind step and drag force in one kernel, exactly as ``fly_reference`` does per tick.
+        """Wind step and drag force in one kernel, as the engine needs them per tick.
 
         ``z`` ``(N,)``: height; ``v`` ``(N, 3)``: world velocity; ``c_lin``, ``c_quad``
         ``(N, 3)``: drag coefficients.  Uses altitude ``max(z, 0)``, airspeed
@@ -443,61 +202,10 @@ class BatchWind:
         """
         act = _active(active, self._ones)
         dt = float(dt)
-        while _wind_drag_kernel(dt, z, v, c_lin, c_quad, act, self._fs, self._ist, self._buf,
+        while wind_drag_rows(dt, z, v, c_lin, c_quad, act, self._fs, self._ist, self._buf,
                                 self.wind, self.force):
             self._refill(act)
         return self.wind, self.force
-
-    def _step_numpy(self, dt: float, altitude: F64, airspeed: F64,
-                    active: NDArray[np.bool_] | None = None) -> F64:
-        """The same step with numpy array operations instead of the kernel (for comparison;
-        coefficient refreshes are done per row in Python)."""
-        act = _active(active, self._ones)
-        fs, ist = self._fs, self._ist
-        self._refill(act)
-        V = np.where(airspeed > V_MIN, airspeed, V_MIN)
-        h = np.minimum(np.where(altitude > H_MIN_M, altitude, H_MIN_M), H_MAX_M)
-        run = act & self.turbulent
-        upd = run & ((np.abs(V - fs[:, _V]) > fs[:, _TOLV]) | (np.abs(h - fs[:, _H])
-                                                               > fs[:, _TOLH])
-                     | (dt != fs[:, _DT]))
-        for i in np.flatnonzero(upd):
-            su, sw, l_u, l_w, _ = dryden_parameters(fs[i, _W20], float(h[i]))
-            theta_u = V[i] * dt / l_u
-            fs[i, [_SU, _SW, _LU, _LW]] = su, sw, l_u, l_w
-            fs[i, _A] = math.exp(-theta_u)
-            fs[i, _B] = math.sqrt(-math.expm1(-2.0 * theta_u))
-            fs[i, _VC:_VC + 7] = _second_order_coeffs(theta_u)
-            fs[i, _WC:_WC + 7] = _second_order_coeffs(V[i] * dt / l_w)
-            fs[i, [_V, _H, _DT]] = V[i], h[i], dt
-            fs[i, _TOLV] = fs[i, _RELTOL] * V[i]
-            fs[i, _TOLH] = fs[i, _RELTOL] * h[i]
-        rows = np.flatnonzero(run)
-        k = ist[rows, _I]
-        nn = self._buf[rows[:, None], k[:, None] + np.arange(5)]
-        ist[rows, _I] = k + 5
-        f = fs[rows]
-        z = f[:, _Z:_Z + 5]
-        vc, wc = f[:, _VC:_VC + 7], f[:, _WC:_WC + 7]
-        zu = f[:, _A] * z[:, 0] + f[:, _B] * nn[:, 0]
-        zv1 = vc[:, 0] * z[:, 1] + vc[:, 1] * z[:, 2] + vc[:, 4] * nn[:, 1]
-        zv2 = vc[:, 2] * z[:, 1] + vc[:, 3] * z[:, 2] + vc[:, 5] * nn[:, 1] + vc[:, 6] * nn[:, 2]
-        zw1 = wc[:, 0] * z[:, 3] + wc[:, 1] * z[:, 4] + wc[:, 4] * nn[:, 3]
-        zw2 = wc[:, 2] * z[:, 3] + wc[:, 3] * z[:, 4] + wc[:, 5] * nn[:, 3] + wc[:, 6] * nn[:, 4]
-        fs[rows, _Z:_Z + 5] = np.stack([zu, zv1, zv2, zw1, zw2], axis=1)
-        su = f[:, _SU]
-        u = su * zu
-        v = su * (0.5 * zv1 + _SQRT3_2 * zv2)
-        w = f[:, _SW] * (0.5 * zw1 + _SQRT3_2 * zw2)
-        ex, ey = f[:, _EX], f[:, _EY]
-        out = self.wind
-        out[rows, 0] = f[:, _MX] + u * ex - v * ey
-        out[rows, 1] = f[:, _MY] + u * ey + v * ex
-        out[rows, 2] = w
-        calm = act & ~self.turbulent
-        out[calm, :2] = self.mean[calm, :2]
-        out[calm, 2] = 0.0
-        return out
 
 
 class BatchImu:
@@ -516,13 +224,11 @@ class BatchImu:
         self._sigma_white = np.stack([s.sigma_white for s in imus])
         self._bias = np.stack([s._bias for s in imus])        # bias after the buffered block
         self.bias0: F64 = np.stack([s.bias0 for s in imus])
-        width = max(int(self._block.max()), max(len(s._err) for s in imus), 1)
+        width = max(int(self._block.max()), max(s._err.shape[1] for s in imus), 1)
         self._err = np.zeros((n, width, 6))
-        self._ist = np.zeros((n, 2), dtype=np.int64)           # next sample, samples buffered
+        self._ist = np.concatenate([s._ist for s in imus])     # next sample, samples buffered
         for i, s in enumerate(imus):
-            if s._err:
-                self._err[i, :len(s._err)] = s._err
-            self._ist[i] = s._i, len(s._err)
+            self._err[i, :s._err.shape[1]] = s._err[0]
         self._ones = np.ones(n, dtype=np.bool_)
         self.f_meas: F64 = np.zeros((n, 3))
         self.w_meas: F64 = np.zeros((n, 3))
@@ -533,16 +239,13 @@ class BatchImu:
         return cls(imus)
 
     def _refill(self, active: NDArray[np.bool_]) -> None:
-        """ImuSensor._refill (same draws and operations) for the rows that need it."""
+        """:func:`~ag_uav.vehicle.imu.imu_error_block` for the rows whose block is used up."""
         ist = self._ist
         for i in np.flatnonzero(active & (ist[:, 0] >= ist[:, 1])):
             n = int(self._block[i])
-            rng = self._rngs[i]
-            steps = rng.standard_normal((n, 6)) * self._sigma_rw[i]
-            bias = self._bias[i] + np.cumsum(steps, axis=0) - steps
-            self._bias[i] = bias[-1] + steps[-1]
-            white = rng.standard_normal((n, 6)) * self._sigma_white[i]
-            self._err[i, :n] = bias + white
+            err, self._bias[i], _ = imu_error_block(self._rngs[i], self._bias[i], n,
+                                                    self._sigma_rw[i], self._sigma_white[i])
+            self._err[i, :n] = err
             ist[i] = 0, n
 
     def measure(self, f: F64, w: F64,
@@ -552,7 +255,7 @@ class BatchImu:
         ``f``, ``w``: MuJoCo's exact readings ``(N, 3)`` (accelerometer, gyro sensordata).
         """
         act = _active(active, self._ones)
-        while _imu_kernel(f, w, act, self._err, self._ist, self.f_meas, self.w_meas):
+        while imu_rows(f, w, act, self._err, self._ist, self.f_meas, self.w_meas):
             self._refill(act)
         return self.f_meas, self.w_meas
 
@@ -572,14 +275,12 @@ class BatchAttitudeError:
         self._phi = np.array([e.phi for e in errs])
         self._sigma = np.stack([e.sigma for e in errs])
         self._x = np.stack([e._x for e in errs])
-        width = max(int(self._block.max()), max(len(e._rot) for e in errs), 1)
+        width = max(int(self._block.max()), max(e._dth.shape[1] for e in errs), 1)
         self._dth = np.zeros((n, width, 3))
-        self._ist = np.zeros((n, 2), dtype=np.int64)
+        self._ist = np.concatenate([e._ist for e in errs])
         for i, e in enumerate(errs):
-            if e._rot:
-                self._dth[i, :len(e._rot)] = e._dth
-            self._ist[i] = e._i, len(e._rot)
-        self.last: F64 = np.stack([np.asarray(e.last, dtype=float) for e in errs])
+            self._dth[i, :e._dth.shape[1]] = e._dth[0]
+        self.last: F64 = np.concatenate([e._last for e in errs])
         self._ones = np.ones(n, dtype=np.bool_)
         self.R_hat: F64 = np.zeros((n, 9))
 
@@ -589,11 +290,12 @@ class BatchAttitudeError:
         return cls(errs)
 
     def _refill(self, active: NDArray[np.bool_]) -> None:
+        """:func:`~ag_uav.vehicle.imu.gauss_markov_block` for the rows whose block is used up."""
         ist = self._ist
         for i in np.flatnonzero(active & (ist[:, 0] >= ist[:, 1])):
             n = int(self._block[i])
-            x = _gauss_markov_block(self._rngs[i], self._x[i].copy(), n, float(self._phi[i]),
-                                    self._sigma[i])
+            x = gauss_markov_block(self._rngs[i], self._x[i].copy(), n, float(self._phi[i]),
+                                   self._sigma[i])
             self._x[i] = x[-1]
             self._dth[i, :n] = x
             ist[i] = 0, n
@@ -601,7 +303,7 @@ class BatchAttitudeError:
     def apply(self, R: F64, active: NDArray[np.bool_] | None = None) -> F64:
         """``R_hat = Exp(dtheta) R`` per vehicle; ``R`` and the result are row-major ``(N, 9)``."""
         act = _active(active, self._ones)
-        while _att_kernel(R, act, self._dth, self._ist, self.R_hat, self.last):
+        while attitude_rows(R, act, self._dth, self._ist, self.R_hat, self.last):
             self._refill(act)
         return self.R_hat
 
@@ -645,8 +347,6 @@ def _bench_one(n: int, ticks: int) -> dict[str, float]:
         lambda k: bw2.step(0.01, alt_jump[k], spd[k]), ticks)
     bw3 = winds()
     res["wind.step_drag"] = _timed(lambda k: bw3.step_drag(0.01, alt[k], vel[k], cl, cq), ticks)
-    bw4 = winds()
-    res["wind numpy"] = _timed(lambda k: bw4._step_numpy(0.01, alt[k], spd[k]), ticks)
     cfg = ImuConfig()
     imu = BatchImu.from_sensors([ImuSensor(cfg, 100.0, i) for i in range(n)])
     f = rng.standard_normal((n, 3))

@@ -46,9 +46,23 @@ of the mean wind and sigma_u ~ 20 % at 3 m, 14 % at 30 m), which is the physical
 for a low-flying drone and the recommended default when turbulence is wanted.  A float gives an
 explicit W20 in m/s; ``"none"`` (or 0) disables turbulence.
 
-Speed: :meth:`DrydenTurbulence.step` uses plain Python floats, caches the discretisation (recomputed
-only when V or h drift by more than ``rel_tol`` relative, or dt changes), and draws Gaussian
-numbers from the Generator in blocks.  Typical cost is a few microseconds per call.
+Where the law lives (issue 17: each law written once)
+-----------------------------------------------------
+One vehicle's wind is one **row** of state: ``fs[i]`` (float columns ``WF_*``: the cached
+discretisation, the five filter states, the mean wind and its direction), ``ist[i]`` (int
+columns ``WI_*``: read position and length of the draw buffer, turbulence on, block size) and
+``buf[i]`` (the buffered standard normals).  The per-tick law is :func:`wind_row` (mean wind +
+rotated gusts) over :func:`gust_row` (clamps, coefficient refresh by :func:`_refresh_row` when
+V or h drift by more than ``rel_tol`` relative or dt changes, the exact discretised filters),
+numba-compiled (``cache=True``, no fastmath).  :meth:`Wind.step` and
+:meth:`DrydenTurbulence.step` call them on their own one-row arrays (a batch of one);
+:class:`ag_uav.vehicle.sensors_batched.BatchWind` runs the loops over rows below
+(:func:`wind_rows`, :func:`wind_drag_rows`), which call the same functions.  The
+drag law is :func:`drag_axis` (one axis), used by :func:`drag_force` and the batch kernels.
+Gaussian numbers come from the vehicle's Generator in blocks of ``block`` (5 per tick, refilled
+by :func:`refill_row` only when fewer than 5 are left), so a vehicle's wind depends only on its
+Generator.  The independent reference (plain Python, from the formulas above) is
+``tests/oracles/wind_ref.py``.
 """
 
 from __future__ import annotations
@@ -58,9 +72,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-try:  # plain Python functions that numba kernels may also call (ag_uav.vehicle.sensors_batched)
+try:  # numba is a dependency; without it the row functions run as plain Python (slowly)
+    from numba import njit
     from numba.extending import register_jitable
 except ImportError:  # pragma: no cover
+    def njit(*args, **kwargs):
+        return args[0] if args and callable(args[0]) else (lambda f: f)
+
     def register_jitable(f):
         return f
 
@@ -70,8 +88,15 @@ __all__ = [
     "TURBULENCE_PRESETS_W20",
     "DrydenTurbulence",
     "Wind",
+    "drag_axis",
     "drag_force",
     "dryden_parameters",
+    "drag_rows",
+    "gust_row",
+    "refill_row",
+    "wind_drag_rows",
+    "wind_row",
+    "wind_rows",
 ]
 
 M_PER_FT = 0.3048
@@ -90,6 +115,18 @@ H_MIN_M = 3.0
 H_MAX_M = 1000.0 * M_PER_FT
 V_MIN = 1.0
 _SQRT3_2 = math.sqrt(3.0) / 2.0
+
+# ---- the wind row: float columns of fs[i] (one row per vehicle)
+WF_V, WF_H, WF_DT, WF_TOLV, WF_TOLH, WF_SU, WF_SW, WF_A, WF_B = range(9)  # cached V, h, dt ...
+WF_VC = 9         # 7 coefficients (f11, f12, f21, f22, l11, l21, l22) of the lateral filter
+WF_WC = 16        # 7 coefficients of the vertical filter
+WF_LU, WF_LW, WF_RELTOL, WF_W20 = 23, 24, 25, 26
+WF_Z = 27         # 5 filter states zu, zv1, zv2, zw1, zw2 (unit stationary variance)
+WF_EX, WF_EY, WF_MX, WF_MY = 32, 33, 34, 35  # downwind unit vector, mean wind (ENU)
+WF_N = 36
+# ---- int columns of ist[i]: next unread normal, normals buffered, turbulence on, block size
+WI_I, WI_LEN, WI_TURB, WI_BLOCK = range(4)
+WI_N = 4
 
 
 @register_jitable
@@ -150,6 +187,201 @@ def _second_order_coeffs(theta: float) -> tuple[float, float, float, float, floa
     return f11, f12, f21, f22, l11, l21, l22
 
 
+@register_jitable
+def drag_axis(r: float, c_lin: float, c_quad: float) -> float:
+    """Drag on one world axis, ``F = -c_lin r - c_quad |r| r`` (``r``: velocity relative to the
+    air on that axis; N s/m and N s^2/m^2)."""
+    return -c_lin * r - c_quad * abs(r) * r
+
+
+# ============================================================================ the row law
+
+
+@njit(cache=True)
+def _refresh_row(fs: np.ndarray, i: int, dt: float, h: float, V: float) -> None:
+    """Recompute row ``i``'s cached discretisation at (dt, h, V) (h, V already clamped)."""
+    su, sw, l_u, l_w, _ = dryden_parameters(fs[i, WF_W20], h)
+    fs[i, WF_SU] = su
+    fs[i, WF_SW] = sw
+    fs[i, WF_LU] = l_u
+    fs[i, WF_LW] = l_w
+    theta_u = V * dt / l_u
+    fs[i, WF_A] = math.exp(-theta_u)
+    fs[i, WF_B] = math.sqrt(-math.expm1(-2.0 * theta_u))
+    co = _second_order_coeffs(theta_u)  # L_v = L_u
+    for j in range(7):
+        fs[i, WF_VC + j] = co[j]
+    co = _second_order_coeffs(V * dt / l_w)
+    for j in range(7):
+        fs[i, WF_WC + j] = co[j]
+    fs[i, WF_V] = V
+    fs[i, WF_H] = h
+    fs[i, WF_DT] = dt
+    fs[i, WF_TOLV] = fs[i, WF_RELTOL] * V
+    fs[i, WF_TOLH] = fs[i, WF_RELTOL] * h
+
+
+@njit(cache=True)
+def gust_row(fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, i: int, dt: float,
+             altitude: float, airspeed: float) -> tuple[float, float, float]:
+    """Advance row ``i``'s Dryden filters by ``dt``; the gust ``(u, v, w)`` (m/s, mean-wind frame).
+
+    Clamps V to >= 1 m/s and h to [3 m, 1000 ft], refreshes the discretisation when V or h
+    moved by more than ``rel_tol`` relative or dt changed, and reads the next 5 normals of
+    ``buf[i]`` (there must be 5 unread: :func:`refill_row` first).
+    """
+    V = airspeed if airspeed > V_MIN else V_MIN
+    h = altitude if altitude > H_MIN_M else H_MIN_M
+    if h > H_MAX_M:
+        h = H_MAX_M
+    if (abs(V - fs[i, WF_V]) > fs[i, WF_TOLV] or abs(h - fs[i, WF_H]) > fs[i, WF_TOLH]
+            or dt != fs[i, WF_DT]):
+        _refresh_row(fs, i, dt, h, V)
+    k = ist[i, WI_I]
+    n0 = buf[i, k]
+    n1 = buf[i, k + 1]
+    n2 = buf[i, k + 2]
+    n3 = buf[i, k + 3]
+    n4 = buf[i, k + 4]
+    ist[i, WI_I] = k + 5
+    zu = fs[i, WF_A] * fs[i, WF_Z] + fs[i, WF_B] * n0
+    z1 = fs[i, WF_Z + 1]
+    z2 = fs[i, WF_Z + 2]
+    c = WF_VC
+    zv1 = fs[i, c] * z1 + fs[i, c + 1] * z2 + fs[i, c + 4] * n1
+    zv2 = fs[i, c + 2] * z1 + fs[i, c + 3] * z2 + fs[i, c + 5] * n1 + fs[i, c + 6] * n2
+    z1 = fs[i, WF_Z + 3]
+    z2 = fs[i, WF_Z + 4]
+    c = WF_WC
+    zw1 = fs[i, c] * z1 + fs[i, c + 1] * z2 + fs[i, c + 4] * n3
+    zw2 = fs[i, c + 2] * z1 + fs[i, c + 3] * z2 + fs[i, c + 5] * n3 + fs[i, c + 6] * n4
+    fs[i, WF_Z] = zu
+    fs[i, WF_Z + 1] = zv1
+    fs[i, WF_Z + 2] = zv2
+    fs[i, WF_Z + 3] = zw1
+    fs[i, WF_Z + 4] = zw2
+    su = fs[i, WF_SU]
+    return (su * zu, su * (0.5 * zv1 + _SQRT3_2 * zv2),
+            fs[i, WF_SW] * (0.5 * zw1 + _SQRT3_2 * zw2))
+
+
+@njit(cache=True)
+def wind_row(fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, i: int, dt: float,
+             altitude: float, airspeed: float) -> tuple[float, float, float]:
+    """Row ``i``'s wind ``(wx, wy, wz)`` (m/s, ENU) for this tick: the mean wind, plus the gust
+    of :func:`gust_row` rotated from the mean-wind frame when turbulence is on
+    (``e_u = (ex, ey, 0)`` downwind, ``e_v = e_w x e_u = (-ey, ex, 0)``, ``e_w = (0, 0, 1)``)."""
+    if ist[i, WI_TURB] == 0:
+        return fs[i, WF_MX], fs[i, WF_MY], 0.0
+    u, v, w = gust_row(fs, ist, buf, i, dt, altitude, airspeed)
+    ex = fs[i, WF_EX]
+    ey = fs[i, WF_EY]
+    return fs[i, WF_MX] + u * ex - v * ey, fs[i, WF_MY] + u * ey + v * ex, w
+
+
+@register_jitable
+def needs_draws(ist: np.ndarray, i: int) -> bool:
+    """Row ``i`` is turbulent and has fewer than 5 unread normals (its next step needs a block)."""
+    return ist[i, WI_TURB] != 0 and ist[i, WI_I] + 5 > ist[i, WI_LEN]
+
+
+def refill_row(rng: np.random.Generator, ist: np.ndarray, buf: np.ndarray, i: int) -> None:
+    """Draw row ``i``'s next block of ``ist[i, WI_BLOCK]`` standard normals into ``buf[i]`` when
+    :func:`needs_draws` (the Generator is touched only then; the unread rest is dropped)."""
+    if needs_draws(ist, i):
+        m = int(ist[i, WI_BLOCK])
+        buf[i, :m] = rng.standard_normal(m)
+        ist[i, WI_I] = 0
+        ist[i, WI_LEN] = m
+
+
+# ============================================================================ over a batch
+# The loops of ag_uav.vehicle.sensors_batched.BatchWind live here, beside the row law: numba's
+# cache of a function is renewed only when its own file changes.
+
+
+@njit(cache=True)
+def wind_rows_need(active: np.ndarray, ist: np.ndarray) -> int:
+    """Number of active rows whose draw buffer cannot serve this tick."""
+    need = 0
+    for i in range(ist.shape[0]):
+        if active[i] and needs_draws(ist, i):
+            need += 1
+    return need
+
+
+@njit(cache=True)
+def wind_rows(dt: float, altitude: np.ndarray, airspeed: np.ndarray, active: np.ndarray,
+              fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, out: np.ndarray) -> int:
+    """:func:`wind_row` of every active row into ``out`` (N, 3); returns 0, or (nothing done)
+    the number of active rows that need draws first (:func:`refill_row`)."""
+    need = wind_rows_need(active, ist)
+    if need:
+        return need
+    for i in range(fs.shape[0]):
+        if active[i]:
+            wx, wy, wz = wind_row(fs, ist, buf, i, dt, altitude[i], airspeed[i])
+            out[i, 0] = wx
+            out[i, 1] = wy
+            out[i, 2] = wz
+    return 0
+
+
+@njit(cache=True)
+def wind_drag_rows(dt: float, z: np.ndarray, v: np.ndarray, c_lin: np.ndarray,
+                   c_quad: np.ndarray, active: np.ndarray, fs: np.ndarray, ist: np.ndarray,
+                   buf: np.ndarray, out: np.ndarray, force: np.ndarray) -> int:
+    """:func:`wind_rows` at altitude ``max(z, 0)`` and airspeed ``|v_xy - mean_xy|`` (the
+    engine's per-tick inputs), and the drag ``force`` (N, 3) of ``r = v - wind``
+    (:func:`drag_axis`)."""
+    need = wind_rows_need(active, ist)
+    if need:
+        return need
+    for i in range(fs.shape[0]):
+        if not active[i]:
+            continue
+        vx = v[i, 0]
+        vy = v[i, 1]
+        vz = v[i, 2]
+        pz = z[i]
+        ax = vx - fs[i, WF_MX]
+        ay = vy - fs[i, WF_MY]
+        wx, wy, wz = wind_row(fs, ist, buf, i, dt, pz if pz > 0.0 else 0.0,
+                              math.sqrt(ax * ax + ay * ay))
+        out[i, 0] = wx
+        out[i, 1] = wy
+        out[i, 2] = wz
+        force[i, 0] = drag_axis(vx - wx, c_lin[i, 0], c_quad[i, 0])
+        force[i, 1] = drag_axis(vy - wy, c_lin[i, 1], c_quad[i, 1])
+        force[i, 2] = drag_axis(vz - wz, c_lin[i, 2], c_quad[i, 2])
+    return 0
+
+
+@njit(cache=True)
+def drag_rows(v: np.ndarray, wind: np.ndarray, c_lin: np.ndarray, c_quad: np.ndarray,
+              out: np.ndarray) -> None:
+    """:func:`drag_axis` of every row and axis: ``out = -c_lin r - c_quad |r| r``,
+    ``r = v - wind``."""
+    for i in range(v.shape[0]):
+        for j in range(3):
+            out[i, j] = drag_axis(v[i, j] - wind[i, j], c_lin[i, j], c_quad[i, j])
+
+
+def _new_row(w20: float, rel_tol: float, block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One wind row (``fs`` (1, WF_N), ``ist`` (1, WI_N), ``buf`` (1, block)) before its first
+    step: no discretisation cached, no normals buffered."""
+    fs = np.zeros((1, WF_N))
+    fs[0, WF_V] = fs[0, WF_H] = fs[0, WF_DT] = -1.0
+    fs[0, WF_RELTOL] = rel_tol
+    fs[0, WF_W20] = w20
+    ist = np.zeros((1, WI_N), dtype=np.int64)
+    ist[0, WI_BLOCK] = block
+    return fs, ist, np.zeros((1, block))
+
+
+# ============================================================================ per vehicle
+
+
 class DrydenTurbulence:
     """Dryden gust generator (MIL-F-8785C low altitude), exact discretisation.
 
@@ -161,17 +393,9 @@ class DrydenTurbulence:
 
     The state is kept in normalised units (unit stationary variance), so a change of altitude
     rescales the gusts immediately without a transient.  The initial state is drawn from the
-    stationary distribution.
+    stationary distribution.  The state is one wind row (module docstring); :meth:`step` is
+    :func:`gust_row` on it.
     """
-
-    __slots__ = (
-        "w20", "rng", "rel_tol", "_block", "_buf", "_i",
-        "_V", "_h", "_dt", "_tolV", "_toll",
-        "_su", "_sw", "_a", "_b",
-        "_v_coef", "_w_coef",
-        "_zu", "_zv1", "_zv2", "_zw1", "_zw2",
-        "L_u", "L_w",
-    )
 
     def __init__(
         self, w20: float, rng: np.random.Generator, rel_tol: float = 0.01, block: int = 5120
@@ -191,37 +415,20 @@ class DrydenTurbulence:
         self.w20 = float(w20)
         self.rng = rng
         self.rel_tol = float(rel_tol)
-        self._block = max(5, (int(block) // 5) * 5)
-        self._buf: list[float] = []
-        self._i = 0
-        self._V = -1.0
-        self._h = -1.0
-        self._dt = -1.0
-        self._tolV = 0.0
-        self._toll = 0.0
-        self._su = self._sw = 0.0
-        self._a = self._b = 0.0
-        self._v_coef = (0.0,) * 7
-        self._w_coef = (0.0,) * 7
-        self.L_u = self.L_w = 0.0
-        z = rng.standard_normal(5).tolist()
-        self._zu, self._zv1, self._zv2, self._zw1, self._zw2 = z
+        self.block = max(5, (int(block) // 5) * 5)
+        self._fs, self._ist, self._buf = _new_row(self.w20, self.rel_tol, self.block)
+        self._ist[0, WI_TURB] = 1
+        self._fs[0, WF_Z:WF_Z + 5] = rng.standard_normal(5)
 
-    def _refill(self) -> None:
-        self._buf = self.rng.standard_normal(self._block).tolist()
-        self._i = 0
+    @property
+    def L_u(self) -> float:
+        """Longitudinal (= lateral) scale length of the last step (m; 0 before the first)."""
+        return float(self._fs[0, WF_LU])
 
-    def _update(self, dt: float, h: float, V: float) -> None:
-        su, sw, l_u, l_w, h_used = dryden_parameters(self.w20, h)
-        self._su, self._sw, self.L_u, self.L_w = su, sw, l_u, l_w
-        theta_u = V * dt / l_u
-        self._a = math.exp(-theta_u)
-        self._b = math.sqrt(-math.expm1(-2.0 * theta_u))
-        self._v_coef = _second_order_coeffs(theta_u)  # L_v = L_u
-        self._w_coef = _second_order_coeffs(V * dt / l_w)
-        self._V, self._h, self._dt = V, h, dt
-        self._tolV = self.rel_tol * V
-        self._toll = self.rel_tol * h
+    @property
+    def L_w(self) -> float:
+        """Vertical scale length of the last step (m; 0 before the first)."""
+        return float(self._fs[0, WF_LW])
 
     def sigmas(self, altitude_m: float) -> tuple[float, float, float]:
         """Stationary stds (sigma_u, sigma_v, sigma_w) in m/s at ``altitude_m``."""
@@ -230,39 +437,9 @@ class DrydenTurbulence:
 
     def step(self, dt: float, altitude_m: float, airspeed_mps: float) -> tuple[float, float, float]:
         """Advance by ``dt`` seconds and return the gust ``(u, v, w)`` in m/s (mean-wind frame)."""
-        V = airspeed_mps if airspeed_mps > V_MIN else V_MIN
-        h = altitude_m if altitude_m > H_MIN_M else H_MIN_M
-        if h > H_MAX_M:
-            h = H_MAX_M
-        if abs(V - self._V) > self._tolV or abs(h - self._h) > self._toll or dt != self._dt:
-            self._update(dt, h, V)
-        i = self._i
-        if i + 5 > len(self._buf):
-            self._refill()
-            i = 0
-        buf = self._buf
-        n0 = buf[i]
-        n1 = buf[i + 1]
-        n2 = buf[i + 2]
-        n3 = buf[i + 3]
-        n4 = buf[i + 4]
-        self._i = i + 5
-        zu = self._a * self._zu + self._b * n0
-        f11, f12, f21, f22, l11, l21, l22 = self._v_coef
-        z1, z2 = self._zv1, self._zv2
-        zv1 = f11 * z1 + f12 * z2 + l11 * n1
-        zv2 = f21 * z1 + f22 * z2 + l21 * n1 + l22 * n2
-        f11, f12, f21, f22, l11, l21, l22 = self._w_coef
-        z1, z2 = self._zw1, self._zw2
-        zw1 = f11 * z1 + f12 * z2 + l11 * n3
-        zw2 = f21 * z1 + f22 * z2 + l21 * n3 + l22 * n4
-        self._zu, self._zv1, self._zv2, self._zw1, self._zw2 = zu, zv1, zv2, zw1, zw2
-        su = self._su
-        return (
-            su * zu,
-            su * (0.5 * zv1 + _SQRT3_2 * zv2),
-            self._sw * (0.5 * zw1 + _SQRT3_2 * zw2),
-        )
+        refill_row(self.rng, self._ist, self._buf, 0)
+        return gust_row(self._fs, self._ist, self._buf, 0, float(dt), float(altitude_m),
+                        float(airspeed_mps))
 
 
 class Wind:
@@ -280,7 +457,9 @@ class Wind:
 
     ``step(dt, altitude_m, airspeed_mps)`` returns ``(wx, wy, wz)`` in m/s, ENU, where
     ``altitude_m`` is height above ground and ``airspeed_mps`` the vehicle speed relative to the
-    air (used for the frozen-turbulence time scaling; floored at 1 m/s).
+    air (used for the frozen-turbulence time scaling; floored at 1 m/s).  The state is one wind
+    row (module docstring; shared with ``turbulence`` when it is on); ``step`` is
+    :func:`wind_row` on it.
     """
 
     def __init__(
@@ -297,37 +476,13 @@ class Wind:
             )
         if not math.isfinite(direction_deg):
             raise ValueError(f"Wind: direction_deg = {direction_deg!r} is invalid; must be finite")
-        if isinstance(turbulence, str):
-            key = turbulence.strip().lower()
-            if key == "mean":
-                w20 = float(mean_speed)
-            elif key in TURBULENCE_PRESETS_W20:
-                w20 = TURBULENCE_PRESETS_W20[key]
-            else:
-                allowed = ", ".join(repr(k) for k in [*TURBULENCE_PRESETS_W20, "mean"])
-                raise ValueError(
-                    f"Wind: turbulence = {turbulence!r} is invalid; allowed: {allowed} "
-                    "or a float W20 in m/s"
-                )
-        else:
-            w20 = float(turbulence)
-            if not (math.isfinite(w20) and w20 >= 0.0):
-                raise ValueError(
-                    f"Wind: turbulence = {turbulence!r} is invalid; an explicit W20 must be "
-                    "finite and >= 0 (m/s)"
-                )
+        w20 = _w20(turbulence, mean_speed)
         self.mean_speed = float(mean_speed)
         self.direction_deg = float(direction_deg)
         self.w20 = w20
         d = math.radians(direction_deg)
-        # downwind unit vector (where the air goes), ENU
-        self._ex = -math.sin(d)
-        self._ey = -math.cos(d)
-        self.mean: tuple[float, float, float] = (
-            self.mean_speed * self._ex,
-            self.mean_speed * self._ey,
-            0.0,
-        )
+        ex, ey = -math.sin(d), -math.cos(d)  # downwind unit vector (where the air goes), ENU
+        self.mean: tuple[float, float, float] = (self.mean_speed * ex, self.mean_speed * ey, 0.0)
         self.turbulence: DrydenTurbulence | None = None
         if w20 > 0.0:
             if rng is None:
@@ -335,6 +490,12 @@ class Wind:
                     "Wind: rng = None is invalid when turbulence is on; pass a Generator"
                 )
             self.turbulence = DrydenTurbulence(w20, rng, rel_tol=rel_tol)
+            t = self.turbulence
+            self._fs, self._ist, self._buf = t._fs, t._ist, t._buf
+        else:
+            self._fs, self._ist, self._buf = _new_row(w20, float(rel_tol), 0)
+        self._fs[0, WF_EX], self._fs[0, WF_EY] = ex, ey
+        self._fs[0, WF_MX], self._fs[0, WF_MY] = self.mean[0], self.mean[1]
 
     def sigmas(self, altitude_m: float) -> tuple[float, float, float]:
         """Gust stds (sigma_u, sigma_v, sigma_w) at ``altitude_m`` (zeros without turbulence)."""
@@ -344,15 +505,32 @@ class Wind:
 
     def step(self, dt: float, altitude_m: float, airspeed_mps: float) -> tuple[float, float, float]:
         """Advance by ``dt`` and return the wind velocity ``(wx, wy, wz)`` (m/s, ENU)."""
-        turb = self.turbulence
-        if turb is None:
-            return self.mean
-        u, v, w = turb.step(dt, altitude_m, airspeed_mps)
-        ex = self._ex
-        ey = self._ey
-        mx, my, _ = self.mean
-        # e_u = (ex, ey, 0), e_v = e_w x e_u = (-ey, ex, 0), e_w = (0, 0, 1)
-        return (mx + u * ex - v * ey, my + u * ey + v * ex, w)
+        if self.turbulence is not None:
+            refill_row(self.turbulence.rng, self._ist, self._buf, 0)
+        return wind_row(self._fs, self._ist, self._buf, 0, float(dt), float(altitude_m),
+                        float(airspeed_mps))
+
+
+def _w20(turbulence: str | float, mean_speed: float) -> float:
+    """W20 (m/s) of the ``turbulence`` setting of :class:`Wind`."""
+    if isinstance(turbulence, str):
+        key = turbulence.strip().lower()
+        if key == "mean":
+            return float(mean_speed)
+        if key in TURBULENCE_PRESETS_W20:
+            return TURBULENCE_PRESETS_W20[key]
+        allowed = ", ".join(repr(k) for k in [*TURBULENCE_PRESETS_W20, "mean"])
+        raise ValueError(
+            f"Wind: turbulence = {turbulence!r} is invalid; allowed: {allowed} "
+            "or a float W20 in m/s"
+        )
+    w20 = float(turbulence)
+    if not (math.isfinite(w20) and w20 >= 0.0):
+        raise ValueError(
+            f"Wind: turbulence = {turbulence!r} is invalid; an explicit W20 must be "
+            "finite and >= 0 (m/s)"
+        )
+    return w20
 
 
 def drag_force(
@@ -363,25 +541,14 @@ def drag_force(
 ) -> tuple[float, float, float]:
     """Aerodynamic drag on the vehicle, per world axis.
 
-    ``F_i = -c_lin_i * r_i - c_quad_i * |r_i| * r_i`` with ``r = v - v_wind`` the velocity relative
-    to the air (component-wise magnitude, so each axis has its own effective area).  Coefficients
-    are scalars or 3-sequences (N s/m and N s^2/m^2) and are set by the vehicle config, not here.
-    A steady wind on a hovering vehicle (v = 0) gives ``F = c_lin w + c_quad |w| w``, pushing it
-    downwind.
+    ``F_i = -c_lin_i * r_i - c_quad_i * |r_i| * r_i`` (:func:`drag_axis`) with ``r = v - v_wind``
+    the velocity relative to the air (component-wise magnitude, so each axis has its own
+    effective area).  Coefficients are scalars or 3-sequences (N s/m and N s^2/m^2) and are set
+    by the vehicle config, not here.  A steady wind on a hovering vehicle (v = 0) gives
+    ``F = c_lin w + c_quad |w| w``, pushing it downwind.
     """
-    if isinstance(c_d_lin, (int, float)):
-        cl0 = cl1 = cl2 = float(c_d_lin)
-    else:
-        cl0, cl1, cl2 = (float(c) for c in c_d_lin)
-    if isinstance(c_d_quad, (int, float)):
-        cq0 = cq1 = cq2 = float(c_d_quad)
-    else:
-        cq0, cq1, cq2 = (float(c) for c in c_d_quad)
-    r0 = float(v[0]) - float(v_wind[0])
-    r1 = float(v[1]) - float(v_wind[1])
-    r2 = float(v[2]) - float(v_wind[2])
-    return (
-        -cl0 * r0 - cq0 * abs(r0) * r0,
-        -cl1 * r1 - cq1 * abs(r1) * r1,
-        -cl2 * r2 - cq2 * abs(r2) * r2,
-    )
+    cl = [float(c_d_lin)] * 3 if isinstance(c_d_lin, (int, float)) else [float(c) for c in c_d_lin]
+    cq = ([float(c_d_quad)] * 3 if isinstance(c_d_quad, (int, float))
+          else [float(c) for c in c_d_quad])
+    f = [drag_axis(float(v[j]) - float(v_wind[j]), cl[j], cq[j]) for j in range(3)]
+    return f[0], f[1], f[2]
