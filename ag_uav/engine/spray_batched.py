@@ -64,6 +64,89 @@ F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
 
 
 @numba.njit(cache=True)
+def _sortie_row(i, s, par, st, ist):  # pragma: no cover
+    """A sortie change: close the last one, refill and a fresh battery, open the new one.
+    Returns the event flags."""
+    fl = F_CHANGE
+    if ist[i, I_CUR] >= 0:
+        fl |= F_CLOSE
+        st[i, C_LIT] = st[i, S_LIT]
+        st[i, C_EJ] = st[i, S_EJ]
+        st[i, C_MINSOC] = st[i, S_MINSOC]
+        st[i, C_RANDRY] = st[i, S_RANDRY]
+        st[i, C_TLAND] = st[i, S_TLAND]
+    ist[i, I_CUR] = s
+    if s > 0:
+        st[i, S_TANK] = par[i, P_FILL]
+        st[i, S_E] = 0.0
+        m = st[i, S_TANK] * par[i, P_RHO]
+        st[i, S_MREFILL] = m
+        st[i, S_MSET] = m
+        fl |= F_REFILL
+    st[i, S_LIT] = 0.0
+    st[i, S_EJ] = 0.0
+    st[i, S_MINSOC] = 1.0
+    st[i, S_RANDRY] = np.nan
+    st[i, S_TLAND] = np.nan
+    return fl
+
+
+@numba.njit(cache=True)
+def _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st):  # pragma: no cover
+    """The nozzles: the plan sprays, the tank is not empty, the height is within the band; the
+    flow per ground distance. Returns (on, event flags)."""
+    dt = par[i, P_DT]
+    on = False
+    if spray_ref[i]:
+        if st[i, S_TANK] <= 0.0:
+            st[i, S_DRY] += dt
+            if math.isnan(st[i, S_RANDRY]):
+                st[i, S_RANDRY] = t
+        elif par[i, P_HMIN] < pz[i] < par[i, P_HMAX]:
+            on = True
+        else:
+            st[i, S_GATED] += dt
+    if not on:
+        return False, 0
+    tank = st[i, S_TANK]
+    dv = par[i, P_LPM] * math.sqrt(vx[i] * vx[i] + vy[i] * vy[i]) * dt
+    if dv > tank:
+        dv = tank
+    tank -= dv
+    st[i, S_TANK] = tank
+    st[i, S_LTOT] += dv
+    st[i, S_LIT] += dv
+    m_liq = tank * par[i, P_RHO]
+    if st[i, S_MSET] - m_liq >= 1e-3 or tank <= 0.0:
+        st[i, S_MSET] = m_liq
+        st[i, S_MSPRAY] = m_liq
+        return True, F_MASS
+    return True, 0
+
+
+@numba.njit(cache=True)
+def _energy_row(i, g, act, par, st):  # pragma: no cover
+    """Electrical power of the actual rotor thrusts (zero on the ground), energy, state of
+    charge. Returns (power, state of charge)."""
+    p = par[i, P_PAV]
+    kp = par[i, P_KP]
+    for c in range(act.shape[1]):
+        a = act[i, c]
+        if a > 0.0:
+            p += kp * a * math.sqrt(a)
+    if g:
+        p = 0.0
+    e = p * par[i, P_DT]
+    st[i, S_E] += e
+    st[i, S_ETOT] += e
+    st[i, S_EJ] += e
+    soc = 1.0 - st[i, S_E] / par[i, P_CAP]
+    if soc < st[i, S_MINSOC]:
+        st[i, S_MINSOC] = soc
+    return p, soc
+
+
+@numba.njit(cache=True)
 def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab, rec, rec_on,
                   out):  # pragma: no cover
     """One control tick of the spray job for every active row: the per-tick law (module docstring;
@@ -73,8 +156,6 @@ def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab
     touching anything when tick ``k`` is outside active row i's tables. ``tab``: (2, total)
     sortie and ground tables; ``out``: (2, N) nozzles on and controller reset."""
     n = pz.shape[0]
-    nf = f.shape[1]
-    na = act.shape[1]
     for i in range(n):
         if active[i] and (k < 0 or k >= ist[i, I_LIM]):
             return -(i + 1)
@@ -86,81 +167,18 @@ def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab
         if not active[i]:
             continue
         j = ist[i, I_OFF] + k
-        fl = 0
-        # ---- sortie change: close the last one, refill and a fresh battery, open the new one
         s = tab[0, j]
-        if s != ist[i, I_CUR]:
-            fl |= F_CHANGE
-            if ist[i, I_CUR] >= 0:
-                fl |= F_CLOSE
-                st[i, C_LIT] = st[i, S_LIT]
-                st[i, C_EJ] = st[i, S_EJ]
-                st[i, C_MINSOC] = st[i, S_MINSOC]
-                st[i, C_RANDRY] = st[i, S_RANDRY]
-                st[i, C_TLAND] = st[i, S_TLAND]
-            ist[i, I_CUR] = s
-            if s > 0:
-                st[i, S_TANK] = par[i, P_FILL]
-                st[i, S_E] = 0.0
-                m = st[i, S_TANK] * par[i, P_RHO]
-                st[i, S_MREFILL] = m
-                st[i, S_MSET] = m
-                fl |= F_REFILL
-            st[i, S_LIT] = 0.0
-            st[i, S_EJ] = 0.0
-            st[i, S_MINSOC] = 1.0
-            st[i, S_RANDRY] = np.nan
-            st[i, S_TLAND] = np.nan
-        # ---- on the ground at the base: motors off, controller reset
+        fl = _sortie_row(i, s, par, st, ist) if s != ist[i, I_CUR] else 0
         g = tab[1, j] != 0
-        if g:
+        if g:  # on the ground at the base: motors off, controller reset
             out[1, i] = True
-            for c in range(nf):
+            for c in range(f.shape[1]):
                 f[i, c] = 0.0
             if math.isnan(st[i, S_TLAND]):
                 st[i, S_TLAND] = t
-        # ---- nozzles: the plan sprays, the tank is not empty, the height is within the band
-        dt = par[i, P_DT]
-        on = False
-        if spray_ref[i]:
-            if st[i, S_TANK] <= 0.0:
-                st[i, S_DRY] += dt
-                if math.isnan(st[i, S_RANDRY]):
-                    st[i, S_RANDRY] = t
-            elif par[i, P_HMIN] < pz[i] < par[i, P_HMAX]:
-                on = True
-            else:
-                st[i, S_GATED] += dt
-        if on:
-            tank = st[i, S_TANK]
-            dv = par[i, P_LPM] * math.sqrt(vx[i] * vx[i] + vy[i] * vy[i]) * dt
-            if dv > tank:
-                dv = tank
-            tank -= dv
-            st[i, S_TANK] = tank
-            st[i, S_LTOT] += dv
-            st[i, S_LIT] += dv
-            m_liq = tank * par[i, P_RHO]
-            if st[i, S_MSET] - m_liq >= 1e-3 or tank <= 0.0:
-                st[i, S_MSET] = m_liq
-                st[i, S_MSPRAY] = m_liq
-                fl |= F_MASS
-        # ---- electrical power of the actual rotor thrusts, energy, state of charge
-        p = par[i, P_PAV]
-        kp = par[i, P_KP]
-        for c in range(na):
-            a = act[i, c]
-            if a > 0.0:
-                p += kp * a * math.sqrt(a)
-        if g:
-            p = 0.0
-        e = p * dt
-        st[i, S_E] += e
-        st[i, S_ETOT] += e
-        st[i, S_EJ] += e
-        soc = 1.0 - st[i, S_E] / par[i, P_CAP]
-        if soc < st[i, S_MINSOC]:
-            st[i, S_MINSOC] = soc
+        on, fm = _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st)
+        fl |= fm
+        p, soc = _energy_row(i, g, act, par, st)
         tank = st[i, S_TANK]
         rec[0, j] = tank
         rec[1, j] = par[i, P_DRY] + tank * par[i, P_RHO]
