@@ -60,13 +60,14 @@ class PlanCut:
 
 
 def reach_m(cfg: Config, horizon_s: float) -> float:
-    """Path length (m) that bounds how far a mission can get in ``horizon_s`` seconds, with
-    room for what the reference looks ahead: the fastest speed it flies (cruise, transit, climb)
-    over the horizon plus slack for the smoothing window, plus twice the braking distance
+    """Path length (m) that bounds how far a mission can get along its plan in ``horizon_s``
+    seconds, with room for what the reference looks ahead: the cruise speed v (the plan's own
+    segments are capped at it; transits to the base and climbs make no progress along the
+    plan) over the horizon plus slack for the smoothing window, plus twice the braking distance
     v²/(2 a_t) at the tangential acceleration a_t = a·sqrt(1 − 0.7²) of curves (so that the end
     of the head does not slow the part flown), plus four swaths and 20 m."""
     m = cfg.mission
-    v = max(m.speed_mps, cfg.spray.transit_speed_mps if cfg.spray.enabled else 0.0, 1.5)
+    v = m.speed_mps
     a_t = m.accel_max_mps2 * math.sqrt(1.0 - 0.7**2)
     return v * (horizon_s + 5.0) + v * v / a_t + 4.0 * m.swath_m + 20.0
 
