@@ -67,6 +67,36 @@ def _unit(v: np.ndarray) -> tuple[np.ndarray, float]:
     return (v / n if n > 0 else v * 0.0), n
 
 
+def _forward_backward(vlim: np.ndarray, two_a_ds: np.ndarray) -> np.ndarray:
+    """Fastest speed profile under ``vlim`` with v[0] = 0 and v²[i+1] − v²[i] bounded by
+    ``two_a_ds[i]`` (= 2 a_t ds) both ways: a forward pass (accelerate) then a backward one
+    (brake). Scalar loops over pieces of :data:`_CHUNK` samples (Python floats, held a piece at
+    a time)."""
+    n = len(vlim)
+    v = np.empty(n)
+    v[0] = 0.0
+    vi = 0.0
+    for a in range(0, n - 1, _CHUNK):
+        b = min(n - 1, a + _CHUNK)
+        lims, tw = vlim[a + 1:b + 1].tolist(), two_a_ds[a:b].tolist()
+        out = [0.0] * (b - a)
+        for q in range(b - a):
+            w = vi * vi + tw[q]
+            lim = lims[q]
+            vi = lim if lim * lim <= w else math.sqrt(w)
+            out[q] = vi
+        v[a + 1:b + 1] = out
+    for b in range(n - 1, 0, -_CHUNK):  # indices b-1 … a, with v[b] final
+        a = max(0, b - _CHUNK)
+        vs, tw = v[a:b + 1].tolist(), two_a_ds[a:b].tolist()
+        for q in range(b - a - 1, -1, -1):
+            w = vs[q + 1] * vs[q + 1] + tw[q]
+            if vs[q] * vs[q] > w:
+                vs[q] = math.sqrt(w)
+        v[a:b] = vs[:-1]
+    return v
+
+
 class Reference:
     """Smooth, flyable reference along a coverage plan (see module docstring).
 
@@ -224,56 +254,8 @@ class Reference:
         self.n_stops = n_stops
 
         # dense arc-length samples; every primitive contributes both end points (duplicates at
-        # junctions carry the tangent/curvature of each side).
-        S, PP, TT, KK, CAP, SEG, STOP = [], [], [], [], [], [], []
-        s_acc = 0.0
-        ds = self._ds
-        for pr in prims:
-            if pr[0] == "line":
-                _, a, b, sg, cap, stop = pr
-                u, ln = _unit(b - a)
-                if ln < 1e-9:
-                    if stop and STOP:
-                        STOP[-1] = True
-                    continue
-                m = max(2, math.ceil(ln / ds))
-                f = np.linspace(0.0, 1.0, m + 1)
-                S.append(s_acc + f * ln)
-                PP.append(a + f[:, None] * (b - a))
-                TT.append(np.repeat(u[None], m + 1, axis=0))
-                KK.append(np.zeros((m + 1, 3)))
-                CAP.append(np.full(m + 1, cap))
-                SEG.append(np.full(m + 1, sg))
-                st = np.zeros(m + 1, bool)
-                st[-1] = stop
-                STOP.append(st)
-                s_acc += ln
-            else:
-                _, a, c, r, phi, u_in, sg0, sg1, cap = pr
-                ln = r * phi
-                m = max(2, math.ceil(ln / ds))
-                th = np.linspace(0.0, phi, m + 1)
-                e1 = (a - c) / r
-                cth, sth = np.cos(th)[:, None], np.sin(th)[:, None]
-                pos = c + r * (cth * e1 + sth * u_in)
-                S.append(s_acc + th * r)
-                PP.append(pos)
-                TT.append(-sth * e1 + cth * u_in)
-                KK.append((c - pos) / (r * r))
-                CAP.append(np.full(m + 1, cap))
-                SEG.append(np.where(th < 0.5 * phi, sg0, sg1))
-                STOP.append(np.zeros(m + 1, bool))
-                s_acc += ln
-        self._s = np.concatenate(S)
-        self._P = np.concatenate(PP)
-        self._T = np.concatenate(TT)
-        self._K = np.concatenate(KK)
-        self._cap = np.concatenate(CAP)
-        self._seg_s = np.concatenate(SEG).astype(int)
-        stop = np.concatenate(STOP)
-        stop[0] = True
-        stop[-1] = True
-        self._stop = stop
+        # junctions carry the tangent/curvature of each side). Sized first, then written.
+        self._dense(prims)
         self.length = float(self._s[-1])
 
         # heading along s (unwrapped), jump-free part and the jumps at stops
@@ -304,6 +286,53 @@ class Reference:
         self._psi_smooth = psi - corr
         self._psi0 = float(psi[0])
 
+    def _dense(self, prims: list[tuple]) -> None:
+        """The arc-length grid (step ≤ ``ds``) of the primitives: s, P, T, K, speed cap, plan
+        segment, stop flag, in arrays of the total size (no per-primitive copies)."""
+        ds = self._ds
+        sized: list[tuple[tuple, float, int]] = []  # (primitive, length, m); m < 0: no samples
+        for pr in prims:
+            ln = _unit(pr[2] - pr[1])[1] if pr[0] == "line" else pr[3] * pr[4]
+            m = -1 if pr[0] == "line" and ln < 1e-9 else max(2, math.ceil(ln / ds))
+            sized.append((pr, ln, m))
+        n = sum(m + 1 for _, _, m in sized if m > 0)
+        S, P, T, K = np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.zeros((n, 3))
+        cap, seg, stop = np.empty(n), np.empty(n, dtype=int), np.zeros(n, bool)
+        s_acc = 0.0
+        k = 0
+        for pr, ln, m in sized:
+            if m < 0:  # a zero-length line: its stop flag goes to the previous sample
+                if pr[5] and k:
+                    stop[k - 1] = True
+                continue
+            sl = slice(k, k + m + 1)
+            if pr[0] == "line":
+                _, a, b, sg, cp, st = pr
+                f = np.linspace(0.0, 1.0, m + 1)
+                S[sl] = s_acc + f * ln
+                P[sl] = a + f[:, None] * (b - a)
+                T[sl] = _unit(b - a)[0]
+                seg[sl] = sg
+                stop[k + m] = st
+            else:
+                _, a, c, r, phi, u_in, sg0, sg1, cp = pr
+                th = np.linspace(0.0, phi, m + 1)
+                e1 = (a - c) / r
+                cth, sth = np.cos(th)[:, None], np.sin(th)[:, None]
+                pos = c + r * (cth * e1 + sth * u_in)
+                S[sl] = s_acc + th * r
+                P[sl] = pos
+                T[sl] = -sth * e1 + cth * u_in
+                K[sl] = (c - pos) / (r * r)
+                seg[sl] = np.where(th < 0.5 * phi, sg0, sg1)
+            cap[sl] = cp
+            s_acc += ln
+            k += m + 1
+        stop[0] = True
+        stop[-1] = True
+        self._s, self._P, self._T, self._K = S, P, T, K
+        self._cap, self._seg_s, self._stop = cap, seg, stop
+
     # ------------------------------------------------------------------ time law
     def _build_time_law(self, a_int: float):
         s, K, cap, stop = self._s, self._K, self._cap, self._stop
@@ -316,21 +345,7 @@ class Reference:
         ds = np.diff(s)
         curved = (kap[:-1] > 1e-12) | (kap[1:] > 1e-12)
         at = np.where(curved, a_int * math.sqrt(max(1.0 - self.lat_frac**2, 0.01)), a_int)
-        vl = vlim.tolist()
-        ds.tolist()
-        two_a_ds = (2.0 * at * ds).tolist()
-        n = len(vl)
-        v = [0.0] * n
-        v[0] = 0.0
-        for i in range(n - 1):
-            w = v[i] * v[i] + two_a_ds[i]
-            lim = vl[i + 1]
-            v[i + 1] = lim if lim * lim <= w else math.sqrt(w)
-        for i in range(n - 2, -1, -1):
-            w = v[i + 1] * v[i + 1] + two_a_ds[i]
-            if v[i] * v[i] > w:
-                v[i] = math.sqrt(w)
-        v_arr = np.array(v)
+        v_arr = _forward_backward(vlim, 2.0 * at * ds)
         # per-interval acceleration and duration
         with np.errstate(divide="ignore", invalid="ignore"):
             dv2 = v_arr[1:] ** 2 - v_arr[:-1] ** 2
