@@ -211,6 +211,8 @@ def mission_setup(cfg: Config) -> tuple[Field, Any, Any]:
         if len(_SETUP_CACHE) > 8:
             _SETUP_CACHE.clear()
         hit = _SETUP_CACHE[key] = (fld, plan, ref)
+    else:  # the budget is no mission key: the same check on a cached setup
+        check_memory_budget(cfg, hit[1].length / cfg.mission.speed_mps, "the plan")
     return hit
 
 
