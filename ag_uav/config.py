@@ -114,6 +114,9 @@ class SimConfig:
                            "says so in its summary", gt=0)
     hover_after_s: float = _f(3.0, "hover time at the end of the path (s)", ge=0, le=3600)
     takeoff: bool = _f(True, "start on the ground and climb to spray altitude")
+    memory_budget_mb: float = _f(8192.0, "memory budget of one run (MB): a run whose planned "
+                                 "reference and per-tick tables would need more is refused "
+                                 "before it flies", gt=0)
 
 
 @dataclass

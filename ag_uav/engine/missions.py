@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -31,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Config
+from ..config import Config, ConfigError
 from ..navigation.feedback import Feedback, TrueFeedback
 from ..seeds import rng_streams, seed_sequences
 from ..vehicle.mjcf import build_vehicle
@@ -40,23 +42,95 @@ from ..world.mission import build_field, build_plan, field_outline
 from ..world.reference import Reference
 from .loop import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
 
-
 # ------------------------------------------------------------------------------------ building
-def build_reference(cfg: Config, plan, *, spray: bool = True) -> Any:
+#: Bytes one vehicle's run holds per control tick, for the memory budget
+#: (``sim.memory_budget_mb``): the reference grid (~100 B: pos, vel, acc, yaw, yaw rate, segment,
+#: spray) and its build (the arc-length grid, ~300 B a tick at 5 m/s), the engine's copies of
+#: it and its records (~1 KB: the recorded columns, the IMU, the estimators' estimates, the
+#: sprayer's series). An estimate of the order of magnitude, not a measurement of every config.
+TABLE_BYTES_PER_TICK = 1536
+
+
+@dataclass
+class PlanCut:
+    """How far a mission cut by ``sim.max_time_s`` was planned (:func:`build_reference`)."""
+
+    path_m: float          # the whole coverage path
+    planned_m: float       # the head of it that was densified into the reference
+    needs_min_s: float     # the whole path at cruise speed: a lower bound on the mission's time
+
+
+def reach_m(cfg: Config, horizon_s: float) -> float:
+    """Path length (m) that bounds how far a mission can get along its plan in ``horizon_s``
+    seconds, with room for what the reference looks ahead: the cruise speed v (the plan's own
+    segments are capped at it; transits to the base and climbs make no progress along the
+    plan) over the horizon plus slack for the smoothing window, plus twice the braking distance
+    v²/(2 a_t) at the tangential acceleration a_t = a·sqrt(1 − 0.7²) of curves (so that the end
+    of the head does not slow the part flown), plus four swaths and 20 m."""
+    m = cfg.mission
+    v = m.speed_mps
+    a_t = m.accel_max_mps2 * math.sqrt(1.0 - 0.7**2)
+    return v * (horizon_s + 5.0) + v * v / a_t + 4.0 * m.swath_m + 20.0
+
+
+def build_reference(cfg: Config, plan, *, spray: bool = True,
+                    horizon_s: float | None = None) -> Any:
     """The time-parameterised reference ``simulate`` flies along ``plan``. With
     ``spray.enabled`` (and ``spray``) it carries the spray job (``.spray_job``: tank, battery,
     sorties; :func:`ag_uav.world.spray_job.plan_job`), split into sorties where one tank or battery
-    does not do the job."""
+    does not do the job.
+
+    ``horizon_s`` (``simulate`` passes ``sim.max_time_s``): a plan longer than the mission can
+    fly in that time (:func:`reach_m`) is cut to its head before it is densified, so that the
+    reference, the sortie plan and the engine's tables grow with what is flown, not with the
+    field; the reference then has ``plan_cut`` (:class:`PlanCut`), else ``plan_cut`` is None.
+    Up to the horizon the head's reference is the whole plan's."""
     m = cfg.mission
-    ref = Reference(plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
+    fly_plan = plan if horizon_s is None else plan.head(reach_m(cfg, horizon_s))
+    ref = Reference(fly_plan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
                     takeoff=cfg.sim.takeoff, hover_time=cfg.sim.hover_after_s,
                     rate=cfg.sim.control_hz)
     if spray and cfg.spray.enabled:
         from ..world.spray_job import plan_job
 
-        ref, _job = plan_job(cfg, plan, ref, plan.field, dry_mass_kg=cfg.vehicle.mass_kg
-                             + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08)
+        ref, _job = plan_job(cfg, fly_plan, ref, plan.field, dry_mass_kg=cfg.vehicle.mass_kg
+                             + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08,
+                             truncated=fly_plan is not plan)
+    ref.plan_cut = None if fly_plan is plan else PlanCut(plan.length, fly_plan.length,
+                                                         plan.length / m.speed_mps)
     return ref
+
+
+def _plan_needs(ref: Any) -> str:
+    """How long the plan takes: the reference's duration, or a lower bound for a cut plan."""
+    cut = getattr(ref, "plan_cut", None)
+    if cut is None:
+        return f"{ref.duration:.0f} s"
+    return f"at least {cut.needs_min_s:.0f} s ({cut.path_m / 1000:.1f} km of path)"
+
+
+def preflight_notice(cfg: Config, ref: Any) -> str | None:
+    """The one line said before flying a mission that ``sim.max_time_s`` will cut (else None)."""
+    if ref.duration <= cfg.sim.max_time_s:
+        return None
+    return (f"the plan needs {_plan_needs(ref)}, more than sim.max_time_s = "
+            f"{cfg.sim.max_time_s:g} s: flying the first {cfg.sim.max_time_s:g} s "
+            "(raise sim.max_time_s to fly it all)")
+
+
+def check_memory_budget(cfg: Config, duration_s: float, what: str) -> None:
+    """Refuse (:class:`ConfigError`, one line) a run whose tables for ``duration_s`` of flight
+    (cut at ``sim.max_time_s``) would exceed ``sim.memory_budget_mb``
+    (:data:`TABLE_BYTES_PER_TICK` a control tick)."""
+    s = cfg.sim
+    flown = min(duration_s, s.max_time_s)
+    ticks = int(math.ceil(flown * s.control_hz))
+    need_mb = ticks * TABLE_BYTES_PER_TICK / 2**20
+    if need_mb > s.memory_budget_mb:
+        raise ConfigError(f"sim.memory_budget_mb = {s.memory_budget_mb:g}: {what} needs about "
+                          f"{need_mb:.0f} MB of tables ({ticks} control ticks: {flown:.0f} s at "
+                          f"{s.control_hz:g} Hz); raise sim.memory_budget_mb or lower "
+                          "sim.max_time_s")
 
 
 # -------------------------------------------------------------------------------------- result
@@ -99,7 +173,7 @@ def _cut_by_max_time(cfg: Config, ref: Reference, out: LoopOutput,
         return None
     return (f"cut by sim.max_time_s = {cfg.sim.max_time_s:g} s after "
             f"{summ.get('legs_flown', 0)} of {summ.get('legs', 0)} legs; the plan needs "
-            f"{ref.duration:.0f} s (raise sim.max_time_s)")
+            f"{_plan_needs(ref)} (raise sim.max_time_s)")
 
 
 @dataclass
@@ -112,6 +186,7 @@ class _Prepared:
     fb: Feedback
     log: Any
     wall0: float
+    notice: str | None = None
 
 
 _SETUP_CACHE: dict[str, tuple[Field, Any, Any]] = {}
@@ -125,16 +200,20 @@ def mission_setup(cfg: Config) -> tuple[Field, Any, Any]:
     from dataclasses import asdict
 
     key = json.dumps([asdict(cfg.mission), cfg.sim.takeoff, cfg.sim.hover_after_s,
-                      cfg.sim.control_hz, asdict(cfg.spray), asdict(cfg.battery),
-                      asdict(cfg.vehicle)], default=str, sort_keys=True)
+                      cfg.sim.control_hz, cfg.sim.max_time_s, asdict(cfg.spray),
+                      asdict(cfg.battery), asdict(cfg.vehicle)], default=str, sort_keys=True)
     hit = _SETUP_CACHE.get(key)
     if hit is None:
         fld = build_field(cfg)
         plan = build_plan(cfg, fld)
-        ref = build_reference(cfg, plan)
+        # refused before the reference is built (the whole path at cruise speed: a lower bound)
+        check_memory_budget(cfg, plan.length / cfg.mission.speed_mps, "the plan")
+        ref = build_reference(cfg, plan, horizon_s=cfg.sim.max_time_s)
         if len(_SETUP_CACHE) > 8:
             _SETUP_CACHE.clear()
         hit = _SETUP_CACHE[key] = (fld, plan, ref)
+    else:  # the budget is no mission key: the same check on a cached setup
+        check_memory_budget(cfg, hit[1].length / cfg.mission.speed_mps, "the plan")
     return hit
 
 
@@ -144,6 +223,7 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
     wall0 = time.perf_counter()
     streams = rng_streams(cfg.seed)
     fld, plan, ref = mission_setup(cfg)
+    check_memory_budget(cfg, ref.duration, "the reference")
     m = cfg.mission
     bounds = fld.bounds
     job = getattr(ref, "spray_job", None)
@@ -172,7 +252,8 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
         fb.log = log
     flight = Flight(cfg, ref, ref.duration, outline=outline, bounds=bounds, feedback=fb,
                     log=log, render=cfg.log.render, tick_hook=tick_hook, streams=streams)
-    return _Prepared(cfg, flight, fld, plan, ref, fb, log, wall0)
+    return _Prepared(cfg, flight, fld, plan, ref, fb, log, wall0,
+                     notice=preflight_notice(cfg, ref))
 
 
 def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
@@ -185,6 +266,8 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     frames go into it. ``tick_hook(t, data)`` is called after every control tick.
     """
     prep = _prepare(cfg, feedback, tick_hook, log)
+    if prep.notice:
+        print(f"ag-uav: {prep.notice}", file=sys.stderr, flush=True)
     out = fly([prep.flight], progress=progress)[0]
     return _finish(prep, out, batch=1)
 
@@ -288,6 +371,8 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
     cut = _cut_by_max_time(cfg, ref, out, summ)
     if cut:
         summ["incomplete_reason"] = cut
+    if getattr(ref, "plan_cut", None) is not None:  # the sortie plan covers this much path
+        summ["planned_to_m"] = round(ref.plan_cut.planned_m, 1)
     if out.sprayer is not None:
         summ.update(out.sprayer.summary(sim_time))
         res.extra["spray"] = out.sprayer.series(len(out.t))

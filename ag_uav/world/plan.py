@@ -38,6 +38,7 @@ counter-clockwise from east, in [0, 180).
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import math
 from dataclasses import dataclass, field
@@ -129,6 +130,31 @@ class CoveragePlan:
         if cur:
             out.append(np.concatenate(cur))
         return out
+
+    def head(self, length_m: float) -> CoveragePlan:
+        """The plan's first ``length_m`` metres of path: the segments up to there, the last one
+        cut at that arc length (same kinds, spray flags and segment indices), so that a mission
+        cut by time is planned and densified only as far as it can fly. ``meta["head_of_m"]``
+        is the whole path's length. The plan itself when it is no longer than ``length_m``."""
+        total = self.length
+        if not length_m < total:
+            return self
+        segs: list[Segment] = []
+        left = float(length_m)
+        for sg in self.segments:
+            d = np.hypot(*np.diff(sg.points, axis=0).T)
+            cum = np.concatenate([[0.0], np.cumsum(d)])
+            if cum[-1] < left:
+                segs.append(sg)
+                left -= float(cum[-1])
+                continue
+            j = int(np.searchsorted(cum, left, side="left"))  # cum[j-1] < left <= cum[j]
+            if left > 1e-6 and j >= 1:
+                f = (left - cum[j - 1]) / max(float(d[j - 1]), 1e-12)
+                q = sg.points[j - 1] + f * (sg.points[j] - sg.points[j - 1])
+                segs.append(Segment(sg.kind, np.vstack([sg.points[:j], q[None]]), sg.spray))
+            break
+        return dataclasses.replace(self, segments=segs, meta={**self.meta, "head_of_m": total})
 
     def summary(self) -> str:
         kinds = {k: sum(1 for s in self.segments if s.kind == k) for k in KINDS}

@@ -45,6 +45,10 @@ from .plan import CoveragePlan
 
 __all__ = ["RefSample", "Reference"]
 
+#: ticks per piece when the output grid is built (bounds the working memory: the fine grid of a
+#: piece is ``_sub`` × this many points)
+_CHUNK = 1 << 14
+
 
 class RefSample(NamedTuple):
     """Reference at one time. ``pos``/``vel``/``acc`` are read-only (3,) arrays (views)."""
@@ -61,6 +65,36 @@ class RefSample(NamedTuple):
 def _unit(v: np.ndarray) -> tuple[np.ndarray, float]:
     n = float(np.linalg.norm(v))
     return (v / n if n > 0 else v * 0.0), n
+
+
+def _forward_backward(vlim: np.ndarray, two_a_ds: np.ndarray) -> np.ndarray:
+    """Fastest speed profile under ``vlim`` with v[0] = 0 and v²[i+1] − v²[i] bounded by
+    ``two_a_ds[i]`` (= 2 a_t ds) both ways: a forward pass (accelerate) then a backward one
+    (brake). Scalar loops over pieces of :data:`_CHUNK` samples (Python floats, held a piece at
+    a time)."""
+    n = len(vlim)
+    v = np.empty(n)
+    v[0] = 0.0
+    vi = 0.0
+    for a in range(0, n - 1, _CHUNK):
+        b = min(n - 1, a + _CHUNK)
+        lims, tw = vlim[a + 1:b + 1].tolist(), two_a_ds[a:b].tolist()
+        out = [0.0] * (b - a)
+        for q in range(b - a):
+            w = vi * vi + tw[q]
+            lim = lims[q]
+            vi = lim if lim * lim <= w else math.sqrt(w)
+            out[q] = vi
+        v[a + 1:b + 1] = out
+    for b in range(n - 1, 0, -_CHUNK):  # indices b-1 … a, with v[b] final
+        a = max(0, b - _CHUNK)
+        vs, tw = v[a:b + 1].tolist(), two_a_ds[a:b].tolist()
+        for q in range(b - a - 1, -1, -1):
+            w = vs[q + 1] * vs[q + 1] + tw[q]
+            if vs[q] * vs[q] > w:
+                vs[q] = math.sqrt(w)
+        v[a:b] = vs[:-1]
+    return v
 
 
 class Reference:
@@ -146,7 +180,7 @@ class Reference:
         for _ in range(6):
             self._build_time_law(a_int)
             self._build_outputs()
-            amax = float(np.max(np.linalg.norm(self._acc, axis=1)))
+            amax = self._max_norm(slice(6, 9))
             if amax <= self.a_max * (1.0 + 1e-6):
                 break
             a_int *= 0.995 * self.a_max / amax
@@ -220,56 +254,8 @@ class Reference:
         self.n_stops = n_stops
 
         # dense arc-length samples; every primitive contributes both end points (duplicates at
-        # junctions carry the tangent/curvature of each side).
-        S, PP, TT, KK, CAP, SEG, STOP = [], [], [], [], [], [], []
-        s_acc = 0.0
-        ds = self._ds
-        for pr in prims:
-            if pr[0] == "line":
-                _, a, b, sg, cap, stop = pr
-                u, ln = _unit(b - a)
-                if ln < 1e-9:
-                    if stop and STOP:
-                        STOP[-1] = True
-                    continue
-                m = max(2, math.ceil(ln / ds))
-                f = np.linspace(0.0, 1.0, m + 1)
-                S.append(s_acc + f * ln)
-                PP.append(a + f[:, None] * (b - a))
-                TT.append(np.repeat(u[None], m + 1, axis=0))
-                KK.append(np.zeros((m + 1, 3)))
-                CAP.append(np.full(m + 1, cap))
-                SEG.append(np.full(m + 1, sg))
-                st = np.zeros(m + 1, bool)
-                st[-1] = stop
-                STOP.append(st)
-                s_acc += ln
-            else:
-                _, a, c, r, phi, u_in, sg0, sg1, cap = pr
-                ln = r * phi
-                m = max(2, math.ceil(ln / ds))
-                th = np.linspace(0.0, phi, m + 1)
-                e1 = (a - c) / r
-                cth, sth = np.cos(th)[:, None], np.sin(th)[:, None]
-                pos = c + r * (cth * e1 + sth * u_in)
-                S.append(s_acc + th * r)
-                PP.append(pos)
-                TT.append(-sth * e1 + cth * u_in)
-                KK.append((c - pos) / (r * r))
-                CAP.append(np.full(m + 1, cap))
-                SEG.append(np.where(th < 0.5 * phi, sg0, sg1))
-                STOP.append(np.zeros(m + 1, bool))
-                s_acc += ln
-        self._s = np.concatenate(S)
-        self._P = np.concatenate(PP)
-        self._T = np.concatenate(TT)
-        self._K = np.concatenate(KK)
-        self._cap = np.concatenate(CAP)
-        self._seg_s = np.concatenate(SEG).astype(int)
-        stop = np.concatenate(STOP)
-        stop[0] = True
-        stop[-1] = True
-        self._stop = stop
+        # junctions carry the tangent/curvature of each side). Sized first, then written.
+        self._dense(prims)
         self.length = float(self._s[-1])
 
         # heading along s (unwrapped), jump-free part and the jumps at stops
@@ -300,6 +286,53 @@ class Reference:
         self._psi_smooth = psi - corr
         self._psi0 = float(psi[0])
 
+    def _dense(self, prims: list[tuple]) -> None:
+        """The arc-length grid (step ≤ ``ds``) of the primitives: s, P, T, K, speed cap, plan
+        segment, stop flag, in arrays of the total size (no per-primitive copies)."""
+        ds = self._ds
+        sized: list[tuple[tuple, float, int]] = []  # (primitive, length, m); m < 0: no samples
+        for pr in prims:
+            ln = _unit(pr[2] - pr[1])[1] if pr[0] == "line" else pr[3] * pr[4]
+            m = -1 if pr[0] == "line" and ln < 1e-9 else max(2, math.ceil(ln / ds))
+            sized.append((pr, ln, m))
+        n = sum(m + 1 for _, _, m in sized if m > 0)
+        S, P, T, K = np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.zeros((n, 3))
+        cap, seg, stop = np.empty(n), np.empty(n, dtype=int), np.zeros(n, bool)
+        s_acc = 0.0
+        k = 0
+        for pr, ln, m in sized:
+            if m < 0:  # a zero-length line: its stop flag goes to the previous sample
+                if pr[5] and k:
+                    stop[k - 1] = True
+                continue
+            sl = slice(k, k + m + 1)
+            if pr[0] == "line":
+                _, a, b, sg, cp, st = pr
+                f = np.linspace(0.0, 1.0, m + 1)
+                S[sl] = s_acc + f * ln
+                P[sl] = a + f[:, None] * (b - a)
+                T[sl] = _unit(b - a)[0]
+                seg[sl] = sg
+                stop[k + m] = st
+            else:
+                _, a, c, r, phi, u_in, sg0, sg1, cp = pr
+                th = np.linspace(0.0, phi, m + 1)
+                e1 = (a - c) / r
+                cth, sth = np.cos(th)[:, None], np.sin(th)[:, None]
+                pos = c + r * (cth * e1 + sth * u_in)
+                S[sl] = s_acc + th * r
+                P[sl] = pos
+                T[sl] = -sth * e1 + cth * u_in
+                K[sl] = (c - pos) / (r * r)
+                seg[sl] = np.where(th < 0.5 * phi, sg0, sg1)
+            cap[sl] = cp
+            s_acc += ln
+            k += m + 1
+        stop[0] = True
+        stop[-1] = True
+        self._s, self._P, self._T, self._K = S, P, T, K
+        self._cap, self._seg_s, self._stop = cap, seg, stop
+
     # ------------------------------------------------------------------ time law
     def _build_time_law(self, a_int: float):
         s, K, cap, stop = self._s, self._K, self._cap, self._stop
@@ -312,21 +345,7 @@ class Reference:
         ds = np.diff(s)
         curved = (kap[:-1] > 1e-12) | (kap[1:] > 1e-12)
         at = np.where(curved, a_int * math.sqrt(max(1.0 - self.lat_frac**2, 0.01)), a_int)
-        vl = vlim.tolist()
-        ds.tolist()
-        two_a_ds = (2.0 * at * ds).tolist()
-        n = len(vl)
-        v = [0.0] * n
-        v[0] = 0.0
-        for i in range(n - 1):
-            w = v[i] * v[i] + two_a_ds[i]
-            lim = vl[i + 1]
-            v[i + 1] = lim if lim * lim <= w else math.sqrt(w)
-        for i in range(n - 2, -1, -1):
-            w = v[i + 1] * v[i + 1] + two_a_ds[i]
-            if v[i] * v[i] > w:
-                v[i] = math.sqrt(w)
-        v_arr = np.array(v)
+        v_arr = _forward_backward(vlim, 2.0 * at * ds)
         # per-interval acceleration and duration
         with np.errstate(divide="ignore", invalid="ignore"):
             dv2 = v_arr[1:] ** 2 - v_arr[:-1] ** 2
@@ -410,57 +429,97 @@ class Reference:
     def _build_outputs(self):
         """Box-filter the raw 3-D trajectory p_raw(t) = P(s(t)) over the window W:
         p_W = (1/W)∫p_raw, v_W = (p_raw(t+W/2) − p_raw(t−W/2))/W,
-        a_W = (v_raw(t+W/2) − v_raw(t−W/2))/W. Hence |a_W| ≤ sup|a_raw| ≤ a and |jerk| ≤ 2a/W."""
+        a_W = (v_raw(t+W/2) − v_raw(t−W/2))/W. Hence |a_W| ≤ sup|a_raw| ≤ a and |jerk| ≤ 2a/W.
+
+        Computed in pieces of :data:`_CHUNK` ticks (the running integral of p_raw carried from
+        one piece to the next), so the working memory is bounded whatever the mission's length;
+        what is kept is the output grid itself (pos, vel, acc; the plan segment and the smooth
+        part of the yaw)."""
         n = int(math.floor(self.duration * self.rate + 1e-9)) + 1
-        t = np.arange(n) * self.dt
-        self._t = t
+        self._n = n
+        self._R = np.empty((n, 9))
+        self._seg = np.empty(n, dtype=np.int64)
+        self._yaw_u = np.empty(n)
+        carry = np.zeros(3)
+        for a in range(0, n, _CHUNK):
+            b = min(n, a + _CHUNK)
+            t = np.arange(a, b) * self.dt
+            if self.window <= 0:
+                sw = self._outputs_unsmoothed(t, a, b)
+            else:
+                sw, carry = self._outputs_smoothed(t, a, b, carry)
+            self._progress(sw, a, b)
+
+    def _outputs_unsmoothed(self, t: np.ndarray, a: int, b: int) -> np.ndarray:
+        """W = 0: p, v, a of the raw time law on ticks [a, b); returns the arc length."""
+        sr, vr, _ = self._raw(t)
+        P, T = self._path_at(sr)
+        i, f = self._interp_s(np.clip(sr, 0.0, self.length))
+        K = self._K[i] + f * (self._K[i + 1] - self._K[i])
+        j = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self._tk) - 2)
+        moving = (t > self._tdep[j]) & (t <= self._tk[-1])
+        ar = np.where(moving, self._acc_i[j], 0.0)
+        self._R[a:b, 0:3] = P
+        self._R[a:b, 3:6] = vr[:, None] * T
+        self._R[a:b, 6:9] = ar[:, None] * T + (vr**2)[:, None] * K
+        return np.clip(sr, 0.0, self.length)
+
+    def _outputs_smoothed(self, t: np.ndarray, a: int, b: int,
+                          carry: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """p_W, v_W, a_W on ticks [a, b). p_W by trapezoidal integration on a fine grid of step
+        dt/m (W/2 is a whole number nh of steps): with C(j) = ∫ p_raw up to fine point j,
+        p_W(k) = (C(km + 2nh) − C(km))/W; ``carry`` is C(am), the next piece's is C(bm).
+        Returns the box-averaged arc length (progress, for segment, spray and yaw) and C(bm)."""
         w = self.window
-        if w <= 0:
-            sr, vr, _ = self._raw(t)
-            P, T = self._path_at(sr)
-            i, f = self._interp_s(np.clip(sr, 0.0, self.length))
-            K = self._K[i] + f * (self._K[i + 1] - self._K[i])
-            j = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self._tk) - 2)
-            moving = (t > self._tdep[j]) & (t <= self._tk[-1])
-            ar = np.where(moving, self._acc_i[j], 0.0)
-            self._sw = np.clip(sr, 0.0, self.length)
-            self._i = i
-            self._pos, self._vel = P, vr[:, None] * T
-            self._acc = ar[:, None] * T + (vr**2)[:, None] * K
-            return
         h = 0.5 * w
         sp, vp, _ = self._raw(t + h)
         sm, vm, _ = self._raw(t - h)
         Pp, Tp = self._path_at(sp)
         Pm, Tm = self._path_at(sm)
-        self._vel = (Pp - Pm) / w
-        self._acc = (vp[:, None] * Tp - vm[:, None] * Tm) / w
-        # p_W by trapezoidal integration on a fine grid (dt/m; W/2 is a whole number of steps)
+        self._R[a:b, 3:6] = (Pp - Pm) / w
+        self._R[a:b, 6:9] = (vp[:, None] * Tp - vm[:, None] * Tm) / w
         m = self._sub
         dtf = self.dt / m
         nh = int(round(h / dtf))
-        tf = (np.arange(-nh, (n - 1) * m + nh + 1)) * dtf
+        hi = max((b - 1) * m + 2 * nh, b * m)  # fine points a·m … hi
+        tf = np.arange(a * m - nh, hi - nh + 1) * dtf
         sf, _, _ = self._raw(tf)
         Pf, _ = self._path_at(sf)
-        cum = np.vstack([np.zeros((1, 3)), np.cumsum(0.5 * (Pf[1:] + Pf[:-1]) * dtf, axis=0)])
-        k = np.arange(n) * m + nh
-        self._pos = (cum[k + nh] - cum[k - nh]) / (2 * nh * dtf)
-        # progress (for segment, spray and yaw): the box-averaged arc length
+        cum = np.cumsum(np.vstack([carry[None], 0.5 * (Pf[1:] + Pf[:-1]) * dtf]), axis=0)
+        k = np.arange(b - a) * m
+        self._R[a:b, 0:3] = (cum[k + 2 * nh] - cum[k]) / (2 * nh * dtf)
         sw, _, _ = self._smoothed(t)
-        sw = np.clip(sw, 0.0, self.length)
-        self._sw = sw
-        self._i, _ = self._interp_s(sw)
+        return np.clip(sw, 0.0, self.length), cum[(b - a) * m].copy()
+
+    def _progress(self, sw: np.ndarray, a: int, b: int) -> None:
+        """Plan segment and the smooth part of the yaw on ticks [a, b) from the progress sw."""
+        i, _ = self._interp_s(sw)
+        seg = self._seg_s[i]
+        seg[sw >= self.length - 1e-9] = -1
+        self._seg[a:b] = seg
+        f = np.clip((sw - self._s[i]) / np.maximum(self._s[i + 1] - self._s[i], 1e-12), 0, 1)
+        self._yaw_u[a:b] = self._psi_smooth[i] + f * (self._psi_smooth[i + 1]
+                                                      - self._psi_smooth[i])
+
+    def _max_norm(self, cols: slice, diff: bool = False) -> float:
+        """max over the grid of |R[:, cols]| (or of its first difference / dt), piece by
+        piece."""
+        out = 0.0
+        for a in range(0, self._n, _CHUNK):
+            x = self._R[a:min(self._n, a + _CHUNK + (1 if diff else 0)), cols]
+            if diff:
+                x = np.diff(x, axis=0) / self.dt
+            if len(x):
+                out = max(out, float(np.max(np.linalg.norm(x, axis=1))))
+        return out
 
     def _finalise(self):
-        t, sw, i = self._t, self._sw, self._i
-        # segment index and spray
-        seg = self._seg_s[i].copy()
-        seg[sw >= self.length - 1e-9] = -1
+        n = self._n
+        seg = self._seg
         spray_of = np.array([s.spray for s in self.plan.segments] + [False], bool)
-        spray = spray_of[seg]  # seg == -1 picks the trailing False
+        self._spray = spray_of[seg]  # seg == -1 picks the trailing False
         # yaw: smooth part + raised-cosine ramps at stops
-        f = np.clip((sw - self._s[i]) / np.maximum(self._s[i + 1] - self._s[i], 1e-12), 0, 1)
-        yaw = self._psi_smooth[i] + f * (self._psi_smooth[i + 1] - self._psi_smooth[i])
+        yaw = self._yaw_u
         if len(self._jump_s):
             # time at the middle of each stop's dwell (raw time law, symmetric under smoothing)
             node = np.searchsorted(self._s, self._jump_s, side="left")
@@ -468,37 +527,25 @@ class Reference:
             for tm, d in zip(tmid.tolist(), self._jump_d.tolist(), strict=True):
                 wk = max(0.5, 0.5 * math.pi * abs(d) / self.yaw_rate_max)
                 j0 = max(0, int((tm - 0.5 * wk) * self.rate))
-                j1 = min(len(t), int((tm + 0.5 * wk) * self.rate) + 2)
-                x = np.clip((t[j0:j1] - (tm - 0.5 * wk)) / wk, 0.0, 1.0)
+                j1 = min(n, int((tm + 0.5 * wk) * self.rate) + 2)
+                x = np.clip((np.arange(j0, j1) * self.dt - (tm - 0.5 * wk)) / wk, 0.0, 1.0)
                 yaw[j0:j1] += d * (0.5 - 0.5 * np.cos(math.pi * x))
                 yaw[j1:] += d
-        yaw_rate = np.gradient(yaw, self.dt) if len(yaw) > 1 else np.zeros(1)
-        self._yaw_u = yaw
-        self._yaw_rate = yaw_rate
-        self._seg = seg
-        self._spray = spray
-        R = np.hstack([self._pos, self._vel, self._acc])
-        D = np.vstack([np.diff(R, axis=0), np.zeros((1, 9))])
-        R.setflags(write=False)
-        D.setflags(write=False)
-        self._R, self._D = R, D
-        self._n = len(t)
-        yw = (yaw + math.pi) % (2 * math.pi) - math.pi
-        self._yaw_l = yw.tolist()
-        self._yawu_l = yaw.tolist()
-        self._yr_l = yaw_rate.tolist()
-        self._spray_l = spray.tolist()
-        self._seg_l = seg.tolist()
-        self.max_acc = float(np.max(np.linalg.norm(self._acc, axis=1)))
-        self.max_speed = float(np.max(np.linalg.norm(self._vel, axis=1)))
-        jerk = np.diff(self._acc, axis=0) / self.dt
-        self.max_jerk = float(np.max(np.linalg.norm(jerk, axis=1))) if len(jerk) else 0.0
+        self._yaw_rate = np.gradient(yaw, self.dt) if n > 1 else np.zeros(1)
+        self._R.setflags(write=False)
+        self.max_acc = self._max_norm(slice(6, 9))
+        self.max_speed = self._max_norm(slice(3, 6))
+        self.max_jerk = self._max_norm(slice(6, 9), diff=True) if n > 1 else 0.0
+        # the arc-length grid and the time law are not needed once the grid is built
+        for name in ("_s", "_P", "_T", "_K", "_cap", "_stop", "_seg_s", "_psi_smooth", "_tk",
+                     "_tdep", "_v", "_acc_i", "_Sk"):
+            setattr(self, name, None)
 
     # ------------------------------------------------------------------ public API
     @property
     def times(self) -> np.ndarray:
         """Output grid times (s)."""
-        return self._t
+        return np.arange(self._n) * self.dt
 
     @property
     def positions(self) -> np.ndarray:
@@ -515,7 +562,7 @@ class Reference:
     @property
     def yaws(self) -> np.ndarray:
         """Yaw on the grid, wrapped to [-π, π)."""
-        return np.asarray(self._yaw_l)
+        return (self._yaw_u + math.pi) % (2 * math.pi) - math.pi
 
     @property
     def spray_flags(self) -> np.ndarray:
@@ -528,6 +575,12 @@ class Reference:
     @property
     def initial_position(self) -> np.ndarray:
         return self._R[0, 0:3].copy()
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the output grid (what the reference keeps after it is built)."""
+        return int(self._R.nbytes + self._yaw_u.nbytes + self._yaw_rate.nbytes
+                   + self._seg.nbytes + self._spray.nbytes)
 
     def sample(self, t: float) -> RefSample:
         """Reference at time ``t`` (s); clamps to [0, duration]. Linear interpolation between
@@ -544,14 +597,15 @@ class Reference:
             i, f = i + 1, 0.0
         if f < 1e-6:
             row = self._R[i]
-            yaw = self._yaw_l[i]
+            yaw = float((self._yaw_u[i] + math.pi) % (2 * math.pi) - math.pi)
         else:
-            row = self._R[i] + f * self._D[i]
-            yu = self._yawu_l[i] + f * (self._yawu_l[i + 1] - self._yawu_l[i])
+            row = self._R[i] + f * (self._R[i + 1] - self._R[i])
+            y0, y1 = float(self._yaw_u[i]), float(self._yaw_u[i + 1])
+            yu = y0 + f * (y1 - y0)
             yaw = (yu + math.pi) % (2 * math.pi) - math.pi
         j = i + 1 if f >= 0.5 else i
-        return RefSample(row[0:3], row[3:6], row[6:9], yaw, self._yr_l[j], self._spray_l[j],
-                         self._seg_l[j])
+        return RefSample(row[0:3], row[3:6], row[6:9], yaw, float(self._yaw_rate[j]),
+                         bool(self._spray[j]), int(self._seg[j]))
 
     def sample_all(self, times) -> dict[str, np.ndarray]:
         """Vectorised :meth:`sample`: dict of arrays pos (N,3), vel, acc, yaw, yaw_rate, spray,
@@ -559,9 +613,10 @@ class Reference:
         x = np.clip(np.asarray(times, float) * self.rate, 0.0, self._n - 1)
         i = np.minimum(np.floor(x).astype(int), self._n - 1)
         f = (x - i)[:, None]
-        row = self._R[i] + f * self._D[i]
-        j = np.minimum(np.where(f[:, 0] >= 0.5, i + 1, i), self._n - 1)
         i1 = np.minimum(i + 1, self._n - 1)
+        r0 = self._R[i]
+        row = r0 + f * (self._R[i1] - r0)
+        j = np.minimum(np.where(f[:, 0] >= 0.5, i + 1, i), self._n - 1)
         yu = self._yaw_u[i] + f[:, 0] * (self._yaw_u[i1] - self._yaw_u[i])
         return {
             "pos": row[:, 0:3],

@@ -69,6 +69,8 @@ G = 9.81
 #: seg index of the inserted transits to and from the base, and of the time on the ground there
 SEG_TRANSIT = -2
 SEG_GROUND = -3
+#: control ticks per piece when the planner walks the single-sortie reference
+_WALK_CHUNK = 1 << 16
 #: the liquid body's box (half sizes, m): the tank geom's footprint in models/quad.xml
 TANK_HALF = (0.10, 0.08, 0.06)
 
@@ -291,13 +293,36 @@ def _seg(kind: str, pts, spray: bool):
     return Segment(kind, np.asarray(pts, float), spray)
 
 
+def _walk(ref: Reference, base: np.ndarray, lpm: float, dt: float
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(segment, litres sprayed before the tick, distance to the base) on the control grid of
+    ``ref``, sampled in pieces so that only these three columns are held."""
+    n = int(math.floor(ref.duration / dt)) + 1
+    seg = np.empty(n, dtype=np.int64)
+    flow = np.empty(n)
+    d_home = np.empty(n)
+    for a in range(0, n, _WALK_CHUNK):
+        b = min(n, a + _WALK_CHUNK)
+        tab = ref.sample_all(np.arange(a, b) * dt)
+        seg[a:b] = tab["seg"]
+        speed = np.hypot(tab["vel"][:, 0], tab["vel"][:, 1])
+        flow[a:b] = np.where(tab["spray"], speed, 0.0) * dt * lpm
+        d_home[a:b] = np.hypot(*(tab["pos"][:, :2] - base[None]).T)
+    litres_cum = np.concatenate([[0.0], np.cumsum(flow)])[:-1]
+    return seg, litres_cum, d_home
+
+
 def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
-             z_land: float) -> tuple[Any, SprayJob]:
+             z_land: float, truncated: bool = False) -> tuple[Any, SprayJob]:
     """Split the mission into sorties (see the module docstring).
 
     Returns ``(reference, job)``: ``ref`` itself (with ``spray_job`` set) when one sortie does
     the job, else a :class:`ChainedReference`. Raises :class:`ConfigError` when the tank or the
     battery cannot make any progress from the base.
+
+    ``truncated``: ``plan`` is the head of a longer plan (:meth:`CoveragePlan.head`, a mission
+    cut by ``sim.max_time_s``), so its end is not the job's end: a sortie reaching it must still
+    keep its way home at every tick, or it is cut as anywhere else.
     """
     sp, b, m = cfg.spray, cfg.battery, cfg.mission
     k_p = rotor_power_coeff(b.figure_of_merit, b.rotor_diameter_m, b.air_density_kgm3)
@@ -312,12 +337,8 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
     a_max = m.accel_max_mps2
     climb = 1.5  # Reference's default climb speed (m/s)
 
-    t = np.arange(int(math.floor(ref.duration / dt)) + 1) * dt
-    tab = ref.sample_all(t)
-    pos, seg, spray = tab["pos"], tab["seg"], tab["spray"]
-    speed = np.hypot(tab["vel"][:, 0], tab["vel"][:, 1])
-    litres_cum = np.concatenate([[0.0], np.cumsum(np.where(spray, speed, 0.0) * dt * lpm)])[:-1]
-    n = len(t)
+    seg, litres_cum, d_home = _walk(ref, base, lpm, dt)
+    n = len(seg)
 
     def t_way(d: np.ndarray | float) -> np.ndarray | float:
         """Predicted time (s) of a transit of d metres plus a descent or climb and dwells."""
@@ -328,7 +349,6 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
         mass = dry_mass_kg + np.asarray(litres_left) * rho
         return (4.0 * k_p * (mass * G / 4.0) ** 1.5 + b.avionics_w) * (1.0 + b.plan_margin)
 
-    d_home = np.hypot(*(pos[:, :2] - base[None]).T)
     i0 = 0
     cuts: list[tuple[int, float, float]] = []  # (tick of the cut, litres, energy J)
     e_pre = 0.0
@@ -342,7 +362,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
         e_home = power(np.maximum(left, 0.0)) * t_way(d_home[i0:])
         ok = (left >= fill * sp.plan_margin) & (e_run + e_home <= e_use)
         # the job's end: no way home needed (the pilot collects the drone where it hovers)
-        if left[-1] >= 0.0 and e_run[-1] <= e_use:
+        if (ok.all() if truncated else left[-1] >= 0.0 and e_run[-1] <= e_use):
             cuts.append((n - 1, float(left[0] - left[-1]), float(e_run[-1])))
             break
         bad = int(np.argmin(ok))  # first tick that fails
@@ -396,7 +416,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
             cut_q = None
         else:
             j_to = int(seg[k])
-            cut_q = pos[k, :2].copy()
+            cut_q = ref.sample_all(np.array([k * dt]))["pos"][0, :2].copy()
         for j in range(j_from, j_to + 1):
             pts = segs[j].points
             if j == j_from and first_pts is not None:
