@@ -256,6 +256,9 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
                      notice=preflight_notice(cfg, ref))
 
 
+_SAID: set[str] = set()
+
+
 def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
              tick_hook: Callable[..., None] | None = None, log: Any = None) -> RunResult:
     """Fly ``cfg``'s mission once and return the trajectory and the summary metrics: the
@@ -266,7 +269,8 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     frames go into it. ``tick_hook(t, data)`` is called after every control tick.
     """
     prep = _prepare(cfg, feedback, tick_hook, log)
-    if prep.notice:
+    if prep.notice and prep.notice not in _SAID:  # once per process: loops of runs repeat it
+        _SAID.add(prep.notice)
         print(f"ag-uav: {prep.notice}", file=sys.stderr, flush=True)
     out = fly([prep.flight], progress=progress)[0]
     return _finish(prep, out, batch=1)
