@@ -47,7 +47,7 @@ def _fail(msg: str, code: int = 1) -> int:
     return code
 
 
-def _guarded(what: str, out: Path, job) -> tuple[int | None, object]:
+def _guarded(what: str, out: Path, job, kept: str) -> tuple[int | None, object]:
     """``job()`` with SIGTERM raising; the known ways a job stops become one line and an exit
     code: ``(code, None)``; a job that ran: ``(None, result)``."""
     from ..jobs._atomic import disk_error_line
@@ -61,7 +61,7 @@ def _guarded(what: str, out: Path, job) -> tuple[int | None, object]:
             return None, job()
     except Terminated:
         return _fail(f"{what} terminated (SIGTERM) after {time.perf_counter() - t0:.1f} s; "
-                     f"what finished is kept in {out}; --resume continues", 143), None
+                     f"{kept}; --resume in {out} continues", 143), None
     except (BatchStopped, TuneStopped, ExecutorLost) as e:
         extra = "" if isinstance(e, BatchStopped | TuneStopped) else (
             f"; {what} stopped, --resume in {out} continues")
@@ -130,7 +130,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
     with _executor(args) as ex:
         code, res = _guarded(f"batch {spec.name}", out, lambda: run_batch(
             spec, out, ex, resume=args.resume, fresh=args.fresh, logs=args.logs,
-            progress=not args.quiet, report=not args.no_report, tasks=tasks))
+            progress=not args.quiet, report=not args.no_report, tasks=tasks),
+            kept=f"finished runs kept, {out / 'results.csv'} written")
     if code is not None:
         return code
     group = [a.name for a in spec.axes if a.name != "seed" and len(a.values) > 1]
@@ -165,7 +166,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     with _executor(args) as ex:
         code, res = _guarded(f"tune {spec.name}", out, lambda: run_tune(
             spec, out, ex, resume=args.resume, fresh=args.fresh, iters=args.iters,
-            progress=not args.quiet))
+            progress=not args.quiet), kept="finished iterations and evaluations kept")
     if code is not None:
         return code
     print(f"best cost {res.best_cost:.6g} (default gains {res.default_cost:.6g}) after "

@@ -394,16 +394,20 @@ _DIGESTS: dict[tuple[str, int, int], str] = {}
 
 
 def file_digest(path: Path) -> str:
-    """SHA-256 of a file's bytes (memoised per path, size and modification time)."""
+    """SHA-256 of a file's bytes. Memoised per path, size and modification time, but only for
+    a file unchanged for a second or more: file times are coarse, so a file rewritten within
+    the same tick at the same size is read again rather than trusted (as git does)."""
     st = path.stat()
     key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
-    if key not in _DIGESTS:
-        h = hashlib.sha256()
-        with path.open("rb") as f:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                h.update(block)
+    if key in _DIGESTS:
+        return _DIGESTS[key]
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    if time.time_ns() - st.st_mtime_ns > 1_000_000_000:
         _DIGESTS[key] = h.hexdigest()
-    return _DIGESTS[key]
+    return h.hexdigest()
 
 
 def expand(spec: BatchSpec) -> list[RunTask]:
