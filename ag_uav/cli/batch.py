@@ -102,6 +102,8 @@ def _executor(args: argparse.Namespace):
     try:
         return make_executor(args.workers, args.dask, dask_timeout_s=args.dask_timeout)
     except ValueError as e:
+        if not args.dask:
+            raise
         raise ConfigError(f"--dask = {e}") from None
     except (OSError, TimeoutError) as e:
         raise ConfigError(f'--dask = "{args.dask}": cannot connect ({e})') from None
