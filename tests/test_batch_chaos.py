@@ -103,7 +103,6 @@ def test_bad_dask_address_is_one_line_exit_2(tmp_path):
     assert "tcp://HOST:PORT" in r.stderr and "Traceback" not in r.stderr
 
 
-@pytest.mark.slow
 def test_last_dask_worker_killed_stops_within_60_s(tmp_path, cluster):
     spec = write_spec(tmp_path / "spec.toml", seeds=4)
     out = tmp_path / "o"

@@ -354,10 +354,10 @@ class DaskExecutor(Executor):
                 for f in done:
                     pending.discard(f)
                     if f.status == "cancelled":
-                        self._check_alive(len(futures) - len(pending) - 1, len(futures))
+                        self._check_alive()
                     yield index[f.key], self._outcome(f, return_exceptions)
                 if not done:
-                    self._check_alive(len(futures) - len(pending), len(futures))
+                    self._check_alive()
         finally:
             for f in futures:
                 try:
@@ -387,19 +387,18 @@ class DaskExecutor(Executor):
         f.release()
         return r
 
-    def _check_alive(self, n_done: int, n: int) -> None:
+    def _check_alive(self) -> None:
         """Raise :class:`ExecutorLost` when the scheduler is gone or no worker has been
         connected for ``lost_timeout_s``."""
         import time
 
-        where = f"{n_done} of {n} tasks finished"
         if self._client.status != "running":
-            raise ExecutorLost(f"dask: lost the scheduler at {self.address} ({where})")
+            raise ExecutorLost(f"dask: lost the scheduler at {self.address}")
         try:
             n_workers = len(self._client.nthreads())
         except Exception as e:  # noqa: BLE001 - the scheduler went away between the calls
-            raise ExecutorLost(f"dask: lost the scheduler at {self.address} ({where}; "
-                               f"{type(e).__name__})") from None
+            raise ExecutorLost(f"dask: lost the scheduler at {self.address} "
+                               f"({type(e).__name__})") from None
         now = time.monotonic()
         if n_workers:
             self._no_worker_since = None
@@ -407,7 +406,7 @@ class DaskExecutor(Executor):
             self._no_worker_since = now
         elif now - self._no_worker_since >= self.lost_timeout_s:
             raise ExecutorLost(f"dask: no worker left at {self.address} for "
-                               f"{self.lost_timeout_s:g} s ({where})")
+                               f"{self.lost_timeout_s:g} s")
 
     def close(self) -> None:
         try:
