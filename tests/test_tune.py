@@ -195,3 +195,41 @@ def test_integer_keys_get_integer_candidates():
     cfg = config_from_dict(d)
     assert cfg.estimator.window == 13 and isinstance(cfg.estimator.window, int)
     assert cfg.controller.xy.ke == 1.25
+
+
+def test_an_engine_batch_failure_is_logged_and_counted(tmp_path):
+    """Candidates of different control rates cannot share an engine batch: the chunk is
+    evaluated one candidate at a time, with a warning and a counter (never silently)."""
+    spec = spec_from_dict(tiny(
+        pop=3, iters=1, base={"wind.turbulence": "none", "estimator.name": "true"},
+        params={"sim.control_hz": {"lo": 100.0, "hi": 100.00001}},
+        scenarios=[{"kind": "step", "axis": "x", "size": 1.0, "duration": 0.5,
+                    "t_step": 0.2}]))
+    said: list[str] = []
+    res = run_tune(spec, tmp_path, progress=False, warn=said.append)
+    assert res.n_fallback == 3
+    assert len(said) == 1 and "evaluated one at a time" in said[0]
+    assert "must share sim.control_hz" in said[0]
+    ck = json.loads((tmp_path / "checkpoint.json").read_text())
+    assert ck["iterations"][0]["engine_fallbacks"] == 3
+    assert json.loads((tmp_path / "tune.json").read_text())["engine_fallbacks"] == 3
+    evals = [json.loads(line) for line in (tmp_path / "evals.jsonl").read_text().splitlines()]
+    assert all("ValueError" in e["result"]["engine_fallback"] for e in evals)
+    alone = evaluate_candidate({"spec": spec, "values": [100.0]})
+    assert "engine_fallback" not in alone
+    assert [e["result"]["cost"] for e in evals if e["i"] == 0] == [alone["cost"]]
+
+
+def test_damaged_tune_files_are_one_line_or_skipped(tmp_path):
+    spec = spec_from_dict(tiny(iters=1, pop=2))
+    run_tune(spec, tmp_path, progress=False, outputs=False)
+    ev = tmp_path / "evals.jsonl"
+    ev.write_bytes(ev.read_bytes() + b"\xff\xfe not json\n")
+    said: list[str] = []
+    more = run_tune(spec, tmp_path, resume=True, iters=2, progress=False, outputs=False,
+                    warn=said.append)
+    assert more.iterations == 2 and len(said) == 1 and "skipped 1 unreadable line" in said[0]
+    (tmp_path / "checkpoint.json").write_bytes(b"\x00\xff{")
+    with pytest.raises(ConfigError, match="damaged") as e:
+        run_tune(spec, tmp_path, resume=True, iters=3, progress=False, outputs=False)
+    assert "\n" not in str(e.value)

@@ -1,11 +1,76 @@
-"""``ag-uav batch`` and ``ag-uav tune``: headless runs on a process pool or Dask."""
+"""``ag-uav batch`` and ``ag-uav tune``: headless runs on a process pool or Dask.
+
+Exit codes: 0 when every run produced a result (a crashed vehicle is a result); 1 with one line
+when runs failed (lost to the machinery, or an exception in the product), when the executor was
+lost (Dask scheduler gone, no worker left: the journal is kept and ``--resume`` completes the
+job), or when an output could not be written (no space, no permission: the line names the
+path); 2 for a bad spec, flag or ``--dask`` address; 130 on Ctrl-C and 143 on SIGTERM, after
+writing ``results.csv`` (batch) from what is done.
+"""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
+import sys
+import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from ..config import ConfigError
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that ``finally`` blocks (results.csv, journal,
+    checkpoint) run; a BaseException so that no ``except Exception`` turns it into a row."""
+
+
+@contextlib.contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    def handler(signum: int, frame: object) -> None:
+        raise Terminated()
+
+    try:
+        old = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread: leave SIGTERM alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def _fail(msg: str, code: int = 1) -> int:
+    print(f"ag-uav: {msg}", file=sys.stderr)
+    return code
+
+
+def _guarded(what: str, out: Path, job, kept: str) -> tuple[int | None, object]:
+    """``job()`` with SIGTERM raising; the known ways a job stops become one line and an exit
+    code: ``(code, None)``; a job that ran: ``(None, result)``."""
+    from ..jobs._atomic import disk_error_line
+    from ..jobs.batch import BatchStopped
+    from ..jobs.executor import ExecutorLost
+    from ..jobs.tune import TuneStopped
+
+    t0 = time.perf_counter()
+    try:
+        with _sigterm_raises():
+            return None, job()
+    except Terminated:
+        return _fail(f"{what} terminated (SIGTERM) after {time.perf_counter() - t0:.1f} s; "
+                     f"{kept}; --resume in {out} continues", 143), None
+    except (BatchStopped, TuneStopped, ExecutorLost) as e:
+        extra = "" if isinstance(e, BatchStopped | TuneStopped) else (
+            f"; {what} stopped, --resume in {out} continues")
+        return _fail(f"{e}{extra}"), None
+    except OSError as e:
+        line = disk_error_line(e)
+        if line is None:
+            raise
+        return _fail(line), None
 
 
 def _add_exec_args(p: argparse.ArgumentParser) -> None:
@@ -19,6 +84,9 @@ def _add_exec_args(p: argparse.ArgumentParser) -> None:
                    help="continue an interrupted job in --out (finished work is not re-run)")
     p.add_argument("--fresh", action="store_true",
                    help="discard what --out holds from an earlier job and start over")
+    p.add_argument("--dask-timeout", type=float, default=30.0, metavar="S",
+                   help="with --dask: stop (exit 1, --resume continues) when no worker has been "
+                        "connected for S seconds (default 30); a lost scheduler stops at once")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
 
@@ -29,8 +97,14 @@ def _executor(args: argparse.Namespace):
         raise ConfigError(f"--workers = {args.workers}: must be >= 1")
     if args.resume and args.fresh:
         raise ConfigError("--resume and --fresh: choose one")
+    if not args.dask_timeout > 0:
+        raise ConfigError(f"--dask-timeout = {args.dask_timeout}: must be > 0")
     try:
-        return make_executor(args.workers, args.dask)
+        return make_executor(args.workers, args.dask, dask_timeout_s=args.dask_timeout)
+    except ValueError as e:
+        if not args.dask:
+            raise
+        raise ConfigError(f"--dask = {e}") from None
     except (OSError, TimeoutError) as e:
         raise ConfigError(f'--dask = "{args.dask}": cannot connect ({e})') from None
 
@@ -48,7 +122,7 @@ def _load_spec(load_spec, path: str, what: str):
 def cmd_batch(args: argparse.Namespace) -> int:
     from ..jobs.batch import expand, load_spec, print_table, run_batch, summary_rows
 
-    spec = _load_spec(load_spec, args.spec, "batch")
+    spec = _load_spec(lambda p: load_spec(p, max_runs=args.max_runs), args.spec, "batch")
     tasks = expand(spec)
     out = Path(args.out or f"runs/batch-{spec.name}")
     if args.dry_run:
@@ -56,8 +130,12 @@ def cmd_batch(args: argparse.Namespace) -> int:
               + "; ".join(f"{a.name} × {len(a.values)}" for a in spec.axes) + f"; out: {out}")
         return 0
     with _executor(args) as ex:
-        res = run_batch(spec, out, ex, resume=args.resume, fresh=args.fresh, logs=args.logs,
-                        progress=not args.quiet, report=not args.no_report, tasks=tasks)
+        code, res = _guarded(f"batch {spec.name}", out, lambda: run_batch(
+            spec, out, ex, resume=args.resume, fresh=args.fresh, logs=args.logs,
+            progress=not args.quiet, report=not args.no_report, tasks=tasks),
+            kept=f"finished runs kept, {out / 'results.csv'} written")
+    if code is not None:
+        return code
     group = [a.name for a in spec.axes if a.name != "seed" and len(a.values) > 1]
     header, table = summary_rows(res.rows, group)
     print_table(header, table, f"batch {spec.name}: {len(res.rows)} runs "
@@ -65,7 +143,11 @@ def cmd_batch(args: argparse.Namespace) -> int:
                 f"on {res.executor}")
     print(f"results: {out / 'results.csv'}" + ("" if args.no_report else
                                                 f"; report: {out / 'report.md'}"))
-    return 0
+    if res.n_fallback:
+        print(f"ag-uav: warning: batch {spec.name}: {res.n_fallback} runs flown one at a time "
+              "after their engine batch failed (column engine_fallback)", file=sys.stderr)
+    line = res.failure_line()
+    return 0 if line is None else _fail(f"batch {spec.name}: {line}")
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
@@ -84,8 +166,11 @@ def cmd_tune(args: argparse.Namespace) -> int:
         raise ConfigError(f"--iters = {args.iters}: must be >= 1")
     out = Path(args.out or f"runs/tune-{spec.name}")
     with _executor(args) as ex:
-        res = run_tune(spec, out, ex, resume=args.resume, fresh=args.fresh, iters=args.iters,
-                       progress=not args.quiet)
+        code, res = _guarded(f"tune {spec.name}", out, lambda: run_tune(
+            spec, out, ex, resume=args.resume, fresh=args.fresh, iters=args.iters,
+            progress=not args.quiet), kept="finished iterations and evaluations kept")
+    if code is not None:
+        return code
     print(f"best cost {res.best_cost:.6g} (default gains {res.default_cost:.6g}) after "
           f"{res.iterations} iterations; {res.n_evals} evaluations in {res.wall_s:.1f} s")
     print(f"gains: {out / 'best_gains.toml'}; plot: {out / 'convergence.png'}; "
@@ -106,6 +191,9 @@ def register(sub) -> None:
     b.add_argument("--no-report", action="store_true", help="results.csv only, no report")
     b.add_argument("--dry-run", action="store_true",
                    help="validate the spec and print the run count")
+    b.add_argument("--max-runs", type=int, default=None, metavar="N",
+                   help="refuse a spec of more than N runs (default: the spec's max_runs, else "
+                        "10000)")
     _add_exec_args(b)
     b.set_defaults(func=cmd_batch)
 

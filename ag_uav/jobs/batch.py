@@ -12,18 +12,34 @@ Spec (TOML; ``ag-uav batch SPEC.toml``, see ``examples/batch.toml``)::
     controller = ["default", "soft"]    # a preset axis: names of config fragments below
     [presets.controller.soft]           # a fragment: config tables and/or dotted keys and/or
     "controller.xy.k0" = 2.0            #   config = "fragment.toml" (e.g. `ag-uav tune` output)
+    max_runs = 20000                    # optional: the most runs the spec may expand to
+                                        #   (default MAX_RUNS; a bigger product is refused)
+
+Paths mean one thing: every file a spec names (``config = ...`` and ``mission.field`` files of
+every format, ``PATH#selector`` included) is resolved against the spec's folder (a path inside a
+loaded config file: against that file's folder), never the working directory. The config hash
+includes the content of every file a run reads (a shapefile with its sidecars), so a field file
+changed in place is a different run for ``--resume``.
 
 An axis is a *preset axis* when ``[presets.<axis>]`` exists (``controller`` always is; its
 preset ``default`` is the empty fragment). Every run's config is ``base ⊕ presets ⊕ axis keys``,
 validated with the usual one-line :class:`~ag_uav.config.ConfigError` before anything runs.
 
 Each finished run becomes one row (every scalar summary metric, the axis values, ``status`` =
-ok | crashed | error and ``crash_reason``) appended to ``journal.jsonl`` (flushed and fsynced per
-run). ``results.csv`` is regenerated from the journal, sorted by run index, so it never depends
-on scheduling. ``--resume`` skips the runs whose *config hash* is already in the journal (so a
-spec that grows — more seeds — reuses the finished runs). A run that raises, or whose worker
-process dies, is a row with status ``error`` and the reason; the batch goes on (rows lost to a
-dead worker are re-run by ``--resume``).
+ok | crashed | error, ``crash_reason`` and ``engine_fallback``) appended to ``journal.jsonl``
+(flushed and fsynced per run). ``results.csv`` is regenerated (atomically) from the journal,
+sorted by run index, so it never depends on scheduling; it is written however the batch ends
+(Ctrl-C and SIGTERM included). ``--resume`` skips the runs whose *config hash* is already in
+the journal (so a spec that grows — more seeds — reuses the finished runs); unreadable journal
+lines are skipped with a warning saying how many.
+
+Failures are never silent. A crashed vehicle is a result (status ``crashed``). A run that
+raises is a row with status ``error`` and the exception; a chunk whose worker died (after the
+executor's bounded retries) is a row per run with status ``error`` and ``worker failure: ...``,
+journalled for ``--resume`` to re-run; :meth:`BatchResult.failure_line` sums them up (the CLI
+exits non-zero). An executor that is lost (scheduler gone, no worker left) stops the batch with
+:class:`BatchStopped`. A lockstep chunk whose engine batch raised is flown one run at a time,
+with the exception in each row's ``engine_fallback``, a warning, and a count in the report.
 
 Determinism: a run's row depends only on its config (seed included), never on the worker or the
 order; only the timing columns (:func:`is_timing_column`) differ between repeats.
@@ -47,13 +63,18 @@ from pathlib import Path
 from typing import Any
 
 from ..config import Config, ConfigError, config_from_dict
-from .executor import Executor, LocalPoolExecutor, SerialExecutor
+from ._atomic import savefig_atomic, write_atomic, write_text_atomic
+from .executor import Executor, ExecutorLost, LocalPoolExecutor, SerialExecutor
 
-SPEC_KEYS = ("name", "description", "base", "axes", "presets")
+SPEC_KEYS = ("name", "description", "base", "axes", "presets", "max_runs")
+#: most runs a spec may expand to unless it (``max_runs = N``) or ``--max-runs`` says more:
+#: every run is validated before anything flies, so a typo'd range is refused, not expanded
+MAX_RUNS = 10_000
 #: columns that lead results.csv, before the axis columns
 LEAD_COLUMNS = ("index", "run_id")
 #: summary metrics in display order (any other scalar metric follows, sorted by name)
-METRIC_ORDER = ("status", "crash_reason", "completed", "crashed", "crash_time_s", "mission_time_s",
+METRIC_ORDER = ("status", "crash_reason", "engine_fallback", "completed", "crashed",
+                "crash_time_s", "mission_time_s",
                 "tracking_rmse_m", "estimate_rmse_m", "cross_track_rmse_m", "cross_track_max_m",
                 "altitude_rmse_m", "coverage_fraction", "overlap_fraction", "path_length_m",
                 "planned_path_length_m", "legs", "legs_flown", "final_position_error_m",
@@ -157,7 +178,9 @@ def _read_toml(path: Path, what: str) -> dict[str, Any]:
 
 def resolve_fragment(frag: Any, where: str, base_dir: Path) -> dict[str, Any]:
     """A config fragment (table) → a nested config dict. ``config = "file.toml"`` loads a file
-    (relative to ``base_dir``) first; keys with dots are dotted config keys."""
+    (relative to ``base_dir``) first; keys with dots are dotted config keys. Field paths are made
+    absolute: those of the fragment against ``base_dir``, those of the loaded file against the
+    file's folder (:func:`resolve_paths`)."""
     if not isinstance(frag, dict):
         raise ConfigError(f"{where} = {_fmt(frag)}: expected a table (config fragment)")
     out: dict[str, Any] = {}
@@ -166,7 +189,7 @@ def resolve_fragment(frag: Any, where: str, base_dir: Path) -> dict[str, Any]:
         if not isinstance(p, str):
             raise ConfigError(f"{where}.config = {_fmt(p)}: expected a path to a TOML file")
         path = Path(p) if Path(p).is_absolute() else base_dir / p
-        out = _read_toml(path, f"{where}.config")
+        out = resolve_paths(_read_toml(path, f"{where}.config"), path.parent)
     nested: dict[str, Any] = {}
     for k, v in frag.items():
         if k == "config":
@@ -175,10 +198,43 @@ def resolve_fragment(frag: Any, where: str, base_dir: Path) -> dict[str, Any]:
             set_dotted(nested, k, v)
         else:
             nested = deep_merge(nested, {k: v})
-    return deep_merge(out, nested)
+    return deep_merge(out, resolve_paths(nested, base_dir))
 
 
-def _axis_values(name: str, raw: Any) -> list[Any]:
+#: config keys that name files (resolved against the folder of the TOML that names them)
+PATH_KEYS = ("mission.field",)
+
+
+def resolve_paths(d: dict[str, Any], base_dir: Path) -> dict[str, Any]:
+    """``d`` (a nested config dict, changed in place and returned) with every file path of
+    :data:`PATH_KEYS` made absolute against ``base_dir``."""
+    for key in PATH_KEYS:
+        v = get_dotted(d, key)
+        if v is not None:
+            set_dotted(d, key, resolve_field(v, base_dir))
+    return d
+
+
+def resolve_field(v: Any, base_dir: Path) -> Any:
+    """A field file (any of ``FIELD_FILE_SUFFIXES``, with or without a ``#selector``) relative
+    to ``base_dir`` → its absolute path (selector kept). Built-in names stay; anything else is
+    left for the config's own one-line check. As in ``load_field``, a file whose name holds a
+    ``#`` wins over a selector."""
+    from ..world.field import BUILTIN_FIELDS, FIELD_FILE_SUFFIXES
+
+    if not isinstance(v, str) or v.strip().lower().replace("_", "-") in BUILTIN_FIELDS:
+        return v
+    path, sel = v, None
+    if "#" in v and not (base_dir / Path(v).expanduser()).exists():
+        path, _, sel = v.partition("#")
+    if not path.lower().endswith(FIELD_FILE_SUFFIXES):
+        return v
+    p = Path(path).expanduser()
+    p = Path(os.path.abspath(p if p.is_absolute() else base_dir / p))
+    return str(p) + (f"#{sel}" if sel is not None else "")
+
+
+def _axis_values(name: str, raw: Any, max_runs: int = MAX_RUNS) -> list[Any]:
     where = f"axes.{name}" if "." not in name else f'axes."{name}"'
     if isinstance(raw, dict):
         if set(raw) == {"range"}:
@@ -187,18 +243,26 @@ def _axis_values(name: str, raw: Any) -> list[Any]:
                     or not all(isinstance(x, int) and not isinstance(x, bool) for x in r)):
                 raise ConfigError(f"{where} = {_fmt(raw)}: range needs [start, stop] or "
                                   "[start, stop, step] integers (stop excluded)")
+            if len(r) == 3 and r[2] == 0:
+                raise ConfigError(f"{where} = {_fmt(raw)}: range step must not be 0")
+            _check_count(where, raw, len(range(*r)), max_runs)
             vals = list(range(*r))
         elif set(raw) == {"linspace"}:
             r = raw["linspace"]
             if (not isinstance(r, list) or len(r) != 3 or not isinstance(r[2], int)
-                    or r[2] < 1 or not all(isinstance(x, int | float) for x in r[:2])):
-                raise ConfigError(f"{where} = {_fmt(raw)}: linspace needs [start, stop, count]")
+                    or isinstance(r[2], bool) or r[2] < 1
+                    or not all(isinstance(x, int | float) and not isinstance(x, bool)
+                               and math.isfinite(x) for x in r[:2])):
+                raise ConfigError(f"{where} = {_fmt(raw)}: linspace needs [start, stop, count] "
+                                  "(finite numbers, count >= 1)")
+            _check_count(where, raw, r[2], max_runs)
             a, b, n = float(r[0]), float(r[1]), r[2]
             vals = [a + (b - a) * i / (n - 1) if n > 1 else a for i in range(n)]
         else:
             raise ConfigError(f"{where} = {_fmt(raw)}: expected a list of values, "
                               "{range = [start, stop]} or {linspace = [start, stop, count]}")
     elif isinstance(raw, list):
+        _check_count(where, "[...]", len(raw), max_runs)
         vals = list(raw)
     else:
         vals = [raw]
@@ -207,9 +271,34 @@ def _axis_values(name: str, raw: Any) -> list[Any]:
     return vals
 
 
+def _check_count(where: str, raw: Any, n: int, max_runs: int) -> None:
+    if n > max_runs:
+        shown = raw if isinstance(raw, str) else _fmt(raw)
+        raise ConfigError(f"{where} = {shown}: {n:,} values, more than the limit of "
+                          f"{max_runs:,} runs (raise it with max_runs = N in the spec or "
+                          "--max-runs N)")
+
+
+def _max_runs(data: dict[str, Any], override: int | None) -> int:
+    if override is not None:
+        if isinstance(override, bool) or not isinstance(override, int) or override < 1:
+            raise ConfigError(f"--max-runs = {override}: expected an integer >= 1")
+        return override
+    v = data.get("max_runs", MAX_RUNS)
+    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+        raise ConfigError(f"max_runs = {_fmt(v)}: expected an integer >= 1")
+    return v
+
+
 def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".",
-                   name: str | None = None, source: str | None = None) -> BatchSpec:
-    """Validate a batch spec given as a (TOML-shaped) dict. Raises one-line ConfigError."""
+                   name: str | None = None, source: str | None = None,
+                   max_runs: int | None = None) -> BatchSpec:
+    """Validate a batch spec given as a (TOML-shaped) dict. Raises one-line ConfigError.
+
+    Every file path (``config = ...`` and field files of every format, selectors kept) is
+    resolved against ``base_dir`` (the spec's folder), never the working directory. A spec of
+    more than ``max_runs`` runs (default: the spec's ``max_runs``, else :data:`MAX_RUNS`) is
+    refused before anything is expanded."""
     base_dir = Path(base_dir)
     if not isinstance(data, dict):
         raise ConfigError(f"batch spec = {_fmt(data)}: expected a table")
@@ -236,44 +325,89 @@ def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".",
     axes_raw = data.get("axes", {})
     if not isinstance(axes_raw, dict):
         raise ConfigError(f"axes = {_fmt(axes_raw)}: expected a table of key = [values]")
+    limit = _max_runs(data, max_runs)
     axes: list[Axis] = []
     for key, raw in axes_raw.items():
-        vals = _axis_values(key, raw)
+        vals = _axis_values(key, raw, limit)
         is_preset = key in presets_raw or key == "controller"
         if is_preset:
             for v in vals:
                 if not isinstance(v, str) or v not in presets[key]:
                     raise ConfigError(f"axes.{key} = {_fmt(v)}: no preset of that name; "
                                       f"defined: {', '.join(presets[key])}")
-        elif key == "mission.field":
-            vals = [_resolve_field(v, base_dir) for v in vals]
+        elif key in PATH_KEYS:
+            vals = [resolve_field(v, base_dir) for v in vals]
         axes.append(Axis(key, vals, is_preset))
-    if "field" in base.get("mission", {}):
-        base["mission"]["field"] = _resolve_field(base["mission"]["field"], base_dir)
+    n = math.prod(len(a.values) for a in axes)
+    if n > limit:
+        raise ConfigError("axes: " + " × ".join(f"{a.name} {len(a.values)}" for a in axes)
+                          + f" = {n:,} runs, more than the limit of {limit:,} (raise it with "
+                          "max_runs = N in the spec or --max-runs N)")
     return BatchSpec(name=nm, base=base, axes=axes, presets=presets,
                      description=str(data.get("description", "")), source=source)
 
 
-def _resolve_field(v: Any, base_dir: Path) -> Any:
-    """A GeoJSON path relative to the spec file becomes absolute (built-in names stay)."""
-    if isinstance(v, str) and v.lower().endswith((".geojson", ".json")):
-        p = Path(v)
-        if not p.is_absolute() and (base_dir / p).exists():
-            return str((base_dir / p).resolve())
-    return v
-
-
-def load_spec(path: str | Path) -> BatchSpec:
-    """Read and validate a batch spec file."""
+def load_spec(path: str | Path, max_runs: int | None = None) -> BatchSpec:
+    """Read and validate a batch spec file (paths in it are relative to its folder)."""
     p = Path(path)
     data = _read_toml(p, "batch spec")
-    return spec_from_dict(data, base_dir=p.parent, name=data.get("name", p.stem), source=str(p))
+    return spec_from_dict(data, base_dir=p.parent, name=data.get("name", p.stem), source=str(p),
+                          max_runs=max_runs)
 
 
 def config_hash(cfg_dict: dict[str, Any]) -> str:
-    """Stable hash of a full config dict (what makes a run a run)."""
+    """Stable hash of a full config dict and of the content of every file it names (what
+    makes a run a run): a field file changed in place is a different run. A config that names
+    no file hashes as the config alone (journals written before file hashing still resume)."""
     blob = json.dumps(cfg_dict, sort_keys=True, separators=(",", ":"), default=str)
+    files = referenced_files(cfg_dict)
+    if files:
+        blob += json.dumps({str(f): file_digest(f) for f in files}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+#: the files a shapefile is read with (``.shp`` geometry, ``.shx`` index, ``.dbf`` attributes,
+#: ``.prj`` projection, ``.cpg`` code page)
+SHAPEFILE_PARTS = (".shp", ".shx", ".dbf", ".prj", ".cpg")
+
+
+def referenced_files(cfg_dict: dict[str, Any]) -> list[Path]:
+    """The existing files a config dict reads (field files; a shapefile with its sidecars)."""
+    from ..world.field import split_field_spec
+
+    out: list[Path] = []
+    for key in PATH_KEYS:
+        v = get_dotted(cfg_dict, key)
+        if not isinstance(v, str):
+            continue
+        p = Path(split_field_spec(v)[0])
+        if not p.is_file():
+            continue
+        out.append(p)
+        if p.suffix.lower() == ".shp":
+            for ext in SHAPEFILE_PARTS[1:]:
+                out += [q for q in (p.with_suffix(ext), p.with_suffix(ext.upper())) if q.is_file()]
+    return out
+
+
+_DIGESTS: dict[tuple[str, int, int], str] = {}
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's bytes. Memoised per path, size and modification time, but only for
+    a file unchanged for a second or more: file times are coarse, so a file rewritten within
+    the same tick at the same size is read again rather than trusted (as git does)."""
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key in _DIGESTS:
+        return _DIGESTS[key]
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    if time.time_ns() - st.st_mtime_ns > 1_000_000_000:
+        _DIGESTS[key] = h.hexdigest()
+    return h.hexdigest()
 
 
 def expand(spec: BatchSpec) -> list[RunTask]:
@@ -380,7 +514,9 @@ def run_chunk(tasks: list[RunTask]) -> list[dict[str, Any]]:
     """Worker entry point: fly a chunk of runs as one lockstep engine batch
     (:func:`ag_uav.engine.missions.simulate_many`) and return their rows, in order. Never raises: a
     run that cannot be set up is an error row; if the batch itself fails, the chunk falls back to
-    one run at a time so the failing run is isolated and the others still fly."""
+    one run at a time so the failing run is isolated and the others still fly. The fallback is
+    not silent: every row of the chunk carries the batch's exception in ``engine_fallback``
+    (empty when the chunk flew as one batch), and :func:`run_batch` warns and counts it."""
     if len(tasks) == 1 or any(t.logs_dir for t in tasks):
         return [run_task(t) for t in tasks]
     from ..engine.missions import simulate_many
@@ -400,11 +536,18 @@ def run_chunk(tasks: list[RunTask]) -> list[dict[str, Any]]:
         results = simulate_many(cfgs, errors="return",
                                 reduce=lambda k, res: _row(tasks[where[k]], res, t0)
                                 ) if cfgs else []
-    except Exception:  # noqa: BLE001 - isolate the failing run
-        return [run_task(t) for t in tasks]
+    except Exception as e:  # noqa: BLE001 - isolate the failing run, and say so
+        reason = exception_line(e)
+        return [{**run_task(t), "engine_fallback": reason} for t in tasks]
     for j, res in zip(where, results, strict=True):
         rows[j] = _error_row(tasks[j], res, t0) if isinstance(res, BaseException) else res
     return rows  # type: ignore[return-value]
+
+
+def exception_line(e: BaseException) -> str:
+    """``Type: first line of the message`` (at most 300 characters)."""
+    msg = str(e).splitlines()[0] if str(e) else ""
+    return f"{type(e).__name__}: {msg}"[:300]
 
 
 def _row(task: RunTask, res: Any, t0: float) -> dict[str, Any]:
@@ -415,14 +558,15 @@ def _row(task: RunTask, res: Any, t0: float) -> dict[str, Any]:
     status = "crashed" if summ.get("crashed") else "ok"
     row.update({"status": status, "crash_reason": summ.pop("crash_reason", None) or ""})
     row.update(summ)
+    row["engine_fallback"] = ""
     return row
 
 
 def _error_row(task: RunTask, e: BaseException, t0: float) -> dict[str, Any]:
-    msg = str(e).splitlines()[0] if str(e) else ""
     return {"index": task.index, "run_id": task.run_id, **task.axis_values, "status": "error",
-            "crash_reason": f"{type(e).__name__}: {msg}"[:300], "completed": False,
-            "crashed": True, "wall_time_s": round(time.perf_counter() - t0, 3)}
+            "crash_reason": exception_line(e), "completed": False,
+            "crashed": True, "wall_time_s": round(time.perf_counter() - t0, 3),
+            "engine_fallback": ""}
 
 
 #: bytes the engine keeps per vehicle and control tick: records, IMU and spray job, plus
@@ -470,30 +614,30 @@ class Journal:
     """Append-only JSONL of finished runs, one line per run, flushed and fsynced per line.
 
     Each line: ``{"hash": config_hash, "retry": bool, "row": {...}}``. A truncated last line
-    (the process was killed mid-write) is ignored on reading.
+    (the process was killed mid-write) is ignored on reading; any other line that is not a
+    journal record (damaged bytes, not UTF-8, not JSON) is skipped and counted in
+    :attr:`skipped`, so ``--resume`` re-runs those runs and says how many lines it passed over.
     """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._f = None
+        self.skipped = 0
 
     def read(self) -> dict[str, dict[str, Any]]:
         """config hash → row, for the lines that are final (not marked ``retry``)."""
         done: dict[str, dict[str, Any]] = {}
+        self.skipped = 0
         if not self.path.exists():
             return done
-        with self.path.open("r") as f:
-            for line in f:
-                try:
-                    rec = json.loads(line)
-                except json.JSONDecodeError:
-                    continue  # a torn last line
-                if not isinstance(rec, dict) or "hash" not in rec:
-                    continue
-                if rec.get("retry"):
-                    done.pop(rec["hash"], None)
-                else:
-                    done[rec["hash"]] = rec["row"]
+        recs, self.skipped = read_jsonl(self.path)
+        for rec in recs:
+            if not isinstance(rec.get("hash"), str) or not isinstance(rec.get("row"), dict):
+                self.skipped += 1
+            elif rec.get("retry"):
+                done.pop(rec["hash"], None)
+            else:
+                done[rec["hash"]] = rec["row"]
         return done
 
     def open(self, fresh: bool = False) -> None:
@@ -504,23 +648,57 @@ class Journal:
 
     def _repair(self) -> None:
         """Cut a torn last line so that the next append starts on a line of its own."""
-        data = self.path.read_bytes()
-        if data and not data.endswith(b"\n"):
-            cut = data.rfind(b"\n") + 1
-            with self.path.open("r+b") as f:
-                f.truncate(cut)
+        repair_jsonl(self.path)
 
     def append(self, h: str, row: dict[str, Any], retry: bool = False) -> None:
         assert self._f is not None, "journal not open"
-        self._f.write(json.dumps({"hash": h, "retry": retry, "row": row},
-                                 default=_json_default) + "\n")
-        self._f.flush()
-        os.fsync(self._f.fileno())
+        try:
+            self._f.write(json.dumps({"hash": h, "retry": retry, "row": row},
+                                     default=_json_default) + "\n")
+            self._f.flush()
+            os.fsync(self._f.fileno())
+        except OSError as e:  # ENOSPC, EIO, ...: name the journal
+            raise OSError(e.errno, e.strerror or str(e), str(self.path)) from None
 
     def close(self) -> None:
         if self._f is not None:
-            self._f.close()
+            try:
+                self._f.close()
+            except OSError:  # a flush that failed was reported by append
+                pass
             self._f = None
+
+
+def read_jsonl(path: Path) -> tuple[list[dict[str, Any]], int]:
+    """The JSON objects of a JSONL file, and how many lines were skipped as unreadable (bytes
+    that are not UTF-8 or not a JSON object). A torn last line (no newline) is dropped
+    without counting: it is what a kill mid-append leaves."""
+    data = path.read_bytes()
+    lines = data.split(b"\n")
+    if lines and lines[-1] and not data.endswith(b"\n"):
+        lines = lines[:-1]
+    out: list[dict[str, Any]] = []
+    bad = 0
+    for raw in lines:
+        if not raw.strip():
+            continue
+        try:
+            rec = json.loads(raw.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError):
+            rec = None
+        if isinstance(rec, dict):
+            out.append(rec)
+        else:
+            bad += 1
+    return out, bad
+
+
+def repair_jsonl(path: Path) -> None:
+    """Cut a torn last line (no newline) so that the next append starts a line of its own."""
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        with path.open("r+b") as f:
+            f.truncate(data.rfind(b"\n") + 1)
 
 
 # ------------------------------------------------------------------------------------ results
@@ -549,14 +727,14 @@ def write_results_csv(rows: Sequence[dict[str, Any]], path: str | Path,
     """Write rows sorted by run index (atomic replace); returns the columns."""
     rows = sorted(rows, key=lambda r: r.get("index", 0))
     cols = ordered_columns(rows, axis_names)
-    path = Path(path)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    with tmp.open("w", newline="") as f:
+
+    def write(f: Any) -> None:
         w = csv.writer(f)
         w.writerow(cols)
         for r in rows:
             w.writerow([_csv_value(r.get(c)) for c in cols])
-    tmp.replace(path)
+
+    write_atomic(path, write, newline="")
     return cols
 
 
@@ -702,7 +880,7 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
                 ax.grid(alpha=0.3)
         fig.tight_layout()
         p = out / "rmse.png"
-        fig.savefig(p, dpi=110)
+        savefig_atomic(fig, p, dpi=110)
         plt.close(fig)
         written.append(p)
     # --- tracking vs estimate error
@@ -722,7 +900,7 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
         ax.grid(alpha=0.3)
         fig.tight_layout()
         p = out / "tracking_vs_estimate.png"
-        fig.savefig(p, dpi=110)
+        savefig_atomic(fig, p, dpi=110)
         plt.close(fig)
         written.append(p)
     # --- coverage
@@ -737,7 +915,7 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
         ax.grid(alpha=0.3)
         fig.tight_layout()
         p = out / "coverage.png"
-        fig.savefig(p, dpi=110)
+        savefig_atomic(fig, p, dpi=110)
         plt.close(fig)
         written.append(p)
     # --- markdown
@@ -749,6 +927,9 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
     md += [f"- runs: {len(rows)} ({sum(r.get('status') == 'ok' for r in rows)} ok, "
            f"{sum(r.get('status') == 'crashed' for r in rows)} crashed, "
            f"{sum(r.get('status') == 'error' for r in rows)} error)"]
+    n_fb = sum(bool(r.get("engine_fallback")) for r in rows)
+    md += [f"- engine fallbacks: {n_fb} runs flown one at a time after their engine batch "
+           "failed (column `engine_fallback`)" if n_fb else "- engine fallbacks: 0"]
     md += ["- axes: " + "; ".join(f"`{a.name}` × {len(a.values)}" for a in spec.axes)]
     for k, v in info.items():
         md.append(f"- {k}: {v}")
@@ -765,12 +946,17 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
     for p in written:
         md += [f"![{p.stem}]({p.name})", ""]
     rp = out / "report.md"
-    rp.write_text("\n".join(md))
+    write_text_atomic(rp, "\n".join(md))
     written.insert(0, rp)
     return written
 
 
 # ---------------------------------------------------------------------------------- run_batch
+class BatchStopped(RuntimeError):
+    """The batch stopped before every run had a row (the executor was lost: scheduler gone, no
+    worker left). One line; ``results.csv`` holds what finished and ``--resume`` completes it."""
+
+
 @dataclass
 class BatchResult:
     rows: list[dict[str, Any]]       # sorted by index
@@ -780,17 +966,46 @@ class BatchResult:
     wall_s: float
     executor: str
     files: list[Path] = field(default_factory=list)
+    n_lost: int = 0                  # runs of this call lost to the machinery (re-run on resume)
+    n_fallback: int = 0              # rows flown one at a time after their engine batch failed
+    journal_skipped: int = 0         # unreadable journal lines passed over (--resume)
+
+    def failure_line(self) -> str | None:
+        """None when every run produced a result (ok or crashed: a crash is a result); else one
+        line: how many runs failed, lost to the machinery or by an exception in the product."""
+        bad = [r for r in self.rows if r.get("status") == "error"]
+        if not bad:
+            return None
+        lost = [r for r in bad if str(r.get("crash_reason", "")).startswith(LOST_PREFIX)]
+        parts = []
+        if lost:
+            parts.append(f"{len(lost)} lost to the machinery ({lost[0]['crash_reason']}; "
+                         "--resume re-runs them)")
+        if len(bad) > len(lost):
+            first = next(r for r in bad if r not in lost)
+            parts.append(f"{len(bad) - len(lost)} raised in the product (first: run "
+                         f"{first.get('run_id')}: {first.get('crash_reason')})")
+        return f"{len(bad)} of {len(self.rows)} runs failed: " + "; ".join(parts)
+
+
+#: ``crash_reason`` of a row whose run was lost to the machinery (journalled as a retry)
+LOST_PREFIX = "worker failure: "
 
 
 def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = None, *,
               resume: bool = False, fresh: bool = False, logs: bool = False,
               progress: bool = True, report: bool = True,
               tasks: list[RunTask] | None = None,
-              on_row: Callable[[dict[str, Any]], None] | None = None) -> BatchResult:
+              on_row: Callable[[dict[str, Any]], None] | None = None,
+              warn: Callable[[str], None] | None = None) -> BatchResult:
     """Run every task of ``spec`` on ``executor`` (default: serial) into ``out_dir``.
 
     ``resume``: skip runs already in ``out_dir/journal.jsonl``; ``fresh``: discard an existing
     journal. With neither, an existing journal is an error (nothing is overwritten silently).
+    ``results.csv`` is written however the call ends (an interrupt or SIGTERM included). When
+    the executor is lost (:class:`~ag_uav.jobs.executor.ExecutorLost`), raises
+    :class:`BatchStopped` after writing it. Warnings (unreadable journal lines, engine batches
+    that fell back to one run at a time) go to ``warn`` (default: one line on stderr).
     """
     out = Path(out_dir)
     tasks = tasks if tasks is not None else expand(spec)
@@ -804,67 +1019,126 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
         for t in tasks:
             t.logs_dir = str(out / "runs")
     todo = [t for t in tasks if t.config_hash not in done]
-    rows_by_index: dict[int, dict[str, Any]] = {}
-    for t in tasks:
-        if t.config_hash in done:
-            rows_by_index[t.index] = _rebase_row(done[t.config_hash], t)
-    (out / "batch.json").write_text(json.dumps({
+    rows_by_index = {t.index: _rebase_row(done[t.config_hash], t) for t in tasks
+                     if t.config_hash in done}
+    write_text_atomic(out / "batch.json", json.dumps({
         "name": spec.name, "source": spec.source, "n_runs": len(tasks),
         "axes": {a.name: a.values for a in spec.axes}, "base": spec.base,
         "presets": spec.presets}, indent=2, default=_json_default))
     executor = executor or SerialExecutor()
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), unit="run",
-                   desc=f"batch {spec.name}", dynamic_ncols=True, smoothing=0.05)
+    run = _BatchRun(spec.name, len(tasks), len(tasks) - len(todo), progress, warn, on_row)
+    if journal.skipped:
+        run.warn(f"{journal.path}: skipped {journal.skipped} unreadable line(s); their runs "
+                 "are run again")
     t0 = time.perf_counter()
     journal.open(fresh=fresh and not resume)
-    n_bad = 0
+    stopped = None
     try:
         chunks = plan_chunks(todo, executor.workers) if todo else []
         for c, rs in executor.map_unordered(run_chunk, [[todo[i] for i in ch] for ch in chunks],
                                             return_exceptions=True):
-            for i, r in zip(chunks[c], rs if isinstance(rs, list) else [rs] * len(chunks[c]),
-                            strict=True):
-                task = todo[i]
-                retry = False
-                if isinstance(r, BaseException):
-                    # the machinery failed (worker died): a row now, re-run by --resume
-                    retry = True
-                    r = {"index": task.index, "run_id": task.run_id, **task.axis_values,
-                         "status": "error", "completed": False, "crashed": True,
-                         "crash_reason": f"worker failure: {type(r).__name__}: {r}"[:300]}
-                journal.append(task.config_hash, r, retry=retry)
-                rows_by_index[task.index] = r
-                n_bad += r.get("status") != "ok"
-                if on_row is not None:
-                    on_row(r)
-                if bar is not None:
-                    bar.update(1)
-                    if n_bad:
-                        bar.set_postfix(failed=n_bad, refresh=False)
-    finally:
-        if bar is not None:
-            bar.close()
-        journal.close()
-        rows = [rows_by_index[k] for k in sorted(rows_by_index)]
-        write_results_csv(rows, out / "results.csv", [a.name for a in spec.axes])
+            run.chunk([todo[i] for i in chunks[c]], rs, journal, rows_by_index)
+    except ExecutorLost as e:
+        stopped = str(e)
+    except BaseException:  # interrupted (Ctrl-C, SIGTERM) or a disk error: keep what is done
+        run.finish(journal, rows_by_index, out / "results.csv", spec, quiet=True)
+        raise
+    rows = run.finish(journal, rows_by_index, out / "results.csv", spec)
+    if stopped:
+        raise BatchStopped(f"batch {spec.name} stopped: {stopped}; {len(rows)} of {len(tasks)} "
+                           f"runs done, {out / 'results.csv'} written; --resume completes it")
     wall = time.perf_counter() - t0
     res = BatchResult(rows=rows, out_dir=out, n_run=len(todo), n_skipped=len(tasks) - len(todo),
-                      wall_s=wall, executor=executor.name, files=[out / "results.csv"])
+                      wall_s=wall, executor=executor.name, files=[out / "results.csv"],
+                      n_lost=run.n_lost, journal_skipped=journal.skipped,
+                      n_fallback=sum(bool(r.get("engine_fallback")) for r in rows))
     if report:
         res.files += write_report(rows, spec, out, info={
             "executor": executor.name, "wall time (this call)": f"{wall:.1f} s",
-            "runs executed / resumed": f"{res.n_run} / {res.n_skipped}"})
+            "runs executed / resumed": f"{res.n_run} / {res.n_skipped}",
+            "runs lost to the machinery (this call)": res.n_lost})
     return res
+
+
+class _BatchRun:
+    """The bookkeeping of one :func:`run_batch` call: journal rows, progress bar, warnings."""
+
+    def __init__(self, name: str, n: int, n_done: int, progress: bool,
+                 warn: Callable[[str], None] | None,
+                 on_row: Callable[[dict[str, Any]], None] | None) -> None:
+        self.bar = None
+        if progress:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=n, initial=n_done, unit="run", desc=f"batch {name}",
+                            dynamic_ncols=True, smoothing=0.05)
+        self._warn, self.on_row = warn, on_row
+        self.n_bad = self.n_lost = 0
+
+    def warn(self, msg: str) -> None:
+        if self._warn is not None:
+            self._warn(msg)
+            return
+        import sys
+
+        line = f"ag-uav: warning: {msg}"
+        if self.bar is not None:
+            self.bar.write(line, file=sys.stderr)
+        else:
+            print(line, file=sys.stderr)
+
+    def chunk(self, tasks: list[RunTask], rs: Any, journal: Journal,
+              rows_by_index: dict[int, dict[str, Any]]) -> None:
+        """Journal the rows of one finished chunk (an exception: the machinery lost it)."""
+        if isinstance(rs, BaseException):
+            # the machinery failed (worker died, retries spent): a row now, re-run by --resume
+            reason = f"{LOST_PREFIX}{exception_line(rs)}"[:300]
+            rs = [{"index": t.index, "run_id": t.run_id, **t.axis_values, "status": "error",
+                   "completed": False, "crashed": True, "crash_reason": reason,
+                   "engine_fallback": ""} for t in tasks]
+            self.n_lost += len(tasks)
+            self.warn(f"runs {tasks[0].run_id}..{tasks[-1].run_id}: {reason}")
+            retry = True
+        else:
+            retry = False
+            fb = next((r.get("engine_fallback") for r in rs if r.get("engine_fallback")), "")
+            if fb:
+                self.warn(f"runs {tasks[0].run_id}..{tasks[-1].run_id}: the engine batch failed "
+                          f"({fb}); flown one at a time (column engine_fallback)")
+        for task, r in zip(tasks, rs, strict=True):
+            journal.append(task.config_hash, r, retry=retry)
+            rows_by_index[task.index] = r
+            self.n_bad += r.get("status") != "ok"
+            if self.on_row is not None:
+                self.on_row(r)
+            if self.bar is not None:
+                self.bar.update(1)
+                if self.n_bad:
+                    self.bar.set_postfix(failed=self.n_bad, refresh=False)
+
+    def finish(self, journal: Journal, rows_by_index: dict[int, dict[str, Any]], csv_path: Path,
+               spec: BatchSpec, quiet: bool = False) -> list[dict[str, Any]]:
+        """Close the bar and the journal and write ``results.csv`` from what is done; with
+        ``quiet`` (an exception is already on its way) a write error is a warning only."""
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+        journal.close()
+        rows = [rows_by_index[k] for k in sorted(rows_by_index)]
+        try:
+            write_results_csv(rows, csv_path, [a.name for a in spec.axes])
+        except OSError as e:
+            if not quiet:
+                raise
+            self.warn(f"cannot write {e.filename or csv_path}: {e.strerror or e}")
+        return rows
 
 
 def _rebase_row(row: dict[str, Any], task: RunTask) -> dict[str, Any]:
     """A journal row under the current spec's index and axis values (same config hash)."""
     r = dict(row)
     r.update({"index": task.index, "run_id": task.run_id, **task.axis_values})
+    r.setdefault("engine_fallback", "")
     return r
 
 
@@ -937,6 +1211,7 @@ def bench_workers(cfg: Config, repeats: int = 1, quick: bool = False, *,
 
 
 __all__ = ["Axis", "BatchSpec", "RunTask", "BatchResult", "load_spec", "spec_from_dict", "expand",
-           "run_task", "run_batch", "Journal", "write_results_csv", "read_results_csv",
+           "run_task", "run_batch", "Journal", "BatchStopped", "MAX_RUNS", "write_results_csv",
+           "read_results_csv", "resolve_field", "resolve_paths", "referenced_files",
            "write_report", "summary_rows", "mean_ci", "bench_workers", "write_rect_field",
            "is_timing_column", "config_hash", "deep_merge", "set_dotted", "get_dotted"]

@@ -15,6 +15,16 @@ Implementations: :class:`SerialExecutor` (in-process, for tests and debugging),
 workers, or a running scheduler at ``tcp://host:port``). ``fn`` and the items must be picklable
 (top-level functions and plain data).
 
+Failures of the machinery are never silent and never hang:
+
+- a worker that dies is retried a bounded number of times (the pool resubmits the tasks of a
+  broken pool up to :attr:`LocalPoolExecutor.retries` times; Dask reschedules a lost worker's
+  tasks up to its ``distributed.scheduler.allowed-failures``), then its tasks are yielded as
+  exceptions (``return_exceptions=True``);
+- when the executor can run nothing more (the Dask scheduler is gone, or no Dask worker has been
+  connected for ``lost_timeout_s``), ``map_unordered`` raises :class:`ExecutorLost` with one line
+  saying why; what finished before was yielded.
+
 Results never depend on the executor: a run's outcome is a function of its config and seed only
 (every random draw comes from a Generator seeded from the config). Worker processes run with
 one BLAS/OpenMP thread each (:data:`THREAD_ENV`), so N workers use N cores.
@@ -75,6 +85,10 @@ def _pop_env(old: dict[str, str | None]) -> None:
             os.environ.pop(k, None)
         else:
             os.environ[k] = v
+
+
+class ExecutorLost(RuntimeError):
+    """The executor can run nothing more (scheduler gone, no worker left); one line."""
 
 
 def default_workers() -> int:
@@ -152,17 +166,20 @@ class LocalPoolExecutor(Executor):
 
     At most ``2 × workers`` tasks are in flight at once, so a long item list is fed lazily and an
     interrupted batch has little queued work to throw away. A worker that dies (segfault, OOM
-    kill) breaks the pool: its in-flight tasks are reported as exceptions (``BrokenProcessPool``),
-    the pool is rebuilt and the remaining items go on.
+    kill) breaks the pool: the pool is rebuilt and its in-flight tasks are resubmitted, up to
+    ``retries`` times each, then reported as exceptions (``BrokenProcessPool``); the remaining
+    items go on. An interrupted ``map_unordered`` terminates the workers (no waiting on them).
     """
 
-    def __init__(self, workers: int | None = None, env: dict[str, str] | None = None) -> None:
+    def __init__(self, workers: int | None = None, env: dict[str, str] | None = None,
+                 retries: int = 2) -> None:
         import multiprocessing as mp
 
         self.workers = default_workers() if workers is None else int(workers)
         if self.workers < 1:
             raise ValueError("workers must be >= 1")
         self.name = f"pool:{self.workers}"
+        self.retries = int(retries)
         self._env = dict(THREAD_ENV if env is None else env)
         self._ctx = mp.get_context("spawn")
         self._pool: ProcessPoolExecutor | None = None
@@ -190,54 +207,60 @@ class LocalPoolExecutor(Executor):
         from concurrent.futures.process import BrokenProcessPool
 
         it = iter(enumerate(items))
-        pending: dict[Future, int] = {}
+        pending: dict[Future, tuple[int, Any]] = {}
+        tries: dict[int, int] = {}
+        again: list[tuple[int, Any]] = []  # tasks of a broken pool, to resubmit
         depth = 2 * self.workers
         exhausted = False
 
         def fill() -> None:
             nonlocal exhausted
-            while not exhausted and len(pending) < depth:
-                try:
-                    i, x = next(it)
-                except StopIteration:
-                    exhausted = True
-                    return
-                pending[self._get_pool().submit(fn, x)] = i
+            while len(pending) < depth and (again or not exhausted):
+                if again:
+                    i, x = again.pop(0)
+                else:
+                    try:
+                        i, x = next(it)
+                    except StopIteration:
+                        exhausted = True
+                        return
+                pending[self._get_pool().submit(fn, x)] = (i, x)
 
+        ok = False
         try:
             fill()
             while pending:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                broken = False
+                broken = any(isinstance(f.exception(), BrokenProcessPool) for f in done)
+                if broken:  # every other in-flight task of the dead pool fails the same way
+                    done = set(pending)
                 for f in done:
-                    i = pending.pop(f)
-                    try:
-                        r = f.result()
-                    except BrokenProcessPool as e:
-                        broken = True
-                        if not return_exceptions:
-                            raise
-                        r = e
-                    except Exception as e:
-                        if not return_exceptions:
-                            raise
-                        r = e
-                    yield i, r
+                    i, x = pending.pop(f)
+                    exc = (f.exception() if f.done() and not f.cancelled()
+                           else BrokenProcessPool("pool broken"))
+                    if isinstance(exc, BrokenProcessPool) and tries.get(i, 0) < self.retries:
+                        tries[i] = tries.get(i, 0) + 1
+                        again.append((i, x))
+                        continue
+                    if exc is not None and not return_exceptions:
+                        raise exc
+                    yield i, exc if exc is not None else f.result()
                 if broken:
-                    # every other in-flight task of the dead pool fails the same way
-                    for f in list(pending):
-                        i = pending.pop(f)
-                        exc = f.exception() if f.done() else BrokenProcessPool("pool broken")
-                        yield i, exc if exc is not None else f.result()
                     self._discard_pool()
                 fill()
+            ok = True
         finally:
             for f in pending:
                 f.cancel()
+            if not ok:  # interrupted (Ctrl-C, SIGTERM, a consumer's error): stop the workers
+                self._discard_pool(kill=True)
 
-    def _discard_pool(self) -> None:
+    def _discard_pool(self, kill: bool = False) -> None:
         if self._pool is not None:
+            procs = list(getattr(self._pool, "_processes", {}).values()) if kill else []
             self._pool.shutdown(wait=False, cancel_futures=True)
+            for p in procs:  # running tasks are abandoned, not awaited
+                p.terminate()
             self._pool = None
 
     def close(self) -> None:
@@ -259,18 +282,29 @@ class DaskExecutor(Executor):
     """``dask.distributed``: ``address="local"`` starts a ``LocalCluster`` of ``workers``
     single-threaded process workers (loopback only, no dashboard); ``"tcp://host:port"``
     connects to a running scheduler (its workers should import ``ag_uav`` from the same code
-    and run one thread each, e.g. ``dask worker ADDR --nthreads 1``)."""
+    and run one thread each, e.g. ``dask worker ADDR --nthreads 1``).
+
+    ``map_unordered`` watches the cluster every ``poll_s``: a scheduler that is gone, or no
+    worker connected for ``lost_timeout_s``, raises :class:`ExecutorLost` (one line) instead of
+    waiting forever. Dask's own connection-loss log lines and tracebacks are muted while the
+    client is open (the one line replaces them)."""
 
     def __init__(self, address: str = "local", workers: int | None = None,
-                 env: dict[str, str] | None = None) -> None:
+                 env: dict[str, str] | None = None, lost_timeout_s: float = 30.0,
+                 poll_s: float = 0.5) -> None:
         try:
             from distributed import Client, LocalCluster
         except ImportError as e:  # pragma: no cover - optional dependency
             raise RuntimeError("the Dask executor needs `pip install dask distributed`") from e
         import logging
 
+        if not lost_timeout_s > 0:
+            raise ValueError(f"lost_timeout_s = {lost_timeout_s}: must be > 0")
+        self.lost_timeout_s = float(lost_timeout_s)
+        self.poll_s = float(poll_s)
         self._env = dict(THREAD_ENV if env is None else env)
         self._cluster = None
+        self._muted: dict[str, int] = {}
         if address == "local":
             n = default_workers() if workers is None else int(workers)
             if n < 1:
@@ -285,8 +319,15 @@ class DaskExecutor(Executor):
             self._client = Client(self._cluster)
             self.name = f"dask:local:{n}"
         else:
-            self._client = Client(address, timeout="20s")
+            _check_address(address)
+            self._mute_logs()
+            try:
+                self._client = Client(address, timeout="20s")
+            except BaseException:
+                self._unmute_logs()
+                raise
             self.name = f"dask:{address}"
+        self.address = address
         nthreads = self._client.nthreads()
         self.workers = max(1, sum(nthreads.values()))
         self._client.run(_worker_init, self._env)
@@ -299,49 +340,119 @@ class DaskExecutor(Executor):
         return self._client.submit(fn, *args, pure=False)
 
     def map_unordered(self, fn, items, *, return_exceptions=False):
-        from distributed import as_completed
-
         items = list(items)
         if not items:
             return
         futures = self._client.map(fn, items, pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
+        pending = set(futures)
+        self._no_worker_since: float | None = None
         try:
-            for f in as_completed(futures):
-                i = index[f.key]
-                if f.status == "error":
-                    exc = f.exception()
-                    if not return_exceptions:
-                        raise exc
-                    r: Any = exc
-                else:
-                    try:
-                        r = f.result()
-                    except Exception as e:  # e.g. a cancelled future or a lost worker
-                        if not return_exceptions:
-                            raise
-                        r = e
-                f.release()
-                yield i, r
+            while pending:
+                self._wait_some(pending)
+                done = [f for f in pending if f.status in ("finished", "error", "cancelled")]
+                for f in done:
+                    pending.discard(f)
+                    if f.status == "cancelled":
+                        self._check_alive()
+                    yield index[f.key], self._outcome(f, return_exceptions)
+                if not done:
+                    self._check_alive()
         finally:
             for f in futures:
-                if not f.done():
-                    f.cancel()
+                try:
+                    if not f.done():
+                        f.cancel()
+                except Exception:  # noqa: BLE001, S110 - a client that lost its scheduler
+                    pass
+
+    def _wait_some(self, pending: set[Any]) -> None:
+        """Block until a future of ``pending`` is done or ``poll_s`` has passed."""
+        from distributed import wait
+        from distributed.client import FuturesCancelledError
+
+        try:
+            wait(list(pending), timeout=self.poll_s, return_when="FIRST_COMPLETED")
+        except (TimeoutError, FuturesCancelledError):
+            pass
+
+    @staticmethod
+    def _outcome(f: Any, return_exceptions: bool) -> Any:
+        try:
+            r = f.result()
+        except Exception as e:  # the task's error, a cancelled future, a lost worker
+            if not return_exceptions:
+                raise
+            r = e
+        f.release()
+        return r
+
+    def _check_alive(self) -> None:
+        """Raise :class:`ExecutorLost` when the scheduler is gone or no worker has been
+        connected for ``lost_timeout_s``."""
+        import time
+
+        if self._client.status != "running":
+            raise ExecutorLost(f"dask: lost the scheduler at {self.address}")
+        try:
+            n_workers = len(self._client.nthreads())
+        except Exception as e:  # noqa: BLE001 - the scheduler went away between the calls
+            raise ExecutorLost(f"dask: lost the scheduler at {self.address} "
+                               f"({type(e).__name__})") from None
+        now = time.monotonic()
+        if n_workers:
+            self._no_worker_since = None
+        elif self._no_worker_since is None:
+            self._no_worker_since = now
+        elif now - self._no_worker_since >= self.lost_timeout_s:
+            raise ExecutorLost(f"dask: no worker left at {self.address} for "
+                               f"{self.lost_timeout_s:g} s")
 
     def close(self) -> None:
         try:
-            self._client.close()
+            self._client.close(timeout=5)
+        except Exception:  # noqa: BLE001, S110 - closing a client whose scheduler is gone
+            pass
         finally:
             if self._cluster is not None:
                 self._cluster.close()
                 self._cluster = None
+            self._unmute_logs()
+
+    def _mute_logs(self) -> None:
+        import logging
+
+        names = ["distributed", *(n for n in logging.root.manager.loggerDict
+                                  if n.startswith("distributed."))]
+        for n in names:
+            lg = logging.getLogger(n)
+            self._muted[n] = lg.level
+            lg.setLevel(logging.CRITICAL + 1)
+
+    def _unmute_logs(self) -> None:
+        import logging
+
+        for n, level in self._muted.items():
+            logging.getLogger(n).setLevel(level)
+        self._muted.clear()
 
 
-def make_executor(workers: int | None = None, dask: str | None = None) -> Executor:
+def _check_address(address: str) -> None:
+    """A scheduler address is ``local`` or ``[PROTOCOL://]HOST:PORT``; anything else is one
+    ValueError line (Dask's own message is a traceback deep in its comm layer)."""
+    import re
+
+    if not re.fullmatch(r"([a-z]+://)?[^\s:/]+:\d{1,5}", address):
+        raise ValueError(f'"{address}": not a Dask scheduler address; expected "local" or '
+                         "tcp://HOST:PORT")
+
+
+def make_executor(workers: int | None = None, dask: str | None = None,
+                  dask_timeout_s: float = 30.0) -> Executor:
     """The executor the CLI flags ask for: ``--dask ADDR`` → :class:`DaskExecutor`;
     ``--workers 1`` → :class:`SerialExecutor`; otherwise :class:`LocalPoolExecutor`."""
     if dask:
-        return DaskExecutor(dask, workers)
+        return DaskExecutor(dask, workers, lost_timeout_s=dask_timeout_s)
     n = default_workers() if workers is None else int(workers)
     if n < 1:
         raise ValueError("workers must be >= 1")
@@ -349,4 +460,4 @@ def make_executor(workers: int | None = None, dask: str | None = None) -> Execut
 
 
 __all__ = ["Executor", "SerialExecutor", "LocalPoolExecutor", "DaskExecutor", "make_executor",
-           "default_workers", "THREAD_ENV"]
+           "default_workers", "THREAD_ENV", "ExecutorLost"]

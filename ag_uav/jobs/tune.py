@@ -35,6 +35,7 @@ tuned on the same scenarios, also printed) and ``tune.json``.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import hashlib
 import json
@@ -50,7 +51,17 @@ from typing import Any
 import numpy as np
 
 from ..config import Config, ConfigError, config_from_dict
-from .batch import get_dotted, resolve_fragment, set_dotted
+from ._atomic import savefig_atomic, write_text_atomic
+from .batch import (
+    exception_line,
+    file_digest,
+    get_dotted,
+    read_jsonl,
+    referenced_files,
+    repair_jsonl,
+    resolve_fragment,
+    set_dotted,
+)
 from .executor import Executor, SerialExecutor
 
 SPEC_KEYS = ("name", "description", "optimizer", "pop", "iters", "seed", "noise_seed", "metric",
@@ -119,6 +130,9 @@ class TuneSpec:
         for k in ("iters", "description", "source", "name"):
             d.pop(k)
         blob = json.dumps(d, sort_keys=True, default=str)
+        files = referenced_files(self.base)  # a field file changed in place: another tune
+        if files:
+            blob += json.dumps({str(f): file_digest(f) for f in files}, sort_keys=True)
         return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -405,8 +419,9 @@ def evaluate_candidate(task: dict[str, Any]) -> dict[str, Any]:
 def evaluate_candidates(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Worker entry point: the total cost of every candidate of ``tasks`` (a chunk of one
     population, same spec), each scenario flown by all of them as one engine batch. Never
-    raises: a candidate that fails gets the penalty (and the chunk falls back to one at a time
-    if the batch itself fails)."""
+    raises: a candidate that fails gets the penalty. If the batch itself fails, the chunk falls
+    back to one candidate at a time, and each result carries the batch's exception in
+    ``engine_fallback`` (:func:`run_tune` warns and counts it)."""
     spec: TuneSpec = tasks[0]["spec"]
     penalty = 2.0 * spec.crash_penalty * sum(s.weight for s in spec.scenarios)
     outs: list[dict[str, Any]] = [{"parts": {}, "crash": "", "cost": 0.0} for _ in tasks]
@@ -434,14 +449,13 @@ def evaluate_candidates(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 out["cost"] += sc.weight * r["cost"]
                 if r["crash"] and not out["crash"]:
                     out["crash"] = f"{sc.name}: {r['crash']}"
-    except Exception:  # noqa: BLE001 - isolate the failing candidate: one at a time
+    except Exception as e:  # noqa: BLE001 - isolate the failing candidate: one at a time
         if len(tasks) == 1:
-            import traceback
-
-            err = traceback.format_exception_only(*__import__("sys").exc_info()[:2])[-1]
-            outs[0] = {"parts": {}, "cost": penalty, "crash": err.strip()[:300]}
+            outs[0] = {"parts": {}, "cost": penalty, "crash": exception_line(e)}
             return outs
-        return [evaluate_candidates([t])[0] for t in tasks]
+        # not silent: each result says its engine batch failed; run_tune warns and counts it
+        reason = exception_line(e)
+        return [{**evaluate_candidates([t])[0], "engine_fallback": reason} for t in tasks]
     return outs
 
 
@@ -450,15 +464,6 @@ def chunk(items: list[Any], n_chunks: int) -> list[list[int]]:
     n_chunks = max(1, min(n_chunks, len(items)))
     bounds = np.linspace(0, len(items), n_chunks + 1).round().astype(int)
     return [list(range(a, b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-    tmp.replace(path)
 
 
 def default_values(spec: TuneSpec) -> list[float]:
@@ -515,16 +520,33 @@ class TuneResult:
     out_dir: Path
     files: list[Path] = field(default_factory=list)
     before_after: list[list[str]] = field(default_factory=list)
+    n_fallback: int = 0        # evaluations (this call) flown alone after their batch failed
+
+
+class TuneStopped(RuntimeError):
+    """Evaluations were lost to the machinery after the retries (one line); the checkpoint of the
+    last finished iteration and the evaluation journal are kept, ``--resume`` continues."""
+
+
+#: times a chunk of evaluations whose worker died is resubmitted before the tune stops
+LOST_RETRIES = 2
 
 
 def run_tune(spec: TuneSpec, out_dir: str | Path, executor: Executor | None = None, *,
              resume: bool = False, fresh: bool = False, iters: int | None = None,
              progress: bool = True, outputs: bool = True,
-             on_iteration: Callable[[int, dict[str, Any]], None] | None = None) -> TuneResult:
-    """Run (or resume) the optimisation; see the module docstring."""
+             on_iteration: Callable[[int, dict[str, Any]], None] | None = None,
+             warn: Callable[[str], None] | None = None) -> TuneResult:
+    """Run (or resume) the optimisation; see the module docstring.
+
+    Nothing is silent: a chunk whose engine batch failed and was evaluated one candidate at a
+    time is a warning (``warn``, default one line on stderr) and counted (``engine_fallbacks``
+    per iteration, :attr:`TuneResult.n_fallback`, ``tune.json``); evaluations lost to a dead
+    worker are resubmitted :data:`LOST_RETRIES` times, then :class:`TuneStopped` (a lost
+    executor: :class:`~ag_uav.jobs.executor.ExecutorLost`) ends the call, never a made-up cost.
+    """
     out = Path(out_dir)
-    ck_path = out / "checkpoint.json"
-    ev_path = out / "evals.jsonl"
+    ck_path, ev_path = out / "checkpoint.json", out / "evals.jsonl"
     if (ck_path.exists() or ev_path.exists()) and not (resume or fresh):
         raise ConfigError(f'--out = "{out}": already holds a tuning checkpoint; use --resume to '
                           "continue it or --fresh to start over")
@@ -533,123 +555,168 @@ def run_tune(spec: TuneSpec, out_dir: str | Path, executor: Executor | None = No
     n_iter = iters if iters is not None else spec.iters
     h = spec.hash()
     x0 = default_values(spec)
-    log_stats: list[dict[str, Any]] = []
-    cache: dict[str, dict[str, Any]] = {}
-    if resume and ck_path.exists():
-        ck = json.loads(ck_path.read_text())
-        if ck.get("spec_hash") != h:
-            raise ConfigError(f'--resume: "{ck_path}" was written for a different spec '
-                              "(params, scenarios or optimizer changed); use --fresh")
-        opt = _opt_from_state(ck["optimizer"])
-        log_stats = ck.get("iterations", [])
-    else:
-        if fresh:
-            for p in (ck_path, ev_path):
-                p.unlink(missing_ok=True)
-        opt = _make_optimizer(spec)
-        if spec.include_default:
-            u0 = np.array([p.to_internal(v) for p, v in zip(spec.params, x0, strict=True)])
-            lo = np.array([p.bounds[0] for p in spec.params])
-            hi = np.array([p.bounds[1] for p in spec.params])
-            _set_member(opt, 0, np.clip(u0, lo, hi))
-    # evaluations already journalled (resume: the current iteration's finished members)
-    if ev_path.exists():
-        _repair_jsonl(ev_path)
-        for line in ev_path.read_text().splitlines():
-            try:
-                rec = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if rec.get("h") == h:
-                cache[_xkey(rec["u"])] = rec["result"]
-    evf = ev_path.open("a")
+    opt, log_stats = _start(spec, ck_path, ev_path, h, x0, resume, fresh)
+    ev = _EvalLog(ev_path, h, spec, progress, n_iter, opt.iteration, warn)
     t_start = time.perf_counter()
-    n_new = 0
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n_iter * spec.pop, initial=opt.iteration * spec.pop, unit="eval",
-                   desc=f"tune {spec.name}", dynamic_ncols=True, smoothing=0.05)
     try:
         while opt.iteration < n_iter:
             t_it = time.perf_counter()
             U = _population(opt)
             k = opt.iteration + 1
-            results: list[dict[str, Any] | None] = [None] * len(U)
-            todo = []
-            for i, u in enumerate(U):
-                hit = cache.get(_xkey(u))
-                if hit is not None:
-                    results[i] = hit
-                    if bar is not None:
-                        bar.update(1)
-                else:
-                    todo.append(i)
-            tasks = [{"spec": spec, "values": [p.from_internal(v) for p, v in
-                                               zip(spec.params, U[i], strict=True)]}
-                     for i in todo]
-            chunks = chunk(tasks, executor.workers)
-            for c, rs in executor.map_unordered(
-                    evaluate_candidates, [[tasks[j] for j in ch] for ch in chunks],
-                    return_exceptions=True):
-                if not isinstance(rs, list):
-                    rs = [rs] * len(chunks[c])
-                for j, r in zip(chunks[c], rs, strict=True):
-                    i = todo[j]
-                    if isinstance(r, BaseException):
-                        r = {"cost": 2.0 * spec.crash_penalty
-                             * sum(s.weight for s in spec.scenarios),
-                             "crash": f"worker failure: {type(r).__name__}: {r}"[:300],
-                             "parts": {}}
-                        results[i] = r  # not journalled: re-evaluated on resume
-                    else:
-                        results[i] = r
-                        cache[_xkey(U[i])] = r
-                        evf.write(json.dumps({"h": h, "iter": k, "i": i, "u": U[i].tolist(),
-                                             "result": r})
-                                  + "\n")
-                        evf.flush()
-                        os.fsync(evf.fileno())
-                    n_new += 1
-                    if bar is not None:
-                        bar.update(1)
-            costs = [r["cost"] for r in results]  # type: ignore[index]
+            results, n_fb = ev.evaluate(executor, U, k)
+            costs = [r["cost"] for r in results]
             opt.tell(costs)
             fin = np.array([c for c in costs if math.isfinite(c)])
             stat = {"iteration": k, "best_so_far": opt.best_f, "gen_min": float(fin.min()),
-                    "gen_median": float(np.median(fin)), "crashes": sum(
-                        bool(r["crash"]) for r in results),  # type: ignore[index]
-                    "wall_s": round(time.perf_counter() - t_it, 3)}
+                    "gen_median": float(np.median(fin)),
+                    "crashes": sum(bool(r["crash"]) for r in results),
+                    "engine_fallbacks": n_fb, "wall_s": round(time.perf_counter() - t_it, 3)}
             log_stats.append(stat)
-            ck = {"version": 1, "spec_hash": h, "spec_name": spec.name,
-                  "optimizer": opt.state_dict(), "iterations": log_stats,
-                  "default_values": x0}
-            _atomic_write(ck_path, json.dumps(ck))
-            if bar is not None:
-                bar.set_postfix(best=f"{opt.best_f:.4g}", refresh=False)
+            write_text_atomic(ck_path, json.dumps({
+                "version": 1, "spec_hash": h, "spec_name": spec.name,
+                "optimizer": opt.state_dict(), "iterations": log_stats, "default_values": x0}))
+            if ev.bar is not None:
+                ev.bar.set_postfix(best=f"{opt.best_f:.4g}", refresh=False)
             if on_iteration is not None:
                 on_iteration(k, stat)
     finally:
-        evf.close()
-        if bar is not None:
-            bar.close()
-    wall = time.perf_counter() - t_start
-    best_u = opt.best_x
-    best = [p.from_internal(v) for p, v in zip(spec.params, best_u, strict=True)]
+        ev.close()
+    best = [p.from_internal(v) for p, v in zip(spec.params, opt.best_x, strict=True)]
     res = TuneResult(best_values=best, best_cost=float(opt.best_f), default_values=x0,
                      default_cost=math.nan, history=list(opt.history), iterations=opt.iteration,
-                     n_evals=n_new, wall_s=wall, out_dir=out)
+                     n_evals=ev.n_new, wall_s=time.perf_counter() - t_start, out_dir=out,
+                     n_fallback=ev.n_fallback)
     if outputs:
         write_outputs(spec, res, executor, log_stats)
     return res
 
 
-def _repair_jsonl(path: Path) -> None:
-    data = path.read_bytes()
-    if data and not data.endswith(b"\n"):
-        with path.open("r+b") as f:
-            f.truncate(data.rfind(b"\n") + 1)
+def _start(spec: TuneSpec, ck_path: Path, ev_path: Path, h: str, x0: list[float],
+           resume: bool, fresh: bool) -> tuple[Any, list[dict[str, Any]]]:
+    """The optimiser and the iteration log: from the checkpoint (``resume``), or new (with the
+    default gains as member 0)."""
+    if resume and ck_path.exists():
+        try:
+            ck = json.loads(ck_path.read_bytes().decode("utf-8"))
+            state, its, ck_hash = ck["optimizer"], ck.get("iterations", []), ck.get("spec_hash")
+        except (UnicodeDecodeError, json.JSONDecodeError, KeyError, TypeError):
+            raise ConfigError(f'--resume: "{ck_path}" is damaged (not a tuning checkpoint); '
+                              "use --fresh") from None
+        if ck_hash != h:
+            raise ConfigError(f'--resume: "{ck_path}" was written for a different spec '
+                              "(params, scenarios, optimizer or a field file changed); use "
+                              "--fresh")
+        return _opt_from_state(state), its
+    if fresh:
+        for p in (ck_path, ev_path):
+            p.unlink(missing_ok=True)
+    opt = _make_optimizer(spec)
+    if spec.include_default:
+        u0 = np.array([p.to_internal(v) for p, v in zip(spec.params, x0, strict=True)])
+        lo = np.array([p.bounds[0] for p in spec.params])
+        hi = np.array([p.bounds[1] for p in spec.params])
+        _set_member(opt, 0, np.clip(u0, lo, hi))
+    return opt, []
+
+
+class _EvalLog:
+    """The evaluations of one :func:`run_tune` call: the journal (``evals.jsonl``, a cache of
+    finished evaluations), the progress bar, warnings and counters."""
+
+    def __init__(self, path: Path, h: str, spec: TuneSpec, progress: bool, n_iter: int,
+                 it0: int, warn: Callable[[str], None] | None) -> None:
+        self.h, self.spec, self._warn = h, spec, warn
+        self.cache: dict[str, dict[str, Any]] = {}
+        self.bar = None
+        if progress:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=n_iter * spec.pop, initial=it0 * spec.pop, unit="eval",
+                            desc=f"tune {spec.name}", dynamic_ncols=True, smoothing=0.05)
+        if path.exists():  # finished evaluations (resume: those of the current iteration)
+            repair_jsonl(path)
+            recs, bad = read_jsonl(path)
+            if bad:
+                self.warn(f"{path}: skipped {bad} unreadable line(s); those evaluations are "
+                          "run again")
+            for rec in recs:
+                if rec.get("h") == h and isinstance(rec.get("result"), dict):
+                    self.cache[_xkey(rec["u"])] = rec["result"]
+        self.path = path
+        self.f = path.open("a")
+        self.n_new = self.n_fallback = 0
+
+    def warn(self, msg: str) -> None:
+        if self._warn is not None:
+            return self._warn(msg)
+        import sys
+
+        line = f"ag-uav: warning: {msg}"
+        if self.bar is not None:
+            self.bar.write(line, file=sys.stderr)
+        else:
+            print(line, file=sys.stderr)
+
+    def evaluate(self, executor: Executor, U: np.ndarray, k: int
+                 ) -> tuple[list[dict[str, Any]], int]:
+        """Every member's result (cached ones reused); and how many fell back to one at a time."""
+        results: list[dict[str, Any] | None] = [None] * len(U)
+        for i, u in enumerate(U):
+            results[i] = self.cache.get(_xkey(u))
+        todo = [i for i, r in enumerate(results) if r is None]
+        if self.bar is not None:
+            self.bar.update(len(U) - len(todo))
+        n_fb = 0
+        for attempt in range(LOST_RETRIES + 1):
+            lost: list[int] = []
+            tasks = [{"spec": self.spec, "values": [p.from_internal(v) for p, v in
+                                                    zip(self.spec.params, U[i], strict=True)]}
+                     for i in todo]
+            chunks = chunk(tasks, executor.workers)
+            for c, rs in executor.map_unordered(
+                    evaluate_candidates, [[tasks[j] for j in ch] for ch in chunks],
+                    return_exceptions=True):
+                if isinstance(rs, BaseException):
+                    lost += [todo[j] for j in chunks[c]]
+                    last = exception_line(rs)
+                    continue
+                n_fb += self._record(k, U, [todo[j] for j in chunks[c]], rs, results)
+            if not lost:
+                return results, n_fb  # type: ignore[return-value]
+            self.warn(f"iteration {k}: {len(lost)} evaluations lost to the machinery ({last})"
+                      + ("; resubmitting" if attempt < LOST_RETRIES else ""))
+            todo = lost
+        raise TuneStopped(f"tune {self.spec.name}: {len(todo)} evaluations of iteration {k} lost "
+                          f"to the machinery {LOST_RETRIES + 1} times ({last}); the checkpoint "
+                          f"of iteration {k - 1} is kept, --resume continues")
+
+    def _record(self, k: int, U: np.ndarray, idx: list[int], rs: list[dict[str, Any]],
+                results: list[dict[str, Any] | None]) -> int:
+        fb = next((r["engine_fallback"] for r in rs if r.get("engine_fallback")), "")
+        if fb:
+            self.warn(f"iteration {k}: an engine batch of {len(rs)} candidates failed ({fb}); "
+                      "evaluated one at a time")
+            self.n_fallback += len(rs)
+        for i, r in zip(idx, rs, strict=True):
+            results[i] = r
+            self.cache[_xkey(U[i])] = r
+            try:
+                self.f.write(json.dumps({"h": self.h, "iter": k, "i": i, "u": U[i].tolist(),
+                                         "result": r}) + "\n")
+                self.f.flush()
+                os.fsync(self.f.fileno())
+            except OSError as e:
+                raise OSError(e.errno, e.strerror or str(e), str(self.path)) from None
+            self.n_new += 1
+            if self.bar is not None:
+                self.bar.update(1)
+        return len(rs) if fb else 0
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            self.f.close()
+        if self.bar is not None:
+            self.bar.close()
 
 
 # ------------------------------------------------------------------------------------ outputs
@@ -679,7 +746,7 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
     before, after = executor.map(evaluate_candidate, tasks)
     res.default_cost = float(before["cost"])
     gp = out / "best_gains.toml"
-    gp.write_text(gains_toml(spec, res.best_values, comment=(
+    write_text_atomic(gp, gains_toml(spec, res.best_values, comment=(
         f"ag-uav tune {spec.source or spec.name}: {spec.optimizer.upper()} {spec.pop} x "
         f"{res.iterations}, {spec.metric.upper()} cost {res.best_cost:.6g} "
         f"(default gains: {res.default_cost:.6g})\n"
@@ -699,7 +766,7 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
     ax.legend(fontsize=8)
     fig.tight_layout()
     cp = out / "convergence.png"
-    fig.savefig(cp, dpi=110)
+    savefig_atomic(fig, cp, dpi=110)
     plt.close(fig)
     # before/after table
     header = ["scenario", "quantity", "default", "tuned"]
@@ -727,15 +794,16 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
           f"- best cost {res.best_cost:.6g}; default gains {res.default_cost:.6g}", "",
           markdown_table(header, table), "![convergence](convergence.png)", ""]
     bp = out / "before_after.md"
-    bp.write_text("\n".join(md))
+    write_text_atomic(bp, "\n".join(md))
     jp = out / "tune.json"
-    jp.write_text(json.dumps({
+    write_text_atomic(jp, json.dumps({
         "name": spec.name, "best": dict(zip([p.key for p in spec.params], res.best_values,
                                             strict=True)),
         "best_cost": res.best_cost, "default": dict(zip([p.key for p in spec.params],
                                                         res.default_values, strict=True)),
         "default_cost": res.default_cost, "history": res.history,
-        "iterations": log_stats, "wall_s": res.wall_s, "executor": executor.name}, indent=2))
+        "iterations": log_stats, "wall_s": res.wall_s, "executor": executor.name,
+        "engine_fallbacks": res.n_fallback}, indent=2))
     res.files = [gp, cp, bp, jp]
     res.before_after = table
 
@@ -750,4 +818,4 @@ def _f4(v: Any) -> str:
 
 __all__ = ["Param", "Scenario", "TuneSpec", "TuneResult", "load_spec", "spec_from_dict",
            "run_tune", "evaluate_candidate", "scenario_cost", "candidate_config", "gains_toml",
-           "default_values"]
+           "default_values", "TuneStopped", "LOST_RETRIES"]
