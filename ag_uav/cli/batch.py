@@ -50,10 +50,10 @@ def _fail(msg: str, code: int = 1) -> int:
 def _guarded(what: str, out: Path, job, kept: str) -> tuple[int | None, object]:
     """``job()`` with SIGTERM raising; the known ways a job stops become one line and an exit
     code: ``(code, None)``; a job that ran: ``(None, result)``."""
-    from ..jobs._atomic import disk_error_line
     from ..jobs.batch import BatchStopped
     from ..jobs.executor import ExecutorLost
     from ..jobs.tune import TuneStopped
+    from ..record.atomic import DISK_ERRNOS, disk_error_line
 
     t0 = time.perf_counter()
     try:
@@ -67,10 +67,9 @@ def _guarded(what: str, out: Path, job, kept: str) -> tuple[int | None, object]:
             f"; {what} stopped, --resume in {out} continues")
         return _fail(f"{e}{extra}"), None
     except OSError as e:
-        line = disk_error_line(e)
-        if line is None:
+        if e.errno not in DISK_ERRNOS:
             raise
-        return _fail(line), None
+        return _fail(f"cannot write {disk_error_line(e)}"), None
 
 
 def _add_exec_args(p: argparse.ArgumentParser) -> None:

@@ -63,7 +63,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import Config, ConfigError, config_from_dict
-from ._atomic import savefig_atomic, write_atomic, write_text_atomic
+from ..record.atomic import atomic_open, atomic_write_text, savefig
 from .executor import Executor, ExecutorLost, LocalPoolExecutor, SerialExecutor
 
 SPEC_KEYS = ("name", "description", "base", "axes", "presets", "max_runs")
@@ -734,7 +734,8 @@ def write_results_csv(rows: Sequence[dict[str, Any]], path: str | Path,
         for r in rows:
             w.writerow([_csv_value(r.get(c)) for c in cols])
 
-    write_atomic(path, write, newline="")
+    with atomic_open(path, "w", newline="") as f:
+        write(f)
     return cols
 
 
@@ -880,7 +881,7 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
                 ax.grid(alpha=0.3)
         fig.tight_layout()
         p = out / "rmse.png"
-        savefig_atomic(fig, p, dpi=110)
+        savefig(fig, p, dpi=110)
         plt.close(fig)
         written.append(p)
     # --- tracking vs estimate error
@@ -900,7 +901,7 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
         ax.grid(alpha=0.3)
         fig.tight_layout()
         p = out / "tracking_vs_estimate.png"
-        savefig_atomic(fig, p, dpi=110)
+        savefig(fig, p, dpi=110)
         plt.close(fig)
         written.append(p)
     # --- coverage
@@ -915,7 +916,7 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
         ax.grid(alpha=0.3)
         fig.tight_layout()
         p = out / "coverage.png"
-        savefig_atomic(fig, p, dpi=110)
+        savefig(fig, p, dpi=110)
         plt.close(fig)
         written.append(p)
     # --- markdown
@@ -946,7 +947,7 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
     for p in written:
         md += [f"![{p.stem}]({p.name})", ""]
     rp = out / "report.md"
-    write_text_atomic(rp, "\n".join(md))
+    atomic_write_text(rp, "\n".join(md))
     written.insert(0, rp)
     return written
 
@@ -1021,7 +1022,7 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
     todo = [t for t in tasks if t.config_hash not in done]
     rows_by_index = {t.index: _rebase_row(done[t.config_hash], t) for t in tasks
                      if t.config_hash in done}
-    write_text_atomic(out / "batch.json", json.dumps({
+    atomic_write_text(out / "batch.json", json.dumps({
         "name": spec.name, "source": spec.source, "n_runs": len(tasks),
         "axes": {a.name: a.values for a in spec.axes}, "base": spec.base,
         "presets": spec.presets}, indent=2, default=_json_default))

@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Config, ConfigError, config_from_dict
-from ._atomic import savefig_atomic, write_text_atomic
+from ..record.atomic import atomic_write_text, savefig
 from .batch import (
     exception_line,
     file_digest,
@@ -572,7 +572,7 @@ def run_tune(spec: TuneSpec, out_dir: str | Path, executor: Executor | None = No
                     "crashes": sum(bool(r["crash"]) for r in results),
                     "engine_fallbacks": n_fb, "wall_s": round(time.perf_counter() - t_it, 3)}
             log_stats.append(stat)
-            write_text_atomic(ck_path, json.dumps({
+            atomic_write_text(ck_path, json.dumps({
                 "version": 1, "spec_hash": h, "spec_name": spec.name,
                 "optimizer": opt.state_dict(), "iterations": log_stats, "default_values": x0}))
             if ev.bar is not None:
@@ -746,7 +746,7 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
     before, after = executor.map(evaluate_candidate, tasks)
     res.default_cost = float(before["cost"])
     gp = out / "best_gains.toml"
-    write_text_atomic(gp, gains_toml(spec, res.best_values, comment=(
+    atomic_write_text(gp, gains_toml(spec, res.best_values, comment=(
         f"ag-uav tune {spec.source or spec.name}: {spec.optimizer.upper()} {spec.pop} x "
         f"{res.iterations}, {spec.metric.upper()} cost {res.best_cost:.6g} "
         f"(default gains: {res.default_cost:.6g})\n"
@@ -766,7 +766,7 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
     ax.legend(fontsize=8)
     fig.tight_layout()
     cp = out / "convergence.png"
-    savefig_atomic(fig, cp, dpi=110)
+    savefig(fig, cp, dpi=110)
     plt.close(fig)
     # before/after table
     header = ["scenario", "quantity", "default", "tuned"]
@@ -794,9 +794,9 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
           f"- best cost {res.best_cost:.6g}; default gains {res.default_cost:.6g}", "",
           markdown_table(header, table), "![convergence](convergence.png)", ""]
     bp = out / "before_after.md"
-    write_text_atomic(bp, "\n".join(md))
+    atomic_write_text(bp, "\n".join(md))
     jp = out / "tune.json"
-    write_text_atomic(jp, json.dumps({
+    atomic_write_text(jp, json.dumps({
         "name": spec.name, "best": dict(zip([p.key for p in spec.params], res.best_values,
                                             strict=True)),
         "best_cost": res.best_cost, "default": dict(zip([p.key for p in spec.params],

@@ -115,6 +115,18 @@ def atomic_write_text(path: str | os.PathLike[str], text: str, *, encoding: str 
     return atomic_write_bytes(path, text.encode(encoding), fsync=fsync)
 
 
+#: the errors of an output that cannot be written (space, permission, read-only, quota, size)
+DISK_ERRNOS = frozenset({errno.ENOSPC, errno.EACCES, errno.EPERM, errno.EROFS, errno.EDQUOT,
+                         errno.EFBIG})
+
+
+def savefig(fig: Any, path: str | os.PathLike[str], **kw: Any) -> Path:
+    """``fig.savefig`` atomically (the format from ``path``'s extension, kept by the temp)."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, **kw)
+    return Path(path)
+
+
 def disk_error_line(err: OSError) -> str:
     """One line for a failed file operation: ``PATH: <strerror>`` (``<strerror>`` alone when
     the error names no file)."""
