@@ -1,6 +1,7 @@
 """Full coverage missions on real MuJoCo physics, checked against the issue's acceptance."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -58,7 +59,11 @@ def test_a_mission_cut_by_max_time_says_so():
     assert not s["completed"] and not s["crashed"]
     why = s["incomplete_reason"]
     assert why.startswith("cut by sim.max_time_s = 150 s after ")
-    assert f"of {s['legs']} legs" in why and "the plan needs 485 s" in why
+    assert f"of {s['legs']} legs" in why
+    # the plan is cut before it is densified: the need is a lower bound (path / cruise speed)
+    # on the whole mission's 485 s
+    need = float(re.search(r"the plan needs at least (\d+) s", why).group(1))
+    assert 350 < need <= 485
     assert 0 < s["legs_flown"] < s["legs"]
 
 
