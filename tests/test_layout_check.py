@@ -240,3 +240,34 @@ def test_a_planted_fault_fails_the_check(run, how):
     problems = check_layout(_plant(layout, how), log)
     assert len(problems) == 1, problems
     assert PLANTS[how] in problems[0]
+
+
+_NO_EGL_RUN = """
+import json, sys
+import ag_uav
+from ag_uav.jobs.run import fly
+res, d = fly(ag_uav.load_config(None, {"sim.max_time_s": 3.0, "log.render_hz": 1.0}),
+             out_root=sys.argv[1], run_id="no-egl")
+print(json.dumps({"frames": res.summary.get("frames"), "dir": str(d)}))
+"""
+
+
+@pytest.mark.xfail(strict=True, reason="known: when renders were asked for but EGL cannot "
+                   "start, RunLog._write_layout (ag_uav/record/runlog.py) still names the "
+                   "configured cameras; drop this mark when it writes only the logged ones")
+def test_a_run_whose_renders_failed_gets_no_camera_panels(tmp_path):
+    """EGL made to fail for real (no vendor library), so the run goes on without frames."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "__EGL_VENDOR_LIBRARY_FILENAMES": str(tmp_path / "none.json"),
+           "MUJOCO_GL": "egl", "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    out = subprocess.run([sys.executable, "-c", _NO_EGL_RUN, str(tmp_path)], env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    info = json.loads(out.stdout.strip().splitlines()[-1])
+    assert not info["frames"]
+    d = Path(info["dir"])
+    problems = check_layout(json.loads((d / "layout.json").read_text()), LogIndex(d / "run.mcap"))
+    assert [p for p in problems if "/camera/" in p] == []
