@@ -252,9 +252,6 @@ print(json.dumps({"frames": res.summary.get("frames"), "dir": str(d)}))
 """
 
 
-@pytest.mark.xfail(strict=True, reason="known: when renders were asked for but EGL cannot "
-                   "start, RunLog._write_layout (ag_uav/record/runlog.py) still names the "
-                   "configured cameras; drop this mark when it writes only the logged ones")
 def test_a_run_whose_renders_failed_gets_no_camera_panels(tmp_path):
     """EGL made to fail for real (no vendor library), so the run goes on without frames."""
     import os

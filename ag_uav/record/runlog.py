@@ -1197,15 +1197,18 @@ class RunLog:
                             name="summary.json", media_type="application/json",
                             data=json.dumps(summary, default=str, indent=1).encode())
 
-    def _write_layout(self) -> None:
-        """``layout.json`` beside the log, for the channels seen so far."""
+    def _write_layout(self, final: bool = False) -> None:
+        """``layout.json`` beside the log, for the channels seen so far (before any frame: the
+        configured cameras, so that a killed run has a layout; at the end: only the cameras
+        that were logged, so a run whose renders failed gets no empty image panels)."""
         if not self._layout:
             return
         try:
             from ..analysis.viewing import write_foxglove_layout
 
-            cams = tuple(self._cam) or (("chase", "down") if self._period["camera"] < _INF
-                                        else ())
+            cams = tuple(self._cam)
+            if not cams and not final and self._period["camera"] < _INF:
+                cams = ("chase", "down")
             write_foxglove_layout(self.path.parent / "layout.json", cameras=cams,
                                   estimators=tuple(sanitize_name(n) for n in self._est),
                                   ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4,
@@ -1234,7 +1237,7 @@ class RunLog:
                 raise err from None
         finally:
             _OPEN.discard(self)
-        self._write_layout()
+        self._write_layout(final=True)
 
     def write_error(self, exc: BaseException) -> OSError | None:
         """``exc`` as an :class:`OSError` naming the log if it is the MCAP writer failing to
