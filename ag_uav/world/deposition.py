@@ -15,9 +15,10 @@ is a state machine on the condition *want = command ∧ ground speed ≥ v_min*
 toggles (``update_sprayer_state``). In ArduPilot a command *off* (``AC_Sprayer::run(false)``)
 stops the pump at once and the 1,000 ms applies to the speed gate only: ``cmd_off_immediate``
 (default true) keeps that; false delays a command off as well. The target flow follows the
-ground speed v (constant rate per area, as ``SPRAY_PUMP_RATE`` scales the pump with speed)::
+ground speed v (constant rate per area, as ``SPRAY_PUMP_RATE`` scales the pump with speed),
+floored at ``flow_min_l_per_s`` (``SPRAY_PUMP_MIN``, default 0)::
 
-    q* = R · w · v / 10⁴   (L/s; R = rate L/ha, w = swath m)
+    q* = max(R · w · v / 10⁴, q_min)   (L/s; R = rate L/ha, w = swath m)
 
 and the line pressure (hence the flow) lags it as a first-order system of time constant τ
 (``pressure_tau_s``; an assumption: "a few hundred milliseconds" to settle, 3τ = 0.45 s),
@@ -130,6 +131,7 @@ class DepositionConfig:
     nozzle_off_delay_s: float = 1.0               # AC_SPRAYER_DEFAULT_SHUT_OFF_DELAY
     cmd_off_immediate: bool = True                # AC_Sprayer::run(false) stops at once
     speed_min_mps: float = 1.0                    # AC_SPRAYER_DEFAULT_SPEED_MIN
+    flow_min_l_per_s: float = 0.0                 # AC_SPRAYER_DEFAULT_PUMP_MIN = 0 %
     pressure_tau_s: float = 0.15
     rotor_diameter_m: float = 0.533
     n_rotors: int = 4
@@ -139,7 +141,7 @@ class DepositionConfig:
     liquid_density: float = 1000.0
     jet_decay_b: float = 6.0
     wake_turbulence: float = 0.25
-    outwash_layer_m: float = 0.15
+    outwash_layer_m: float = 0.155
     release_sigma_m: float = 0.1
     ambient_sigma_mps: float = 0.0
     cell_m: float = 0.5
@@ -209,7 +211,7 @@ def droplet_classes(dv10_um: float, dv50_um: float, dv90_um: float,
 # header slots of the parameter vector (float64); arrays follow at the offsets stored in it
 (P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF, P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0, P_ROTZ, P_IW,
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
- P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC) = range(33)
+ P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN) = range(34)
 P_HEADER = 40
 # state slots per row; accumulators (M·K × 6: V, Sx, Sy, Sxx, Syy, Svar) follow at S_ACC
 (S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
@@ -351,8 +353,9 @@ def _valve(par, st, dt: float, cmd: bool, speed: float) -> None:
 
 @njit(cache=True)
 def _flow(par, st, dt: float, speed: float) -> float:
-    """Litres out this tick: the first-order pressure lag toward q* = R·w·v/10⁴, exactly."""
-    qs = par[P_RATE] * par[P_SWATH] * speed * 1e-4 if st[S_ON] > 0.5 else 0.0
+    """Litres out this tick: the first-order pressure lag toward q* = max(R·w·v/10⁴, q_min),
+    exactly."""
+    qs = max(par[P_RATE] * par[P_SWATH] * speed * 1e-4, par[P_QMIN]) if st[S_ON] > 0.5 else 0.0
     q0, tau = st[S_Q], par[P_TAU]
     if tau <= 0.0:
         st[S_Q] = qs
@@ -516,11 +519,12 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
             P_SIG0: c.release_sigma_m, P_X0: g.x0, P_Y0: g.y0, P_CELL: g.cell, P_NX: g.nx,
             P_NY: g.ny, P_NLEV: g.levels, P_FLUSHD: c.flush_cells * g.cell,
             P_FLUSHT: c.flush_ticks, P_M: len(noz), P_K: len(d), P_MERGE: c.merge_ratio,
-            P_NOZC: float(np.max(np.hypot(noz[:, 0], noz[:, 1])))}
+            P_NOZC: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))), P_QMIN: c.flow_min_l_per_s}
     for k, v in head.items():
         par[k] = v
     o = P_HEADER
-    for slot, arr in zip((P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV), arrays):
+    for slot, arr in zip((P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV), arrays,
+                         strict=True):
         par[slot] = o
         par[o:o + len(arr)] = arr
         o += len(arr)

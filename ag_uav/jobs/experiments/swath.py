@@ -4,14 +4,15 @@ As a pattern test does (ASABE S386-style; the effective swath for multirotors as
 Woldt & Latheef, *Drones* 3(4):83, 2019: the widest lane spacing with CV ≤ 25 %), single passes
 are flown across a line of collectors at several heights, speeds and crosswinds, and the deposit
 profile across the flight line is read from the dose map (mean over a 10 m stretch of track in
-the middle of a 60 m pass; collectors every 0.25 m, out to 20 m on each side). The vehicle is kinematic (:func:`pass_states`): constant ground
+the middle of a 60 m pass; collectors every 0.25 m, out to 20 m on each side). The vehicle is
+kinematic (:func:`pass_states`): constant ground
 speed along +x at y = 0, the tilt and thrust that balance its weight and the configured air drag
 at its airspeed (``vehicle.drag_linear`` / ``drag_quadratic``), no MuJoCo, so a case takes well
 under a second. The crosswind blows along +y (towards the collectors' positive side).
 
 Overlaying the profile at lane spacing S (Σ_j p(y − jS); with symmetric nozzles the back-and-
 forth and racetrack overlays coincide in the ground frame) gives the CV against S; the effective
-swath is the first S at which the CV exceeds 25 %, minus one step (the widest S below it).
+swath is the widest S (0.25 m steps up to 20 m) with CV ≤ 25 %.
 
 Prints and writes (``--out``): ``swath.csv`` (one row per case: height, speed, wind, effective
 swath, CV at the configured swath, centroid shift of the deposit, drift fraction, share of the
@@ -29,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from ...world.deposition import DepositionConfig, DepositionBatch
+from ...world.deposition import DepositionBatch, DepositionConfig
 
 NAME = "swath"
 HELP = ("spray pattern test of the deposition model: single passes across a collector line at "
@@ -102,11 +103,9 @@ def cv_vs_spacing(y: np.ndarray, prof: np.ndarray, spacings: np.ndarray) -> np.n
 
 
 def effective_swath(spacings: np.ndarray, cv: np.ndarray, limit: float = CV_LIMIT) -> float:
-    """The widest spacing before the CV first exceeds ``limit`` (0 if the first does)."""
-    bad = np.nonzero(cv > limit)[0]
-    if len(bad) == 0:
-        return float(spacings[-1])
-    return float(spacings[bad[0] - 1]) if bad[0] > 0 else 0.0
+    """The widest spacing with CV ≤ ``limit`` (0 if none)."""
+    ok = np.nonzero(cv <= limit)[0]
+    return float(spacings[ok[-1]]) if len(ok) else 0.0
 
 
 def swath_pattern(cfg: DepositionConfig, heights, speeds, winds, mass_kg: float = 6.47,
@@ -156,8 +155,8 @@ def _overrides(items: list[str]) -> dict[str, Any]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from . import write_csv
     from ..batch import markdown_table, print_table
+    from . import write_csv
 
     cfg = DepositionConfig(**_overrides(args.set))
     t0 = time.perf_counter()
@@ -168,7 +167,7 @@ def main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "swath.csv", rows)
     prow = [{"height_m": h, "speed_mps": v, "wind_mps": w, "y_m": float(a), "l_per_ha": float(b)}
-            for (h, v, w), (y, p) in profiles.items() for a, b in zip(y, p)]
+            for (h, v, w), (y, p) in profiles.items() for a, b in zip(y, p, strict=True)]
     write_csv(out / "profiles.csv", prow)
     header = ["h (m)", "v (m/s)", "wind (m/s)", "eff. swath (m)", f"CV @ {cfg.swath_m:g} m",
               "peak (L/ha)", "centroid (m)", "drift"]
