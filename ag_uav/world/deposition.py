@@ -100,12 +100,15 @@ import numpy as np
 
 try:
     from numba import njit
+    from numba.core.errors import TypingError as NumbaTypingError
 except ImportError:  # pragma: no cover
+    NumbaTypingError = TypeError
     def njit(*a, **k):
         return (lambda f: f) if not a or not callable(a[0]) else a[0]
 
 __all__ = ["DepositionConfig", "Deposition", "DepositionBatch", "DoseMap", "droplet_classes",
-           "terminal_velocity", "dose_metrics", "INPUT_WIDTH"]
+           "terminal_velocity", "dose_metrics", "INPUT_WIDTH", "GridSpec", "pack_input",
+           "pack_params"]
 
 G = 9.81
 #: columns of one input row: pos 3, vel 3, R 9 (row-major), thrust, wind 3, cmd
@@ -692,6 +695,13 @@ class DepositionBatch:
         return self.dose_map(i).metrics(self.field, t, margin_m)
 
 
+def _f64(a) -> np.ndarray:
+    """A float64 1-D array (arrays pass through without a copy)."""
+    if isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == 1:
+        return a
+    return np.ascontiguousarray(a, dtype=np.float64).ravel()
+
+
 class Deposition(DepositionBatch):
     """One vehicle: :meth:`step` takes that vehicle's arrays and returns the litres as a float;
     it runs the same compiled row function as the batch."""
@@ -702,11 +712,24 @@ class Deposition(DepositionBatch):
         self._inp0, self._st0, self._buf0 = self.inp[0], self.st[0], self.buf[0]
 
     def step(self, dt: float, pos, vel, R, thrust: float, wind, cmd: bool) -> float:  # type: ignore[override]
-        i = self._inp0
-        i[0:3] = pos
-        i[3:6] = vel
-        i[6:15] = R
-        i[15] = thrust
-        i[16:19] = wind
-        i[19] = 1.0 if cmd else 0.0
-        return _row_step(self.par, i, self._st0, self._buf0, float(dt), self.scratch)
+        try:
+            return _row_step_args(self.par, self._inp0, self._st0, self._buf0, float(dt),
+                                  self.scratch, pos, vel, R, float(thrust), wind, bool(cmd))
+        except NumbaTypingError:   # sequences of mixed int/float: convert (slow path)
+            return _row_step_args(self.par, self._inp0, self._st0, self._buf0, float(dt),
+                                  self.scratch, _f64(pos), _f64(vel), _f64(R), float(thrust),
+                                  _f64(wind), bool(cmd))
+
+
+@njit(cache=True)
+def _row_step_args(par, inp, st, buf, dt, scratch, pos, vel, R, thrust, wind, cmd) -> float:
+    """:func:`_row_step` from unpacked arrays (fills the packed input row in compiled code)."""
+    for j in range(3):
+        inp[j] = pos[j]
+        inp[3 + j] = vel[j]
+        inp[16 + j] = wind[j]
+    for j in range(9):
+        inp[6 + j] = R[j]
+    inp[15] = thrust
+    inp[19] = 1.0 if cmd else 0.0
+    return _row_step(par, inp, st, buf, dt, scratch)
