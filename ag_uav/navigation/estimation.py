@@ -280,8 +280,9 @@ class EstimatorFeedback(FilterBank, Feedback):
         a :class:`BatchEstimatorFeedback` of one (the engine's batched path, so a vehicle's
         estimates are the same alone or in any batch); any other bank (e.g. a filter without a
         batched version) on its scalar filters (:meth:`FilterBank._step_bank`)."""
-        if self._solo is None and type(self) is EstimatorFeedback:
-            self._solo = BatchEstimatorFeedback.try_batch([self], 1) or False
+        if self._solo is None:  # once; a bank already refused by the engine is not tried again
+            ok = type(self) is EstimatorFeedback and self.batch_note is None
+            self._solo = ok and BatchEstimatorFeedback.try_batch([self], 1) or False
         if self._solo:
             return self._solo.update_one(t, p_true, v_true, imu)
         z, R_new = self.measure(t, p_true)
