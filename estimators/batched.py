@@ -89,6 +89,7 @@ __all__ = [
     "BatchPCAMCKF",
     "batch_class",
     "benchmark",
+    "pca_batch",
     "warm_up",
 ]
 
@@ -116,7 +117,7 @@ def _predict_batch(x, P, fptr, fidx, fval, Fb, Q, u, pos, vel, hh, dt, active, u
 
 
 @njit
-def _pca_batch(buf, pcs, zf, z, mask, Nw, L, r, mode):
+def pca_batch(buf, pcs, zf, z, mask, Nw, L, r, mode):
     """The PCA block of the masked rows: :func:`estimators.pca.pca_row` on each."""
     for i in range(z.shape[0]):
         if mask[i]:
@@ -125,7 +126,7 @@ def _pca_batch(buf, pcs, zf, z, mask, Nw, L, r, mode):
 
 @njit
 def _pca_batch2(buf, pcs, zf, buf2, pcs2, zf2, z, mask, Nw, L, r, mode):
-    """:func:`_pca_batch` for two filters with the same PCA options (PCA-KF and PCA-MCKF of
+    """:func:`pca_batch` for two filters with the same PCA options (PCA-KF and PCA-MCKF of
     one bank): where a row's two windows are equal (they see the same fixes) the block runs
     once and its result (window, output) is copied; otherwise each runs on its own window.
     The same deterministic function of the same inputs: bit-identical to running both."""
@@ -472,7 +473,7 @@ class _PCAMixin:
         return (self.window, self._L, self._r, self.pca_mode, self.m)
 
     def _pca(self, z: np.ndarray, mask: np.ndarray) -> None:
-        _pca_batch(self._buf, self._pcs, self.z_filtered, z, mask, self.window, self._L,
+        pca_batch(self._buf, self._pcs, self.z_filtered, z, mask, self.window, self._L,
                    self._r, PCA_MODE[self.pca_mode])
 
     def _pca2(self, other: _PCAMixin, z: np.ndarray, mask: np.ndarray) -> None:
