@@ -2,58 +2,40 @@
 
 Used by a lockstep engine that flies N missions at once: every control tick it predicts every
 vehicle's filters with its IMU acceleration, and on a GNSS fix (some vehicles only: outages)
-updates them.  The arithmetic is that of the scalar classes, row by row:
+updates them.  Each law lives once, as a compiled row function on one filter's arrays; the
+kernels here only loop over the rows calling them, and the scalar classes call the same
+functions on their own arrays, so row i equals the scalar filter bit for bit:
 
-* :class:`BatchKF` ↔ :class:`estimators.KF` (Kalman 1960, Joseph form; Candan & Li Alg. 1)::
-
-      predict:  x̄ = F x̂ (+ B u),   P̄ = F P Fᵀ + Q
-      update:   ν = z − H x̄,  S = H P̄ Hᵀ + R,  K = P̄ Hᵀ S⁻¹,  NIS = νᵀ S⁻¹ ν
-                x̂ = x̄ + K ν,  P = (I − K H) P̄ (I − K H)ᵀ + K R Kᵀ
-
-* :class:`BatchMCKF` ↔ :class:`estimators.MCKF` (Chen, Liu, Zhao, Principe, Automatica 80,
-  2017): the whitened fixed point of :mod:`estimators.mckf_kernel` (same operation order as
-  the unrolled kernel; Cholesky pivot test ``REL_PIVOT``, falling back to the jittered
-  :func:`estimators.mckf.safe_cholesky` reading), the lock-out recovery rules ``"kf"`` /
-  ``"inflate"`` / ``None`` and the Joseph update with the original P̄ (or α P̄ after an
-  inflation reset) and R.
-* :class:`BatchPCAKF`, :class:`BatchPCAMCKF` ↔ :class:`estimators.PCAKF` / ``PCAMCKF``: the
-  sliding-window PCA block of :mod:`estimators.pca` (Candan & Li §III.C, "hankel" = SSA per
-  channel or "channels" reading) in front of the KF / MCKF update.
-
-The input ``u`` of :meth:`BatchFilter.predict` is added to the state only, after the
-prediction, exactly as ``ag_uav.estimation.FilterBank._step_bank`` does::
-
-      x[pos_a] += dt²/2 · u_a,   x[vel_a] += dt · u_a      (per axis a)
+* predict (all classes): :func:`estimators.kf.kf_predict_row` (x̄ = F x̂, P̄ = F P Fᵀ + Q) and
+  the IMU input :func:`estimators.kf.kf_input_row` (x[pos_a] += dt²/2·u_a, x[vel_a] += dt·u_a,
+  as ``ag_uav.navigation.estimation.FilterBank._step_bank`` adds it to a scalar filter);
+* :class:`BatchKF` ↔ :class:`estimators.KF`: :func:`estimators.kf.kf_update_row` (Kalman
+  1960, Joseph form; Candan & Li Alg. 1);
+* :class:`BatchMCKF` ↔ :class:`estimators.MCKF`: :func:`estimators.mckf.mckf_update_row`
+  (Chen, Liu, Zhao, Principe 2017: the whitened fixed point
+  :func:`~estimators.mckf.mckf_fixed_point_row`, the Cholesky pivot test and jittered factor,
+  the lock-out recovery rules ``"kf"`` / ``"inflate"`` / ``None``, the Joseph update with the
+  original P̄ or α P̄ after an inflation reset);
+* :class:`BatchPCAKF`, :class:`BatchPCAMCKF` ↔ :class:`estimators.PCAKF` / ``PCAMCKF``:
+  :func:`estimators.pca.pca_row` (Candan & Li §III.C, "hankel" = SSA per channel or
+  "channels") in front of the KF / MCKF update row.
 
 Array layout (C-contiguous float64, leading batch axis N): ``x`` (N, n), ``P`` (N, n, n),
 ``R`` (N, m, m), ``nis`` (N,), ``y`` (N, m) (last innovation), MCKF ``n_rejected`` etc. (N,),
 PCA window ring buffers (N, m, 2·window).  F, H, Q are shared by the batch (same model, dt,
 q).  R is per vehicle and may be written at any time (``bf.R[i] = R_i`` or
 :meth:`BatchFilter.set_R`): every quantity derived from R (B_r⁻¹ of the MCKF) is recomputed at
-each update, as the scalar ``f.R = ...`` setter does on assignment.
+each update, as in the scalar filters.
 
-Why numba: at the sizes of the bank (n = 9, m = 3) a numpy call costs ~1 µs whatever the size,
-and a vectorised batched update needs dozens of calls (more for the MCKF's per-row fixed point
-with its data-dependent iteration count, the PCA eigenproblems and the recovery branches), so
-numpy vectorisation is call-overhead bound for small N and still costs µs per vehicle for
-large N; the compiled kernels loop over the rows with straight float arithmetic (~0.1-0.3 µs
-per predict, ~0.5-3 µs per update per vehicle).  Each row is computed by the same scalar code
-with no cross-row BLAS call, so vehicle i's results are bit-identical whatever N and whatever
-the other rows hold (determinism of the lockstep engine).  Without numba the same kernels run
-as (slow) Python (:mod:`estimators._jit`).
-
-Measured (``python -m estimators.batched``, cvb model, dim 3, window 10 hankel, a fix every
-10th tick, best of 3 on a loaded 2-core machine), µs per vehicle-tick::
-
-    N                          1       64      256
-    numpy-vectorised KF only   11.2    0.67    0.53
-    numba KF only              1.4     0.24    0.23
-    numba bank of all four     7.8     1.96    1.90
-
-First compile of the kernels ~7-11 s (cached by numba in ``__pycache__``), later loads 0.2 s.
-
-Equivalence with the scalar filters: to rounding of the summation order (tests: 1e-9 relative
-+ absolute over hundreds of ticks with outliers, outages, recoveries and R switches).
+Why numba: at the sizes of the bank (n = 9, m = 3) a numpy call costs about a microsecond
+whatever the size, and a vectorised batched update needs dozens of calls (more for the MCKF's
+per-row fixed point with its data-dependent iteration count, the PCA eigenproblems and the
+recovery branches); the compiled kernels loop over the rows with straight float arithmetic.
+No row touches another and there is no cross-row BLAS call, so vehicle i's results are
+bit-identical whatever N and whatever the other rows hold (determinism of the lockstep
+engine).  Without numba the same functions run as (slow) Python (:mod:`estimators._jit`).
+The first use compiles the kernels (cached by numba in ``__pycache__``); :func:`warm_up` does
+it before anything is timed.  Speed: ``python -m estimators.batched`` (:func:`benchmark`).
 """
 
 from __future__ import annotations

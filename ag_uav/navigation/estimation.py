@@ -399,12 +399,17 @@ class BatchEstimatorFeedback:
     rate only), each filter predicts with the IMU input ``â = R̂ f̃ + g`` and the vehicles with
     a fix update; the records (per-tick estimates, NEES/NIS inputs, update costs) are arrays
     and go back into the per-run objects at :meth:`finish`, so :meth:`EstimatorFeedback.scores`
-    and ``summary`` work unchanged. Identical to the per-vehicle :class:`EstimatorFeedback`
-    (tests: 1e-9).
+    and ``summary`` work unchanged. The fix handling and initialisation are the per-run
+    objects' own (:meth:`EstimatorFeedback.measure`, :meth:`EstimatorFeedback.initial_state`),
+    and a vehicle flown alone by :meth:`EstimatorFeedback.update` is a batch of one of this
+    class: its estimates are bit-identical alone, in any batch, or on the scalar filters
+    (``tests/test_feedback_paths.py``).
 
     Updates go through the bank, where PCA-KF and PCA-MCKF share their PCA step; every
     :attr:`TIME_EVERY`-th fix tick each filter updates alone and is timed, which gives the
-    per-filter ``update_us`` (the mean time of one vehicle's update in those ticks).
+    per-filter ``update_us`` (the mean time of one vehicle's update in those ticks); the kernels
+    are compiled (or loaded from numba's cache) before the first timed update
+    (:func:`estimators.batched.warm_up`), so ``update_us`` does not count a one-time compile.
     """
 
     TIME_EVERY = 16
