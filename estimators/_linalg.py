@@ -110,14 +110,22 @@ def inv_small_into(S, Si):
         Si[2, 1] = (b * g - a * h) / det
         Si[2, 2] = (a * e - b * d) / det
     else:
-        Sc = np.empty((m, m))
-        for r in range(m):
-            for c in range(m):
-                Sc[r, c] = S[r, c]
-        inv = np.linalg.inv(Sc)
-        for r in range(m):
-            for c in range(m):
-                Si[r, c] = inv[r, c]
+        _inv_lapack(S, Si)
+
+
+@njit
+def _inv_lapack(S, Si):
+    """Si = S⁻¹ by LAPACK (m > 3; kept out of :func:`inv_small_into` so that the closed forms
+    stay small enough to inline)."""
+    m = S.shape[0]
+    Sc = np.empty((m, m))
+    for r in range(m):
+        for c in range(m):
+            Sc[r, c] = S[r, c]
+    inv = np.linalg.inv(Sc)
+    for r in range(m):
+        for c in range(m):
+            Si[r, c] = inv[r, c]
 
 
 @njit

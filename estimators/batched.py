@@ -83,19 +83,26 @@ _MODELS = ("cv", "cvb")
 
 
 @njit
-def _predict_batch(x, P, fptr, fidx, fval, Fb, Q, u, pos, vel, hh, dt, active, use_u, tx, FP):
-    """:func:`estimators.kf.kf_predict_row` (+ :func:`~estimators.kf.kf_input_row` with u) on
-    the active rows (its two forms dispatched once per batch, not per row)."""
-    b3 = Fb.shape[0] == 3
+def _predict_batch_b3(x, P, Fb, Q, u, pos, vel, hh, dt, active, use_u):
+    """:func:`estimators.kf.kf_predict_row` on the active rows for F = blkdiag(Fb, …) (its
+    3×3-block form :func:`~estimators.kf.predict_b3_row`), then with ``use_u`` the IMU input
+    :func:`~estimators.kf.kf_input_row`."""
     for i in range(x.shape[0]):
-        if not active[i]:
-            continue
-        if b3:
+        if active[i]:
             predict_b3_row(x[i], P[i], Fb, Q)
-        else:
+            if use_u:
+                kf_input_row(x[i], u[i], pos, vel, hh, dt)
+
+
+@njit
+def _predict_batch(x, P, fptr, fidx, fval, Q, u, pos, vel, hh, dt, active, use_u, tx, FP):
+    """As :func:`_predict_batch_b3` for a general F in CSR form
+    (:func:`~estimators.kf.predict_csr_row`)."""
+    for i in range(x.shape[0]):
+        if active[i]:
             predict_csr_row(x[i], P[i], fptr, fidx, fval, Q, tx, FP)
-        if use_u:
-            kf_input_row(x[i], u[i], pos, vel, hh, dt)
+            if use_u:
+                kf_input_row(x[i], u[i], pos, vel, hh, dt)
 
 
 @njit
@@ -287,9 +294,13 @@ class BatchFilter:
             if uu.shape != self._u0.shape:
                 raise ValueError(f"u must have shape {self._u0.shape}, got {uu.shape}")
             use_u = True
+        if self._Fb.shape[0] == 3:  # the two forms of kf_predict_row, chosen once per batch
+            _predict_batch_b3(self.x, self.P, self._Fb, self.Q, uu, self.pos_idx, self.vel_idx,
+                              self._hh, self.dt, act, use_u)
+            return
         ptr, idx, val = self._fcsr
-        _predict_batch(self.x, self.P, ptr, idx, val, self._Fb, self.Q, uu, self.pos_idx,
-                       self.vel_idx, self._hh, self.dt, act, use_u, self._tx, self._FP)
+        _predict_batch(self.x, self.P, ptr, idx, val, self.Q, uu, self.pos_idx, self.vel_idx,
+                       self._hh, self.dt, act, use_u, self._tx, self._FP)
 
     def update(self, z: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         """Fuse fix z[i] into the rows with mask[i] (default all), each exactly as the scalar

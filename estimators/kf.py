@@ -143,7 +143,7 @@ def predict_csr_row(x, P, fptr, fidx, fval, Q, tx, FP):
         x[r] = tx[r]
 
 
-@njit
+@njit(inline="always")
 def predict_b3_row(x, P, Fb, Q):
     """:func:`kf_predict_row` for F = blkdiag(Fb, …, Fb), 3×3 blocks, unrolled."""
     na = x.shape[0] // 3
@@ -181,7 +181,7 @@ def predict_b3_row(x, P, Fb, Q):
             P[o + 2, c + 2] = (g20 * f20 + g21 * f21 + g22 * f22) + Q[o + 2, c + 2]
 
 
-@njit
+@njit(inline="always")
 def kf_input_row(x, u, pos, vel, hh, dt):
     """The IMU input of the prediction, after ``kf_predict_row``: per axis a
     x[pos_a] += dt²/2 · u_a (hh = dt²/2), x[vel_a] += dt · u_a."""

@@ -117,63 +117,17 @@ def kernel_coeffs(sigma: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------------------ the law, rows
-@njit(inline="always")
-def _solve(A, nw, s, q, L, xb, T, M, Mi, sn, be, u, xn):
-    """One fixed-point solve: T = A C_x⁻¹ Aᵀ, M = I + S T S, β = S M⁻¹ S ν_w,
-    u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u (q = diag C_x⁻¹, s = √diag C_y)."""
-    m, n = A.shape
-    for i in range(m):
-        for k in range(i, m):
-            acc = 0.0
-            for j in range(n):
-                acc += A[i, j] * A[k, j] * q[j]
-            T[i, k] = acc
-    for i in range(m):
-        for k in range(i, m):
-            v = s[i] * s[k] * T[i, k]
-            M[i, k] = 1.0 + v if i == k else v
-            M[k, i] = M[i, k]
-    inv_small_into(M, Mi)
-    for i in range(m):
-        sn[i] = s[i] * nw[i]
-    mat_vec(Mi, sn, be)
-    for i in range(m):
-        be[i] = s[i] * be[i]
-    mat_vec(A.T, be, u)
-    for j in range(n):
-        u[j] = q[j] * u[j]
-    for j in range(n):
-        acc = 0.0
-        for k in range(j + 1):
-            acc += L[j, k] * u[k]
-        xn[j] = xb[j] + acc
-
-
-@njit(inline="always")
-def _reweight(A, nw, u, kx, ky, floor, e, c, q, s):
-    """Weights of the next iteration: e_y = ν_w − A u, c_j = max(exp(u_j² kx_j), floor),
-    q = 1/c, s_i = exp(e_y,i² ky_i)."""
-    mat_vec(A, u, e)
-    for i in range(nw.shape[0]):
-        e[i] = nw[i] - e[i]
-    for j in range(u.shape[0]):
-        cj = math.exp(u[j] * u[j] * kx[j])
-        if cj < floor:
-            cj = floor
-        c[j] = cj
-        q[j] = 1.0 / cj
-    for i in range(nw.shape[0]):
-        s[i] = math.exp(e[i] * e[i] * ky[i])
-
-
 @njit
 def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, floor, eps2, max_iter,
                          A, nw, T, M, Mi, s, sn, be, q, u, xn, o, e, c, K, Nm, V):
     """MCKF step 4 in whitened coordinates given L = chol(P̄) and G = B_r⁻¹ H; writes x̂ into
     xn, K̃ into K, C_x into c (when more than one iteration ran) and √C_y into s; returns the
-    number of iterations.  Iteration 1 starts at x̂⁽⁰⁾ = x̄ (C_x = I, e_y = ν_w); the stop rule
-    is ‖x̂⁽ᵗ⁾ − x̂⁽ᵗ⁻¹⁾‖² ≤ ε² max(‖x̂⁽ᵗ⁻¹⁾‖², 1) or t = max_iter.  Finally
-    K̃ = L C_x⁻¹ Aᵀ N, N = S M⁻¹ S B_r⁻¹."""
+    number of iterations.  Iteration 1 starts at x̂⁽⁰⁾ = x̄ (C_x = I, e_y = ν_w); each solves
+    T = A C_x⁻¹ Aᵀ, M = I + S T S, β = S M⁻¹ S ν_w, u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u; the stop rule
+    is ‖x̂⁽ᵗ⁾ − x̂⁽ᵗ⁻¹⁾‖² ≤ ε² max(‖x̂⁽ᵗ⁻¹⁾‖², 1) or t = max_iter; the next weights are
+    e_y = ν_w − A u, c_j = max(exp(u_j² kx_j), floor), q = 1/c, s_i = exp(e_y,i² ky_i).
+    Finally K̃ = L C_x⁻¹ Aᵀ N, N = S M⁻¹ S B_r⁻¹.  One straight loop (helper calls inside the
+    iteration measured slower)."""
     n = xb.shape[0]
     m = nu.shape[0]
     for i in range(m):
@@ -193,7 +147,32 @@ def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, floor, eps2, max_iter,
         nrm2 += xb[j] * xb[j]
     it = 1
     while True:
-        _solve(A, nw, s, q, L, xb, T, M, Mi, sn, be, u, xn)
+        # solve: T = A C_x⁻¹ Aᵀ, M = I + S T S, β = S M⁻¹ S ν_w, u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u
+        for i in range(m):
+            for k in range(i, m):
+                acc = 0.0
+                for j in range(n):
+                    acc += A[i, j] * A[k, j] * q[j]
+                T[i, k] = acc
+        for i in range(m):
+            for k in range(i, m):
+                v = s[i] * s[k] * T[i, k]
+                M[i, k] = 1.0 + v if i == k else v
+                M[k, i] = M[i, k]
+        inv_small_into(M, Mi)
+        for i in range(m):
+            sn[i] = s[i] * nw[i]
+        mat_vec(Mi, sn, be)
+        for i in range(m):
+            be[i] = s[i] * be[i]
+        mat_vec(A.T, be, u)
+        for j in range(n):
+            u[j] = q[j] * u[j]
+        for j in range(n):
+            acc = 0.0
+            for k in range(j + 1):
+                acc += L[j, k] * u[k]
+            xn[j] = xb[j] + acc
         if it >= max_iter:
             break
         d2 = 0.0
@@ -206,7 +185,18 @@ def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, floor, eps2, max_iter,
         for j in range(n):
             o[j] = xn[j]
             nrm2 += xn[j] * xn[j]
-        _reweight(A, nw, u, kx, ky, floor, e, c, q, s)
+        mat_vec(A, u, e)
+        for i in range(m):
+            e[i] = nw[i] - e[i]
+        for j in range(n):
+            cj = math.exp(u[j] * u[j] * kx[j])
+            if cj < floor:
+                cj = floor
+            c[j] = cj
+            q[j] = 1.0 / cj
+        for i in range(m):
+            s[i] = math.exp(e[i] * e[i] * ky[i])
+    # K̃ = L C_x⁻¹ Aᵀ N,  N = S M⁻¹ S B_r⁻¹
     for i in range(m):
         for col in range(m):
             acc = 0.0
@@ -268,7 +258,7 @@ def _recover(x, P, R, H, nu, PHT, Si, K, xo, fpar, ipar, ist, Pa, PaHT, Sa, Sai)
     return 0
 
 
-@njit
+@njit(inline="always")
 def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
     """The MCKF update of one filter in place (x, P); returns the KF NIS of the innovation (not
     finite: no fix, x and P untouched).
@@ -301,10 +291,8 @@ def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
     else:
         ist[0] = 0
     copy_vec(xo, x)
-    if rec == 2:
-        joseph_row(Pa, K, H, R, P, A, AP, KR)  # covariance reset: the inflated prior
-    else:
-        joseph_row(P, K, H, R, P, A, AP, KR)  # the original P̄ and R
+    # the original P̄ and R, or the inflated prior after an "inflate" reset
+    joseph_row(Pa if rec == 2 else P, K, H, R, P, A, AP, KR)
     ist[1] = it
     ist[2] = 1 if rejected else 0
     ist[3] = 1 if rec else 0
@@ -444,5 +432,6 @@ class MCKF(LinearGaussianBase):
         self.x, self.P = x, P
         self.weights = wy
         self.weights_x = np.ones(n) if self._ist[1] == 1 else w[25].copy()
-        self.y, self.S, self.K, self.nis = w[0].copy(), w[2].copy(), w[4].copy(), float(v)
+        self.y, self.S, self.K = w[0].copy(), w[2].copy(), w[4].copy()
+        self.nis = float(v)
         return True
