@@ -1,10 +1,11 @@
 """``njit``: :func:`numba.njit` with ``cache=True`` when numba is installed, else the identity.
 
-The batched kernels of :mod:`estimators.batched` are written as plain Python loops over float64
+The row functions where each filter law lives (:mod:`estimators.kf`, :mod:`estimators.mckf`,
+:mod:`estimators.pca`, :mod:`estimators._linalg`) and the batched kernels of
+:mod:`estimators.batched` that loop over them are written as plain Python loops over float64
 arrays so that they also run (slowly, for tests and small batches) on numpy alone: the package
-must stay importable with numpy/scipy only.  No ``fastmath``: the kernels must give the same
-floating-point results as the scalar filters (to rounding of the summation order) and
-bit-identical results per vehicle whatever the batch size.
+must stay importable with numpy/scipy only.  No ``fastmath``: a vehicle's results must be
+bit-identical in a scalar filter and in any row of any batch.
 """
 
 from __future__ import annotations

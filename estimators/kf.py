@@ -13,19 +13,22 @@ Update with a fix y (position)::
 This is Algorithm 1 of Candan & Li with the Joseph form in place of the short form
 ``(I − K H) P`` (which loses symmetry and definiteness in floating point).
 
+Where the law lives: the compiled row functions of this module, on one filter's arrays —
+:func:`kf_predict_row` (F in sparse row form, so the zeros of F are skipped), :func:`kf_input_row`
+(the IMU input ``x[pos] += dt²/2·u``, ``x[vel] += dt·u``), :func:`kf_innovation_row`,
+:func:`kf_gain_row`, :func:`joseph_row` and :func:`kf_update_row` (the whole update).  The class
+:class:`KF` calls them on its own arrays (a batch of one) and
+:class:`estimators.batched.BatchKF` loops over its rows calling them, so a vehicle's results are
+bit-identical in either.  The MCKF (:mod:`estimators.mckf`) reuses the innovation, gain and
+Joseph steps.  Without numba the same functions run as Python (:mod:`estimators._jit`).
+
 Interface shared by every filter of the bank: ``predict()``, ``update(z) -> bool``, attributes
 ``x`` (shape (n,)), ``P`` (n, n), and after an update ``y`` (innovation), ``S``, ``K``, ``nis``.
 ``update(None)`` or a fix with any NaN/inf component is "no fix": nothing changes and ``False``
 is returned (detected on the scalar NIS, so a finite fix so large that νᵀS⁻¹ν overflows, e.g.
-1e300 m, is also dropped; numpy may warn about the overflow).  ``F``, ``H``, ``Q``, ``R`` can be
-reassigned at any time (``kf.R = ...``).
-
-Speed: small matrices are dominated by numpy call overhead (~0.5 µs per call, whatever the
-size), so the code counts calls: it uses the ``ndarray.dot`` method (cheaper than ``np.dot`` and
-``@`` on tiny arrays), caches Fᵀ, Hᵀ and I, inverts S in closed form for m ≤ 3 and checks
-finiteness once on the scalar NIS instead of on the input.  Measured with
-``ag_uav.bench_estimators``: ~2/3 of the time of filterpy's ``KalmanFilter`` per
-predict+update, identical results (to ~1e-14).
+1e300 m, is also dropped).  ``F``, ``H``, ``Q``, ``R`` can be reassigned at any time
+(``kf.R = ...``); ``predict`` and ``update`` store new ``x`` and ``P`` arrays (a reference kept
+by the caller is not changed in place).
 """
 
 from __future__ import annotations
@@ -34,14 +37,20 @@ import math
 
 import numpy as np
 
-__all__ = ["KF", "inv_small", "as_fix"]
+from ._jit import njit
+from ._linalg import add_into, copy_vec, inv_small_into, mat_mul, mat_vec, quad_form
+
+__all__ = ["KF", "inv_small", "as_fix", "block3", "csr", "joseph_row", "kf_gain_row",
+           "kf_innovation_row", "kf_input_row", "kf_predict_row", "kf_update_row", "kf_work",
+           "predict_b3_row", "predict_csr_row"]
 
 _dot = np.dot
 
 
 def inv_small(S: np.ndarray) -> np.ndarray:
     """Inverse of a small non-singular matrix: closed form (adjugate / determinant) for 1×1,
-    2×2 and 3×3 (a numpy call on a tiny matrix costs more than the arithmetic), LAPACK above."""
+    2×2 and 3×3 (a numpy call on a tiny matrix costs more than the arithmetic), LAPACK above.
+    (For the numpy filters of the package: EKF, UKF, coloured-noise KFs.)"""
     m = S.shape[0]
     if m == 2:
         (a, b), (c, d) = S.tolist()
@@ -73,15 +82,190 @@ def as_fix(z) -> np.ndarray | None:
     return np.asarray(z, dtype=float).reshape(-1)
 
 
+def csr(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """F in compressed sparse row form ``(ptr, idx, val)`` for :func:`kf_predict_row`."""
+    ptr, idx, val = [0], [], []
+    for row in np.asarray(F, dtype=float):
+        nz = np.flatnonzero(row)
+        idx.extend(nz.tolist())
+        val.extend(row[nz].tolist())
+        ptr.append(len(idx))
+    return (np.array(ptr, dtype=np.int64), np.array(idx, dtype=np.int64),
+            np.array(val, dtype=float))
+
+
+# ------------------------------------------------------------------------------ the law, rows
+def block3(F: np.ndarray) -> np.ndarray:
+    """The 3×3 block Fb when F = blkdiag(Fb, …, Fb) (the per-axis models, e.g. "cvb"), else an
+    empty (0, 0) array: the argument ``Fb`` of :func:`kf_predict_row`."""
+    F = np.asarray(F, dtype=float)
+    n = F.shape[0]
+    Fb = np.ascontiguousarray(F[:3, :3])
+    if n % 3 == 0 and np.array_equal(F, np.kron(np.eye(n // 3), Fb)):
+        return Fb
+    return np.zeros((0, 0))
+
+
+@njit
+def kf_predict_row(x, P, fptr, fidx, fval, Fb, Q, tx, FP):
+    """x ← F x, P ← F P Fᵀ + Q in place.  F in CSR form (fptr, fidx, fval: its zeros are
+    skipped); when F = blkdiag(Fb, …) with 3×3 blocks (Fb non-empty, :func:`block3`) the same
+    sums run block by block on local floats (each 3×3 block P_ab ← Fb P_ab Fbᵀ + Q_ab; the
+    zeros of Fb add exact zeros).  tx (n,), FP (n, n) are scratch."""
+    if Fb.shape[0] == 3:
+        predict_b3_row(x, P, Fb, Q)
+    else:
+        predict_csr_row(x, P, fptr, fidx, fval, Q, tx, FP)
+
+
+@njit
+def predict_csr_row(x, P, fptr, fidx, fval, Q, tx, FP):
+    """:func:`kf_predict_row` for a general F in CSR form."""
+    n = x.shape[0]
+    for r in range(n):
+        s = 0.0
+        for k in range(fptr[r], fptr[r + 1]):
+            s += fval[k] * x[fidx[k]]
+        tx[r] = s
+    for r in range(n):
+        for c in range(n):
+            s = 0.0
+            for k in range(fptr[r], fptr[r + 1]):
+                s += fval[k] * P[fidx[k], c]
+            FP[r, c] = s
+    for r in range(n):
+        for c in range(n):
+            s = 0.0
+            for k in range(fptr[c], fptr[c + 1]):
+                s += FP[r, fidx[k]] * fval[k]
+            P[r, c] = s + Q[r, c]
+    for r in range(n):
+        x[r] = tx[r]
+
+
+@njit(inline="always")
+def predict_b3_row(x, P, Fb, Q):
+    """:func:`kf_predict_row` for F = blkdiag(Fb, …, Fb), 3×3 blocks, unrolled."""
+    na = x.shape[0] // 3
+    f00, f01, f02 = Fb[0, 0], Fb[0, 1], Fb[0, 2]
+    f10, f11, f12 = Fb[1, 0], Fb[1, 1], Fb[1, 2]
+    f20, f21, f22 = Fb[2, 0], Fb[2, 1], Fb[2, 2]
+    for a in range(na):
+        o = 3 * a
+        x0, x1, x2 = x[o], x[o + 1], x[o + 2]
+        x[o] = f00 * x0 + f01 * x1 + f02 * x2
+        x[o + 1] = f10 * x0 + f11 * x1 + f12 * x2
+        x[o + 2] = f20 * x0 + f21 * x1 + f22 * x2
+        for bb in range(na):
+            c = 3 * bb
+            p00, p01, p02 = P[o, c], P[o, c + 1], P[o, c + 2]
+            p10, p11, p12 = P[o + 1, c], P[o + 1, c + 1], P[o + 1, c + 2]
+            p20, p21, p22 = P[o + 2, c], P[o + 2, c + 1], P[o + 2, c + 2]
+            g00 = f00 * p00 + f01 * p10 + f02 * p20  # G = Fb P_ab
+            g01 = f00 * p01 + f01 * p11 + f02 * p21
+            g02 = f00 * p02 + f01 * p12 + f02 * p22
+            g10 = f10 * p00 + f11 * p10 + f12 * p20
+            g11 = f10 * p01 + f11 * p11 + f12 * p21
+            g12 = f10 * p02 + f11 * p12 + f12 * p22
+            g20 = f20 * p00 + f21 * p10 + f22 * p20
+            g21 = f20 * p01 + f21 * p11 + f22 * p21
+            g22 = f20 * p02 + f21 * p12 + f22 * p22
+            P[o, c] = (g00 * f00 + g01 * f01 + g02 * f02) + Q[o, c]  # G Fbᵀ + Q
+            P[o, c + 1] = (g00 * f10 + g01 * f11 + g02 * f12) + Q[o, c + 1]
+            P[o, c + 2] = (g00 * f20 + g01 * f21 + g02 * f22) + Q[o, c + 2]
+            P[o + 1, c] = (g10 * f00 + g11 * f01 + g12 * f02) + Q[o + 1, c]
+            P[o + 1, c + 1] = (g10 * f10 + g11 * f11 + g12 * f12) + Q[o + 1, c + 1]
+            P[o + 1, c + 2] = (g10 * f20 + g11 * f21 + g12 * f22) + Q[o + 1, c + 2]
+            P[o + 2, c] = (g20 * f00 + g21 * f01 + g22 * f02) + Q[o + 2, c]
+            P[o + 2, c + 1] = (g20 * f10 + g21 * f11 + g22 * f12) + Q[o + 2, c + 1]
+            P[o + 2, c + 2] = (g20 * f20 + g21 * f21 + g22 * f22) + Q[o + 2, c + 2]
+
+
+@njit(inline="always")
+def kf_input_row(x, u, pos, vel, hh, dt):
+    """The IMU input of the prediction, after ``kf_predict_row``: per axis a
+    x[pos_a] += dt²/2 · u_a (hh = dt²/2), x[vel_a] += dt · u_a."""
+    for a in range(pos.shape[0]):
+        x[pos[a]] += hh * u[a]
+        x[vel[a]] += dt * u[a]
+
+
+@njit
+def kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si):
+    """ν = z − H x, P Hᵀ, S = H P Hᵀ + R, S⁻¹; returns NIS = νᵀ S⁻¹ ν (not finite: no fix)."""
+    mat_vec(H, x, nu)
+    for a in range(z.shape[0]):
+        nu[a] = z[a] - nu[a]
+    mat_mul(P, H.T, PHT)
+    mat_mul(H, PHT, S)
+    add_into(S, R)
+    inv_small_into(S, Si)
+    return quad_form(Si, nu)
+
+
+@njit
+def kf_gain_row(x, PHT, Si, nu, K, xo):
+    """K = P Hᵀ S⁻¹, xo = x + K ν."""
+    mat_mul(PHT, Si, K)
+    mat_vec(K, nu, xo)
+    for r in range(x.shape[0]):
+        xo[r] = x[r] + xo[r]
+
+
+@njit
+def joseph_row(Pb, K, H, R, Pout, A, AP, KR):
+    """Pout = (I − K H) Pb (I − K H)ᵀ + K R Kᵀ (Pout may alias Pb); A, AP (n, n), KR (n, m)
+    scratch."""
+    mat_mul(K, H, A)
+    n = A.shape[0]
+    for r in range(n):
+        for c in range(n):
+            A[r, c] = (1.0 if r == c else 0.0) - A[r, c]
+    mat_mul(A, Pb, AP)
+    mat_mul(K, R, KR)
+    mat_mul(AP, A.T, Pout)
+    mat_mul(KR, K.T, AP)  # AP is free: K R Kᵀ
+    add_into(Pout, AP)
+
+
+@njit
+def kf_work(n, m):
+    """Work arrays of one update: ν, P Hᵀ, S, S⁻¹, K, x̂, I − K H, (I − K H) P̄, K R."""
+    return (np.empty(m), np.empty((n, m)), np.empty((m, m)), np.empty((m, m)),
+            np.empty((n, m)), np.empty(n), np.empty((n, n)), np.empty((n, n)),
+            np.empty((n, m)))
+
+
+@njit
+def kf_update_row(x, P, R, H, z, nu, PHT, S, Si, K, xo, A, AP, KR):
+    """The KF update of one filter in place (x, P); returns its NIS.  A non-finite NIS (NaN/inf
+    in z, or an overflow) is "no fix": x and P are then untouched.  After a fix the work
+    arrays hold ν, S, K."""
+    v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
+    if not math.isfinite(v):
+        return v
+    kf_gain_row(x, PHT, Si, nu, K, xo)
+    copy_vec(xo, x)
+    joseph_row(P, K, H, R, P, A, AP, KR)
+    return v
+
+
+# ------------------------------------------------------------------------------ classes
 def _mat(a, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    arr = np.array(a, dtype=float, ndmin=2)
+    arr = np.array(a, dtype=float, ndmin=2, order="C")
     if shape is not None and arr.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
     return arr
 
 
+def _vec(a, n: int) -> np.ndarray:
+    """A fresh C-contiguous float64 copy of a state vector (n,)."""
+    return np.array(a, dtype=float, order="C").reshape(n)
+
+
 class LinearGaussianBase:
-    """Holds F, H, Q, R, x, P and the per-update diagnostics; caches transposes."""
+    """Holds F, H, Q, R, x, P and the per-update diagnostics; caches transposes and F's CSR
+    form; ``predict`` is :func:`kf_predict_row` on the filter's own arrays."""
 
     def __init__(self, F, H, Q, R, x0=None, P0=None) -> None:
         F = _mat(F, "F")
@@ -103,6 +287,9 @@ class LinearGaussianBase:
         self.S = self.R.copy()
         self.K = np.zeros((n, self.m))
         self.nis = math.nan
+        self._tx = np.empty(n)
+        self._FP = np.empty((n, n))
+        self._kfw = kf_work(n, self.m)
 
     # matrices with cached derived quantities -------------------------------------------------
     @property
@@ -113,6 +300,8 @@ class LinearGaussianBase:
     def F(self, value) -> None:
         F = _mat(value, "F", (self.n, self.n))
         self._F, self._FT = F, F.T.copy()
+        self._fcsr = csr(F)
+        self._Fb = block3(F)
 
     @property
     def H(self) -> np.ndarray:
@@ -142,19 +331,33 @@ class LinearGaussianBase:
         self._on_model_change()
 
     def _on_model_change(self) -> None:
-        """Hook for subclasses that cache factors of H or R."""
+        """Hook for subclasses that check or cache factors of H or R."""
 
     # common steps ------------------------------------------------------------------------------
     def predict(self) -> None:
-        """x̄ = F x̂, P̄ = F P Fᵀ + Q."""
-        F = self._F
-        self.x = F.dot(self.x)
-        self.P = F.dot(self.P).dot(self._FT) + self._Q
+        """x̄ = F x̂, P̄ = F P Fᵀ + Q (:func:`kf_predict_row`)."""
+        x = _vec(self.x, self.n)
+        P = _mat(self.P, "P", (self.n, self.n))
+        ptr, idx, val = self._fcsr
+        kf_predict_row(x, P, ptr, idx, val, self._Fb, self._Q, self._tx, self._FP)
+        self.x, self.P = x, P
 
     def _joseph(self, P: np.ndarray, K: np.ndarray) -> np.ndarray:
-        """(I − K H) P (I − K H)ᵀ + K R Kᵀ."""
-        IKH = self._I - K.dot(self._H)
-        return IKH.dot(P).dot(IKH.T) + K.dot(self._R).dot(K.T)
+        """(I − K H) P (I − K H)ᵀ + K R Kᵀ (:func:`joseph_row`)."""
+        n = self.n
+        out = np.empty((n, n))
+        joseph_row(_mat(P, "P", (n, n)), _mat(K, "K", (n, self.m)), self._H, self._R, out,
+                   np.empty((n, n)), np.empty((n, n)), np.empty((n, self.m)))
+        return out
+
+    def _fix(self, z) -> np.ndarray | None:
+        """``z`` as a C-contiguous float64 (m,) vector, or None (no fix)."""
+        if z is None:
+            return None
+        zz = np.array(z, dtype=float, order="C").reshape(-1)
+        if zz.shape != (self.m,):
+            raise ValueError(f"z must have {self.m} elements, got {zz.size}")
+        return zz
 
 
 class KF(LinearGaussianBase):
@@ -167,21 +370,17 @@ class KF(LinearGaussianBase):
     """
 
     def update(self, z) -> bool:
-        """Fuse fix ``z`` (shape (m,)); returns ``False`` (and changes nothing) if there is none."""
-        if z is None:
+        """Fuse fix ``z`` (shape (m,)); returns ``False`` (and changes nothing) if there is none
+        (:func:`kf_update_row`)."""
+        zz = self._fix(z)
+        if zz is None:
             return False
-        z = np.asarray(z, dtype=float).reshape(-1)
-        P, x, H = self.P, self.x, self._H
-        PHT = P.dot(self._HT)
-        S = H.dot(PHT) + self._R
-        Si = inv_small(S)
-        y = z - H.dot(x)
-        nis = float(y.dot(Si.dot(y)))
-        if not math.isfinite(nis):  # NaN / inf in z (or a broken S): no fix
+        x = _vec(self.x, self.n)
+        P = _mat(self.P, "P", (self.n, self.n))
+        w = self._kfw
+        v = kf_update_row(x, P, self._R, self._H, zz, *w)
+        if not math.isfinite(v):
             return False
-        K = PHT.dot(Si)
-        self.x = x + K.dot(y)
-        IKH = self._I - K.dot(H)
-        self.P = IKH.dot(P).dot(IKH.T) + K.dot(self._R).dot(K.T)
-        self.y, self.S, self.K, self.nis = y, S, K, nis
+        self.x, self.P = x, P
+        self.y, self.S, self.K, self.nis = w[0].copy(), w[2].copy(), w[4].copy(), float(v)
         return True

@@ -21,17 +21,17 @@ gain of step 4 is, by the matrix-inversion lemma,
 
 which never forms C_y⁻¹: a measurement channel whose kernel underflows to 0 (|e| ≳ 38.6 σ)
 simply drops out (K̃ column 0) instead of producing inf/NaN.  The state weights are floored at
-``kernel_floor`` (default 1e-12) so C_x⁻¹ stays finite.  The m×m matrix inverted is I + PSD.
+``kernel_floor`` (default 1e-12, must be > 0) so C_x⁻¹ stays finite.  The m×m matrix inverted
+is I + PSD.  B_p: the Cholesky factor of P̄ if every pivot d passes ``d > REL_PIVOT · P̄_jj``,
+else the jittered / eigen-floored factor of :func:`safe_cholesky` (P̄ ill-conditioned).
 
-Speed: for m ≤ 3 and n ≤ 12 the whole of step 2-4 (Cholesky of P̄, whitening, fixed point and
-K̃) runs in an unrolled, generated straight-line kernel on Python floats
-(:mod:`estimators.mckf_kernel`): numpy's ~0.5 µs per call dominated the tiny matrices (~25
-calls per iteration).  Same arithmetic, results equal to the vectorised path to ~1e-12 and the
-same iteration counts (tests); the vectorised path (``impl = "numpy"``) runs for larger sizes,
-for ``kernel_floor = 0`` and whenever the kernel's Cholesky pivot test fails (P̄
-ill-conditioned: LAPACK and :func:`safe_cholesky` decide).  Measured by
-``ag_uav.bench_estimators`` (one run each on a loaded 2-core machine): paper model 97 → 29 µs
-per predict+update (filterpy's KF: 28-29); 6-state in-loop model 191 → 54 µs per update.
+Where the law lives: the compiled row functions of this module, on one filter's arrays —
+:func:`mckf_fixed_point_row` (step 4) and :func:`mckf_update_row` (innovation, B_r⁻¹, the
+Cholesky handling, the fixed point, the rejection count and the lock-out recovery rules, the
+Joseph update), built on the KF rows of :mod:`estimators.kf` and the helpers of
+:mod:`estimators._linalg`.  :class:`MCKF` calls them on its own arrays (a batch of one);
+:class:`estimators.batched.BatchMCKF` loops over its rows calling them.  Only the adaptive
+bandwidth rule (below) is the scalar class's own: it chooses σ_k before calling the same row.
 
 Options
 -------
@@ -74,35 +74,232 @@ import math
 
 import numpy as np
 
-from .kf import LinearGaussianBase, inv_small
-from .mckf_kernel import REL_PIVOT, kernel
+from ._jit import njit
+from ._linalg import (
+    add_into,
+    chol,
+    chol_inv_lower,
+    copy_vec,
+    inv_small_into,
+    mat_mul,
+    mat_vec,
+    quad_form,
+    safe_cholesky_into,
+    scale,
+)
+from .kf import LinearGaussianBase, _mat, _vec, joseph_row, kf_gain_row, kf_innovation_row
 
-__all__ = ["MCKF", "safe_cholesky"]
+__all__ = ["MCKF", "REL_PIVOT", "RECOVERY", "kernel_coeffs", "mckf_fixed_point_row",
+           "mckf_update_row", "mckf_work", "safe_cholesky"]
 
-_dot = np.dot
-_exp = np.exp
+#: Cholesky pivots below REL_PIVOT · P̄_jj send P̄ to :func:`safe_cholesky` (jitter), so the
+#: positive-definite decision never hinges on the summation order
+REL_PIVOT = 1e-8
 
-#: largest n (state size) run by the unrolled kernel of :mod:`estimators.mckf_kernel` (m ≤ 3)
-KERNEL_MAX_N = 12
+#: recovery rule → code of the row functions (``ipar[2]``)
+RECOVERY = {None: 0, "kf": 1, "inflate": 2}
 
 
 def safe_cholesky(P: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor; symmetrises and adds growing jitter if P is not numerically PD."""
-    try:
-        return np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        Ps = 0.5 * (P + P.T)
-        scale = max(float(np.max(np.abs(np.diag(Ps)))), 1e-300)
-        jitter = 1e-12 * scale
-        for _ in range(20):
-            try:
-                return np.linalg.cholesky(Ps + jitter * np.eye(P.shape[0]))
-            except np.linalg.LinAlgError:
-                jitter *= 10.0
-        w, V = np.linalg.eigh(Ps)
-        return np.linalg.cholesky((V * np.maximum(w, 1e-12 * scale)) @ V.T)
+    """Lower Cholesky factor; symmetrises and adds growing jitter if P is not numerically PD
+    (:func:`estimators._linalg.safe_cholesky_into`)."""
+    Pc = np.array(P, dtype=float, order="C")
+    L = np.zeros_like(Pc)
+    safe_cholesky_into(Pc, L)
+    return L
 
 
+def kernel_coeffs(sigma: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(−1/(2σ²) for the n state rows, −1/(4σ²) for the measurement rows): G(e) = exp(e² kx)
+    and √G(e) = exp(e² ky).  σ = inf gives 0, a weight of exactly 1."""
+    c = -1.0 / (2.0 * sigma * sigma)
+    return np.ascontiguousarray(c[:n]), np.ascontiguousarray(0.5 * c[n:])
+
+
+# ------------------------------------------------------------------------------ the law, rows
+@njit
+def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, floor, eps2, max_iter,
+                         A, nw, T, M, Mi, s, sn, be, q, u, xn, o, e, c, K, Nm, V):
+    """MCKF step 4 in whitened coordinates given L = chol(P̄) and G = B_r⁻¹ H; writes x̂ into
+    xn, K̃ into K, C_x into c (when more than one iteration ran) and √C_y into s; returns the
+    number of iterations.  Iteration 1 starts at x̂⁽⁰⁾ = x̄ (C_x = I, e_y = ν_w); each solves
+    T = A C_x⁻¹ Aᵀ, M = I + S T S, β = S M⁻¹ S ν_w, u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u; the stop rule
+    is ‖x̂⁽ᵗ⁾ − x̂⁽ᵗ⁻¹⁾‖² ≤ ε² max(‖x̂⁽ᵗ⁻¹⁾‖², 1) or t = max_iter; the next weights are
+    e_y = ν_w − A u, c_j = max(exp(u_j² kx_j), floor), q = 1/c, s_i = exp(e_y,i² ky_i).
+    Finally K̃ = L C_x⁻¹ Aᵀ N, N = S M⁻¹ S B_r⁻¹.  One straight loop (helper calls inside the
+    iteration measured slower)."""
+    n = xb.shape[0]
+    m = nu.shape[0]
+    for i in range(m):
+        for j in range(n):
+            acc = 0.0
+            for k in range(j, n):
+                acc += G[i, k] * L[k, j]
+            A[i, j] = acc
+    mat_vec(Brinv, nu, nw)
+    for i in range(m):
+        s[i] = math.exp(nw[i] * nw[i] * ky[i])
+    for j in range(n):
+        q[j] = 1.0
+    nrm2 = 0.0
+    for j in range(n):
+        o[j] = xb[j]
+        nrm2 += xb[j] * xb[j]
+    it = 1
+    while True:
+        # solve: T = A C_x⁻¹ Aᵀ, M = I + S T S, β = S M⁻¹ S ν_w, u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u
+        for i in range(m):
+            for k in range(i, m):
+                acc = 0.0
+                for j in range(n):
+                    acc += A[i, j] * A[k, j] * q[j]
+                T[i, k] = acc
+        for i in range(m):
+            for k in range(i, m):
+                v = s[i] * s[k] * T[i, k]
+                M[i, k] = 1.0 + v if i == k else v
+                M[k, i] = M[i, k]
+        inv_small_into(M, Mi)
+        for i in range(m):
+            sn[i] = s[i] * nw[i]
+        mat_vec(Mi, sn, be)
+        for i in range(m):
+            be[i] = s[i] * be[i]
+        mat_vec(A.T, be, u)
+        for j in range(n):
+            u[j] = q[j] * u[j]
+        for j in range(n):
+            acc = 0.0
+            for k in range(j + 1):
+                acc += L[j, k] * u[k]
+            xn[j] = xb[j] + acc
+        if it >= max_iter:
+            break
+        d2 = 0.0
+        for j in range(n):
+            d2 += (xn[j] - o[j]) * (xn[j] - o[j])
+        if d2 <= eps2 * (nrm2 if nrm2 > 1.0 else 1.0):
+            break
+        it += 1
+        nrm2 = 0.0
+        for j in range(n):
+            o[j] = xn[j]
+            nrm2 += xn[j] * xn[j]
+        mat_vec(A, u, e)
+        for i in range(m):
+            e[i] = nw[i] - e[i]
+        for j in range(n):
+            cj = math.exp(u[j] * u[j] * kx[j])
+            if cj < floor:
+                cj = floor
+            c[j] = cj
+            q[j] = 1.0 / cj
+        for i in range(m):
+            s[i] = math.exp(e[i] * e[i] * ky[i])
+    # K̃ = L C_x⁻¹ Aᵀ N,  N = S M⁻¹ S B_r⁻¹
+    for i in range(m):
+        for col in range(m):
+            acc = 0.0
+            for h in range(m):
+                acc += Mi[i, h] * s[h] * Brinv[h, col]
+            Nm[i, col] = s[i] * acc
+    mat_mul(A.T, Nm, V)
+    for k in range(n):
+        for col in range(m):
+            V[k, col] = q[k] * V[k, col]
+    for j in range(n):
+        for col in range(m):
+            acc = 0.0
+            for k in range(j + 1):
+                acc += L[j, k] * V[k, col]
+            K[j, col] = acc
+    return it
+
+
+@njit
+def mckf_work(n, m):
+    """Work arrays of one MCKF update (:func:`mckf_update_row`): those of
+    :func:`estimators.kf.kf_work` (ν, P Hᵀ, S, S⁻¹, K, x̂, …) then the fixed point's."""
+    return (np.empty(m), np.empty((n, m)), np.empty((m, m)), np.empty((m, m)),
+            np.empty((n, m)), np.empty(n), np.empty((n, n)), np.empty((n, n)),
+            np.empty((n, m)),
+            np.empty((n, n)), np.empty((m, m)), np.empty((m, m)), np.empty((m, n)),
+            np.empty((m, n)), np.empty(m), np.empty((m, m)), np.empty((m, m)),
+            np.empty((m, m)), np.empty(m), np.empty(m), np.empty(m), np.empty(n),
+            np.empty(n), np.empty(n), np.empty(m), np.empty(n), np.empty((m, m)),
+            np.empty((n, m)), np.empty((n, n)), np.empty((n, m)), np.empty((m, m)),
+            np.empty((m, m)))
+
+
+@njit
+def _recover(x, P, R, H, nu, PHT, Si, K, xo, fpar, ipar, ist, Pa, PaHT, Sa, Sai):
+    """The lock-out recovery rule after a rejected fix (count in ist[0] already raised):
+    ``"kf"`` (ipar[2] = 1) K = P̄ Hᵀ S⁻¹, x̂ = x̄ + K ν; ``"inflate"`` (2) the same on α P̄,
+    α = inflate^j, if νᵀ (H α P̄ Hᵀ + R)⁻¹ ν ≤ gate.  Returns 0 (no recovery), 1 (recovered on
+    P̄) or 2 (recovered on α P̄, now in Pa: the prior of the Joseph update)."""
+    if ist[0] < ipar[1]:
+        return 0
+    if ipar[2] == 1:
+        kf_gain_row(x, PHT, Si, nu, K, xo)
+        ist[0] = 0
+        return 1
+    if ipar[2] == 2:
+        j = min(ist[0] - ipar[1] + 1, ipar[3])
+        alpha = math.pow(fpar[3], float(j))
+        scale(alpha, PHT, PaHT)
+        mat_mul(H, PaHT, Sa)
+        add_into(Sa, R)
+        inv_small_into(Sa, Sai)
+        if quad_form(Sai, nu) <= fpar[4]:
+            scale(alpha, P, Pa)
+            kf_gain_row(x, PaHT, Sai, nu, K, xo)
+            ist[0] = 0
+            return 2
+    return 0
+
+
+@njit(inline="always")
+def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
+    """The MCKF update of one filter in place (x, P); returns the KF NIS of the innovation (not
+    finite: no fix, x and P untouched).
+
+    fpar = (kernel_floor, ε², reject_weight, inflate, inflate_gate), ipar = (max_iter,
+    lockout_n, recovery 0/1/2 = None/"kf"/"inflate", inflate_jmax), ist = (n_rejected, n_iter,
+    rejected, recovered) (updated), wy ← diag C_y, w = :func:`mckf_work`; after a fix w holds
+    ν (w[0]), S (w[2]), K̃ (w[4]) and C_x (w[25], valid when n_iter > 1)."""
+    (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn, be, q, u,
+     o, e, c, Nm, V, Pa, PaHT, Sa, Sai) = w
+    v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
+    if not math.isfinite(v):
+        return v
+    chol_inv_lower(R, Brinv, Lr)
+    mat_mul(Brinv, H, G)
+    if not chol(P, Lp, REL_PIVOT):
+        safe_cholesky_into(P, Lp)
+    it = mckf_fixed_point_row(x, Lp, nu, Brinv, G, kx, ky, fpar[0], fpar[1], ipar[0], Aw, nw,
+                              T, M, Mi, s, sn, be, q, u, xo, o, e, c, K, Nm, V)
+    wmin = np.inf
+    for a in range(nu.shape[0]):
+        wy[a] = s[a] * s[a]
+        if wy[a] < wmin:
+            wmin = wy[a]
+    rejected = wmin < fpar[2]
+    rec = 0
+    if rejected:
+        ist[0] += 1
+        rec = _recover(x, P, R, H, nu, PHT, Si, K, xo, fpar, ipar, ist, Pa, PaHT, Sa, Sai)
+    else:
+        ist[0] = 0
+    copy_vec(xo, x)
+    # the original P̄ and R, or the inflated prior after an "inflate" reset
+    joseph_row(Pa if rec == 2 else P, K, H, R, P, A, AP, KR)
+    ist[1] = it
+    ist[2] = 1 if rejected else 0
+    ist[3] = 1 if rec else 0
+    return v
+
+
+# ------------------------------------------------------------------------------ the class
 class MCKF(LinearGaussianBase):
     """Maximum correntropy Kalman filter; see the module docstring for every option.
 
@@ -111,7 +308,7 @@ class MCKF(LinearGaussianBase):
     F, H, Q, R, x0, P0 : as :class:`estimators.KF`.
     sigma : kernel bandwidth, scalar or vector of length n+m (multi-kernel).
     eps, max_iter : fixed-point stop rule and cap.
-    kernel_floor : lower bound of the state weights C_x.
+    kernel_floor : lower bound (> 0) of the state weights C_x.
     adaptive_sigma, adapt_lambda, adapt_clip : adaptive bandwidth rule.
     recovery, lockout_n, reject_weight, inflate : lock-out recovery rule.
     """
@@ -136,11 +333,14 @@ class MCKF(LinearGaussianBase):
         reject_weight: float = 0.05,
         inflate: float = 4.0,
     ) -> None:
+        self._ist = np.zeros(4, dtype=np.int64)
         super().__init__(F, H, Q, R, x0, P0)
-        if recovery not in (None, "kf", "inflate"):
+        if recovery not in RECOVERY:
             raise ValueError(f"recovery must be None, 'kf' or 'inflate', got {recovery!r}")
         if max_iter < 1:
             raise ValueError("max_iter must be >= 1")
+        if not kernel_floor > 0.0:
+            raise ValueError("kernel_floor must be > 0")
         self.sigma = sigma
         self.eps = float(eps)
         self.max_iter = int(max_iter)
@@ -154,24 +354,24 @@ class MCKF(LinearGaussianBase):
         self.inflate = float(inflate)
         if recovery == "inflate" and not self.inflate > 1.0:
             raise ValueError("inflate must be > 1")
-        # α = inflate^j is capped at ~1e12; gate = χ²_m 99.9 % quantile
-        self._inflate_jmax = max(1, int(12.0 / math.log10(self.inflate))) if recovery else 1
         from scipy.special import gammaincinv
 
         self.inflate_gate = 2.0 * float(gammaincinv(0.5 * self.m, 0.999))
         self.scale2 = 1.0  # ŝ_k of the adaptive rule
-        self.n_iter = 0
         self.weights = np.ones(self.m)
         self.weights_x = np.ones(self.n)
         self.sigma_k = self._sigma.copy()
-        self.rejected = False
-        self.n_rejected = 0
-        self.recovered = False
-        self._Im = np.eye(self.m)
-        self._ones_n = np.ones(self.n)
-        small = self.m <= 3 and self.n <= KERNEL_MAX_N
-        self._kernel = kernel(self.n, self.m) if small else None
-        self.impl = "auto"  # "numpy": always the vectorised fixed point (tests, comparisons)
+        self._w = mckf_work(self.n, self.m)
+
+    # state of the lock-out rule and the last fixed point (views of the row's ``ist``) ---------
+    n_rejected = property(lambda self: int(self._ist[0]),
+                          lambda self, v: self._ist.__setitem__(0, int(v)))
+    n_iter = property(lambda self: int(self._ist[1]),
+                      lambda self, v: self._ist.__setitem__(1, int(v)))
+    rejected = property(lambda self: bool(self._ist[2]),
+                        lambda self, v: self._ist.__setitem__(2, int(bool(v))))
+    recovered = property(lambda self: bool(self._ist[3]),
+                         lambda self, v: self._ist.__setitem__(3, int(bool(v))))
 
     @property
     def sigma(self) -> np.ndarray:
@@ -186,131 +386,52 @@ class MCKF(LinearGaussianBase):
             n_m = self.n + self.m
             raise ValueError(f"sigma must be a positive scalar or have length n+m={n_m}")
         self._sigma = s
-        self._set_kernel(s)
-
-    def _set_kernel(self, s: np.ndarray) -> None:
-        c = -1.0 / (2.0 * s * s)  # inf sigma -> 0 -> weight exactly 1
-        self._ncx, self._ncy_half = c[: self.n].copy(), 0.5 * c[self.n :]
-        self._ncx_l, self._ncyh_l = self._ncx.tolist(), self._ncy_half.tolist()
+        self._ncx, self._ncy_half = kernel_coeffs(s, self.n)
 
     def _on_model_change(self) -> None:
-        if hasattr(self, "_R") and hasattr(self, "_H"):
-            Br = np.linalg.cholesky(self._R)
-            self._Brinv = np.linalg.inv(Br)
-            self._BrinvH = _dot(self._Brinv, self._H)
-            self._Gf = self._BrinvH.ravel().tolist()
-            self._Rf = self._Brinv.ravel().tolist()
+        R = getattr(self, "_R", None)
+        if R is not None and R is not getattr(self, "_R_checked", None):
+            np.linalg.cholesky(R)  # R must be SPD (B_r = chol R); raises LinAlgError
+            self._R_checked = R
+
+    def params(self) -> tuple[np.ndarray, np.ndarray]:
+        """The row functions' parameters ``(fpar, ipar)`` from the attributes (see
+        :func:`mckf_update_row`)."""
+        jmax = max(1, int(12.0 / math.log10(self.inflate))) if self.inflate > 1.0 else 1
+        fpar = np.array([self.kernel_floor, self.eps * self.eps, self.reject_weight,
+                         self.inflate, self.inflate_gate])
+        ipar = np.array([self.max_iter, self.lockout_n, RECOVERY[self.recovery], jmax],
+                        dtype=np.int64)
+        return fpar, ipar
 
     def update(self, z) -> bool:
-        """Fuse fix ``z``; returns ``False`` (nothing changes) for "no fix": ``None``, NaN/inf in
-        ``z``, or a fix so large that its NIS overflows."""
-        if z is None:
+        """Fuse fix ``z`` (:func:`mckf_update_row`); returns ``False`` (nothing changes) for
+        "no fix": ``None``, NaN/inf in ``z``, or a fix so large that its NIS overflows."""
+        zz = self._fix(z)
+        if zz is None:
             return False
-        z = np.asarray(z, dtype=float).reshape(-1)
-        xb, Pb, H = self.x, self.P, self._H
-        nu = z - H.dot(xb)
-        PHT = Pb.dot(self._HT)
-        S = H.dot(PHT) + self._R
-        Si = inv_small(S)
-        nis = float(nu.dot(Si.dot(nu)))
-        if not math.isfinite(nis):
-            return False
-
+        n = self.n
+        x = _vec(self.x, n)
+        P = _mat(self.P, "P", (n, n))
+        w = self._w
+        kx, ky = self._ncx, self._ncy_half
         if self.adaptive_sigma:
+            nis = kf_innovation_row(x, P, self._R, self._H, zz, w[0], w[1], w[2], w[3])
+            if not math.isfinite(nis):
+                return False
             lim = self.adapt_clip**2 * max(self.scale2, 1.0)
             lam = self.adapt_lambda
             self.scale2 = lam * self.scale2 + (1.0 - lam) * min(nis / self.m, lim)
             self.sigma_k = self._sigma * max(1.0, math.sqrt(self.scale2))
-            self._set_kernel(self.sigma_k)
-
-        x_new, K, Cy = self._fixed_point(xb, Pb, nu)
-        rejected = min(Cy.tolist()) < self.reject_weight
-        self.recovered = False
-        if rejected:
-            self.n_rejected += 1
-            if self.n_rejected >= self.lockout_n:
-                if self.recovery == "kf":
-                    K = PHT.dot(Si)
-                    x_new = xb + K.dot(nu)
-                    self.n_rejected = 0
-                    self.recovered = True
-                elif self.recovery == "inflate":
-                    j = min(self.n_rejected - self.lockout_n + 1, self._inflate_jmax)
-                    alpha = self.inflate**j
-                    PaHT = alpha * PHT
-                    Sai = inv_small(H.dot(PaHT) + self._R)
-                    if float(nu.dot(Sai.dot(nu))) <= self.inflate_gate:
-                        Pb = alpha * Pb  # covariance reset: the inflated prior is kept
-                        K = PaHT.dot(Sai)
-                        x_new = xb + K.dot(nu)
-                        self.n_rejected = 0
-                        self.recovered = True
-        else:
-            self.n_rejected = 0
-        self.rejected = rejected
-        self.x = x_new
-        self.P = self._joseph(Pb, K)  # original P̄ (inflated only by recovery) and R
-        self.y, self.S, self.K, self.nis = nu, S, K, nis
-        if self.adaptive_sigma:
-            self._set_kernel(self._sigma)
+            kx, ky = kernel_coeffs(self.sigma_k, n)
+        fpar, ipar = self.params()
+        wy = np.empty(self.m)
+        v = mckf_update_row(x, P, self._R, self._H, zz, kx, ky, fpar, ipar, self._ist, wy, w)
+        if not math.isfinite(v):
+            return False
+        self.x, self.P = x, P
+        self.weights = wy
+        self.weights_x = np.ones(n) if self._ist[1] == 1 else w[25].copy()
+        self.y, self.S, self.K = w[0].copy(), w[2].copy(), w[4].copy()
+        self.nis = float(v)
         return True
-
-    def _fixed_point(self, xb: np.ndarray, Pb: np.ndarray, nu: np.ndarray):
-        """Run step 4 in whitened coordinates; returns (x̂, K̃, diag C_y).
-
-        For m ≤ 3 and n ≤ ``KERNEL_MAX_N`` (and ``impl != "numpy"``) the unrolled kernel of
-        :mod:`estimators.mckf_kernel` runs the same arithmetic on Python floats; if its
-        Cholesky pivot test fails (P̄ ill-conditioned or not PD), or otherwise, the vectorised
-        :meth:`_fixed_point_numpy` does (with :func:`safe_cholesky`)."""
-        kern = self._kernel
-        if kern is not None and self.impl != "numpy" and self.kernel_floor > 0.0:
-            r = kern(Pb.ravel().tolist(), xb.tolist(), nu.tolist(), self._Gf, self._Rf,
-                     self._ncx_l, self._ncyh_l, self.kernel_floor, self.eps * self.eps,
-                     self.max_iter, REL_PIVOT)
-            if r is not None:
-                x, K, w, cx, self.n_iter = r
-                self.weights = np.array(w)
-                self.weights_x = self._ones_n if cx is None else np.array(cx)
-                return np.array(x), np.array(K).reshape(self.n, self.m), self.weights
-        return self._fixed_point_numpy(xb, Pb, nu)
-
-    def _fixed_point_numpy(self, xb: np.ndarray, Pb: np.ndarray, nu: np.ndarray):
-        """Step 4 vectorised (any m, n)."""
-        Bp = safe_cholesky(Pb)
-        Brinv = self._Brinv
-        nu_w = _dot(Brinv, nu)
-        A = _dot(self._BrinvH, Bp)
-        ncx, ncy_half, floor = self._ncx, self._ncy_half, self.kernel_floor
-        Im, eps2, max_iter = self._Im, self.eps * self.eps, self.max_iter
-        # iteration 1: x̂⁽⁰⁾ = x̄ so e_x = 0, C_x = I exactly and e_y = ν_w
-        s = _exp(nu_w * nu_w * ncy_half)  # √C_y
-        G = As = A * s[:, None]  # S_y A C_x⁻¹ with C_x = I
-        Mi = inv_small(_dot(As, As.T) + Im)
-        sb = _dot(Mi, s * nu_w) * s
-        u = _dot(sb, A)
-        inv_cx = None
-        x_prev = xb
-        x_new = xb + _dot(Bp, u)
-        it = 1
-        while it < max_iter:
-            dx = x_new - x_prev
-            nrm2 = float(_dot(x_prev, x_prev))
-            if float(_dot(dx, dx)) <= eps2 * (nrm2 if nrm2 > 1.0 else 1.0):
-                break
-            it += 1
-            x_prev = x_new
-            ey = nu_w - _dot(A, u)
-            inv_cx = 1.0 / np.maximum(_exp(u * u * ncx), floor)
-            s = _exp(ey * ey * ncy_half)
-            As = A * s[:, None]
-            G = As * inv_cx
-            Mi = inv_small(_dot(G, As.T) + Im)
-            sb = _dot(Mi, s * nu_w) * s
-            u = _dot(sb, A) * inv_cx
-            x_new = xb + _dot(Bp, u)
-        # K̃ = B_p C_x⁻¹ Aᵀ S_y M⁻¹ S_y B_r⁻¹ = B_p Gᵀ M⁻¹ S_y B_r⁻¹
-        K = _dot(_dot(Bp, _dot(G.T, Mi * s)), Brinv)
-        self.n_iter = it
-        self.weights = s * s
-        self.weights_x = self._ones_n if inv_cx is None else 1.0 / inv_cx
-        return x_new, K, self.weights

@@ -20,10 +20,13 @@ window as 1×N, which taken literally makes PCA a no-op, so two readings are imp
     subspace; the rank-r reconstruction is diagonal-averaged and its last sample returned.  The
     last anti-diagonal holds the single element X[L−1, K−1], so the output is
     ``mean + U_r[L−1, :] · U_rᵀ X[:, K−1]``.  r = 2 reproduces a constant-velocity leg exactly
-    (a + b t has a rank-2 trajectory matrix); turns need 3-4.  Only the r leading eigenvectors
-    are computed (LAPACK ``dsyevr``, per channel); equal to the full ``numpy.linalg.eigh``
-    reading (kept as ``PCABlock._hankel_eigh``) to ~1e-12 (tests).  The eigen-solver is ~2/3 of
-    the block's cost (~11 µs per 10×10 channel, mostly LAPACK's tridiagonalisation overhead).
+    (a + b t has a rank-2 trajectory matrix); turns need 3-4.
+
+Where the law lives: :func:`pca_row`, a compiled function on one block's ring buffer (push a
+finite fix, reconstruct the latest sample; both modes, with the closed-form leading
+eigenvector for c = 2, m = 1).  :class:`PCABlock` calls it on its own buffer (a batch of one);
+:class:`estimators.batched.BatchPCAKF` / ``BatchPCAMCKF`` loop over their rows calling it.
+:class:`PCAKF` and :class:`PCAMCKF` are the block in front of the KF / MCKF update rows.
 
 Default: ``mode="hankel"``, ``window=20`` (1 s at 20 Hz), L = 10, r = 2, chosen by measurement
 (:func:`mode_experiment`, ``python -m estimators.pca``): lawnmower constant-speed track (6 legs
@@ -47,18 +50,125 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg.lapack import dsyevr as _dsyevr
 
+from ._jit import njit
+from ._linalg import mat_mul
 from .kf import KF
 from .mckf import MCKF
 
-__all__ = ["PCABlock", "PCAKF", "PCAMCKF", "DEFAULT_MODE", "DEFAULT_WINDOW"]
+__all__ = ["PCABlock", "PCAKF", "PCAMCKF", "DEFAULT_MODE", "DEFAULT_WINDOW", "PCA_MODE",
+           "pca_row"]
 
 DEFAULT_MODE = "hankel"
 DEFAULT_WINDOW = 20
-_dot = np.dot
+#: mode → code of :func:`pca_row`
+PCA_MODE = {"channels": 0, "hankel": 1}
 
 
+# ------------------------------------------------------------------------------ the law, rows
+@njit
+def _reconstruct(U, w, r, row):
+    """Row ``row`` of the rank-r reconstruction of w: Σ_k U[row, k] (Σ_i w_i U[i, k]) over the
+    r leading eigenvectors (the last r columns of ``eigh``'s ascending U)."""
+    L = U.shape[0]
+    out = 0.0
+    for k in range(L - r, L):
+        coef = 0.0
+        for i in range(L):
+            coef += w[i] * U[i, k]
+        out += U[row, k] * coef
+    return out
+
+
+@njit
+def _hankel(Wc, mean, L, r, zf):
+    """Per channel a: zf_a = mean_a + the last sample of the rank-r SSA reconstruction of the
+    centred window Wc[a] (lag covariance C = X Xᵀ, X[i, j] = w[i + j])."""
+    c, Nw = Wc.shape
+    K = Nw - L + 1
+    C = np.empty((L, L))
+    for a in range(c):
+        for i in range(L):
+            for k in range(i, L):
+                acc = 0.0
+                for j in range(K):
+                    acc += Wc[a, i + j] * Wc[a, k + j]
+                C[i, k] = acc
+                C[k, i] = acc
+        _, U = np.linalg.eigh(C)
+        zf[a] = mean[a] + _reconstruct(U, Wc[a, Nw - L:], r, L - 1)
+
+
+@njit
+def _channels(Wc, mean, z, r, zf):
+    """zf = mean + P̂ P̂ᵀ (z − mean), P̂ the r leading eigenvectors of Wc Wcᵀ; for c = 2, r = 1
+    the leading eigenvector of [[a, b], [b, e]] in closed form, angle ½ atan2(2b, a − e)."""
+    c, Nw = Wc.shape
+    if c == 2 and r == 1:
+        a0 = 0.0
+        b0 = 0.0
+        e0 = 0.0
+        for j in range(Nw):
+            a0 += Wc[0, j] * Wc[0, j]
+            b0 += Wc[0, j] * Wc[1, j]
+            e0 += Wc[1, j] * Wc[1, j]
+        th = 0.5 * math.atan2(2.0 * b0, a0 - e0)
+        c0 = math.cos(th)
+        s0 = math.sin(th)
+        pr = c0 * (z[0] - mean[0]) + s0 * (z[1] - mean[1])
+        zf[0] = mean[0] + pr * c0
+        zf[1] = mean[1] + pr * s0
+        return
+    C = np.empty((c, c))
+    mat_mul(Wc, Wc.T, C)
+    _, U = np.linalg.eigh(C)
+    zc = np.empty(c)
+    for b in range(c):
+        zc[b] = z[b] - mean[b]
+    for a in range(c):
+        zf[a] = mean[a] + _reconstruct(U, zc, r, a)
+
+
+@njit
+def pca_row(buf, pcs, z, Nw, L, r, mode, zf):
+    """One call of the PCA block: push a finite z into the doubled ring buffer buf (c, 2 Nw)
+    (pcs = (position, count), updated), and write the reconstructed latest sample into zf
+    (pass-through while the window fills, and for a non-finite z, which is not pushed).
+    mode: 0 channels (r components), 1 hankel (embedding L, rank r)."""
+    c = z.shape[0]
+    tot = 0.0
+    for a in range(c):
+        tot += z[a]
+    for a in range(c):
+        zf[a] = z[a]
+    if not math.isfinite(tot):
+        return
+    p = pcs[0]
+    for a in range(c):
+        buf[a, p] = z[a]
+        buf[a, p + Nw] = z[a]
+    pos = p + 1 if p + 1 < Nw else 0
+    pcs[0] = pos
+    pcs[1] += 1
+    if pcs[1] < Nw:
+        return
+    inv_n = 1.0 / Nw
+    mean = np.empty(c)
+    Wc = np.empty((c, Nw))
+    for a in range(c):
+        acc = 0.0
+        for j in range(Nw):
+            acc += buf[a, pos + j] * inv_n
+        mean[a] = acc
+        for j in range(Nw):
+            Wc[a, j] = buf[a, pos + j] - acc
+    if mode == 1:
+        _hankel(Wc, mean, L, r, zf)
+    else:
+        _channels(Wc, mean, z, r, zf)
+
+
+# ------------------------------------------------------------------------------ classes
 class PCABlock:
     """Sliding-window PCA denoiser of c-channel measurements (see the module docstring).
 
@@ -79,7 +189,7 @@ class PCABlock:
         mode: str = DEFAULT_MODE,
         embed: int | None = None,
     ) -> None:
-        if mode not in ("channels", "hankel"):
+        if mode not in PCA_MODE:
             raise ValueError(f"mode must be 'channels' or 'hankel', got {mode!r}")
         self.c = int(n_channels)
         self.N = int(window)
@@ -98,18 +208,17 @@ class PCABlock:
             self.n_components = 2 if n_components is None else int(n_components)
             if not 1 <= self.n_components <= min(self.L, self.N - self.L + 1):
                 raise ValueError("n_components must be in [1, min(L, N - L + 1)]")
-            K = self.N - self.L + 1
-            self._hidx = np.arange(self.L)[:, None] + np.arange(K)[None, :]  # X[i, j] = w[i+j]
-        self._mean_w = np.full(self.N, 1.0 / self.N)
         # doubled ring buffer: the last N samples are always buf[:, pos : pos + N]
         self._buf = np.zeros((self.c, 2 * self.N))
-        self._pos = 0
-        self.count = 0
-        self.last_components: np.ndarray | None = None
+        self._pcs = np.zeros(2, dtype=np.int64)  # (pos, count), as pca_row keeps them
+
+    _pos = property(lambda self: int(self._pcs[0]),
+                    lambda self, v: self._pcs.__setitem__(0, int(v)))
+    count = property(lambda self: int(self._pcs[1]),
+                     lambda self, v: self._pcs.__setitem__(1, int(v)))
 
     def reset(self) -> None:
-        self._pos = 0
-        self.count = 0
+        self._pcs[:] = 0
 
     @property
     def ready(self) -> bool:
@@ -119,75 +228,21 @@ class PCABlock:
     def window_data(self) -> np.ndarray:
         """The current window, oldest sample first (c × min(count, N))."""
         k = min(self.count, self.N)
-        return self._buf[:, self._pos + self.N - k : self._pos + self.N].copy()
-
-    def push(self, z: np.ndarray) -> None:
-        """Append a (finite) sample to the window."""
         p = self._pos
-        self._buf[:, p] = z
-        self._buf[:, p + self.N] = z
-        self._pos = p + 1 if p + 1 < self.N else 0
-        self.count += 1
+        return self._buf[:, p + self.N - k : p + self.N].copy()
 
     def __call__(self, z):
-        """Push ``z`` and return the reconstructed latest sample (pass-through until ready)."""
+        """Push ``z`` and return the reconstructed latest sample (pass-through until ready, and
+        for a non-finite ``z``, which is not pushed); :func:`pca_row`."""
         if z is None:
             return None
-        z = np.asarray(z, dtype=float).reshape(-1)
-        if not math.isfinite(sum(z.tolist())):
-            return z
-        self.push(z)
-        if self.count < self.N:
-            return z.copy()
-        W = self._buf[:, self._pos : self._pos + self.N]
-        if self.mode == "channels":
-            return self._channels(W, z)
-        return self._hankel(W)
-
-    def _channels(self, W: np.ndarray, z: np.ndarray) -> np.ndarray:
-        mean = W.dot(self._mean_w)
-        Wc = W - mean[:, None]
-        if self.c == 2 and self.n_components == 1:
-            (a, b), (_, e) = Wc.dot(Wc.T).tolist()
-            th = 0.5 * math.atan2(2.0 * b, a - e)  # leading eigenvector of [[a, b], [b, e]]
-            c0, s0 = math.cos(th), math.sin(th)
-            m0, m1 = mean.tolist()
-            z0, z1 = z.tolist()
-            p = c0 * (z0 - m0) + s0 * (z1 - m1)
-            self.last_components = None
-            return np.array([m0 + p * c0, m1 + p * s0])
-        d = z - mean
-        _, V = np.linalg.eigh(_dot(Wc, Wc.T))
-        Pm = V[:, -self.n_components :]
-        self.last_components = Pm
-        return mean + _dot(Pm, _dot(Pm.T, d))
-
-    def _hankel(self, W: np.ndarray) -> np.ndarray:
-        """Only the r leading eigenvectors are computed (LAPACK dsyevr, one call per channel,
-        on the F-ordered view of the symmetric C: no copy); ``eigh`` if dsyevr fails."""
-        mean = W.dot(self._mean_w)
-        Wc = W - mean[:, None]
-        X = Wc[:, self._hidx]  # c × L × K
-        C = np.matmul(X, X.transpose(0, 2, 1))  # c × L × L lag covariance
-        L, r = self.L, self.n_components
-        last = Wc[:, self.N - L :]  # c × L, last column of each trajectory matrix
-        out = mean.tolist()
-        for ch in range(self.c):
-            Ur, info = _dsyevr(C[ch].T, compute_v=1, range="I", il=L - r + 1, iu=L,
-                               overwrite_a=1)[1::3]
-            if info != 0:
-                Ur = np.linalg.eigh(np.matmul(X[ch], X[ch].T))[1][:, L - r :]
-            out[ch] += Ur[L - 1].dot(last[ch].dot(Ur))
-        return np.array(out)
-
-    def _hankel_eigh(self, W: np.ndarray) -> np.ndarray:
-        """Reference: the same output from the full ``numpy.linalg.eigh`` of every channel."""
-        mean = W.sum(axis=1) / self.N
-        X = (W - mean[:, None])[:, self._hidx]
-        _, U = np.linalg.eigh(np.matmul(X, X.transpose(0, 2, 1)))
-        Ur = U[:, :, -self.n_components :]
-        coef = np.einsum("clr,cl->cr", Ur, X[:, :, -1])
-        return mean + np.einsum("cr,cr->c", Ur[:, -1, :], coef)
+        zz = np.array(z, dtype=float, order="C").reshape(-1)
+        if zz.shape != (self.c,):
+            raise ValueError(f"z must have {self.c} elements, got {zz.size}")
+        out = np.empty(self.c)
+        pca_row(self._buf, self._pcs, zz, self.N, self.L, self.n_components,
+                PCA_MODE[self.mode], out)
+        return out
 
 
 class PCAKF(KF):

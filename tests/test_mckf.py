@@ -226,54 +226,8 @@ def test_mckf_beats_kf_on_impulsive_noise_and_costs_little_on_gaussian():
     assert rmse["gauss", "mckf"] < 1.2 * rmse["gauss", "kf"]
 
 
-# ------------------------------------------------------------- fast path (unrolled kernel)
-def _run_pair(mdl, P0, Z, **kw):
-    """The same MCKF on the unrolled kernel and on the vectorised path, step by step."""
-    fast = MCKF(mdl.F, mdl.H, mdl.Q, mdl.R, np.zeros(mdl.n), P0, **kw)
-    ref = MCKF(mdl.F, mdl.H, mdl.Q, mdl.R, np.zeros(mdl.n), P0, **kw)
-    ref.impl = "numpy"
-    assert fast._kernel is not None
-    for z in Z:
-        fast.predict()
-        ref.predict()
-        assert fast.update(z) == ref.update(z)
-        scale = max(1.0, float(np.max(np.abs(ref.x))))
-        np.testing.assert_allclose(fast.x, ref.x, rtol=0, atol=1e-10 * scale)
-        np.testing.assert_allclose(fast.P, ref.P, rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(fast.K, ref.K, rtol=1e-9, atol=1e-12)
-        np.testing.assert_allclose(fast.weights, ref.weights, rtol=1e-9, atol=1e-300)
-        np.testing.assert_allclose(fast.weights_x, ref.weights_x, rtol=1e-9)
-        assert fast.n_iter == ref.n_iter and fast.rejected == ref.rejected
-    return fast
-
-
-@pytest.mark.parametrize(
-    "kind,dim,kw",
-    [
-        ("paper", 2, {}),
-        ("cv", 3, {}),
-        ("cv", 1, {"sigma": 1.0}),
-        ("ca", 3, {"sigma": 3.0, "max_iter": 20, "eps": 1e-9}),
-        ("cv", "2d+alt", {"adaptive_sigma": True}),
-        ("cv", 2, {"sigma": [5, 5, 5, 5, 1.5, np.inf]}),
-    ],
-)
-def test_unrolled_kernel_matches_vectorised_path(kind, dim, kw):
-    mdl = paper_numerical_model() if kind == "paper" else motion_model(kind, dim, 0.05, q=0.5,
-                                                                       r=[2.0, 3.0, 0.5][:1]
-                                                                       if dim == 1 else 2.0)
-    rng = np.random.default_rng(11)
-    T = 120
-    std = np.sqrt(np.diag(mdl.R))
-    Z = np.cumsum(rng.normal(size=(T, mdl.m)), axis=0) + std * rng.standard_normal((T, mdl.m))
-    hit = rng.random((T, mdl.m)) < 0.1
-    Z += hit * 30 * std * rng.standard_normal((T, mdl.m))  # outliers: small and zero weights
-    Z[60:, 0] += 500.0  # a jump: lock-out and recovery
-    f = _run_pair(mdl, 10 * np.eye(mdl.n), Z, **kw)
-    assert f.n_iter >= 1
-
-
-def test_unrolled_kernel_matches_literal_reference_3d():
+# ------------------------------------------------------------- the row functions, 3-D
+def test_matches_literal_reference_3d():
     mdl = motion_model("cv", 3, 0.01, q=0.05, r=[1.0, 1.0, 0.04])
     rng = np.random.default_rng(3)
     f = MCKF(mdl.F, mdl.H, mdl.Q, mdl.R, np.zeros(6), 4 * np.eye(6), eps=1e-9, max_iter=30,
@@ -292,33 +246,18 @@ def test_unrolled_kernel_matches_literal_reference_3d():
         assert f.n_iter == it_ref
 
 
-def test_kernel_fallbacks():
-    from estimators.mckf_kernel import kernel, kernel_source
-
-    with pytest.raises(ValueError):
-        kernel_source(4, 4)
-    assert kernel(4, 2) is kernel(4, 2)  # compiled once
-    # m = 4: vectorised path only, still the spec's MCKF
+def test_general_m_and_refused_floor():
+    # m = 4: the rows' LAPACK inverse in place of the closed forms, still the spec's MCKF
     H = np.eye(4)
     R = np.diag([1.0, 2.0, 3.0, 4.0])
     f = MCKF(np.eye(4), H, 0.01 * np.eye(4), R, np.zeros(4), np.eye(4), eps=1e-9, max_iter=30)
-    assert f._kernel is None
     z = np.array([1.0, -2.0, 9.0, 0.5])
     f.update(z)
     x_ref, P_ref, it_ref, _ = _mckf_reference(np.zeros(4), np.eye(4), H, R, z, 2.0, 1e-9, 30)
     np.testing.assert_allclose(f.x, x_ref, atol=1e-10)
     assert f.n_iter == it_ref
-    # a singular prior fails the kernel's pivot test: the jittered LAPACK path takes over
-    mdl = paper_numerical_model()
-    P0 = np.diag([1.0, 0.0, 1.0, 0.0])
-    a = MCKF(mdl.F, mdl.H, 0 * mdl.Q, mdl.R, np.zeros(4), P0)
-    b = MCKF(mdl.F, mdl.H, 0 * mdl.Q, mdl.R, np.zeros(4), P0)
-    b.impl = "numpy"
-    for g in (a, b):
-        g.update([3.0, 40.0])
-    np.testing.assert_array_equal(a.x, b.x)
-    np.testing.assert_array_equal(a.P, b.P)
-    assert np.all(np.isfinite(a.P))
+    with pytest.raises(ValueError, match="kernel_floor"):
+        MCKF(np.eye(4), H, 0.01 * np.eye(4), R, kernel_floor=0.0)
 
 
 def test_inflate_recovery_keeps_the_covariance_bounded():

@@ -36,6 +36,7 @@ uncorrelated; can exceed 1), and ``update_us`` (mean wall time of one ``update``
 from __future__ import annotations
 
 import time
+import warnings
 from typing import Any
 
 import numpy as np
@@ -143,10 +144,9 @@ class FilterBank:
         if not self.imu:
             return None
         if imu is not None:
-            f, R = imu
-            return [R[0] * f[0] + R[1] * f[1] + R[2] * f[2],
-                    R[3] * f[0] + R[4] * f[1] + R[5] * f[2],
-                    R[6] * f[0] + R[7] * f[1] + R[8] * f[2] - G]
+            out = np.empty((1, 3))
+            _world_accel(_row(imu[1], 9), _row(imu[0], 3), G, out)
+            return out[0].tolist()
         pv = self._v_prev
         self._v_prev = v_true
         if pv is None:
@@ -231,8 +231,13 @@ class EstimatorFeedback(FilterBank, Feedback):
         self._setup_records()
         self.fixes: list[tuple[float, float, float, float]] = []
         self.log = None
+        self._solo: BatchEstimatorFeedback | bool | None = None
+        #: why this bank flies one vehicle at a time, if it cannot batch (None: it can)
+        self.batch_note: str | None = None
 
-    def _init(self, z: np.ndarray) -> None:
+    def initial_state(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x0, P0) at the first fix ``z``: position z, zero velocity, ``P0 = diag(R, 4 m²/s²)``
+        and the bias states (``"cvb"``) at the IMU's turn-on figures."""
         x0 = np.zeros(self.n)
         x0[self.pos_idx] = z
         P0 = np.eye(self.n) * 4.0
@@ -240,26 +245,50 @@ class EstimatorFeedback(FilterBank, Feedback):
         if self.cfg.estimator.model == "cvb":   # bias states: the IMU's turn-on figures
             bi = [i + 2 for i in self.pos_idx]
             P0[bi, bi] = process_noise(self.cfg)[2]
+        return x0, P0
+
+    def _init(self, z: np.ndarray) -> None:
+        x0, P0 = self.initial_state(z)
         for f in self.filters.values():
             f.x = x0.copy()
             f.P = P0.copy()
         self.initialised = True
 
-    def update(self, t, p_true, v_true, imu=None):
+    def measure(self, t: float, p_true) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """This tick's GNSS fix (None between fixes) with the radar altimeter's height, and the
+        new R when the receiver's fix type changed (``gps.r_from_fix_type``), else None; logs
+        and records the fix.  Shared by the per-vehicle and the batched paths."""
         z = self.gps.measure(t, p_true)
-        if z is not None and self.radar:
+        if z is None:
+            return None, None
+        if self.radar:
             z[2] = p_true[2] + self.radar_sigma * self.radar_rng.standard_normal()
-        if z is not None and self.r_by_fix:
+        R_new = None
+        if self.r_by_fix:
             mode = self.gps.last_fix_type
             if mode != self._r_mode and mode in self.r_by_fix:
                 self._r_mode = mode
-                for f in self.filters.values():
-                    f.R = self.r_by_fix[mode]
-        if z is not None:
-            self.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
-            if self.log is not None:
-                self.log.gps(t, z)
-                self.log.set_truth(p_true)
+                R_new = self.r_by_fix[mode]
+        self.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
+        if self.log is not None:
+            self.log.gps(t, z)
+            self.log.set_truth(p_true)
+        return z, R_new
+
+    def update(self, t, p_true, v_true, imu=None):
+        """One control tick of this vehicle alone.  A bank the batched kernels support flies as
+        a :class:`BatchEstimatorFeedback` of one (the engine's batched path, so a vehicle's
+        estimates are the same alone or in any batch); any other bank (e.g. a filter without a
+        batched version) on its scalar filters (:meth:`FilterBank._step_bank`)."""
+        if self._solo is None:  # once; a bank already refused by the engine is not tried again
+            ok = type(self) is EstimatorFeedback and self.batch_note is None
+            self._solo = ok and BatchEstimatorFeedback.try_batch([self], 1) or False
+        if self._solo:
+            return self._solo.update_one(t, p_true, v_true, imu)
+        z, R_new = self.measure(t, p_true)
+        if R_new is not None:
+            for f in self.filters.values():
+                f.R = R_new
         if not self.initialised:
             if z is None:
                 return p_true, v_true  # no fix yet: nothing to fly on (only at t = 0)
@@ -276,6 +305,7 @@ class EstimatorFeedback(FilterBank, Feedback):
         covariance; a consistent filter gives 3). ``nis_mean``: mean normalised innovation
         squared ``νᵀ S⁻¹ ν`` (3 when consistent; the PCA filters' ν is on the reconstructed
         fix). ``update_us``: mean wall time of one ``update`` call."""
+        _sync_solo(self)
         out: dict[str, Any] = {}
         n = len(p_true)
         d = p_true[mission, :2] - p_ref[mission, :2]
@@ -306,6 +336,7 @@ class EstimatorFeedback(FilterBank, Feedback):
         return out
 
     def summary(self) -> dict[str, Any]:
+        _sync_solo(self)
         counts = getattr(self.gps, "fix_type_counts", None)
         return {"gps_preset": self.cfg.gps.preset, "gps_fixes": len(self.fixes),
                 "gps_fix_types": dict(counts) if counts else None,
@@ -317,6 +348,14 @@ class EstimatorFeedback(FilterBank, Feedback):
         """The engine batch's banks as one :class:`BatchEstimatorFeedback` (see
         :meth:`BatchEstimatorFeedback.try_batch`), or None."""
         return BatchEstimatorFeedback.try_batch(feedbacks, n_max)
+
+
+def _sync_solo(fb: Any) -> None:
+    """Records of a vehicle flown alone through its batch of one (:meth:`EstimatorFeedback.update`)
+    back into ``fb`` (for its ``scores``/``summary``)."""
+    solo = getattr(fb, "_solo", None)  # BearingFeedback borrows scores()
+    if solo:
+        solo.finish(np.array([solo.k_next]))
 
 
 def _nees_nis(cons: Any, full: np.ndarray, p_true: np.ndarray, off: int, lo: int, hi: int,
@@ -360,12 +399,17 @@ class BatchEstimatorFeedback:
     rate only), each filter predicts with the IMU input ``â = R̂ f̃ + g`` and the vehicles with
     a fix update; the records (per-tick estimates, NEES/NIS inputs, update costs) are arrays
     and go back into the per-run objects at :meth:`finish`, so :meth:`EstimatorFeedback.scores`
-    and ``summary`` work unchanged. Identical to the per-vehicle :class:`EstimatorFeedback`
-    (tests: 1e-9).
+    and ``summary`` work unchanged. The fix handling and initialisation are the per-run
+    objects' own (:meth:`EstimatorFeedback.measure`, :meth:`EstimatorFeedback.initial_state`),
+    and a vehicle flown alone by :meth:`EstimatorFeedback.update` is a batch of one of this
+    class: its estimates are bit-identical alone, in any batch, or on the scalar filters
+    (``tests/test_feedback_paths.py``).
 
     Updates go through the bank, where PCA-KF and PCA-MCKF share their PCA step; every
     :attr:`TIME_EVERY`-th fix tick each filter updates alone and is timed, which gives the
-    per-filter ``update_us`` (the mean time of one vehicle's update in those ticks).
+    per-filter ``update_us`` (the mean time of one vehicle's update in those ticks); the kernels
+    are compiled (or loaded from numba's cache) before the first timed update
+    (:func:`estimators.batched.warm_up`), so ``update_us`` does not count a one-time compile.
     """
 
     TIME_EVERY = 16
@@ -373,22 +417,37 @@ class BatchEstimatorFeedback:
     @classmethod
     def try_batch(cls, feedbacks: list[Any], n_max: int) -> BatchEstimatorFeedback | None:
         """The batched bank when every feedback is an :class:`EstimatorFeedback` with the same
-        filter names and IMU aiding, else None (the engine then uses them one by one)."""
-        if not feedbacks or not all(type(fb) is EstimatorFeedback for fb in feedbacks):
+        filter names and IMU aiding and the batched kernels support its filters; else None
+        (the engine then flies them one by one), with the reason in a ``RuntimeWarning`` and
+        in each feedback's ``batch_note``."""
+        if not feedbacks:
             return None
         f0 = feedbacks[0]
-        if not f0.names:
-            return None
-        if any(fb.names != f0.names or fb.primary != f0.primary or fb.imu != f0.imu
-               or fb.wants_imu != f0.wants_imu for fb in feedbacks):
-            return None
-        from estimators.batched import BatchBank
+        reason = None
+        kinds = {type(fb).__name__ for fb in feedbacks}
+        if kinds != {"EstimatorFeedback"} or not all(type(fb) is EstimatorFeedback
+                                                     for fb in feedbacks):
+            reason = (f"{', '.join(sorted(kinds))}: only plain EstimatorFeedback banks are "
+                      "batched")
+        elif not f0.names:
+            return None  # nothing to estimate: the controllers fly on the truth
+        elif any(fb.names != f0.names or fb.primary != f0.primary or fb.imu != f0.imu
+                 or fb.wants_imu != f0.wants_imu for fb in feedbacks):
+            reason = "the vehicles' estimator banks differ (filters, primary or IMU aiding)"
+        if reason is None:
+            from estimators.batched import BatchBank
 
-        try:
-            bank = BatchBank.from_filters([fb.filters for fb in feedbacks])
-        except ValueError:
-            return None
-        return cls(feedbacks, bank, n_max)
+            try:
+                bank = BatchBank.from_filters([fb.filters for fb in feedbacks])
+            except ValueError as e:
+                reason = str(e)
+            else:
+                return cls(feedbacks, bank, n_max)
+        note = f"estimator bank flown one vehicle at a time (not batched): {reason}"
+        warnings.warn(note, RuntimeWarning, stacklevel=2)
+        for fb in feedbacks:
+            fb.batch_note = note
+        return None
 
     def __init__(self, feedbacks: list[EstimatorFeedback], bank: Any, n_max: int) -> None:
         self.fbs = feedbacks
@@ -418,43 +477,63 @@ class BatchEstimatorFeedback:
         self.n_upd = dict.fromkeys(self.names, 0)
         self.n_timed = dict.fromkeys(self.names, 0)
         self.n_fix_ticks = 0
-        self.logs = [fb.log for fb in feedbacks]
-        self.any_log = any(lg is not None for lg in self.logs)
+        self.k_next = 0  # ticks seen (the records grow past n_max when needed)
+        self._act1 = np.ones(1, dtype=bool)
+        from estimators.batched import warm_up
+
+        warm_up(bank)  # compile / load the kernels before any timed update
 
     def _fix(self, i: int, t: float, p: np.ndarray) -> None:
-        """Vehicle ``i``'s GNSS (and radar) at ``t``: initialise at the first fix, else stage
-        the fix for this tick's update."""
+        """Vehicle ``i``'s GNSS (and radar) at ``t`` (:meth:`EstimatorFeedback.measure`):
+        initialise at the first fix, else stage the fix for this tick's update."""
         fb = self.fbs[i]
         pt = (float(p[0]), float(p[1]), float(p[2]))
-        z = fb.gps.measure(t, pt)
+        z, R_new = fb.measure(t, pt)
         self.next_t[i] = fb.gps._next_k * fb.gps.dt
         if z is None:
             return
-        if fb.radar:
-            z[2] = pt[2] + fb.radar_sigma * fb.radar_rng.standard_normal()
-        if fb.r_by_fix:
-            mode = fb.gps.last_fix_type
-            if mode != fb._r_mode and mode in fb.r_by_fix:
-                fb._r_mode = mode
-                for bf in self.bank.filters.values():
-                    bf.R[i] = fb.r_by_fix[mode]
-        fb.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
-        if fb.log is not None:
-            fb.log.gps(t, z)
-            fb.log.set_truth(pt)
+        if R_new is not None:
+            for bf in self.bank.filters.values():
+                bf.R[i] = R_new
         if not self.init[i]:
-            fb._init(z)  # sets the scalar filters' x, P: copy them into the batch
-            for name, bf in self.bank.filters.items():
-                bf.initialise([i], fb.filters[name].x, fb.filters[name].P)
-            self.init[i] = True
+            x0, P0 = fb.initial_state(z)
+            for bf in self.bank.filters.values():
+                bf.initialise([i], x0, P0)
+            fb.initialised = self.init[i] = True
             return
         self.z[i] = z
         self.mask[i] = True
+
+    def _grow(self, k: int) -> None:
+        """Double the per-tick and per-update records when tick ``k`` or the next update does
+        not fit (a batch of one flown by :meth:`EstimatorFeedback.update` has no n_max)."""
+        for n in self.names:
+            e = self.est[n]
+            if k >= e.shape[1]:
+                self.est[n] = np.concatenate([e, np.full_like(e, np.nan)], axis=1)
+            c = self.cons[n]
+            if int(self.n_cons.max()) >= c.shape[1]:
+                self.cons[n] = np.concatenate([c, np.zeros_like(c)], axis=1)
+
+    def update_one(self, t: float, p_true, v_true, imu=None):
+        """:meth:`update` for a batch of one, with the per-vehicle arguments and result of
+        :meth:`EstimatorFeedback.update` (``imu = (f̃, R̂)`` as sequences)."""
+        p = np.array([p_true], dtype=float)
+        v = np.array([v_true], dtype=float)
+        imu_in = None if imu is None else (_row(imu[0], 3), _row(imu[1], 9))
+        pf, vf = self.update(self.k_next, t, p, v, imu_in, self._act1)
+        if not self.init[0]:
+            return p_true, v_true
+        return tuple(pf[0].tolist()), tuple(vf[0].tolist())
 
     def update(self, k: int, t: float, p: np.ndarray, v: np.ndarray, imu: tuple | None,
                act: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One control tick of every active vehicle; returns the (p, v) the controllers fly on
         (the primary filter's estimate; the truth before a vehicle's first fix)."""
+        self.k_next = max(self.k_next, k + 1)
+        if k >= self.est[self.names[0]].shape[1] or int(self.n_cons.max()) >= \
+                self.cons[self.names[0]].shape[1]:
+            self._grow(k)
         due = act & ((t >= self.next_t - 1e-9) | self.every_tick)
         self.mask[:] = False
         if due.any():
@@ -490,7 +569,7 @@ class BatchEstimatorFeedback:
                 self.n_upd[name] += rows
                 _cons_record(self.cons[name], self.n_cons, k, mask, bf.nis, bf.P, self.pos_idx)
             self.n_cons[mask] += 1
-            if self.any_log:
+            if any(fb.log is not None for fb in self.fbs):
                 self._log(t, mask)
         for name, bf in filters.items():
             _est_record(self.est[name], k, run, bf.x, self.pos_idx)
@@ -516,7 +595,7 @@ class BatchEstimatorFeedback:
     def _log(self, t: float, mask: np.ndarray) -> None:
         pi = self.pos_idx
         for i in np.flatnonzero(mask):
-            log = self.logs[i]
+            log = self.fbs[i].log
             if log is None:
                 continue
             for name, bf in self.bank.filters.items():
@@ -549,6 +628,11 @@ try:
 except ImportError:  # pragma: no cover
     def njit(*a, **k):
         return a[0] if a and callable(a[0]) else (lambda f: f)
+
+
+def _row(a, n: int) -> np.ndarray:
+    """One vehicle's sequence as a (1, n) float64 row for the kernels below."""
+    return np.asarray(a, dtype=float).reshape(1, n)
 
 
 @njit(cache=True)

@@ -1,2 +1,2 @@
-"""Independent references (plain Python, from the formulas) that the product's laws are
-tested against."""
+"""Independent references (plain Python or numpy, from the formulas) that the product's laws
+are tested against: never imported by the product."""

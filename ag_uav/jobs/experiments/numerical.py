@@ -42,12 +42,10 @@ The fast engine computes the same numbers with numpy batched over runs:
 - KF, PCA-KF, kf-bias, kf-diff have data-independent gain sequences (fixed F, H, Q, R, no
   missing fixes).  The gains are RECORDED from the library filter itself (run once on dummy
   fixes) and applied to all runs at once; only the linear state recursion is vectorised.
-- The PCA block depends on the fixes only: its output is computed for all windows at once
-  (batched ``eigh``), the same formulas as :class:`estimators.PCABlock`.
-- MCKF is data dependent: :func:`mckf_batch` runs the time loop of the library's MCKF
-  (:mod:`estimators.mckf`, whitened fixed point with the same stop rule, floor, rejection
-  and KF-recovery rule) with every operation batched over the runs of a chunk, each run
-  leaving the fixed-point iteration when its own stop rule fires.
+- The PCA block depends on the fixes only, and MCKF / PCA-MCKF are data dependent: the runs of
+  a chunk are the rows of the library's batched filters (:mod:`estimators.batched`, which
+  loop over the rows calling the same row functions as the scalar filters: one implementation
+  of each law), :func:`pca_batch` and :func:`mckf_batch`.
 - The update time in the table is measured with the LIBRARY filter, step by step
   (``predict()`` + ``update()``, loop included), on the first ``--timing-runs`` runs of every
   case; the same runs serve as a self-check: the fast path must agree with the library filter
@@ -284,158 +282,54 @@ def kf_diff_fixed_gain(F: np.ndarray, H: np.ndarray, gamma: np.ndarray, Ks: np.n
 # ------------------------------------------------------------------------------ fast: PCA
 def pca_batch(Z: np.ndarray, setup: Setup) -> np.ndarray:
     """Output of :class:`estimators.PCABlock` (2 channels, the filters' window/mode defaults)
-    for every fix of every run at once: Z (B, T, 2) → (B, T, 2).  The first N − 1 fixes pass
-    through unchanged."""
-    from numpy.lib.stride_tricks import sliding_window_view
-
+    for every fix of every run: Z (B, T, 2) → (B, T, 2), the runs as the rows of the batched
+    block (:func:`estimators.batched.pca_batch`, the library's ``pca_row``).  The first N − 1
+    fixes pass through unchanged."""
     from estimators import PCABlock
+    from estimators.batched import pca_batch as run_rows
+    from estimators.pca import PCA_MODE
 
     blk = PCABlock(2, setup.window, None, setup.pca_mode)
-    N, L, r = blk.N, blk.L, blk.n_components
     B, T, c = Z.shape
-    out = Z.copy()
-    if T < N:
-        return out
-    for b in range(B):
-        Zc = np.ascontiguousarray(Z[b].T)  # c × T, time contiguous like the library's buffer
-        W = sliding_window_view(Zc, N, axis=1)  # c × (T−N+1) × N
-        mean = W.sum(axis=2) / N  # c × nW
-        Wc = W - mean[:, :, None]
-        if blk.mode == "hankel":
-            K = N - L + 1
-            hidx = np.arange(L)[:, None] + np.arange(K)[None, :]
-            X = Wc[:, :, hidx]  # c × nW × L × K
-            C = np.matmul(X, X.swapaxes(-1, -2))
-            _, U = np.linalg.eigh(C)
-            Ur = U[..., -r:]  # c × nW × L × r
-            last = X[..., -1]  # c × nW × L
-            coef = np.einsum("cwlr,cwl->cwr", Ur, last)
-            rec = mean + np.einsum("cwr,cwr->cw", Ur[:, :, -1, :], coef)
-        elif r == 1:  # channels, closed form of the library for c = 2, m = 1
-            a = np.einsum("wn,wn->w", Wc[0], Wc[0])
-            bb = np.einsum("wn,wn->w", Wc[0], Wc[1])
-            e = np.einsum("wn,wn->w", Wc[1], Wc[1])
-            th = 0.5 * np.arctan2(2.0 * bb, a - e)
-            c0, s0 = np.cos(th), np.sin(th)
-            d = Zc[:, N - 1:] - mean
-            p = c0 * d[0] + s0 * d[1]
-            rec = np.stack([mean[0] + p * c0, mean[1] + p * s0])
-        else:  # channels with m = c: the identity
-            rec = Zc[:, N - 1:].copy()
-        out[b, N - 1:] = rec.T
+    Zt = np.ascontiguousarray(np.asarray(Z, dtype=float).transpose(1, 0, 2))  # T × B × c
+    buf = np.zeros((B, c, 2 * blk.N))
+    pcs = np.zeros((B, 2), dtype=np.int64)
+    zf = np.empty((B, c))
+    rows = np.ones(B, dtype=bool)
+    out = np.empty((B, T, c))
+    for k in range(T):
+        run_rows(buf, pcs, zf, Zt[k], rows, blk.N, blk.L, blk.n_components,
+                 PCA_MODE[blk.mode])
+        out[:, k] = zf
     return out
 
 
 # ------------------------------------------------------------------------------ fast: MCKF
-def _inv2(S: np.ndarray) -> np.ndarray:
-    """Batched closed-form inverse of 2×2 matrices, as :func:`estimators.kf.inv_small`."""
-    a, b, c, d = S[:, 0, 0], S[:, 0, 1], S[:, 1, 0], S[:, 1, 1]
-    det = a * d - b * c
-    out = np.empty_like(S)
-    out[:, 0, 0] = d / det
-    out[:, 0, 1] = -b / det
-    out[:, 1, 0] = -c / det
-    out[:, 1, 1] = a / det
-    return out
-
-
-def _chol(P: np.ndarray) -> np.ndarray:
-    from estimators.mckf import safe_cholesky
-
-    try:
-        return np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        return np.array([safe_cholesky(p) for p in P])
-
-
 def mckf_batch(F: np.ndarray, H: np.ndarray, Q: np.ndarray, R: np.ndarray, x0: np.ndarray,
                P0: np.ndarray, Z: np.ndarray, sigma: float = 2.0, eps: float = 1e-6,
                max_iter: int = 10, kernel_floor: float = 1e-12, recovery: str | None = "kf",
                lockout_n: int = 10, reject_weight: float = 0.05) -> np.ndarray:
-    """:class:`estimators.MCKF` (scalar σ, no adaptive σ, recovery "kf" or None) on a batch of
-    runs: Z (B, T, 2) finite → x̂ (B, T, n).  The same steps as the library's ``update`` and
-    ``_fixed_point``, batched over runs; a run leaves the fixed point when its own stop rule
-    ‖Δx̂‖ ≤ ε max(‖x̂⁽ᵗ⁻¹⁾‖, 1) fires or after ``max_iter`` iterations."""
-    if recovery not in (None, "kf"):
-        raise ValueError("mckf_batch supports recovery None or 'kf'")
+    """:class:`estimators.MCKF` on a batch of runs: Z (B, T, m) → x̂ (B, T, n), the runs as the
+    rows of :class:`estimators.batched.BatchMCKF` (the library's ``mckf_update_row``; no
+    predict at k = 0)."""
+    from estimators import MCKF
+    from estimators.batched import BatchMCKF
+
     B, T, m = Z.shape
     n = F.shape[0]
-    if m != 2:
-        raise ValueError("mckf_batch supports 2 measurement channels")
-    if not np.all(np.isfinite(Z)):
-        raise ValueError("mckf_batch needs finite fixes (no outages)")
-    FT, HT = F.T, H.T
-    Brinv = np.linalg.inv(np.linalg.cholesky(R))
-    BrinvH = np.dot(Brinv, H)
-    sig = np.full(n + m, float(sigma))
-    cc = -1.0 / (2.0 * sig * sig)
-    ncx, ncy_half = cc[:n].copy(), 0.5 * cc[n:]
-    eps2 = eps * eps
-    Im, In = np.eye(m), np.eye(n)
-    x = np.broadcast_to(x0, (B, n)).copy()
-    P = np.broadcast_to(P0, (B, n, n)).copy()
-    n_rej = np.zeros(B, dtype=int)
+    f = MCKF(F, H, Q, R, x0, P0, sigma=sigma, eps=eps, max_iter=max_iter,
+             kernel_floor=kernel_floor, recovery=recovery, lockout_n=lockout_n,
+             reject_weight=reject_weight)
+    bf = BatchMCKF(F, H, Q, np.broadcast_to(f.R, (B, m, m)), np.broadcast_to(f.x, (B, n)),
+                   np.broadcast_to(f.P, (B, n, n)), [], [], 1.0)
+    bf._from([f] * B)
+    Zt = np.ascontiguousarray(np.asarray(Z, dtype=float).transpose(1, 0, 2))  # T × B × m
     out = np.empty((B, T, n))
     for k in range(T):
         if k:
-            x = x @ FT
-            P = np.matmul(np.matmul(F, P), FT) + Q
-        xb, Pb = x, P
-        nu = Z[:, k] - xb @ HT
-        PHT = np.matmul(Pb, HT)
-        Si = _inv2(np.matmul(H, PHT) + R)
-        Bp = _chol(Pb)
-        nu_w = nu @ Brinv.T
-        A = np.matmul(BrinvH, Bp)  # B × m × n
-        # iteration 1: C_x = I, e_y = ν_w
-        s = np.exp(nu_w * nu_w * ncy_half)
-        G = A * s[:, :, None]
-        Mi = _inv2(np.matmul(G, G.swapaxes(1, 2)) + Im)
-        sb = np.einsum("bij,bj->bi", Mi, s * nu_w) * s
-        u = np.einsum("bi,bij->bj", sb, A)
-        x_prev = xb
-        x_new = xb + np.einsum("bij,bj->bi", Bp, u)
-        it = 1
-        act = np.arange(B)
-        while it < max_iter:
-            dx = x_new[act] - x_prev[act]
-            xp = x_prev[act]
-            nrm2 = np.einsum("bi,bi->b", xp, xp)
-            conv = np.einsum("bi,bi->b", dx, dx) <= eps2 * np.where(nrm2 > 1.0, nrm2, 1.0)
-            act = act[~conv]
-            if act.size == 0:
-                break
-            it += 1
-            if x_prev is xb:
-                x_prev = xb.copy()
-            x_prev[act] = x_new[act]
-            Aa, ua, nwa = A[act], u[act], nu_w[act]
-            ey = nwa - np.einsum("bij,bj->bi", Aa, ua)
-            inv_cx = 1.0 / np.maximum(np.exp(ua * ua * ncx), kernel_floor)
-            sa = np.exp(ey * ey * ncy_half)
-            As = Aa * sa[:, :, None]
-            Ga = As * inv_cx[:, None, :]
-            Mia = _inv2(np.matmul(Ga, As.swapaxes(1, 2)) + Im)
-            sba = np.einsum("bij,bj->bi", Mia, sa * nwa) * sa
-            ua = np.einsum("bi,bij->bj", sba, Aa) * inv_cx
-            s[act], G[act], Mi[act], u[act] = sa, Ga, Mia, ua
-            x_new[act] = xb[act] + np.einsum("bij,bj->bi", Bp[act], ua)
-        # K̃ = B_p Gᵀ M⁻¹ S_y B_r⁻¹
-        K = np.matmul(np.matmul(Bp, np.matmul(G.swapaxes(1, 2), Mi * s[:, None, :])), Brinv)
-        rejected = np.min(s * s, axis=1) < reject_weight
-        n_rej = np.where(rejected, n_rej + 1, 0)
-        if recovery == "kf":
-            rec = np.nonzero(rejected & (n_rej >= lockout_n))[0]
-            if rec.size:
-                Kr = np.matmul(PHT[rec], Si[rec])
-                K[rec] = Kr
-                x_new[rec] = xb[rec] + np.einsum("bij,bj->bi", Kr, nu[rec])
-                n_rej[rec] = 0
-        IKH = In - np.matmul(K, H)
-        P = (np.matmul(np.matmul(IKH, Pb), IKH.swapaxes(1, 2))
-             + np.matmul(np.matmul(K, R), K.swapaxes(1, 2)))
-        x = x_new
-        out[:, k] = x
+            bf.predict()
+        bf.update(Zt[k])
+        out[:, k] = bf.x
     return out
 
 
