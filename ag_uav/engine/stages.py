@@ -161,10 +161,13 @@ class Feedback:
                 self._say_per_vehicle()
 
     def _say_per_vehicle(self) -> None:
-        why = next((n for n in (getattr(fb, "batch_note", None) for fb in self.fbs) if n),
-                   f"{type(self.fbs[0]).__name__} has no batched form")
-        msg = f"feedback flies one vehicle at a time: {why}"
-        warnings.warn(msg, RuntimeWarning, stacklevel=4)
+        """In every run's notes; a warning unless the feedback class already gave one (its
+        ``batch_note``)."""
+        note = next((n for n in (getattr(fb, "batch_note", None) for fb in self.fbs) if n), None)
+        msg = ("feedback flies one vehicle at a time: "
+               f"{note or type(self.fbs[0]).__name__ + ' has no batched form'}")
+        if note is None:
+            warnings.warn(msg, RuntimeWarning, stacklevel=4)
         for notes in self.b.notes:
             notes.append(msg)
 
