@@ -1,0 +1,878 @@
+"""Error-state INS/GNSS filter with delayed fusion; the bank's four laws as its GNSS update.
+
+Frames and conventions (those of the simulator: ``ag_uav/vehicle/imu.py``): world ENU (z up),
+gravity ``g_w = (0, 0, −g)``; the IMU reports the body-frame **specific force**
+``f̃ = Rᵀ(a − g_w) + b_a + n_a`` (+g along body z at rest) and the body rate
+``ω̃ = ω + b_g + n_g``; ``q = (w, x, y, z)`` is the Hamilton body-to-world quaternion
+(MuJoCo's), ``R = R(q)``.
+
+Nominal state (16) and error state (15), after Solà, *Quaternion kinematics for the error-state
+Kalman filter* (2017, arXiv:1711.02508), §5 with the local (body) angular error
+``q_true = q ⊗ Exp(δθ)``::
+
+    x = [p, v, q, b_a, b_g]                δx = [δp, δv, δθ, δb_a, δb_g]
+
+Prediction, one IMU sample (Solà eqs 5.3.3 / 260 without the gravity state; a = f̃ − b_a,
+ω = ω̃ − b_g, R at the start of the step)::
+
+    p ← p + v Δt + ½ (R a + g_w) Δt²,   v ← v + (R a + g_w) Δt,   q ← q ⊗ Exp(ω Δt)
+    P ← F P Fᵀ + Q,   F = I + blocks:  F_pv = I Δt,  F_vθ = −R [a]× Δt,  F_vba = −R Δt,
+                                       F_θθ = Exp(ω Δt)ᵀ (replaces I),  F_θbg = −I Δt
+    Q = diag(σ_a² Δt² I, σ_g² Δt² I, σ_ba² Δt I, σ_bg² Δt I)   on (δv, δθ, δb_a, δb_g)
+
+(Solà eqs 5.4.3 / 269-270: the impulses V_i = σ_ãn² Δt², Θ_i = σ_ω̃n² Δt², A_i = σ_aw² Δt,
+Ω_i = σ_ωw² Δt).  ``σ_a``, ``σ_g`` are the per-sample white-noise standard deviations of the
+IMU (density over the Nyquist band of the sample rate, plus vibration, as the simulator's IMU
+draws them: :meth:`INSConfig.from_imu`), ``σ_ba``, ``σ_bg`` the bias random walks.
+``F P Fᵀ`` runs on the 45 non-zeros of F (compressed rows), the upper triangle mirrored.
+
+Measurements (h, and H = ∂h/∂δx; R [r]× from ∂(R Exp(δθ) r)/∂δθ = −R [r]×):
+
+* GNSS position at the antenna (lever arm ``r_ant`` in body axes)::
+
+      h = p + R r_ant,               H = [I, 0, −R [r_ant]×, 0, 0]
+
+* GNSS velocity at the antenna (ω from the gyro sample of that step)::
+
+      h = v + R (ω × r_ant),         H = [0, I, −R [ω × r_ant]×, 0, R [r_ant]×]
+
+* Dual-antenna heading: azimuth of the antenna baseline ``r_b`` (body) in the world,
+  ``b = R r_b``, less the baseline's body azimuth (PX4's ``heading_offset``), so that the
+  measurement is the vehicle yaw: ``ψ = atan2(b_y, b_x) − atan2(r_b,y, r_b,x)``::
+
+      H_θ = [−b_y, b_x, 0] / (b_x² + b_y²) · (−R [r_b]×),   ν wrapped to (−π, π]
+
+  This is the default yaw source (the DJI Matrice 350 RTK class carries two GNSS antennas;
+  PX4 supports dual-antenna RTK heading "as an alternative to compass-based heading
+  estimation", docs.px4.io, *RTK GPS Heading with Dual u-blox F9P*): a magnetometer on a spray
+  drone sits among motor and pump currents and steel, whose disturbance is neither white nor
+  known, while the baseline heading's error is σ_ψ ≈ σ_b / L (relative-position error over the
+  baseline length).  Default σ_ψ = 0.5° is that ratio for σ_b ≈ 5 mm and L ≈ 0.6 m
+  (engineering judgement; no DJI datasheet figure was found); receivers report it per fix
+  (PX4 ``VehicleGnssHeading.heading_accuracy``), which the caller can pass as the variance.
+* Radar altimeter, a narrow beam along body −z from ``r_rad`` to flat ground at ``z_g``
+  (slant range over a tilted vehicle: ρ = h / cos(tilt))::
+
+      s = p + R r_rad,   c = (R e_z)_z = cos(tilt),   h = s_z − z_g,   ρ = h / c
+      ∂ρ/∂δp_z = 1/c,    ∂ρ/∂δθ = (1/c) (−R [r_rad]×)_z − (h/c²) (−R [e_z]×)_z
+
+  Not fused (a dropout, counted) for a NaN range, c < cos(max tilt) or ρ above the maximum
+  range.  (A wide-beam radar returns the nearest echo, ≈ h not h/c: not modelled.)
+
+Update rules of the GNSS **position** (``rule``): ``"kf"`` the Joseph update; ``"mckf"`` the
+correntropy fixed point on the position innovation (Chen, Liu, Zhao, Principe, Automatica 80,
+2017; σ → ∞ is the KF; lock-out recovery as :class:`estimators.MCKF`); ``"pca-kf"``,
+``"pca-mckf"`` the same after the PCA block (Candan & Li §III.C) on the window of antenna
+fixes, run once per vehicle when a fix arrives.  Velocity, heading and radar use the KF
+update.  Each measurement is fused sequentially (R block-diagonal), then injected and reset
+(Solà §6.2-6.3, eqs 282-287)::
+
+      p += δp, v += δv, q ← q ⊗ Exp(δθ), b += δb;   P ← G P Gᵀ, G_θθ = I − [½ δθ]×
+
+The laws live in :mod:`estimators._ins_laws` (the bank's own row functions).
+
+**Delayed fusion** (PX4 EKF2: "The EKF runs on a delayed 'fusion time horizon' … an output
+predictor … uses buffered IMU data to propagate the states forward to the current time",
+docs.px4.io *Using the ECL EKF*; ``EKF2_GPS_DELAY`` default 110 ms, ekf2_params.c): the core
+filter (nominal + P) runs ``D = round(delay / Δt)`` IMU samples behind now, from a ring of the
+last D+1 samples.  Every measurement carries its time tag (``now − age``) into a queue and is
+fused when the core reaches it (at once if it is already late, counted in ``n_late``).  The
+output for the controller is the core nominal propagated through the buffered samples (the
+same nominal step, so with no new correction it advances one sample per tick).  With
+``delayed = False`` (fuse at receipt) D = 0 and every fix is fused as if it were current.
+
+Everything is one compiled kernel per tick over the rows (vehicles × filters): the
+single-vehicle :class:`INS` is a :class:`BatchINS` of one vehicle, so a row's arithmetic is the
+same whatever the batch (bit-identical rows).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._ins_laws import kf_fuse, mckf_fuse, pca_row
+from ._jit import njit
+
+__all__ = ["RULES", "BatchINS", "INS", "INSConfig", "quat_to_rot", "quat_exp", "quat_mul",
+           "quat_log_err"]
+
+RULES = ("kf", "mckf", "pca-kf", "pca-mckf")
+_RULE_CODE = {r: i for i, r in enumerate(RULES)}
+_PCA_MODE = {"channels": 0, "hankel": 1}
+_RECOVERY = {None: 0, "none": 0, "kf": 1, "inflate": 2}
+G_STD = 9.81
+DEG = math.pi / 180.0
+
+# prm (shared parameters) layout
+_P_DT, _P_G, _P_QV, _P_QT, _P_QBA, _P_QBG = 0, 1, 2, 3, 4, 5
+_P_RANT, _P_RB, _P_RRAD = 6, 9, 12
+_P_ZG, _P_COSMAX, _P_RMAX, _P_D, _P_DELAYED, _P_B, _P_QC = 15, 16, 17, 18, 19, 20, 21
+_NPRM = 22
+# ints (per row) layout
+_I_NOW, _I_CORE, _I_QN, _I_DIRTY, _I_LATE, _I_QDROP = 0, 1, 2, 3, 4, 5
+_I_MST = 6  # 6..9: MCKF (n_rejected, n_iter, rejected, recovered)
+_I_NGNSS, _I_NRAD, _I_RDROP = 10, 11, 12
+_NINT = 13
+# dg (per row diagnostics)
+_D_NISP, _D_NISV, _D_NISY, _D_NISR, _D_WY = 0, 1, 2, 3, 4  # 4..6 diag C_y
+_NDG = 7
+# queue record: tick, kind, z(7), zpca(3), var(7)
+_Q_T, _Q_K, _Q_Z, _Q_ZP, _Q_V = 0, 1, 2, 9, 12
+_QW = 19
+# GNSS input row: age, p(3), v(3), yaw, var p(3), var v(3), var yaw
+_GIN = 15
+
+# non-zero columns of F per row (error layout δp 0:3, δv 3:6, δθ 6:9, δb_a 9:12, δb_g 12:15)
+_fc: list[list[int]] = []
+for _r in range(15):
+    a = _r % 3
+    if _r < 3:
+        _fc.append([_r, 3 + a])
+    elif _r < 6:
+        _fc.append([_r, 6, 7, 8, 9, 10, 11])
+    elif _r < 9:
+        _fc.append([6, 7, 8, 12 + a])
+    else:
+        _fc.append([_r])
+_FPTR = np.array([0] + list(np.cumsum([len(c) for c in _fc])), dtype=np.int64)
+_FIDX = np.array([c for cols in _fc for c in cols], dtype=np.int64)
+del _fc, _r, a
+
+
+# ------------------------------------------------------------------------ quaternion algebra
+@njit
+def quat_mul(a, b, out):
+    """out = a ⊗ b (Hamilton, (w, x, y, z)); out may not alias a or b."""
+    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
+    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
+    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
+    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
+
+
+@njit
+def quat_exp(phi, out):
+    """out = Exp(φ) = (cos(θ/2), sin(θ/2) φ/θ), θ = ‖φ‖ (Solà eq 101)."""
+    th = math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
+    if th < 1e-12:
+        out[0] = 1.0
+        for k in range(3):
+            out[k + 1] = 0.5 * phi[k]
+        return
+    s = math.sin(0.5 * th) / th
+    out[0] = math.cos(0.5 * th)
+    for k in range(3):
+        out[k + 1] = s * phi[k]
+
+
+@njit
+def quat_to_rot(q, R):
+    """R = R(q), body to world (Solà eq 115)."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[0, 1] = 2.0 * (x * y - w * z)
+    R[0, 2] = 2.0 * (x * z + w * y)
+    R[1, 0] = 2.0 * (x * y + w * z)
+    R[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[1, 2] = 2.0 * (y * z - w * x)
+    R[2, 0] = 2.0 * (x * z - w * y)
+    R[2, 1] = 2.0 * (y * z + w * x)
+    R[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit
+def quat_log_err(q_est, q_true, out):
+    """out = Log(q_est* ⊗ q_true): the local attitude error δθ with q_true = q_est ⊗ Exp(δθ)."""
+    c = np.empty(4)
+    c[0] = q_est[0]
+    for k in range(3):
+        c[k + 1] = -q_est[k + 1]
+    d = np.empty(4)
+    quat_mul(c, q_true, d)
+    if d[0] < 0.0:
+        for k in range(4):
+            d[k] = -d[k]
+    n = math.sqrt(d[1] * d[1] + d[2] * d[2] + d[3] * d[3])
+    th = 2.0 * math.atan2(n, d[0])
+    s = th / n if n > 1e-15 else 2.0
+    for k in range(3):
+        out[k] = s * d[k + 1]
+
+
+@njit
+def _skew_mul(M, r, out):
+    """out = M [r]× (3×3)."""
+    for i in range(3):
+        out[i, 0] = M[i, 1] * r[2] - M[i, 2] * r[1]
+        out[i, 1] = M[i, 2] * r[0] - M[i, 0] * r[2]
+        out[i, 2] = M[i, 0] * r[1] - M[i, 1] * r[0]
+
+
+# ------------------------------------------------------------------------ prediction
+@njit
+def nominal_step(x, u, dt, g):
+    """One IMU sample u = (f̃, ω̃) on the nominal x = [p, v, q, b_a, b_g] (module docstring)."""
+    R = np.empty((3, 3))
+    quat_to_rot(x[6:10], R)
+    a = np.empty(3)
+    for k in range(3):
+        a[k] = u[k] - x[10 + k]
+    for i in range(3):
+        acc = R[i, 0] * a[0] + R[i, 1] * a[1] + R[i, 2] * a[2]
+        if i == 2:
+            acc -= g
+        x[i] += x[3 + i] * dt + 0.5 * acc * dt * dt
+        x[3 + i] += acc * dt
+    phi = np.empty(3)
+    for k in range(3):
+        phi[k] = (u[3 + k] - x[13 + k]) * dt
+    dq = np.empty(4)
+    quat_exp(phi, dq)
+    qn = np.empty(4)
+    quat_mul(x[6:10], dq, qn)
+    nrm = math.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
+    for k in range(4):
+        x[6 + k] = qn[k] / nrm
+
+
+@njit
+def _fill_F(x, u, dt, F):
+    """The non-zero blocks of F (dense 15×15 work array; only the pattern _FIDX is read)."""
+    R = np.empty((3, 3))
+    quat_to_rot(x[6:10], R)
+    a = np.empty(3)
+    phi = np.empty(3)
+    for k in range(3):
+        a[k] = u[k] - x[10 + k]
+        phi[k] = -(u[3 + k] - x[13 + k]) * dt
+    Ra = np.empty((3, 3))
+    _skew_mul(R, a, Ra)
+    dq = np.empty(4)
+    quat_exp(phi, dq)  # Exp(ω Δt)ᵀ = Exp(−ω Δt)
+    E = np.empty((3, 3))
+    quat_to_rot(dq, E)
+    for i in range(3):
+        F[i, i] = 1.0
+        F[i, 3 + i] = dt
+        F[3 + i, 3 + i] = 1.0
+        F[6 + i, 12 + i] = -dt
+        F[9 + i, 9 + i] = 1.0
+        F[12 + i, 12 + i] = 1.0
+        for j in range(3):
+            F[3 + i, 6 + j] = -Ra[i, j] * dt
+            F[3 + i, 9 + j] = -R[i, j] * dt
+            F[6 + i, 6 + j] = E[i, j]
+
+
+@njit
+def cov_step(P, x, u, prm, F, M):
+    """P ← F P Fᵀ + Q on the sparse pattern of F (F, M: 15×15 work arrays)."""
+    _fill_F(x, u, prm[_P_DT], F)
+    for r in range(15):
+        for c in range(15):
+            s = 0.0
+            for k in range(_FPTR[r], _FPTR[r + 1]):
+                j = _FIDX[k]
+                s += F[r, j] * P[j, c]
+            M[r, c] = s
+    for r in range(15):
+        for c in range(r, 15):
+            s = 0.0
+            for k in range(_FPTR[c], _FPTR[c + 1]):
+                j = _FIDX[k]
+                s += M[r, j] * F[c, j]
+            P[r, c] = s
+            P[c, r] = s
+    for b in range(4):
+        q = prm[_P_QV + b]
+        for k in range(3):
+            d = 3 + 3 * b + k
+            P[d, d] += q
+
+
+# ------------------------------------------------------------------------ error injection
+@njit
+def inject_reset(x, P, dx):
+    """x ← x ⊕ δx, then P ← G P Gᵀ with G_θθ = I − [½ δθ]× (Solà eqs 282-287)."""
+    for k in range(6):
+        x[k] += dx[k]
+    for k in range(6):
+        x[10 + k] += dx[9 + k]
+    dq = np.empty(4)
+    quat_exp(dx[6:9], dq)
+    qn = np.empty(4)
+    quat_mul(x[6:10], dq, qn)
+    nrm = math.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
+    for k in range(4):
+        x[6 + k] = qn[k] / nrm
+    h0, h1, h2 = 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8]
+    G = np.array([[1.0, h2, -h1], [-h2, 1.0, h0], [h1, -h0, 1.0]])
+    T = np.empty((3, 15))
+    for i in range(3):
+        for c in range(15):
+            T[i, c] = G[i, 0] * P[6, c] + G[i, 1] * P[7, c] + G[i, 2] * P[8, c]
+    for i in range(3):
+        for c in range(15):
+            P[6 + i, c] = T[i, c]
+    for r in range(15):
+        t0 = P[r, 6] * G[0, 0] + P[r, 7] * G[0, 1] + P[r, 8] * G[0, 2]
+        t1 = P[r, 6] * G[1, 0] + P[r, 7] * G[1, 1] + P[r, 8] * G[1, 2]
+        t2 = P[r, 6] * G[2, 0] + P[r, 7] * G[2, 1] + P[r, 8] * G[2, 2]
+        P[r, 6], P[r, 7], P[r, 8] = t0, t1, t2
+    for r in range(15):  # keep P exactly symmetric
+        for c in range(r + 1, 15):
+            s = 0.5 * (P[r, c] + P[c, r])
+            P[r, c] = s
+            P[c, r] = s
+
+
+# ------------------------------------------------------------------------ measurement models
+@njit
+def h_gnss_pos(x, prm, z, nu, H):
+    """ν = z − (p + R r_ant), H = [I, 0, −R [r_ant]×, 0, 0]."""
+    R = np.empty((3, 3))
+    quat_to_rot(x[6:10], R)
+    r = prm[_P_RANT:_P_RANT + 3]
+    S = np.empty((3, 3))
+    _skew_mul(R, r, S)
+    for i in range(3):
+        nu[i] = z[i] - (x[i] + R[i, 0] * r[0] + R[i, 1] * r[1] + R[i, 2] * r[2])
+        for c in range(15):
+            H[i, c] = 0.0
+        H[i, i] = 1.0
+        for j in range(3):
+            H[i, 6 + j] = -S[i, j]
+
+
+@njit
+def h_gnss_vel(x, w, prm, z, nu, H):
+    """ν = z − (v + R (ω × r_ant)), H = [0, I, −R [ω × r_ant]×, 0, R [r_ant]×]; w = ω̃."""
+    R = np.empty((3, 3))
+    quat_to_rot(x[6:10], R)
+    r = prm[_P_RANT:_P_RANT + 3]
+    om = np.empty(3)
+    for k in range(3):
+        om[k] = w[k] - x[13 + k]
+    wr = np.empty(3)
+    wr[0] = om[1] * r[2] - om[2] * r[1]
+    wr[1] = om[2] * r[0] - om[0] * r[2]
+    wr[2] = om[0] * r[1] - om[1] * r[0]
+    S1 = np.empty((3, 3))
+    _skew_mul(R, wr, S1)
+    S2 = np.empty((3, 3))
+    _skew_mul(R, r, S2)
+    for i in range(3):
+        nu[i] = z[i] - (x[3 + i] + R[i, 0] * wr[0] + R[i, 1] * wr[1] + R[i, 2] * wr[2])
+        for c in range(15):
+            H[i, c] = 0.0
+        H[i, 3 + i] = 1.0
+        for j in range(3):
+            H[i, 6 + j] = -S1[i, j]
+            H[i, 12 + j] = S2[i, j]
+
+
+@njit
+def h_heading(x, prm, z, nu, H):
+    """Yaw from the baseline b = R r_b: ψ̂ = atan2(b_y, b_x) − atan2(r_b,y, r_b,x) (the body
+    yaw when level), ν = wrap(z − ψ̂), H_θ as the module docstring.  False when the baseline
+    is (nearly) vertical."""
+    R = np.empty((3, 3))
+    quat_to_rot(x[6:10], R)
+    r = prm[_P_RB:_P_RB + 3]
+    bx = R[0, 0] * r[0] + R[0, 1] * r[1] + R[0, 2] * r[2]
+    by = R[1, 0] * r[0] + R[1, 1] * r[1] + R[1, 2] * r[2]
+    n2 = bx * bx + by * by
+    if n2 < 1e-6:
+        return False
+    d = z[0] - (math.atan2(by, bx) - math.atan2(r[1], r[0]))
+    nu[0] = math.atan2(math.sin(d), math.cos(d))
+    S = np.empty((3, 3))
+    _skew_mul(R, r, S)
+    for c in range(15):
+        H[0, c] = 0.0
+    for j in range(3):
+        H[0, 6 + j] = (by * S[0, j] - bx * S[1, j]) / n2
+    return True
+
+
+@njit
+def h_radar(x, prm, z, nu, H):
+    """Slant range along body −z to the plane z = z_g (docstring); False = not usable (tilt
+    above the beam limit, sensor below the ground, or beyond the maximum range)."""
+    R = np.empty((3, 3))
+    quat_to_rot(x[6:10], R)
+    r = prm[_P_RRAD:_P_RRAD + 3]
+    c = R[2, 2]
+    if c < prm[_P_COSMAX]:
+        return False
+    h = x[2] + R[2, 0] * r[0] + R[2, 1] * r[1] + R[2, 2] * r[2] - prm[_P_ZG]
+    if h <= 0.0 or h / c > prm[_P_RMAX] or z[0] > prm[_P_RMAX]:
+        return False
+    nu[0] = z[0] - h / c
+    S = np.empty((3, 3))
+    _skew_mul(R, r, S)
+    # (R [e_z]×)_2j = (R_21, −R_20, 0)
+    ez = np.array((R[2, 1], -R[2, 0], 0.0))
+    for k in range(15):
+        H[0, k] = 0.0
+    H[0, 2] = 1.0 / c
+    for j in range(3):
+        H[0, 6 + j] = -S[2, j] / c + h / (c * c) * ez[j]
+    return True
+
+
+# ------------------------------------------------------------------------ one measurement
+@njit
+def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, wy):
+    """δx = 0, the KF or MCKF update of (H, R, ν), then inject and reset; returns the NIS
+    (not finite: not fused)."""
+    dx = np.zeros(15)
+    if use_mckf:
+        v = mckf_fuse(dx, P, Rm, H, nu, mpar[0:15], mpar[15:18], mpar[18:23], ipar, mst, wy)
+    else:
+        v = kf_fuse(dx, P, Rm, H, nu)
+    if np.isfinite(v):
+        inject_reset(x, P, dx)
+    return v
+
+
+@njit
+def _diag_R(var, o, m):
+    Rm = np.zeros((m, m))
+    for a in range(m):
+        Rm[a, a] = var[o + a]
+    return Rm
+
+
+@njit
+def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg):
+    """A GNSS record: position (the rule's law, on the PCA'd fix for rules 2-3), then velocity
+    and heading (KF), each present when finite."""
+    H3 = np.empty((3, 15))
+    nu3 = np.empty(3)
+    z = rec[_Q_ZP:_Q_ZP + 3] if rule >= 2 else rec[_Q_Z:_Q_Z + 3]
+    if np.isfinite(z[0] + z[1] + z[2]):
+        h_gnss_pos(x, prm, z, nu3, H3)
+        use_mckf = rule == 1 or rule == 3
+        wy = dg[_D_WY:_D_WY + 3]
+        v = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V, 3), use_mckf, mpar, ipar,
+                      ints[_I_MST:_I_MST + 4], wy)
+        dg[_D_NISP] = v
+        ints[_I_NGNSS] += 1
+    zv = rec[_Q_Z + 3:_Q_Z + 6]
+    if np.isfinite(zv[0] + zv[1] + zv[2]):
+        h_gnss_vel(x, w, prm, zv, nu3, H3)
+        dg[_D_NISV] = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V + 3, 3), False, mpar, ipar,
+                                ints[_I_MST:_I_MST + 4], dg[_D_WY:_D_WY + 3])
+    zy = rec[_Q_Z + 6:_Q_Z + 7]
+    if np.isfinite(zy[0]):
+        H1 = np.empty((1, 15))
+        nu1 = np.empty(1)
+        if h_heading(x, prm, zy, nu1, H1):
+            dg[_D_NISY] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V + 6, 1), False, mpar,
+                                    ipar, ints[_I_MST:_I_MST + 4], dg[_D_WY:_D_WY + 3])
+
+
+@njit
+def _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg):
+    H1 = np.empty((1, 15))
+    nu1 = np.empty(1)
+    if np.isfinite(rec[_Q_Z]) and h_radar(x, prm, rec[_Q_Z:_Q_Z + 1], nu1, H1):
+        dg[_D_NISR] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V, 1), False, mpar, ipar,
+                                ints[_I_MST:_I_MST + 4], dg[_D_WY:_D_WY + 3])
+        ints[_I_NRAD] += 1
+    else:
+        ints[_I_RDROP] += 1
+
+
+@njit
+def _fuse_due(x, P, ib, ints, mq, dg, mpar, ipar, rule, prm):
+    """Fuse every queued record whose tick ≤ the core tick (in arrival order); compact."""
+    core = ints[_I_CORE]
+    B = int(prm[_P_B])
+    keep = 0
+    for j in range(ints[_I_QN]):
+        rec = mq[j]
+        t = int(rec[_Q_T])
+        if t > core:
+            if keep != j:
+                for k in range(_QW):
+                    mq[keep, k] = rec[k]
+            keep += 1
+            continue
+        if t < core:
+            ints[_I_LATE] += 1
+        if rec[_Q_K] == 0.0:
+            _fuse_gnss(x, P, rec, ib[core % B, 3:6], rule, prm, mpar, ipar, ints, dg)
+        else:
+            _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg)
+        ints[_I_DIRTY] = 1
+    ints[_I_QN] = keep
+
+
+@njit
+def _enqueue(ints, mq, prm, kind, age_ticks, z, o, nz, zp, var, ov):
+    """Append a record (tick = now − age in delayed mode, now at receipt)."""
+    n = ints[_I_QN]
+    if n >= mq.shape[0]:
+        ints[_I_QDROP] += 1
+        return
+    rec = mq[n]
+    for k in range(_QW):
+        rec[k] = np.nan
+    rec[_Q_T] = ints[_I_NOW] - (age_ticks if prm[_P_DELAYED] > 0.0 else 0)
+    rec[_Q_K] = kind
+    for k in range(nz):
+        rec[_Q_Z + k] = z[o + k]
+        rec[_Q_V + k] = var[ov + k]
+    for k in range(3):
+        rec[_Q_ZP + k] = zp[k]
+    ints[_I_QN] = n + 1
+
+
+# ------------------------------------------------------------------------ one row, one tick
+@njit
+def _advance(xc, P, ib, ints, u, prm, F, M):
+    """now += 1, store u; the core takes the sample D ticks back once the ring holds it."""
+    B = int(prm[_P_B])
+    D = int(prm[_P_D])
+    now = ints[_I_NOW] + 1
+    ints[_I_NOW] = now
+    for k in range(6):
+        ib[now % B, k] = u[k]
+    if now - D > ints[_I_CORE]:
+        uc = ib[(now - D) % B]
+        cov_step(P, xc, uc, prm, F, M)
+        nominal_step(xc, uc, prm[_P_DT], prm[_P_G])
+        ints[_I_CORE] = now - D
+
+
+@njit
+def _refresh_output(xc, xo, ib, ints, prm, predicted):
+    """xo = the core nominal propagated through the buffered samples core+1 … now (or one
+    step on the previous output when nothing was fused since)."""
+    B = int(prm[_P_B])
+    dt, g = prm[_P_DT], prm[_P_G]
+    now, core = ints[_I_NOW], ints[_I_CORE]
+    if ints[_I_DIRTY] or now == core:
+        for k in range(16):
+            xo[k] = xc[k]
+        for t in range(core + 1, now + 1):
+            nominal_step(xo, ib[t % B], dt, g)
+        ints[_I_DIRTY] = 0
+    elif predicted:
+        nominal_step(xo, ib[now % B], dt, g)
+
+
+@njit
+def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm, popt,
+                 imu, predict, gin, rin):
+    """One tick of every row (row i belongs to vehicle i // n_rules): predict with imu[v] (if
+    ``predict``), queue the vehicle's GNSS fix gin[v] (a NaN age: none) and radar range rin[v]
+    (NaN: none), fuse what is due, refresh the output."""
+    N = xc.shape[0]
+    NV = imu.shape[0]
+    nr = N // NV
+    F = np.zeros((15, 15))
+    M = np.empty((15, 15))
+    zp = np.empty(3)
+    nan3 = np.full(3, np.nan)
+    dt = prm[_P_DT]
+    Nw, L, r, mode, any_pca = popt[0], popt[1], popt[2], popt[3], popt[4]
+    for v in range(NV):
+        g = gin[v]
+        has_g = np.isfinite(g[0])
+        if has_g and any_pca and np.isfinite(g[1] + g[2] + g[3]):
+            pca_row(pbuf[v], pcs[v], g[1:4], Nw, L, r, mode, zp)
+        else:
+            zp[:] = nan3
+        has_r = np.isfinite(rin[v, 0])
+        for i in range(v * nr, (v + 1) * nr):
+            if predict:
+                _advance(xc[i], P[i], ib[i], ints[i], imu[v], prm, F, M)
+            if has_g:
+                age = int(round(g[0] / dt))
+                _enqueue(ints[i], mq[i], prm, 0.0, age, g, 1, 7, zp, g, 8)
+            if has_r:
+                _enqueue(ints[i], mq[i], prm, 1.0, int(round(rin[v, 2] / dt)), rin[v], 0, 1,
+                         nan3, rin[v], 1)
+            _fuse_due(xc[i], P[i], ib[i], ints[i], mq[i], dg[i], mpar[i], ipar[i], rules[i],
+                      prm)
+            _refresh_output(xc[i], xo[i], ib[i], ints[i], prm, predict)
+
+
+# ------------------------------------------------------------------------ configuration
+@dataclass
+class INSConfig:
+    """Parameters of the INS (defaults: the simulator's ICM-42688-P-class IMU at 100 Hz, an
+    M350-RTK-class receiver, PX4's GNSS delay).
+
+    IMU noise: ``accel_sigma`` / ``gyro_sigma`` per-sample white std (m/s², rad/s),
+    ``accel_bias_rw`` ((m/s²)/√s), ``gyro_bias_rw`` ((rad/s)/√s); :meth:`from_imu` derives
+    them from datasheet densities as ``ag_uav.vehicle.imu`` draws them.  Geometry (body axes,
+    m): ``lever_arm`` IMU → GNSS antenna, ``heading_baseline`` the dual-antenna baseline
+    direction, ``radar_offset`` IMU → radar; ``ground_z`` the flat ground height;
+    ``radar_max_tilt_deg``, ``radar_max_range`` the radar's usable cone and range.  Fusion:
+    ``delay_s`` (PX4 ``EKF2_GPS_DELAY`` default 110 ms), ``delayed`` (False: fuse at receipt),
+    ``queue`` records per row.  GNSS position rule options: ``sigma`` the MCKF kernel
+    bandwidth (scalar or 18 values, one per row of the whitened regression; ``inf`` = KF),
+    ``max_iter``, ``eps``, ``recovery`` (``"kf"``, ``"inflate"`` or ``None``),
+    ``lockout_n``, ``reject_weight``, ``inflate``; PCA block ``pca_window``, ``pca_mode``,
+    ``pca_embed``, ``pca_components`` (as :class:`estimators.PCABlock`).
+    """
+
+    dt: float = 0.01
+    gravity: float = G_STD
+    accel_sigma: float = 0.1004
+    gyro_sigma: float = 3.46e-4
+    accel_bias_rw: float = 3e-4
+    gyro_bias_rw: float = 1e-3 * DEG
+    lever_arm: Sequence[float] = (0.0, 0.0, 0.3)
+    heading_baseline: Sequence[float] = (0.0, 1.0, 0.0)
+    radar_offset: Sequence[float] = (0.0, 0.0, -0.1)
+    ground_z: float = 0.0
+    radar_max_tilt_deg: float = 30.0
+    radar_max_range: float = 50.0
+    delay_s: float = 0.11
+    delayed: bool = True
+    queue: int = 64
+    sigma: float | Sequence[float] = 2.0
+    max_iter: int = 10
+    eps: float = 1e-6
+    recovery: str | None = "kf"
+    lockout_n: int = 10
+    reject_weight: float = 0.05
+    inflate: float = 4.0
+    pca_window: int = 10
+    pca_mode: str = "hankel"
+    pca_embed: int | None = None
+    pca_components: int | None = None
+    extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_imu(cls, rate_hz: float, accel_nd_ug: float = 70.0, gyro_nd_mdps: float = 2.8,
+                 vibration: float = 0.1, accel_rw: float = 3e-4, gyro_rw_dps: float = 1e-3,
+                 **kw) -> INSConfig:
+        """σ per sample = density · √(f_s/2) (⊕ vibration for the accelerometer), as
+        ``ag_uav.vehicle.imu.accel_sigma`` / ``gyro_sigma``; defaults ICM-42688-P (DS-000347
+        Tables 1-2) and the simulator's ``[imu]`` defaults."""
+        nyq = math.sqrt(rate_hz / 2.0)
+        sa = math.hypot(accel_nd_ug * 1e-6 * G_STD * nyq, vibration)
+        sg = gyro_nd_mdps * 1e-3 * DEG * nyq
+        return cls(dt=1.0 / rate_hz, accel_sigma=sa, gyro_sigma=sg, accel_bias_rw=accel_rw,
+                   gyro_bias_rw=gyro_rw_dps * DEG, **kw)
+
+    def delay_ticks(self) -> int:
+        return int(round(self.delay_s / self.dt)) if self.delayed else 0
+
+    def prm(self) -> np.ndarray:
+        p = np.zeros(_NPRM)
+        dt = self.dt
+        p[_P_DT], p[_P_G] = dt, self.gravity
+        p[_P_QV] = (self.accel_sigma * dt) ** 2
+        p[_P_QT] = (self.gyro_sigma * dt) ** 2
+        p[_P_QBA] = self.accel_bias_rw**2 * dt
+        p[_P_QBG] = self.gyro_bias_rw**2 * dt
+        p[_P_RANT:_P_RANT + 3] = self.lever_arm
+        b = np.asarray(self.heading_baseline, dtype=float)
+        p[_P_RB:_P_RB + 3] = b / np.linalg.norm(b)
+        p[_P_RRAD:_P_RRAD + 3] = self.radar_offset
+        p[_P_ZG] = self.ground_z
+        p[_P_COSMAX] = math.cos(self.radar_max_tilt_deg * DEG)
+        p[_P_RMAX] = self.radar_max_range
+        D = self.delay_ticks()
+        p[_P_D], p[_P_DELAYED], p[_P_B], p[_P_QC] = D, float(self.delayed), D + 1, self.queue
+        return p
+
+    def mckf_params(self) -> tuple[np.ndarray, np.ndarray]:
+        """(mpar = [kx(15), ky(3), fpar(5)], ipar(4)) as :class:`estimators.MCKF` sets them."""
+        from scipy.special import gammaincinv
+
+        s = np.atleast_1d(np.asarray(self.sigma, dtype=float))
+        s = np.full(18, s[0]) if s.size == 1 else s
+        if s.shape != (18,) or np.any(s <= 0):
+            raise ValueError("sigma must be a positive scalar or 18 values (15 states + 3)")
+        c = -1.0 / (2.0 * s * s)
+        if self.recovery not in _RECOVERY:
+            raise ValueError(f"recovery must be 'kf', 'inflate' or None, got {self.recovery!r}")
+        gate = 2.0 * float(gammaincinv(1.5, 0.999))
+        jmax = max(1, int(12.0 / math.log10(self.inflate))) if self.inflate > 1 else 1
+        mpar = np.concatenate([c[:15], 0.5 * c[15:], [1e-12, self.eps**2, self.reject_weight,
+                                                       self.inflate, gate]])
+        ipar = np.array([self.max_iter, self.lockout_n, _RECOVERY[self.recovery], jmax],
+                        dtype=np.int64)
+        return mpar, ipar
+
+
+# ------------------------------------------------------------------------ classes
+class BatchINS:
+    """``n_vehicles`` × ``len(rules)`` INS filters advanced by one compiled call per tick.
+
+    Row ``i`` is vehicle ``i // len(rules)`` with rule ``rules[i % len(rules)]`` (a vehicle's
+    bank: one flown filter and its shadows, all fed the same IMU samples and fixes).  Arrays:
+    ``x_out`` (N, 16) the output nominal now ``[p, v, q, b_a, b_g]``, ``x_core`` / ``P`` the
+    core filter at the fusion horizon (tick ``core_tick``), ``nis`` (N, 4) the last NIS of
+    position / velocity / heading / radar.
+    """
+
+    def __init__(self, n_vehicles: int, cfg: INSConfig | None = None,
+                 rules: Sequence[str] = ("kf",)) -> None:
+        self.cfg = cfg = cfg or INSConfig()
+        bad = [r for r in rules if r not in _RULE_CODE]
+        if bad or not rules:
+            raise ValueError(f"rules must be among {RULES}, got {list(rules)}")
+        if cfg.pca_mode not in _PCA_MODE:
+            raise ValueError(f"pca_mode must be 'hankel' or 'channels', got {cfg.pca_mode!r}")
+        self.NV, self.rules = int(n_vehicles), tuple(rules)
+        N = self.N = self.NV * len(rules)
+        self.prm = cfg.prm()
+        B = int(self.prm[_P_B])
+        self.x_core = np.zeros((N, 16))
+        self.x_core[:, 6] = 1.0
+        self.P = np.tile(np.eye(15), (N, 1, 1))
+        self.x_out = self.x_core.copy()
+        self._ib = np.zeros((N, B, 6))
+        self._ints = np.zeros((N, _NINT), dtype=np.int64)
+        self._mq = np.zeros((N, cfg.queue, _QW))
+        self._dg = np.full((N, _NDG), np.nan)
+        mpar, ipar = cfg.mckf_params()
+        self._mpar = np.tile(mpar, (N, 1))
+        self._ipar = np.tile(ipar, (N, 1))
+        self._rules = np.tile(np.array([_RULE_CODE[r] for r in rules], dtype=np.int64), self.NV)
+        Nw = int(cfg.pca_window)
+        mode = cfg.pca_mode
+        L = (Nw // 2 if cfg.pca_embed is None else int(cfg.pca_embed)) if mode == "hankel" else 0
+        r = cfg.pca_components or (2 if mode == "hankel" else 1)
+        any_pca = any(x.startswith("pca") for x in rules)
+        self._popt = np.array([Nw, L, r, _PCA_MODE[mode], int(any_pca)], dtype=np.int64)
+        self._pbuf = np.zeros((self.NV, 3, 2 * Nw))
+        self._pcs = np.zeros((self.NV, 2), dtype=np.int64)
+        self._no_g = np.full((self.NV, _GIN), np.nan)
+        self._no_r = np.full((self.NV, 3), np.nan)
+        self._no_imu = np.zeros((self.NV, 6))
+
+    # -- state ------------------------------------------------------------------------------
+    def reset(self, p, v, q, ba=None, bg=None, P0=None) -> None:
+        """Initial nominal per vehicle ((NV, 3) / (NV, 4) or one row for all) and P0 (15
+        standard deviations, or a 15×15 matrix); clears the buffers and queues."""
+        NV, nr = self.NV, len(self.rules)
+        x = np.zeros((NV, 16))
+        x[:, 0:3], x[:, 3:6], x[:, 6:10] = p, v, q
+        x[:, 10:13] = 0.0 if ba is None else ba
+        x[:, 13:16] = 0.0 if bg is None else bg
+        x[:, 6:10] /= np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
+        self.x_core[:] = np.repeat(x, nr, axis=0)
+        self.x_out[:] = self.x_core
+        P0 = np.eye(15) if P0 is None else np.asarray(P0, dtype=float)
+        self.P[:] = np.diag(P0**2) if P0.ndim == 1 else P0
+        self._ib[:] = 0.0
+        self._ints[:] = 0
+        self._dg[:] = np.nan
+        self._pcs[:] = 0
+
+    # -- ticks ------------------------------------------------------------------------------
+    def step(self, imu=None, gnss=None, radar=None) -> None:
+        """One tick: predict with ``imu`` (NV, 6) = (f̃, ω̃) if given, then queue the fixes and
+        fuse what is due.  ``gnss`` (NV, 15) rows ``[age_s, p(3), v(3), yaw, var_p(3),
+        var_v(3), var_yaw]`` (NaN age: no fix; NaN components: absent); ``radar`` (NV, 3)
+        rows ``[range, var, age_s]`` (NaN range: none / dropout)."""
+        pred = imu is not None
+        _step_kernel(self.x_core, self.P, self.x_out, self._ib, self._ints, self._mq,
+                     self._dg, self._mpar, self._ipar, self._pbuf, self._pcs, self._rules,
+                     self.prm, self._popt,
+                     self._no_imu if imu is None else np.ascontiguousarray(imu, dtype=float),
+                     pred, self._no_g if gnss is None else np.ascontiguousarray(gnss, dtype=float),
+                     self._no_r if radar is None else np.ascontiguousarray(radar, dtype=float))
+
+    def predict(self, imu) -> None:
+        self.step(imu)
+
+    def update(self, gnss=None, radar=None) -> None:
+        self.step(None, gnss, radar)
+
+    @staticmethod
+    def gnss_row(pos=None, vel=None, yaw=None, var_pos=(1e-4,) * 3, var_vel=(1e-4,) * 3,
+                 var_yaw=(0.5 * DEG) ** 2, age_s: float = 0.0) -> np.ndarray:
+        """One ``gnss`` input row (absent parts NaN)."""
+        g = np.full(_GIN, np.nan)
+        g[0] = age_s
+        if pos is not None:
+            g[1:4] = pos
+        if vel is not None:
+            g[4:7] = vel
+        if yaw is not None:
+            g[7] = yaw
+        g[8:11], g[11:14], g[14] = var_pos, var_vel, var_yaw
+        return g
+
+    # -- views ------------------------------------------------------------------------------
+    @property
+    def now_tick(self) -> np.ndarray:
+        return self._ints[:, _I_NOW]
+
+    @property
+    def core_tick(self) -> np.ndarray:
+        return self._ints[:, _I_CORE]
+
+    @property
+    def nis(self) -> np.ndarray:
+        return self._dg[:, :4]
+
+    @property
+    def counters(self) -> dict[str, np.ndarray]:
+        i = self._ints
+        return {"gnss_fused": i[:, _I_NGNSS], "radar_fused": i[:, _I_NRAD],
+                "radar_dropped": i[:, _I_RDROP], "late": i[:, _I_LATE],
+                "queue_full": i[:, _I_QDROP], "mckf_n_iter": i[:, _I_MST + 1],
+                "mckf_rejected": i[:, _I_MST + 2], "mckf_recovered": i[:, _I_MST + 3]}
+
+
+class INS:
+    """One INS filter with one GNSS rule: a :class:`BatchINS` of one vehicle and one row (the
+    same compiled kernel).  1-D views ``x``, ``P``, ``x_core``; ``p``, ``v``, ``q``, ``b_a``,
+    ``b_g`` of the output (now)."""
+
+    def __init__(self, cfg: INSConfig | None = None, rule: str = "kf") -> None:
+        self.batch = BatchINS(1, cfg, (rule,))
+        self.cfg, self.rule = self.batch.cfg, rule
+        self._g = np.full((1, _GIN), np.nan)
+        self._r = np.full((1, 3), np.nan)
+        self._u = np.zeros((1, 6))
+
+    def reset(self, p, v, q, ba=None, bg=None, P0=None) -> None:
+        self.batch.reset(p, v, q, ba, bg, P0)
+
+    def predict(self, f, w) -> None:
+        """One IMU sample: specific force f̃ and body rate ω̃ (body axes)."""
+        self._u[0, :3], self._u[0, 3:] = f, w
+        self.batch.step(self._u)
+
+    def update_gnss(self, pos=None, vel=None, yaw=None, var_pos=(1e-4,) * 3,
+                    var_vel=(1e-4,) * 3, var_yaw=(0.5 * DEG) ** 2, age_s: float = 0.0) -> None:
+        self._g[0] = BatchINS.gnss_row(pos, vel, yaw, var_pos, var_vel, var_yaw, age_s)
+        self.batch.step(None, self._g, None)
+
+    def update_radar(self, rng: float, var: float = 0.05**2, age_s: float = 0.0) -> None:
+        self._r[0] = (rng, var, age_s)
+        self.batch.step(None, None, self._r)
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.batch.x_out[0]
+
+    @property
+    def x_core(self) -> np.ndarray:
+        return self.batch.x_core[0]
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.batch.P[0]
+
+    p = property(lambda self: self.x[0:3])
+    v = property(lambda self: self.x[3:6])
+    q = property(lambda self: self.x[6:10])
+    b_a = property(lambda self: self.x[10:13])
+    b_g = property(lambda self: self.x[13:16])
