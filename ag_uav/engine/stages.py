@@ -139,7 +139,7 @@ class Sensing:
                                      b.act)
         b.Rc = self.att.apply(b.R, b.act)
         imu_record(self.rec, k, b.act, f_m, b.om, self.att.last)
-        b.imu_in = (f_m, b.Rc)
+        b.imu_in = (f_m, b.Rc, b.om)
 
     def row(self, i: int, k: int) -> np.ndarray | None:
         return None if self.rec is None else self.rec[i, k]
@@ -172,13 +172,18 @@ class Feedback:
             notes.append(msg)
 
     def step(self, k: int, t: float) -> None:
+        """``p_fb``, ``v_fb`` of every active vehicle; a feedback that estimates the attitude
+        too returns it third ((N, 9) row-major body → world), and the controller flies on it
+        instead of the sensing stage's attitude."""
         b = self.b
         if self.all_true:
             pf, vf = b.p, b.v
-        elif self.bank is not None:
-            pf, vf = self.bank.update(k, t, b.p, b.v, b.imu_in, b.act)
         else:
-            pf, vf = self._per_vehicle(t)
+            out = (self.bank.update(k, t, b.p, b.v, b.imu_in, b.act) if self.bank is not None
+                   else self._per_vehicle(t))
+            pf, vf = out[0], out[1]
+            if len(out) > 2:
+                b.Rc = out[2]
         hold_on_ground(b.act, b.airborne, pf, vf, b.rp, b.rv, b.p_fb, b.v_fb)
 
     def _per_vehicle(self, t: float) -> tuple[np.ndarray, np.ndarray]:
@@ -188,8 +193,9 @@ class Feedback:
             pt = (float(b.p[i, 0]), float(b.p[i, 1]), float(b.p[i, 2]))
             vt = (float(b.v[i, 0]), float(b.v[i, 1]), float(b.v[i, 2]))
             if b.imu_in is not None:
-                f_m, Rc = b.imu_in
-                pf, vf = self.fbs[i].update(t, pt, vt, (f_m[i].tolist(), tuple(Rc[i].tolist())))
+                f_m, Rc, om = b.imu_in
+                pf, vf = self.fbs[i].update(t, pt, vt, (f_m[i].tolist(), tuple(Rc[i].tolist()),
+                                                        om[i].tolist()))
             else:
                 pf, vf = self.fbs[i].update(t, pt, vt)
             p_fb[i], v_fb[i] = pf, vf
