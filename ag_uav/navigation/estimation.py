@@ -541,7 +541,7 @@ class BatchEstimatorFeedback:
                 self._fix(int(i), t, p[i])
         run = act & self.init
         if imu is not None:
-            f_m, Rh = imu
+            f_m, Rh = imu[0], imu[1]
             _world_accel(Rh, f_m, G, self.u)
             u = self.u
         elif self.ideal_imu:
