@@ -307,3 +307,20 @@ def test_a_full_disk_is_one_line_and_leaves_no_tmp(tmp_path, full_disk):
     assert str(full_disk / "out") in r.stderr and "Traceback" not in r.stderr
     assert not [p for p in (full_disk / "out").iterdir() if p.name.endswith(".tmp")]
 
+
+
+def test_an_experiment_whose_batch_stops_exits_1_with_one_line(monkeypatch, capsys, tmp_path):
+    """The experiments run on run_batch: a batch stopped by a lost scheduler or worker ends the
+    command with its one line and exit 1, not a traceback."""
+    from ag_uav.cli import main
+    from ag_uav.jobs import batch as batch_mod
+
+    def stopped(*a, **k):
+        raise batch_mod.BatchStopped("batch table2 stopped: dask: lost the scheduler; "
+                                     "0 of 2 runs done; --resume completes it")
+
+    monkeypatch.setattr(batch_mod, "run_batch", stopped)
+    rc = main(["experiment", "table2", "--runs", "1", "--out", str(tmp_path / "t2")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 1
+    assert err[-1].startswith("ag-uav: batch table2 stopped") and "Traceback" not in "".join(err)

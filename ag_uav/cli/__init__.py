@@ -229,7 +229,15 @@ def main(argv: list[str] | None = None) -> int:
 
         print(f"ag-uav: {disk_error_line(e)}", file=sys.stderr)
         return 1
+    except RuntimeError as e:  # a batch or tune stopped (workers or scheduler lost): one line
+        from ..jobs.batch import BatchStopped
+        from ..jobs.executor import ExecutorLost
+        from ..jobs.tune import TuneStopped
 
+        if not isinstance(e, BatchStopped | ExecutorLost | TuneStopped):
+            raise
+        print(f"ag-uav: {e}", file=sys.stderr)
+        return 1
 
 
 __all__ = ["main", "build_parser", "Path"]
