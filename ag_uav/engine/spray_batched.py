@@ -314,6 +314,7 @@ class BatchSprayer:
         self._on, self._reset = self._out[0], self._out[1]
         self._logged = [(i, sp) for i, sp in enumerate(self.sprayers)
                         if sp.log is not None and hasattr(sp.log, "spray_state")]
+        self._log_next = -math.inf  # the earliest time a logged vehicle's spray state is due
         if push_initial:
             for sp in self.sprayers:
                 if sp.mass_set >= 0.0:
@@ -370,7 +371,7 @@ class BatchSprayer:
                 raise IndexError(f"tick {k} is outside vehicle {i}'s tables "
                                  f"({int(self._ist[i, I_LIM])} ticks)")
             self._events(t)
-        if self._logged:
+        if self._logged and t >= self._log_next:
             self._log(k, t, vx, vy, active)
         return self._on, self._reset
 
@@ -415,6 +416,8 @@ class BatchSprayer:
                                energy_wh=float(st[i, S_ETOT]) / 3600.0, soc=float(rec[3, j]),
                                sortie=int(self._ist[i, I_CUR]) + 1,
                                ground=bool(self._tab[1, j]))
+        self._log_next = min((sp._next_log for i, sp in self._logged if active[i]),
+                             default=math.inf)
 
     # ------------------------------------------------------------------------------ the end
     def sync(self) -> None:
