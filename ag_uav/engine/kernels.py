@@ -104,7 +104,7 @@ def tick_out(rec, k, act, p, v, rp, pfb, ref_tab, ref_ids, spray, f, w,
     for i in range(p.shape[0]):
         if not act[i]:
             continue
-        r = rec[i, k]
+        r = rec[k, i]
         for j in range(3):
             r[j] = p[i, j]
             r[3 + j] = v[i, j]
@@ -123,9 +123,9 @@ def imu_record(imu_rec, k, act, f_m, om, err):  # pragma: no cover
     for i in range(act.shape[0]):
         if act[i]:
             for j in range(3):
-                imu_rec[i, k, j] = f_m[i, j]
-                imu_rec[i, k, 3 + j] = om[i, j]
-                imu_rec[i, k, 6 + j] = err[i, j]
+                imu_rec[k, i, j] = f_m[i, j]
+                imu_rec[k, i, 3 + j] = om[i, j]
+                imu_rec[k, i, 6 + j] = err[i, j]
 
 
 @njit(cache=True)

@@ -444,12 +444,12 @@ def _outputs(e: _Engine, wall: float, compile_s: float) -> list[LoopOutput]:
     outs = []
     for i in range(b.n):
         n = int(b.flown[i])
-        out = LoopOutput(t=np.arange(n) * b.dt, rec=e.recorder.rec[i, :n],
+        out = LoopOutput(t=np.arange(n) * b.dt, rec=e.recorder.of(i, n),
                          crash_reason=b.crash_reason[i], crash_time=b.crash_time[i],
                          wall_loop_s=wall, vehicle=e.vehicles[i], frames=int(frames[i]),
                          notes=b.notes[i], sprayer=e.sprayers[i], compile_s=compile_s)
         if imu is not None:
-            out.imu = e.sensing.rec[i, :n]
+            out.imu = np.ascontiguousarray(e.sensing.rec[:n, i])
             out.imu_bias0 = imu.bias0[i].copy()
         outs.append(out)
     return outs

@@ -52,9 +52,15 @@ class Sprayer:
         self.com_dry_z = float(self.model.body_ipos[self.drone][2])
         self.liq_z = float(self.model.body_pos[self.liq][2])
         self.J_dry = tuple(float(v) for v in veh.inertia)
+        # the model's arrays the liquid's mass changes write (views, looked up once)
+        m = self.model
+        self._mass_views = (m.body_mass, m.body_inertia[self.liq], m.body_ipos[self.liq],
+                            m.body_subtreemass)
         n = n_ticks
-        self.ground = tab["ground"].tolist() if "ground" in tab else [False] * n
-        self.sortie = tab["sortie"].tolist() if "sortie" in tab else [0] * n
+        self.ground = (np.asarray(tab["ground"], dtype=bool) if "ground" in tab
+                       else np.zeros(n, dtype=bool))
+        self.sortie = (np.asarray(tab["sortie"], dtype=np.int64) if "sortie" in tab
+                       else np.zeros(n, dtype=np.int64))
         self.tank = job.fill_l
         self.energy_j = 0.0          # used from the current battery
         self.energy_total_j = 0.0
@@ -76,26 +82,26 @@ class Sprayer:
     def _set_mass(self, m_liq: float) -> None:
         """Liquid body mass and inertia (a box of liquid filling the tank's footprint from the
         bottom; parallel-axis terms about the composite centre of mass go to the controller)."""
-        model = self.model
+        body_mass, inertia, ipos, subtree = self._mass_views
         a, c, h = TANK_HALF
         frac = min(1.0, m_liq / max(self.job.fill_l * self.rho, 1e-9))
         hz = max(h * frac, 1e-3)  # liquid half-height
-        model.body_mass[self.liq] = max(m_liq, 1e-6)
+        body_mass[self.liq] = max(m_liq, 1e-6)
         ml = max(m_liq, 1e-6)
-        model.body_inertia[self.liq] = (ml * ((2 * c) ** 2 + (2 * hz) ** 2) / 12,
-                                        ml * ((2 * a) ** 2 + (2 * hz) ** 2) / 12,
-                                        ml * ((2 * a) ** 2 + (2 * c) ** 2) / 12)
-        model.body_ipos[self.liq][2] = -h + hz
+        inertia[:] = (ml * ((2 * c) ** 2 + (2 * hz) ** 2) / 12,
+                      ml * ((2 * a) ** 2 + (2 * hz) ** 2) / 12,
+                      ml * ((2 * a) ** 2 + (2 * c) ** 2) / 12)
+        ipos[2] = -h + hz
         total = self.dry + ml
-        model.body_subtreemass[self.liq] = ml
-        model.body_subtreemass[self.drone] = total
-        model.body_subtreemass[0] = total
+        subtree[self.liq] = ml
+        subtree[self.drone] = total
+        subtree[0] = total
         # controller: mass and inertia about the composite centre of mass (parallel axis)
         zl = self.liq_z - h + hz
         zc = (self.dry * self.com_dry_z + ml * zl) / total
         dz2 = self.dry * (self.com_dry_z - zc) ** 2 + ml * (zl - zc) ** 2
         Ix, Iy, Iz = self.J_dry
-        li = model.body_inertia[self.liq]
+        li = inertia
         self.cascade.mass = total
         self.cascade.attitude.J = (Ix + li[0] + dz2, Iy + li[1] + dz2, Iz + li[2])
         self.mass_set = m_liq

@@ -128,7 +128,9 @@ class Sensing:
     def __init__(self, b: Batch, imu: Any, att: Any, accel_adr: int, gyro_adr: int) -> None:
         self.b, self.imu, self.att = b, imu, att
         self.ia, self.ig = accel_adr, gyro_adr
-        self.rec = np.zeros((b.n, b.n_max, 9)) if imu is not None else None
+        # tick-major (n_max, N, 9): one tick's rows are contiguous (the per-tick writes stay in
+        # cache lines the physics step did not evict); a vehicle's record is copied out at the end
+        self.rec = np.zeros((b.n_max, b.n, 9)) if imu is not None else None
 
     def step(self, k: int) -> None:
         b = self.b
@@ -142,7 +144,7 @@ class Sensing:
         b.imu_in = (f_m, b.Rc, b.om)
 
     def row(self, i: int, k: int) -> np.ndarray | None:
-        return None if self.rec is None else self.rec[i, k]
+        return None if self.rec is None else self.rec[k, i]
 
 
 class Feedback:
@@ -251,13 +253,17 @@ class Disturbance:
 
 
 class Recorder:
-    """Row ``k`` of every active vehicle's record (:data:`REC_COLUMNS`), as arrays."""
+    """Row ``k`` of every active vehicle's record (:data:`REC_COLUMNS`), as arrays (tick-major:
+    ``rec[k, i]``; :meth:`of` gives vehicle ``i``'s own contiguous copy)."""
 
     def __init__(self, b: Batch) -> None:
         self.b = b
-        self.rec = np.zeros((b.n, b.n_max, len(REC_COLUMNS)))
+        self.rec = np.zeros((b.n_max, b.n, len(REC_COLUMNS)))  # tick-major, as Sensing.rec
 
     def step(self, k: int) -> None:
         b = self.b
         tick_out(self.rec, k, b.act, b.p, b.v, b.rp, b.p_fb, b.ref_tab, b.ref_ids, b.spray,
                  b.f, b.w, b.flown)
+
+    def of(self, i: int, n: int) -> np.ndarray:
+        return np.ascontiguousarray(self.rec[:n, i])
