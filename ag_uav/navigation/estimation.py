@@ -469,7 +469,8 @@ class BatchEstimatorFeedback:
         self.p_out = np.zeros((N, 3))
         self.v_out = np.zeros((N, 3))
         n_fix = int(n_max * max(fb.gps.rate_hz for fb in feedbacks) * self.dt) + 4
-        self.est = {n: np.full((N, n_max, 3), np.nan) for n in self.names}
+        # tick-major (n_max, N, 3): one tick's rows contiguous (cache-friendly per-tick writes)
+        self.est = {n: np.full((n_max, N, 3), np.nan) for n in self.names}
         # per update: tick, NIS, position covariance (3×3) — the NEES/NIS record
         self.cons = {n: np.zeros((N, n_fix, 11)) for n in self.names}
         self.n_cons = np.zeros(N, dtype=np.int64)
@@ -509,8 +510,8 @@ class BatchEstimatorFeedback:
         not fit (a batch of one flown by :meth:`EstimatorFeedback.update` has no n_max)."""
         for n in self.names:
             e = self.est[n]
-            if k >= e.shape[1]:
-                self.est[n] = np.concatenate([e, np.full_like(e, np.nan)], axis=1)
+            if k >= e.shape[0]:
+                self.est[n] = np.concatenate([e, np.full_like(e, np.nan)], axis=0)
             c = self.cons[n]
             if int(self.n_cons.max()) >= c.shape[1]:
                 self.cons[n] = np.concatenate([c, np.zeros_like(c)], axis=1)
@@ -531,7 +532,7 @@ class BatchEstimatorFeedback:
         """One control tick of every active vehicle; returns the (p, v) the controllers fly on
         (the primary filter's estimate; the truth before a vehicle's first fix)."""
         self.k_next = max(self.k_next, k + 1)
-        if k >= self.est[self.names[0]].shape[1] or int(self.n_cons.max()) >= \
+        if k >= self.est[self.names[0]].shape[0] or int(self.n_cons.max()) >= \
                 self.cons[self.names[0]].shape[1]:
             self._grow(k)
         due = act & ((t >= self.next_t - 1e-9) | self.every_tick)
@@ -613,7 +614,7 @@ class BatchEstimatorFeedback:
             n = int(flown[i])
             nc = int(self.n_cons[i])
             for name, bf in self.bank.filters.items():
-                fb.est[name] = self.est[name][i, :n]
+                fb.est[name] = np.ascontiguousarray(self.est[name][:n, i])
                 fb.cons[name] = self.cons[name][i, :nc]
                 # the mean time of one row's update in the timed (one filter at a time) ticks
                 fb.upd_ns[name] = self.upd_ns[name] * nc / max(self.n_timed[name], 1)
@@ -650,7 +651,7 @@ def _est_record(est, k, run, x, pos):  # pragma: no cover
     for i in range(run.shape[0]):
         if run[i]:
             for j in range(3):
-                est[i, k, j] = x[i, pos[j]]
+                est[k, i, j] = x[i, pos[j]]
 
 
 @njit(cache=True)
