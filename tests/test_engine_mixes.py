@@ -179,3 +179,26 @@ def test_a_mixed_batch_with_sorties_equals_solo(rect_field):
     assert max(r.summary["sorties"] for r in many) >= 2
     for c, r in zip(cfgs, many, strict=True):
         _same_mission(simulate(c), r)
+
+
+def test_the_physics_replay_reproduces_the_flights_bit_for_bit():
+    """``ag-uav bench`` measures the engine against MuJoCo alone replaying the very same flights
+    (initial states, the controls handed to the physics each tick and the spray job's mass
+    changes captured from the engine): the replay lands on the engine's states exactly, pool or
+    lanes, so the reference really is the engine's own physics."""
+    from ag_uav.engine.missions import fly_many
+    from ag_uav.jobs.bench import replay_physics
+
+    over = {"spray.tank_l": 0.02, "spray.service_s": 0.0, "sim.max_time_s": 30.0}
+    cfgs = [_cfg(s, **over) for s in (1, 2, 3)]
+    outs = fly_many(cfgs, capture=True)
+    assert any(o.sprayer.mass_events for o in outs)
+    models = [o.vehicle.model for o in outs]
+    body = outs[0].vehicle.body_id
+    for way in (None, "lanes"):
+        _, S = replay_physics(models, body, 5, [o.s0 for o in outs],
+                              [o.controls[:-1] for o in outs], 2, way,
+                              [o.sprayer for o in outs])
+        for i, o in enumerate(outs):
+            # the state after tick n-2's physics is the state tick n-1 recorded
+            assert np.array_equal(S[i, 1:4], o.rec[-1, :3])

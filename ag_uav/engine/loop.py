@@ -102,6 +102,8 @@ class LoopOutput:
     imu_bias0: np.ndarray | None = None   # turn-on biases (accel m/s², gyro rad/s)
     sprayer: Any = None
     compile_s: float = 0.0                # kernels compiled on the first tick (not in wall_loop_s)
+    s0: np.ndarray | None = None          # with capture: the initial full physics state
+    controls: np.ndarray | None = None    # with capture: (n, 7) rotor commands (4), force (3)
 
 
 # ------------------------------------------------------------------------------------ setup
@@ -295,10 +297,10 @@ class _Engine:
     def __init__(self, b: Batch, guard: Guard, sensing: Sensing, feedback: Feedback,
                  control: Control, spraying: Spraying | None, disturbance: Disturbance,
                  observers: list[Observer], view: TickView, stepper: Any,
-                 sprayers: list[Any], vehicles: list[Vehicle]) -> None:
+                 sprayers: list[Any], vehicles: list[Vehicle], capture: bool = False) -> None:
         self.b, self.guard, self.sensing, self.feedback = b, guard, sensing, feedback
         self.control, self.spraying, self.disturbance = control, spraying, disturbance
-        self.recorder = Recorder(b)
+        self.recorder = Recorder(b, capture)
         self.observers, self.view, self.stepper = observers, view, stepper
         self.sprayers, self.vehicles = sprayers, vehicles
         self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
@@ -347,7 +349,7 @@ class _Engine:
         self.feedback.finish()
 
 
-def _build(flights: Sequence[Flight], nthread: int | None) -> _Engine:
+def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False) -> _Engine:
     from controllers.batched import BatchCascade
 
     from ..navigation.feedback import TrueFeedback
@@ -363,6 +365,10 @@ def _build(flights: Sequence[Flight], nthread: int | None) -> _Engine:
         [make_cascade(fl.cfg, v) for fl, v in zip(flights, vehs, strict=True)]))
     sensing = _sensing(b, flights, fbs, m0)
     spraying, sprayers = _spraying(b, flights, vehs, job_tabs, control, m0)
+    if capture:
+        for sp in sprayers:
+            if sp is not None:
+                sp.mass_events = []
     disturbance = _disturbance(b, flights)
     feedback = Feedback(b, fbs, all(isinstance(fb, TrueFeedback) for fb in fbs))
     observers = _observers(b, flights, vehs, fbs, control, sensing)
@@ -371,7 +377,7 @@ def _build(flights: Sequence[Flight], nthread: int | None) -> _Engine:
                            nthread)
     return _Engine(b, Guard(b, vehs, iq, iq + m0.nq), sensing, feedback, control, spraying,
                    disturbance, observers, TickView(b, [v.model for v in vehs], body), stepper,
-                   sprayers, vehs)
+                   sprayers, vehs, capture)
 
 
 def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
@@ -413,6 +419,8 @@ def _tick(lanes: list[_Engine], alive: list[bool], pool: Any, k: int, t: float) 
             continue
         if j < last:
             futures.append((e, pool.submit(e.physics)))
+            time.sleep(0)  # hand the GIL to the worker now: it starts the physics (which runs
+            # without the GIL) instead of waiting for this thread's switch interval
         else:
             e.physics()
             e.after_physics(k, t)
@@ -451,11 +459,14 @@ def _outputs(e: _Engine, wall: float, compile_s: float) -> list[LoopOutput]:
         if imu is not None:
             out.imu = np.ascontiguousarray(e.sensing.rec[:n, i])
             out.imu_bias0 = imu.bias0[i].copy()
+        if e.recorder.s0 is not None:
+            out.s0, out.controls = e.recorder.s0[i], e.recorder.controls[:n, i].copy()
         outs.append(out)
     return outs
 
 
-def _lanes(flights: list[Flight], nthread: int | None, lanes: int | None) -> list[_Engine]:
+def _lanes(flights: list[Flight], nthread: int | None, lanes: int | None,
+           capture: bool = False) -> list[_Engine]:
     """The batch as ``lanes`` engines over contiguous parts (default: one per thread when each
     gets at least :data:`LANE_MIN` vehicles), each stepping its physics in one thread; or one
     engine whose rollout uses ``nthread`` threads."""
@@ -465,25 +476,27 @@ def _lanes(flights: list[Flight], nthread: int | None, lanes: int | None) -> lis
         lanes = threads if LANES_BY_DEFAULT and threads > 1 and n >= LANE_MIN * threads else 1
     lanes = max(1, min(lanes, n))
     if lanes == 1:
-        return [_build(flights, threads)]
+        return [_build(flights, threads, capture)]
     cuts = np.linspace(0, n, lanes + 1).round().astype(int)
-    return [_build(flights[a:b], 0) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    return [_build(flights[a:b], 0, capture) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 
 def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | None = None,
-        lanes: int | None = None) -> list[LoopOutput]:
+        lanes: int | None = None, capture: bool = False) -> list[LoopOutput]:
     """Fly every flight of ``flights`` in lockstep; one :class:`LoopOutput` per flight.
 
     All flights must share ``sim.control_hz`` and ``sim.timestep_s``. ``nthread``: threads
     (default: ``$AG_UAV_ENGINE_THREADS`` or the machine's cores, at most the batch size; a
     single vehicle is stepped in this thread). ``lanes``: engines the batch is split into, whose
     physics overlaps the next lane's Python tick (default: one per thread for batches of at least
-    :data:`LANE_MIN` vehicles per thread; 1: one engine, the rollout on ``nthread`` threads)."""
+    :data:`LANE_MIN` vehicles per thread; 1: one engine, the rollout on ``nthread`` threads).
+    ``capture``: each output also holds its initial physics state and the controls the physics
+    was handed each tick (``s0``, ``controls``: what ``ag-uav bench`` replays)."""
     flights = list(flights)
     if not flights:
         return []
     _check_rates(flights)
-    engines = _lanes(flights, nthread, lanes)
+    engines = _lanes(flights, nthread, lanes, capture)
     b0 = engines[0].b
     bar = None
     if progress:

@@ -313,9 +313,10 @@ def simulate_many(cfgs: list[Config], *, progress: bool = False, errors: str = "
     return res
 
 
-def fly_many(cfgs: list[Config], *, progress: bool = False) -> list[Any]:
+def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = False) -> list[Any]:
     """The loop outputs (:class:`~ag_uav.engine.loop.LoopOutput`, no metrics) of every config's
-    mission flown as one engine batch, or the exception of a run that could not be set up."""
+    mission flown as one engine batch, or the exception of a run that could not be set up.
+    ``capture``: with the initial states and controls (:func:`ag_uav.engine.loop.fly`)."""
     preps: list[Any] = []
     for c in cfgs:
         try:
@@ -323,7 +324,8 @@ def fly_many(cfgs: list[Config], *, progress: bool = False) -> list[Any]:
         except Exception as e:  # noqa: BLE001 - reported per run
             preps.append(e)
     ok = [p for p in preps if isinstance(p, _Prepared)]
-    outs = iter(fly([p.flight for p in ok], progress=progress)) if ok else iter(())
+    outs = (iter(fly([p.flight for p in ok], progress=progress, capture=capture)) if ok
+            else iter(()))
     return [next(outs) if isinstance(p, _Prepared) else p for p in preps]
 
 

@@ -192,6 +192,14 @@ def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab
     return nev
 
 
+def _set_mass(sp: Sprayer, t: float, m_liq: float) -> None:
+    """The liquid mass of ``sp``'s vehicle from tick time ``t`` on (recorded when the engine
+    captures the flight for a physics replay)."""
+    sp._set_mass(m_liq)
+    if sp.mass_events is not None:
+        sp.mass_events.append((t, m_liq))
+
+
 def _none_nan(v: float | None) -> float:
     return math.nan if v is None else float(v)
 
@@ -391,13 +399,13 @@ class BatchSprayer:
                     per["t_land_s"] = _nan_none(st[i, C_TLAND])
                     sp._close_sortie(t)
                 if fl & F_REFILL:
-                    sp._set_mass(float(st[i, S_MREFILL]))
+                    _set_mass(sp, t, float(st[i, S_MREFILL]))
                 s = int(self._ist[i, I_CUR])
                 sp.per.append({"sortie": s + 1, "t_takeoff_s": t, "litres": 0.0,
                                "energy_j": 0.0, "min_soc": 1.0, "ran_dry_s": None,
                                "t_land_s": None})
             if fl & F_MASS:
-                sp._set_mass(float(st[i, S_MSPRAY]))
+                _set_mass(sp, t, float(st[i, S_MSPRAY]))
 
     def _log(self, k: int, t: float, vx: np.ndarray, vy: np.ndarray,
              active: np.ndarray) -> None:

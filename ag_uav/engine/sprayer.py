@@ -77,6 +77,8 @@ class Sprayer:
         self.gated_s = 0.0
         self.dry_s = 0.0
         self._next_log = -math.inf
+        #: (t, liquid kg) of every mass change in flight, when the engine captures the flight
+        self.mass_events: list[tuple[float, float]] | None = None
         self._set_mass(self.tank * self.rho)
 
     def _set_mass(self, m_liq: float) -> None:

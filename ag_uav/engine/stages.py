@@ -254,16 +254,23 @@ class Disturbance:
 
 class Recorder:
     """Row ``k`` of every active vehicle's record (:data:`REC_COLUMNS`), as arrays (tick-major:
-    ``rec[k, i]``; :meth:`of` gives vehicle ``i``'s own contiguous copy)."""
+    ``rec[k, i]``; :meth:`of` gives vehicle ``i``'s own contiguous copy). With ``capture``, also
+    the initial physics state and what the physics was handed each tick (rotor commands and
+    applied force), so that the physics alone can be replayed (``ag-uav bench``)."""
 
-    def __init__(self, b: Batch) -> None:
+    def __init__(self, b: Batch, capture: bool = False) -> None:
         self.b = b
         self.rec = np.zeros((b.n_max, b.n, len(REC_COLUMNS)))  # tick-major, as Sensing.rec
+        self.s0 = b.S.copy() if capture else None
+        self.controls = np.zeros((b.n_max, b.n, 7)) if capture else None
 
     def step(self, k: int) -> None:
         b = self.b
         tick_out(self.rec, k, b.act, b.p, b.v, b.rp, b.p_fb, b.ref_tab, b.ref_ids, b.spray,
                  b.f, b.w, b.flown)
+        if self.controls is not None:
+            self.controls[k, :, :4] = b.f
+            self.controls[k, :, 4:] = b.xf
 
     def of(self, i: int, n: int) -> np.ndarray:
         return np.ascontiguousarray(self.rec[:n, i])
