@@ -108,11 +108,13 @@ class LogObserver(Observer):
     frames (:class:`ag_uav.record.render.Renderer`) when a frame is due."""
 
     def __init__(self, i: int, log: Any, renderer: Any, feedback: Any, control: Control,
-                 sensing: Sensing) -> None:
+                 sensing: Sensing, depositing: Any = None) -> None:
         self.i, self.log, self.renderer = i, log, renderer
         self.fb, self.control, self.sensing = feedback, control, sensing
         self.frames = 0
         self._est = feedback.name != "true"
+        self.dose = depositing.of(i) if depositing is not None else None
+        self._dose_f = _dose_factor(self.dose[0].grid) if self.dose is not None else 0
 
     def next_time(self) -> float:
         return self.log.next_due(frames=self.renderer is not None)
@@ -138,6 +140,10 @@ class LogObserver(Observer):
                       p_est=tuple(b.p_fb[i].tolist()) if self._est else None,
                       v_est=tuple(b.v_fb[i].tolist()), ctrl=ctrl, motors=b.f[i].tolist(),
                       wind=tuple(b.w[i].tolist()), spray=bool(b.spray[i]))
+        if self.dose is not None and self.log.want_dose(t):
+            dep, j = self.dose
+            g, f = dep.grid, self._dose_f
+            self.log.dose(t, g.x0, g.y0, g.cell * (1 << f), dep.l_per_ha_now(j, f))
 
     def _frames(self, view: TickView) -> None:
         d, r = view.data(self.i), self.renderer
@@ -149,6 +155,16 @@ class LogObserver(Observer):
     def close(self) -> None:
         if self.renderer is not None:
             self.renderer.close()
+
+
+def _dose_factor(g: Any, cell_m: float = 1.0, max_cells: int = 250_000) -> int:
+    """Levels by which the live dose map in the log is coarser than the dose map: cells of at
+    least ``cell_m`` and at most ``max_cells`` of them (the log's cost stays small)."""
+    f = 0
+    while f < g.levels - 1 and (g.cell * (1 << f) < cell_m
+                                or (g.nx >> f) * (g.ny >> f) > max_cells):
+        f += 1
+    return f
 
 
 def frames_of(observers: Sequence[Observer], n: int) -> np.ndarray:
