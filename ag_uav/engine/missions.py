@@ -369,9 +369,10 @@ def dose_summary(cfg: Config, fld: Field, dose: Any, tank_l: float | None = None
     (``nozzle_sprayed_l``: valve delays, pressure lag, minimum speed) and, with the tank law's
     litres ``tank_l`` (``litres_sprayed_l``: flow ∝ ground speed while the nozzles are
     commanded on), the difference ``nozzle_minus_tank_l``. The tank is drawn down by the tank
-    law; what lands is the nozzle model's."""
+    law; what lands is the nozzle model's. Undefined values (nothing sprayed on the field) are
+    None."""
     m = dose.metrics(fld, cfg.spray.rate_l_per_ha, cfg.spray.dose_margin_m)
-    out: dict[str, Any] = {k: m[k] for k in DOSE_KEYS}
+    out: dict[str, Any] = {k: (None if math.isnan(m[k]) else m[k]) for k in DOSE_KEYS}
     out["nozzle_sprayed_l"] = m["sprayed_l"]
     if tank_l is not None:
         out["nozzle_minus_tank_l"] = m["sprayed_l"] - tank_l
