@@ -1,4 +1,5 @@
-"""One run end to end: config → run folder → (log + renderer) → simulate → summary.json."""
+"""One run end to end: config → run folder → (log + renderer) → simulate → summary.json (and
+dose.npz, the dose map on the ground)."""
 
 from __future__ import annotations
 
@@ -96,6 +97,8 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
             log_err = e
     res.summary["run_dir"] = str(run_dir)
     try:
+        if res.extra.get("dose") is not None:  # the dose map, for `ag-uav plot`
+            res.extra["dose"].save(run_dir / "dose.npz")
         write_summary(res.summary, run_dir / "summary.json")
     except OSError as e:
         raise RunOutputError(e, res, run_dir, False) from None
