@@ -605,8 +605,8 @@ def _check_nozzles(sp: SprayConfig) -> None:
         raise ConfigError(f"spray.nozzle_share = {_fmt(sp.nozzle_share)}: expected one share per "
                           f"nozzle ({n // 3}) summing to 1, or [] (equal shares)")
     if not sp.dv10_um < sp.dv50_um < sp.dv90_um:
-        raise ConfigError(f"spray.dv50_um = {sp.dv50_um}: need spray.dv10_um = {sp.dv10_um} < "
-                          f"dv50_um < spray.dv90_um = {sp.dv90_um}")
+        raise ConfigError(f"spray.dv50_um = {sp.dv50_um}: must be between spray.dv10_um = "
+                          f"{sp.dv10_um} and spray.dv90_um = {sp.dv90_um} (Dv10 < Dv50 < Dv90)")
 
 
 def _validate(cfg: Config) -> None:
