@@ -597,8 +597,8 @@ def _plot_dose(dose: tuple[np.ndarray, float, float, float], field_scene: Any,
     fig, ax = plt.subplots(figsize=(9, 7))
     ny, nx = a.shape
     cmap = plt.get_cmap("RdYlBu").copy()
-    cmap.set_bad("white")  # no deposit at all
-    im = ax.imshow(np.ma.masked_less_equal(100.0 * a / target, 1e-3), origin="lower", cmap=cmap,
+    cmap.set_bad("white")  # (next to) no deposit: below 0.5 % of the target
+    im = ax.imshow(np.ma.masked_less(100.0 * a / target, 0.5), origin="lower", cmap=cmap,
                    vmin=0.0, vmax=200.0,
                    extent=(x0, x0 + nx * cell, y0, y0 + ny * cell), interpolation="nearest")
     fig.colorbar(im, ax=ax, shrink=0.8, label=f"dose [% of {target:g} L/ha]")
