@@ -596,8 +596,7 @@ def _plot_dose(dose: tuple[np.ndarray, float, float, float], field_scene: Any,
         target = float(np.max(a)) / 2 or 1.0
     fig, ax = plt.subplots(figsize=(9, 7))
     ny, nx = a.shape
-    cmap = plt.get_cmap("RdYlBu").copy()
-    cmap.set_bad("white")  # (next to) no deposit: below 0.5 % of the target
+    cmap = plt.get_cmap("RdYlBu").with_extremes(bad="white")  # below 0.5 %: (next to) none
     im = ax.imshow(np.ma.masked_less(100.0 * a / target, 0.5), origin="lower", cmap=cmap,
                    vmin=0.0, vmax=200.0,
                    extent=(x0, x0 + nx * cell, y0, y0 + ny * cell), interpolation="nearest")
