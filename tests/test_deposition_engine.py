@@ -79,3 +79,27 @@ def test_dose_alone_equals_dose_in_a_batch(rect):
         assert np.array_equal(a.extra["dose"].litres, solo.extra["dose"].litres)
     # the delay and the wind do change the dose (the rows are not all the same)
     assert many[0].summary["dose_cv"] != many[1].summary["dose_cv"]
+
+
+def test_fly_prints_saves_logs_and_plots_the_dose(rect, tmp_path, capsys):
+    """``ag-uav fly`` prints the dose rows and writes dose.npz; the log has the /dose grid (during
+    the flight and at the end); ``ag-uav plot`` draws dose.png from either."""
+    from ag_uav.analysis.viewing import plot, read_run
+    from ag_uav.cli import main
+    from ag_uav.world.deposition import DoseMap
+
+    assert main(["fly", "--no-render", "--out", str(tmp_path), "--run-id", "r", "--set",
+                 f'mission.field="{rect}"', "--set", "sim.max_time_s=30"]) == 0
+    out = capsys.readouterr().out
+    assert "dose CV" in out and "under-dosed area" in out and "deposit off the field" in out
+    run = tmp_path / "r"
+    dm = DoseMap.load(run / "dose.npz")
+    d = read_run(run, images=False)
+    assert d.channels["/dose"]["count"] >= 1 + 30 // 5 - 1    # every 5 s and the end
+    g = d.grids["/dose"]
+    last = np.frombuffer(g.data, dtype="<f4").reshape(dm.litres.shape)
+    np.testing.assert_allclose(last, dm.l_per_ha, rtol=1e-6, atol=1e-6)
+    assert (g.pose.position.x, g.cell_size.x) == (dm.grid.x0, dm.grid.cell)
+    assert any(p.name == "dose.png" for p in plot(d, tmp_path / "plots"))
+    (run / "dose.npz").unlink()   # from the log alone
+    assert any(p.name == "dose.png" for p in plot(run, tmp_path / "plots2"))
