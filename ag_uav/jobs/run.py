@@ -44,6 +44,16 @@ def write_summary(summary: dict, path: Path) -> None:
     atomic_write_text(path, summary_json(summary))
 
 
+def write_dose(dose: Any, path: Path) -> None:
+    """``dose.npz`` (:meth:`ag_uav.world.deposition.DoseMap.arrays`), written atomically."""
+    import numpy as np
+
+    from ..record.atomic import atomic_path
+
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **dose.arrays())
+
+
 class RunOutputError(OSError):
     """The flight finished but an output could not be written (summary.json, the end of the
     log): ``result`` and ``run_dir`` hold what was flown, ``summary_written`` says whether
@@ -98,7 +108,7 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     res.summary["run_dir"] = str(run_dir)
     try:
         if res.extra.get("dose") is not None:  # the dose map, for `ag-uav plot`
-            res.extra["dose"].save(run_dir / "dose.npz")
+            write_dose(res.extra["dose"], run_dir / "dose.npz")
         write_summary(res.summary, run_dir / "summary.json")
     except OSError as e:
         raise RunOutputError(e, res, run_dir, False) from None

@@ -657,20 +657,18 @@ class DoseMap:
         """The summary metrics (names fixed by issue 18); see :func:`dose_metrics`."""
         return dose_metrics(self, fld, target_l_per_ha, margin_m)
 
-    def save(self, path: Any) -> None:
-        """``dose.npz`` (written atomically): ``litres`` (ny, nx), ``l_per_ha``, the grid's
-        ``x0, y0, cell`` (lower-left corner, m) and the volume bookkeeping."""
-        from ..record.atomic import atomic_path
-
+    def arrays(self) -> dict[str, Any]:
+        """What ``dose.npz`` holds (:func:`ag_uav.jobs.run.fly` writes it): ``litres`` (ny, nx),
+        ``l_per_ha``, the grid's ``x0, y0, cell`` (lower-left corner, m) and the volume
+        bookkeeping."""
         g = self.grid
-        with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.savez_compressed(f, litres=self.litres, l_per_ha=self.l_per_ha, x0=g.x0, y0=g.y0,
-                                cell=g.cell, sprayed_l=self.sprayed_l,
-                                outside_grid_l=self.outside_grid_l, drift_l=self.drift_l)
+        return {"litres": self.litres, "l_per_ha": self.l_per_ha, "x0": g.x0, "y0": g.y0,
+                "cell": g.cell, "sprayed_l": self.sprayed_l,
+                "outside_grid_l": self.outside_grid_l, "drift_l": self.drift_l}
 
     @classmethod
     def load(cls, path: Any) -> DoseMap:
-        """A map written by :meth:`save` (one level)."""
+        """A map from ``dose.npz`` (:meth:`arrays`; one level)."""
         with np.load(path) as z:
             lit = np.asarray(z["litres"], float)
             ny, nx = lit.shape
