@@ -100,6 +100,10 @@ def test_fly_prints_saves_logs_and_plots_the_dose(rect, tmp_path, capsys):
     last = np.frombuffer(g.data, dtype="<f4").reshape(dm.litres.shape)
     np.testing.assert_allclose(last, dm.l_per_ha, rtol=1e-6, atol=1e-6)
     assert (g.pose.position.x, g.cell_size.x) == (dm.grid.x0, dm.grid.cell)
+    st = d.series["/drone/state"]
+    valve, flow = st["ctrl.nozzle.valve"], st["ctrl.nozzle.flow_lps"]
+    assert valve.max() == 1.0 and valve.min() == 0.0 and flow.max() > 0.0
+    assert 0.5 * 3e-3 < flow.max() < 1.1 * 3e-3  # R·w·v/10⁴ = 3 mL/s at the 5 m/s cruise
     assert any(p.name == "dose.png" for p in plot(d, tmp_path / "plots"))
     (run / "dose.npz").unlink()   # from the log alone
     assert any(p.name == "dose.png" for p in plot(run, tmp_path / "plots2"))

@@ -104,8 +104,10 @@ class _LazyData:
 
 class LogObserver(Observer):
     """Vehicle ``i``'s run log (:class:`ag_uav.record.runlog.RunLog`): the state, reference,
-    estimate, controller internals, motors, wind and spray at the log's rate, and camera
-    frames (:class:`ag_uav.record.render.Renderer`) when a frame is due."""
+    estimate, controller internals, motors, wind and spray at the log's rate (with the dose:
+    the nozzle model's valve and actual flow as ``ctrl.nozzle.*``, and the dose map on
+    ``/dose`` every few seconds), and camera frames (:class:`ag_uav.record.render.Renderer`)
+    when a frame is due."""
 
     def __init__(self, i: int, log: Any, renderer: Any, feedback: Any, control: Control,
                  sensing: Sensing, depositing: Any = None) -> None:
@@ -134,6 +136,10 @@ class LogObserver(Observer):
             row = self.sensing.row(i, view.k)
             if row is not None:
                 ctrl.update(zip(IMU_KEYS, row.tolist(), strict=True))
+            if self.dose is not None:  # the nozzle model: valve open, actual flow (L/s)
+                dep, j = self.dose
+                ctrl["nozzle.valve"] = 1.0 if dep.valve_on[j] else 0.0
+                ctrl["nozzle.flow_lps"] = float(dep.flow_lps[j])
         self.log.tick(t, p_true=tuple(b.p[i].tolist()), q_true_wxyz=tuple(b.quat[i].tolist()),
                       v_true=tuple(b.v[i].tolist()), p_ref=tuple(b.rp[i].tolist()),
                       v_ref=tuple(b.rv[i].tolist()), yaw_ref=float(b.yaw[i]),
