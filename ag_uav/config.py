@@ -148,6 +148,44 @@ class SprayConfig:
                             "where the tank runs dry (actual flow follows the actual speed)",
                             ge=0, lt=0.5)
     max_sorties: int = _f(200, "sortie limit of the planner", ge=1)
+    # ---- the dose on the ground (ag_uav.world.deposition; docs/spray_deposition.md)
+    deposition: bool = _f(True, "model what lands: nozzles, droplets, downwash, wind and the "
+                          "dose map (L/ha) with its summary metrics (false: skip it)")
+    nozzle_on_delay_s: float = _f(0.1, "valve opening delay (s); ArduPilot AC_Sprayer "
+                                  "TURN_ON_DELAY 100 ms", ge=0, le=60)
+    nozzle_off_delay_s: float = _f(1.0, "valve closing delay (s) when the ground speed drops "
+                                   "below speed_min_mps (and on a command off unless "
+                                   "cmd_off_immediate); AC_Sprayer SHUT_OFF_DELAY 1000 ms",
+                                   ge=0, le=60)
+    cmd_off_immediate: bool = _f(True, "a command off closes the valve at once (AC_Sprayer::run"
+                                 "(false)); false: after nozzle_off_delay_s")
+    speed_min_mps: float = _f(1.0, "no spray below this ground speed (m/s); AC_Sprayer "
+                              "SPEED_MIN 100 cm/s", ge=0, le=15)
+    flow_min_l_per_s: float = _f(0.0, "floor of the flow while the valve is open (L/s); "
+                                 "AC_Sprayer PUMP_MIN 0 %", ge=0, le=10)
+    pressure_tau_s: float = _f(0.15, "time constant of the line pressure (flow) lag (s); an "
+                               "assumption (settles in ~0.45 s)", ge=0, le=10)
+    nozzle_xyz_m: list[float] = _f([0.3164, -0.3164, -0.15, 0.3164, 0.3164, -0.15,
+                                    -0.3164, 0.3164, -0.15, -0.3164, -0.3164, -0.15],
+                                   "nozzle positions in the body frame (m), x, y, z of each "
+                                   "nozzle in turn (default: one under each M350 rotor)",
+                                   ge=-10, le=10)
+    nozzle_share: list[float] = _f([], "share of the flow of each nozzle (summing to 1); [] = "
+                                   "equal shares", ge=0, le=1)
+    dv10_um: float = _f(120.0, "droplet spectrum Dv10 (um); 120/250/420 is a medium spray "
+                        "(ASABE S572 via GRDC: 19 % of the volume below 150 um)", gt=1, le=5000)
+    dv50_um: float = _f(250.0, "volume median diameter Dv50 (um)", gt=1, le=5000)
+    dv90_um: float = _f(420.0, "droplet spectrum Dv90 (um)", gt=1, le=5000)
+    n_classes: int = _f(5, "droplet classes (equal volume) the spectrum is split into", ge=1,
+                        le=20)
+    cell_m: float = _f(0.5, "cell of the dose map (m); coarsened (doubling) if the map would "
+                       "exceed max_cells", ge=0.05, le=10)
+    buffer_m: float = _f(10.0, "the dose map covers the field plus this buffer (m); what lands "
+                         "beyond it counts as drift", ge=0, le=1000)
+    max_cells: int = _f(4_000_000, "cell limit of one vehicle's dose map (memory: ~11 bytes "
+                        "a cell)", ge=1024, le=100_000_000)
+    dose_margin_m: float = _f(0.0, "the dose CV and under-/over-dosed area are taken over the "
+                              "field this far inside its boundary (m)", ge=0, le=100)
 
 
 @dataclass
@@ -556,6 +594,21 @@ def _check_field(name: str) -> None:
                       f"{'/'.join(FIELD_FILE_SUFFIXES)} file (optionally #KEY=VALUE)")
 
 
+def _check_nozzles(sp: SprayConfig) -> None:
+    """The nozzle layout and the droplet spectrum of ``[spray]`` (rules across keys)."""
+    n = len(sp.nozzle_xyz_m)
+    if n == 0 or n % 3:
+        raise ConfigError(f"spray.nozzle_xyz_m = {_fmt(sp.nozzle_xyz_m)}: expected x, y, z of "
+                          "each nozzle in turn (a multiple of 3 numbers, at least 3)")
+    if sp.nozzle_share and (len(sp.nozzle_share) != n // 3
+                            or abs(sum(sp.nozzle_share) - 1.0) > 1e-6):
+        raise ConfigError(f"spray.nozzle_share = {_fmt(sp.nozzle_share)}: expected one share per "
+                          f"nozzle ({n // 3}) summing to 1, or [] (equal shares)")
+    if not sp.dv10_um < sp.dv50_um < sp.dv90_um:
+        raise ConfigError(f"spray.dv50_um = {sp.dv50_um}: must be between spray.dv10_um = "
+                          f"{sp.dv10_um} and spray.dv90_um = {sp.dv90_um} (Dv10 < Dv50 < Dv90)")
+
+
 def _validate(cfg: Config) -> None:
     """Checks across fields (one field's own range is :func:`_check_range`'s)."""
     _check_field(cfg.mission.field)
@@ -575,6 +628,7 @@ def _validate(cfg: Config) -> None:
         raise ConfigError(f"mission.altitude_m = {cfg.mission.altitude_m}: must be between "
                           f"spray.min_height_m = {sp.min_height_m} and spray.max_height_m = "
                           f"{sp.max_height_m} (the nozzles spray only there)")
+    _check_nozzles(sp)
     if isinstance(sp.base, str):
         if sp.base != "auto":
             raise ConfigError(f'spray.base = "{sp.base}": expected [x, y] or "auto"')

@@ -149,11 +149,19 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
         return ["spray.min_height_m", "spray.max_height_m"]
     if not lo < alt < hi:
         return ["mission.altitude_m", "spray.min_height_m", "spray.max_height_m"]
+    xyz, share = g("spray.nozzle_xyz_m"), g("spray.nozzle_share")
+    if not xyz or len(xyz) % 3:
+        return ["spray.nozzle_xyz_m"]
+    if share and (len(share) != len(xyz) // 3 or abs(sum(share) - 1.0) > 1e-6):
+        return ["spray.nozzle_share"]
+    if not g("spray.dv10_um") < g("spray.dv50_um") < g("spray.dv90_um"):
+        return ["spray.dv50_um", "spray.dv10_um", "spray.dv90_um"]
     return []
 
 
 CROSS = {"sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",
-         "mission.altitude_m"}
+         "mission.altitude_m", "spray.nozzle_xyz_m", "spray.nozzle_share", "spray.dv10_um",
+         "spray.dv50_um", "spray.dv90_um"}
 
 
 def allowed(leaf: Leaf, v: Any) -> bool:
@@ -282,7 +290,8 @@ def check_message(body: str, leaf: Leaf, v: Any) -> None:
     """The message names the key, the value (scalars) and what is allowed."""
     if leaf.key in CROSS:  # a rule across keys names them all
         broken = cross_ok({leaf.key: v}) if meta_ok(leaf.tp, leaf.meta, v) else []
-        assert all(f"{k} = " in body for k in broken) and f"{leaf.key} = " in body, body
+        assert all(f"{k} = " in body for k in broken), body
+        assert f"{leaf.key} = " in body or f"{leaf.key}[" in body, body  # [i]: a list item
     else:
         assert body.startswith((f"{leaf.key} = ", f"{leaf.key}[")), body
     assert any(w in body for w in ("expected", "must", "allowed", "appears twice",

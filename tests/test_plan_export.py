@@ -39,7 +39,9 @@ def assert_has_point(xy, p, tol=0.01):
 def test_qgc_plan_structure_and_points(planned, tmp_path, capsys):
     cfg, fld, plan = planned
     out = tmp_path / "mission.plan"
-    assert main(["plan", cfg.mission.field, "-o", str(out)]) == 0
+    # no valve delay: the commands sit on the sprayed edges (the lead has its own test)
+    assert main(["plan", cfg.mission.field, "-o", str(out), "--set",
+                 "spray.nozzle_on_delay_s=0"]) == 0
     assert "QGroundControl plan" in capsys.readouterr().out
     doc = json.loads(out.read_text())
     # QGroundControl's plan file: top level, mission, geoFence, rallyPoints
@@ -185,3 +187,43 @@ def test_write_plan_rejects_unknown_suffix(tmp_path):
     plan = plan_coverage(load_field("two-part"))
     with pytest.raises(ValueError, match="unknown plan file type '.gpx'"):
         write_plan(plan, tmp_path / "a.gpx", altitude=3.0, speed=5.0)
+
+
+def _path_s(wps) -> np.ndarray:
+    xy = np.array([(w.x, w.y) for w in wps])
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
+
+
+@pytest.mark.parametrize("lead_on, lead_off", [(0.5, 0.0), (1.3, 2.0)])
+def test_nozzle_commands_lead_the_sprayed_edges(lead_on, lead_off):
+    """Each command sits its lead (v·d) of path before the edge the plan sprays from; the path
+    itself is unchanged (the command waypoints are inserted on it)."""
+    plan = plan_coverage(load_field("two-part"))
+    base = plan_waypoints(plan)
+    led = plan_waypoints(plan, lead_on_m=lead_on, lead_off_m=lead_off)
+    s0, s1 = _path_s(base), _path_s(led)
+    assert s1[-1] == pytest.approx(s0[-1], abs=1e-6)
+    ev0 = [(w.event, s) for w, s in zip(base, s0, strict=True) if w.event]
+    ev1 = [(w.event, s) for w, s in zip(led, s1, strict=True) if w.event]
+    assert [e for e, _ in ev1] == [e for e, _ in ev0]
+    for (e, a), (_, b) in zip(ev0, ev1, strict=True):
+        want = min(lead_on if e == "spray_on" else lead_off, a)  # not before the path's start
+        assert a - b == pytest.approx(want, abs=1e-6), e
+    # the spray flag flips only at a command
+    for a, b in zip(led[:-1], led[1:], strict=True):
+        assert (a.spray != b.spray) == (b.event is not None)
+
+
+def test_plan_cli_leads_by_the_configured_delay(tmp_path):
+    out = tmp_path / "m.plan"
+    assert main(["plan", "two-part", "-o", str(out), "--set", "spray.nozzle_on_delay_s=0.2"]) == 0
+    fld = load_field("two-part")
+    cfg = ag_uav.load_config(None, {"mission.field": "two-part", "spray.nozzle_on_delay_s": 0.2})
+    tracks = build_plan(cfg, fld).spray_tracks()
+    items = json.loads(out.read_text())["mission"]["items"]
+    ons = [enu(fld, items[k - 1]["params"][5], items[k - 1]["params"][4])
+           for k, it in enumerate(items) if it["command"] == 216 and it["params"][0] == 1]
+    lead = cfg.mission.speed_mps * 0.2  # 1 m of path (a chord of a turn is at most that)
+    assert len(ons) == len(tracks)
+    for p, t in zip(ons[1:], tracks[1:], strict=True):  # the first starts the path
+        assert 0.9 * lead < np.hypot(*(p - t[0])) < lead + 1e-3  # lon/lat round trip

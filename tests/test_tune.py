@@ -54,6 +54,9 @@ def tiny(**kw) -> dict:
     ({"scenarios": [{"kind": "step"}, {"kind": "step"}]}, "duplicate"),
     ({"optimizer_options": {"c1": 2.0}}, "optimizer_options.c1"),
     ({"pop": 1}, "pop"),
+    ({"dose_weights": {"dose_rmse": 1.0}}, "dose_weights.dose_rmse"),
+    ({"dose_weights": {"dose_cv": -1.0}}, "dose_weights.dose_cv"),
+    ({"dose_weights": {"dose_cv": 1.0}, "base": {"spray.deposition": False}}, "deposition"),
 ])
 def test_spec_errors_are_one_line(patch, needle):
     with pytest.raises(ConfigError) as e:
@@ -233,3 +236,26 @@ def test_damaged_tune_files_are_one_line_or_skipped(tmp_path):
     with pytest.raises(ConfigError, match="damaged") as e:
         run_tune(spec, tmp_path, resume=True, iters=3, progress=False, outputs=False)
     assert "\n" not in str(e.value)
+
+
+def test_a_dose_cost_term_weighs_the_missions_dose_metrics(tmp_path):
+    """``[dose_weights]`` adds Σ w·m over the flown mission's dose metrics (the summary's own
+    figures); ``metric = "none"`` leaves the tracking error out."""
+    from ag_uav.engine.missions import simulate
+    from ag_uav.jobs.batch import write_rect_field
+
+    f = str(write_rect_field(tmp_path / "f.geojson", 24.0, 12.0))
+    base = {"mission.field": f, "wind.turbulence": "none", "estimator.name": "true",
+            "estimator.shadow": []}
+    sc = [{"kind": "mission", "name": "m", "max_time_s": 25.0}]
+    w = {"dose_cv": 1.0, "underdosed_fraction": 2.0, "offtarget_deposit_fraction": 3.0}
+    plain = spec_from_dict(tiny(base=base, scenarios=sc, metric="none"))
+    dosed = spec_from_dict(tiny(base=base, scenarios=sc, metric="none", dose_weights=w))
+    assert plain.hash() != dosed.hash()
+    a = evaluate_candidate({"spec": plain, "values": default_values(plain)})
+    b = evaluate_candidate({"spec": dosed, "values": default_values(dosed)})
+    cfg = load_config(None, {**base, "sim.max_time_s": 25.0, "log.enabled": False, "seed": 0})
+    s = simulate(cfg).summary
+    want = sum(v * s[k] for k, v in w.items())
+    assert a["cost"] == 0.0 and not b["crash"]
+    assert want > 0.1 and b["cost"] == pytest.approx(want, rel=1e-12)

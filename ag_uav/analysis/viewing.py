@@ -2,8 +2,9 @@
 
     show(run)            -> str          metadata, config, metrics, channels with counts and rates
     plot(run, out_dir)   -> list[Path]   map.png (field, plan, sprayed area, true and estimated
-                                         tracks, GPS fixes), errors.png, controller.png,
-                                         estimators.png
+                                         tracks, GPS fixes), dose.png (the dose on the ground,
+                                         from dose.npz beside the log or the last ``/dose``
+                                         grid), errors.png, controller.png, estimators.png
     video(run, out_mp4, camera=None) -> Path   MP4 from the logged JPEG frames (imageio-ffmpeg)
     recover(in_path, out_path) -> ScanReport   rewrite a truncated or damaged log into a
                                          finished, indexed MCAP; messages kept and lost
@@ -116,6 +117,7 @@ class RunData:
     channels: dict[str, dict[str, Any]] = field(default_factory=dict)  # topic -> info
     series: dict[str, Series] = field(default_factory=dict)  # numeric topics
     scenes: dict[str, Any] = field(default_factory=dict)  # topic -> last decoded SceneUpdate
+    grids: dict[str, Any] = field(default_factory=dict)  # topic -> last decoded foxglove.Grid
     images: dict[str, list[tuple[float, bytes]]] = field(default_factory=dict)
     t_start: float = math.nan
     t_end: float = math.nan
@@ -208,7 +210,8 @@ def read_run(run: str | Path, *, images: bool = True) -> RunData:
         t = _note(data, topic, schema, channel, rec)
         numeric = topic in _SERIES_TOPICS or topic.startswith("/estimator/")
         is_img = images and topic.startswith("/camera/") and not topic.endswith("/calibration")
-        is_scene = schema is not None and schema.name == "foxglove.SceneUpdate"
+        is_scene = schema is not None and schema.name in ("foxglove.SceneUpdate",
+                                                          "foxglove.Grid")
         if not (numeric or is_img or is_scene) or (is_scene and t < scene_t.get(topic, -1.0)):
             continue
         try:
@@ -223,7 +226,8 @@ def read_run(run: str | Path, *, images: bool = True) -> RunData:
         if is_img:
             data.images.setdefault(topic, []).append((t, bytes(msg.data)))
         elif is_scene:
-            data.scenes[topic], scene_t[topic] = msg, t
+            kept = data.grids if schema.name == "foxglove.Grid" else data.scenes
+            kept[topic], scene_t[topic] = msg, t
         else:
             rows.setdefault(topic, []).append((t, _flatten(msg)))
     if not (data.metadata or data.attachments or scan.channels):
@@ -451,6 +455,9 @@ def plot(run: str | Path | RunData, out_dir: str | Path) -> list[Path]:
         ax.legend(loc="upper right", fontsize=8, framealpha=0.85)
     ax.grid(alpha=0.3)
     paths.append(_save(fig, out / "map.png", 110))
+    dose = _dose_of(d)
+    if dose is not None:
+        paths.append(_plot_dose(dose, field_scene, summ, out / "dose.png"))
 
     # --- spray job: tank, mass, battery, power
     if spr is not None and len(spr.t):
@@ -556,6 +563,60 @@ def plot(run: str | Path | RunData, out_dir: str | Path) -> list[Path]:
         fig.suptitle("Estimator comparison (error against the true position)")
         paths.append(_save(fig, out / "estimators.png", 110))
     return paths
+
+
+def _dose_of(d: RunData) -> tuple[np.ndarray, float, float, float] | None:
+    """(L/ha (ny, nx), x0, y0, cell) of the run's dose map: ``dose.npz`` beside the log, else
+    the last ``/dose`` grid of the log; None without one."""
+    npz = d.path.parent / "dose.npz"
+    if npz.is_file():
+        try:
+            with np.load(npz) as z:
+                return (np.asarray(z["l_per_ha"], float), float(z["x0"]), float(z["y0"]),
+                        float(z["cell"]))
+        except (OSError, KeyError, ValueError):
+            pass
+    g = d.grids.get("/dose")
+    if g is None or not g.column_count:
+        return None
+    a = np.frombuffer(g.data, dtype="<f4").astype(float)
+    a = a.reshape(-1, g.column_count)
+    return a, g.pose.position.x, g.pose.position.y, g.cell_size.x
+
+
+def _plot_dose(dose: tuple[np.ndarray, float, float, float], field_scene: Any,
+               summ: dict[str, Any], path: Path) -> Path:
+    """The dose on the ground as a share of the target rate (0-200 %), the field's outline and
+    holes over it, the dose metrics in the title."""
+    import matplotlib.pyplot as plt
+
+    a, x0, y0, cell = dose
+    target = float(summ.get("config", {}).get("spray", {}).get("rate_l_per_ha", 0.0) or 0.0)
+    if target <= 0:
+        target = float(np.max(a)) / 2 or 1.0
+    fig, ax = plt.subplots(figsize=(9, 7))
+    ny, nx = a.shape
+    cmap = plt.get_cmap("RdYlBu").with_extremes(bad="white")  # below 0.5 %: (next to) none
+    im = ax.imshow(np.ma.masked_less(100.0 * a / target, 0.5), origin="lower", cmap=cmap,
+                   vmin=0.0, vmax=200.0,
+                   extent=(x0, x0 + nx * cell, y0, y0 + ny * cell), interpolation="nearest")
+    fig.colorbar(im, ax=ax, shrink=0.8, label=f"dose [% of {target:g} L/ha]")
+    if field_scene is not None:
+        for pts, _col in _scene_lines(field_scene, "field"):
+            ax.plot(pts[:, 0], pts[:, 1], color="k", lw=1.2)
+    ax.set_aspect("equal")
+    ax.set_xlabel("east x [m]")
+    ax.set_ylabel("north y [m]")
+
+    def pct(k: str) -> str:
+        v = summ.get(k)
+        return "–" if v is None else f"{100 * v:.1f} %"
+
+    ax.set_title(f"Dose on the ground: CV {pct('dose_cv')}, under-dosed "
+                 f"{pct('underdosed_fraction')}, over-dosed {pct('overdosed_fraction')}\n"
+                 "off the field "
+                 f"{pct('offtarget_deposit_fraction')} of sprayed, drift {pct('drift_fraction')}")
+    return _save(fig, path, 110)
 
 
 def _plot_off_target(ax: Any, field_scene: Any, sprayed_scene: Any,

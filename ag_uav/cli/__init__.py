@@ -85,7 +85,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
 def cmd_plan(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..engine.missions import build_field, build_plan
-    from ..world.plan_export import write_plan
+    from ..world.plan_export import nozzle_leads, write_plan
 
     if not (math.isfinite(args.simplify) and args.simplify >= 0):
         raise ConfigError(f"--simplify = {args.simplify:g}: must be a tolerance >= 0 (metres; "
@@ -107,10 +107,12 @@ def cmd_plan(args: argparse.Namespace) -> int:
     elif fld.origin is None:
         raise ConfigError(f'mission.field = "{cfg.mission.field}": a field in local metres has '
                           "no lon/lat; give --origin LAT,LON")
-    m = cfg.mission
+    m, sp = cfg.mission, cfg.spray
+    leads = nozzle_leads(m.speed_mps, sp.nozzle_on_delay_s, sp.nozzle_off_delay_s,
+                         sp.cmd_off_immediate)
     try:
         info = write_plan(plan, args.output, altitude=m.altitude_m, speed=m.speed_mps,
-                          origin=origin, simplify_m=args.simplify)
+                          origin=origin, simplify_m=args.simplify, leads=leads)
     except ValueError as e:
         raise ConfigError(f'-o = "{args.output}": {e}') from None
     items = f", {info['items']} mission items" if "items" in info else ""

@@ -4,7 +4,7 @@ One loop serves one mission and hundreds. :func:`fly` builds the stages
 (:mod:`ag_uav.engine.stages`), the physics stepper (:mod:`ag_uav.engine.physics`) and the
 observers (:mod:`ag_uav.engine.observers`), then runs every tick as the flow reads:
 
-    guard → sense → feed back → control → spray → disturb → record → observe → physics
+    guard → sense → feed back → control → spray → disturb → deposit → record → observe → physics
 
 * **guard**: state rows → pose; non-finite, tilt > 80°, bounding box and ground contacts end a
   vehicle's flight with its reason; the reference row;
@@ -14,7 +14,9 @@ observers (:mod:`ag_uav.engine.observers`), then runs every tick as the flow rea
   PCA-MCKF) or any other feedback through a per-vehicle adapter (which says so);
 * **control**: the batched cascade (IT2/T1-FPID or PID per axis, thrust vectoring, geometric
   attitude loop, X mixer); **spray**: the spray job; **disturb**: wind (mean + Dryden) as a
-  drag force, held over the control period;
+  drag force, held over the control period; **deposit**: the nozzles, droplets and the dose map
+  (:class:`~ag_uav.engine.stages.Depositing`; it only observes, the trajectory is the same
+  without it);
 * **record**: the tick's row (arrays); **observe**: logs, camera frames and tick hooks, all
   through one view of the batch;
 * **physics**: one control period of every active vehicle (``mj_step`` for one vehicle,
@@ -49,6 +51,7 @@ from .stages import (
     REC_COLUMNS,
     Batch,
     Control,
+    Depositing,
     Disturbance,
     Feedback,
     Guard,
@@ -86,6 +89,7 @@ class Flight:
     render: bool = False
     tick_hook: Callable[..., None] | None = None
     streams: dict | None = None
+    field: Any = None   # the field (ag_uav.world.field.Field): with it, the dose map
 
 
 @dataclass
@@ -104,6 +108,7 @@ class LoopOutput:
     compile_s: float = 0.0                # kernels compiled on the first tick (not in wall_loop_s)
     s0: np.ndarray | None = None          # with capture: the initial full physics state
     controls: np.ndarray | None = None    # with capture: (n, 7) rotor commands (4), force (3)
+    dose: Any = None                      # the dose map (ag_uav.world.deposition.DoseMap) or None
 
 
 # ------------------------------------------------------------------------------------ setup
@@ -262,15 +267,36 @@ def _spraying(b: Batch, flights: Sequence[Flight], vehs: Sequence[Vehicle],
     return Spraying(b, spr, control, ia), objs
 
 
+def _depositing(b: Batch, flights: Sequence[Flight], act_adr: int, n_act: int
+                ) -> Depositing | None:
+    """The dose maps of the flights that have a field and ``spray.deposition``: one
+    :class:`~ag_uav.world.deposition.DepositionBatch` per (deposition config, field bounds)."""
+    from ..world.deposition import DepositionBatch, DepositionConfig
+
+    keyed: dict[str, tuple[list[int], Any, Any]] = {}
+    for i, fl in enumerate(flights):
+        if fl.field is None or not fl.cfg.spray.deposition:
+            continue
+        dc = DepositionConfig.from_config(fl.cfg)
+        key = repr((dc, tuple(fl.field.bounds)))
+        keyed.setdefault(key, ([], dc, fl.field))[0].append(i)
+    if not keyed:
+        return None
+    groups = [(np.array(rows, dtype=np.int64), DepositionBatch(dc, fld, len(rows)))
+              for rows, dc, fld in keyed.values()]
+    return Depositing(b, groups, act_adr, n_act)
+
+
 def _observers(b: Batch, flights: Sequence[Flight], vehs: Sequence[Vehicle],
-               fbs: Sequence[Any], control: Control, sensing: Sensing) -> list[Observer]:
+               fbs: Sequence[Any], control: Control, sensing: Sensing,
+               depositing: Depositing | None = None) -> list[Observer]:
     obs: list[Observer] = []
     for i, fl in enumerate(flights):
         if fl.log is not None:
             if hasattr(fbs[i], "log"):
                 fbs[i].log = fl.log
             obs.append(LogObserver(i, fl.log, _renderer(b, i, fl, vehs[i]), fbs[i], control,
-                                   sensing))
+                                   sensing, depositing))
         if fl.tick_hook is not None:
             obs.append(HookObserver(i, fl.tick_hook))
     return obs
@@ -297,19 +323,21 @@ class _Engine:
     def __init__(self, b: Batch, guard: Guard, sensing: Sensing, feedback: Feedback,
                  control: Control, spraying: Spraying | None, disturbance: Disturbance,
                  observers: list[Observer], view: TickView, stepper: Any,
-                 sprayers: list[Any], vehicles: list[Vehicle], capture: bool = False) -> None:
+                 sprayers: list[Any], vehicles: list[Vehicle],
+                 depositing: Depositing | None = None, capture: bool = False) -> None:
         self.b, self.guard, self.sensing, self.feedback = b, guard, sensing, feedback
         self.control, self.spraying, self.disturbance = control, spraying, disturbance
         self.recorder = Recorder(b, capture)
         self.observers, self.view, self.stepper = observers, view, stepper
         self.sprayers, self.vehicles = sprayers, vehicles
+        self.depositing = depositing
         self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
         self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
         self._pre_next = -math.inf  # the earliest time a pre-physics observer is due
 
     def before_physics(self, k: int, t: float) -> bool:
-        """Guard, sense, feed back, control, spray, disturb, record, observe; False when no
-        vehicle of this lane is left to fly."""
+        """Guard, sense, feed back, control, spray, disturb, deposit, record, observe; False
+        when no vehicle of this lane is left to fly."""
         if k >= self.b.n_max or not self.guard.start(k, t):
             return False
         self.sensing.step(k)
@@ -318,6 +346,8 @@ class _Engine:
         if self.spraying is not None:
             self.spraying.step(k, t)
         self.disturbance.step()
+        if self.depositing is not None:
+            self.depositing.step()
         self.recorder.step(k)
         if self.pre_obs and t >= self._pre_next:
             self._observe(self.pre_obs, "tick", k, t)
@@ -371,13 +401,14 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
                 sp.mass_events = []
     disturbance = _disturbance(b, flights)
     feedback = Feedback(b, fbs, all(isinstance(fb, TrueFeedback) for fb in fbs))
-    observers = _observers(b, flights, vehs, fbs, control, sensing)
+    depositing = _depositing(b, flights, iq + m0.nq + m0.nv, m0.na)
+    observers = _observers(b, flights, vehs, fbs, control, sensing, depositing)
     body = vehs[0].body_id
     stepper = make_stepper([v.model for v in vehs], body, round(dt / m0.opt.timestep), b.S,
                            nthread)
     return _Engine(b, Guard(b, vehs, iq, iq + m0.nq), sensing, feedback, control, spraying,
                    disturbance, observers, TickView(b, [v.model for v in vehs], body), stepper,
-                   sprayers, vehs, capture)
+                   sprayers, vehs, depositing, capture)
 
 
 def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
@@ -455,7 +486,8 @@ def _outputs(e: _Engine, wall: float, compile_s: float) -> list[LoopOutput]:
         out = LoopOutput(t=np.arange(n) * b.dt, rec=e.recorder.of(i, n),
                          crash_reason=b.crash_reason[i], crash_time=b.crash_time[i],
                          wall_loop_s=wall, vehicle=e.vehicles[i], frames=int(frames[i]),
-                         notes=b.notes[i], sprayer=e.sprayers[i], compile_s=compile_s)
+                         notes=b.notes[i], sprayer=e.sprayers[i], compile_s=compile_s,
+                         dose=e.depositing.dose_map(i) if e.depositing is not None else None)
         if imu is not None:
             out.imu = np.ascontiguousarray(e.sensing.rec[:n, i])
             out.imu_bias0 = imu.bias0[i].copy()

@@ -251,7 +251,8 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
     if log is not None and hasattr(fb, "log"):
         fb.log = log
     flight = Flight(cfg, ref, ref.duration, outline=outline, bounds=bounds, feedback=fb,
-                    log=log, render=cfg.log.render, tick_hook=tick_hook, streams=streams)
+                    log=log, render=cfg.log.render, tick_hook=tick_hook, streams=streams,
+                    field=fld)
     return _Prepared(cfg, flight, fld, plan, ref, fb, log, wall0,
                      notice=preflight_notice(cfg, ref))
 
@@ -357,6 +358,31 @@ def model_layout(cfg: Config) -> str:
     return _LAYOUTS[key]
 
 
+#: the summary keys of the dose on the ground (names fixed by issue 18)
+DOSE_KEYS = ("dose_mean_l_per_ha", "dose_cv", "underdosed_fraction", "overdosed_fraction",
+             "offtarget_deposit_fraction", "drift_fraction")
+
+
+def dose_summary(cfg: Config, fld: Field, dose: Any, tank_l: float | None = None
+                 ) -> dict[str, Any]:
+    """The summary keys of a flight's dose map (:func:`ag_uav.world.deposition.dose_metrics`
+    over the field, ``spray.dose_margin_m`` inside it, against ``spray.rate_l_per_ha``):
+    :data:`DOSE_KEYS`, the litres that left the nozzles by the nozzle model
+    (``nozzle_sprayed_l``: valve delays, pressure lag, minimum speed) and, with the tank law's
+    litres ``tank_l`` (``litres_sprayed_l``: flow ∝ ground speed while the nozzles are
+    commanded on), the difference ``nozzle_minus_tank_l``. The tank is drawn down by the tank
+    law; what lands is the nozzle model's. Undefined values (nothing sprayed on the field) are
+    None."""
+    m = dose.metrics(fld, cfg.spray.rate_l_per_ha, cfg.spray.dose_margin_m)
+    out: dict[str, Any] = {k: (None if math.isnan(m[k]) else m[k]) for k in DOSE_KEYS}
+    out["nozzle_sprayed_l"] = m["sprayed_l"]
+    if tank_l is not None:
+        out["nozzle_minus_tank_l"] = m["sprayed_l"] - tank_l
+    out["dose_cell_m"] = dose.grid.cell
+    out["dose_mass_balance_error"] = m["mass_balance_error"]
+    return out
+
+
 def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
     """Metrics and the summary of one flown run."""
     from ..analysis import metrics
@@ -385,6 +411,9 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
         from ..analysis.metrics import add_sortie_areas
 
         add_sortie_areas(summ, res, m.swath_m)
+    if out.dose is not None:
+        summ.update(dose_summary(cfg, fld, out.dose, summ.get("litres_sprayed_l")))
+        res.extra["dose"] = out.dose
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))
@@ -419,5 +448,8 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
             foot = shapely.union_all([shapely.LineString(tr).simplify(0.1).buffer(
                 0.5 * m.swath_m, cap_style="flat") for tr in tracks])
             log.sprayed(sim_time, [foot])
+        if out.dose is not None:
+            g = out.dose.grid
+            log.dose(sim_time, g.x0, g.y0, g.cell, out.dose.l_per_ha, final=True)
         log.summary(summ)
     return res

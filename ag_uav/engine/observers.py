@@ -104,15 +104,19 @@ class _LazyData:
 
 class LogObserver(Observer):
     """Vehicle ``i``'s run log (:class:`ag_uav.record.runlog.RunLog`): the state, reference,
-    estimate, controller internals, motors, wind and spray at the log's rate, and camera
-    frames (:class:`ag_uav.record.render.Renderer`) when a frame is due."""
+    estimate, controller internals, motors, wind and spray at the log's rate (with the dose:
+    the nozzle model's valve and actual flow as ``ctrl.nozzle.*``, and the dose map on
+    ``/dose`` every few seconds), and camera frames (:class:`ag_uav.record.render.Renderer`)
+    when a frame is due."""
 
     def __init__(self, i: int, log: Any, renderer: Any, feedback: Any, control: Control,
-                 sensing: Sensing) -> None:
+                 sensing: Sensing, depositing: Any = None) -> None:
         self.i, self.log, self.renderer = i, log, renderer
         self.fb, self.control, self.sensing = feedback, control, sensing
         self.frames = 0
         self._est = feedback.name != "true"
+        self.dose = depositing.of(i) if depositing is not None else None
+        self._dose_f = _dose_factor(self.dose[0].grid) if self.dose is not None else 0
 
     def next_time(self) -> float:
         return self.log.next_due(frames=self.renderer is not None)
@@ -132,12 +136,20 @@ class LogObserver(Observer):
             row = self.sensing.row(i, view.k)
             if row is not None:
                 ctrl.update(zip(IMU_KEYS, row.tolist(), strict=True))
+            if self.dose is not None:  # the nozzle model: valve open, actual flow (L/s)
+                dep, j = self.dose
+                ctrl["nozzle.valve"] = 1.0 if dep.valve_on[j] else 0.0
+                ctrl["nozzle.flow_lps"] = float(dep.flow_lps[j])
         self.log.tick(t, p_true=tuple(b.p[i].tolist()), q_true_wxyz=tuple(b.quat[i].tolist()),
                       v_true=tuple(b.v[i].tolist()), p_ref=tuple(b.rp[i].tolist()),
                       v_ref=tuple(b.rv[i].tolist()), yaw_ref=float(b.yaw[i]),
                       p_est=tuple(b.p_fb[i].tolist()) if self._est else None,
                       v_est=tuple(b.v_fb[i].tolist()), ctrl=ctrl, motors=b.f[i].tolist(),
                       wind=tuple(b.w[i].tolist()), spray=bool(b.spray[i]))
+        if self.dose is not None and self.log.want_dose(t):
+            dep, j = self.dose
+            g, f = dep.grid, self._dose_f
+            self.log.dose(t, g.x0, g.y0, g.cell * (1 << f), dep.l_per_ha_now(j, f))
 
     def _frames(self, view: TickView) -> None:
         d, r = view.data(self.i), self.renderer
@@ -149,6 +161,16 @@ class LogObserver(Observer):
     def close(self) -> None:
         if self.renderer is not None:
             self.renderer.close()
+
+
+def _dose_factor(g: Any, cell_m: float = 1.0, max_cells: int = 250_000) -> int:
+    """Levels by which the live dose map in the log is coarser than the dose map: cells of at
+    least ``cell_m`` and at most ``max_cells`` of them (the log's cost stays small)."""
+    f = 0
+    while f < g.levels - 1 and (g.cell * (1 << f) < cell_m
+                                or (g.nx >> f) * (g.ny >> f) > max_cells):
+        f += 1
+    return f
 
 
 def frames_of(observers: Sequence[Observer], n: int) -> np.ndarray:

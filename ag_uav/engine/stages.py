@@ -4,7 +4,8 @@ A tick, in order (:func:`ag_uav.engine.loop.fly`): :class:`Guard` (state rows �
 ground checks, the reference row) → :class:`Sensing` (MEMS IMU, attitude estimate) →
 :class:`Feedback` (truth, the batched estimator bank or a per-vehicle adapter) →
 :class:`Control` (the batched cascade) → :class:`Spraying` (the spray job) →
-:class:`Disturbance` (wind and drag) → :class:`Recorder` → observers (logs, renders, hooks)
+:class:`Disturbance` (wind and drag) → :class:`Depositing` (the dose on the ground, observed
+only) → :class:`Recorder` → observers (logs, renders, hooks)
 → physics (:mod:`ag_uav.engine.physics`). The stages share one :class:`Batch` of per-vehicle
 arrays (leading axis N); each law they run is a batched kernel that never mixes rows.
 """
@@ -250,6 +251,37 @@ class Disturbance:
     def step(self) -> None:
         b = self.b
         b.w, b.xf = self.wind.step_drag(b.dt, b.p[:, 2], b.v, self.c_lin, self.c_quad, b.act)
+
+
+class Depositing:
+    """What lands on the ground (:mod:`ag_uav.world.deposition`): each vehicle's nozzles (valve
+    delays, pressure lag, minimum speed) on the spray job's nozzle command ``b.spray`` (the plan,
+    gated by the tank and the height window), the droplets carried by the downwash of the actual
+    rotor thrust (the actuator states) and the wind with its gust ``b.w``, splatted onto the
+    vehicle's dose map. It only observes: nothing it computes reaches the physics.
+
+    ``groups``: (rows, :class:`~ag_uav.world.deposition.DepositionBatch`) for the vehicles that
+    share a deposition config and a ground grid; each row is stepped by the one row function, so
+    a vehicle's dose does not depend on the batch it flies in."""
+
+    def __init__(self, b: Batch, groups: list[tuple[np.ndarray, Any]], act_adr: int,
+                 n_act: int) -> None:
+        self.b, self.groups, self.ia, self.na = b, groups, act_adr, n_act
+        self.where = {int(i): (dep, j) for rows, dep in groups for j, i in enumerate(rows)}
+
+    def step(self) -> None:
+        b = self.b
+        for rows, dep in self.groups:
+            dep.step_rows(b.dt, rows, b.p, b.v, b.R, b.S, self.ia, self.na, b.w, b.spray, b.act)
+
+    def of(self, i: int) -> tuple[Any, int] | None:
+        """(the DepositionBatch, its row) of vehicle ``i``, or None without a dose map."""
+        return self.where.get(i)
+
+    def dose_map(self, i: int) -> Any:
+        """Vehicle ``i``'s :class:`~ag_uav.world.deposition.DoseMap` (pending splats done)."""
+        hit = self.where.get(i)
+        return None if hit is None else hit[0].dose_map(hit[1])
 
 
 class Recorder:

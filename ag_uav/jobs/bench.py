@@ -442,7 +442,37 @@ def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     return out
 
 
-_EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers, _batched]
+def _deposition(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    """``deposition``: the dose on the ground's share of the loop, ``loop_share`` = (loop time
+    with ``spray.deposition`` − without) / with, for one mission and for a batch of N
+    (``loop_share_batched``). Each repeat flies with and right after it without, so a load
+    change on a shared machine hits both; the medians of the per-repeat shares, with their
+    min and max."""
+    sim_s = 20.0 if quick else 60.0
+    n = 16 if quick else 64
+    on = with_overrides(c, {"spray.deposition": True, "sim.max_time_s": sim_s})
+    off = with_overrides(on, {"spray.deposition": False})
+    batched_rate(on, 2, 1.0)  # compiled kernels loaded outside the timed loops
+
+    def share(fly: Callable[[Config], float]) -> list[float]:
+        out = []
+        for _ in range(repeats):
+            a, b = fly(on), fly(off)
+            out.append((a - b) / a)
+        return out
+
+    single = share(lambda conf: closed_loop(conf)[1])
+    batched = share(lambda conf: batched_rate(conf, n, sim_s)[1])
+    return {"deposition": {
+        "loop_share": round(statistics.median(single), 3),
+        "loop_share_spread": _spread(single),
+        "loop_share_batched": round(statistics.median(batched), 3),
+        "loop_share_batched_spread": _spread(batched),
+        "batched_vehicles": n, "mission_sim_s": sim_s, "target": 0.15}}
+
+
+_EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers, _batched,
+                                                               _deposition]
 
 
 def print_bench(out: dict[str, Any]) -> None:

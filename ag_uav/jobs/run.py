@@ -1,4 +1,5 @@
-"""One run end to end: config → run folder → (log + renderer) → simulate → summary.json."""
+"""One run end to end: config → run folder → (log + renderer) → simulate → summary.json (and
+dose.npz, the dose map on the ground)."""
 
 from __future__ import annotations
 
@@ -41,6 +42,16 @@ def write_summary(summary: dict, path: Path) -> None:
     from ..record.atomic import atomic_write_text
 
     atomic_write_text(path, summary_json(summary))
+
+
+def write_dose(dose: Any, path: Path) -> None:
+    """``dose.npz`` (:meth:`ag_uav.world.deposition.DoseMap.arrays`), written atomically."""
+    import numpy as np
+
+    from ..record.atomic import atomic_path
+
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **dose.arrays())
 
 
 class RunOutputError(OSError):
@@ -96,6 +107,8 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
             log_err = e
     res.summary["run_dir"] = str(run_dir)
     try:
+        if res.extra.get("dose") is not None:  # the dose map, for `ag-uav plot`
+            write_dose(res.extra["dose"], run_dir / "dose.npz")
         write_summary(res.summary, run_dir / "summary.json")
     except OSError as e:
         raise RunOutputError(e, res, run_dir, False) from None

@@ -15,8 +15,12 @@ numbers):
 - ``kind = "mission"``: the base config's mission, cut at ``max_time_s`` of sim time (take-off and
   the first leg(s)); error e(t) = p_ref − p_true over every tick.
 
-with ``J_s = ∫|e|² dt`` (ISE) or ``∫ (t − t0)|e| dt`` (ITAE), plus ``effort_weight · Σ|Δf|²``
-(rotor-thrust increments, N²). A crash (or a non-finite cost) costs
+with ``J_s = ∫|e|² dt`` (ISE), ``∫ (t − t0)|e| dt`` (ITAE) or 0 (``metric = "none"``), plus
+``effort_weight · Σ|Δf|²`` (rotor-thrust increments, N²) and, for mission scenarios, the dose on
+the ground: ``[dose_weights]`` (e.g. ``dose_cv = 1.0, underdosed_fraction = 2.0``) adds
+``Σ_k w_k · m_k`` over the mission's dose metrics (:data:`ag_uav.engine.missions.DOSE_KEYS`, the
+names of its summary; a metric that is undefined, nothing having landed on the field, counts
+as 1). A crash (or a non-finite cost) costs
 ``crash_penalty · (2 − t_crash / duration)`` — finite, and worse the earlier it happens — and
 every scenario cost is capped at ``crash_penalty``.
 
@@ -66,10 +70,10 @@ from .executor import Executor, SerialExecutor
 
 SPEC_KEYS = ("name", "description", "optimizer", "pop", "iters", "seed", "noise_seed", "metric",
              "crash_penalty", "effort_weight", "include_default", "base", "params", "scenarios",
-             "optimizer_options")
+             "optimizer_options", "dose_weights")
 AXES = {"x": 0, "y": 1, "z": 2}
 OPTIMIZERS = ("bbbc", "pso")
-METRICS = ("ise", "itae")
+METRICS = ("ise", "itae", "none")
 
 
 @dataclass
@@ -121,6 +125,7 @@ class TuneSpec:
     effort_weight: float = 0.0
     include_default: bool = True
     optimizer_options: dict[str, Any] = field(default_factory=dict)
+    dose_weights: dict[str, float] = field(default_factory=dict)
     description: str = ""
     source: str | None = None
 
@@ -129,6 +134,8 @@ class TuneSpec:
         d = asdict(self)
         for k in ("iters", "description", "source", "name"):
             d.pop(k)
+        if not d["dose_weights"]:  # a spec without them resumes its older checkpoints
+            d.pop("dose_weights")
         blob = json.dumps(d, sort_keys=True, default=str)
         files = referenced_files(self.base)  # a field file changed in place: another tune
         if files:
@@ -270,7 +277,26 @@ def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".", name: st
         crash_penalty=_num(data.get("crash_penalty", 1000.0), "crash_penalty", gt=0.0),
         effort_weight=_num(data.get("effort_weight", 0.0), "effort_weight", ge=0.0),
         include_default=inc, optimizer_options=dict(oo),
+        dose_weights=_dose_weights(data.get("dose_weights", {}), base_cfg),
         description=str(data.get("description", "")), source=source)
+
+
+def _dose_weights(raw: Any, base_cfg: Config) -> dict[str, float]:
+    """``[dose_weights]``: dose metric name → weight >= 0 (the base must model the dose)."""
+    from ..engine.missions import DOSE_KEYS
+
+    if not isinstance(raw, dict):
+        raise ConfigError(f"dose_weights = {_fmt(raw)}: expected a table of metric = weight")
+    out = {}
+    for k, v in raw.items():
+        if k not in DOSE_KEYS:
+            raise ConfigError(f"dose_weights.{k} = {_fmt(v)}: unknown dose metric; allowed: "
+                              f"{', '.join(DOSE_KEYS)}")
+        out[k] = _num(v, f"dose_weights.{k}", ge=0.0)
+    if out and not base_cfg.spray.deposition:
+        raise ConfigError("dose_weights: the base config has spray.deposition = false (no dose "
+                          "to weigh)")
+    return out
 
 
 def load_spec(path: str | Path) -> TuneSpec:
@@ -313,6 +339,8 @@ def _is_int_key(key: str) -> bool:
 
 
 def _error_cost(t: np.ndarray, e: np.ndarray, metric: str, t0: float, dt: float) -> float:
+    if metric == "none":
+        return 0.0
     mag2 = np.einsum("ij,ij->i", e, e)
     if metric == "ise":
         return float(np.sum(mag2) * dt)
@@ -320,13 +348,16 @@ def _error_cost(t: np.ndarray, e: np.ndarray, metric: str, t0: float, dt: float)
 
 
 def scenario_cost(cfg: Config, sc: Scenario, metric: str, crash_penalty: float,
-                  effort_weight: float, details: bool = False) -> dict[str, Any]:
+                  effort_weight: float, details: bool = False,
+                  dose_weights: dict[str, float] | None = None) -> dict[str, Any]:
     """Cost of one scenario for one config (and, with ``details``, step metrics / RMSE)."""
-    return scenario_costs([cfg], sc, metric, crash_penalty, effort_weight, details)[0]
+    return scenario_costs([cfg], sc, metric, crash_penalty, effort_weight, details,
+                          dose_weights)[0]
 
 
 def scenario_costs(cfgs: list[Config], sc: Scenario, metric: str, crash_penalty: float,
-                   effort_weight: float, details: bool = False) -> list[dict[str, Any]]:
+                   effort_weight: float, details: bool = False,
+                   dose_weights: dict[str, float] | None = None) -> list[dict[str, Any]]:
     """:func:`scenario_cost` of every config, their flights flown as one engine batch."""
     if sc.kind == "step":
         from ..engine.scenarios import step_responses
@@ -339,11 +370,11 @@ def scenario_costs(cfgs: list[Config], sc: Scenario, metric: str, crash_penalty:
             trajs.append((out.t[sel], out.rec[sel, 6:9] - out.rec[sel, 0:3], out.rec[:, 14:18],
                           out.crash_reason, out.crash_time, sc.duration, (t_rel, y)))
     else:
-        trajs = [(t, p_ref - p_true, motors, crash, crash_t, full, None)
-                 for t, p_true, p_ref, motors, crash, crash_t, full in mission_trajectories(
-                     [_mission_cfg(c, sc) for c in cfgs])]
-    return [_cost(cfgs[0], sc, tr, metric, crash_penalty, effort_weight, details)
-            for tr in trajs]
+        runs = _mission_runs([_mission_cfg(c, sc) for c in cfgs])
+        trajs = [(t, p_ref - p_true, motors, crash, crash_t, full, dose)
+                 for (t, p_true, p_ref, motors, crash, crash_t, full), dose in runs]
+    return [_cost(cfgs[0], sc, tr, metric, crash_penalty, effort_weight, details,
+                  dose_weights or {}) for tr in trajs]
 
 
 def _mission_cfg(cfg: Config, sc: Scenario) -> Config:
@@ -353,9 +384,20 @@ def _mission_cfg(cfg: Config, sc: Scenario) -> Config:
     return c
 
 
+def _dose_cost(dose: dict[str, Any] | None, weights: dict[str, float]) -> float:
+    """Σ w_k · m_k over the dose metrics (an undefined one counts as 1)."""
+    if not weights:
+        return 0.0
+    if dose is None:
+        return math.inf
+    return float(sum(w * (1.0 if dose.get(k) is None else dose[k]) for k, w in weights.items()))
+
+
 def _cost(cfg: Config, sc: Scenario, traj: tuple, metric: str, crash_penalty: float,
-          effort_weight: float, details: bool) -> dict[str, Any]:
+          effort_weight: float, details: bool,
+          dose_weights: dict[str, float] | None = None) -> dict[str, Any]:
     t, e, motors, crash, crash_t, full, step = traj
+    dose = step if sc.kind == "mission" else None
     dt = 1.0 / cfg.sim.control_hz
     info: dict[str, Any] = {}
     if sc.kind == "step":
@@ -375,6 +417,10 @@ def _cost(cfg: Config, sc: Scenario, traj: tuple, metric: str, crash_penalty: fl
                     if len(t) else None,
                     "altitude_rmse_m": float(np.sqrt(np.mean(e[:, 2] ** 2))) if len(t) else None}
     cost = _error_cost(t, e, metric, t0, dt) if len(t) else math.inf
+    if sc.kind == "mission" and dose_weights:
+        cost += _dose_cost(dose, dose_weights)
+        if details and dose is not None:
+            info.update(dose)
     if sc.kind == "step" and over > sc.overshoot_max:
         # a soft constraint: every unit fraction of overshoot beyond the bound costs this much
         cost += sc.overshoot_penalty * (over - sc.overshoot_max)
@@ -398,16 +444,26 @@ def mission_trajectory(cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray,
 
 def mission_trajectories(cfgs: list[Config]) -> list[tuple]:
     """:func:`mission_trajectory` of every config, flown as one engine batch."""
-    from ..engine.missions import fly_many, mission_setup
+    return [tr for tr, _ in _mission_runs(cfgs)]
+
+
+def _mission_runs(cfgs: list[Config]) -> list[tuple[tuple, dict[str, Any] | None]]:
+    """(:func:`mission_trajectory`'s tuple, the dose metrics or None) of every config, flown as
+    one engine batch."""
+    from ..engine.missions import DOSE_KEYS, dose_summary, fly_many, mission_setup
 
     out = []
     for cfg, o in zip(cfgs, fly_many(cfgs), strict=True):
         if isinstance(o, BaseException):
             raise o
-        ref = mission_setup(cfg)[2]
+        fld, _plan, ref = mission_setup(cfg)
         rec = o.rec
-        out.append((o.t, rec[:, 0:3], rec[:, 6:9], rec[:, 14:18], o.crash_reason,
-                    o.crash_time, min(cfg.sim.max_time_s, ref.duration)))
+        dose = None
+        if o.dose is not None:
+            d = dose_summary(cfg, fld, o.dose)
+            dose = {k: d[k] for k in DOSE_KEYS}
+        out.append(((o.t, rec[:, 0:3], rec[:, 6:9], rec[:, 14:18], o.crash_reason,
+                     o.crash_time, min(cfg.sim.max_time_s, ref.duration)), dose))
     return out
 
 
@@ -442,7 +498,8 @@ def evaluate_candidates(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
     try:
         for sc in spec.scenarios:
             rs = scenario_costs([cfgs[i] for i in live], sc, spec.metric, spec.crash_penalty,
-                                spec.effort_weight, details=details)
+                                spec.effort_weight, details=details,
+                                dose_weights=spec.dose_weights)
             for i, r in zip(live, rs, strict=True):
                 out = outs[i]
                 out["parts"][sc.name] = r

@@ -45,7 +45,8 @@ Channels (Foxglove well-known schemas where one fits; groups in brackets):
   [estimator] ``/estimator/<name>``   ag_uav.EstimatorState: x[], p_diag[], innovation[], pos,
                                       err (pos - last true position), extra{...}
   [scene]     ``/field`` (field polygon + planned path), ``/sprayed`` (sprayed area),
-              foxglove.SceneUpdate (separate topics so a seek shows both)
+              foxglove.SceneUpdate (separate topics so a seek shows both);
+              ``/dose`` foxglove.Grid: the dose on the ground (L/ha), every 5 s and at the end
   [camera]    ``/camera/<name>`` foxglove.CompressedImage (JPEG) and
               ``/camera/<name>/calibration`` foxglove.CameraCalibration
   always      metadata records ``run`` and ``versions`` (and ``summary``), attachments
@@ -109,6 +110,8 @@ PRESETS: dict[str, dict[str, float | None]] = {
 
 _NAN = float("nan")
 _INF = float("inf")
+#: sim seconds between two dose maps on ``/dose`` during a flight (and one at the end)
+DOSE_PERIOD_S = 5.0
 
 
 def ns(t: float) -> int:
@@ -1121,6 +1124,42 @@ class RunLog:
                               (0.1, 0.7, 1.0, 1.0), 1.0),
         )
         self._scene_entities(t, [ent], "/sprayed")
+
+    # ---------------------------------------------------------------- dose map
+    def want_dose(self, t: float) -> bool:
+        """Would :meth:`dose` log a map at sim time ``t``? (no side effects)"""
+        return (not self.closed and self._period["scene"] < _INF
+                and t >= getattr(self, "_next_dose", -_INF))
+
+    def dose(self, t: float, x0: float, y0: float, cell: float, l_per_ha: Any, *,
+             final: bool = False) -> None:
+        """The dose map on the ground (L/ha, (ny, nx), row j at y0 + j·cell) -> ``/dose``
+        foxglove.Grid (one float32 field ``l_per_ha``, lower-left corner at (x0, y0), 2 cm above
+        the ground), at most every :data:`DOSE_PERIOD_S` of sim time (``final``: always). Part
+        of the ``scene`` group."""
+        if self.closed or self._period["scene"] == _INF:
+            return
+        if not final and t < getattr(self, "_next_dose", -_INF):
+            return
+        self._next_dose = t + DOSE_PERIOD_S - 1e-9
+        ch = getattr(self, "_ch_dose", None)
+        if ch is None:
+            ch = self._ch_dose = self._fc.GridChannel("/dose", context=self._ctx)
+        M = self._M
+        a = np.ascontiguousarray(l_per_ha, dtype="<f4")
+        ny, nx = a.shape
+        tn = ns(t)
+        self._drain()
+        ch.log(M.Grid(
+            timestamp=self._ts(tn), frame_id="world",
+            pose=M.Pose(position=M.Vector3(x=float(x0), y=float(y0), z=0.02),
+                        orientation=M.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+            column_count=nx, cell_size=M.Vector2(x=float(cell), y=float(cell)),
+            row_stride=4 * nx, cell_stride=4,
+            fields=[M.PackedElementField(name="l_per_ha", offset=0,
+                                         type=M.PackedElementFieldNumericType.Float32)],
+            data=a.tobytes()), log_time=tn)
+        self._count("/dose")
 
     # ---------------------------------------------------------------- camera
     def frame(

@@ -168,7 +168,13 @@ class DepositionConfig:
         names = set(cls.__dataclass_fields__)
         for k, v in vars(cfg.spray).items():
             if k in names and k not in kw:
-                kw[k] = tuple(map(tuple, v)) if k == "nozzle_xyz_m" else v
+                kw[k] = tuple(v) if isinstance(v, list) else v
+        xyz = kw.get("nozzle_xyz_m")
+        if xyz is not None and xyz and not isinstance(xyz[0], tuple | list):  # flat x, y, z, ..
+            kw["nozzle_xyz_m"] = tuple(tuple(xyz[i:i + 3]) for i in range(0, len(xyz), 3))
+        if kw.get("nozzle_share") == ():  # [] in the config: equal shares
+            m = len(kw.get("nozzle_xyz_m", _M350_NOZZLES))
+            kw["nozzle_share"] = tuple([1.0 / m] * m)
         kw.update(over)
         return cls(**kw)
 
@@ -458,6 +464,60 @@ def _batch_step(par, inp, st, buf, dt: float, out, scratch) -> None:
 
 
 @njit(cache=True)
+def _engine_step(par, st, buf, inp, out, scratch, dt, rows, p, v, R, S, ia, na, w, cmd,
+                 act) -> None:
+    """The engine's rows: row j of this batch is vehicle ``rows[j]`` of the engine's arrays
+    (pos p, velocity v, R row-major, wind w, nozzle command cmd; the total thrust is the sum of
+    the ``na`` actuator states at column ``ia`` of the physics state S). Inactive vehicles are
+    not stepped (as alone, where the flight has ended)."""
+    for j in range(rows.shape[0]):
+        i = rows[j]
+        out[j] = 0.0
+        if not act[i]:
+            continue
+        r = inp[j]
+        for c in range(3):
+            r[c] = p[i, c]
+            r[3 + c] = v[i, c]
+            r[16 + c] = w[i, c]
+        for c in range(9):
+            r[6 + c] = R[i, c]
+        th = 0.0
+        for c in range(na):
+            th += S[i, ia + c]
+        r[15] = th
+        r[19] = 1.0 if cmd[i] else 0.0
+        out[j] = _row_step(par, r, st[j], buf[j], dt, scratch)
+
+
+@njit(cache=True)
+def _levels_sum(buf, offs, nx, ny, nlev, f, out) -> None:
+    """All levels of one row's buffer summed onto a grid of cells 2^f fine cells wide (``out``
+    (ny >> f, nx >> f), litres; a coarser level's litres spread evenly, mass-exact)."""
+    out[:, :] = 0.0
+    for lev in range(nlev):
+        nxl, nyl = nx >> lev, ny >> lev
+        o = int(offs[lev])
+        if lev <= f:
+            sh = f - lev
+            for j in range(nyl):
+                for i in range(nxl):
+                    out[j >> sh, i >> sh] += buf[o + j * nxl + i]
+        else:
+            sh = lev - f
+            k = 1 << sh
+            share = 1.0 / (k * k)
+            for j in range(nyl):
+                for i in range(nxl):
+                    a = buf[o + j * nxl + i]
+                    if a != 0.0:
+                        a *= share
+                        for jj in range(j * k, j * k + k):
+                            for ii in range(i * k, i * k + k):
+                                out[jj, ii] += a
+
+
+@njit(cache=True)
 def _batch_flush(par, st, buf, scratch) -> None:
     for n in range(st.shape[0]):
         if st[n, S_PENDING] > 0.0:
@@ -597,6 +657,26 @@ class DoseMap:
         """The summary metrics (names fixed by issue 18); see :func:`dose_metrics`."""
         return dose_metrics(self, fld, target_l_per_ha, margin_m)
 
+    def arrays(self) -> dict[str, Any]:
+        """What ``dose.npz`` holds (:func:`ag_uav.jobs.run.fly` writes it): ``litres`` (ny, nx),
+        ``l_per_ha``, the grid's ``x0, y0, cell`` (lower-left corner, m) and the volume
+        bookkeeping."""
+        g = self.grid
+        return {"litres": self.litres, "l_per_ha": self.l_per_ha, "x0": g.x0, "y0": g.y0,
+                "cell": g.cell, "sprayed_l": self.sprayed_l,
+                "outside_grid_l": self.outside_grid_l, "drift_l": self.drift_l}
+
+    @classmethod
+    def load(cls, path: Any) -> DoseMap:
+        """A map from ``dose.npz`` (:meth:`arrays`; one level)."""
+        with np.load(path) as z:
+            lit = np.asarray(z["litres"], float)
+            ny, nx = lit.shape
+            g = GridSpec(float(z["x0"]), float(z["y0"]), float(z["cell"]), nx, ny, 1,
+                         (0, nx * ny))
+            return cls(g, lit, float(z["sprayed_l"]), float(z["outside_grid_l"]),
+                       float(z["drift_l"]))
+
 
 def dose_metrics(dm: DoseMap, fld: Any, target: float, margin_m: float = 0.0) -> dict:
     """``dose_mean_l_per_ha`` and ``dose_cv`` over the field cells (centre in the field, holes
@@ -677,6 +757,23 @@ class DepositionBatch:
         """As :meth:`step` from a packed (N, INPUT_WIDTH) input (:func:`pack_input` layout)."""
         _batch_step(self.par, inp, self.st, self.buf, float(dt), self.out, self.scratch)
         return self.out
+
+    def step_rows(self, dt: float, rows: np.ndarray, p, v, R, S, ia: int, na: int, w, cmd,
+                  act) -> np.ndarray:
+        """One tick from the engine's per-vehicle arrays: this batch's row j is the engine's
+        vehicle ``rows[j]`` (see :func:`_engine_step`); litres per row (a view)."""
+        _engine_step(self.par, self.st, self.buf, self.inp, self.out, self.scratch, float(dt),
+                     rows, p, v, R, S, ia, na, w, cmd, act)
+        return self.out
+
+    def l_per_ha_now(self, i: int, factor: int = 0) -> np.ndarray:
+        """Row ``i``'s applied rate (L/ha) so far on cells 2^factor fine cells wide, without
+        splatting what is pending (so reading it changes nothing): for a live display."""
+        g = self.grid
+        f = max(0, min(int(factor), g.levels - 1))
+        out = np.empty((g.ny >> f, g.nx >> f))
+        _levels_sum(self.buf[i], np.asarray(g.offsets, np.int64), g.nx, g.ny, g.levels, f, out)
+        return out / ((g.cell * (1 << f)) ** 2 * 1e-4)
 
     def finish(self) -> None:
         """Splat whatever is pending (call at the end of the flight; idempotent)."""

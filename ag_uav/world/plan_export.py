@@ -5,7 +5,10 @@ extension names (``.geojson``/``.json``, ``.kml``, ``.plan``). All three carry t
 (:func:`plan_waypoints`): the plan's polyline converted to WGS-84 lon/lat about the field's
 geodetic origin (:func:`ag_uav.world.field.enu_to_lonlat`), sweep-leg ends exact, the densely
 sampled U-turn arcs and transits thinned by Douglas–Peucker to ``simplify_m`` (default 0.2 m; an
-autopilot rounds its own corners), and the points where the nozzles switch on and off.
+autopilot rounds its own corners), and the points where the nozzles are commanded on and off:
+``ag-uav plan`` puts each command ``v·d`` metres of path before the sprayed edge, d the
+configured valve delay (``spray.nozzle_on_delay_s``; ``spray.nozzle_off_delay_s`` when a command
+off is delayed too), so that the nozzles open and close where the plan sprays.
 
 Formats:
 
@@ -59,6 +62,7 @@ __all__ = [
     "plan_to_geojson",
     "plan_to_kml",
     "plan_to_qgc",
+    "nozzle_leads",
     "plan_waypoints",
     "write_plan",
 ]
@@ -117,12 +121,18 @@ def _thin(points: np.ndarray, tol: float) -> np.ndarray:
 
 
 def plan_waypoints(plan: CoveragePlan, origin: Sequence[float] | None = None,
-                   simplify_m: float = 0.2) -> list[Waypoint]:
+                   simplify_m: float = 0.2, lead_on_m: float = 0.0,
+                   lead_off_m: float = 0.0) -> list[Waypoint]:
     """The plan's waypoints in order (shared segment joints once), in local metres and lon/lat.
 
     ``origin`` = (lat, lon[, h]) overrides the field's geodetic origin (needed for a field given in
     local metres). Each segment's polyline is thinned to ``simplify_m`` (its end points are kept,
-    so every leg end and every nozzle switch is a waypoint)."""
+    so every leg end and every nozzle switch is a waypoint).
+
+    ``lead_on_m`` / ``lead_off_m``: the nozzle commands lead the sprayed edges by this much path
+    (:func:`nozzle_leads`: v·d for a valve delay d at speed v), so that the nozzles open and close
+    where the plan sprays: the command is a waypoint that many metres back along the path (not
+    before the previous switch), and ``spray`` / ``event`` are the *commands*."""
     org = _origin(plan, origin)
     segs = plan.segments
     pts: list[np.ndarray] = []
@@ -135,18 +145,63 @@ def plan_waypoints(plan: CoveragePlan, origin: Sequence[float] | None = None,
                 continue
             pts.append(q[j])
             nxt.append(k if j < len(q) - 1 else k + 1)
+    kinds = [segs[k].kind if k < len(segs) else "end" for k in nxt]
+    sprays = [bool(segs[k].spray) if k < len(segs) else False for k in nxt]
+    if lead_on_m > 0 or lead_off_m > 0:
+        _lead(pts, kinds, sprays, lead_on_m, lead_off_m)
     xy = np.asarray(pts)
     lon, lat = enu_to_lonlat(xy[:, 0], xy[:, 1], org)
     out: list[Waypoint] = []
     prev_spray = False
-    for i, k in enumerate(nxt):
-        spray = bool(segs[k].spray) if k < len(segs) else False
+    for i, spray in enumerate(sprays):
         event = ("spray_on" if spray and not prev_spray else
                  "spray_off" if prev_spray and not spray else None)
         out.append(Waypoint(float(xy[i, 0]), float(xy[i, 1]), float(lon[i]), float(lat[i]),
-                            spray, segs[k].kind if k < len(segs) else "end", event))
+                            spray, kinds[i], event))
         prev_spray = spray
     return out
+
+
+def nozzle_leads(speed_mps: float, on_delay_s: float, off_delay_s: float,
+                 cmd_off_immediate: bool = True) -> tuple[float, float]:
+    """(on, off) lead in metres of path of the nozzle commands: v·d_on, and v·d_off unless a
+    command off acts at once (ArduPilot ``AC_Sprayer::run(false)``; :mod:`ag_uav.world.
+    deposition`)."""
+    return speed_mps * on_delay_s, 0.0 if cmd_off_immediate else speed_mps * off_delay_s
+
+
+def _lead(pts: list[np.ndarray], kinds: list[str], sprays: list[bool], lead_on: float,
+          lead_off: float) -> None:
+    """Move every switch of ``sprays`` back along the polyline ``pts`` by its lead, inserting a
+    waypoint where the command falls inside a stretch (in place; last switch first)."""
+    switches = [i for i in range(len(sprays)) if sprays[i] != (sprays[i - 1] if i else False)]
+    for n in range(len(switches) - 1, -1, -1):
+        i, lo = switches[n], (switches[n - 1] if n else 0)
+        lead = lead_on if sprays[i] else lead_off
+        if lead <= 0 or i <= lo:
+            continue
+        j, rest = i, lead
+        while j > lo:
+            d = float(np.hypot(*(pts[j] - pts[j - 1])))
+            if d >= rest:
+                break
+            rest, j = rest - d, j - 1
+        if j == lo:  # less path than the lead since the previous switch: just after it
+            new = lo + 1 if n else 0
+        elif rest < 1e-6:
+            new = j
+        else:
+            d = float(np.hypot(*(pts[j] - pts[j - 1])))
+            if d - rest < 1e-6:
+                new = j - 1 if (j - 1 > lo or not n) else j
+            else:
+                q = pts[j] - (pts[j] - pts[j - 1]) * (rest / d)
+                pts.insert(j, q)
+                kinds.insert(j, kinds[j - 1])
+                sprays.insert(j, sprays[j - 1])
+                new, i = j, i + 1
+        for m in range(new, i):
+            sprays[m] = sprays[i]
 
 
 def _plan_props(plan: CoveragePlan, altitude: float, speed: float) -> dict[str, Any]:
@@ -162,7 +217,8 @@ def _ll(x: np.ndarray, y: np.ndarray, org) -> list[list[float]]:
 
 
 def plan_to_geojson(plan: CoveragePlan, *, altitude: float, speed: float,
-                    origin: Sequence[float] | None = None, simplify_m: float = 0.2) -> dict:
+                    origin: Sequence[float] | None = None, simplify_m: float = 0.2,
+                    leads: tuple[float, float] = (0.0, 0.0)) -> dict:
     """The plan as a GeoJSON FeatureCollection (see the module doc)."""
     org = _origin(plan, origin)
     polys = []
@@ -180,7 +236,7 @@ def plan_to_geojson(plan: CoveragePlan, *, altitude: float, speed: float,
                       "geometry": {"type": "LineString", "coordinates": _ll(q[:, 0], q[:, 1], org)},
                       "properties": {"role": "path", "index": k, "kind": s.kind,
                                      "spray": bool(s.spray), "altitude_m_agl": altitude}})
-    for i, w in enumerate(plan_waypoints(plan, org, simplify_m)):
+    for i, w in enumerate(plan_waypoints(plan, org, simplify_m, *leads)):
         if w.event:
             feats.append({"type": "Feature",
                           "geometry": {"type": "Point",
@@ -204,7 +260,8 @@ def _kml_coords(lonlat: Sequence[Sequence[float]], alt: float | None) -> str:
 
 
 def plan_to_kml(plan: CoveragePlan, *, altitude: float, speed: float,
-                origin: Sequence[float] | None = None, simplify_m: float = 0.2) -> str:
+                origin: Sequence[float] | None = None, simplify_m: float = 0.2,
+                leads: tuple[float, float] = (0.0, 0.0)) -> str:
     """The plan as an OGC KML 2.2 document (see the module doc)."""
     org = _origin(plan, origin)
     ET.register_namespace("", KML_NS)
@@ -251,7 +308,7 @@ def plan_to_kml(plan: CoveragePlan, *, altitude: float, speed: float,
         _kml_el(ls, "coordinates", _kml_coords(_ll(q[:, 0], q[:, 1], org), altitude))
     noz = _kml_el(doc, "Folder")
     _kml_el(noz, "name", "nozzles")
-    for i, w in enumerate(plan_waypoints(plan, org, simplify_m)):
+    for i, w in enumerate(plan_waypoints(plan, org, simplify_m, *leads)):
         if w.event:
             p = _kml_el(noz, "Placemark")
             _kml_el(p, "name", w.event.replace("_", " "))
@@ -270,10 +327,11 @@ def _item(jump_id: int, command: int, frame: int, params: list[float | None]) ->
 
 
 def plan_to_qgc(plan: CoveragePlan, *, altitude: float, speed: float,
-                origin: Sequence[float] | None = None, simplify_m: float = 0.2) -> dict:
+                origin: Sequence[float] | None = None, simplify_m: float = 0.2,
+                leads: tuple[float, float] = (0.0, 0.0)) -> dict:
     """The plan as a QGroundControl ``.plan`` document (a dict; see the module doc)."""
     org = _origin(plan, origin)
-    wps = plan_waypoints(plan, org, simplify_m)
+    wps = plan_waypoints(plan, org, simplify_m, *leads)
     items: list[dict] = []
 
     def add(command: int, frame: int, params: list[float | None]) -> None:
@@ -309,9 +367,12 @@ def plan_to_qgc(plan: CoveragePlan, *, altitude: float, speed: float,
 
 
 def write_plan(plan: CoveragePlan, path: str | Path, *, altitude: float, speed: float,
-               origin: Sequence[float] | None = None, simplify_m: float = 0.2) -> dict[str, Any]:
+               origin: Sequence[float] | None = None, simplify_m: float = 0.2,
+               leads: tuple[float, float] = (0.0, 0.0)) -> dict[str, Any]:
     """Write ``plan`` to ``path`` in the format its extension names (:data:`PLAN_SUFFIXES`).
 
+    ``leads`` = (on, off) metres of path by which the nozzle commands lead the sprayed edges
+    (:func:`nozzle_leads`; :func:`plan_waypoints`).
     Returns a summary: format, waypoints, nozzle switches, mission items (``.plan``), bytes.
     Raises ValueError for an unknown extension, a field without a geodetic origin or a
     negative ``simplify_m``; the file is written atomically (an OSError names it)."""
@@ -325,8 +386,8 @@ def write_plan(plan: CoveragePlan, path: str | Path, *, altitude: float, speed: 
     if not (math.isfinite(simplify_m) and simplify_m >= 0):
         raise ValueError(f"simplify_m ({simplify_m}) must be >= 0")
     kw = {"altitude": float(altitude), "speed": float(speed), "origin": origin,
-          "simplify_m": simplify_m}
-    wps = plan_waypoints(plan, origin, simplify_m)
+          "simplify_m": simplify_m, "leads": leads}
+    wps = plan_waypoints(plan, origin, simplify_m, *leads)
     info: dict[str, Any] = {"waypoints": len(wps),
                             "spray_switches": sum(1 for w in wps if w.event)}
     if suf == ".kml":
