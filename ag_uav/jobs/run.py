@@ -106,10 +106,10 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
         except OSError as e:
             log_err = e
     res.summary["run_dir"] = str(run_dir)
-    try:
+    try:  # the summary first: on a full disk it is the file that must not be lost
+        write_summary(res.summary, run_dir / "summary.json")
         if res.extra.get("dose") is not None:  # the dose map, for `ag-uav plot`
             write_dose(res.extra["dose"], run_dir / "dose.npz")
-        write_summary(res.summary, run_dir / "summary.json")
     except OSError as e:
         raise RunOutputError(e, res, run_dir, False) from None
     if log_err is not None:
