@@ -806,6 +806,13 @@ class BatchINS:
                      pred, self._no_g if gnss is None else np.ascontiguousarray(gnss, dtype=float),
                      self._no_r if radar is None else np.ascontiguousarray(radar, dtype=float))
 
+    def step_raw(self, imu, gnss, radar) -> None:
+        """:meth:`step` with all three inputs given as C-contiguous float64 arrays (the
+        caller's own buffers: no conversion), always predicting."""
+        _step_kernel(self.x_core, self.P, self.x_out, self._ib, self._ints, self._mq,
+                     self._dg, self._mpar, self._ipar, self._pbuf, self._pcs, self._rules,
+                     self.prm, self._popt, imu, True, gnss, radar)
+
     def predict(self, imu) -> None:
         self.step(imu)
 

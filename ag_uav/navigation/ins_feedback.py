@@ -273,6 +273,8 @@ class BatchInsFeedback:
         self.next_t = np.zeros(NV)
         self.radar_every = max(1, int(round(f0.cfg.sim.control_hz / f0.cfg.gps.radar_hz)))
         self.imu = np.zeros((NV, 6))
+        self.due = np.zeros(NV, dtype=np.bool_)
+        self.radar_on = f0.radar
         self.gnss = np.full((NV, 15), np.nan)
         self.radar = np.full((NV, 3), np.nan)
         self.p_out, self.v_out = np.zeros((NV, 3)), np.zeros((NV, 3))
@@ -291,6 +293,7 @@ class BatchInsFeedback:
         self.noise_i = np.zeros(NV, dtype=np.int64)
         self.upd_ns = 0
         self.n_upd = 0
+        self.n_calls = 0
 
     def truth_tap(self, R: np.ndarray, omega: np.ndarray) -> None:
         """The engine's true attitude (N, 9) and body rate (N, 3) arrays (written in place each
@@ -301,30 +304,35 @@ class BatchInsFeedback:
     def update(self, k: int, t: float, p: np.ndarray, v: np.ndarray, imu: tuple | None,
                act: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """One control tick of every active vehicle: sensors → INS → (p, v, R) of the flown
-        filter."""
+        filter. Per tick: one kernel for the truth ring, the IMU rows and the due fixes, the
+        receivers of the vehicles with a fix due (Python, at the fix rate), the radar (at its
+        rate), the INS (one kernel), one kernel for the outputs and the score records."""
         if imu is None:
             raise ConfigError("estimator.nav = \"ins\" needs the MEMS IMU (imu.model = "
                               "\"mems\", estimator.imu = true)")
-        R_true = self.R_true if self.R_true is not None else np.full((self.NV, 9), np.nan)
-        w_true = self.w_true if self.w_true is not None else np.full((self.NV, 3), np.nan)
-        _ring_write(self.ring, k, p, v, R_true, w_true, act, self.prm)
-        self.imu[:, :3], self.imu[:, 3:] = imu[0], imu[2]
-        self.gnss[:, 0] = np.nan
-        due = act & (t >= self.next_t - 1e-9)
-        for i in np.flatnonzero(due):
-            self._fix(int(i), k, t)
-        self._radar(k, act)
+        if self.R_true is None:   # no engine tap: the sensors that need the attitude drop out
+            self.truth_tap(np.full((self.NV, 9), np.nan), np.full((self.NV, 3), np.nan))
+        flags = _tick_in(self.ring, k, t, p, v, self.R_true, self.w_true, act, self.prm,
+                         imu[0], imu[2], self.imu, self.gnss, self.radar, self.next_t,
+                         self.init, self.due)
+        if flags & 1:
+            for i in np.flatnonzero(self.due):
+                self._fix(int(i), k, t)
+        if self.radar_on and k % self.radar_every == 0:
+            self._radar(k, act)
         if self.bank is not None:
             t0 = time.perf_counter_ns()
-            self.bank.step(self.imu, self.gnss, self.radar)
-            self.upd_ns += time.perf_counter_ns() - t0
-            self.n_upd += 1
-            fixed = np.isfinite(self.gnss[:, 0]) & self.init
+            self.bank.step_raw(self.imu, self.gnss, self.radar)
+            if self.n_calls:   # the first call may compile (or load) the kernel: not timed
+                self.upd_ns += time.perf_counter_ns() - t0
+                self.n_upd += 1
+            self.n_calls += 1
             _outputs(self.bank.x_out, self.bank.x_core, self.bank.P, self.bank.nis,
                      self.bank.core_tick, self.k0, k, self.nr, self.flown, act, self.init,
-                     fixed, p, v, R_true, self.ring, self.bias0, self.err, self.fix_k,
+                     self.gnss, p, v, self.R_true, self.ring, self.bias0, self.err, self.fix_k,
                      self.nees, self.n_fix, self.p_out, self.v_out, self.R_out)
-        self._pre_init(act)
+        if flags & 2:
+            self._pre_init(act)
         return self.p_out, self.v_out, self.R_out
 
     def _fix(self, i: int, k: int, t: float) -> None:
@@ -360,9 +368,6 @@ class BatchInsFeedback:
         self.k0[i] = k - 1   # the reset state is the tick before: this tick's step moves it on
 
     def _radar(self, k: int, act: np.ndarray) -> None:
-        self.radar[:, 0] = np.nan
-        if not self.fbs[0].radar or k % self.radar_every:
-            return
         sig = self.cfg.gps.radar_sigma_m
         for i in np.flatnonzero(act):
             j = self.noise_i[i]
@@ -381,7 +386,9 @@ class BatchInsFeedback:
                             0.0)
             quat_to_rot(q, self.R_out[i])
             h = self.radar[i, 0]
-            self.p_out[i] = (0.0, 0.0, h if np.isfinite(h) else 0.0)
+            self.p_out[i, :2] = 0.0
+            if np.isfinite(h):   # body height = slant range + the radar's offset (level)
+                self.p_out[i, 2] = h - RADAR[2]
             self.v_out[i] = 0.0
 
     def finish(self, flown: np.ndarray) -> None:
@@ -446,6 +453,28 @@ def _ring_write(ring, k, p, v, R, w, act, prm):  # pragma: no cover
         sz = p[i, 2] + R[i, 6] * rr[0] + R[i, 7] * rr[1] + R[i, 8] * rr[2]
         rho = sz / c if c > 0 else np.nan
         r[16] = rho if (c >= prm[9] and rho <= prm[10]) else np.nan
+
+
+@njit(cache=True)
+def _tick_in(ring, k, t, p, v, R, w, act, prm, f_m, om, imu, gnss, radar, next_t, init,
+             due):  # pragma: no cover
+    """The tick's truth ring row (:func:`_ring_write`), the IMU rows (f̃, ω̃), no fix and no
+    radar yet, the vehicles with a fix due; returns 1 if any fix is due | 2 if an active
+    vehicle is not initialised."""
+    _ring_write(ring, k, p, v, R, w, act, prm)
+    flags = 0
+    for i in range(act.shape[0]):
+        for a in range(3):
+            imu[i, a] = f_m[i, a]
+            imu[i, 3 + a] = om[i, a]
+        gnss[i, 0] = np.nan
+        radar[i, 0] = np.nan
+        due[i] = act[i] and t >= next_t[i] - 1e-9
+        if due[i]:
+            flags |= 1
+        if act[i] and not init[i]:
+            flags |= 2
+    return flags
 
 
 @njit(cache=True)
@@ -522,7 +551,7 @@ def _row_errors(x, p, v, Rt, Re, out):  # pragma: no cover
 
 
 @njit(cache=True)
-def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, fixed, p, v, Rt, ring, bias0,
+def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, ring, bias0,
              err, fix_k, nees, n_fix, p_out, v_out, R_out):  # pragma: no cover
     """The flown row's (p, v, R) per vehicle; per row the tick's errors (:func:`_row_errors`)
     and, at a fix, the NEES of the core's 15-state error against the truth of the core's tick
@@ -543,7 +572,7 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, fixed, p, v, Rt,
                 v_out[i, a] = x[3 + a]
             quat_to_rot(x[6:10], R_out[i])
         rec = n_fix[i]
-        at_fix = fixed[i] and rec < fix_k.shape[1]
+        at_fix = np.isfinite(gnss[i, 0]) and rec < fix_k.shape[1]
         if at_fix:
             fix_k[i, rec] = k
             n_fix[i] = rec + 1
