@@ -287,7 +287,7 @@ class EstimatorConfig:
                   "update rule, flown on its own attitude; ideal-attitude = the idealised "
                   "stand-in (position filters driven by the true attitude x a Gauss-Markov "
                   "error, fixes without latency)", choices=("ins", "ideal-attitude"))
-    ins_recovery: str = _f("none", "nav = ins, MCKF rules: lock-out recovery after 10 rejected "
+    ins_recovery: str = _f("kf", "nav = ins, MCKF rules: lock-out recovery after 10 rejected "
                            "fixes (none / inflate / kf; measured in docs/ins.md)",
                            choices=("none", "inflate", "kf"))
     bearing_filter: str = _f("mcc-ekf", "source = bearings: the filter flown on",

@@ -141,6 +141,9 @@ class InsFeedback(Feedback):
         # scoring only: the IMU's turn-on biases (the engine's IMU draws them from this stream)
         self.bias0 = ImuSensor(cfg.imu, cfg.sim.control_hz, seeds["imu"], block=1).bias0
         self.fixes = 0
+        #: forced GNSS outages (t0, t1): no position, velocity or heading inside (the radar
+        #: goes on), e.g. ``ag-uav experiment ins-nav --what outage``
+        self.outages: list[tuple[float, float]] = []
         self.log = None
         self.rec: dict[str, Any] = {}
         self.att: dict[str, float] = {}
@@ -149,7 +152,7 @@ class InsFeedback(Feedback):
         """The receiver's fix of this tick from the delayed antenna truth, as one
         :meth:`BatchINS.gnss_row` (None: no fix due, or lost)."""
         z = self.gps.measure(t, p_ant)
-        if z is None:
+        if z is None or any(a <= t < b for a, b in self.outages):
             return None
         true_type = self.gps.last_fix_type
         rep, scale = true_type, 1.0
@@ -196,6 +199,8 @@ class InsFeedback(Feedback):
             sel = (fk >= lo) & (fk < hi)
             nees = r["nees"][sel, j]
             nis = r["nis"][sel, j]
+            npos = r["nees_pos"][sel, j]
+            npos = npos[np.isfinite(npos)]
             nees = nees[np.isfinite(nees)]
             nis = nis[np.isfinite(nis)]
 
@@ -214,6 +219,7 @@ class InsFeedback(Feedback):
                 "yaw_error_rms_deg": rms(ye / DEG),
                 "nees15_mean": round(float(nees.mean()), 3) if nees.size else None,
                 "nees15_band95": _chi2_band(15, nees.size),
+                "nees_pos_mean": round(float(npos.mean()), 3) if npos.size else None,
                 "nis_mean": round(float(nis.mean()), 3) if nis.size else None,
                 "update_us": r["update_us"],
                 "updates": int(sel.sum()),
@@ -287,7 +293,7 @@ class BatchInsFeedback:
         self.err = np.full((NV, n_max, 4, nrec), np.nan)    # herr, verr, tilt, yaw
         n_fix = int(n_max * f0.gps.rate_hz * self.dt) + 4
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
-        self.nees = np.full((NV, n_fix, 2, nrec), np.nan)   # NEES15, NIS(pos)
+        self.nees = np.full((NV, n_fix, 3, nrec), np.nan)   # NEES15, NIS(pos), NEES(pos)
         self.n_fix = np.zeros(NV, dtype=np.int64)
         self.noise = [fb.radar_rng.standard_normal(4096) for fb in fbs]
         self.noise_i = np.zeros(NV, dtype=np.int64)
@@ -400,7 +406,8 @@ class BatchInsFeedback:
             fb.rec = {"herr": self.err[i, :n, 0], "verr": self.err[i, :n, 1],
                       "tilt": self.err[i, :n, 2], "yaw": self.err[i, :n, 3],
                       "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, 0],
-                      "nis": self.nees[i, :nf, 1], "update_us": us,
+                      "nis": self.nees[i, :nf, 1], "nees_pos": self.nees[i, :nf, 2],
+                      "update_us": us,
                       "counters": {key: [int(x) for x in val[i * self.nr:(i + 1) * self.nr]]
                                    for key, val in counters.items()}}
 
@@ -519,6 +526,7 @@ def _nees15(x, P, tr, bias0, q_t, dth, e):  # pragma: no cover
     """eᵀ P⁻¹ e of one row's core state against the truth ``tr`` (a ring row): e = [p, v,
     Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the turn-on biases."""
     if not np.isfinite(tr[17]):
+        e[0] = np.nan
         return np.nan
     _rot_to_quat(tr[7:16], q_t)
     quat_log_err(x[6:10], q_t, dth)
@@ -585,3 +593,6 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
                 tr = ring[i, (k0[i] + core[row]) % B]
                 nees[i, rec, 0, j] = _nees15(xc[row], P[row], tr, bias0[i], q_t, dth, e)
                 nees[i, rec, 1, j] = nis[row, 0]
+                if np.isfinite(e[0]):   # the position block alone (3 dof)
+                    y = np.linalg.solve(P[row, :3, :3], e[:3])
+                    nees[i, rec, 2, j] = e[0] * y[0] + e[1] * y[1] + e[2] * y[2]
