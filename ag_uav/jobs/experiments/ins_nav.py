@@ -96,6 +96,8 @@ def consistency(args: argparse.Namespace) -> list[dict[str, Any]]:
         rows.append({"seed": seed, **{f"{r}.nees15": s["estimators"][r]["nees15_mean"]
                                       for r in RULES},
                      **{f"{r}.nis": s["estimators"][r]["nis_mean"] for r in RULES},
+                     **{f"{r}.nees_pos": s["estimators"][r]["nees_pos_mean"] for r in RULES},
+                     **{f"{r}.rmse": s["estimators"][r]["estimate_rmse_m"] for r in RULES},
                      "band": s["estimators"]["kf"]["nees15_band95"],
                      "updates": s["estimators"]["kf"]["updates"]})
     from scipy.stats import chi2
@@ -105,7 +107,9 @@ def consistency(args: argparse.Namespace) -> list[dict[str, Any]]:
     for r in RULES:
         v = [x[f"{r}.nees15"] for x in rows]
         print(f"{r}: mean NEES15 over {len(rows)} seeds {_ci(v)} (95 % band of the mean over "
-              f"{n} updates {lo:.2f}-{hi:.2f}); NIS {_ci([x[f'{r}.nis'] for x in rows])}")
+              f"{n} updates {lo:.2f}-{hi:.2f}); NIS {_ci([x[f'{r}.nis'] for x in rows])}; "
+              f"NEES pos (3) {_ci([x[f'{r}.nees_pos'] for x in rows])}; RMSE "
+              f"{_ci([x[f'{r}.rmse'] for x in rows])}")
     return rows
 
 
