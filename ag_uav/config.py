@@ -264,7 +264,8 @@ class GpsConfig:
     false_fix_mean_s: float = _f(30.0, "receiver = honest: mean false-fix duration (s; "
                                  "exponential; judgement)", gt=0, le=3600)
     false_fix_bias_m: list[float] = _f([0.1, 0.4], "receiver = honest: false-fix 3-D bias "
-                                       "magnitude range (m, uniform; one L1 cycle is 0.19 m)",
+                                       "magnitude range (m, uniform between the two; one "
+                                       "L1 cycle is 0.19 m)",
                                        ge=0, le=10, length=2)
     accuracy_calibration_sigma: float = _f(0.3, "receiver = honest: per-episode log-normal "
                                            "error of the reported accuracy (sigma of ln; 0.3 = "
@@ -583,14 +584,10 @@ def _check_gps_rate(cfg: Config) -> None:
     g = cfg.gps
     rate = g.rate_hz or g.overrides.get("rate_hz") or gps.gps_preset(g.preset)["rate_hz"]
     if float(rate) > cfg.sim.control_hz + 1e-9:
-        raise ConfigError(f"gps rate = {_fmt(rate)} Hz (gps.rate_hz or the {g.preset} preset): "
-                          f"exceeds sim.control_hz = {cfg.sim.control_hz}; the loop takes at most "
-                          "one fix per control tick, so lower the GNSS rate or raise the control "
-                          "rate")
-    lo, hi = g.false_fix_bias_m
-    if lo > hi:
-        raise ConfigError(f"gps.false_fix_bias_m = {_fmt(g.false_fix_bias_m)}: expected "
-                          "[min, max] with min <= max")
+        raise ConfigError(f"gps.rate_hz = {_fmt(g.rate_hz)} (0 = the rate of gps.preset = "
+                          f"{_fmt(g.preset)}): a GNSS rate of {_fmt(rate)} Hz exceeds "
+                          f"sim.control_hz = {cfg.sim.control_hz}; the loop takes at most one fix "
+                          "per control tick: the GNSS rate must be <= the control rate")
 
 
 def _check_field(name: str) -> None:

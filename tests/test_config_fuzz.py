@@ -149,11 +149,16 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
         return ["spray.min_height_m", "spray.max_height_m"]
     if not lo < alt < hi:
         return ["mission.altitude_m", "spray.min_height_m", "spray.max_height_m"]
+    from ag_uav.vehicle.gps import gps_preset
+
+    rate = g("gps.rate_hz") or gps_preset(g("gps.preset"))["rate_hz"]
+    if rate > g("sim.control_hz") + 1e-9:    # a GNSS rate above the control rate (issue 19)
+        return ["gps.rate_hz", "sim.control_hz", "gps.preset"]
     return []
 
 
 CROSS = {"sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",
-         "mission.altitude_m"}
+         "mission.altitude_m", "gps.rate_hz", "gps.preset"}
 
 
 def allowed(leaf: Leaf, v: Any) -> bool:

@@ -300,6 +300,7 @@ class BatchInsFeedback:
         self.upd_ns = 0
         self.n_upd = 0
         self.n_calls = 0
+        self.logging = any(fb.log is not None for fb in fbs)
 
     def truth_tap(self, R: np.ndarray, omega: np.ndarray) -> None:
         """The engine's true attitude (N, 9) and body rate (N, 3) arrays (written in place each
@@ -339,7 +340,25 @@ class BatchInsFeedback:
                      self.nees, self.n_fix, self.p_out, self.v_out, self.R_out)
         if flags & 2:
             self._pre_init(act)
+        if self.logging and flags & 1:
+            self._log(t, p)
         return self.p_out, self.v_out, self.R_out
+
+    def _log(self, t: float, p: np.ndarray) -> None:
+        """``/estimator/<rule>`` of the vehicles that fused a fix this tick: the output state
+        (16) and the core's P diagonal (15), as the position-filter bank logs its filters."""
+        for i in np.flatnonzero(np.isfinite(self.gnss[:, 0])):
+            log = self.fbs[i].log
+            if log is None:
+                continue
+            log.set_truth(p[i])
+            for j, name in enumerate(self.names):
+                if log.want_estimator(name, t):
+                    row = i * self.nr + j
+                    x = self.bank.x_out[row].copy()
+                    xl = x.tolist()
+                    log.estimator(t, name, x, np.diagonal(self.bank.P[row]).copy(), None,
+                                  pos=(xl[0], xl[1], xl[2]))
 
     def _fix(self, i: int, k: int, t: float) -> None:
         fb = self.fbs[i]
