@@ -132,3 +132,15 @@ def test_honest_receiver_off_in_rtk_preset():
     assert fb.report is None
     fb2 = InsFeedback(_cfg(), seed_sequences(0))
     assert fb2.report is not None
+
+
+def test_true_flown_with_ins_shadows_flies_on_the_truth():
+    """estimator.name = "true": the INS rules are scored as shadows, the controller flies on
+    the true position (and the sensing stage's attitude, not an identity)."""
+    res = simulate(_cfg(estimator__name="true", sim__max_time_s=4.0))
+    s = res.summary
+    assert not s["crashed"] and list(s["estimators"]) == ["kf", "mckf", "pca-kf"]
+    # (on the skids and in the lift-off latch the horizontal part is the reference's)
+    assert np.array_equal(res.p_fb[:, 2], res.p_true[:, 2])
+    assert np.array_equal(res.p_fb[-100:], res.p_true[-100:])
+    assert s["estimators"]["kf"]["estimate_rmse_m"] < 0.1
