@@ -278,6 +278,38 @@ class GpsConfig:
     altitude_source: str = _f("radar", "height channel of each fix: a radar altimeter (as on "
                               "spray drones) or the GPS's own vertical", choices=("radar", "gps"))
     radar_sigma_m: float = _f(0.05, "radar altimeter noise std (m), white", gt=0)
+    latency_s: float = _f(0.11, "receiver latency (s): a fix delivered at t reports the state "
+                          "at t - latency_s (u-blox ZED-F9P class; PX4 EKF2_GPS_DELAY default "
+                          "110 ms). estimator.nav = ins fuses it on the delayed horizon; the "
+                          "ideal-attitude stand-in reads fixes without latency, as it always did",
+                          ge=0, le=1)
+    velocity_sigma_mps: float = _f(0.05, "estimator.nav = ins: receiver velocity noise per axis "
+                                   "(m/s, white; ZED-F9P datasheet velocity accuracy 0.05 m/s)",
+                                   gt=0, le=10)
+    heading_sigma_deg: float = _f(0.5, "estimator.nav = ins: dual-antenna heading noise (deg, "
+                                  "white; sigma_b / L for ~5 mm over a 0.6 m baseline: "
+                                  "engineering judgement)", gt=0, le=30)
+    radar_hz: float = _f(20.0, "estimator.nav = ins: radar altimeter rate (Hz; slant range over "
+                         "flat ground, dropouts beyond 30 deg tilt)", gt=0, le=1000)
+    receiver: str = _f("honest", "what the receiver reports with each fix (presets with fix "
+                       "types only, e.g. rtk-m350): honest = the reported fix type lags the "
+                       "true one, the reported accuracy carries a per-episode calibration "
+                       "error, and RTK can report fixed on wrong integers (false fixes; see "
+                       "docs/gnss.md); ideal = the true fix type and its exact variance",
+                       choices=("honest", "ideal"))
+    false_fix_per_hour: float = _f(3.0, "receiver = honest: false-fix episodes per hour of RTK "
+                                   "fixed (engineering judgement, docs/gnss.md)", ge=0, le=3600)
+    false_fix_mean_s: float = _f(30.0, "receiver = honest: mean false-fix duration (s; "
+                                 "exponential; judgement)", gt=0, le=3600)
+    false_fix_bias_m: list[float] = _f([0.1, 0.4], "receiver = honest: false-fix 3-D bias "
+                                       "magnitude range (m, uniform between the two; one "
+                                       "L1 cycle is 0.19 m)",
+                                       ge=0, le=10, length=2)
+    accuracy_calibration_sigma: float = _f(0.3, "receiver = honest: per-episode log-normal "
+                                           "error of the reported accuracy (sigma of ln; 0.3 = "
+                                           "x/÷1.35; judgement)", ge=0, le=3)
+    fix_type_report_lag_s: float = _f(1.0, "receiver = honest: the reported fix type lags the "
+                                      "true one by this (s; judgement)", ge=0, le=60)
     overrides: dict[str, Any] = _f({}, "raw overrides of the preset's keys (rate_hz, latency_s, "
                                    "axis_scale, components, outage), see ag_uav.vehicle.gps")
 
@@ -289,6 +321,14 @@ class EstimatorConfig:
                      choices=("gps", "bearings"))
     name: str = _f("pca-mckf", "what the controller flies on: true state or an estimator",
                    choices=ESTIMATORS)
+    nav: str = _f("ins", "navigation chain: ins = the error-state INS/GNSS filter (attitude, "
+                  "biases, delayed fusion; estimators.ins) with estimator.name as its GNSS "
+                  "update rule, flown on its own attitude; ideal-attitude = the idealised "
+                  "stand-in (position filters driven by the true attitude x a Gauss-Markov "
+                  "error, fixes without latency)", choices=("ins", "ideal-attitude"))
+    ins_recovery: str = _f("kf", "nav = ins, MCKF rules: lock-out recovery after 10 rejected "
+                           "fixes (none / inflate / kf; measured in docs/ins.md)",
+                           choices=("none", "inflate", "kf"))
     bearing_filter: str = _f("mcc-ekf", "source = bearings: the filter flown on",
                              choices=("mcc-ekf", "ekf", "ukf"))
     bearing_noise_scale: float = _f(0.1, "source = bearings: scale of the paper's mixture "
@@ -574,6 +614,20 @@ def _check_gps_overrides(g: GpsConfig) -> None:
         raise ConfigError(f"gps.overrides = {_fmt(g.overrides)}: {e}") from None
 
 
+def _check_gps_rate(cfg: Config) -> None:
+    """A GNSS rate above the control rate is refused: the loop asks the receiver once per
+    control tick, so fixes in between would be dropped silently (issue 19)."""
+    from .vehicle import gps
+
+    g = cfg.gps
+    rate = g.rate_hz or g.overrides.get("rate_hz") or gps.gps_preset(g.preset)["rate_hz"]
+    if float(rate) > cfg.sim.control_hz + 1e-9:
+        raise ConfigError(f"gps.rate_hz = {_fmt(g.rate_hz)} (0 = the rate of gps.preset = "
+                          f"{_fmt(g.preset)}): a GNSS rate of {_fmt(rate)} Hz exceeds "
+                          f"sim.control_hz = {cfg.sim.control_hz}; the loop takes at most one fix "
+                          "per control tick: the GNSS rate must be <= the control rate")
+
+
 def _check_field(name: str) -> None:
     """``mission.field`` names a built-in field or an existing field file (what
     :func:`ag_uav.world.field.load_field` accepts, with an optional ``#KEY=VALUE`` feature
@@ -620,6 +674,7 @@ def _validate(cfg: Config) -> None:
                           f"{s.timestep_s}: the control rate must divide the physics rate "
                           f"1/timestep_s = {1.0 / s.timestep_s:g} Hz")
     _check_gps_overrides(cfg.gps)
+    _check_gps_rate(cfg)
     sp = cfg.spray
     if sp.min_height_m >= sp.max_height_m:
         raise ConfigError(f"spray.min_height_m = {sp.min_height_m}: must be < spray.max_height_m "

@@ -773,6 +773,25 @@ class BatchINS:
         self._dg[:] = np.nan
         self._pcs[:] = 0
 
+    def reset_vehicle(self, iv: int, p, v, q, ba=None, bg=None, P0=None) -> None:
+        """:meth:`reset` of vehicle ``iv``'s rows only (the others untouched): a vehicle of a
+        batch initialised at its own first fix."""
+        nr = len(self.rules)
+        rows = slice(iv * nr, (iv + 1) * nr)
+        x = np.zeros(16)
+        x[0:3], x[3:6], x[6:10] = p, v, q
+        x[10:13] = 0.0 if ba is None else ba
+        x[13:16] = 0.0 if bg is None else bg
+        x[6:10] /= np.linalg.norm(x[6:10])
+        self.x_core[rows] = x
+        self.x_out[rows] = x
+        P0 = np.eye(15) if P0 is None else np.asarray(P0, dtype=float)
+        self.P[rows] = np.diag(P0**2) if P0.ndim == 1 else P0
+        self._ib[rows] = 0.0
+        self._ints[rows] = 0
+        self._dg[rows] = np.nan
+        self._pcs[iv] = 0
+
     # -- ticks ------------------------------------------------------------------------------
     def step(self, imu=None, gnss=None, radar=None) -> None:
         """One tick: predict with ``imu`` (NV, 6) = (f̃, ω̃) if given, then queue the fixes and
@@ -786,6 +805,13 @@ class BatchINS:
                      self._no_imu if imu is None else np.ascontiguousarray(imu, dtype=float),
                      pred, self._no_g if gnss is None else np.ascontiguousarray(gnss, dtype=float),
                      self._no_r if radar is None else np.ascontiguousarray(radar, dtype=float))
+
+    def step_raw(self, imu, gnss, radar) -> None:
+        """:meth:`step` with all three inputs given as C-contiguous float64 arrays (the
+        caller's own buffers: no conversion), always predicting."""
+        _step_kernel(self.x_core, self.P, self.x_out, self._ib, self._ints, self._mq,
+                     self._dg, self._mpar, self._ipar, self._pbuf, self._pcs, self._rules,
+                     self.prm, self._popt, imu, True, gnss, radar)
 
     def predict(self, imu) -> None:
         self.step(imu)

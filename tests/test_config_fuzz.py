@@ -144,6 +144,11 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
 
     if not _divides(g("sim.timestep_s"), g("sim.control_hz")):
         return ["sim.control_hz", "sim.timestep_s"]
+    from ag_uav.vehicle.gps import gps_preset
+
+    rate = g("gps.rate_hz") or gps_preset(g("gps.preset"))["rate_hz"]
+    if rate > g("sim.control_hz") + 1e-9:    # a GNSS rate above the control rate (issue 19)
+        return ["gps.rate_hz", "sim.control_hz", "gps.preset"]
     lo, hi, alt = g("spray.min_height_m"), g("spray.max_height_m"), g("mission.altitude_m")
     if lo >= hi:
         return ["spray.min_height_m", "spray.max_height_m"]
@@ -161,7 +166,7 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
 
 CROSS = {"sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",
          "mission.altitude_m", "spray.nozzle_xyz_m", "spray.nozzle_share", "spray.dv10_um",
-         "spray.dv50_um", "spray.dv90_um"}
+         "spray.dv50_um", "spray.dv90_um", "gps.rate_hz", "gps.preset"}
 
 
 def allowed(leaf: Leaf, v: Any) -> bool:

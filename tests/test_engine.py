@@ -34,7 +34,7 @@ def test_a_run_is_the_same_alone_and_in_batches_of_7_and_64():
             est_b = other.summary["estimators"]
             for name in est_a:
                 assert est_b[name]["estimate_rmse_m"] == est_a[name]["estimate_rmse_m"]
-                assert est_b[name]["nees_mean"] == est_a[name]["nees_mean"]
+                assert est_b[name]["nees15_mean"] == est_a[name]["nees15_mean"]
     # the batch really is a batch, and different seeds really differ
     assert seven[0].summary["batch_size"] == 7
     assert np.max(np.abs(seven[0].p_true - seven[1].p_true)) > 1e-4

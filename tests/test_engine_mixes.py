@@ -39,7 +39,7 @@ def _same_mission(a, b) -> None:
     assert sa == sb
     for name, e in a.summary.get("estimators", {}).items():
         o = b.summary["estimators"][name]
-        for k in ("estimate_rmse_m", "nees_mean", "nis_mean"):
+        for k in ("estimate_rmse_m", "nees15_mean", "nis_mean"):
             assert o.get(k) == e.get(k)
 
 

@@ -9,7 +9,9 @@ from ag_uav.seeds import seed_sequences
 
 
 def _cfg(**over):
-    base = {"sim.max_time_s": 40.0, "gps.preset": "standalone", "gps.multipath_prob": 0.05}
+    # the position-filter bank of the ideal-attitude stand-in (the INS: tests/test_ins_feedback)
+    base = {"sim.max_time_s": 40.0, "gps.preset": "standalone", "gps.multipath_prob": 0.05,
+            "estimator.nav": "ideal-attitude"}
     base.update(over)
     cfg = ag_uav.load_config(None, base)
     cfg.log.enabled = False

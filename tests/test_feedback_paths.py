@@ -19,7 +19,7 @@ from ag_uav.seeds import seed_sequences
 def _cfg(seed: int = 0, **over):
     base = {"sim.max_time_s": 12.0, "gps.preset": "standalone", "gps.multipath_prob": 0.05,
             "estimator.name": "pca-mckf", "estimator.shadow": ["kf", "mckf", "pca-kf"],
-            "seed": seed}
+            "seed": seed, "estimator.nav": "ideal-attitude"}  # the position-filter bank's paths
     base.update(over)
     cfg = ag_uav.load_config(None, base)
     cfg.log.enabled = False

@@ -38,16 +38,19 @@ def test_default_mission_flies_the_estimator_bank(default_run):
     assert s["feedback"] == "pca-mckf" and cfg.gps.preset == "rtk-m350"
     assert set(s["estimators"]) == {"kf", "mckf", "pca-kf", "pca-mckf"}
     assert [k for k, v in s["estimators"].items() if v["flown"]] == ["pca-mckf"]
+    assert s["nav"] == "ins"
     for v in s["estimators"].values():
-        # an RTK-class estimate: centimetres, and its covariance within an order of magnitude
-        # of its errors (NEES 3 = consistent; coloured RTK errors make it a few times that)
-        assert 0.003 < v["estimate_rmse_m"] < 0.05
-        assert v["estimate_max_m"] < 0.3
-        assert 1.0 < v["nees_mean"] < 30.0 and 0.5 < v["nis_mean"] < 10.0
+        # the INS (issue 19): an RTK-class estimate, centimetres, with the honest receiver's
+        # false fix of seed 0 (one episode, decimetres) in it; attitude to tenths of a degree.
+        # The NEES of the 15-state error is far above χ²(15) (docs/ins.md says why)
+        assert 0.003 < v["estimate_rmse_m"] < 0.08
+        assert v["estimate_max_m"] < 0.4
+        assert v["tilt_error_rms_deg"] < 0.5 and v["yaw_error_rms_deg"] < 0.3
+        assert v["nees15_mean"] > 15.0 and 0.5 < v["nis_mean"] < 15.0
         assert v["updates"] > 4000 and v["update_us"] > 0
     # the controller flew on the estimate, not on the truth
     d = res.p_fb[100:, :2] - res.p_true[100:, :2]
-    assert 0.002 < float(np.sqrt(np.mean(np.sum(d * d, axis=1)))) < 0.05
+    assert 0.002 < float(np.sqrt(np.mean(np.sum(d * d, axis=1)))) < 0.08
     assert res.extra["imu"] is not None and res.extra["imu"].shape == (len(res.t), 9)
 
 

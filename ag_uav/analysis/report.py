@@ -41,6 +41,10 @@ ROWS = [
     ("battery_below_reserve", "battery below reserve", "{}", ""),
     ("tank_ran_dry", "tank ran dry", "{}", ""),
     ("estimate_rmse_m", "estimate RMSE (horizontal)", "{:.3f}", "m"),
+    ("tilt_error_rms_deg", "tilt error RMS (INS, flown)", "{:.3f}", "°"),
+    ("tilt_error_max_deg", "tilt error max (INS, flown)", "{:.3f}", "°"),
+    ("yaw_error_rms_deg", "yaw error RMS (INS, flown)", "{:.3f}", "°"),
+    ("false_fix_episodes", "GNSS false-fix episodes", "{}", ""),
     ("sim_time_s", "sim time", "{:.1f}", "s"),
     ("wall_time_s", "wall time", "{:.2f}", "s"),
     ("real_time_factor", "loop speed", "{:.0f}", "× real time"),
@@ -83,7 +87,10 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
 
 def estimator_table(scores: dict[str, dict[str, Any]]) -> Table:
     """Every filter of the bank on the very same fixes: the flown one marked."""
-    t = Table(title="estimators (same fixes; * = flown)", show_header=True, header_style="bold")
+    if any("nees15_mean" in s for s in scores.values()):
+        return _ins_table(scores)
+    t = Table(title="estimators (ideal-attitude stand-in; same fixes; * = flown)",
+              show_header=True, header_style="bold")
     for col in ("filter", "RMSE (m)", "max (m)", "NEES (3 = consistent)", "NIS (3)",
                 "update (µs)"):
         t.add_column(col, justify="left" if col == "filter" else "right")
@@ -97,4 +104,31 @@ def estimator_table(scores: dict[str, dict[str, Any]]) -> Table:
                   f(s.get("estimate_max_m"), "{:.3f}"), f(s.get("nees_mean"), "{:.2f}"),
                   f(s.get("nis_mean"), "{:.2f}"),
                   f(s.get("update_us"), "{:.0f}"))
+    return t
+
+
+def _ins_table(scores: dict[str, dict[str, Any]]) -> Table:
+    """The INS bank (``estimator.nav = "ins"``): position, velocity and attitude errors and the
+    NEES of the 15-state error per GNSS update rule, all on the very same IMU samples and
+    fixes."""
+    t = Table(title="estimators (INS; same fixes; * = flown)", show_header=True,
+              header_style="bold")
+    for col in ("rule", "pos RMSE (m)", "pos max (m)", "vel RMSE (m/s)", "tilt RMS/max (°)",
+                "yaw RMS (°)", "NEES15 (band)", "NIS (3)"):
+        t.add_column(col, justify="left" if col == "rule" else "right")
+
+    def f(v: Any, fmt: str) -> str:
+        return "–" if v is None else fmt.format(v)
+
+    for name, s in scores.items():
+        label = f"[bold]{name} *[/]" if s.get("flown") else name
+        band = s.get("nees15_band95")
+        nees = f(s.get("nees15_mean"), "{:.1f}")
+        if band:
+            nees += f" ({band[0]:.1f}–{band[1]:.1f})"
+        t.add_row(label, f(s.get("estimate_rmse_m"), "{:.3f}"),
+                  f(s.get("estimate_max_m"), "{:.3f}"), f(s.get("velocity_rmse_mps"), "{:.3f}"),
+                  f"{f(s.get('tilt_error_rms_deg'), '{:.2f}')}/"
+                  f"{f(s.get('tilt_error_max_deg'), '{:.2f}')}",
+                  f(s.get("yaw_error_rms_deg"), "{:.2f}"), nees, f(s.get("nis_mean"), "{:.2f}"))
     return t

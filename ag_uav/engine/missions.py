@@ -243,10 +243,15 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
         feedback = BearingFeedback.for_config(cfg, filter=e.bearing_filter,
                                               noise_scale=e.bearing_noise_scale)
     if feedback is None and (cfg.estimator.name != "true" or cfg.estimator.shadow):
-        from ..navigation.estimation import EstimatorFeedback
-
         ss = seed_sequences(cfg.seed)
-        feedback = EstimatorFeedback(cfg, ss["gps"], ss["altimeter"], ss["imu"])
+        if cfg.estimator.nav == "ins":
+            from ..navigation.ins_feedback import InsFeedback
+
+            feedback = InsFeedback(cfg, ss)
+        else:
+            from ..navigation.estimation import EstimatorFeedback
+
+            feedback = EstimatorFeedback(cfg, ss["gps"], ss["altimeter"], ss["imu"])
     fb = feedback or TrueFeedback()
     if log is not None and hasattr(fb, "log"):
         fb.log = log
@@ -337,7 +342,8 @@ def batch_key(cfg: Config) -> tuple:
     imu = ((e.source == "bearings" or e.name != "true" or bool(e.shadow))
            and e.imu and cfg.imu.model == "mems")
     # the same filters (names, flown one first) share the batched bank
-    filters = (e.source, e.name, tuple(s for s in e.shadow if s != e.name), e.model)
+    filters = (e.source, e.name, tuple(s for s in e.shadow if s != e.name), e.model, e.nav,
+               round(cfg.gps.latency_s * cfg.sim.control_hz) if e.nav == "ins" else 0)
     return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled, filters,
             model_layout(cfg))
 
@@ -419,6 +425,7 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))
         scores = fb.scores(res.p_true, res.p_ref, mission)
         summ["estimators"] = scores
+        summ["nav"] = cfg.estimator.nav if cfg.estimator.source == "gps" else "bearings"
         if fb.name in scores:
             summ["estimate_rmse_m"] = scores[fb.name]["estimate_rmse_m"]
             summ["estimate_update_us"] = scores[fb.name]["update_us"]

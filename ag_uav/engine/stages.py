@@ -159,6 +159,9 @@ class Feedback:
         self.bank = None
         if not all_true:
             self.bank = type(self.fbs[0]).batch(self.fbs, b.n_max)
+            tap = getattr(self.bank, "truth_tap", None)
+            if tap is not None:  # the sensor models' and the scores' truth (never fed back)
+                tap(b.R, b.omega)
             notes = [getattr(fb, "batch_note", None) for fb in self.fbs]
             if self.bank is None and (len(self.fbs) > 1 or any(notes)):
                 self._say_per_vehicle()

@@ -1,0 +1,619 @@
+"""The drone navigates on the INS (issue 19, ``estimator.nav = "ins"``, the default).
+
+:class:`InsFeedback` is one run's navigation: the receiver (:class:`~ag_uav.vehicle.gps.GpsSensor`
+with its fix types, the :class:`~ag_uav.vehicle.gps.ReceiverReport` of an honest receiver, the
+receiver's velocity and dual-antenna heading, the radar altimeter) and the filter settings; the
+engine flies a whole batch of them as one :class:`BatchInsFeedback`
+(:meth:`InsFeedback.batch`), whose filters are ONE :class:`estimators.ins.BatchINS`: per vehicle
+the flown rule (``estimator.name``) and the shadows (``estimator.shadow``), all fed the very same
+IMU samples and fixes (common random numbers). It returns ``(p, v, R)``: the controller flies on
+the INS position, velocity and attitude.
+
+**What reads the truth.** Only the sensor models, as the physical sensors do: the receiver
+(position, velocity and heading at the antenna, ``latency_s`` old) and the radar (slant range)
+read the true state from a ring of the last ``D + 1`` ticks; the IMU reading comes from the
+engine's MEMS IMU (``f̃``, ``ω̃``). The filter reads only those measurements. The true attitude
+and body rate reach the bank through :meth:`BatchInsFeedback.truth_tap` (the engine hands it
+its state arrays once), for the heading/antenna sensors and for the scores; nothing read there
+is fed back but through the sensors (``tests/test_ins_feedback.py`` flies a mission with the
+truth replaced by NaN after take-off: the sensors drop out and the INS coasts).
+
+**Latency and delayed fusion.** A fix delivered at tick k reports the antenna state at tick
+``k − D``, ``D = round(gps.latency_s · control_hz)`` (the latency is rounded to whole control
+periods), tagged with its age ``D·Δt``; the INS fuses it on its delayed horizon
+(:mod:`estimators.ins`). The radar has no latency (age 0).
+
+**Initialisation on the ground** (at the vehicle's first fix with the accelerometer at rest,
+``| |f̃| − g | < 0.5 m/s²``: the first tick's reading, before the skids' contact settles, is not;
+usually the second fix, 0.1 s): position = the
+fix less the lever arm, velocity 0, roll and pitch levelled from the accelerometer sample
+(``φ = atan2(f̃_y, f̃_z)``, ``θ = atan2(−f̃_x, √(f̃_y² + f̃_z²))``), yaw from the first
+heading, biases 0; ``P0`` = the fix's variance, (0.1 m/s)², (1°)² tilt, (2°)² yaw, and the IMU's
+turn-on bias figures (``[imu]``). Before the first fix the output is the radar height, zero
+velocity and the levelled attitude (on the skids the engine holds the horizontal part at the
+reference).
+
+**R.** Position: ``max(r_scale · variance, (1 cm)²)`` of the *reported* fix type
+(``gps.r_from_fix_type``; with ``gps.receiver = "honest"`` the reported type lags and its
+accuracy carries the per-episode calibration error), else the preset's nominal variance;
+velocity ``gps.velocity_sigma_mps²``, heading ``gps.heading_sigma_deg²``, radar
+``gps.radar_sigma_m²``.
+
+**Scores** (per filter, over the mission ticks): horizontal position error RMS / max, 3-D
+velocity error RMS, tilt error (angle between the true and estimated body z axes) RMS / max,
+yaw error RMS, and the NEES of the 15-state error at every GNSS fix (the core state against the
+truth at the core's tick; bias truth = the IMU's turn-on biases, whose random walk is left out),
+with NIS of the position update.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from estimators.ins import BatchINS, INSConfig, quat_log_err
+
+from ..config import Config, ConfigError
+from ..vehicle.gps import ReceiverReport, derive_seed
+from .feedback import Feedback
+
+try:
+    from numba import njit
+except ImportError:  # pragma: no cover
+    def njit(*a, **k):
+        return a[0] if a and callable(a[0]) else (lambda f: f)
+
+R_FLOOR = 1e-4
+DEG = math.pi / 180.0
+#: IMU → GNSS antenna (body axes, m): the antenna mast above the IMU (engineering judgement for
+#: an M350-class airframe; the filter is given the same installed value, as it is calibrated)
+ANTENNA = (0.0, 0.0, 0.3)
+#: IMU → radar altimeter (body axes, m)
+RADAR = (0.0, 0.0, -0.1)
+INS_RULES = ("kf", "mckf", "pca-kf", "pca-mckf")
+
+
+def ins_config(cfg: Config) -> INSConfig:
+    """The INS's settings from the run config (IMU figures at the control rate, latency,
+    MCKF σ and recovery, PCA window)."""
+    e, im = cfg.estimator, cfg.imu
+    rec = None if e.ins_recovery == "none" else e.ins_recovery
+    return INSConfig.from_imu(
+        cfg.sim.control_hz, accel_nd_ug=im.accel_noise_density_ug,
+        gyro_nd_mdps=im.gyro_noise_density_mdps, vibration=im.vibration_sigma_mps2,
+        accel_rw=max(im.accel_bias_rw, 1e-6), gyro_rw_dps=max(im.gyro_bias_rw, 1e-6),
+        lever_arm=ANTENNA, radar_offset=RADAR, delay_s=cfg.gps.latency_s,
+        delayed=cfg.gps.latency_s > 0, sigma=e.sigma, max_iter=e.max_iter, recovery=rec,
+        pca_window=e.window, pca_mode=e.pca_mode)
+
+
+class InsFeedback(Feedback):
+    """One run's INS navigation (see the module docstring); flown through
+    :class:`BatchInsFeedback`."""
+
+    name = "ins"
+    wants_imu = True
+
+    def __init__(self, cfg: Config, seeds: dict[str, np.random.SeedSequence]) -> None:
+        from ..vehicle.imu import ImuSensor
+        from .estimation import make_gps
+
+        e, g = cfg.estimator, cfg.gps
+        self.cfg = cfg
+        self.primary = self.name = e.name
+        self.names = ([e.name] if e.name != "true" else []) + [s for s in e.shadow
+                                                               if s != e.name]
+        bad = [n for n in self.names if n not in INS_RULES]
+        if bad:
+            raise ConfigError(f"estimator.nav = \"ins\": {', '.join(bad)} is not an INS GNSS "
+                              f"update rule ({', '.join(INS_RULES)}); use estimator.nav = "
+                              "\"ideal-attitude\" for it")
+        if cfg.imu.model != "mems" or not e.imu:
+            raise ConfigError("estimator.nav = \"ins\" needs the MEMS IMU (imu.model = "
+                              "\"mems\", estimator.imu = true); use estimator.nav = "
+                              "\"ideal-attitude\" otherwise")
+        self.gps = make_gps(cfg, seeds["gps"])
+        self.gps.latency_s = 0.0     # the latency is applied from the truth ring (exact ticks)
+        self.dt = 1.0 / cfg.sim.control_hz
+        self.D = int(round(g.latency_s / self.dt))
+        spare = seeds["spare4"]
+        self.report = None
+        if g.receiver == "honest" and self.gps.fix_types:
+            self.report = ReceiverReport(
+                self.gps.rate_hz, derive_seed(spare, "receiver"),
+                per_hour=g.false_fix_per_hour, mean_s=g.false_fix_mean_s,
+                bias_m=g.false_fix_bias_m, calibration_sigma=g.accuracy_calibration_sigma,
+                report_lag_s=g.fix_type_report_lag_s)
+        self.aux_rng = np.random.default_rng(derive_seed(spare, "gnss_aux"))
+        self.radar = g.altitude_source == "radar"
+        self.radar_rng = np.random.default_rng(seeds["altimeter"])
+        var = np.asarray(self.gps.variance, dtype=float).reshape(-1)
+        var = np.where(np.isfinite(var), var, 1.0)
+        self.var_nominal = np.maximum(e.r_scale * np.broadcast_to(var, (3,)), R_FLOOR)
+        self.var_by_type = {m: np.maximum(e.r_scale * np.asarray(self.gps.mode_variance(m)),
+                                          R_FLOOR)
+                            for m in self.gps.fix_types} if g.r_from_fix_type else {}
+        self.var_v = g.velocity_sigma_mps**2
+        self.var_yaw = (g.heading_sigma_deg * DEG) ** 2
+        # scoring only: the IMU's turn-on biases (the engine's IMU draws them from this stream)
+        self.bias0 = ImuSensor(cfg.imu, cfg.sim.control_hz, seeds["imu"], block=1).bias0
+        self.fixes = 0
+        #: forced GNSS outages (t0, t1): no position, velocity or heading inside (the radar
+        #: goes on), e.g. ``ag-uav experiment ins-nav --what outage``
+        self.outages: list[tuple[float, float]] = []
+        self.log = None
+        self.rec: dict[str, Any] = {}
+        self.att: dict[str, float] = {}
+
+    def fix(self, t: float, p_ant, v_ant, yaw) -> np.ndarray | None:
+        """The receiver's fix of this tick from the delayed antenna truth, as one
+        :meth:`BatchINS.gnss_row` (None: no fix due, or lost)."""
+        z = self.gps.measure(t, p_ant)
+        if z is None or any(a <= t < b for a, b in self.outages):
+            return None
+        true_type = self.gps.last_fix_type
+        rep, scale = true_type, 1.0
+        if self.report is not None:
+            bias, rep, scale = self.report.step(true_type)
+            z = z + bias
+        var_p = self.var_by_type.get(rep, self.var_nominal) * scale * scale
+        n = self.aux_rng.standard_normal(4)
+        vel = np.asarray(v_ant) + self.cfg.gps.velocity_sigma_mps * n[:3]
+        psi = yaw + self.cfg.gps.heading_sigma_deg * DEG * n[3]
+        self.fixes += 1
+        if self.log is not None:
+            self.log.gps(t, z)
+        return BatchINS.gnss_row(z, vel, psi, var_p, (self.var_v,) * 3, self.var_yaw,
+                                 age_s=self.D * self.dt)
+
+    def update(self, t, p_true, v_true, imu=None):
+        raise NotImplementedError("InsFeedback flies through the engine's batch "
+                                  "(InsFeedback.batch); it has no per-vehicle path")
+
+    @classmethod
+    def batch(cls, feedbacks: list[Any], n_max: int) -> BatchInsFeedback:
+        kinds = {type(fb) for fb in feedbacks}
+        f0 = feedbacks[0]
+        if kinds != {InsFeedback} or any(fb.names != f0.names or fb.D != f0.D
+                                         for fb in feedbacks):
+            raise ValueError("BatchInsFeedback: the vehicles' INS banks differ (filters or "
+                             "latency); batch_key keeps such runs apart")
+        return BatchInsFeedback(feedbacks, n_max)
+
+    # -- scores ----------------------------------------------------------------------------
+    def scores(self, p_true: np.ndarray, p_ref: np.ndarray, mission: slice) -> dict[str, Any]:
+        """Per filter over the ``mission`` ticks (module docstring); the flown filter's attitude
+        figures also go into the summary (:meth:`summary`)."""
+        out: dict[str, Any] = {}
+        r = self.rec
+        n = len(p_true)
+        lo, hi, _ = mission.indices(n)
+        for j, name in enumerate(self.names):
+            he, ve = r["herr"][lo:hi, j], r["verr"][lo:hi, j]
+            te, ye = r["tilt"][lo:hi, j], r["yaw"][lo:hi, j]
+            ok = np.isfinite(he)
+            fk = r["fix_k"]
+            sel = (fk >= lo) & (fk < hi)
+            nees = r["nees"][sel, j]
+            nis = r["nis"][sel, j]
+            npos = r["nees_pos"][sel, j]
+            npos = npos[np.isfinite(npos)]
+            nees = nees[np.isfinite(nees)]
+            nis = nis[np.isfinite(nis)]
+
+            def rms(a: np.ndarray) -> float | None:
+                a = a[np.isfinite(a)]
+                return round(float(np.sqrt(np.mean(a * a))), 4) if a.size else None
+
+            def mx(a: np.ndarray) -> float | None:
+                a = a[np.isfinite(a)]
+                return round(float(a.max()), 4) if a.size else None
+
+            out[name] = {
+                "estimate_rmse_m": rms(he), "estimate_max_m": mx(he),
+                "velocity_rmse_mps": rms(ve),
+                "tilt_error_rms_deg": rms(te / DEG), "tilt_error_max_deg": mx(te / DEG),
+                "yaw_error_rms_deg": rms(ye / DEG),
+                "nees15_mean": round(float(nees.mean()), 3) if nees.size else None,
+                "nees15_band95": _chi2_band(15, nees.size),
+                "nees_pos_mean": round(float(npos.mean()), 3) if npos.size else None,
+                "nis_mean": round(float(nis.mean()), 3) if nis.size else None,
+                "update_us": r["update_us"],
+                "updates": int(sel.sum()),
+                "ticks": int(ok.sum()),
+                "flown": name == self.primary,
+            }
+            if name == self.primary:
+                self.att = {k: out[name][k] for k in ("tilt_error_rms_deg", "tilt_error_max_deg",
+                                                      "yaw_error_rms_deg")}
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        counts = self.gps.fix_type_counts
+        s: dict[str, Any] = {
+            "nav": "ins", "gps_preset": self.cfg.gps.preset, "gps_fixes": self.fixes,
+            "gps_fix_types": dict(counts) if counts else None, "gps_rate_hz": self.gps.rate_hz,
+            "gps_latency_s": round(self.D * self.dt, 4),
+            "ins_counters": self.rec.get("counters"),
+            **self.att}
+        if self.report is not None:
+            s["false_fix_episodes"] = self.report.n_false
+            s["false_fix_fixes"] = self.report.false_fixes
+        return s
+
+
+def _chi2_band(dof: int, n: int) -> list[float] | None:
+    """The 95 % two-sided band of the mean of ``n`` independent χ²(dof) values."""
+    if n <= 0:
+        return None
+    from scipy.stats import chi2
+
+    return [round(float(chi2.ppf(0.025, dof * n) / n), 3),
+            round(float(chi2.ppf(0.975, dof * n) / n), 3)]
+
+
+class BatchInsFeedback:
+    """The INS feedbacks of an engine batch: one :class:`estimators.ins.BatchINS` (rows =
+    vehicles × rules), the receivers per vehicle (Python, at the fix rate), the truth ring and
+    the score records (numba kernels, one call each per tick)."""
+
+    def __init__(self, fbs: list[InsFeedback], n_max: int) -> None:
+        self.fbs = fbs
+        f0 = fbs[0]
+        self.NV = NV = len(fbs)
+        self.names = list(f0.names)
+        self.nr = nr = len(self.names)
+        self.flown = self.names.index(f0.primary) if f0.primary in self.names else -1
+        self.cfg = f0.cfg
+        self.icfg = ins_config(f0.cfg)
+        self.bank = BatchINS(NV, self.icfg, self.names) if nr else None
+        self.D, self.dt = f0.D, f0.dt
+        self.ring = np.full((NV, self.D + 1, _RW), np.nan)
+        self.R_true: np.ndarray | None = None
+        self.w_true: np.ndarray | None = None
+        self.init = np.zeros(NV, dtype=np.bool_)
+        self.k0 = np.zeros(NV, dtype=np.int64)
+        self.next_t = np.zeros(NV)
+        self.radar_every = max(1, int(round(f0.cfg.sim.control_hz / f0.cfg.gps.radar_hz)))
+        self.imu = np.zeros((NV, 6))
+        self.due = np.zeros(NV, dtype=np.bool_)
+        self.radar_on = f0.radar
+        self.gnss = np.full((NV, 15), np.nan)
+        self.radar = np.full((NV, 3), np.nan)
+        self.p_out, self.v_out = np.zeros((NV, 3)), np.zeros((NV, 3))
+        self.R_out = np.tile(np.eye(3).ravel(), (NV, 1))
+        self.bias0 = np.stack([fb.bias0 for fb in fbs])
+        self.prm = np.array([*ANTENNA, *RADAR, *self.icfg.heading_baseline,
+                             math.cos(self.icfg.radar_max_tilt_deg * DEG),
+                             self.icfg.radar_max_range])
+        nrec = max(nr, 1)
+        self.err = np.full((NV, n_max, 4, nrec), np.nan)    # herr, verr, tilt, yaw
+        n_fix = int(n_max * f0.gps.rate_hz * self.dt) + 4
+        self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
+        self.nees = np.full((NV, n_fix, 3, nrec), np.nan)   # NEES15, NIS(pos), NEES(pos)
+        self.n_fix = np.zeros(NV, dtype=np.int64)
+        self.noise = [fb.radar_rng.standard_normal(4096) for fb in fbs]
+        self.noise_i = np.zeros(NV, dtype=np.int64)
+        self.upd_ns = 0
+        self.n_upd = 0
+        self.n_calls = 0
+        self.logging = any(fb.log is not None for fb in fbs)
+
+    def truth_tap(self, R: np.ndarray, omega: np.ndarray) -> None:
+        """The engine's true attitude (N, 9) and body rate (N, 3) arrays (written in place each
+        tick): read by the sensor models (heading, antenna velocity, slant range) and the
+        scores only."""
+        self.R_true, self.w_true = R, omega
+
+    def update(self, k: int, t: float, p: np.ndarray, v: np.ndarray, imu: tuple | None,
+               act: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """One control tick of every active vehicle: sensors → INS → (p, v, R) of the flown
+        filter. Per tick: one kernel for the truth ring, the IMU rows and the due fixes, the
+        receivers of the vehicles with a fix due (Python, at the fix rate), the radar (at its
+        rate), the INS (one kernel), one kernel for the outputs and the score records."""
+        if imu is None:
+            raise ConfigError("estimator.nav = \"ins\" needs the MEMS IMU (imu.model = "
+                              "\"mems\", estimator.imu = true)")
+        if self.R_true is None:   # no engine tap: the sensors that need the attitude drop out
+            self.truth_tap(np.full((self.NV, 9), np.nan), np.full((self.NV, 3), np.nan))
+        flags = _tick_in(self.ring, k, t, p, v, self.R_true, self.w_true, act, self.prm,
+                         imu[0], imu[2], self.imu, self.gnss, self.radar, self.next_t,
+                         self.init, self.due)
+        if flags & 1:
+            for i in np.flatnonzero(self.due):
+                self._fix(int(i), k, t)
+        if self.radar_on and k % self.radar_every == 0:
+            self._radar(k, act)
+        if self.bank is not None:
+            t0 = time.perf_counter_ns()
+            self.bank.step_raw(self.imu, self.gnss, self.radar)
+            if self.n_calls:   # the first call may compile (or load) the kernel: not timed
+                self.upd_ns += time.perf_counter_ns() - t0
+                self.n_upd += 1
+            self.n_calls += 1
+            _outputs(self.bank.x_out, self.bank.x_core, self.bank.P, self.bank.nis,
+                     self.bank.core_tick, self.k0, k, self.nr, self.flown, act, self.init,
+                     self.gnss, p, v, self.R_true, self.ring, self.bias0, self.err, self.fix_k,
+                     self.nees, self.n_fix, self.p_out, self.v_out, self.R_out)
+        if flags & 2:
+            self._pre_init(act)
+        if self.logging and flags & 1:
+            self._log(t, p)
+        if self.flown < 0:   # estimator.name = "true": the controller flies on the truth
+            return p, v
+        return self.p_out, self.v_out, self.R_out
+
+    def _log(self, t: float, p: np.ndarray) -> None:
+        """``/estimator/<rule>`` of the vehicles that fused a fix this tick: the output state
+        (16) and the core's P diagonal (15), as the position-filter bank logs its filters."""
+        for i in np.flatnonzero(np.isfinite(self.gnss[:, 0])):
+            log = self.fbs[i].log
+            if log is None:
+                continue
+            log.set_truth(p[i])
+            for j, name in enumerate(self.names):
+                if log.want_estimator(name, t):
+                    row = i * self.nr + j
+                    x = self.bank.x_out[row].copy()
+                    xl = x.tolist()
+                    log.estimator(t, name, x, np.diagonal(self.bank.P[row]).copy(), None,
+                                  pos=(xl[0], xl[1], xl[2]))
+
+    def _fix(self, i: int, k: int, t: float) -> None:
+        fb = self.fbs[i]
+        r = self.ring[i, max(k - self.D, 0) % (self.D + 1)]
+        if not np.isfinite(r[0]):   # before D ticks of history: the oldest there is
+            r = self.ring[i, 0]
+        row = fb.fix(t, r[0:3], r[3:6], float(r[6]))
+        self.next_t[i] = fb.gps._next_k * fb.gps.dt
+        if row is None or not np.all(np.isfinite(row[1:4])):
+            return
+        if not self.init[i]:
+            if abs(float(np.linalg.norm(self.imu[i, :3])) - 9.81) < 0.5:  # at rest: levels
+                self._initialise(i, k, row)
+            return
+        self.gnss[i] = row
+
+    def _initialise(self, i: int, k: int, row: np.ndarray) -> None:
+        """On the ground at the first fix (module docstring)."""
+        f = self.imu[i, :3]
+        roll = math.atan2(f[1], f[2])
+        pitch = math.atan2(-f[0], math.hypot(f[1], f[2]))
+        q = _euler_quat(roll, pitch, float(row[7]))
+        Rm = np.empty(9)
+        quat_to_rot(q, Rm)
+        p = row[1:4] - Rm.reshape(3, 3) @ np.asarray(ANTENNA)
+        im = self.cfg.imu
+        sd = np.r_[np.sqrt(row[8:11]), [0.1] * 3, [DEG, DEG, 2 * DEG],
+                   [max(im.accel_bias_mg * 1e-3 * 9.81, 1e-3)] * 3,
+                   [max(im.gyro_bias_dps, 1e-3) * DEG] * 3]
+        self.bank.reset_vehicle(i, p, np.zeros(3), q, P0=sd)
+        self.init[i] = True
+        self.k0[i] = k - 1   # the reset state is the tick before: this tick's step moves it on
+
+    def _radar(self, k: int, act: np.ndarray) -> None:
+        sig = self.cfg.gps.radar_sigma_m
+        for i in np.flatnonzero(act):
+            j = self.noise_i[i]
+            if j >= len(self.noise[i]):
+                self.noise[i] = self.fbs[i].radar_rng.standard_normal(4096)
+                j = 0
+            self.noise_i[i] = j + 1
+            rng = self.ring[i, k % (self.D + 1), 16]
+            self.radar[i] = (rng + sig * self.noise[i][j], sig * sig, 0.0)
+
+    def _pre_init(self, act: np.ndarray) -> None:
+        """Vehicles without a fix yet: radar height, zero velocity, levelled attitude."""
+        for i in np.flatnonzero(act & ~self.init):
+            f = self.imu[i, :3]
+            q = _euler_quat(math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2])),
+                            0.0)
+            quat_to_rot(q, self.R_out[i])
+            h = self.radar[i, 0]
+            self.p_out[i, :2] = 0.0
+            if np.isfinite(h):   # body height = slant range + the radar's offset (level)
+                self.p_out[i, 2] = h - RADAR[2]
+            self.v_out[i] = 0.0
+
+    def finish(self, flown: np.ndarray) -> None:
+        """The records back into the per-run feedbacks (for their ``scores``/``summary``)."""
+        us = round(self.upd_ns / max(self.n_upd, 1) / 1e3 / self.NV, 2)
+        counters = self.bank.counters if self.bank is not None else {}
+        for i, fb in enumerate(self.fbs):
+            n, nf = int(flown[i]), int(self.n_fix[i])
+            fb.rec = {"herr": self.err[i, :n, 0], "verr": self.err[i, :n, 1],
+                      "tilt": self.err[i, :n, 2], "yaw": self.err[i, :n, 3],
+                      "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, 0],
+                      "nis": self.nees[i, :nf, 1], "nees_pos": self.nees[i, :nf, 2],
+                      "update_us": us,
+                      "counters": {key: [int(x) for x in val[i * self.nr:(i + 1) * self.nr]]
+                                   for key, val in counters.items()}}
+
+
+def _euler_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """ZYX Euler angles → Hamilton (w, x, y, z), body → world."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
+
+
+# ------------------------------------------------------------------------------- kernels
+#: ring layout per tick: antenna position, antenna velocity, heading, R, slant range, p, v
+_RW = 23
+
+
+@njit(cache=True)
+def _ring_write(ring, k, p, v, R, w, act, prm):  # pragma: no cover
+    """Tick k's sensor truth per vehicle (row ``k % B``): the antenna position p + R r_ant
+    (0:3), the antenna velocity v + R(ω × r_ant) (3:6), the dual-antenna heading
+    ψ = atan2(b_y, b_x) − atan2(r_b,y, r_b,x) with b = R r_b (6), R (7:16), the radar's slant
+    range ρ = s_z / R₂₂ with s = p + R r_rad over the ground z = 0 (16; NaN beyond the radar's
+    cone or range), p (17:20), v (20:23)."""
+    B = ring.shape[1]
+    ra = prm[0:3]
+    rr = prm[3:6]
+    rb = prm[6:9]
+    for i in range(p.shape[0]):
+        if not act[i]:
+            continue
+        r = ring[i, k % B]
+        wx = w[i, 1] * ra[2] - w[i, 2] * ra[1]
+        wy = w[i, 2] * ra[0] - w[i, 0] * ra[2]
+        wz = w[i, 0] * ra[1] - w[i, 1] * ra[0]
+        for a in range(3):
+            R0, R1, R2 = R[i, 3 * a], R[i, 3 * a + 1], R[i, 3 * a + 2]
+            r[a] = p[i, a] + R0 * ra[0] + R1 * ra[1] + R2 * ra[2]
+            r[3 + a] = v[i, a] + R0 * wx + R1 * wy + R2 * wz
+            r[17 + a] = p[i, a]
+            r[20 + a] = v[i, a]
+        bx = R[i, 0] * rb[0] + R[i, 1] * rb[1] + R[i, 2] * rb[2]
+        by = R[i, 3] * rb[0] + R[i, 4] * rb[1] + R[i, 5] * rb[2]
+        psi = math.atan2(by, bx) - math.atan2(rb[1], rb[0])
+        r[6] = math.atan2(math.sin(psi), math.cos(psi))
+        for j in range(9):
+            r[7 + j] = R[i, j]
+        c = R[i, 8]
+        sz = p[i, 2] + R[i, 6] * rr[0] + R[i, 7] * rr[1] + R[i, 8] * rr[2]
+        rho = sz / c if c > 0 else np.nan
+        r[16] = rho if (c >= prm[9] and rho <= prm[10]) else np.nan
+
+
+@njit(cache=True)
+def _tick_in(ring, k, t, p, v, R, w, act, prm, f_m, om, imu, gnss, radar, next_t, init,
+             due):  # pragma: no cover
+    """The tick's truth ring row (:func:`_ring_write`), the IMU rows (f̃, ω̃), no fix and no
+    radar yet, the vehicles with a fix due; returns 1 if any fix is due | 2 if an active
+    vehicle is not initialised."""
+    _ring_write(ring, k, p, v, R, w, act, prm)
+    flags = 0
+    for i in range(act.shape[0]):
+        for a in range(3):
+            imu[i, a] = f_m[i, a]
+            imu[i, 3 + a] = om[i, a]
+        gnss[i, 0] = np.nan
+        radar[i, 0] = np.nan
+        due[i] = act[i] and t >= next_t[i] - 1e-9
+        if due[i]:
+            flags |= 1
+        if act[i] and not init[i]:
+            flags |= 2
+    return flags
+
+
+@njit(cache=True)
+def quat_to_rot(q, R):  # pragma: no cover
+    """Unit quaternion (w, x, y, z) → row-major rotation (9,), body → world."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R[0] = 1.0 - 2.0 * (y * y + z * z)
+    R[1] = 2.0 * (x * y - w * z)
+    R[2] = 2.0 * (x * z + w * y)
+    R[3] = 2.0 * (x * y + w * z)
+    R[4] = 1.0 - 2.0 * (x * x + z * z)
+    R[5] = 2.0 * (y * z - w * x)
+    R[6] = 2.0 * (x * z - w * y)
+    R[7] = 2.0 * (y * z + w * x)
+    R[8] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit(cache=True)
+def _rot_to_quat(R, q):  # pragma: no cover
+    """Row-major rotation → unit quaternion (w, x, y, z) (Shepperd's method)."""
+    tr = R[0] + R[4] + R[8]
+    if tr > 0.0:
+        s = math.sqrt(tr + 1.0) * 2.0
+        q[0], q[1] = 0.25 * s, (R[7] - R[5]) / s
+        q[2], q[3] = (R[2] - R[6]) / s, (R[3] - R[1]) / s
+    elif R[0] > R[4] and R[0] > R[8]:
+        s = math.sqrt(1.0 + R[0] - R[4] - R[8]) * 2.0
+        q[0], q[1] = (R[7] - R[5]) / s, 0.25 * s
+        q[2], q[3] = (R[1] + R[3]) / s, (R[2] + R[6]) / s
+    elif R[4] > R[8]:
+        s = math.sqrt(1.0 + R[4] - R[0] - R[8]) * 2.0
+        q[0], q[1] = (R[2] - R[6]) / s, (R[1] + R[3]) / s
+        q[2], q[3] = 0.25 * s, (R[5] + R[7]) / s
+    else:
+        s = math.sqrt(1.0 + R[8] - R[0] - R[4]) * 2.0
+        q[0], q[1] = (R[3] - R[1]) / s, (R[2] + R[6]) / s
+        q[2], q[3] = (R[5] + R[7]) / s, 0.25 * s
+
+
+@njit(cache=True)
+def _nees15(x, P, tr, bias0, q_t, dth, e):  # pragma: no cover
+    """eᵀ P⁻¹ e of one row's core state against the truth ``tr`` (a ring row): e = [p, v,
+    Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the turn-on biases."""
+    if not np.isfinite(tr[17]):
+        e[0] = np.nan
+        return np.nan
+    _rot_to_quat(tr[7:16], q_t)
+    quat_log_err(x[6:10], q_t, dth)
+    for a in range(3):
+        e[a] = tr[17 + a] - x[a]
+        e[3 + a] = tr[20 + a] - x[3 + a]
+        e[6 + a] = dth[a]
+        e[9 + a] = bias0[a] - x[10 + a]
+        e[12 + a] = bias0[3 + a] - x[13 + a]
+    L = np.linalg.cholesky(P)
+    y = np.linalg.solve(L, e)
+    return float(np.dot(y, y))
+
+
+@njit(cache=True)
+def _row_errors(x, p, v, Rt, Re, out):  # pragma: no cover
+    """Horizontal position, 3-D velocity, tilt (angle between the body z axes) and yaw errors
+    of one row's output against the truth of the tick."""
+    quat_to_rot(x[6:10], Re)
+    dx, dy = x[0] - p[0], x[1] - p[1]
+    out[0] = math.sqrt(dx * dx + dy * dy)
+    s = 0.0
+    for a in range(3):
+        s += (x[3 + a] - v[a]) ** 2
+    out[1] = math.sqrt(s)
+    cz = Re[2] * Rt[2] + Re[5] * Rt[5] + Re[8] * Rt[8]
+    out[2] = math.acos(min(1.0, max(-1.0, cz)))
+    ye = math.atan2(Re[3], Re[0]) - math.atan2(Rt[3], Rt[0])
+    out[3] = abs(math.atan2(math.sin(ye), math.cos(ye)))
+
+
+@njit(cache=True)
+def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, ring, bias0,
+             err, fix_k, nees, n_fix, p_out, v_out, R_out):  # pragma: no cover
+    """The flown row's (p, v, R) per vehicle; per row the tick's errors (:func:`_row_errors`)
+    and, at a fix, the NEES of the core's 15-state error against the truth of the core's tick
+    (:func:`_nees15`) and the position NIS."""
+    B = ring.shape[1]
+    Re = np.empty(9)
+    q_t = np.empty(4)
+    dth = np.empty(3)
+    e = np.empty(15)
+    o = np.empty(4)
+    for i in range(act.shape[0]):
+        if not (act[i] and init[i]):
+            continue
+        if flown >= 0:
+            x = xo[i * nr + flown]
+            for a in range(3):
+                p_out[i, a] = x[a]
+                v_out[i, a] = x[3 + a]
+            quat_to_rot(x[6:10], R_out[i])
+        rec = n_fix[i]
+        at_fix = np.isfinite(gnss[i, 0]) and rec < fix_k.shape[1]
+        if at_fix:
+            fix_k[i, rec] = k
+            n_fix[i] = rec + 1
+        for j in range(nr):
+            row = i * nr + j
+            _row_errors(xo[row], p[i], v[i], Rt[i], Re, o)
+            for c in range(4):
+                err[i, k, c, j] = o[c]
+            if at_fix:
+                tr = ring[i, (k0[i] + core[row]) % B]
+                nees[i, rec, 0, j] = _nees15(xc[row], P[row], tr, bias0[i], q_t, dth, e)
+                nees[i, rec, 1, j] = nis[row, 0]
+                if np.isfinite(e[0]):   # the position block alone (3 dof)
+                    y = np.linalg.solve(P[row, :3, :3], e[:3])
+                    nees[i, rec, 2, j] = e[0] * y[0] + e[1] * y[1] + e[2] * y[2]

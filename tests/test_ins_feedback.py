@@ -1,0 +1,146 @@
+"""The drone navigates on the INS (issue 19 phase 2): ag_uav.navigation.ins_feedback."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ag_uav.config import ConfigError, config_from_dict
+from ag_uav.engine import missions as M
+from ag_uav.engine.missions import simulate, simulate_many
+from ag_uav.navigation.ins_feedback import BatchInsFeedback, InsFeedback
+from ag_uav.vehicle.gps import ReceiverReport
+
+
+def _cfg(**kw) -> object:
+    d: dict = {"sim": {"max_time_s": 8.0}, "log": {"enabled": False, "render": False}}
+    for k, v in kw.items():
+        sec, key = k.split("__")
+        d.setdefault(sec, {})[key] = v
+    return config_from_dict(d)
+
+
+def test_default_is_ins_and_flies_on_its_attitude():
+    cfg = _cfg()
+    assert cfg.estimator.nav == "ins" and cfg.gps.latency_s == pytest.approx(0.11)
+    s = simulate(cfg).summary
+    assert s["nav"] == "ins" and not s["crashed"]
+    est = s["estimators"]
+    assert list(est) == ["pca-mckf", "kf", "mckf", "pca-kf"] and est["pca-mckf"]["flown"]
+    for e in est.values():
+        assert e["estimate_rmse_m"] < 0.1 and e["velocity_rmse_mps"] < 0.2
+        assert e["tilt_error_rms_deg"] < 1.0 and e["nees15_mean"] > 0
+    for k in ("tilt_error_rms_deg", "tilt_error_max_deg", "yaw_error_rms_deg"):
+        assert s[k] == est["pca-mckf"][k]
+    assert s["gps_latency_s"] == pytest.approx(0.11)
+    assert s["ins_counters"]["late"] == [0, 0, 0, 0]
+
+
+class _Blind(BatchInsFeedback):
+    """The bank with every truth array it is handed (position, velocity, attitude, body rate)
+    replaced by NaN from tick ``K`` on: only the sensors read them, so the fixes and the radar
+    drop out and the INS must coast on the IMU alone."""
+
+    K = 400
+
+    def update(self, k, t, p, v, imu, act):
+        if k >= self.K:
+            p, v = np.full_like(p, np.nan), np.full_like(v, np.nan)
+            self.R_true = np.full((self.NV, 9), np.nan)
+            self.w_true = np.full((self.NV, 3), np.nan)
+        return super().update(k, t, p, v, imu, act)
+
+
+def test_nothing_in_the_control_path_reads_the_truth(monkeypatch):
+    """Structural: after take-off (t = 4 s) the truth handed to the feedback is NaN; the
+    vehicle still flies (on the IMU alone: no fix, no radar) to the end of the 8 s and its
+    fed-back state stays finite."""
+    monkeypatch.setattr(InsFeedback, "batch",
+                        classmethod(lambda cls, fbs, n_max: _Blind(fbs, n_max)))
+    cfg = _cfg(gps__receiver="ideal")
+    res = simulate(cfg)
+    s = res.summary
+    assert not s["crashed"], s.get("crash_reason")
+    assert np.all(np.isfinite(res.p_fb))
+    # 10 Hz fixes until 4 s, plus those delivered in the next 110 ms (they report the state
+    # 110 ms back, still true): none after
+    assert 30 <= s["ins_counters"]["gnss_fused"][0] <= 42
+    drift = np.linalg.norm(res.p_fb[-1, :2] - res.p_true[-1, :2])
+    assert 0.0 < drift < 2.0
+
+
+def test_alone_or_batched_bit_identical():
+    c0, c1 = _cfg(), _cfg()
+    c1.seed = 7
+    alone = simulate(c0)
+    both = simulate_many([c1, c0])
+    assert np.array_equal(alone.p_fb, both[1].p_fb)
+    assert alone.summary["estimators"] == {
+        k: {**v, "update_us": alone.summary["estimators"][k]["update_us"]}
+        for k, v in both[1].summary["estimators"].items()}
+
+
+def test_gnss_rate_above_control_rate_refused():
+    with pytest.raises(ConfigError, match="exceeds sim.control_hz"):
+        _cfg(sim__control_hz=10.0, gps__preset="rtk")
+    with pytest.raises(ConfigError, match="exceeds sim.control_hz"):
+        _cfg(sim__control_hz=50.0, gps__rate_hz=100.0)
+
+
+def test_ins_refuses_rules_it_has_not():
+    cfg = _cfg(estimator__shadow=["kf-bias"])
+    with pytest.raises(ConfigError, match="not an INS GNSS update rule"):
+        M._prepare(cfg, None, None, None)
+
+
+def test_receiver_report_false_fixes_lag_and_calibration():
+    """False fixes start only in RTK fixed, at the configured rate, last ~mean_s, carry a
+    bias in the configured range; the reported type lags by report_lag_s; each reported-type
+    episode draws a new accuracy scale."""
+    rate = 10.0
+    rr = ReceiverReport(rate, 3, per_hour=360.0, mean_s=5.0, bias_m=(0.1, 0.4),
+                        calibration_sigma=0.3, report_lag_s=1.0)
+    n = 36000  # one hour of fixes
+    types = ["rtk-fixed"] * n
+    for a in range(1000, n, 3000):          # 10 s of float every 300 s
+        types[a:a + 100] = ["rtk-float"] * 100
+    bias = np.zeros((n, 3))
+    rep, scale = [], []
+    for k, ty in enumerate(types):
+        b, r_, s_ = rr.step(ty)
+        bias[k] = b
+        rep.append(r_)
+        scale.append(s_)
+    on = np.linalg.norm(bias, axis=1)
+    assert np.all(on[on > 0] >= 0.1 - 1e-12) and np.all(on <= 0.4 + 1e-12)
+    assert not np.any(on[np.array(types) == "rtk-float"] > 0)
+    # a renewal: fixed time 3240 s / (1/λ + mean_s = 10 s + 5 s) ≈ 216 episodes
+    assert 180 < rr.n_false < 255
+    assert rep[:10] == ["rtk-fixed"] * 10
+    assert rep[1000 + 10] == "rtk-float" and rep[1000 + 9] == "rtk-fixed"   # 1 s late
+    sc = np.array(scale)
+    u = np.unique(sc)
+    assert len(u) == 2 * 12 + 1 - 1 or len(u) >= 20    # one draw per reported-type episode
+    assert 0.15 < np.std(np.log(u)) < 0.45              # calibration_sigma = 0.3
+
+
+def test_honest_receiver_off_in_rtk_preset():
+    """The consistency check's preset has no fix types: no report, no false fixes."""
+    from ag_uav.seeds import seed_sequences
+
+    fb = InsFeedback(_cfg(gps__preset="rtk"), seed_sequences(0))
+    assert fb.report is None
+    fb2 = InsFeedback(_cfg(), seed_sequences(0))
+    assert fb2.report is not None
+
+
+def test_true_flown_with_ins_shadows_flies_on_the_truth():
+    """estimator.name = "true": the INS rules are scored as shadows, the controller flies on
+    the true position (and the sensing stage's attitude, not an identity)."""
+    res = simulate(_cfg(estimator__name="true", sim__max_time_s=4.0))
+    s = res.summary
+    assert not s["crashed"] and list(s["estimators"]) == ["kf", "mckf", "pca-kf"]
+    # (on the skids and in the lift-off latch the horizontal part is the reference's)
+    assert np.array_equal(res.p_fb[:, 2], res.p_true[:, 2])
+    assert np.array_equal(res.p_fb[-100:], res.p_true[-100:])
+    assert s["estimators"]["kf"]["estimate_rmse_m"] < 0.1
