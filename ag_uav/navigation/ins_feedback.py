@@ -290,7 +290,8 @@ class BatchInsFeedback:
                              math.cos(self.icfg.radar_max_tilt_deg * DEG),
                              self.icfg.radar_max_range])
         nrec = max(nr, 1)
-        self.err = np.full((NV, n_max, 4, nrec), np.nan)    # herr, verr, tilt, yaw
+        # herr, verr, tilt, yaw; tick-major (one tick's rows contiguous: cache-friendly writes)
+        self.err = np.full((n_max, NV, 4, nrec), np.nan)
         n_fix = int(n_max * f0.gps.rate_hz * self.dt) + 4
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
         self.nees = np.full((NV, n_fix, 3, nrec), np.nan)   # NEES15, NIS(pos), NEES(pos)
@@ -424,8 +425,8 @@ class BatchInsFeedback:
         counters = self.bank.counters if self.bank is not None else {}
         for i, fb in enumerate(self.fbs):
             n, nf = int(flown[i]), int(self.n_fix[i])
-            fb.rec = {"herr": self.err[i, :n, 0], "verr": self.err[i, :n, 1],
-                      "tilt": self.err[i, :n, 2], "yaw": self.err[i, :n, 3],
+            e = np.ascontiguousarray(self.err[:n, i])
+            fb.rec = {"herr": e[:, 0], "verr": e[:, 1], "tilt": e[:, 2], "yaw": e[:, 3],
                       "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, 0],
                       "nis": self.nees[i, :nf, 1], "nees_pos": self.nees[i, :nf, 2],
                       "update_us": us,
@@ -609,7 +610,7 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
             row = i * nr + j
             _row_errors(xo[row], p[i], v[i], Rt[i], Re, o)
             for c in range(4):
-                err[i, k, c, j] = o[c]
+                err[k, i, c, j] = o[c]
             if at_fix:
                 tr = ring[i, (k0[i] + core[row]) % B]
                 nees[i, rec, 0, j] = _nees15(xc[row], P[row], tr, bias0[i], q_t, dth, e)
