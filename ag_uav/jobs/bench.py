@@ -241,12 +241,8 @@ def _estimators(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
     return {"estimators": bench_estimators(repeats=repeats, n=500 if quick else 2000)}
 
 
-#: further sections, each fn(cfg, repeats, quick) -> dict merged into the output
-def batched_rate(cfg: Config, n: int, sim_s: float) -> tuple[float, float]:
-    """Vehicle-sim-seconds and loop wall seconds of ``n`` missions of ``cfg`` (seeds 0…n-1,
-    cut at ``sim_s``) flown as one lockstep batch (:func:`ag_uav.engine.missions.simulate_many`)."""
-    from ..engine.missions import simulate_many
-
+def _batch_cfgs(cfg: Config, n: int, sim_s: float) -> list[Config]:
+    """``n`` copies of ``cfg`` with seeds 0…n-1, no log, no renders, cut at ``sim_s``."""
     cfgs = []
     for i in range(n):
         c = copy.deepcopy(cfg)
@@ -255,7 +251,15 @@ def batched_rate(cfg: Config, n: int, sim_s: float) -> tuple[float, float]:
         c.log.render = False
         c.sim.max_time_s = sim_s
         cfgs.append(c)
-    res = simulate_many(cfgs)
+    return cfgs
+
+
+def batched_rate(cfg: Config, n: int, sim_s: float) -> tuple[float, float]:
+    """Vehicle-sim-seconds and loop wall seconds of ``n`` missions of ``cfg`` (seeds 0…n-1,
+    cut at ``sim_s``) flown as one lockstep batch (:func:`ag_uav.engine.missions.simulate_many`)."""
+    from ..engine.missions import simulate_many
+
+    res = simulate_many(_batch_cfgs(cfg, n, sim_s))
     sim = sum(r.summary["sim_time_s"] for r in res)
     return sim, res[0].summary["loop_wall_time_s"] * n
 
@@ -392,15 +396,7 @@ def batched_capture(cfg: Config, n: int, sim_s: float) -> tuple[float, float, li
     batch."""
     from ..engine.missions import fly_many
 
-    cfgs = []
-    for i in range(n):
-        c = copy.deepcopy(cfg)
-        c.seed = i
-        c.log.enabled = False
-        c.log.render = False
-        c.sim.max_time_s = sim_s
-        cfgs.append(c)
-    outs = fly_many(cfgs, capture=True)
+    outs = fly_many(_batch_cfgs(cfg, n, sim_s), capture=True)
     dt = 1.0 / cfg.sim.control_hz
     return sum(len(o.t) for o in outs) * dt, outs[0].wall_loop_s, outs
 
