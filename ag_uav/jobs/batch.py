@@ -47,6 +47,7 @@ order; only the timing columns (:func:`is_timing_column`) differ between repeats
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import csv
 import hashlib
@@ -55,9 +56,10 @@ import json
 import math
 import os
 import re
+import signal
 import time
 import tomllib
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -722,6 +724,22 @@ def _csv_value(v: Any) -> str:
     return str(v)
 
 
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGTERM and SIGINT held back (delivered right after): a run's journal line and its row
+    in memory, from which an interrupted batch writes ``results.csv``, are recorded together."""
+    sigs = {signal.SIGTERM, signal.SIGINT}
+    try:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    except (AttributeError, ValueError, OSError):  # pragma: no cover - not POSIX
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def write_results_csv(rows: Sequence[dict[str, Any]], path: str | Path,
                       axis_names: Sequence[str] = ()) -> list[str]:
     """Write rows sorted by run index (atomic replace); returns the columns."""
@@ -1107,8 +1125,9 @@ class _BatchRun:
                 self.warn(f"runs {tasks[0].run_id}..{tasks[-1].run_id}: the engine batch failed "
                           f"({fb}); flown one at a time (column engine_fallback)")
         for task, r in zip(tasks, rs, strict=True):
-            journal.append(task.config_hash, r, retry=retry)
-            rows_by_index[task.index] = r
+            with _signals_held():  # the journal and the rows agree, whenever SIGTERM comes
+                journal.append(task.config_hash, r, retry=retry)
+                rows_by_index[task.index] = r
             self.n_bad += r.get("status") != "ok"
             if self.on_row is not None:
                 self.on_row(r)
