@@ -244,6 +244,20 @@ def _fall_time(vt: float, a: float, s0: float, s1: float, s2: float) -> float:
 
 
 @njit(cache=True)
+def _cell_weights(lo, c, m, r, i0, i1, w) -> float:
+    """Cells ``i0..i1`` (of size ``c`` from ``lo``) of a 1-D Gaussian of mean ``m`` and
+    ``r = 1/(√2 σ)``: twice each cell's share into ``w`` (erf differences); their sum."""
+    e0 = math.erf((lo + i0 * c - m) * r)
+    tot = 0.0
+    for i in range(i0, i1 + 1):
+        e1 = math.erf((lo + (i + 1) * c - m) * r)
+        w[i - i0] = e1 - e0
+        tot += e1 - e0
+        e0 = e1
+    return tot
+
+
+@njit(cache=True)
 def _splat(par, buf, vol, mx, my, vx, vy, scratch) -> float:
     """Add ``vol`` litres as an axis-aligned Gaussian (mean mx, my; variances vx, vy) to the
     level buffers; returns the litres put on the grid (exactly the analytic in-grid share)."""
@@ -268,20 +282,8 @@ def _splat(par, buf, vol, mx, my, vx, vy, scratch) -> float:
     if i1 < i0 or j1 < j0 or i1 - i0 >= scratch.shape[1] or j1 - j0 >= scratch.shape[1]:
         return 0.0
     wx, wy = scratch[0], scratch[1]
-    e0 = math.erf((x0 + i0 * c - mx) * rx)
-    tx = 0.0
-    for i in range(i0, i1 + 1):
-        e1 = math.erf((x0 + (i + 1) * c - mx) * rx)
-        wx[i - i0] = e1 - e0
-        tx += e1 - e0
-        e0 = e1
-    e0 = math.erf((y0 + j0 * c - my) * ry)
-    ty = 0.0
-    for j in range(j0, j1 + 1):
-        e1 = math.erf((y0 + (j + 1) * c - my) * ry)
-        wy[j - j0] = e1 - e0
-        ty += e1 - e0
-        e0 = e1
+    tx = _cell_weights(x0, c, mx, rx, i0, i1, wx)
+    ty = _cell_weights(y0, c, my, ry, j0, j1, wy)
     if tx * ty <= 0.0:
         return 0.0
     put = vol * px * py
