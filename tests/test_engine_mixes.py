@@ -202,3 +202,15 @@ def test_the_physics_replay_reproduces_the_flights_bit_for_bit():
         for i, o in enumerate(outs):
             # the state after tick n-2's physics is the state tick n-1 recorded
             assert np.array_equal(S[i, 1:4], o.rec[-1, :3])
+
+
+def test_lanes_change_nothing():
+    """A batch split into lanes (engines over disjoint parts whose physics overlaps the next
+    lane's Python tick; off by default, measured no faster here) flies every vehicle as one
+    engine does."""
+    cfgs = [_cfg(s, **{"sim.max_time_s": 4.0}) for s in range(5)]
+    ref = mission_setup(cfgs[0])[2]
+    one = fly([Flight(c, ref, 4.0) for c in cfgs], lanes=1)
+    two = fly([Flight(c, ref, 4.0) for c in cfgs], lanes=2)
+    for a, b in zip(one, two, strict=True):
+        assert np.array_equal(a.rec, b.rec)
