@@ -134,3 +134,18 @@ def test_fly_cli_writes_summary(tmp_path):
     s = json.loads((tmp_path / "r1" / "summary.json").read_text())
     assert s["seed"] == 0 and s["sim_time_s"] == pytest.approx(20.0, abs=0.02)
     assert "cross-track RMSE" in r.stdout
+
+
+def test_default_mission_dose_figures_the_readme_states(default_run):
+    """The README's dose figures of the default mission (seed 0: CV 41.5 %, 36.0 % under-dosed,
+    37.0 % over-dosed, 1.73 % off the field, nothing past the buffer) and its cross-track RMSE
+    on the INS (0.039 m), within bounds that a broken deposition or navigation would leave."""
+    _, res = default_run
+    s = res.summary
+    assert 0.9 < s["dose_mean_l_per_ha"] < 1.2
+    assert 0.33 < s["dose_cv"] < 0.50
+    assert 0.28 < s["underdosed_fraction"] < 0.44 and 0.29 < s["overdosed_fraction"] < 0.45
+    assert 0.008 < s["offtarget_deposit_fraction"] < 0.03
+    assert s["drift_fraction"] < 1e-3
+    assert s["cross_track_rmse_m"] < 0.06
+    assert s["tilt_error_rms_deg"] < 0.3
