@@ -234,3 +234,23 @@ def test_coarse_grid_when_over_max_cells():
     cfg = dataclasses.replace(DepositionConfig(), max_cells=10_000)
     dep = Deposition(cfg, SQUARE)
     assert dep.cell_m > cfg.cell_m and dep.grid.nx * dep.grid.ny <= 10_000
+
+
+def test_the_pattern_figures_the_readme_states():
+    """README: the M350-class quad's effective swath is 5.25 m at 2 m / 3 m/s calm, 4.25 m at
+    3 m / 5 m/s calm and 4.00 m with a 3 m/s crosswind (centroid +0.88 m); a 100 µm droplet
+    from 1 m in a 15 km/h wind drifts 16.8 m (OMAFRA: ≈ 16 m)."""
+    from ag_uav.jobs.experiments.swath import droplet_anchor, swath_pattern
+    from ag_uav.world.deposition import DepositionConfig
+
+    dc = DepositionConfig()  # what `ag-uav experiment swath` flies by default
+    rows, _ = swath_pattern(dc, [2.0], [3.0], [0.0])
+    assert rows[0]["effective_swath_m"] == pytest.approx(5.25, abs=0.26)
+    rows, _ = swath_pattern(dc, [3.0], [5.0], [0.0, 3.0])
+    calm, cross = rows
+    assert calm["effective_swath_m"] == pytest.approx(4.25, abs=0.26)
+    assert cross["effective_swath_m"] == pytest.approx(4.0, abs=0.26)
+    assert calm["centroid_m"] == pytest.approx(0.0, abs=0.05)
+    assert cross["centroid_m"] == pytest.approx(0.88, abs=0.15)
+    drift = {(r[0], r[1]): float(r[2]) for r in droplet_anchor(dc)}
+    assert drift[("100 µm", "1 m")] == pytest.approx(16.8, abs=0.5)
