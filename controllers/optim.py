@@ -407,6 +407,8 @@ class CMAES(_PopulationOptimizer):
     ) -> None:
         from cmaes import CMA
 
+        if int(pop) < 4:
+            raise ValueError("CMA-ES needs pop >= 4 (at least 2 parents for the rank-mu update)")
         super().__init__(lo, hi, pop, rng)
         if not 0.0 < float(sigma):
             raise ValueError("sigma must be > 0")

@@ -213,5 +213,7 @@ def test_cmaes_seeds_nonfinite_and_injected_member():
     assert np.all(np.isfinite(opt.ask()))
     with pytest.raises(ValueError):
         CMAES([0.0], [1.0], sigma=0.0)
+    with pytest.raises(ValueError, match="pop >= 4"):
+        CMAES([0.0], [1.0], pop=3)
     with pytest.raises(ValueError):
         CMAES.from_state(BBBC([0.0], [1.0], pop=3).state_dict())

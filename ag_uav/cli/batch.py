@@ -204,7 +204,8 @@ def register(sub) -> None:
                     "table. See examples/tune.toml.")
     t.add_argument("spec", metavar="SPEC.toml", help="tune spec: [params] bounds, [[scenarios]]")
     t.add_argument("--out", metavar="DIR", help="output folder (default: runs/tune-<name>)")
-    t.add_argument("--optimizer", choices=("bbbc", "pso"), help="override the spec's optimizer")
+    t.add_argument("--optimizer", choices=("bbbc", "pso", "cmaes"),
+                   help="override the spec's optimizer")
     t.add_argument("--iters", type=int, help="iterations in total (override the spec)")
     t.add_argument("--pop", type=int, help="population size (override the spec)")
     _add_exec_args(t)
