@@ -47,7 +47,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--optimizers", default=",".join(OPTIMISERS),
                    help="comma-separated, from " + ", ".join(OPTIMISERS))
     p.add_argument("--pop", type=int, default=10, help="population size of every optimiser")
-    p.add_argument("--iters", type=int, default=10, help="iterations of every tuning")
+    p.add_argument("--iters", type=int, default=30, help="iterations of every tuning")
     p.add_argument("--seeds", type=int, default=5, help="optimiser seeds per optimiser")
     p.add_argument("--seed0", type=int, default=1, help="first optimiser seed")
     p.add_argument("--out", default="runs/experiment-optimisers", help="output folder")
