@@ -1,6 +1,6 @@
-"""Derivative-free box-constrained optimisers for controller tuning: BB-BC and PSO.
+"""Derivative-free box-constrained optimisers for controller tuning: BB-BC, PSO and CMA-ES.
 
-Both are ask/tell objects with a JSON-serialisable :meth:`state_dict` so that a long tuning
+All three are ask/tell objects with a JSON-serialisable :meth:`state_dict` so that a long tuning
 run can be checkpointed after any iteration and resumed with results identical to an
 uninterrupted run (the numpy Generator's ``bit_generator.state`` is part of the state).
 ``bbbc_minimize`` / ``pso_minimize`` are thin loops over them; every population is
@@ -26,6 +26,18 @@ M. Clerc & J. Kennedy, IEEE TEC 6(1), 2002)::
 
     v_i = ω v_i + c1 r1 ⊙ (p_i - x_i) + c2 r2 ⊙ (g - x_i),  |v| <= v_max (hi - lo)
     x_i = clip(x_i + v_i, lo, hi)  (velocity components that hit a bound are zeroed)
+
+CMA-ES (N. Hansen & A. Ostermeier, "Completely derandomized self-adaptation in evolution
+strategies", Evolutionary Computation 9(2):159–195, 2001; N. Hansen, "The CMA evolution
+strategy: a tutorial", arXiv:1604.00772), through the PyPI library ``cmaes`` (its ``CMA``
+class), run in the unit cube u = (x - lo) / (hi - lo) so one step size σ fits every axis::
+
+    u_i ~ N(m, σ² C), i = 1..λ           (resampled, then clipped, to stay in [0, 1]^d)
+    m ← m + c_m σ Σ_{i≤μ} w_i y_(i)       y = (u - m)/σ, ranked by cost
+    p_σ, p_c, C, σ updated by cumulative step-size adaptation and rank-one + rank-μ updates
+
+with m₀ = centre of the box and σ₀ = ``sigma`` (a fraction of the box width). Only the ranks
+of the costs matter; non-finite costs rank last.
 """
 
 from __future__ import annotations
@@ -36,7 +48,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BBBC", "PSO", "OptimResult", "bbbc_minimize", "pso_minimize"]
+__all__ = ["BBBC", "CMAES", "PSO", "OptimResult", "bbbc_minimize", "cmaes_minimize",
+           "pso_minimize"]
 
 Objective = Callable[[np.ndarray], float]
 MapFn = Callable[[Objective, list[np.ndarray]], Iterable[float]]
@@ -369,8 +382,93 @@ class PSO(_PopulationOptimizer):
         return obj
 
 
+class CMAES(_PopulationOptimizer):
+    """CMA-ES (ask/tell) over the box, delegating the update to ``cmaes.CMA``.
+
+    Parameters
+    ----------
+    lo, hi, pop, rng : as :class:`BBBC`; ``pop`` is the CMA-ES population size λ. The
+        library's own RandomState is seeded from ``rng``'s first draw.
+    sigma : σ₀ as a fraction of (hi - lo) (the search runs in the unit cube).
+
+    :attr:`population` holds the points the next :meth:`tell` ranks (member 0 may be replaced
+    before evaluation, e.g. by the default gains: the update uses the points as told).
+    """
+
+    kind = "cmaes"
+
+    def __init__(
+        self,
+        lo: Any,
+        hi: Any,
+        pop: int = 20,
+        rng: np.random.Generator | int | None = None,
+        sigma: float = 0.3,
+    ) -> None:
+        from cmaes import CMA
+
+        if int(pop) < 4:
+            raise ValueError("CMA-ES needs pop >= 4 (at least 2 parents for the rank-mu update)")
+        super().__init__(lo, hi, pop, rng)
+        if not 0.0 < float(sigma):
+            raise ValueError("sigma must be > 0")
+        self.sigma = float(sigma)
+        bounds = np.tile([0.0, 1.0], (self.dim, 1))
+        seed = int(self.rng.integers(2**31 - 1))
+        self.cma = CMA(mean=np.full(self.dim, 0.5), sigma=self.sigma, bounds=bounds,
+                       seed=seed, population_size=self.pop)
+        self.population = self._sample()
+
+    def _sample(self) -> np.ndarray:
+        U = np.array([self.cma.ask() for _ in range(self.pop)])
+        return self.lo + (self.hi - self.lo) * U
+
+    def ask(self) -> np.ndarray:
+        """The population to evaluate next, shape (pop, dim) (a copy)."""
+        return self.population.copy()
+
+    def tell(self, costs: Iterable[float]) -> None:
+        """Give the costs of the last :meth:`ask`; one CMA-ES generation update."""
+        X = self.population
+        f = _clean_costs(costs, self.pop)
+        self._record(X, f)
+        fin = np.isfinite(f)
+        top = float(np.max(f[fin])) if fin.any() else 0.0
+        ranked = np.where(fin, f, top + abs(top) + 1.0)  # non-finite: worst, rank-preserving
+        U = np.clip((X - self.lo) / (self.hi - self.lo), 0.0, 1.0)
+        self.cma.tell([(U[i], float(ranked[i])) for i in range(self.pop)])
+        self.population = self._sample()
+
+    def state_dict(self) -> dict[str, Any]:
+        """JSON-serialisable snapshot (the ``CMA`` object's attributes as a base64 pickle,
+        its RandomState and full covariance included, which the library's own pickling drops
+        or compresses); :meth:`from_state` continues identically."""
+        import base64
+        import pickle
+
+        s = self._common_state()
+        s.update(sigma=self.sigma, population=self.population.tolist(),
+                 cma=base64.b64encode(pickle.dumps(dict(vars(self.cma)))).decode("ascii"))
+        return s
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> CMAES:
+        """Rebuild an optimiser from :meth:`state_dict` output."""
+        import base64
+        import pickle
+
+        if state.get("kind") != cls.kind:
+            raise ValueError(f"not a {cls.kind} state: kind={state.get('kind')!r}")
+        obj = cls(state["lo"], state["hi"], pop=state["pop"], rng=0, sigma=state["sigma"])
+        obj._load_common(state)
+        obj.cma = type(obj.cma).__new__(type(obj.cma))
+        obj.cma.__dict__.update(pickle.loads(base64.b64decode(state["cma"])))  # noqa: S301
+        obj.population = np.array(state["population"], dtype=float)
+        return obj
+
+
 def _run(
-    opt: BBBC | PSO,
+    opt: BBBC | PSO | CMAES,
     fun: Objective,
     iters: int,
     map_fn: MapFn,
@@ -448,4 +546,24 @@ def pso_minimize(
             v_max=v_max,
             max_iter=iters if isinstance(inertia, tuple | list) else None,
         )
+    return _run(opt, fun, iters, map_fn, callback)
+
+
+def cmaes_minimize(
+    fun: Objective,
+    lo: Any,
+    hi: Any,
+    pop: int = 20,
+    iters: int = 20,
+    rng: np.random.Generator | int | None = None,
+    sigma: float = 0.3,
+    map_fn: MapFn = map,
+    callback: Callable[[CMAES], Any] | None = None,
+    state: dict[str, Any] | None = None,
+) -> OptimResult:
+    """Minimise ``fun`` over the box [lo, hi] with CMA-ES (see :class:`CMAES`).
+
+    Same calling conventions as :func:`bbbc_minimize`.
+    """
+    opt = CMAES.from_state(state) if state is not None else CMAES(lo, hi, pop, rng, sigma)
     return _run(opt, fun, iters, map_fn, callback)

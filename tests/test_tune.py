@@ -120,6 +120,21 @@ def test_pso_runs_and_gains_toml():
         "controller": {"xy": {"k0": 2.0, "ke": 0.5}}}
 
 
+def test_cmaes_tune_keeps_default_and_resumes_identically(tmp_path):
+    spec = spec_from_dict(tiny(optimizer="cmaes", pop=4, iters=2,
+                               optimizer_options={"sigma": 0.2}))
+    ref = run_tune(spec, tmp_path / "ref", progress=False, outputs=False)
+    assert ref.iterations == 2 and ref.n_evals == 8 and math.isfinite(ref.best_cost)
+    run_tune(spec, tmp_path / "cut", iters=1, progress=False, outputs=False)
+    evals = [json.loads(ln) for ln in (tmp_path / "cut" / "evals.jsonl").read_text().splitlines()]
+    x0 = [p.to_internal(v) for p, v in zip(spec.params, default_values(spec), strict=True)]
+    assert [e["u"] for e in evals if e["iter"] == 1 and e["i"] == 0] == [x0]  # default gains
+    more = run_tune(spec, tmp_path / "cut", resume=True, progress=False, outputs=False)
+    assert more.history == ref.history and more.best_values == ref.best_values
+    with pytest.raises(ConfigError, match="optimizer_options.spread"):
+        spec_from_dict(tiny(optimizer="cmaes", optimizer_options={"spread": 0.5}))
+
+
 def _eval_keys(path: Path) -> list[tuple[int, int]]:
     out = []
     for line in path.read_text().splitlines():

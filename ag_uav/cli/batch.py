@@ -197,14 +197,15 @@ def register(sub) -> None:
     b.set_defaults(func=cmd_batch)
 
     t = sub.add_parser(
-        "tune", help="tune controller gains with BB-BC (or PSO) on simulated scenarios",
+        "tune", help="tune controller gains with BB-BC (or PSO, CMA-ES) on simulated scenarios",
         description="Minimise an ISE/ITAE cost over step responses and a short mission with "
-                    "BB-BC (or PSO), evaluating each population in parallel; checkpoint after "
-                    "every iteration; write best_gains.toml, convergence.png and a before/after "
-                    "table. See examples/tune.toml.")
+                    "BB-BC (or PSO, CMA-ES), evaluating each population in parallel; checkpoint "
+                    "after every iteration; write best_gains.toml, convergence.png and a "
+                    "before/after table. See examples/tune.toml.")
     t.add_argument("spec", metavar="SPEC.toml", help="tune spec: [params] bounds, [[scenarios]]")
     t.add_argument("--out", metavar="DIR", help="output folder (default: runs/tune-<name>)")
-    t.add_argument("--optimizer", choices=("bbbc", "pso"), help="override the spec's optimizer")
+    t.add_argument("--optimizer", choices=("bbbc", "pso", "cmaes"),
+                   help="override the spec's optimizer")
     t.add_argument("--iters", type=int, help="iterations in total (override the spec)")
     t.add_argument("--pop", type=int, help="population size (override the spec)")
     _add_exec_args(t)

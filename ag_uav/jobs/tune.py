@@ -1,4 +1,4 @@
-"""Controller tuning: BB-BC (or PSO) over IT2-FPID gains on simulated scenarios.
+"""Controller tuning: BB-BC (or PSO, or CMA-ES) over IT2-FPID gains on simulated scenarios.
 
 ``ag-uav tune SPEC.toml`` (see ``examples/tune.toml``) minimises
 
@@ -72,7 +72,7 @@ SPEC_KEYS = ("name", "description", "optimizer", "pop", "iters", "seed", "noise_
              "crash_penalty", "effort_weight", "include_default", "base", "params", "scenarios",
              "optimizer_options", "dose_weights")
 AXES = {"x": 0, "y": 1, "z": 2}
-OPTIMIZERS = ("bbbc", "pso")
+OPTIMIZERS = ("bbbc", "pso", "cmaes")
 METRICS = ("ise", "itae", "none")
 
 
@@ -260,7 +260,7 @@ def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".", name: st
     if not isinstance(oo, dict):
         raise ConfigError(f"optimizer_options = {_fmt(oo)}: expected a table")
     allowed_oo = {"bbbc": {"spread", "centre", "elitism"},
-                  "pso": {"inertia", "c1", "c2", "v_max"}}[opt]
+                  "pso": {"inertia", "c1", "c2", "v_max"}, "cmaes": {"sigma"}}[opt]
     for k in oo:
         if k not in allowed_oo:
             raise ConfigError(f"optimizer_options.{k} = {_fmt(oo[k])}: unknown for {opt}; "
@@ -530,7 +530,7 @@ def default_values(spec: TuneSpec) -> list[float]:
 
 
 def _make_optimizer(spec: TuneSpec) -> Any:
-    from controllers.optim import BBBC, PSO
+    from controllers.optim import BBBC, CMAES, PSO
 
     lo = [p.bounds[0] for p in spec.params]
     hi = [p.bounds[1] for p in spec.params]
@@ -540,13 +540,15 @@ def _make_optimizer(spec: TuneSpec) -> Any:
             oo["inertia"] = tuple(oo["inertia"])
             oo["max_iter"] = spec.iters
         return PSO(lo, hi, pop=spec.pop, rng=spec.seed, **oo)
+    if spec.optimizer == "cmaes":
+        return CMAES(lo, hi, pop=spec.pop, rng=spec.seed, **oo)
     return BBBC(lo, hi, pop=spec.pop, rng=spec.seed, **oo)
 
 
 def _opt_from_state(state: dict[str, Any]) -> Any:
-    from controllers.optim import BBBC, PSO
+    from controllers.optim import BBBC, CMAES, PSO
 
-    return (PSO if state["kind"] == "pso" else BBBC).from_state(state)
+    return {"pso": PSO, "cmaes": CMAES}.get(state["kind"], BBBC).from_state(state)
 
 
 def _population(opt: Any) -> np.ndarray:
