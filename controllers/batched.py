@@ -259,8 +259,9 @@ class BatchCascade:
         for k in range(3):
             self.state[:, k * AX_NS:(k + 1) * AX_NS] = 0.0
 
-    def internals(self, i: int) -> dict[str, Any]:
-        """Vehicle ``i``'s log values: the keys and values of :meth:`PositionCascade.internals`."""
+    def internal_columns(self, i: int) -> list[tuple[str, int]]:
+        """Vehicle ``i``'s log keys (those of :meth:`PositionCascade.internals`), each with
+        the column of ``state[i]`` that holds its value."""
         P = self.params
         key = (int(P[i, A_TYPE]), int(P[i, AX_NP + A_TYPE]), int(P[i, 2 * AX_NP + A_TYPE]))
         keys = self._keys.get(key)
@@ -268,13 +269,12 @@ class BatchCascade:
             keys = self._keys[key] = [
                 (f"{name}.{attr}", k * AX_NS + _STATE_COL[attr])
                 for k, (name, code) in enumerate(zip("xyz", key, strict=True))
-                for attr in _AXIS_ATTRS if code != KIND_PID or attr in ("integral", "u")]
+                for attr in _AXIS_ATTRS if code != KIND_PID or attr in ("integral", "u")] + [
+                ("ax_cmd", S_ACMD), ("ay_cmd", S_ACMD + 1), ("az_cmd", S_ACMD + 2),
+                ("thrust", S_THRUST), ("tilt_cmd", S_TILT), ("mixer_saturated", S_SAT)]
+        return keys
+
+    def internals(self, i: int) -> dict[str, Any]:
+        """Vehicle ``i``'s log values: the keys and values of :meth:`PositionCascade.internals`."""
         row = self.state[i].tolist()
-        out: dict[str, Any] = {k: row[c] for k, c in keys}
-        out["ax_cmd"] = row[S_ACMD]
-        out["ay_cmd"] = row[S_ACMD + 1]
-        out["az_cmd"] = row[S_ACMD + 2]
-        out["thrust"] = row[S_THRUST]
-        out["tilt_cmd"] = row[S_TILT]
-        out["mixer_saturated"] = row[S_SAT]
-        return out
+        return {k: row[c] for k, c in self.internal_columns(i)}

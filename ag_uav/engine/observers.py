@@ -20,8 +20,11 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from ..world.deposition import S_ON, S_Q
 from .physics import STATE_SPEC
 from .stages import IMU_KEYS, Batch, Control, Sensing
+
+_NAN6 = (np.full(3, np.nan), np.full(3, np.nan))  # no estimate: its position and velocity
 
 
 class TickView:
@@ -117,6 +120,8 @@ class LogObserver(Observer):
         self._est = feedback.name != "true"
         self.dose = depositing.of(i) if depositing is not None else None
         self._dose_f = _dose_factor(self.dose[0].grid) if self.dose is not None else 0
+        self._extra: int | None = None  # the log's raw columns after the motors, once bound
+        self._imu = False
 
     def next_time(self) -> float:
         return self.log.next_due(frames=self.renderer is not None)
@@ -129,27 +134,52 @@ class LogObserver(Observer):
             self._frames(view)
 
     def _record(self, view: TickView) -> None:
-        b, i, t = view.b, self.i, view.t
-        ctrl = None
-        if self.log.want("state", t):
-            ctrl = self.control.bc.internals(i)
-            row = self.sensing.row(i, view.k)
-            if row is not None:
-                ctrl.update(zip(IMU_KEYS, row.tolist(), strict=True))
-            if self.dose is not None:  # the nozzle model: valve open, actual flow (L/s)
-                dep, j = self.dose
-                ctrl["nozzle.valve"] = 1.0 if dep.valve_on[j] else 0.0
-                ctrl["nozzle.flow_lps"] = float(dep.flow_lps[j])
-        self.log.tick(t, p_true=tuple(b.p[i].tolist()), q_true_wxyz=tuple(b.quat[i].tolist()),
-                      v_true=tuple(b.v[i].tolist()), p_ref=tuple(b.rp[i].tolist()),
-                      v_ref=tuple(b.rv[i].tolist()), yaw_ref=float(b.yaw[i]),
-                      p_est=tuple(b.p_fb[i].tolist()) if self._est else None,
-                      v_est=tuple(b.v_fb[i].tolist()), ctrl=ctrl, motors=b.f[i].tolist(),
-                      wind=tuple(b.w[i].tolist()), spray=bool(b.spray[i]))
-        if self.dose is not None and self.log.want_dose(t):
+        """One tick row of the log (:meth:`~ag_uav.record.runlog.RunLog.tick_slot`): the
+        engine's arrays of vehicle ``i`` copied in one go; the log encodes them in blocks."""
+        b, i, t, log = view.b, self.i, view.t, self.log
+        if self._extra is None:
+            self._bind(view)
+        row = log.tick_slot(t, self._est)
+        if row is not None:
+            parts = self._parts
+            if b.f is not self._f:  # the controller handed a new thrust buffer
+                self._f = b.f
+                parts[self._jf] = b.f[i]
+            if self._imu:
+                parts[-1 - (self.dose is not None)] = self.sensing.row(i, view.k)
+            np.concatenate(parts, out=row)
+        if self.dose is not None and log.want_dose(t):
             dep, j = self.dose
             g, f = dep.grid, self._dose_f
-            self.log.dose(t, g.x0, g.y0, g.cell * (1 << f), dep.l_per_ha_now(j, f))
+            log.dose(t, g.x0, g.y0, g.cell * (1 << f), dep.l_per_ha_now(j, f))
+
+    def _bind(self, view: TickView) -> None:
+        """The row layout: the controller's state row, the IMU record, the nozzle's valve and
+        flow after the motors; the ctrl keys name their columns in it."""
+        bc, i = self.control.bc, self.i
+        cols = list(bc.internal_columns(i))
+        base = bc.state.shape[1]
+        self._imu = self.sensing.row(i, view.k) is not None
+        if self._imu:
+            cols += [(k, base + j) for j, k in enumerate(IMU_KEYS)]
+            base += len(IMU_KEYS)
+        if self.dose is not None:
+            cols += [("nozzle.valve", base), ("nozzle.flow_lps", base + S_Q - S_ON)]
+            base += S_Q - S_ON + 1
+        self._extra = base
+        b = view.b
+        parts = [b.p[i], b.quat[i], b.v[i], b.rp[i], b.rv[i], b.yaw[i:i + 1]]
+        parts += (b.p_fb[i], b.v_fb[i]) if self._est else _NAN6
+        self._jf, self._f = len(parts) + 2, b.f
+        parts += (b.w[i], b.spray[i:i + 1], b.f[i], bc.state[i])
+        if self._imu:
+            parts.append(self.sensing.row(i, view.k))
+        if self.dose is not None:
+            dep, j = self.dose
+            parts.append(dep.st[j, S_ON:S_Q + 1])
+        self._parts = parts  # views of the engine's arrays (they are written in place)
+        self.log.bind_ticks(self.control.b.f.shape[1], [k for k, _ in cols],
+                            [c for _, c in cols], base)
 
     def _frames(self, view: TickView) -> None:
         d, r = view.data(self.i), self.renderer

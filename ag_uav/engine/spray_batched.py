@@ -415,6 +415,9 @@ class BatchSprayer:
             if not active[i] or not t >= sp._next_log:
                 continue
             sp._next_log = t + 0.1 - 1e-9
+            due = getattr(sp.log, "spray_due", None)
+            if due is not None and not due(t):  # the log's own rate (light: 5 Hz)
+                continue
             j = int(self._off[i]) + k
             on = bool(self._rec_on[j])
             x, y = float(vx[i]), float(vy[i])

@@ -356,12 +356,10 @@ class BatchInsFeedback:
                 continue
             log.set_truth(p[i])
             for j, name in enumerate(self.names):
-                if log.want_estimator(name, t):
+                if log.want_estimator(name, t):  # the log copies the values now
                     row = i * self.nr + j
-                    x = self.bank.x_out[row].copy()
-                    xl = x.tolist()
-                    log.estimator(t, name, x, np.diagonal(self.bank.P[row]).copy(), None,
-                                  pos=(xl[0], xl[1], xl[2]))
+                    log.estimator(t, name, self.bank.x_out[row],
+                                  np.diagonal(self.bank.P[row]), None)
 
     def _fix(self, i: int, k: int, t: float) -> None:
         fb = self.fbs[i]

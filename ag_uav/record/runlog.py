@@ -282,6 +282,61 @@ class _Packer:
         return self._struct.pack(*args)
 
 
+def _template(prefixes: Sequence[bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """:class:`_Packer`'s layout as a byte template (uint8, zeros where the values go) and the
+    offset of each value's 8 bytes in it: what :mod:`ag_uav.record.encode` fills."""
+    tmpl = bytearray()
+    slots: list[int] = []
+    for p in prefixes:
+        tmpl += p
+        slots.append(len(tmpl))
+        tmpl += bytes(8)
+    return np.frombuffer(bytes(tmpl), dtype=np.uint8).copy(), np.array(slots, dtype=np.int64)
+
+
+class _Rows:
+    """A growing (n, width) float64 block of rows to encode at the next flush.  A row handed
+    out by :meth:`open_row` counts once :meth:`commit` is called (a signal arriving while the
+    caller fills it must not write a half-filled row)."""
+
+    __slots__ = ("a", "n", "open")
+
+    def __init__(self, width: int, cap: int = 64):
+        self.a = np.empty((cap, width))
+        self.n = 0
+        self.open = False
+
+    def open_row(self) -> np.ndarray:
+        if self.n == len(self.a):
+            self.a = np.concatenate([self.a, np.empty_like(self.a)])
+        self.open = True
+        return self.a[self.n]
+
+    def commit(self) -> None:
+        self.n += 1
+        self.open = False
+
+    def take(self) -> np.ndarray:
+        """The committed rows (a view, valid until the next :meth:`open_row`); empties."""
+        r = self.a[:self.n]
+        self.n = 0
+        return r
+
+
+#: the tick row's columns (:meth:`RunLog.tick_slot`): t, group mask (1 tf, 2 pose, 4 state,
+#: 8 an estimate is given), true position, attitude (w, x, y, z), velocity, reference
+#: position, velocity and yaw, estimated position and velocity, wind, spray; then the motors
+TICK_P, TICK_Q, TICK_V, TICK_PREF, TICK_VREF, TICK_YAW = 2, 5, 9, 12, 15, 18
+TICK_PEST, TICK_VEST, TICK_WIND, TICK_SPRAY, TICK_HEAD = 19, 22, 25, 28, 29
+_POSE_TMPL, _POSE_SLOTS = _template([b"\x0a\x1b\x09", b"\x11", b"\x19", b"\x12\x24\x09",
+                                     b"\x11", b"\x19", b"\x21"])
+_TF_TMPL = _POSE_TMPL.copy()
+_TF_TMPL[[0, 29]] = (0x22, 0x2A)  # FrameTransform: translation (4), rotation (5)
+_NO_BYTES = np.zeros(0, dtype=np.uint8)
+#: the most bytes one tick row's messages take, besides the state message
+_ROW_POSE_BYTES = 4 * (2 + 14 + 32 + 67)
+
+
 # --------------------------------------------------------------------------------------------
 # Small geometry helpers (plain floats: faster than numpy for 3-vectors)
 # --------------------------------------------------------------------------------------------
@@ -342,6 +397,7 @@ _POSE_MID = _WORLD2 + b"\x1a\x43"  # PoseInFrame: frame_id "world", then the 67-
 _DEG = 57.29577951308232
 _D = struct.Struct("<d")
 _perf_counter = time.perf_counter
+_LOG_TIME = operator.itemgetter(2)
 _PACKD: dict[int, struct.Struct] = {}
 
 
@@ -383,25 +439,52 @@ _PREV_HANDLERS: dict[int, Any] = {}
 _HANDLERS_INSTALLED = False
 
 
-class _EstChan:
-    """One ``/estimator/<name>`` channel: its clock, writer, schema and encoding pieces."""
+class _FlatRows:
+    """A :class:`FlatSchema` channel whose messages wait as rows of values (column 0 the sim
+    time) and are encoded together at the flush (:func:`ag_uav.record.encode.encode_flat`)."""
 
-    __slots__ = ("schema", "log", "topic", "n", "m", "keys", "next_t", "count", "fast",
-                 "pre_t", "hx", "hp", "hi", "nan_i", "tail")
+    __slots__ = ("rows", "tmpl", "slots", "log", "count")
+
+    def __init__(self, schema: FlatSchema, log: Any):
+        self.rows = _Rows(schema.n_values, cap=16)
+        self.tmpl, self.slots = _template(schema.prefixes)
+        self.log = log
+        self.count = 0
+
+    def put(self, values: Any) -> None:
+        """One message's values (the schema's order)."""
+        self.rows.open_row()[:] = values
+        self.rows.commit()
+        self.count += 1
+
+    def encode(self, pending: list[tuple[Any, bytes, int]]) -> None:
+        """The waiting rows -> ``(log, message, log_time)`` appended to ``pending``."""
+        from .encode import encode_flat
+
+        n = self.rows.n
+        if not n:
+            return
+        r = self.rows.take()
+        size = len(self.tmpl)
+        out = np.empty(n * size, dtype=np.uint8)
+        encode_flat(r, self.tmpl, self.slots, out, np.empty(n + 1, dtype=np.int64))
+        buf, log, ap = out.tobytes(), self.log, pending.append
+        for j, t in enumerate(r[:, 0].tolist()):
+            ap((log, buf[j * size:(j + 1) * size], ns(t)))
+
+
+class _EstChan(_FlatRows):
+    """One ``/estimator/<name>`` channel: its clock and rows; a row is t, x[n], p_diag[n],
+    innovation[m], then the tail (position, error, extras)."""
+
+    __slots__ = ("topic", "n", "m", "keys", "next_t", "ix", "ip", "ii", "it")
 
     def __init__(self, schema: FlatSchema, log: Any, topic: str, n: int, m: int,
                  keys: tuple[str, ...]):
-        self.schema, self.log, self.topic = schema, log, topic
-        self.n, self.m, self.keys = n, m, keys
+        super().__init__(schema, log)
+        self.topic, self.n, self.m, self.keys = topic, n, m, keys
         self.next_t = -_INF
-        self.count = 0
-        # value layout: t, x[n], p_diag[n], innovation[m], then the scalar tail
-        pre = schema.prefixes
-        self.fast = n > 0
-        self.pre_t, self.hx, self.hp = pre[0], pre[1], pre[1 + n] if n else b""
-        self.hi = pre[1 + 2 * n] if m else b""
-        self.nan_i = struct.pack(f"<{m}d", *([_NAN] * m))
-        self.tail = _Packer(pre[1 + 2 * n + m:])
+        self.ix, self.ip, self.ii, self.it = 1, 1 + n, 1 + 2 * n, 1 + 2 * n + m
 
 
 def _os_error(e: OSError, path: Path) -> OSError:
@@ -411,16 +494,16 @@ def _os_error(e: OSError, path: Path) -> OSError:
     return OSError(code, os.strerror(code), str(path))
 
 
-def _close_all() -> None:
+def _close_all(partial: bool = False) -> None:
     for log in list(_OPEN):
         try:
-            log.close()
+            log.close(partial=partial)
         except Exception:  # noqa: BLE001 - closing the others matters more
             pass
 
 
 def _on_signal(signum: int, frame: Any) -> None:
-    _close_all()
+    _close_all(partial=True)  # a tick row being filled when the signal came is dropped
     prev = _PREV_HANDLERS.get(signum)
     if callable(prev):
         prev(signum, frame)
@@ -540,6 +623,9 @@ class RunLog:
         # burst at each flush (and before any other write), which keeps the writer's work out
         # of the control loop's way; a SIGKILL loses them with the unfinished chunk
         self._pending: list[tuple[Any, bytes, int]] = []
+        self._flat_rows: list[_FlatRows] = []  # estimator and spray channels, encoded at flush
+        self._ch_spray: _FlatRows | None = None
+        self._next_spray = -_INF if self._period["state"] < _INF and self.enabled else _INF
         if not self.enabled:
             return
 
@@ -584,12 +670,17 @@ class RunLog:
         self._log_gps = raw("/gps", pose_schema).base.log if en["gps"] else None
         self._child = {"base_link": _str_field(3, "base_link")}
         self._tf_mid = _WORLD2 + self._child["base_link"]
+        self._tf_mid_a = np.frombuffer(self._tf_mid, dtype=np.uint8).copy()
+        self._pose_mid_a = np.frombuffer(_POSE_MID, dtype=np.uint8).copy()
         self._log_state = None  # created at the first tick (schema depends on ctrl keys)
         self._state_schema: FlatSchema | None = None
         self._ctrl_keys: tuple[str, ...] = ()
-        self._ctrl_get: Any = None
-        self._ctrl_nan: list[float] = []
         self._n_motors = 0
+        self._ctrl_cols = np.zeros(0, dtype=np.intp)
+        self._rows = _Rows(TICK_HEAD)  # the tick rows to encode (re-made by the state schema)
+        self._enc_out = _NO_BYTES
+        self._enc_idx = np.zeros((3, 1), dtype=np.int64)
+        self._last_row: np.ndarray | None = None
         self._cam: dict[str, Any] = {}
         self._scene_ch: dict[str, Any] = {}
         self._next_est: dict[str, float] = {}  # per-camera clocks
@@ -643,20 +734,38 @@ class RunLog:
     def counts(self) -> dict[str, int]:
         """Messages written so far, per topic."""
         out = dict(self._counts)
-        n_pose = self._n_pose
-        for topic, n in (("/tf", self._n_tf), ("/drone/pose", n_pose),
-                         ("/drone/pose_ref", n_pose), ("/drone/pose_est", self._n_pose_est),
-                         ("/drone/state", self._n_state), ("/gps", self._n_gps)):
+        r = self._rows  # the tick rows not encoded yet count too (they will be written)
+        m = r.a[:r.n + r.open, 1].astype(np.int64)
+        n_pose = self._n_pose + int(np.count_nonzero(m & 2))
+        n_est = self._n_pose_est + int(np.count_nonzero((m & 10) == 10))
+        for topic, n in (("/tf", self._n_tf + int(np.count_nonzero(m & 1))),
+                         ("/drone/pose", n_pose), ("/drone/pose_ref", n_pose),
+                         ("/drone/pose_est", n_est),
+                         ("/drone/state", self._n_state + int(np.count_nonzero(m & 4))),
+                         ("/gps", self._n_gps)):
             if n:
                 out[topic] = out.get(topic, 0) + n
         for ec in self._est.values():
             if ec.count:
                 out[ec.topic] = ec.count
+        if self._ch_spray is not None and self._ch_spray.count:
+            out["/drone/spray"] = self._ch_spray.count
         return out
 
-    def _drain(self) -> None:
-        """Hand the pending messages to the writer, in the order they were logged."""
+    def _drain(self, partial: bool = False) -> None:
+        """Encode the tick rows, then hand the pending messages to the writer.  ``partial``: a
+        row still being filled (a signal arrived mid-tick) is dropped, not written half-done."""
+        rows = self._rows
+        if rows.open and not partial:
+            rows.commit()
+        rows.open = False
         pend = self._pending
+        for fr in self._flat_rows:
+            fr.encode(pend)
+        if rows.n:
+            self._encode_ticks(rows.take())
+        if pend:  # the topics' messages, merged by log time
+            pend.sort(key=_LOG_TIME)
         if pend:
             self._pending = []  # swapped first: a signal handler's close() drains only the rest
             for log, msg, tn in pend:
@@ -715,7 +824,13 @@ class RunLog:
         return self._M.Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)
 
     # ---------------------------------------------------------------- per-tick data
-    def _make_state_schema(self, ctrl: dict[str, float], n_motors: int) -> None:
+    def _make_state_schema(self, ctrl_keys: Sequence[str], n_motors: int,
+                           ctrl_src: Sequence[int] | None = None, extra: int | None = None,
+                           ) -> None:
+        """Fix ``/drone/state``'s schema (ctrl keys in tree order, ``n_motors`` rotor values)
+        and the tick rows' layout: :data:`TICK_HEAD` columns, the motors, then ``extra`` raw
+        columns of which ``ctrl_src[j]`` holds the j-th ctrl key of ``ctrl_keys`` as given
+        (default: the ctrl values themselves, in the order given)."""
         fields: list[tuple[str, int]] = [("t", 0)]
         fields += [(f"pos.{a}", 0) for a in "xyz"]
         fields += [(f"vel.{a}", 0) for a in "xyz"]
@@ -728,8 +843,9 @@ class RunLog:
         fields += [(f"wind.{a}", 0) for a in "xyz"]
         if n_motors:
             fields.append(("motors", n_motors))
+        given = list(ctrl_keys)
         # ctrl keys: dots make nested groups (kept contiguous, first-appearance order)
-        self._ctrl_keys = tuple(_tree_order(list(ctrl)))
+        self._ctrl_keys = tuple(_tree_order(given))
         try:
             schema = FlatSchema("ag_uav.DroneState",
                                 fields + [(f"ctrl.{k}", 0) for k in self._ctrl_keys])
@@ -739,17 +855,79 @@ class RunLog:
                                           for k in self._ctrl_keys])
         self._n_motors = n_motors
         self._state_schema = schema
-        keys = self._ctrl_keys
-        # ctrl values in schema order; raises KeyError when one is missing (then the slow path)
-        self._ctrl_get = ((lambda d: (d[keys[0]],)) if len(keys) == 1
-                          else operator.itemgetter(*keys) if keys else (lambda d: ()))
-        self._ctrl_nan = [_NAN] * len(keys)
-        self._log_state = self._fg.Channel(
-            "/drone/state", message_encoding="protobuf",
-            schema=self._fg.Schema(name="ag_uav.DroneState", encoding="protobuf",
-                                   data=self._state_schema.schema_data),
-            context=self._ctx,
-        ).base.log
+        src = list(range(len(given))) if ctrl_src is None else [int(c) for c in ctrl_src]
+        pos = {k: src[j] for j, k in enumerate(given)}
+        base = TICK_HEAD + n_motors
+        self._ctrl_cols = np.array([base + pos[k] for k in self._ctrl_keys], dtype=np.intp)
+        self._rows = _Rows(base + (len(given) if extra is None else int(extra)))
+        on = self._period["state"] < _INF
+        if on:
+            self._log_state = self._fg.Channel(
+                "/drone/state", message_encoding="protobuf",
+                schema=self._fg.Schema(name="ag_uav.DroneState", encoding="protobuf",
+                                       data=self._state_schema.schema_data),
+                context=self._ctx,
+            ).base.log
+        st = _template(schema.prefixes) if on else (_NO_BYTES, np.zeros(0, dtype=np.int64))
+        self._enc_tmpl = (st, _POSE_TMPL if self._period["pose"] < _INF else _NO_BYTES,
+                          _TF_TMPL if self._log_tf is not None else _NO_BYTES)
+        self._kind_logs = [self._log_tf] + ([self._log_pose, self._log_pose_ref,
+                                              self._log_pose_est] if self._period["pose"] < _INF
+                                             else [None] * 3) + [self._log_state]
+        self._row_bytes = _ROW_POSE_BYTES + len(st[0])
+
+    def bind_ticks(self, n_motors: int, ctrl_keys: Sequence[str], ctrl_src: Sequence[int],
+                   extra: int) -> None:
+        """The row layout :meth:`tick_slot` hands out (once, before the first slot): the
+        :data:`TICK_HEAD` columns, ``n_motors`` rotor commands, then ``extra`` raw columns;
+        ``ctrl_keys[j]`` is logged from raw column ``ctrl_src[j]``."""
+        if self._state_schema is None and not self.closed:
+            self._make_state_schema(ctrl_keys, n_motors, ctrl_src, extra)
+
+    def tick_slot(self, t: float, est: bool = False) -> np.ndarray | None:
+        """The row to fill for a tick at sim time ``t`` (None when nothing is due), from its
+        true position on: the columns from :data:`TICK_P` to :data:`TICK_HEAD`, the motors,
+        then the raw columns bound by :meth:`bind_ticks` (which must come first).  ``est``: the
+        estimate's columns hold one (else they are ignored).  The row is encoded at the next
+        flush, so the caller fills it now; :meth:`tick` does the same from one call's
+        arguments."""
+        if t < self._next_tick:
+            return None
+        self._t_last = t
+        rows = self._rows
+        if rows.open:
+            rows.commit()
+        now = _perf_counter()
+        if now - self._last_flush_wall >= self._flush_wall_s or (
+            t - self._last_flush_sim >= self._flush_sim_s
+        ):
+            self._drain()
+            self._writer.flush()
+            self._last_flush_wall = now
+            self._last_flush_sim = t
+        nx = self._next
+        mask = 0
+        if t >= nx["tf"]:
+            nx["tf"] = t + self._p_tf
+            mask = 1
+        if t >= nx["pose"]:
+            nx["pose"] = t + self._p_pose
+            mask |= 2
+        if t >= nx["state"]:
+            nx["state"] = t + self._p_state
+            mask |= 4
+        nt = nx["tf"]
+        if nx["pose"] < nt:
+            nt = nx["pose"]
+        if nx["state"] < nt:
+            nt = nx["state"]
+        self._next_tick = nt
+        row = rows.open_row()
+        row[0] = t
+        row[1] = mask | 8 if est else mask
+        self._last_row = row
+        self._last_true = None
+        return row[TICK_P:]
 
     def tick(
         self,
@@ -768,106 +946,62 @@ class RunLog:
         wind: Sequence[float] = (0.0, 0.0, 0.0),
         spray: bool = False,
     ) -> None:
-        """Call every control tick; decimates internally (cheap when nothing is due)."""
+        """Call every control tick; decimates internally (cheap when nothing is due).  One
+        row of :meth:`tick_slot`, filled from the arguments (``p_est`` None: no estimate)."""
         if t < self._next_tick:
             return
-        self._t_last = t
-        tn = ns(t)
-        if type(p_true) is tuple and type(q_true_wxyz) is tuple:  # the loop's: plain floats
-            px, py, pz = p_true
-            qw, qx, qy, qz = q_true_wxyz
+        if self._state_schema is None:
+            self._make_state_schema(list(ctrl or {}), len(motors))
+        self.tick_slot(t, est=p_est is not None)
+        row = self._last_row
+        row[TICK_P:TICK_Q] = _fit(_flat(p_true), 3)
+        row[TICK_Q:TICK_V] = _fit(_flat(q_true_wxyz), 4)
+        row[TICK_V:TICK_PREF] = _fit(_flat(v_true), 3)
+        row[TICK_PREF:TICK_VREF] = _fit(_flat(p_ref), 3)
+        row[TICK_VREF:TICK_YAW] = _fit(_flat(v_ref), 3)
+        row[TICK_YAW] = yaw_ref
+        if p_est is None:
+            row[TICK_PEST:TICK_WIND] = _NAN
         else:
-            px, py, pz = float(p_true[0]), float(p_true[1]), float(p_true[2])
-            qw, qx, qy, qz = (float(q_true_wxyz[0]), float(q_true_wxyz[1]),
-                              float(q_true_wxyz[2]), float(q_true_wxyz[3]))
-        self._last_true = (px, py, pz)
-        nx = self._next
-        head = None
-        pack = _POSE.pack
-        ap = self._pending.append
-        if t >= nx["tf"]:
-            nx["tf"] = t + self._p_tf
-            head = _ts_field(tn)
-            body = head + self._tf_mid + pack(b"\x22\x1b", 9, px, 17, py, 25, pz,
-                                              b"\x2a\x24", 9, qx, 17, qy, 25, qz, 33, qw)
-            ap((self._log_tf, b"\x0a" + _varint(len(body)) + body, tn))
-            self._n_tf += 1
-        if t >= nx["pose"]:
-            nx["pose"] = t + self._p_pose
-            pre = (head or _ts_field(tn)) + _POSE_MID
-            ap((self._log_pose, pre + pack(b"\x0a\x1b", 9, px, 17, py, 25, pz,
-                                           b"\x12\x24", 9, qx, 17, qy, 25, qz, 33, qw), tn))
-            h = 0.5 * yaw_ref
-            ap((self._log_pose_ref, pre + pack(b"\x0a\x1b", 9, p_ref[0], 17, p_ref[1],
-                                               25, p_ref[2], b"\x12\x24", 9, 0.0, 17, 0.0,
-                                               25, math.sin(h), 33, math.cos(h)), tn))
-            self._n_pose += 1
-            if p_est is not None:
-                ap((self._log_pose_est, pre + pack(b"\x0a\x1b", 9, p_est[0], 17, p_est[1],
-                                                   25, p_est[2], b"\x12\x24", 9, qx, 17, qy,
-                                                   25, qz, 33, qw), tn))
-                self._n_pose_est += 1
-        if t >= nx["state"]:
-            nx["state"] = t + self._p_state
-            if self._state_schema is None:
-                self._make_state_schema(ctrl or {}, len(motors))
-            rx, ry, rz = p_ref[0], p_ref[1], p_ref[2]
-            ex, ey, ez = px - rx, py - ry, pz - rz
-            eh = math.sqrt(ex * ex + ey * ey)
-            vx, vy, vz = v_true[0], v_true[1], v_true[2]
-            # ZYX Euler angles (roll, pitch, yaw) in degrees, as _rpy_deg
-            sp = 2.0 * (qw * qy - qz * qx)
-            sp = 1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp)
-            vals = [t, px, py, pz, vx, vy, vz,
-                    math.atan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy))
-                    * _DEG, math.asin(sp) * _DEG,
-                    math.atan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-                    * _DEG,
-                    rx, ry, rz, v_ref[0], v_ref[1], v_ref[2], yaw_ref]
-            if p_est is not None:
-                sx, sy, sz = p_est[0], p_est[1], p_est[2]
-                dx, dy, dz = sx - px, sy - py, sz - pz
-                if v_est is not None:
-                    vals += (sx, sy, sz, v_est[0], v_est[1], v_est[2])
-                else:
-                    vals += (sx, sy, sz, _NAN, _NAN, _NAN)
-                vals += (ex, ey, ez, eh, math.sqrt(eh * eh + ez * ez),
-                         dx, dy, dz, math.sqrt(dx * dx + dy * dy))
-            else:
-                vals += (_NAN, _NAN, _NAN, _NAN, _NAN, _NAN,
-                         ex, ey, ez, eh, math.sqrt(eh * eh + ez * ez), _NAN, _NAN, _NAN, _NAN)
-            vals += (math.sqrt(vx * vx + vy * vy + vz * vz), 1.0 if spray else 0.0,
-                     wind[0], wind[1], wind[2])
-            nm = self._n_motors
-            if nm:
-                if len(motors) == nm:
-                    vals += motors
-                else:
-                    vals += _fit(list(motors), nm)
-            if ctrl:
-                try:
-                    vals += self._ctrl_get(ctrl)
-                except KeyError:  # a key missing this tick: NaN
-                    g = ctrl.get
-                    vals += [g(k, _NAN) for k in self._ctrl_keys]
-            else:
-                vals += self._ctrl_nan
-            ap((self._log_state, self._state_schema.encode(vals), tn))
-            self._n_state += 1
-        nt = nx["tf"]
-        if nx["pose"] < nt:
-            nt = nx["pose"]
-        if nx["state"] < nt:
-            nt = nx["state"]
-        self._next_tick = nt
-        now = _perf_counter()
-        if now - self._last_flush_wall >= self._flush_wall_s or (
-            t - self._last_flush_sim >= self._flush_sim_s
-        ):
-            self._drain()
-            self._writer.flush()
-            self._last_flush_wall = now
-            self._last_flush_sim = t
+            row[TICK_PEST:TICK_VEST] = _fit(_flat(p_est), 3)
+            row[TICK_VEST:TICK_WIND] = _NAN if v_est is None else _fit(_flat(v_est), 3)
+        row[TICK_WIND:TICK_SPRAY] = _fit(_flat(wind), 3)
+        row[TICK_SPRAY] = 1.0 if spray else 0.0
+        nm = self._n_motors
+        row[TICK_HEAD:TICK_HEAD + nm] = _fit(_flat(motors), nm)
+        g = (ctrl or {}).get
+        row[TICK_HEAD + nm:] = [g(k, _NAN) for k in self._ctrl_keys]
+        self._rows.commit()
+
+    def _encode_ticks(self, r: np.ndarray) -> None:
+        """The committed tick rows ``r`` -> ``/tf``, ``/drone/pose``, ``pose_ref``,
+        ``pose_est`` and ``/drone/state`` messages (:func:`ag_uav.record.encode.encode_ticks`),
+        appended to the pending list."""
+        from .encode import encode_ticks
+
+        n = len(r)
+        if len(self._enc_out) < n * self._row_bytes:
+            self._enc_out = np.empty(2 * n * self._row_bytes, dtype=np.uint8)
+            self._enc_idx = np.empty((3, 8 * n + 1), dtype=np.int64)
+        out, (starts, kinds, tns) = self._enc_out, self._enc_idx
+        st, pose, tf = self._enc_tmpl
+        m = encode_ticks(r, self._n_motors, self._ctrl_cols, st[0], st[1], pose, _POSE_SLOTS,
+                         tf, self._tf_mid_a, self._pose_mid_a, out, starts, kinds, tns)
+        s = starts[:m + 1].tolist()
+        buf = out[:s[-1]].tobytes()
+        logs = self._kind_logs
+        if self._pending:  # merged with the other topics' messages by the caller
+            ap = self._pending.append
+            for j, k, tn in zip(range(m), kinds[:m].tolist(), tns[:m].tolist(), strict=True):
+                ap((logs[k], buf[s[j]:s[j + 1]], tn))
+        else:  # nothing else pending: straight to the writer
+            for j, k, tn in zip(range(m), kinds[:m].tolist(), tns[:m].tolist(), strict=True):
+                logs[k](buf[s[j]:s[j + 1]], tn)
+        c = np.bincount(kinds[:m], minlength=5).tolist()
+        self._n_tf += c[0]
+        self._n_pose += c[1]
+        self._n_pose_est += c[3]
+        self._n_state += c[4]
 
     SPRAY_FIELDS = ("t", "tank_l", "mass_kg", "flow_lps", "nozzles", "power_w", "energy_wh",
                     "battery_frac", "sortie", "ground")
@@ -880,23 +1014,25 @@ class RunLog:
         sortie number, on the ground at the base). Logged at the ``state`` group's rate."""
         if self.closed or self._period["state"] == _INF:
             return
-        nxt = getattr(self, "_next_spray", -_INF)
-        if t < nxt:
+        if t < self._next_spray:
             return
         self._next_spray = t + self._period["state"] - 1e-9
-        if getattr(self, "_ch_spray", None) is None:
-            self._spray_schema = FlatSchema("ag_uav.SprayState",
-                                            [(k, 0) for k in self.SPRAY_FIELDS])
-            self._ch_spray = self._fg.Channel(
+        if self._ch_spray is None:
+            schema = FlatSchema("ag_uav.SprayState", [(k, 0) for k in self.SPRAY_FIELDS])
+            self._ch_spray = _FlatRows(schema, self._fg.Channel(
                 "/drone/spray", message_encoding="protobuf",
                 schema=self._fg.Schema(name="ag_uav.SprayState", encoding="protobuf",
-                                       data=self._spray_schema.schema_data),
-                context=self._ctx)
+                                       data=schema.schema_data),
+                context=self._ctx).base.log)
+            self._flat_rows.append(self._ch_spray)
             self._write_layout()
-        vals = [t, tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w, energy_wh, soc,
-                float(sortie), 1.0 if ground else 0.0]
-        self._ch_spray.log(self._spray_schema.encode(vals), log_time=ns(t))
-        self._count("/drone/spray")
+        self._ch_spray.put((t, tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w,
+                            energy_wh, soc, sortie, 1.0 if ground else 0.0))
+
+    def spray_due(self, t: float) -> bool:
+        """Would :meth:`spray_state` log at sim time ``t``? (no side effects)"""
+        return t >= self._next_spray
+
 
     def gps(self, t: float, fix_xyz: Sequence[float]) -> None:
         """A GPS fix (local ENU metres) -> ``/gps`` PoseInFrame."""
@@ -916,6 +1052,14 @@ class RunLog:
         estimator bank calls it before logging a fix's update, so that ``err`` is not measured
         against a pose up to one state period old (at 5 m/s, 50 ms is 0.25 m)."""
         self._last_true = (float(p_true[0]), float(p_true[1]), float(p_true[2]))
+
+    def _truth(self) -> tuple[float, float, float]:
+        """The last true position given to :meth:`set_truth` or a tick row."""
+        lt = self._last_true
+        if lt is None:
+            r = self._last_row
+            lt = self._last_true = (float(r[TICK_P]), float(r[TICK_P + 1]), float(r[TICK_P + 2]))
+        return lt
 
     def estimator(
         self,
@@ -946,38 +1090,34 @@ class RunLog:
             return
         ec.next_t = t + self._p_est
         n = ec.n
+        xa = type(x) is np.ndarray and x.ndim == 1 and x.size == n
         if pos is None:
-            pl = _flat(x)[:3]
+            pl = x[:3].tolist() if xa else _flat(x)[:3]
         else:
             pl = pos if len(pos) == 3 else _flat(pos)
-        tx, ty, tz = self._last_true
+        tx, ty, tz = self._truth()
         if len(pl) == 3:
             px, py, pz = pl
         else:
             pf = _fit(list(pl), 2)
             px, py, pz = pf[0], pf[1], (tz if len(pl) == 2 else _NAN)
         dx, dy, dz = px - tx, py - ty, pz - tz
-        tail = [px, py, pz, dx, dy, dz, math.sqrt(dx * dx + dy * dy)]
+        row = ec.rows.open_row()
+        row[0] = t
+        row[ec.ix:ec.ip] = x if xa else _fit(_flat(x), n)
+        if type(p_diag) is np.ndarray and p_diag.ndim == 1 and p_diag.size <= n:
+            k = ec.ip + p_diag.size  # shorter (an error-state covariance): NaN-padded
+            row[ec.ip:k] = p_diag
+            row[k:ec.ii] = _NAN
+        else:
+            row[ec.ip:ec.ii] = _fit(_flat(p_diag), n)
+        if ec.m:
+            row[ec.ii:ec.it] = _NAN if innovation is None else _fit(_flat(innovation), ec.m)
+        row[ec.it:ec.it + 7] = (px, py, pz, dx, dy, dz, math.sqrt(dx * dx + dy * dy))
         if ec.keys:
             g = (extra or {}).get
-            tail += [g(k, _NAN) for k in ec.keys]
-        if ec.fast:
-            parts = [ec.pre_t, _D.pack(t), ec.hx, _f8bytes(x, n), ec.hp, _f8bytes(p_diag, n)]
-            if ec.m:
-                parts.append(ec.hi)
-                parts.append(_f8bytes(innovation, ec.m) if innovation is not None
-                             else ec.nan_i)
-            parts.append(ec.tail.pack(tail))
-            msg = b"".join(parts)
-        else:  # zero-length state vector: the generic flat encoding
-            vals = [t]
-            vals += _fit(_flat(x), n)
-            vals += _fit(_flat(p_diag), n)
-            if ec.m:
-                vals += (_fit(_flat(innovation), ec.m) if innovation is not None
-                         else [_NAN] * ec.m)
-            msg = ec.schema.encode(vals + tail)
-        self._pending.append((ec.log, msg, ns(t)))
+            row[ec.it + 7:] = [g(k, _NAN) for k in ec.keys]
+        ec.rows.commit()
         ec.count += 1
 
     def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> _EstChan:
@@ -1002,7 +1142,9 @@ class RunLog:
                                    data=schema.schema_data),
             context=self._ctx,
         )
-        return _EstChan(schema, ch.base.log, topic, n, m, keys)
+        ec = _EstChan(schema, ch.base.log, topic, n, m, keys)
+        self._flat_rows.append(ec)
+        return ec
 
     # ---------------------------------------------------------------- scene
     def _scene_entities(self, t: float, entities: list[Any], topic: str) -> None:
@@ -1251,12 +1393,13 @@ class RunLog:
             write_foxglove_layout(self.path.parent / "layout.json", cameras=cams,
                                   estimators=tuple(sanitize_name(n) for n in self._est),
                                   ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4,
-                                  spray=getattr(self, "_ch_spray", None) is not None)
+                                  spray=self._ch_spray is not None)
         except Exception:  # noqa: BLE001 - a missing layout never stops a run
             pass
 
-    def close(self) -> None:
-        """Finish the file (summary, indexes, footer).  Idempotent; safe in signal handlers."""
+    def close(self, partial: bool = False) -> None:
+        """Finish the file (summary, indexes, footer).  Idempotent; safe in signal handlers
+        (which pass ``partial``: a tick row still being filled is dropped)."""
         if self.closed:
             return
         self.closed = True
@@ -1265,8 +1408,9 @@ class RunLog:
             self._next[g] = _INF
         for ec in self._est.values():
             ec.next_t = _INF
+        self._next_spray = _INF
         try:
-            self._drain()
+            self._drain(partial)
             self._writer.close()
         except RuntimeError as e:  # the SDK's writer errors: an OSError naming the file
             err = self.write_error(e)

@@ -1,0 +1,124 @@
+"""The run log's block encoding (ag_uav.record.encode) against one-message-at-a-time references:
+the poses and transforms of ``enc_pose_in_frame`` / ``enc_transform``, the state message of
+``FlatSchema.encode`` with the derived values computed here by hand; and what a signal arriving
+mid-tick leaves in the file."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ag_uav.record import runlog as R
+from ag_uav.record.encode import EST, POSE, REF, STATE, TF, encode_flat, encode_ticks
+
+
+def _rows(rng, n, nm, extra):
+    r = rng.normal(size=(n, R.TICK_HEAD + nm + extra)) * 10
+    # times across the varint sizes: 0, sub-second, seconds, a long mission; sec or nsec zero
+    r[:, 0] = np.resize([0.0, 0.05, 1.0, 3.25, 127.5, 128.0, 20000.123456789], n)
+    q = rng.normal(size=(n, 4))
+    r[:, R.TICK_Q:R.TICK_V] = q / np.linalg.norm(q, axis=1, keepdims=True)
+    r[:, 1] = rng.integers(0, 16, size=n)
+    return r
+
+
+def _state_ref(row, nm, ctrl_cols):
+    """DroneState's values of one row, written out as the per-call encoder used to."""
+    t, px, py, pz = row[0], *row[R.TICK_P:R.TICK_Q]
+    w, x, y, z = row[R.TICK_Q:R.TICK_V]
+    vx, vy, vz = row[R.TICK_V:R.TICK_PREF]
+    rx, ry, rz = row[R.TICK_PREF:R.TICK_VREF]
+    roll, pitch, yaw = R._rpy_deg(w, x, y, z)
+    has = int(row[1]) & 8
+    est = list(row[R.TICK_PEST:R.TICK_WIND]) if has else [math.nan] * 6
+    ex, ey, ez = px - rx, py - ry, pz - rz
+    eh = math.sqrt(ex * ex + ey * ey)
+    dx, dy, dz = est[0] - px, est[1] - py, est[2] - pz
+    return ([t, px, py, pz, vx, vy, vz, roll, pitch, yaw, rx, ry, rz,
+             *row[R.TICK_VREF:R.TICK_PEST]] + est
+            + [ex, ey, ez, eh, math.sqrt(eh * eh + ez * ez), dx, dy, dz,
+               math.sqrt(dx * dx + dy * dy), math.sqrt(vx * vx + vy * vy + vz * vz),
+               row[R.TICK_SPRAY], *row[R.TICK_WIND:R.TICK_SPRAY]]
+            + list(row[R.TICK_HEAD:R.TICK_HEAD + nm]) + [row[c] for c in ctrl_cols])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_block_messages_equal_the_one_at_a_time_encoders(seed):
+    rng = np.random.default_rng(seed)
+    nm, extra = 4, 7
+    rows = _rows(rng, 40, nm, extra)
+    ctrl_cols = np.array([R.TICK_HEAD + nm + j for j in (3, 0, 6, 1)], dtype=np.intp)
+    schema = R.FlatSchema("t.S", [(f, 0) for f in [f"v{j}" for j in range(37)]]
+                          + [("motors", nm)] + [(f"c{j}", 0) for j in range(len(ctrl_cols))])
+    st = R._template(schema.prefixes)
+    mid = R._WORLD2 + R._str_field(3, "base_link")
+    out = np.zeros(200_000, np.uint8)
+    starts, kinds, tns = (np.zeros(400, np.int64) for _ in range(3))
+    m = encode_ticks(rows, nm, ctrl_cols, st[0], st[1], R._POSE_TMPL, R._POSE_SLOTS, R._TF_TMPL,
+                     np.frombuffer(mid, np.uint8).copy(),
+                     np.frombuffer(R._POSE_MID, np.uint8).copy(), out, starts, kinds, tns)
+    want = []
+    for row in rows:
+        tn, mask = R.ns(float(row[0])), int(row[1])
+        ts = R._ts_pb(tn)
+        p, q = row[R.TICK_P:R.TICK_Q], row[R.TICK_Q:R.TICK_V]
+        if mask & 1:
+            want.append((TF, tn, R.enc_transform(ts, R._str_field(3, "base_link"), p, q)))
+        if mask & 2:
+            h = 0.5 * row[R.TICK_YAW]
+            want.append((POSE, tn, R.enc_pose_in_frame(ts, p, q)))
+            want.append((REF, tn, R.enc_pose_in_frame(
+                ts, row[R.TICK_PREF:R.TICK_VREF], (math.cos(h), 0.0, 0.0, math.sin(h)))))
+            if mask & 8:
+                want.append((EST, tn, R.enc_pose_in_frame(ts, row[R.TICK_PEST:R.TICK_VEST], q)))
+        if mask & 4:
+            want.append((STATE, tn, schema.encode(_state_ref(row, nm, ctrl_cols))))
+    assert m == len(want)
+    got = [(int(kinds[j]), int(tns[j]), out[starts[j]:starts[j + 1]].tobytes()) for j in range(m)]
+    for g, w in zip(got, want, strict=True):
+        assert g[:2] == w[:2]
+        if g[0] == STATE:  # derived values may differ in the last bit (libm vs numba)
+            a = np.frombuffer(g[2], np.uint8)
+            b = np.frombuffer(w[2], np.uint8)
+            assert len(a) == len(b)
+            va = np.array([np.frombuffer(g[2][s:s + 8], "<f8")[0] for s in st[1]])
+            vb = np.array([np.frombuffer(w[2][s:s + 8], "<f8")[0] for s in st[1]])
+            np.testing.assert_allclose(va, vb, rtol=1e-13, atol=1e-12, equal_nan=True)
+            keep = np.ones(len(a), bool)
+            for s in st[1]:
+                keep[s:s + 8] = False
+            assert np.array_equal(a[keep], b[keep])  # tags and headers
+        else:
+            assert g[2] == w[2]
+
+
+def test_flat_rows_equal_flatschema_encode():
+    rng = np.random.default_rng(5)
+    schema = R.FlatSchema("t.E", [("t", 0), ("x", 16), ("p_diag", 16), ("pos.x", 0)])
+    rows = rng.normal(size=(9, schema.n_values))
+    tmpl, slots = R._template(schema.prefixes)
+    out = np.zeros(len(tmpl) * 9, np.uint8)
+    starts = np.zeros(10, np.int64)
+    encode_flat(rows, tmpl, slots, out, starts)
+    for j, row in enumerate(rows):
+        assert out[starts[j]:starts[j + 1]].tobytes() == schema.encode(row.tolist())
+
+
+def test_signal_mid_tick_drops_only_the_row_being_filled(tmp_path):
+    """A tick row handed out but not filled when SIGTERM closes the log is not written; every
+    row before it is."""
+    from mcap.reader import make_reader
+
+    log = R.RunLog(tmp_path / "a.mcap", metadata={}, config_toml="", layout=False)
+    log.bind_ticks(4, ["x.u"], [0], 1)
+    for k in range(10):
+        row = log.tick_slot(k * 0.05)
+        row[:] = k
+    log.tick_slot(0.5)  # handed out, never filled: the signal came
+    log.close(partial=True)
+    with open(tmp_path / "a.mcap", "rb") as f:
+        times = [m.log_time for _, c, m in make_reader(f).iter_messages()
+                 if c.topic == "/drone/state"]
+    assert times == [k * 50_000_000 for k in range(10)]
