@@ -329,6 +329,12 @@ class EstimatorConfig:
     ins_recovery: str = _f("kf", "nav = ins, MCKF rules: lock-out recovery after 10 rejected "
                            "fixes (none / inflate / kf; measured in docs/ins.md)",
                            choices=("none", "inflate", "kf"))
+    mckf_kernel: str = _f("fixed", "nav = ins, MCKF rules: kernel of the GNSS position update: "
+                          "fixed = estimator.sigma on every row; adaptive = sigma x max(1, "
+                          "sqrt(s)), s the clipped running mean of NIS/3 (estimators.mckf); "
+                          "multi = sigma on the fix's 3 rows, inf on the 15 prior rows; "
+                          "measured in docs/ins.md (nav = ideal-attitude refuses all but fixed)",
+                          choices=("fixed", "adaptive", "multi"))
     bearing_filter: str = _f("mcc-ekf", "source = bearings: the filter flown on",
                              choices=("mcc-ekf", "ekf", "ukf"))
     bearing_noise_scale: float = _f(0.1, "source = bearings: scale of the paper's mixture "

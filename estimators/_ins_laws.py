@@ -8,12 +8,15 @@ write them a second time.  It binds the bank's row functions (``estimators.kf.kf
 ``kf_fuse(dx, P, R, H, nu) -> NIS``
     The KF update of the error state ``dx`` (zero on entry) with the innovation ``nu`` as its
     "measurement" (ν − H·0 = ν): ``dx = K ν``, ``P = (I − K H) P (I − K H)ᵀ + K R Kᵀ``.
-``mckf_fuse(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy) -> NIS``
+``mckf_fuse(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast) -> NIS``
     The MCKF update (whitened fixed point from x̂⁽⁰⁾ = 0, recovery rule, Joseph with the original
     P̄ and R); parameters as :class:`estimators.batched.BatchMCKF` rows: ``kx``/``ky`` the
     kernel coefficients −1/(2σ²) / −1/(4σ²), ``fpar`` = (kernel_floor, ε², reject_weight,
     inflate, inflate_gate), ``ipar`` = (max_iter, lockout_n, recovery, inflate_jmax), ``ist`` =
-    (n_rejected, n_iter, rejected, recovered) updated, ``wy`` ← diag C_y.
+    (n_rejected, n_iter, rejected, recovered) updated, ``wy`` ← diag C_y.  ``apar`` =
+    (adaptive 0/1, λ, clip): with adaptive = 1 the kernels come from the adaptive bandwidth
+    rule instead (``estimators.mckf.mckf_adaptive_update_row``: base widths ``sig``, n + m
+    values, state ŝ in ``ast[0]``), as :class:`estimators.MCKF` with ``adaptive_sigma=True``.
 ``pca_row(buf, pcs, z, Nw, L, r, mode, zf)``
     The PCA block (Candan & Li §III.C) on one window.
 
@@ -22,9 +25,12 @@ A non-finite NIS means "not fused" (``dx``, ``P`` untouched).
 
 from __future__ import annotations
 
+import numpy as np
+
 from ._jit import njit
 from .kf import kf_update_row as _kf_row
 from .kf import kf_work as _kf_work
+from .mckf import mckf_adaptive_update_row as _mckf_adaptive_row
 from .mckf import mckf_update_row as _mckf_row
 from .mckf import mckf_work as _mckf_work
 from .pca import pca_row
@@ -42,6 +48,10 @@ def kf_fuse(dx, P, R, H, nu):
 
 
 @njit
-def mckf_fuse(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy):
+def mckf_fuse(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast):
     w = _mckf_work(dx.shape[0], nu.shape[0])
+    if apar[0] > 0.0:
+        return _mckf_adaptive_row(dx, P, R, H, nu, sig, apar[1], apar[2], ast,
+                                  np.empty(dx.shape[0]), np.empty(nu.shape[0]), fpar, ipar, ist,
+                                  wy, w)
     return _mckf_row(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, w)

@@ -63,8 +63,11 @@ Update rules of the GNSS **position** (``rule``): ``"kf"`` the Joseph update; ``
 correntropy fixed point on the position innovation (Chen, Liu, Zhao, Principe, Automatica 80,
 2017; σ → ∞ is the KF; lock-out recovery as :class:`estimators.MCKF`); ``"pca-kf"``,
 ``"pca-mckf"`` the same after the PCA block (Candan & Li §III.C) on the window of antenna
-fixes, run once per vehicle when a fix arrives.  Velocity, heading and radar use the KF
-update.  Each measurement is fused sequentially (R block-diagonal), then injected and reset
+fixes, run once per vehicle when a fix arrives.  The MCKF kernel (``INSConfig.mckf_kernel``):
+``"fixed"`` σ per row as given, ``"adaptive"`` the adaptive bandwidth of :class:`estimators.MCKF`
+(one row function for both, :func:`estimators.mckf.mckf_adaptive_update_row`; state ŝ per
+row), ``"multi"`` σ on the fix's rows, ∞ on the prior's.  Velocity, heading and radar use the
+KF update.  Each measurement is fused sequentially (R block-diagonal), then injected and reset
 (Solà §6.2-6.3, eqs 282-287)::
 
       p += δp, v += δv, q ← q ⊗ Exp(δθ), b += δb;   P ← G P Gᵀ, G_θθ = I − [½ δθ]×
@@ -97,8 +100,8 @@ import numpy as np
 from ._ins_laws import kf_fuse, mckf_fuse, pca_row
 from ._jit import njit
 
-__all__ = ["RULES", "BatchINS", "INS", "INSConfig", "quat_to_rot", "quat_exp", "quat_mul",
-           "quat_log_err"]
+__all__ = ["KERNELS", "RULES", "BatchINS", "INS", "INSConfig", "quat_to_rot", "quat_exp",
+           "quat_mul", "quat_log_err"]
 
 RULES = ("kf", "mckf", "pca-kf", "pca-mckf")
 _RULE_CODE = {r: i for i, r in enumerate(RULES)}
@@ -117,9 +120,13 @@ _I_NOW, _I_CORE, _I_QN, _I_DIRTY, _I_LATE, _I_QDROP = 0, 1, 2, 3, 4, 5
 _I_MST = 6  # 6..9: MCKF (n_rejected, n_iter, rejected, recovered)
 _I_NGNSS, _I_NRAD, _I_RDROP = 10, 11, 12
 _NINT = 13
-# dg (per row diagnostics)
+# dg (per row diagnostics and the adaptive kernel's state)
 _D_NISP, _D_NISV, _D_NISY, _D_NISR, _D_WY = 0, 1, 2, 3, 4  # 4..6 diag C_y
-_NDG = 7
+_D_S2 = 7  # ŝ of the adaptive bandwidth rule (1 after a reset)
+_NDG = 8
+# mpar (per row MCKF parameters) layout: kx(15), ky(3), fpar(5), apar(3), σ(18)
+_M_KX, _M_KY, _M_F, _M_A, _M_SIG, _NMPAR = 0, 15, 18, 23, 26, 44
+KERNELS = ("fixed", "adaptive", "multi")
 # queue record: tick, kind, z(7), zpca(3), var(7)
 _Q_T, _Q_K, _Q_Z, _Q_ZP, _Q_V = 0, 1, 2, 9, 12
 _QW = 19
@@ -426,12 +433,15 @@ def h_radar(x, prm, z, nu, H):
 
 # ------------------------------------------------------------------------ one measurement
 @njit
-def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, wy):
+def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg):
     """δx = 0, the KF or MCKF update of (H, R, ν), then inject and reset; returns the NIS
-    (not finite: not fused)."""
+    (not finite: not fused).  The MCKF kernels are fixed (mpar's kx, ky) or adaptive (apar[0]
+    = 1: from the base widths σ and the row's ŝ, dg[_D_S2]); diag C_y goes to dg[_D_WY:]."""
     dx = np.zeros(15)
     if use_mckf:
-        v = mckf_fuse(dx, P, Rm, H, nu, mpar[0:15], mpar[15:18], mpar[18:23], ipar, mst, wy)
+        v = mckf_fuse(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F], mpar[_M_F:_M_A],
+                      ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG], mpar[_M_SIG:_NMPAR],
+                      dg[_D_S2:_D_S2 + 1])
     else:
         v = kf_fuse(dx, P, Rm, H, nu)
     if np.isfinite(v):
@@ -457,23 +467,22 @@ def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg):
     if np.isfinite(z[0] + z[1] + z[2]):
         h_gnss_pos(x, prm, z, nu3, H3)
         use_mckf = rule == 1 or rule == 3
-        wy = dg[_D_WY:_D_WY + 3]
         v = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V, 3), use_mckf, mpar, ipar,
-                      ints[_I_MST:_I_MST + 4], wy)
+                      ints[_I_MST:_I_MST + 4], dg)
         dg[_D_NISP] = v
         ints[_I_NGNSS] += 1
     zv = rec[_Q_Z + 3:_Q_Z + 6]
     if np.isfinite(zv[0] + zv[1] + zv[2]):
         h_gnss_vel(x, w, prm, zv, nu3, H3)
         dg[_D_NISV] = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V + 3, 3), False, mpar, ipar,
-                                ints[_I_MST:_I_MST + 4], dg[_D_WY:_D_WY + 3])
+                                ints[_I_MST:_I_MST + 4], dg)
     zy = rec[_Q_Z + 6:_Q_Z + 7]
     if np.isfinite(zy[0]):
         H1 = np.empty((1, 15))
         nu1 = np.empty(1)
         if h_heading(x, prm, zy, nu1, H1):
             dg[_D_NISY] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V + 6, 1), False, mpar,
-                                    ipar, ints[_I_MST:_I_MST + 4], dg[_D_WY:_D_WY + 3])
+                                    ipar, ints[_I_MST:_I_MST + 4], dg)
 
 
 @njit
@@ -482,7 +491,7 @@ def _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg):
     nu1 = np.empty(1)
     if np.isfinite(rec[_Q_Z]) and h_radar(x, prm, rec[_Q_Z:_Q_Z + 1], nu1, H1):
         dg[_D_NISR] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V, 1), False, mpar, ipar,
-                                ints[_I_MST:_I_MST + 4], dg[_D_WY:_D_WY + 3])
+                                ints[_I_MST:_I_MST + 4], dg)
         ints[_I_NRAD] += 1
     else:
         ints[_I_RDROP] += 1
@@ -618,8 +627,13 @@ class INSConfig:
     ``radar_max_tilt_deg``, ``radar_max_range`` the radar's usable cone and range.  Fusion:
     ``delay_s`` (PX4 ``EKF2_GPS_DELAY`` default 110 ms), ``delayed`` (False: fuse at receipt),
     ``queue`` records per row.  GNSS position rule options: ``sigma`` the MCKF kernel
-    bandwidth (scalar or 18 values, one per row of the whitened regression; ``inf`` = KF),
-    ``max_iter``, ``eps``, ``recovery`` (``"kf"``, ``"inflate"`` or ``None``),
+    bandwidth (scalar or 18 values, one per row of the whitened regression: 15 error states,
+    then the 3 position channels; ``inf`` = KF), ``mckf_kernel`` (``"fixed"``: those widths;
+    ``"adaptive"``: σ_k = σ max(1, √ŝ_k), ŝ the clipped exponentially weighted NIS/3 with
+    factor ``adapt_lambda`` and clip ``adapt_clip``, the rule of :class:`estimators.MCKF`
+    ``adaptive_sigma``; ``"multi"``: a scalar σ on the 3 position rows and ∞ on the 15 state
+    rows, so only the fix is down-weighted, never the INS prior), ``max_iter``, ``eps``,
+    ``recovery`` (``"kf"``, ``"inflate"`` or ``None``),
     ``lockout_n``, ``reject_weight``, ``inflate``; PCA block ``pca_window``, ``pca_mode``,
     ``pca_embed``, ``pca_components`` (as :class:`estimators.PCABlock`).
     """
@@ -640,6 +654,9 @@ class INSConfig:
     delayed: bool = True
     queue: int = 64
     sigma: float | Sequence[float] = 2.0
+    mckf_kernel: str = "fixed"
+    adapt_lambda: float = 0.98
+    adapt_clip: float = 3.0
     max_iter: int = 10
     eps: float = 1e-6
     recovery: str | None = "kf"
@@ -687,21 +704,42 @@ class INSConfig:
         p[_P_D], p[_P_DELAYED], p[_P_B], p[_P_QC] = D, float(self.delayed), D + 1, self.queue
         return p
 
+    def kernel_widths(self) -> np.ndarray:
+        """The 18 base kernel widths (15 state rows, 3 position rows) of ``sigma`` and
+        ``mckf_kernel``; ValueError for a bad combination."""
+        if self.mckf_kernel not in KERNELS:
+            raise ValueError(f"mckf_kernel must be one of {', '.join(KERNELS)}, got "
+                             f"{self.mckf_kernel!r}")
+        s = np.atleast_1d(np.asarray(self.sigma, dtype=float))
+        if self.mckf_kernel == "multi":
+            if s.size != 1:
+                raise ValueError("mckf_kernel = 'multi' takes a scalar sigma (the position "
+                                 "rows'; the 15 state rows get inf)")
+            s = np.concatenate([np.full(15, np.inf), np.full(3, s[0])])
+        s = np.full(18, s[0]) if s.size == 1 else s
+        if s.shape != (18,) or np.any(~(s > 0)):
+            raise ValueError("sigma must be a positive scalar or 18 values (15 states + 3)")
+        if self.mckf_kernel == "adaptive" and not (0.0 <= self.adapt_lambda < 1.0
+                                                   and self.adapt_clip > 0.0):
+            raise ValueError("mckf_kernel = 'adaptive' needs 0 <= adapt_lambda < 1 and "
+                             "adapt_clip > 0")
+        return s
+
     def mckf_params(self) -> tuple[np.ndarray, np.ndarray]:
-        """(mpar = [kx(15), ky(3), fpar(5)], ipar(4)) as :class:`estimators.MCKF` sets them."""
+        """(mpar = [kx(15), ky(3), fpar(5), apar(3) = (adaptive, λ, clip), σ(18)], ipar(4))
+        as :class:`estimators.MCKF` sets them."""
         from scipy.special import gammaincinv
 
-        s = np.atleast_1d(np.asarray(self.sigma, dtype=float))
-        s = np.full(18, s[0]) if s.size == 1 else s
-        if s.shape != (18,) or np.any(s <= 0):
-            raise ValueError("sigma must be a positive scalar or 18 values (15 states + 3)")
+        s = self.kernel_widths()
         c = -1.0 / (2.0 * s * s)
         if self.recovery not in _RECOVERY:
             raise ValueError(f"recovery must be 'kf', 'inflate' or None, got {self.recovery!r}")
         gate = 2.0 * float(gammaincinv(1.5, 0.999))
         jmax = max(1, int(12.0 / math.log10(self.inflate))) if self.inflate > 1 else 1
         mpar = np.concatenate([c[:15], 0.5 * c[15:], [1e-12, self.eps**2, self.reject_weight,
-                                                       self.inflate, gate]])
+                                                       self.inflate, gate],
+                               [float(self.mckf_kernel == "adaptive"), self.adapt_lambda,
+                                self.adapt_clip], s])
         ipar = np.array([self.max_iter, self.lockout_n, _RECOVERY[self.recovery], jmax],
                         dtype=np.int64)
         return mpar, ipar
@@ -738,6 +776,7 @@ class BatchINS:
         self._ints = np.zeros((N, _NINT), dtype=np.int64)
         self._mq = np.zeros((N, cfg.queue, _QW))
         self._dg = np.full((N, _NDG), np.nan)
+        self._dg[:, _D_S2] = 1.0
         mpar, ipar = cfg.mckf_params()
         self._mpar = np.tile(mpar, (N, 1))
         self._ipar = np.tile(ipar, (N, 1))
@@ -771,6 +810,7 @@ class BatchINS:
         self._ib[:] = 0.0
         self._ints[:] = 0
         self._dg[:] = np.nan
+        self._dg[:, _D_S2] = 1.0
         self._pcs[:] = 0
 
     def reset_vehicle(self, iv: int, p, v, q, ba=None, bg=None, P0=None) -> None:
@@ -790,6 +830,7 @@ class BatchINS:
         self._ib[rows] = 0.0
         self._ints[rows] = 0
         self._dg[rows] = np.nan
+        self._dg[rows, _D_S2] = 1.0
         self._pcs[iv] = 0
 
     # -- ticks ------------------------------------------------------------------------------

@@ -30,8 +30,11 @@ Where the law lives: the compiled row functions of this module, on one filter's 
 Cholesky handling, the fixed point, the rejection count and the lock-out recovery rules, the
 Joseph update), built on the KF rows of :mod:`estimators.kf` and the helpers of
 :mod:`estimators._linalg`.  :class:`MCKF` calls them on its own arrays (a batch of one);
-:class:`estimators.batched.BatchMCKF` loops over its rows calling them.  Only the adaptive
-bandwidth rule (below) is the scalar class's own: it chooses σ_k before calling the same row.
+:class:`estimators.batched.BatchMCKF` loops over its rows calling them.  The adaptive
+bandwidth rule (below) is a row function too, :func:`adapt_kernel_row`, wrapped with the update
+as :func:`mckf_adaptive_update_row`: :class:`MCKF` (``adaptive_sigma=True``) and the INS's GNSS
+update (:mod:`estimators._ins_laws`, ``INSConfig.mckf_kernel = "adaptive"``) call that one
+function; :class:`estimators.batched.BatchMCKF` still refuses ``adaptive_sigma``.
 
 Options
 -------
@@ -89,8 +92,9 @@ from ._linalg import (
 )
 from .kf import LinearGaussianBase, _mat, _vec, joseph_row, kf_gain_row, kf_innovation_row
 
-__all__ = ["MCKF", "REL_PIVOT", "RECOVERY", "kernel_coeffs", "mckf_fixed_point_row",
-           "mckf_update_row", "mckf_work", "safe_cholesky"]
+__all__ = ["MCKF", "REL_PIVOT", "RECOVERY", "adapt_kernel_row", "kernel_coeffs",
+           "mckf_adaptive_update_row", "mckf_fixed_point_row", "mckf_update_row", "mckf_work",
+           "safe_cholesky"]
 
 #: Cholesky pivots below REL_PIVOT · P̄_jj send P̄ to :func:`safe_cholesky` (jitter), so the
 #: positive-definite decision never hinges on the summation order
@@ -299,6 +303,45 @@ def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
     return v
 
 
+@njit
+def adapt_kernel_row(nis, m, sigma, lam, clip, st, kx, ky):
+    """The adaptive bandwidth rule (module docstring, ``adaptive_sigma``) on one filter:
+    ŝ ← λ ŝ + (1 − λ) min(NIS/m, clip² max(ŝ, 1)) with ŝ in ``st[0]``, then σ_k = σ max(1, √ŝ)
+    per row of ``sigma`` (n + m values; ∞ stays ∞) and the kernel coefficients of
+    :func:`kernel_coeffs`: kx = −1/(2σ_k²) (n state rows), ky = −1/(4σ_k²) (m measurement rows).
+    Returns the factor max(1, √ŝ)."""
+    s2 = st[0]
+    lim = clip * clip * (s2 if s2 > 1.0 else 1.0)
+    r = nis / m
+    s2 = lam * s2 + (1.0 - lam) * (r if r < lim else lim)
+    st[0] = s2
+    f = math.sqrt(s2)
+    if f < 1.0:
+        f = 1.0
+    n = kx.shape[0]
+    for j in range(sigma.shape[0]):
+        sk = sigma[j] * f
+        c = -1.0 / (2.0 * sk * sk)
+        if j < n:
+            kx[j] = c
+        else:
+            ky[j - n] = 0.5 * c
+    return f
+
+
+@njit
+def mckf_adaptive_update_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, fpar, ipar, ist, wy,
+                             w):
+    """:func:`mckf_update_row` with the adaptive bandwidth: the KF NIS of the innovation feeds
+    :func:`adapt_kernel_row` (state ``ast``, base widths ``sigma``; kx, ky are written), then the
+    MCKF update with those kernels.  Returns the NIS (not finite: no fix, nothing changes)."""
+    v = kf_innovation_row(x, P, R, H, z, w[0], w[1], w[2], w[3])
+    if not math.isfinite(v):
+        return v
+    adapt_kernel_row(v, z.shape[0], sigma, lam, clip, ast, kx, ky)
+    return mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w)
+
+
 # ------------------------------------------------------------------------------ the class
 class MCKF(LinearGaussianBase):
     """Maximum correntropy Kalman filter; see the module docstring for every option.
@@ -357,7 +400,7 @@ class MCKF(LinearGaussianBase):
         from scipy.special import gammaincinv
 
         self.inflate_gate = 2.0 * float(gammaincinv(0.5 * self.m, 0.999))
-        self.scale2 = 1.0  # ŝ_k of the adaptive rule
+        self._ast = np.ones(1)  # ŝ_k of the adaptive rule (adapt_kernel_row's state)
         self.weights = np.ones(self.m)
         self.weights_x = np.ones(self.n)
         self.sigma_k = self._sigma.copy()
@@ -372,6 +415,9 @@ class MCKF(LinearGaussianBase):
                         lambda self, v: self._ist.__setitem__(2, int(bool(v))))
     recovered = property(lambda self: bool(self._ist[3]),
                          lambda self, v: self._ist.__setitem__(3, int(bool(v))))
+
+    scale2 = property(lambda self: float(self._ast[0]),
+                      lambda self, v: self._ast.__setitem__(0, float(v)))
 
     @property
     def sigma(self) -> np.ndarray:
@@ -414,21 +460,21 @@ class MCKF(LinearGaussianBase):
         x = _vec(self.x, n)
         P = _mat(self.P, "P", (n, n))
         w = self._w
-        kx, ky = self._ncx, self._ncy_half
-        if self.adaptive_sigma:
-            nis = kf_innovation_row(x, P, self._R, self._H, zz, w[0], w[1], w[2], w[3])
-            if not math.isfinite(nis):
-                return False
-            lim = self.adapt_clip**2 * max(self.scale2, 1.0)
-            lam = self.adapt_lambda
-            self.scale2 = lam * self.scale2 + (1.0 - lam) * min(nis / self.m, lim)
-            self.sigma_k = self._sigma * max(1.0, math.sqrt(self.scale2))
-            kx, ky = kernel_coeffs(self.sigma_k, n)
         fpar, ipar = self.params()
         wy = np.empty(self.m)
-        v = mckf_update_row(x, P, self._R, self._H, zz, kx, ky, fpar, ipar, self._ist, wy, w)
-        if not math.isfinite(v):
-            return False
+        if self.adaptive_sigma:
+            kx, ky = np.empty(n), np.empty(self.m)
+            v = mckf_adaptive_update_row(x, P, self._R, self._H, zz, self._sigma,
+                                         self.adapt_lambda, self.adapt_clip, self._ast, kx, ky,
+                                         fpar, ipar, self._ist, wy, w)
+            if not math.isfinite(v):
+                return False
+            self.sigma_k = self._sigma * max(1.0, math.sqrt(self.scale2))
+        else:
+            v = mckf_update_row(x, P, self._R, self._H, zz, self._ncx, self._ncy_half, fpar,
+                                ipar, self._ist, wy, w)
+            if not math.isfinite(v):
+                return False
         self.x, self.P = x, P
         self.weights = wy
         self.weights_x = np.ones(n) if self._ist[1] == 1 else w[25].copy()

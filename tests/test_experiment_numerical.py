@@ -179,3 +179,46 @@ def test_bad_arguments_are_config_errors(tmp_path):
         num.main(p.parse_args(["--cases", "pink", "--out", str(tmp_path)]))
     with pytest.raises(ConfigError):
         num.main(p.parse_args(["--estimators", "ukf", "--out", str(tmp_path)]))
+
+
+def test_kernel_sweep_names_and_infinite_sigma_is_the_kf():
+    """``mckf@inf`` gives the KF's estimates; ``mckf-adaptive`` follows the hand-written
+    reference MCKF (tests/oracles) with the adaptive bandwidth; ``mckf-multi@2`` is σ = ∞ on the
+    state rows and 2 on the measurement rows, batched and library alike."""
+    from tests.oracles.mckf import OracleMCKF
+
+    assert num.parse_estimator("pca-mckf-norec-adaptive@4") == ("pca-mckf-norec", "adaptive",
+                                                                 4.0)
+    assert num.parse_estimator("mckf@inf") == ("mckf", "fixed", math.inf)
+    for bad in ("kf@2", "mckf@0", "mckf@x", "kf-adaptive", "mckf-huber"):
+        with pytest.raises(ValueError):
+            num.parse_estimator(bad)
+    pos, x0, P0, Z = _data("impulsive", runs=(0, 1))
+    gains = {"kf": num.gain_sequence("kf", TINY, len(pos), x0, P0)}
+    ests = ["kf", "mckf@inf", "mckf-adaptive", "mckf-multi@2", "mckf@1"]
+    _, tr = num.fast_tracks(TINY, "impulsive", [0, 1], ests, gains)
+    np.testing.assert_allclose(tr["mckf@inf"], tr["kf"], rtol=0, atol=1e-9)
+    assert np.abs(tr["mckf@1"] - tr["kf"]).max() > 0.1
+    m = num.model()
+    for b in range(2):
+        ref = OracleMCKF(m.F, m.H, m.Q, m.R, x0, P0, sigma=2.0, adaptive_sigma=True)
+        for k in range(len(pos)):
+            if k:
+                ref.predict()
+            ref.update(Z[b, k])
+            np.testing.assert_allclose(tr["mckf-adaptive"][b, k], ref.x[[0, 2]], rtol=0,
+                                       atol=1e-8)
+        lib = _library_track("mckf-multi@2", Z[b], x0, P0)
+        np.testing.assert_allclose(tr["mckf-multi@2"][b], lib, rtol=0, atol=1e-9)
+    f = num.make_filter("mckf-multi@2", TINY, x0, P0)
+    assert np.all(np.isinf(f.sigma[:4])) and np.all(f.sigma[4:] == 2.0)
+    assert np.abs(tr["mckf-multi@2"] - tr["mckf-adaptive"]).max() > 1e-3
+
+
+def test_bad_kernel_names_are_config_errors(tmp_path):
+    from ag_uav.config import ConfigError
+
+    p = argparse.ArgumentParser()
+    num.add_arguments(p)
+    with pytest.raises(ConfigError, match="NAME\\[-adaptive"):
+        num.main(p.parse_args(["--estimators", "kf@3", "--out", str(tmp_path)]))

@@ -98,6 +98,10 @@ def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
     if e.model == "cvb":
         params["q_bias"] = q_bias
     if "mckf" in name:
+        if e.mckf_kernel != "fixed":
+            raise ConfigError(f'estimator.mckf_kernel = "{e.mckf_kernel}": only with '
+                              'estimator.nav = "ins" (the ideal-attitude bank\'s batched MCKF '
+                              'has a fixed kernel)')
         params.update(sigma=e.sigma, max_iter=e.max_iter,
                       recovery=None if e.mckf_recovery == "none" else e.mckf_recovery)
     if name.startswith("pca"):

@@ -78,7 +78,7 @@ INS_RULES = ("kf", "mckf", "pca-kf", "pca-mckf")
 
 def ins_config(cfg: Config) -> INSConfig:
     """The INS's settings from the run config (IMU figures at the control rate, latency,
-    MCKF σ and recovery, PCA window)."""
+    MCKF σ, kernel and recovery, PCA window)."""
     e, im = cfg.estimator, cfg.imu
     rec = None if e.ins_recovery == "none" else e.ins_recovery
     return INSConfig.from_imu(
@@ -86,7 +86,8 @@ def ins_config(cfg: Config) -> INSConfig:
         gyro_nd_mdps=im.gyro_noise_density_mdps, vibration=im.vibration_sigma_mps2,
         accel_rw=max(im.accel_bias_rw, 1e-6), gyro_rw_dps=max(im.gyro_bias_rw, 1e-6),
         lever_arm=ANTENNA, radar_offset=RADAR, delay_s=cfg.gps.latency_s,
-        delayed=cfg.gps.latency_s > 0, sigma=e.sigma, max_iter=e.max_iter, recovery=rec,
+        delayed=cfg.gps.latency_s > 0, sigma=e.sigma, mckf_kernel=e.mckf_kernel,
+        max_iter=e.max_iter, recovery=rec,
         pca_window=e.window, pca_mode=e.pca_mode)
 
 

@@ -12,7 +12,13 @@
   the KF: the INS (``nav = ins``) against the ideal-attitude stand-in; drift of the estimate at
   the end of the outage, peak estimate error and peak cross-track inside it;
 * ``falsefix``: the in-loop table with false fixes on: per rule the position error RMS, and the
-  paired difference to the KF (mean ± 95 % CI over seeds).
+  paired difference to the KF (mean ± 95 % CI over seeds);
+* ``sweep``: the MCKF kernel in the loop, false fixes on (30 per hour of RTK fixed unless
+  ``--set`` says otherwise): the fixed kernel at each σ of ``--sigmas`` (``inf``: every weight
+  1, the KF), then each variant of ``--kernels`` (``estimator.mckf_kernel``) at σ = 2; per
+  setting the KF's position error RMS and the paired MCKF − KF and PCA-MCKF − KF differences
+  (mean ± 95 % CI over seeds).  σ = ∞ is set on the config object directly (the config file
+  takes finite σ only).
 
 Every flight of a seed gets the same fixes (common random numbers); the shadows share the
 flown filter's fixes and IMU samples.
@@ -25,14 +31,17 @@ from pathlib import Path
 from typing import Any
 
 NAME = "ins-nav"
-HELP = ("issue 19 phase 2 measurements: MCKF recovery × σ, NEES consistency, a GNSS outage "
-        "with the INS vs the ideal-attitude stand-in, the false-fix in-loop table")
+HELP = ("issue 19 measurements: MCKF recovery × σ, NEES consistency, a GNSS outage with the "
+        "INS vs the ideal-attitude stand-in, the false-fix in-loop table, the MCKF kernel sweep")
 RULES = ("pca-mckf", "kf", "mckf", "pca-kf")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--what", choices=("recovery", "consistency", "outage", "falsefix"),
+    p.add_argument("--what", choices=("recovery", "consistency", "outage", "falsefix", "sweep"),
                    required=True)
+    p.add_argument("--sigmas", default="1,2,4,8,inf", help="sweep: fixed-kernel σ values")
+    p.add_argument("--kernels", default="adaptive,multi",
+                   help="sweep: estimator.mckf_kernel variants flown at σ = 2")
     p.add_argument("--runs", type=int, default=10, help="seeds 0..runs-1")
     p.add_argument("--duration", type=float, default=10.0, help="outage length (s)")
     p.add_argument("--max-time", type=float, default=None, help="sim.max_time_s")
@@ -178,11 +187,33 @@ def falsefix(args: argparse.Namespace) -> list[dict[str, Any]]:
     return rows
 
 
+def sweep(args: argparse.Namespace) -> list[dict[str, Any]]:
+    cfg = _base(args, {"gps.false_fix_per_hour": 30.0})
+    settings = [("fixed", float(x)) for x in args.sigmas.split(",") if x.strip()]
+    settings += [(k.strip(), 2.0) for k in args.kernels.split(",") if k.strip()]
+    rows = []
+    for kernel, sig in settings:
+        for seed in range(args.runs):
+            s = _fly(cfg, seed, **{"estimator.mckf_kernel": kernel, "estimator.sigma": sig})
+            e = s["estimators"]
+            rows.append({"kernel": kernel, "sigma": sig, "seed": seed,
+                         "false_fix_episodes": s.get("false_fix_episodes"),
+                         "cross_track_rmse_m": s.get("cross_track_rmse_m"),
+                         **{r: e[r]["estimate_rmse_m"] for r in RULES},
+                         **{f"{r}.max": e[r]["estimate_max_m"] for r in RULES}})
+        sel = [r for r in rows if r["kernel"] == kernel and r["sigma"] == sig]
+        print(f"kernel={kernel:8s} sigma={sig:g}: kf {_ci([x['kf'] for x in sel])} m; " +
+              "  ".join(f"{r} − kf {_ci([x[r] - x['kf'] for x in sel])}"
+                        for r in ("mckf", "pca-mckf", "pca-kf")) +
+              f"; cross-track {_ci([x['cross_track_rmse_m'] for x in sel])}", flush=True)
+    return rows
+
+
 def main(args: argparse.Namespace) -> int:
     from . import write_csv
 
     rows = {"recovery": recovery, "consistency": consistency, "outage": outage,
-            "falsefix": falsefix}[args.what](args)
+            "falsefix": falsefix, "sweep": sweep}[args.what](args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / f"{args.what}.csv", rows)

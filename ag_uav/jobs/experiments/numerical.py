@@ -58,8 +58,13 @@ The fast engine computes the same numbers with numpy batched over runs:
   machine (~45-90 s of CPU, of which ~7 s are the library timing runs).
 
 ``--engine library`` runs every library filter step by step on every run instead (the slow
-reference; same numbers to ~1e-12 m).  MCKF options the fast path does not implement (adaptive
-σ, ``recovery="inflate"``) are not exposed here.
+reference; same numbers to ~1e-12 m).  ``recovery="inflate"`` is not exposed here.
+
+Kernel sweep: the MCKF names take ``@SIGMA`` (``mckf@1`` … ``mckf@inf``; σ = ∞ gives weights
+of exactly 1, i.e. the KF's estimates) and a kernel variant suffix, ``-adaptive`` (the adaptive
+bandwidth of :class:`estimators.MCKF`, run by the library filter on every run: the batched MCKF
+has no adaptive rows) or ``-multi`` (σ on the measurement rows, ∞ on the state rows), e.g.
+``--estimators kf,mckf@1,mckf@2,mckf@4,mckf@inf,mckf-adaptive,mckf-multi``.
 
 The paper's Table II (Matlab column: MCKF 6880 s / 0.137 m, KF 2415 s / 0.328 m, PCA-MCKF
 7530 s / 0.068 m, PCA-KF 2865 s / 0.343 m) is printed next to every case; the paper does not
@@ -100,6 +105,8 @@ COLOURS = {"mckf-norec": "tab:olive", "pca-mckf-norec": "tab:pink",
            "pca-mckf": "tab:red", "kf-bias": "tab:purple", "kf-diff": "tab:brown"}
 #: the fast path must match the library filter to this (m) on the timing runs
 SELF_CHECK_TOL = 1e-6
+#: MCKF kernel variants, as suffixes of the MCKF names (see :func:`parse_estimator`)
+KERNELS = ("adaptive", "multi")
 
 
 @dataclass(frozen=True)
@@ -181,9 +188,42 @@ def initial(setup: Setup, pos: np.ndarray, vel: np.ndarray) -> tuple[np.ndarray,
     return x0, P0
 
 
+def parse_estimator(name: str) -> tuple[str, str, float | None]:
+    """``BASE[-adaptive|-multi][@SIGMA]`` → (BASE, kernel, σ or None): the MCKF names (``mckf``,
+    ``pca-mckf`` and their ``-norec`` forms) take a kernel bandwidth (``mckf@4``, ``mckf@inf``:
+    the KF's weights) and a kernel variant: ``-adaptive`` (σ_k = σ max(1, √ŝ_k), the
+    ``adaptive_sigma`` rule of :class:`estimators.MCKF`) or ``-multi`` (σ on the 2 measurement
+    rows, ∞ on the 4 state rows); "fixed" when neither.  ValueError for anything else."""
+    base, at, sig = name.partition("@")
+    sigma = None
+    if at:
+        try:
+            sigma = float(sig)
+        except ValueError:
+            raise ValueError(f"{name!r}: expected NAME@SIGMA with a number (or inf)") from None
+        if not sigma > 0:
+            raise ValueError(f"{name!r}: sigma must be > 0")
+    kernel = "fixed"
+    for k in KERNELS:
+        if base.endswith("-" + k):
+            base, kernel = base[: -len(k) - 1], k
+    if base not in ESTIMATORS or ((at or kernel != "fixed") and "mckf" not in base):
+        raise ValueError(f"{name!r}: allowed {', '.join(ESTIMATORS)}; the MCKF ones also as "
+                         "NAME[-adaptive|-multi][@SIGMA]")
+    return base, kernel, sigma
+
+
 def filter_params(name: str, setup: Setup) -> dict[str, Any]:
     """Keyword arguments of ``estimators.make(name, F=..., ...)`` besides the matrices."""
     m = model()
+    base, kernel, sig = parse_estimator(name)
+    if base != name:
+        p = filter_params(base, setup)
+        s = setup.sigma if sig is None else sig
+        p["sigma"] = np.r_[[np.inf] * 4, [s] * 2] if kernel == "multi" else s
+        if kernel == "adaptive":
+            p["adaptive_sigma"] = True
+        return p
     if name.endswith(NOREC):
         return {**filter_params(name[: -len(NOREC)], setup), "recovery": None}
     if name in ("mckf", "pca-mckf"):
@@ -206,7 +246,7 @@ def make_filter(name: str, setup: Setup, x0: np.ndarray, P0: np.ndarray):
     m = model()
     kw = {"F": m.F, "H": m.H, "Q": m.Q, "R": m.R, "x0": x0, "P0": P0}
     kw.update(filter_params(name, setup))
-    return estimators.make(name.removesuffix(NOREC), **kw)
+    return estimators.make(parse_estimator(name)[0].removesuffix(NOREC), **kw)
 
 
 def run_library(name: str, setup: Setup, Z: np.ndarray, x0: np.ndarray, P0: np.ndarray
@@ -227,6 +267,20 @@ def run_library(name: str, setup: Setup, Z: np.ndarray, x0: np.ndarray, P0: np.n
         out[k, 0] = x[0]
         out[k, 1] = x[2]
     return out, (clock() - t0) / T
+
+
+def _library_states(name: str, setup: Setup, Z: np.ndarray, x0: np.ndarray, P0: np.ndarray
+                    ) -> np.ndarray:
+    """The library filter's full state (T, n) on fixes Z (the PCA filters run their own
+    block)."""
+    f = make_filter(name, setup, x0, P0)
+    out = np.empty((len(Z), x0.size))
+    for k in range(len(Z)):
+        if k:
+            f.predict()
+        f.update(Z[k])
+        out[k] = f.x
+    return out
 
 
 # --------------------------------------------------------------------------- fast: linear KFs
@@ -351,11 +405,15 @@ def fast_tracks(setup: Setup, case: str, runs: list[int], ests: list[str],
     tracks: dict[str, np.ndarray] = {}
     for e in ests:
         data = Zp if e.startswith("pca-") else Z
+        base, kernel, _ = parse_estimator(e)
         if e in ("kf", "pca-kf"):
             xs = kf_fixed_gain(m.F, m.H, gains["kf"], x0, data)
-        elif e in ("mckf", "pca-mckf", "mckf-norec", "pca-mckf-norec"):
-            xs = mckf_batch(m.F, m.H, m.Q, m.R, x0, P0, data, sigma=setup.sigma,
-                            recovery=None if e.endswith(NOREC) else "kf")
+        elif kernel == "adaptive":  # BatchMCKF has no adaptive rows: the library, run by run
+            xs = np.stack([_library_states(e, setup, Z[i], x0, P0) for i in range(len(Z))])
+        elif "mckf" in base:
+            xs = mckf_batch(m.F, m.H, m.Q, m.R, x0, P0, data,
+                            sigma=filter_params(e, setup)["sigma"],
+                            recovery=None if base.endswith(NOREC) else "kf")
         elif e == "kf-bias":
             f = make_filter(e, setup, x0, P0)
             xs = kf_fixed_gain(f.kf.F, f.kf.H, gains[e], f.x_aug, data)
@@ -619,7 +677,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cases", default=",".join(CASES),
                    help=f"comma-separated noise cases ({', '.join(CASES)})")
     p.add_argument("--estimators", default=",".join(ESTIMATORS),
-                   help=f"comma-separated estimators ({', '.join(ESTIMATORS)})")
+                   help=f"comma-separated estimators ({', '.join(ESTIMATORS)}); the MCKF ones "
+                        "also as NAME[-adaptive|-multi][@SIGMA], e.g. mckf@4, mckf@inf, "
+                        "mckf-adaptive, pca-mckf-multi@1 (a σ sweep: docs/ins.md)")
     p.add_argument("--workers", "-j", type=int, default=None,
                    help="worker processes (default: CPU cores; 1 = serial)")
     p.add_argument("--chunk", type=int, default=50,
@@ -660,9 +720,11 @@ def main(args: argparse.Namespace) -> int:
     bad = [c for c in cases if c not in CASES]
     if bad:
         raise ConfigError(f"--cases {bad[0]!r}: allowed {', '.join(CASES)}")
-    bad = [e for e in ests if e not in ESTIMATORS]
-    if bad:
-        raise ConfigError(f"--estimators {bad[0]!r}: allowed {', '.join(ESTIMATORS)}")
+    for e in ests:
+        try:
+            parse_estimator(e)
+        except ValueError as err:
+            raise ConfigError(f"--estimators {err}") from None
     if args.runs < 1 or args.chunk < 1:
         raise ConfigError("--runs and --chunk must be >= 1")
     if not 0 <= args.plot_run < args.runs:

@@ -9,6 +9,12 @@ the same fixes (common random numbers). The mission is cut 5 s after the outage.
 the outage window: peak and RMS distance of the true track from the planned path, and the peak
 estimate error. A second pass flies on the KF with ``route-kf`` as a shadow (monitor), which
 isolates the estimator's part from the closed loop's.
+
+Navigation: these flights run the bank of position filters (``RouteConstrainedFeedback``, the
+``estimator.nav = "ideal-attitude"`` stand-in: true attitude × a Gauss–Markov error, fixes
+without latency) whatever ``estimator.nav`` says: the route constraint is a position-filter
+measurement.  The same outage flown on the error-state INS, side by side with this stand-in, is
+``ag-uav experiment ins-nav --what outage`` (docs/ins.md).
 """
 
 from __future__ import annotations
