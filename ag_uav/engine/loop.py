@@ -351,7 +351,9 @@ class _Engine:
         self.recorder.step(k)
         if self.pre_obs and t >= self._pre_next:
             self._observe(self.pre_obs, "tick", k, t)
-            self._pre_next = min(ob.next_time() for ob in self.pre_obs)
+            obs = self.pre_obs
+            self._pre_next = (obs[0].next_time() if len(obs) == 1
+                              else min(ob.next_time() for ob in obs))
         return True
 
     def physics(self) -> None:

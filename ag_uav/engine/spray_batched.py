@@ -421,11 +421,12 @@ class BatchSprayer:
             j = int(self._off[i]) + k
             on = bool(self._rec_on[j])
             x, y = float(vx[i]), float(vy[i])
-            sp.log.spray_state(t, tank_l=float(st[i, S_TANK]), mass_kg=float(rec[1, j]),
+            _, mass, power, soc = rec[:, j].tolist()
+            sti = st[i].tolist()
+            sp.log.spray_state(t, tank_l=sti[S_TANK], mass_kg=mass,
                                flow_lps=sp.lpm * math.sqrt(x * x + y * y) if on else 0.0,
-                               nozzles=on, power_w=float(rec[2, j]),
-                               energy_wh=float(st[i, S_ETOT]) / 3600.0, soc=float(rec[3, j]),
-                               sortie=int(self._ist[i, I_CUR]) + 1,
+                               nozzles=on, power_w=power, energy_wh=sti[S_ETOT] / 3600.0,
+                               soc=soc, sortie=int(self._ist[i, I_CUR]) + 1,
                                ground=bool(self._tab[1, j]))
         self._log_next = min((sp._next_log for i, sp in self._logged if active[i]),
                              default=math.inf)

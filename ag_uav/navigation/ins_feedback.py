@@ -356,11 +356,11 @@ class BatchInsFeedback:
             if log is None:
                 continue
             log.set_truth(p[i])
+            P = self.bank.P
+            pd = np.diagonal(P, axis1=1, axis2=2)  # a view: the log copies the values now
+            xo, row = self.bank.x_out, i * self.nr
             for j, name in enumerate(self.names):
-                if log.want_estimator(name, t):  # the log copies the values now
-                    row = i * self.nr + j
-                    log.estimator(t, name, self.bank.x_out[row],
-                                  np.diagonal(self.bank.P[row]), None)
+                log.estimator(t, name, xo[row + j], pd[row + j], None)
 
     def _fix(self, i: int, k: int, t: float) -> None:
         fb = self.fbs[i]

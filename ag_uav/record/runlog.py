@@ -46,7 +46,8 @@ Channels (Foxglove well-known schemas where one fits; groups in brackets):
                                       err (pos - last true position), extra{...}
   [scene]     ``/field`` (field polygon + planned path), ``/sprayed`` (sprayed area),
               foxglove.SceneUpdate (separate topics so a seek shows both);
-              ``/dose`` foxglove.Grid: the dose on the ground (L/ha), every 5 s (light: 30 s) and at the end
+              ``/dose`` foxglove.Grid: the dose on the ground (L/ha), every 5 s (light: 30 s) and at
+              the end
   [camera]    ``/camera/<name>`` foxglove.CompressedImage (JPEG) and
               ``/camera/<name>/calibration`` foxglove.CameraCalibration
   always      metadata records ``run`` and ``versions`` (and ``summary``), attachments
@@ -431,6 +432,25 @@ def enc_transform(ts: bytes, child3: bytes, p: Sequence[float], q: Sequence[floa
     return b"\x0a" + _varint(len(body)) + body
 
 
+_GRID_FIELD = b"\x0a\x08l_per_ha" + b"\x15" + bytes(4) + b"\x18\x07"  # float32 at offset 0
+_U32 = struct.Struct("<I")
+
+
+def enc_grid(ts: bytes, x0: float, y0: float, z: float, cell: float, values: Any) -> bytes:
+    """foxglove.Grid in frame ``world``: ``values`` ((ny, nx), row j at y0 + j·cell) as one
+    float32 field ``l_per_ha``, lower-left corner at (x0, y0, z); ``ts`` from :func:`_ts_pb`."""
+    a = np.ascontiguousarray(values, dtype="<f4")
+    nx = a.shape[1]
+    data = a.tobytes()
+    return (b"\x0a" + _varint(len(ts)) + ts + _WORLD2 + b"\x1a\x43"
+            + _POSE.pack(b"\x0a\x1b", 9, x0, 17, y0, 25, z, b"\x12\x24", 9, 0.0, 17, 0.0, 25, 0.0,
+                         33, 1.0)
+            + b"\x25" + _U32.pack(nx) + b"\x2a\x12\x09" + _D.pack(cell) + b"\x11" + _D.pack(cell)
+            + b"\x35" + _U32.pack(4 * nx) + b"\x3d" + _U32.pack(4)
+            + b"\x42" + _varint(len(_GRID_FIELD)) + _GRID_FIELD
+            + b"\x4a" + _varint(len(data)) + data)
+
+
 # --------------------------------------------------------------------------------------------
 # Open-log registry: close on SIGTERM/SIGINT and at exit
 # --------------------------------------------------------------------------------------------
@@ -628,6 +648,7 @@ class RunLog:
         self._pending: list[tuple[Any, bytes, int]] = []
         self._flat_rows: list[_FlatRows] = []  # estimator and spray channels, encoded at flush
         self._ch_spray: _FlatRows | None = None
+        self._ch_dose: Any = None
         self._next_spray = -_INF if self._period["state"] < _INF and self.enabled else _INF
         if not self.enabled:
             return
@@ -1287,23 +1308,13 @@ class RunLog:
         if not final and t < getattr(self, "_next_dose", -_INF):
             return
         self._next_dose = t + self._dose_period - 1e-9
-        ch = getattr(self, "_ch_dose", None)
-        if ch is None:
-            ch = self._ch_dose = self._fc.GridChannel("/dose", context=self._ctx)
-        M = self._M
-        a = np.ascontiguousarray(l_per_ha, dtype="<f4")
-        ny, nx = a.shape
+        if self._ch_dose is None:
+            self._ch_dose = self._fg.Channel(
+                "/dose", message_encoding="protobuf", schema=self._M.Grid.get_schema(),
+                context=self._ctx).base.log
         tn = ns(t)
-        self._drain()
-        ch.log(M.Grid(
-            timestamp=self._ts(tn), frame_id="world",
-            pose=M.Pose(position=M.Vector3(x=float(x0), y=float(y0), z=0.02),
-                        orientation=M.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
-            column_count=nx, cell_size=M.Vector2(x=float(cell), y=float(cell)),
-            row_stride=4 * nx, cell_stride=4,
-            fields=[M.PackedElementField(name="l_per_ha", offset=0,
-                                         type=M.PackedElementFieldNumericType.Float32)],
-            data=a.tobytes()), log_time=tn)
+        self._pending.append((self._ch_dose, enc_grid(_ts_pb(tn), float(x0), float(y0), 0.02,
+                                                      float(cell), l_per_ha), tn))
         self._count("/dose")
 
     # ---------------------------------------------------------------- camera
