@@ -220,11 +220,12 @@ def _skew_mul(M, r, out):
 
 # ------------------------------------------------------------------------ prediction
 @njit
-def nominal_step(x, u, dt, g):
-    """One IMU sample u = (f̃, ω̃) on the nominal x = [p, v, q, b_a, b_g] (module docstring)."""
-    R = np.empty((3, 3))
+def nominal_step(x, u, dt, g, S3, w):
+    """One IMU sample u = (f̃, ω̃) on the nominal x = [p, v, q, b_a, b_g] (module docstring).
+    ``S3`` (≥ 1, 3, 3), ``w`` (≥ 14): scratch (the per-tick path allocates nothing)."""
+    R = S3[0]
     quat_to_rot(x[6:10], R)
-    a = np.empty(3)
+    a = w[0:3]
     for k in range(3):
         a[k] = u[k] - x[10 + k]
     for i in range(3):
@@ -233,12 +234,12 @@ def nominal_step(x, u, dt, g):
             acc -= g
         x[i] += x[3 + i] * dt + 0.5 * acc * dt * dt
         x[3 + i] += acc * dt
-    phi = np.empty(3)
+    phi = w[3:6]
     for k in range(3):
         phi[k] = (u[3 + k] - x[13 + k]) * dt
-    dq = np.empty(4)
+    dq = w[6:10]
     quat_exp(phi, dq)
-    qn = np.empty(4)
+    qn = w[10:14]
     quat_mul(x[6:10], dq, qn)
     nrm = math.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
     for k in range(4):
@@ -246,20 +247,21 @@ def nominal_step(x, u, dt, g):
 
 
 @njit
-def _fill_F(x, u, dt, F):
-    """The non-zero blocks of F (dense 15×15 work array; only the pattern _FIDX is read)."""
-    R = np.empty((3, 3))
+def _fill_F(x, u, dt, F, S3, w):
+    """The non-zero blocks of F (dense 15×15 work array; only the pattern _FIDX is read);
+    ``S3`` (≥ 3, 3, 3), ``w`` (≥ 10): scratch."""
+    R = S3[0]
     quat_to_rot(x[6:10], R)
-    a = np.empty(3)
-    phi = np.empty(3)
+    a = w[0:3]
+    phi = w[3:6]
     for k in range(3):
         a[k] = u[k] - x[10 + k]
         phi[k] = -(u[3 + k] - x[13 + k]) * dt
-    Ra = np.empty((3, 3))
+    Ra = S3[1]
     _skew_mul(R, a, Ra)
-    dq = np.empty(4)
+    dq = w[6:10]
     quat_exp(phi, dq)  # Exp(ω Δt)ᵀ = Exp(−ω Δt)
-    E = np.empty((3, 3))
+    E = S3[2]
     quat_to_rot(dq, E)
     for i in range(3):
         F[i, i] = 1.0
@@ -275,9 +277,9 @@ def _fill_F(x, u, dt, F):
 
 
 @njit
-def cov_step(P, x, u, prm, F, M):
-    """P ← F P Fᵀ + Q on the sparse pattern of F (F, M: 15×15 work arrays)."""
-    _fill_F(x, u, prm[_P_DT], F)
+def cov_step(P, x, u, prm, F, M, S3, w):
+    """P ← F P Fᵀ + Q on the sparse pattern of F (F, M: 15×15 work arrays; S3, w: scratch)."""
+    _fill_F(x, u, prm[_P_DT], F, S3, w)
     for r in range(15):
         for c in range(15):
             s = 0.0
@@ -544,7 +546,7 @@ def _enqueue(ints, mq, prm, kind, age_ticks, z, o, nz, zp, var, ov):
 
 # ------------------------------------------------------------------------ one row, one tick
 @njit
-def _advance(xc, P, ib, ints, u, prm, F, M):
+def _advance(xc, P, ib, ints, u, prm, F, M, S3, w):
     """now += 1, store u; the core takes the sample D ticks back once the ring holds it."""
     B = int(prm[_P_B])
     D = int(prm[_P_D])
@@ -554,13 +556,13 @@ def _advance(xc, P, ib, ints, u, prm, F, M):
         ib[now % B, k] = u[k]
     if now - D > ints[_I_CORE]:
         uc = ib[(now - D) % B]
-        cov_step(P, xc, uc, prm, F, M)
-        nominal_step(xc, uc, prm[_P_DT], prm[_P_G])
+        cov_step(P, xc, uc, prm, F, M, S3, w)
+        nominal_step(xc, uc, prm[_P_DT], prm[_P_G], S3, w)
         ints[_I_CORE] = now - D
 
 
 @njit
-def _refresh_output(xc, xo, ib, ints, prm, predicted):
+def _refresh_output(xc, xo, ib, ints, prm, predicted, S3, w):
     """xo = the core nominal propagated through the buffered samples core+1 … now (or one
     step on the previous output when nothing was fused since)."""
     B = int(prm[_P_B])
@@ -570,10 +572,10 @@ def _refresh_output(xc, xo, ib, ints, prm, predicted):
         for k in range(16):
             xo[k] = xc[k]
         for t in range(core + 1, now + 1):
-            nominal_step(xo, ib[t % B], dt, g)
+            nominal_step(xo, ib[t % B], dt, g, S3, w)
         ints[_I_DIRTY] = 0
     elif predicted:
-        nominal_step(xo, ib[now % B], dt, g)
+        nominal_step(xo, ib[now % B], dt, g, S3, w)
 
 
 @njit
@@ -587,6 +589,8 @@ def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm,
     nr = N // NV
     F = np.zeros((15, 15))
     M = np.empty((15, 15))
+    S3 = np.empty((3, 3, 3))  # the prediction's scratch
+    w = np.empty(16)
     zp = np.empty(3)
     nan3 = np.full(3, np.nan)
     dt = prm[_P_DT]
@@ -601,7 +605,7 @@ def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm,
         has_r = np.isfinite(rin[v, 0])
         for i in range(v * nr, (v + 1) * nr):
             if predict:
-                _advance(xc[i], P[i], ib[i], ints[i], imu[v], prm, F, M)
+                _advance(xc[i], P[i], ib[i], ints[i], imu[v], prm, F, M, S3, w)
             if has_g:
                 age = int(round(g[0] / dt))
                 _enqueue(ints[i], mq[i], prm, 0.0, age, g, 1, 7, zp, g, 8)
@@ -610,7 +614,7 @@ def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm,
                          nan3, rin[v], 1)
             _fuse_due(xc[i], P[i], ib[i], ints[i], mq[i], dg[i], mpar[i], ipar[i], rules[i],
                       prm)
-            _refresh_output(xc[i], xo[i], ib[i], ints[i], prm, predict)
+            _refresh_output(xc[i], xo[i], ib[i], ints[i], prm, predict, S3, w)
 
 
 # ------------------------------------------------------------------------ configuration

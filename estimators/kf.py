@@ -215,17 +215,36 @@ def kf_gain_row(x, PHT, Si, nu, K, xo):
 @njit
 def joseph_row(Pb, K, H, R, Pout, A, AP, KR):
     """Pout = (I − K H) Pb (I − K H)ᵀ + K R Kᵀ (Pout may alias Pb); A, AP (n, n), KR (n, m)
-    scratch."""
-    mat_mul(K, H, A)
-    n = A.shape[0]
-    for r in range(n):
+    scratch.  Joseph's form, evaluated through the rank-m structure of K H (m ≤ n) instead of
+    forming I − K H: B = (I − K H) Pb = Pb − K (H Pb), then B (I − K H)ᵀ = B − (B Hᵀ) Kᵀ; the
+    O(n²m) products replace two O(n³) ones, and the result is the same sum of the two
+    outer-product terms (Bucy & Joseph 1968; Simon 2006 eq 5.19)."""
+    n, m = Pb.shape[0], H.shape[0]
+    for j in range(m):  # A[:m] = H Pb
         for c in range(n):
-            A[r, c] = (1.0 if r == c else 0.0) - A[r, c]
-    mat_mul(A, Pb, AP)
+            s = 0.0
+            for k in range(n):
+                s += H[j, k] * Pb[k, c]
+            A[j, c] = s
+    for r in range(n):  # AP = B = Pb − K (H Pb)
+        for c in range(n):
+            s = Pb[r, c]
+            for j in range(m):
+                s -= K[r, j] * A[j, c]
+            AP[r, c] = s
+    for r in range(n):  # A[:, :m] = B Hᵀ
+        for j in range(m):
+            s = 0.0
+            for k in range(n):
+                s += AP[r, k] * H[j, k]
+            A[r, j] = s
     mat_mul(K, R, KR)
-    mat_mul(AP, A.T, Pout)
-    mat_mul(KR, K.T, AP)  # AP is free: K R Kᵀ
-    add_into(Pout, AP)
+    for r in range(n):  # Pout = B − (B Hᵀ) Kᵀ + K R Kᵀ
+        for c in range(n):
+            s = AP[r, c]
+            for j in range(m):
+                s += KR[r, j] * K[c, j] - A[r, j] * K[c, j]
+            Pout[r, c] = s
 
 
 @njit
