@@ -64,6 +64,13 @@ the rest.  The writer finishes its chunk and flushes to the OS every ``flush_wal
 or ``flush_sim_s`` of sim time, whichever comes first (the buffered messages go in first), so
 a SIGKILL loses at most that much;
 ``ag_uav.analysis.viewing.recover`` turns a truncated file into a finished, indexed one.
+
+Cost: between two flushes nothing is encoded.  A tick is one row of raw values
+(:meth:`RunLog.tick_slot`: the engine copies its arrays into it in one ``np.concatenate``;
+:meth:`RunLog.tick` fills one from its arguments), an estimator or spray-state message one row of
+its flat schema; at the flush :mod:`ag_uav.record.encode` turns the rows into protobuf messages in
+one compiled call per topic group, and they go to the writer merged by log time.  A row still
+being filled when a signal closes the log is dropped, not written half-done.
 """
 
 from __future__ import annotations
