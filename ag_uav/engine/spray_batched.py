@@ -42,6 +42,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from .kernels import zeros_touched
 from .sprayer import Sprayer
 
 SetMass = Callable[[int, float, tuple[float, float, float]], None]
@@ -286,7 +287,7 @@ class BatchSprayer:
         self._st = np.zeros((n, _NS))
         self._ist = np.zeros((n, _NI), np.int64)
         self._tab = np.zeros((2, total), np.int32)  # sortie, ground
-        self._rec = np.zeros((4, total))
+        self._rec = zeros_touched((4, total))  # written tick by tick: faulted in now
         self._rec_on = np.zeros(total, np.uint8)
         for i, sp in enumerate(self.sprayers):
             a, b = int(off[i]), int(off[i + 1])

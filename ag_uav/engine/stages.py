@@ -21,7 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from .kernels import BOX, NONFINITE, hold_on_ground, imu_record, tick_in, tick_out
+from .kernels import BOX, NONFINITE, hold_on_ground, imu_record, tick_in, tick_out, zeros_touched
 from .physics import ground_contact
 
 #: the loop record's columns (one row per control tick)
@@ -131,7 +131,7 @@ class Sensing:
         self.ia, self.ig = accel_adr, gyro_adr
         # tick-major (n_max, N, 9): one tick's rows are contiguous (the per-tick writes stay in
         # cache lines the physics step did not evict); a vehicle's record is copied out at the end
-        self.rec = np.zeros((b.n_max, b.n, 9)) if imu is not None else None
+        self.rec = zeros_touched((b.n_max, b.n, 9)) if imu is not None else None
 
     def step(self, k: int) -> None:
         b = self.b
@@ -295,9 +295,9 @@ class Recorder:
 
     def __init__(self, b: Batch, capture: bool = False) -> None:
         self.b = b
-        self.rec = np.zeros((b.n_max, b.n, len(REC_COLUMNS)))  # tick-major, as Sensing.rec
+        self.rec = zeros_touched((b.n_max, b.n, len(REC_COLUMNS)))  # tick-major, as Sensing.rec
         self.s0 = b.S.copy() if capture else None
-        self.controls = np.zeros((b.n_max, b.n, 7)) if capture else None
+        self.controls = zeros_touched((b.n_max, b.n, 7)) if capture else None
 
     def step(self, k: int) -> None:
         b = self.b
