@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from rich import box
 from rich.console import Console
 from rich.table import Table
 
@@ -111,20 +112,25 @@ def _ins_table(scores: dict[str, dict[str, Any]]) -> Table:
     """The INS bank (``estimator.nav = "ins"``): position, velocity and attitude errors and the
     NEES of the 15-state error per GNSS update rule, all on the very same IMU samples and
     fixes."""
-    t = Table(title="estimators (INS; same fixes; * = flown)", show_header=True,
-              header_style="bold")
-    for col in ("rule", "pos RMSE (m)", "pos max (m)", "vel RMSE (m/s)", "tilt RMS/max (°)",
-                "yaw RMS (°)", "NEES15 (band)", "NIS (3)"):
-        t.add_column(col, justify="left" if col == "rule" else "right")
+    bands = {tuple(s["nees15_band95"]) for s in scores.values() if s.get("nees15_band95")}
+    caption = ("RMS errors of position (m; max too), velocity (m/s), tilt (RMS/max) and yaw "
+               "(°); NEES15 of the 15-state error (15 = consistent")
+    if len(bands) == 1:
+        lo, hi = next(iter(bands))
+        caption += f", 95 % band of the mean {lo:.1f}–{hi:.1f}"
+    t = Table(title="estimators (INS; same fixes; * = flown)", caption=caption + ")",
+              show_header=True, header_style="bold", box=box.SIMPLE_HEAD)
+    for col in ("rule", "pos", "max", "vel", "tilt", "yaw", "NEES15", "NIS (3)"):
+        t.add_column(col, justify="left" if col == "rule" else "right", no_wrap=True)
 
     def f(v: Any, fmt: str) -> str:
         return "–" if v is None else fmt.format(v)
 
     for name, s in scores.items():
         label = f"[bold]{name} *[/]" if s.get("flown") else name
-        band = s.get("nees15_band95")
         nees = f(s.get("nees15_mean"), "{:.1f}")
-        if band:
+        band = s.get("nees15_band95")
+        if band and len(bands) > 1:
             nees += f" ({band[0]:.1f}–{band[1]:.1f})"
         t.add_row(label, f(s.get("estimate_rmse_m"), "{:.3f}"),
                   f(s.get("estimate_max_m"), "{:.3f}"), f(s.get("velocity_rmse_mps"), "{:.3f}"),
