@@ -8,13 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover - numba is a dependency; the kernels still run slowly
-    def njit(*args, **kwargs):
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
+from .._jit import njit
+
 
 def zeros_touched(shape: tuple[int, ...]) -> np.ndarray:
     """Zeros whose pages are written now: a per-tick record written one tick-row at a time

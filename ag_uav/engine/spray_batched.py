@@ -39,9 +39,9 @@ from array import array
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import numba
 import numpy as np
 
+from .._jit import njit
 from .kernels import zeros_touched
 from .sprayer import Sprayer
 
@@ -64,7 +64,7 @@ _NI = 4
 F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _sortie_row(i, s, par, st, ist):  # pragma: no cover
     """A sortie change: close the last one, refill and a fresh battery, open the new one.
     Returns the event flags."""
@@ -92,7 +92,7 @@ def _sortie_row(i, s, par, st, ist):  # pragma: no cover
     return fl
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st):  # pragma: no cover
     """The nozzles: the plan sprays, the tank is not empty, the height is within the band; the
     flow per ground distance. Returns (on, event flags)."""
@@ -125,7 +125,7 @@ def _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st):  # pragma: no cover
     return True, 0
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _energy_row(i, g, act, par, st):  # pragma: no cover
     """Electrical power of the actual rotor thrusts (zero on the ground), energy, state of
     charge. Returns (power, state of charge)."""
@@ -147,7 +147,7 @@ def _energy_row(i, g, act, par, st):  # pragma: no cover
     return p, soc
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab, rec, rec_on,
                   out):  # pragma: no cover
     """One control tick of the spray job for every active row: the per-tick law (module docstring;

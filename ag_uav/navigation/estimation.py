@@ -43,6 +43,7 @@ import numpy as np
 
 import estimators
 
+from .._jit import njit
 from ..config import Config, ConfigError
 from ..vehicle.gps import GpsSensor
 from ..vehicle.mjcf import G
@@ -628,11 +629,6 @@ class BatchEstimatorFeedback:
 
 
 # ------------------------------------------------------------------------ kernels of the bank
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover
-    def njit(*a, **k):
-        return a[0] if a and callable(a[0]) else (lambda f: f)
 
 
 def _row(a, n: int) -> np.ndarray:

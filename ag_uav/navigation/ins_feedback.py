@@ -56,15 +56,10 @@ import numpy as np
 
 from estimators.ins import BatchINS, INSConfig, quat_log_err
 
+from .._jit import njit
 from ..config import Config, ConfigError
 from ..vehicle.gps import ReceiverReport, derive_seed
 from .feedback import Feedback
-
-try:
-    from numba import njit
-except ImportError:  # pragma: no cover
-    def njit(*a, **k):
-        return a[0] if a and callable(a[0]) else (lambda f: f)
 
 R_FLOOR = 1e-4
 DEG = math.pi / 180.0

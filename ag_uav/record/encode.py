@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers._jit import njit
+from .._jit import njit
 
 #: message kinds in the kernel's output, in the order the log's channels are listed
 TF, POSE, REF, EST, STATE = range(5)
 
 
-@njit
+@njit(cache=True)
 def _varint(out: np.ndarray, o: int, v: int) -> int:
     while v >= 0x80:
         out[o] = (v & 0x7F) | 0x80
@@ -36,7 +36,7 @@ def _varint(out: np.ndarray, o: int, v: int) -> int:
     return o + 1
 
 
-@njit
+@njit(cache=True)
 def _stamp(out: np.ndarray, o: int, tn: int) -> int:
     """Field 1 (``timestamp``): tag, length, google.protobuf.Timestamp (zero halves omitted)."""
     sec = tn // 1_000_000_000
@@ -53,14 +53,14 @@ def _stamp(out: np.ndarray, o: int, tn: int) -> int:
     return p
 
 
-@njit
+@njit(cache=True)
 def _copy(out: np.ndarray, o: int, src: np.ndarray) -> int:
     for j in range(len(src)):
         out[o + j] = src[j]
     return o + len(src)
 
 
-@njit
+@njit(cache=True)
 def _fill(out: np.ndarray, o: int, tmpl: np.ndarray, slots: np.ndarray, vals: np.ndarray,
           f8: np.ndarray, b8: np.ndarray) -> int:
     """``tmpl`` at ``o`` with ``vals[j]`` (little-endian double) at ``o + slots[j]``."""
@@ -73,7 +73,7 @@ def _fill(out: np.ndarray, o: int, tmpl: np.ndarray, slots: np.ndarray, vals: np
     return o + len(tmpl)
 
 
-@njit
+@njit(cache=True)
 def _state_values(row: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
                   v: np.ndarray) -> None:
     """``ag_uav.DroneState``'s values of one tick row, in the schema's field order."""
@@ -105,7 +105,7 @@ def _state_values(row: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
         v[37 + n_motors + j] = row[ctrl_cols[j]]
 
 
-@njit
+@njit(cache=True)
 def encode_ticks(rows: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
                  st_tmpl: np.ndarray, st_slots: np.ndarray, pose_tmpl: np.ndarray,
                  pose_slots: np.ndarray, tf_tmpl: np.ndarray, tf_head: np.ndarray,
@@ -165,7 +165,7 @@ def encode_ticks(rows: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
     return m
 
 
-@njit
+@njit(cache=True)
 def encode_flat(rows: np.ndarray, tmpl: np.ndarray, slots: np.ndarray, out: np.ndarray,
                 starts: np.ndarray) -> None:
     """Each row of ``rows`` (its values in a :class:`~ag_uav.record.runlog.FlatSchema`'s

@@ -56,17 +56,8 @@ import math
 
 import numpy as np
 
+from .._jit import njit, register_jitable
 from ..config import ImuConfig
-
-try:  # numba is a dependency; without it the row functions run as plain Python (slowly)
-    from numba import njit
-    from numba.extending import register_jitable
-except ImportError:  # pragma: no cover
-    def njit(*args, **kwargs):
-        return args[0] if args and callable(args[0]) else (lambda f: f)
-
-    def register_jitable(f):
-        return f
 
 G = 9.81
 UG = 1e-6 * G                # one micro-g in m/s²

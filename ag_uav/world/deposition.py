@@ -98,13 +98,12 @@ from typing import Any
 
 import numpy as np
 
-try:
-    from numba import njit
+from .._jit import HAVE_NUMBA, njit
+
+if HAVE_NUMBA:
     from numba.core.errors import TypingError as NumbaTypingError
-except ImportError:  # pragma: no cover
+else:  # pragma: no cover
     NumbaTypingError = TypeError
-    def njit(*a, **k):
-        return (lambda f: f) if not a or not callable(a[0]) else a[0]
 
 __all__ = ["DepositionConfig", "Deposition", "DepositionBatch", "DoseMap", "droplet_classes",
            "terminal_velocity", "dose_metrics", "INPUT_WIDTH", "GridSpec", "pack_input",

@@ -72,15 +72,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-try:  # numba is a dependency; without it the row functions run as plain Python (slowly)
-    from numba import njit
-    from numba.extending import register_jitable
-except ImportError:  # pragma: no cover
-    def njit(*args, **kwargs):
-        return args[0] if args and callable(args[0]) else (lambda f: f)
-
-    def register_jitable(f):
-        return f
+from .._jit import njit, register_jitable
 
 __all__ = [
     "FT_PER_M",

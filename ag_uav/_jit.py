@@ -1,0 +1,25 @@
+"""numba for the application's kernels, in one place: ``njit`` and ``register_jitable`` are
+numba's; without numba (a declared dependency) they return the function itself and the kernels
+run as plain Python, correct and slow.  Kernels use ``@njit(cache=True)``; no ``fastmath`` (a
+vehicle's results must not depend on the batch it flies in)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["HAVE_NUMBA", "njit", "register_jitable"]
+
+try:
+    from numba import njit
+    from numba.extending import register_jitable
+
+    HAVE_NUMBA = True
+except ImportError:  # pragma: no cover - numba is a dependency
+    HAVE_NUMBA = False
+
+    def njit(*args: Any, **kwargs: Any) -> Any:  # type: ignore[no-redef]
+        return args[0] if args and callable(args[0]) else (lambda f: f)
+
+    def register_jitable(f: Callable[..., Any]) -> Callable[..., Any]:  # type: ignore[no-redef]
+        return f
