@@ -76,6 +76,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated conditions (" + ", ".join(CONDITIONS) + ")")
     p.add_argument("--presets", default="examples", metavar="DIR",
                    help="folder holding the controller_*.toml presets")
+    p.add_argument("--tunings", type=int, default=0, metavar="N",
+                   help="first tune every controller N times (optimiser seeds 1..N, the specs "
+                        "in --tune-specs; resumable) and fly each one's median tuning (by "
+                        "held-out validation cost) instead of the --presets")
+    p.add_argument("--tune-specs", default="examples", metavar="DIR",
+                   help="folder holding the tune_*.toml specs (with --tunings)")
+    p.add_argument("--no-fly", action="store_true",
+                   help="with --tunings: the campaign only (tables, plot, presets), no flights")
     p.add_argument("--gps-preset", default="rtk", help="GPS noise preset")
     p.add_argument("--estimator", default="pca-mckf", help="estimator flown on (no shadows)")
     from . import add_batch_arguments
@@ -281,6 +289,19 @@ def main(args: argparse.Namespace) -> int:
     if args.resume and args.fresh:
         raise ConfigError("--resume and --fresh: choose one")
     out = Path(args.out)
+    if args.tunings:
+        from .controller_tunings import TUNE_SPECS, campaign
+
+        if args.tunings < 1:
+            raise ConfigError(f"--tunings = {args.tunings}: must be >= 1")
+        labels = [c for c in _split(args.controllers, CONTROLLERS, "controllers")
+                  if c in TUNE_SPECS]
+        with make_executor(args.workers, args.dask) as ex:
+            presets, _rows, wall = campaign(labels, args.tunings, Path(args.tune_specs), out, ex)
+        print(f"campaign: {wall:.0f} s (this call); presets in {presets}")
+        if args.no_fly:
+            return 0
+        args.presets = str(presets)
     spec, ctrls, conds = build_spec(args)
     tasks = expand(spec)
     out.mkdir(parents=True, exist_ok=True)
