@@ -103,6 +103,18 @@ class VehicleConfig:
                                   "(N per m/s of airspeed; rotor drag)", ge=0, length=3)
     drag_quadratic: list[float] = _f([0.18, 0.18, 0.35], "quadratic air drag per axis "
                                      "(N per (m/s)^2: ½ ρ C_d A)", ge=0, length=3)
+    unknown_payload_kg: float = _f(0.0, "model error: mass the vehicle carries that the flight "
+                                   "controller's model leaves out (its mass, inertia and rotor "
+                                   "arms stay those without it)", ge=0, le=20)
+    unknown_payload_pos_m: list[float] = _f([0.0, 0.0, 0.0], "model error: where the unknown "
+                                            "payload sits (body frame, m from the airframe "
+                                            "origin); off-centre it moves the centre of gravity "
+                                            "by m_u r / m_total, unknown to the controller",
+                                            ge=-0.5, le=0.5, length=3)
+    rotor_thrust_loss: list[float] = _f([0.0, 0.0, 0.0, 0.0], "model error: fraction of the "
+                                        "commanded thrust (and yaw torque) each rotor (fr, fl, "
+                                        "rl, rr) fails to deliver: a failing motor the "
+                                        "controller does not know", ge=0, lt=0.9, length=4)
 
 
 @dataclass
@@ -675,6 +687,11 @@ def _validate(cfg: Config) -> None:
                           f"1/timestep_s = {1.0 / s.timestep_s:g} Hz")
     _check_gps_overrides(cfg.gps)
     _check_gps_rate(cfg)
+    v = cfg.vehicle
+    if any(v.unknown_payload_pos_m) and v.unknown_payload_kg == 0:
+        raise ConfigError(f"vehicle.unknown_payload_pos_m = {_fmt(v.unknown_payload_pos_m)}: "
+                          "places vehicle.unknown_payload_kg = 0.0 (no mass: no effect); set "
+                          "the unknown payload's mass too")
     sp = cfg.spray
     if sp.min_height_m >= sp.max_height_m:
         raise ConfigError(f"spray.min_height_m = {sp.min_height_m}: must be < spray.max_height_m "
