@@ -109,7 +109,8 @@ class VehicleConfig:
     unknown_payload_pos_m: list[float] = _f([0.0, 0.0, 0.0], "model error: where the unknown "
                                             "payload sits (body frame, m from the airframe "
                                             "origin); off-centre it moves the centre of gravity "
-                                            "by m_u r / m_total, unknown to the controller",
+                                            "by m_u r / m_total, unknown to the controller "
+                                            "(no effect without unknown_payload_kg)",
                                             ge=-0.5, le=0.5, length=3)
     rotor_thrust_loss: list[float] = _f([0.0, 0.0, 0.0, 0.0], "model error: fraction of the "
                                         "commanded thrust (and yaw torque) each rotor (fr, fl, "
@@ -687,11 +688,6 @@ def _validate(cfg: Config) -> None:
                           f"1/timestep_s = {1.0 / s.timestep_s:g} Hz")
     _check_gps_overrides(cfg.gps)
     _check_gps_rate(cfg)
-    v = cfg.vehicle
-    if any(v.unknown_payload_pos_m) and v.unknown_payload_kg == 0:
-        raise ConfigError(f"vehicle.unknown_payload_pos_m = {_fmt(v.unknown_payload_pos_m)}: "
-                          "places vehicle.unknown_payload_kg = 0.0 (no mass: no effect); set "
-                          "the unknown payload's mass too")
     sp = cfg.spray
     if sp.min_height_m >= sp.max_height_m:
         raise ConfigError(f"spray.min_height_m = {sp.min_height_m}: must be < spray.max_height_m "

@@ -50,7 +50,6 @@ def test_rotor_thrust_loss_scales_one_actuator_not_the_command_range():
 
 
 @pytest.mark.parametrize("veh, needle", [
-    ({"unknown_payload_pos_m": [0.1, 0.0, 0.0]}, "unknown_payload_kg = 0.0"),
     ({"unknown_payload_kg": 1.0, "unknown_payload_pos_m": [0.8, 0.0, 0.0]},
      "unknown_payload_pos_m[0]"),
     ({"rotor_thrust_loss": [0.95, 0, 0, 0]}, "rotor_thrust_loss[0]"),
