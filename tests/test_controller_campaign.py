@@ -38,6 +38,28 @@ def test_unknown_payload_leaves_the_controllers_model_unchanged():
     assert known.ctrl_mass == known.mass and known.ctrl_rotor_xy == known.rotor_xy
 
 
+def test_the_spray_jobs_mass_updates_leave_the_unknown_payload_out():
+    """On a mission the tank's mass changes reach the controller (Sprayer._set_mass): it gets
+    the liquid, never the unknown payload, while the physics carries both."""
+    import mujoco
+
+    from ag_uav.engine.sprayer import Sprayer
+    from ag_uav.vehicle.cascade import make_cascade
+    from ag_uav.vehicle.mjcf import build_vehicle
+    from ag_uav.world.spray_job import SprayJob
+
+    cfg = config_from_dict({"vehicle": {"unknown_payload_kg": 1.0,
+                                        "unknown_payload_pos_m": [0.15, 0.10, 0.0]}})
+    veh = build_vehicle(cfg)
+    data = mujoco.MjData(veh.model)
+    casc = make_cascade(cfg, veh)
+    job = SprayJob(base_xy=np.zeros(2), sorties=[], fill_l=1.7, dry_mass_kg=6.47, service_s=0.0)
+    sp = Sprayer(cfg, veh, data, casc, {}, job, 1, 0.01)
+    sp._set_mass(1.5)
+    assert casc.mass == pytest.approx(6.471 + 1.5, abs=1e-5)  # 1 g: the empty tank geom
+    assert veh.model.body_subtreemass[veh.body_id] == pytest.approx(6.471 + 1.0 + 1.5, abs=1e-5)
+
+
 def test_rotor_thrust_loss_scales_one_actuator_not_the_command_range():
     from ag_uav.vehicle.mjcf import build_vehicle
 
