@@ -196,9 +196,9 @@ def test_verdict_keeps_the_simplest_not_worse_controller():
                              "tracking_rmse_m": base + d})
     win, why = ex.verdict(rows, ["PID", "T1-FPID", "IT2-BMM"], list(ex.JUDGED))
     assert win == "T1-FPID"
-    assert why[0].split("not worse than it: ")[1].split(", ") == ["T1-FPID", "IT2-BMM"]
-    # a lost flight disqualifies
-    rows.append({"condition": "nominal", "controller": "T1-FPID", "seed": 99,
+    assert why[1].split("not worse than it: ")[1].split(", ") == ["T1-FPID", "IT2-BMM"]
+    # a flight lost in any condition, the failing motor included, disqualifies
+    rows.append({"condition": "motor-failure", "controller": "T1-FPID", "seed": 99,
                  "status": "crashed"})
-    win, _ = ex.verdict(rows, ["PID", "T1-FPID", "IT2-BMM"], list(ex.JUDGED))
-    assert win == "IT2-BMM"
+    win, why = ex.verdict(rows, ["PID", "T1-FPID", "IT2-BMM"], [*ex.JUDGED, "motor-failure"])
+    assert win == "IT2-BMM" and "T1-FPID in motor-failure" in why[0]

@@ -33,10 +33,11 @@ ground: its coefficient of variation and the under-dosed fraction of the field (
 t-interval; called only when the interval excludes zero) of every controller against the winner
 and against T1-FPID, and of each IT2 variant against its type-1 control.
 
-The verdict (:func:`verdict`): in each judged condition (``nominal``, ``unknown-model-error``)
-the controllers whose tracking RMSE is not worse than that condition's best (paired interval)
-and that lost no flight qualify; among those that qualify in both, the simplest (PID, then
-type-1, then type-2) wins, ties broken by the mean tracking RMSE over the judged conditions.
+The verdict (:func:`verdict`): a controller that lost a flight in any flown condition (the
+failing motor included) is out; in each judged condition (``nominal``, ``unknown-model-error``)
+the remaining controllers whose tracking RMSE is not worse than the best remaining one's (paired
+interval) qualify; among those that qualify in both, the simplest (PID, then type-1, then
+type-2) wins, ties broken by the mean tracking RMSE over the judged conditions.
 
 Writes ``results.csv`` (one row per flight), ``controllers.md``, ``controllers.csv``,
 ``verdict.json``, ``controllers_box.png`` and ``controllers_paired.png`` in ``--out``.
@@ -312,41 +313,43 @@ def paired_table(rows: list[dict[str, Any]], ctrls: list[str], conds: list[str],
 
 def verdict(rows: list[dict[str, Any]], ctrls: list[str], conds: list[str],
             col: str = "tracking_rmse_m") -> tuple[str | None, list[str]]:
-    """The winner and the reasoning (lines), see the module docstring: per judged condition,
-    the controllers that lost no flight and whose ``col`` is not worse than the best
-    controller's (paired 95 % interval) qualify; among those qualifying in every judged
-    condition, the simplest wins, then the lowest mean ``col`` over the judged conditions."""
+    """The winner and the reasoning (lines), see the module docstring.
+
+    A default must not lose the vehicle: a controller that lost a flight in any flown condition
+    (the failing motor included) is out. In each judged condition (:data:`JUDGED`) the
+    remaining controllers whose ``col`` is not worse than the best remaining one's (paired 95 %
+    interval) qualify; among those qualifying in every judged condition the simplest wins, then
+    the lowest mean ``col`` over the judged conditions."""
     judged = [c for c in JUDGED if c in conds]
-    why, ok_all = [], set(ctrls)
-    means: dict[str, float] = dict.fromkeys(ctrls, 0.0)
+    lost = {c: [cond for cond in conds if any(
+        r.get("condition") == cond and r.get("controller") == c and not _ok(r) for r in rows)]
+        for c in ctrls}
+    live = [c for c in ctrls if not lost[c]]
+    why = ["lost flights (out): " + ("; ".join(f"{c} in {', '.join(v)}" for c, v in lost.items()
+                                                if v) or "none")]
+    if not live:
+        return None, [*why, "every controller lost flights; no verdict"]
+    ok_all, means = set(live), dict.fromkeys(live, 0.0)
     for cond in judged:
-        lost = {c for c in ctrls if any(r.get("condition") == cond and r.get("controller") == c
-                                        and not _ok(r) for r in rows)}
         mean = {}
-        for c in ctrls:
+        for c in live:
             v = [x for r in rows if r.get("condition") == cond and r.get("controller") == c
-                 and _ok(r) and (x := _val(r, col)) is not None]
+                 and (x := _val(r, col)) is not None]
             mean[c] = sum(v) / len(v) if v else math.inf
             means[c] += mean[c]
-        best = min((c for c in ctrls if c not in lost), key=lambda c: mean[c], default=None)
-        if best is None:
-            return None, [f"{cond}: every controller lost flights; no verdict"]
+        best = min(live, key=lambda c: mean[c])
         qual = {best}
-        for c in ctrls:
-            if c == best or c in lost:
-                continue
+        for c in live:
             m, h, _, n, _ = paired(rows, cond, c, best, col)
-            if n >= 2 and math.isfinite(h) and m - h <= 0.0:  # not worse than the best
+            if c != best and n >= 2 and math.isfinite(h) and m - h <= 0.0:  # not worse
                 qual.add(c)
         why.append(f"{cond}: best {best} ({mean[best] * 1000:.1f} mm); not worse than it: "
-                   + ", ".join(c for c in ctrls if c in qual)
-                   + (f"; lost flights: {', '.join(sorted(lost))}" if lost else ""))
+                   + ", ".join(c for c in live if c in qual))
         ok_all &= qual
     if not ok_all:
-        why.append("no controller qualifies in every judged condition")
-        return None, why
+        return None, [*why, "no controller qualifies in every judged condition"]
     win = min(ok_all, key=lambda c: (SIMPLICITY.get(c, 2), means[c]))
-    why.append(f"qualify in {' and '.join(judged)}: {', '.join(c for c in ctrls if c in ok_all)}"
+    why.append(f"qualify in {' and '.join(judged)}: {', '.join(c for c in live if c in ok_all)}"
                f"; the simplest (then lowest mean) wins: {win}")
     return win, why
 
