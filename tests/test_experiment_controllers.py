@@ -10,7 +10,6 @@ import pytest
 from ag_uav.config import AxisGains, ConfigError
 from ag_uav.jobs.experiments import controllers as ex
 
-
 IT2 = ('[controller]\ntype = "it2-fpid"\n[controller.xy]\nreducer = "nt"\nke = 1.2\n'
        'kd = 1.3\nk0 = 6.0\nk1 = 3.0\nalpha = 0.3\ncm = 0.6\n[controller.z]\nreducer = "nt"\n'
        'ke = 2.2\nkd = 1.5\nk0 = 8.0\nk1 = 3.1\nalpha = 0.75\ncm = 0.6\n')

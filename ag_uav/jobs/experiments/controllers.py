@@ -95,7 +95,7 @@ METRICS = (
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--runs", type=int, default=12, help="seeds per controller and condition")
+    p.add_argument("--runs", type=int, default=15, help="seeds per controller and condition")
     p.add_argument("--seed0", type=int, default=100, help="first seed (the tuning uses 1-3, its "
                    "validation 11-16)")
     p.add_argument("--controllers", default=",".join(ALL),
@@ -395,6 +395,7 @@ def plot_paired(recs: list[dict[str, Any]], conds: list[str], path: Path) -> Non
             ax = axs[i, j]
             rs = [r for r in recs if r["vs"] == ref and r["metric"] == col]
             names = list(dict.fromkeys(r["controller"] for r in rs))
+            labelled: set[str] = set()
             for k, cond in enumerate(conds):
                 for n_i, name in enumerate(names):
                     r = next((x for x in rs if x["controller"] == name
@@ -403,7 +404,8 @@ def plot_paired(recs: list[dict[str, Any]], conds: list[str], path: Path) -> Non
                         continue
                     y = n_i + (k - (len(conds) - 1) / 2) * 0.25
                     ax.errorbar(r["pct"], y, xerr=r["pct_ci95"], fmt="o", ms=3, capsize=2,
-                                color=f"C{k}", label=cond if n_i == 0 else None)
+                                color=f"C{k}", label=None if cond in labelled else cond)
+                    labelled.add(cond)
             ax.axvline(0, color="k", lw=0.8)
             ax.set_yticks(range(len(names)), names, fontsize=7)
             ax.set_title(f"{label} vs {ref} (%)", fontsize=8)
