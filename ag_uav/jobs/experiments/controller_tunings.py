@@ -228,3 +228,62 @@ def campaign(labels: list[str], n: int, spec_dir: Path, out: Path, executor: Any
     (out / "tunings.md").write_text("\n".join([
         f"# {title}", "", markdown_table(header, lines), "![tunings](tunings.png)", ""]))
     return presets, rows, wall
+
+
+def fly_every_tuning(rows: list[dict[str, Any]], spec_dir: Path, out: Path, executor: Any,
+                     seeds: list[int], base: dict[str, Any], *, resume: bool = True
+                     ) -> tuple[list[str], list[list[str]], list[dict[str, Any]]]:
+    """Every tuning of the campaign flown on the whole mission (``base``: the experiment's
+    nominal condition) on ``seeds``, a batch in ``OUT/every-tuning``: how far apart the
+    *flown* results of one controller's tunings are. One table row per controller: the
+    tracking RMSE (mm, mean over the seeds) of each tuning, median [min, max], and the picked
+    tuning's."""
+    from ..batch import mean_ci, run_batch, spec_from_dict
+
+    d = out / "every-tuning"
+    pdir = d / "presets"
+    pdir.mkdir(parents=True, exist_ok=True)
+    presets = {}
+    for r in rows:
+        label = f"{r['controller']}#{r['seed']}"
+        spec = load_spec_cached(spec_dir / TUNE_SPECS[r["controller"]][0])
+        p = pdir / f"{r['controller']}_seed{r['seed']}.toml"
+        p.write_text(preset_toml(r["controller"], r, _flat(spec.base)))
+        presets[label] = {"config": str(p.resolve())}
+    bspec = spec_from_dict({"name": "every-tuning", "base": base,
+                            "presets": {"controller": presets},
+                            "axes": {"controller": list(presets), "seed": seeds}},
+                           base_dir=Path.cwd())
+    res = run_batch(bspec, d, executor, resume=resume, progress=False, report=False)
+    picks = median_pick(rows)
+    header = ["controller", "tracking RMSE (mm) per tuning: median [min, max]",
+              "spread (max − min, mm)", "picked tuning (mm)", "crashed flights"]
+    lines, recs = [], []
+    for label in picks:
+        per = {}
+        crashed = 0
+        for r in rows:
+            if r["controller"] != label:
+                continue
+            fl = [x for x in res.rows if x.get("controller") == f"{label}#{r['seed']}"]
+            crashed += sum(x.get("status") != "ok" for x in fl)
+            m, _, n = mean_ci(x.get("tracking_rmse_m") for x in fl if x.get("status") == "ok")
+            per[r["seed"]] = 1000.0 * m if n else math.nan
+            recs.append({"controller": label, "seed": r["seed"], "tracking_mm": per[r["seed"]],
+                         "validation_cost": r["validation_cost"], "flights": len(fl)})
+        v = sorted(x for x in per.values() if math.isfinite(x))
+        lines.append([label, f"{_median(v):.1f} [{v[0]:.1f}, {v[-1]:.1f}]" if v else "–",
+                      f"{v[-1] - v[0]:.1f}" if v else "–",
+                      f"{per[picks[label]['seed']]:.1f}", str(crashed)])
+    return header, lines, recs
+
+
+_SPECS: dict[Path, Any] = {}
+
+
+def load_spec_cached(path: Path) -> Any:
+    from ..tune import load_spec
+
+    if path not in _SPECS:
+        _SPECS[path] = load_spec(path)
+    return _SPECS[path]

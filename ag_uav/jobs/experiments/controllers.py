@@ -112,6 +112,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="folder holding the tune_*.toml specs (with --tunings)")
     p.add_argument("--no-fly", action="store_true",
                    help="with --tunings: the campaign only (tables, plot, presets), no flights")
+    p.add_argument("--tuning-flights", type=int, default=0, metavar="K",
+                   help="with --tunings: also fly every tuning (not only the picks) on K seeds "
+                        "of the nominal condition: the spread of the flown tracking across "
+                        "tunings (OUT/every-tuning, tunings_flown.md)")
     p.add_argument("--gps-preset", default=None, help="GPS noise preset (default: the config's)")
     p.add_argument("--estimator", default=None,
                    help="GNSS estimator flown on (default: the config's; no shadows)")
@@ -436,8 +440,10 @@ def main(args: argparse.Namespace) -> int:
             raise ConfigError(f"--tunings = {args.tunings}: must be >= 1")
         labels = [c for c in _split(args.controllers, ALL, "controllers") if c in TUNE_SPECS]
         with make_executor(args.workers, args.dask) as ex:
-            presets, _rows, wall = campaign(labels, args.tunings, Path(args.tune_specs), out, ex)
-        print(f"campaign: {wall:.0f} s (this call); presets in {presets}")
+            presets, trows, wall = campaign(labels, args.tunings, Path(args.tune_specs), out, ex)
+            print(f"campaign: {wall:.0f} s (this call); presets in {presets}")
+            if args.tuning_flights:
+                _fly_every_tuning(args, trows, out, ex)
         if args.no_fly:
             return 0
         args.presets = str(presets)
@@ -475,6 +481,30 @@ def main(args: argparse.Namespace) -> int:
           f"{out / 'verdict.json'}, {out / 'controllers_box.png'}, "
           f"{out / 'controllers_paired.png'}")
     return 0
+
+
+def _fly_every_tuning(args: argparse.Namespace, trows: list[dict[str, Any]], out: Path,
+                      ex: Any) -> None:
+    """``--tuning-flights K``: every tuning flown on K nominal seeds (see
+    :func:`.controller_tunings.fly_every_tuning`); prints and writes ``tunings_flown.md``."""
+    import time
+
+    from ...config import parse_set_items
+    from ..batch import markdown_table, print_table
+    from . import write_csv
+    from .controller_tunings import fly_every_tuning
+
+    base: dict[str, Any] = {"estimator.shadow": [], "wind.speed_mps": WIND_MPS,
+                            "wind.turbulence": "light", "log.enabled": False,
+                            **parse_set_items(args.set)}
+    seeds = list(range(args.seed0, args.seed0 + args.tuning_flights))
+    t0 = time.perf_counter()
+    h, lines, recs = fly_every_tuning(trows, Path(args.tune_specs), out, ex, seeds, base)
+    title = (f"every tuning flown: nominal, seeds {seeds[0]}..{seeds[-1]} "
+             f"({time.perf_counter() - t0:.0f} s this call)")
+    print_table(h, lines, title)
+    write_csv(out / "tunings_flown.csv", recs)
+    (out / "tunings_flown.md").write_text(f"# {title}\n\n{markdown_table(h, lines)}\n")
 
 
 def _report(args: argparse.Namespace, ctrls: list[str], conds: list[str], rows: list[Any],
