@@ -202,3 +202,22 @@ def test_verdict_keeps_the_simplest_not_worse_controller():
                  "status": "crashed"})
     win, why = ex.verdict(rows, ["PID", "T1-FPID", "IT2-BMM"], [*ex.JUDGED, "motor-failure"])
     assert win == "IT2-BMM" and "T1-FPID in motor-failure" in why[0]
+
+
+def test_every_tuning_flown_gives_one_row_per_controller(tmp_path):
+    from pathlib import Path
+
+    from ag_uav.jobs.executor import SerialExecutor
+
+    rows = [{"controller": "PID", "seed": s, "spec": "examples/tune_pid.toml",
+             "tune_cost": 0.2, "validation_cost": v,
+             "gains": {"controller.xy.kp": kp, "controller.z.kp": 5.0}}
+            for s, v, kp in [(1, 0.3, 4.0), (2, 0.2, 8.0), (3, 0.25, 6.0)]]
+    root = Path(__file__).resolve().parents[1]
+    h, lines, recs = ct.fly_every_tuning(rows, root / "examples", tmp_path, SerialExecutor(),
+                                         [100], {"sim.max_time_s": 4.0, "log.enabled": False})
+    assert [line[0] for line in lines] == ["PID"] and len(recs) == 3
+    assert len({r["tracking_mm"] for r in recs}) == 3  # three different tunings flew
+    picked = next(r for r in recs if r["seed"] == 3)  # the median by validation cost
+    assert lines[0][3] == f"{picked['tracking_mm']:.1f}"
+    assert (tmp_path / "every-tuning" / "presets" / "PID_seed2.toml").read_text().count("kp = 8.0")
