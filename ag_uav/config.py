@@ -103,6 +103,19 @@ class VehicleConfig:
                                   "(N per m/s of airspeed; rotor drag)", ge=0, length=3)
     drag_quadratic: list[float] = _f([0.18, 0.18, 0.35], "quadratic air drag per axis "
                                      "(N per (m/s)^2: ½ ρ C_d A)", ge=0, length=3)
+    unknown_payload_kg: float = _f(0.0, "model error: mass the vehicle carries that the flight "
+                                   "controller's model leaves out (its mass, inertia and rotor "
+                                   "arms stay those without it)", ge=0, le=20)
+    unknown_payload_pos_m: list[float] = _f([0.0, 0.0, 0.0], "model error: where the unknown "
+                                            "payload sits (body frame, m from the airframe "
+                                            "origin); off-centre it moves the centre of gravity "
+                                            "by m_u r / m_total, unknown to the controller "
+                                            "(no effect without unknown_payload_kg)",
+                                            ge=-0.5, le=0.5, length=3)
+    rotor_thrust_loss: list[float] = _f([0.0, 0.0, 0.0, 0.0], "model error: fraction of the "
+                                        "commanded thrust (and yaw torque) each rotor (fr, fl, "
+                                        "rl, rr) fails to deliver: a failing motor the "
+                                        "controller does not know", ge=0, lt=0.9, length=4)
 
 
 @dataclass
@@ -211,15 +224,15 @@ class BatteryConfig:
 class AxisGains:
     """Gains of one position-axis controller (the keys used depend on ``controller.type``)."""
 
-    ke: float = _f(1.151, "IT2/T1-FPID: error scaling Ke (1/m)", gt=0)
-    kd: float = _f(1.103, "IT2/T1-FPID: error-rate scaling Kd (s/m)", gt=0)
-    k0: float = _f(5.465, "IT2/T1-FPID: PD-part output gain K0 (m/s^2)", ge=0)
-    k1: float = _f(2.943, "IT2/T1-FPID: PI-part output gain K1 (m/s^3)", ge=0)
-    alpha: float = _f(0.4638, "IT2-FPID: lower-MF height parameter (h_Z = alpha, h_N = h_P = "
+    ke: float = _f(1.024, "IT2/T1-FPID: error scaling Ke (1/m)", gt=0)
+    kd: float = _f(0.715, "IT2/T1-FPID: error-rate scaling Kd (s/m)", gt=0)
+    k0: float = _f(6.78, "IT2/T1-FPID: PD-part output gain K0 (m/s^2)", ge=0)
+    k1: float = _f(3.043, "IT2/T1-FPID: PI-part output gain K1 (m/s^3)", ge=0)
+    alpha: float = _f(0.2458, "IT2-FPID: lower-MF height parameter (h_Z = alpha, h_N = h_P = "
                       "1 - alpha)", gt=0, le=1)
     zeta: float = _f(0.5, "IT2-FPID: weight of the zeta type reducer", ge=0, le=1)
-    cm: float = _f(0.6447, "FPID: consequent of the off-diagonal rules", gt=0, le=1)
-    reducer: str = _f("km", "IT2-FPID type reducer", choices=REDUCERS)
+    cm: float = _f(0.6411, "FPID: consequent of the off-diagonal rules", gt=0, le=1)
+    reducer: str = _f("bmm", "IT2-FPID type reducer", choices=REDUCERS)
     kp: float = _f(2.2, "PID: proportional gain (1/s^2)", ge=0)
     ki: float = _f(0.3, "PID: integral gain (1/s^3)", ge=0)
     kdd: float = _f(2.4, "PID: derivative gain (1/s)", ge=0)
@@ -239,12 +252,13 @@ class ControllerConfig:
     type: str = _f("it2-fpid", "position controller", choices=CONTROLLER_TYPES)
     tilt_max_deg: float = _f(30.0, "tilt limit of the thrust vector (deg)", gt=0, lt=80)
     accel_feedforward: bool = _f(True, "add the reference acceleration to the command")
-    # defaults: BB-BC tuned (examples/tune_default.toml: ITAE on 1 m steps with a soft 5 %
-    # overshoot bound + the first 35 s of the default mission, 30 x 40, seed 1; gains, alpha, c_m)
+    # defaults: IT2-FPID with the BMM reducer, the winner of `ag-uav experiment controllers`
+    # (issue 20, docs/controllers.md): the median of 5 BB-BC tunings of examples/tune_it2_bmm.toml
+    # on the realistic loop = examples/controller_it2_bmm.toml
     xy: AxisGains = field(default_factory=AxisGains, metadata={"help": "horizontal axes"})
-    z: AxisGains = field(default_factory=lambda: AxisGains(ke=2.188, kd=1.317, k0=7.983,
-                                                           k1=3.342, alpha=0.6106,
-                                                           cm=0.6388),
+    z: AxisGains = field(default_factory=lambda: AxisGains(ke=3.649, kd=2.067, k0=9.117,
+                                                           k1=3.59, alpha=0.7384,
+                                                           cm=0.6803),
                          metadata={"help": "vertical axis"})
     attitude: AttitudeGains = field(default_factory=AttitudeGains,
                                     metadata={"help": "geometric attitude controller"})

@@ -10,17 +10,21 @@ import pytest
 from ag_uav.config import AxisGains, ConfigError
 from ag_uav.jobs.experiments import controllers as ex
 
+IT2 = ('[controller]\ntype = "it2-fpid"\n[controller.xy]\nreducer = "nt"\nke = 1.2\n'
+       'kd = 1.3\nk0 = 6.0\nk1 = 3.0\nalpha = 0.3\ncm = 0.6\n[controller.z]\nreducer = "nt"\n'
+       'ke = 2.2\nkd = 1.5\nk0 = 8.0\nk1 = 3.1\nalpha = 0.75\ncm = 0.6\n')
+
 
 def _args(tmp_path, **kw):
     for c, fname in ex.CONTROLLERS.items():
         body = {"PID": '[controller]\ntype = "pid"\n',
-                "T1-FPID": '[controller]\ntype = "t1-fpid"\n'}.get(
-            c, '[controller]\ntype = "it2-fpid"\n[controller.xy]\nreducer = "nt"\n')
+                "T1-FPID": '[controller]\ntype = "t1-fpid"\n'}.get(c, IT2)
         (tmp_path / fname).write_text(body)
     p = argparse.ArgumentParser()
     ex.add_arguments(p)
     a = p.parse_args([])
     a.presets = str(tmp_path)
+    a.out = str(tmp_path / "out")
     for k, v in kw.items():
         setattr(a, k, v)
     return a
@@ -30,21 +34,29 @@ def test_spec_conditions_and_presets(tmp_path):
     from ag_uav.jobs.batch import expand
 
     spec, ctrls, conds = ex.build_spec(_args(tmp_path, runs=2))
-    assert ctrls == list(ex.CONTROLLERS) and conds == ["nominal", "model-error"]
+    assert ctrls == ex.ALL and len(ctrls) == 10
+    assert conds == ["nominal", "unknown-model-error", "motor-failure"]
     tasks = expand(spec)
-    assert len(tasks) == 2 * 6 * 2
+    assert len(tasks) == 2 * 10 * 3
     by = {(t.axis_values["condition"], t.axis_values["controller"], t.axis_values["seed"]): t
           for t in tasks}
     nom = by[("nominal", "PID", 100)].config
-    me = by[("model-error", "IT2-KM", 101)].config
-    assert nom["gps"]["preset"] == "rtk" and nom["estimator"]["name"] == "pca-mckf"
+    me = by[("unknown-model-error", "IT2-KM", 101)].config
+    mf = by[("motor-failure", "T1@NT", 100)].config
+    # the default navigation chain (INS, the default GNSS preset), no shadow filters
+    assert nom["gps"]["preset"] == "rtk-m350" and nom["estimator"]["nav"] == "ins"
     assert nom["estimator"]["shadow"] == [] and nom["controller"]["type"] == "pid"
-    assert nom["wind"]["speed_mps"] == 3.0 and nom["vehicle"]["payload_kg"] == 0.0
-    assert me["vehicle"]["payload_kg"] == pytest.approx(0.3 * 6.47)
+    assert nom["wind"]["speed_mps"] == 3.0 and nom["vehicle"]["unknown_payload_kg"] == 0.0
+    assert me["vehicle"]["unknown_payload_kg"] == 1.0 and me["vehicle"]["payload_kg"] == 0.0
+    assert me["spray"]["tank_l"] == 1.7
     assert me["vehicle"]["motor_tau_s"] == pytest.approx(0.08)
     assert me["wind"]["speed_mps"] == 6.0
     assert me["controller"]["type"] == "it2-fpid" and me["controller"]["xy"]["reducer"] == "nt"
     assert me["seed"] == 101
+    assert mf["vehicle"]["rotor_thrust_loss"] == [0.25, 0.0, 0.0, 0.0]
+    assert mf["controller"]["type"] == "t1-fpid" and mf["controller"]["xy"]["ke"] == 1.2
+    with pytest.raises(ConfigError, match="seed0"):
+        ex.build_spec(_args(tmp_path, seed0=11))
 
 
 def test_spec_rejects_unknown_controller_and_missing_preset(tmp_path):
@@ -76,6 +88,7 @@ def test_paired_difference_and_counts():
     _, lines, recs = ex.paired_table(rows, ["T1-FPID", "IT2-KM"], ["nominal"])
     assert lines[0][:3] == ["nominal", "IT2-KM", "T1-FPID"]
     assert recs[0]["pct"] == pytest.approx(-100.0 / 2.875)
+    assert recs[0]["diff"] == pytest.approx(-1000.0)  # in mm
 
 
 def test_controller_surfaces_at_half_alpha():

@@ -51,7 +51,8 @@ class Sprayer:
         self.dry = float(self.model.body_subtreemass[self.drone] - self.model.body_mass[self.liq])
         self.com_dry_z = float(self.model.body_ipos[self.drone][2])
         self.liq_z = float(self.model.body_pos[self.liq][2])
-        self.J_dry = tuple(float(v) for v in veh.inertia)
+        self.J_dry = tuple(float(v) for v in veh.ctrl_inertia)  # the controller's model
+        self.unknown = veh.mass - veh.ctrl_mass  # vehicle.unknown_payload_kg: not told to it
         # the model's arrays the liquid's mass changes write (views, looked up once)
         m = self.model
         self._mass_views = (m.body_mass, m.body_inertia[self.liq], m.body_ipos[self.liq],
@@ -104,7 +105,7 @@ class Sprayer:
         dz2 = self.dry * (self.com_dry_z - zc) ** 2 + ml * (zl - zc) ** 2
         Ix, Iy, Iz = self.J_dry
         li = inertia
-        self.cascade.mass = total
+        self.cascade.mass = total - self.unknown
         self.cascade.attitude.J = (Ix + li[0] + dz2, Iy + li[1] + dz2, Iz + li[2])
         self.mass_set = m_liq
 

@@ -6,8 +6,9 @@
 
 over a box of config keys (``[params]``, e.g. ``"controller.xy.ke" = {lo = 0.1, hi = 10,
 log = true}``: ``log`` searches log10 of the value). Each scenario ``s`` is flown with the
-candidate's gains and the *same* run seed (``noise_seed``) for every candidate (common random
-numbers):
+candidate's gains and the *same* run seeds for every candidate (common random numbers):
+``noise_seed`` (one) or ``noise_seeds = [..]`` (several; ``J_s`` is the mean over them, so that
+the tuning does not fit one wind and GNSS draw):
 
 - ``kind = "step"``: hover at 3 m, step of ``size`` m on ``axis`` (x, y or z) at ``t_step``
   (:func:`ag_uav.engine.scenarios.step_response`); error e(t) = p_ref − p over the 3 axes after the
@@ -31,6 +32,12 @@ killed run stopped — finished iterations and finished evaluations of the curre
 re-run, and the result equals an uninterrupted run (the optimiser RNG state is checkpointed; the
 cost is deterministic). The configured default gains are put in the initial population (member 0)
 so the tuned cost can never be worse than the default's.
+
+Held-out validation (``validation_seeds = [..]``, disjoint from the tuning seeds, checked):
+after the optimisation the ``validate_top`` (3) distinct candidates of lowest tuning cost (from
+the evaluation journal) are flown on the validation seeds with the same scenarios and cost; the
+one of lowest validation cost is shipped, and its validation cost is reported beside its tuning
+cost (printed, ``before_after.md``, ``tune.json``: ``validation``, ``shipped_*``).
 
 Outputs in ``--out``: ``best_gains.toml`` (a config fragment ``[controller.xy] ke = ...`` that
 ``fly --config`` and batch presets accept), ``convergence.png``, ``before_after.md`` (default vs
@@ -70,7 +77,8 @@ from .executor import Executor, SerialExecutor
 
 SPEC_KEYS = ("name", "description", "optimizer", "pop", "iters", "seed", "noise_seed", "metric",
              "crash_penalty", "effort_weight", "include_default", "base", "params", "scenarios",
-             "optimizer_options", "dose_weights")
+             "optimizer_options", "dose_weights", "noise_seeds", "validation_seeds",
+             "validate_top")
 AXES = {"x": 0, "y": 1, "z": 2}
 OPTIMIZERS = ("bbbc", "pso", "cmaes")
 METRICS = ("ise", "itae", "none")
@@ -126,16 +134,26 @@ class TuneSpec:
     include_default: bool = True
     optimizer_options: dict[str, Any] = field(default_factory=dict)
     dose_weights: dict[str, float] = field(default_factory=dict)
+    noise_seeds: list[int] = field(default_factory=list)       # [] = [noise_seed]
+    validation_seeds: list[int] = field(default_factory=list)  # [] = no validation
+    validate_top: int = 3
     description: str = ""
     source: str | None = None
 
+    @property
+    def seeds(self) -> list[int]:
+        """The run seeds every candidate is flown with (common random numbers)."""
+        return list(self.noise_seeds) or [self.noise_seed]
+
     def hash(self) -> str:
-        """What a checkpoint must match to be resumed (``iters`` may grow)."""
+        """What a checkpoint must match to be resumed (``iters`` and the validation may
+        change)."""
         d = asdict(self)
-        for k in ("iters", "description", "source", "name"):
+        for k in ("iters", "description", "source", "name", "validation_seeds", "validate_top"):
             d.pop(k)
-        if not d["dose_weights"]:  # a spec without them resumes its older checkpoints
-            d.pop("dose_weights")
+        for k in ("dose_weights", "noise_seeds"):  # a spec without them resumes older checkpoints
+            if not d[k]:
+                d.pop(k)
         blob = json.dumps(d, sort_keys=True, default=str)
         files = referenced_files(self.base)  # a field file changed in place: another tune
         if files:
@@ -278,7 +296,39 @@ def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".", name: st
         effort_weight=_num(data.get("effort_weight", 0.0), "effort_weight", ge=0.0),
         include_default=inc, optimizer_options=dict(oo),
         dose_weights=_dose_weights(data.get("dose_weights", {}), base_cfg),
-        description=str(data.get("description", "")), source=source)
+        **_seed_lists(data), description=str(data.get("description", "")), source=source)
+
+
+def _seed_list(raw: Any, where: str) -> list[int]:
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(f"{where} = {_fmt(raw)}: expected a non-empty list of seeds (integers "
+                          ">= 0)")
+    out = [_int(v, f"{where}[{i}]", 0) for i, v in enumerate(raw)]
+    if len(set(out)) != len(out):
+        raise ConfigError(f"{where} = {_fmt(raw)}: duplicate seeds")
+    return out
+
+
+def _seed_lists(data: dict[str, Any]) -> dict[str, Any]:
+    """``noise_seeds`` (the tuning's run seeds, common to every candidate; replaces
+    ``noise_seed``), ``validation_seeds`` (held out: disjoint from the tuning's) and
+    ``validate_top`` (how many of the best distinct candidates are flown on them)."""
+    out: dict[str, Any] = {}
+    if "noise_seeds" in data:
+        if "noise_seed" in data:
+            raise ConfigError("noise_seed and noise_seeds: give one (noise_seeds = [..] flies "
+                              "every candidate on each of them)")
+        out["noise_seeds"] = _seed_list(data["noise_seeds"], "noise_seeds")
+    if "validation_seeds" in data:
+        val = _seed_list(data["validation_seeds"], "validation_seeds")
+        tune = out.get("noise_seeds") or [data.get("noise_seed", 0)]
+        common = sorted(set(val) & set(tune))
+        if common:
+            raise ConfigError(f"validation_seeds = {_fmt(val)}: seeds {common} are also tuning "
+                              "seeds; held-out seeds must be disjoint from noise_seed(s)")
+        out["validation_seeds"] = val
+    out["validate_top"] = _int(data.get("validate_top", 3), "validate_top", 1)
+    return out
 
 
 def _dose_weights(raw: Any, base_cfg: Config) -> dict[str, float]:
@@ -479,13 +529,13 @@ def evaluate_candidates(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
     back to one candidate at a time, and each result carries the batch's exception in
     ``engine_fallback`` (:func:`run_tune` warns and counts it)."""
     spec: TuneSpec = tasks[0]["spec"]
+    seeds: list[int] = tasks[0].get("seeds") or spec.seeds
     penalty = 2.0 * spec.crash_penalty * sum(s.weight for s in spec.scenarios)
     outs: list[dict[str, Any]] = [{"parts": {}, "crash": "", "cost": 0.0} for _ in tasks]
     cfgs: list[Config | None] = []
     for task, out in zip(tasks, outs, strict=True):
         try:
             cfg = config_from_dict(candidate_config(spec, task["values"]))
-            cfg.seed = spec.noise_seed
             cfg.log.enabled = False
             cfgs.append(cfg)
         except Exception as e:  # noqa: BLE001 - a failing candidate gets the penalty
@@ -497,10 +547,11 @@ def evaluate_candidates(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
     details = tasks[0].get("details", False)
     try:
         for sc in spec.scenarios:
-            rs = scenario_costs([cfgs[i] for i in live], sc, spec.metric, spec.crash_penalty,
-                                spec.effort_weight, details=details,
-                                dose_weights=spec.dose_weights)
-            for i, r in zip(live, rs, strict=True):
+            rs = scenario_costs([_seeded(cfgs[i], s) for i in live for s in seeds], sc,
+                                spec.metric, spec.crash_penalty, spec.effort_weight,
+                                details=details, dose_weights=spec.dose_weights)
+            for j, i in enumerate(live):
+                r = _seed_mean(rs[j * len(seeds):(j + 1) * len(seeds)])
                 out = outs[i]
                 out["parts"][sc.name] = r
                 out["cost"] += sc.weight * r["cost"]
@@ -514,6 +565,29 @@ def evaluate_candidates(tasks: list[dict[str, Any]]) -> list[dict[str, Any]]:
         reason = exception_line(e)
         return [{**evaluate_candidates([t])[0], "engine_fallback": reason} for t in tasks]
     return outs
+
+
+def _seeded(cfg: Config, seed: int) -> Config:
+    c = copy.deepcopy(cfg)
+    c.seed = seed
+    return c
+
+
+def _seed_mean(rs: list[dict[str, Any]]) -> dict[str, Any]:
+    """One scenario's result over the run seeds: the mean of every number (the cost: the mean
+    cost over the seeds), the first crash."""
+    if len(rs) == 1:
+        return rs[0]
+    out: dict[str, Any] = {"crash": next((r["crash"] for r in rs if r["crash"]), "")}
+    for k, v in rs[0].items():
+        if k == "crash":
+            continue
+        vals = [r.get(k) for r in rs]
+        if all(isinstance(x, int | float) and not isinstance(x, bool) for x in vals):
+            out[k] = float(np.mean(vals))
+        else:
+            out[k] = v
+    return out
 
 
 def chunk(items: list[Any], n_chunks: int) -> list[list[int]]:
@@ -566,6 +640,29 @@ def _xkey(u: Sequence[float]) -> str:
     return json.dumps([float(v) for v in u])
 
 
+def top_candidates(spec: TuneSpec, cache: dict[str, dict[str, Any]], k: int
+                   ) -> list[tuple[list[float], float]]:
+    """The ``k`` distinct evaluated candidates of lowest tuning cost (natural units, cost),
+    best first; ties broken by the candidate's coordinates (deterministic)."""
+    ranked = sorted((float(r["cost"]), key) for key, r in cache.items()
+                    if math.isfinite(float(r["cost"])))
+    return [([p.from_internal(v) for p, v in zip(spec.params, json.loads(key), strict=True)], c)
+            for c, key in ranked[:k]]
+
+
+def validate(spec: TuneSpec, top: list[tuple[list[float], float]], executor: Executor
+             ) -> list[dict[str, Any]]:
+    """Each candidate of ``top`` flown on the held-out ``validation_seeds`` (the same
+    scenarios and cost): ``{"values", "tune_cost", "validation_cost", "crash"}``, in ``top``'s
+    order. Empty when the spec names no validation seeds."""
+    if not spec.validation_seeds or not top:
+        return []
+    tasks = [{"spec": spec, "values": v, "seeds": list(spec.validation_seeds)} for v, _ in top]
+    outs = executor.map(evaluate_candidate, tasks)
+    return [{"values": list(v), "tune_cost": c, "validation_cost": float(o["cost"]),
+             "crash": o["crash"]} for (v, c), o in zip(top, outs, strict=True)]
+
+
 @dataclass
 class TuneResult:
     best_values: list[float]
@@ -580,6 +677,20 @@ class TuneResult:
     files: list[Path] = field(default_factory=list)
     before_after: list[list[str]] = field(default_factory=list)
     n_fallback: int = 0        # evaluations (this call) flown alone after their batch failed
+    top: list[tuple[list[float], float]] = field(default_factory=list)  # best distinct evals
+    validation: list[dict[str, Any]] = field(default_factory=list)  # top on held-out seeds
+    shipped: int = -1          # index in validation of the shipped gains (-1: best = shipped)
+
+    @property
+    def shipped_values(self) -> list[float]:
+        """The gains written to best_gains.toml: the lowest validation cost among the top
+        candidates when the spec validates, else the lowest tuning cost."""
+        return self.validation[self.shipped]["values"] if self.shipped >= 0 else self.best_values
+
+    @property
+    def validation_cost(self) -> float:
+        return (self.validation[self.shipped]["validation_cost"] if self.shipped >= 0
+                else math.nan)
 
 
 class TuneStopped(RuntimeError):
@@ -645,6 +756,7 @@ def run_tune(spec: TuneSpec, out_dir: str | Path, executor: Executor | None = No
                      default_cost=math.nan, history=list(opt.history), iterations=opt.iteration,
                      n_evals=ev.n_new, wall_s=time.perf_counter() - t_start, out_dir=out,
                      n_fallback=ev.n_fallback)
+    res.top = top_candidates(spec, ev.cache, spec.validate_top)
     if outputs:
         write_outputs(spec, res, executor, log_stats)
     return res
@@ -799,16 +911,24 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
     import matplotlib.pyplot as plt
 
     out = res.out_dir
+    res.validation = validate(spec, res.top, executor)
+    if res.validation:
+        res.shipped = min(range(len(res.validation)),
+                          key=lambda i: res.validation[i]["validation_cost"])
+        _print_validation(spec, res)
     # before/after on the same scenarios, with details
     tasks = [{"spec": spec, "values": res.default_values, "details": True},
-             {"spec": spec, "values": res.best_values, "details": True}]
+             {"spec": spec, "values": res.shipped_values, "details": True}]
     before, after = executor.map(evaluate_candidate, tasks)
     res.default_cost = float(before["cost"])
+    val = (f"; held-out validation cost {res.validation_cost:.6g} on seeds "
+           f"{spec.validation_seeds} (best of the top {len(res.validation)} by it)"
+           if res.validation else "")
     gp = out / "best_gains.toml"
-    atomic_write_text(gp, gains_toml(spec, res.best_values, comment=(
+    atomic_write_text(gp, gains_toml(spec, res.shipped_values, comment=(
         f"ag-uav tune {spec.source or spec.name}: {spec.optimizer.upper()} {spec.pop} x "
-        f"{res.iterations}, {spec.metric.upper()} cost {res.best_cost:.6g} "
-        f"(default gains: {res.default_cost:.6g})\n"
+        f"{res.iterations}, {spec.metric.upper()} cost {after['cost']:.6g} on seeds "
+        f"{spec.seeds} (default gains: {res.default_cost:.6g}){val}\n"
         "use: ag-uav fly --config best_gains.toml, or a batch preset {config = \"...\"}")))
     # convergence
     fig, ax = plt.subplots(figsize=(6, 3.8))
@@ -848,10 +968,15 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
           f"- optimizer: {spec.optimizer.upper()}, population {spec.pop}, "
           f"iterations {res.iterations}, seed {spec.seed}",
           f"- cost: {spec.metric.upper()}, crash penalty {spec.crash_penalty:g}, "
-          f"noise seed {spec.noise_seed} (every candidate)",
+          f"noise seeds {spec.seeds} (every candidate; the cost is their mean)",
           f"- executor: {executor.name}; wall time (this call) {res.wall_s:.1f} s",
           f"- best cost {res.best_cost:.6g}; default gains {res.default_cost:.6g}", "",
           markdown_table(header, table), "![convergence](convergence.png)", ""]
+    if res.validation:
+        md += [f"Held-out validation (seeds {spec.validation_seeds}, disjoint from the tuning's "
+               f"{spec.seeds}) of the {len(res.validation)} best distinct candidates; the shipped "
+               "gains (the tuned column above) are the lowest validation cost:", "",
+               markdown_table(*_validation_table(res)), ""]
     bp = out / "before_after.md"
     atomic_write_text(bp, "\n".join(md))
     jp = out / "tune.json"
@@ -862,9 +987,29 @@ def write_outputs(spec: TuneSpec, res: TuneResult, executor: Executor,
                                                         res.default_values, strict=True)),
         "default_cost": res.default_cost, "history": res.history,
         "iterations": log_stats, "wall_s": res.wall_s, "executor": executor.name,
-        "engine_fallbacks": res.n_fallback}, indent=2))
+        "engine_fallbacks": res.n_fallback, "noise_seeds": spec.seeds,
+        "validation_seeds": spec.validation_seeds, "validation": res.validation,
+        "shipped": dict(zip([p.key for p in spec.params], res.shipped_values, strict=True)),
+        "shipped_tune_cost": float(after["cost"]),
+        "shipped_validation_cost": res.validation_cost if res.validation else None},
+        indent=2))
     res.files = [gp, cp, bp, jp]
     res.before_after = table
+
+
+def _validation_table(res: TuneResult) -> tuple[list[str], list[list[str]]]:
+    header = ["rank (tuning)", "tuning cost", "validation cost", "shipped"]
+    rows = [[str(i + 1), f"{v['tune_cost']:.4g}", f"{v['validation_cost']:.4g}",
+             "yes" if i == res.shipped else ""] for i, v in enumerate(res.validation)]
+    return header, rows
+
+
+def _print_validation(spec: TuneSpec, res: TuneResult) -> None:
+    from .batch import print_table
+
+    print_table(*_validation_table(res), f"validation: the {len(res.validation)} best "
+                f"candidates on held-out seeds {spec.validation_seeds} (tuning seeds "
+                f"{spec.seeds})")
 
 
 def _f4(v: Any) -> str:
@@ -877,4 +1022,4 @@ def _f4(v: Any) -> str:
 
 __all__ = ["Param", "Scenario", "TuneSpec", "TuneResult", "load_spec", "spec_from_dict",
            "run_tune", "evaluate_candidate", "scenario_cost", "candidate_config", "gains_toml",
-           "default_values", "TuneStopped", "LOST_RETRIES"]
+           "default_values", "TuneStopped", "LOST_RETRIES", "top_candidates", "validate"]

@@ -30,7 +30,9 @@ def make_cascade(cfg: Config, veh: Vehicle) -> PositionCascade:
     c = cfg.controller
     axes = [make_axis_controller(c.type, c.xy), make_axis_controller(c.type, c.xy),
             make_axis_controller(c.type, c.z)]
-    att = GeometricAttitudeController(veh.inertia, wn=c.attitude.wn, zeta=c.attitude.zeta)
-    mixer = XMixer(veh.rotor_xy, veh.spin, veh.k_yaw, veh.f_max)
-    return PositionCascade(axes, veh.mass, G, att, mixer, tilt_max=math.radians(c.tilt_max_deg),
+    # the controller's model of the vehicle (without vehicle.unknown_payload_*: model error)
+    att = GeometricAttitudeController(veh.ctrl_inertia, wn=c.attitude.wn, zeta=c.attitude.zeta)
+    mixer = XMixer(veh.ctrl_rotor_xy, veh.spin, veh.k_yaw, veh.f_max)
+    return PositionCascade(axes, veh.ctrl_mass, G, att, mixer,
+                           tilt_max=math.radians(c.tilt_max_deg),
                            accel_feedforward=c.accel_feedforward)

@@ -33,6 +33,19 @@ class Vehicle:
     ground_geom: int
     skid_geoms: tuple[int, ...]
     hover_z: float                   # z of the body frame resting on the skids (m)
+    #: the flight controller's model of the vehicle: mass (kg), inertia (kg m²) and rotor arms
+    #: about its centre of mass without the ``vehicle.unknown_payload_*`` (None: the above)
+    ctrl_mass: float | None = None
+    ctrl_inertia: tuple[float, float, float] | None = None
+    ctrl_rotor_xy: list[tuple[float, float]] | None = None
+
+    def __post_init__(self) -> None:
+        if self.ctrl_mass is None:
+            self.ctrl_mass = self.mass
+        if self.ctrl_inertia is None:
+            self.ctrl_inertia = self.inertia
+        if self.ctrl_rotor_xy is None:
+            self.ctrl_rotor_xy = list(self.rotor_xy)
 
     def info(self) -> dict:
         return {
@@ -48,6 +61,16 @@ class Vehicle:
 
 def build_vehicle(cfg: Config) -> Vehicle:
     """Compile the MJCF with the config applied.
+
+    Model error the controller does not know: ``vehicle.unknown_payload_kg`` is added to the tank
+    geom's mass and, at ``vehicle.unknown_payload_pos_m``, shifts the centre of mass (the tank
+    box moves to the payload's mass-weighted position, so the composite centre of mass is where
+    the known tank payload and the unknown mass put it); the ``ctrl_*`` facts of the returned
+    vehicle are those of the same config without it (what :func:`ag_uav.vehicle.cascade.
+    make_cascade` and the spray job's mass updates give the controller).
+    ``vehicle.rotor_thrust_loss`` scales each rotor's actuator (thrust and yaw torque per unit of
+    command) by ``1 − loss``: the command range, and so the controller's idea of the thrust
+    limit, stays ``f_max``.
 
     The physics model depends on the vehicle and simulation keys only, never on the field: the
     field outline and other scenery are drawn into the cameras' scene by
@@ -67,9 +90,16 @@ def build_vehicle(cfg: Config) -> Vehicle:
             g.mass = max(v.payload_kg, 1e-3)
         else:
             g.mass = g.mass * v.mass_kg / dry
+    tank = spec.geom("tank")
+    tank_pos0 = list(tank.pos)
+    if v.unknown_payload_kg > 0:  # lumped into the tank box at the mass-weighted position
+        m_t, m_u = tank.mass, v.unknown_payload_kg
+        tank.pos = [(m_t * a + m_u * b) / (m_t + m_u)
+                    for a, b in zip(tank_pos0, v.unknown_payload_pos_m, strict=True)]
+        tank.mass = m_t + m_u
     # the tank's liquid: its own body welded under the airframe at the tank (no joint), massless
     # here; ag_uav.engine.sprayer.Sprayer sets its mass and inertia at run time as the tank drains
-    liq = body.add_body(name="liquid", pos=list(spec.geom("tank").pos))
+    liq = body.add_body(name="liquid", pos=tank_pos0)
     liq.explicitinertial = True
     liq.mass = 1e-6
     liq.inertia = [1e-9, 1e-9, 1e-9]
@@ -77,7 +107,9 @@ def build_vehicle(cfg: Config) -> Vehicle:
         a.ctrlrange = [0.0, f_max]
         a.dynprm[0] = v.motor_tau_s
         sign = 1.0 if a.gear[5] > 0 else -1.0
-        a.gear[5] = sign * v.yaw_torque_coeff_m
+        eff = 1.0 - v.rotor_thrust_loss[ROTORS.index(a.name.removeprefix("thrust_"))]
+        a.gear[2] = eff
+        a.gear[5] = sign * v.yaw_torque_coeff_m * eff
     model = spec.compile()
     # MuJoCo's clipping planes are relative to the model extent: pin them in metres (5 cm near,
     # 800 m far) so the cameras neither clip the ground and the drone nor the field's far edge
@@ -100,9 +132,18 @@ def build_vehicle(cfg: Config) -> Vehicle:
         spin.append(1 if act.gear[5] > 0 else -1)
     skids = tuple(model.geom(n).id for n in ("skid_l", "skid_r"))
     skid_bottom = -(model.geom("skid_l").pos[2] - model.geom("skid_l").size[0])
-    return Vehicle(
+    veh = Vehicle(
         model=model, mass=float(model.body_subtreemass[body_id]),
         inertia=(float(I_body[0, 0]), float(I_body[1, 1]), float(I_body[2, 2])),
         rotor_xy=rotor_xy, spin=spin, k_yaw=v.yaw_torque_coeff_m, f_max=f_max, body_id=body_id,
         ground_geom=model.geom("ground").id, skid_geoms=skids, hover_z=float(skid_bottom) + 0.002,
     )
+    if v.unknown_payload_kg > 0:  # the controller's model: the same vehicle without it
+        import copy
+
+        known = copy.deepcopy(cfg)
+        known.vehicle.unknown_payload_kg = 0.0
+        known.vehicle.unknown_payload_pos_m = [0.0, 0.0, 0.0]
+        nom = build_vehicle(known)
+        veh.ctrl_mass, veh.ctrl_inertia, veh.ctrl_rotor_xy = nom.mass, nom.inertia, nom.rotor_xy
+    return veh
