@@ -29,8 +29,8 @@ BEGIN = "<!-- BEGIN GENERATED: python -m ag_uav.jobs.architecture --write -->"
 END = "<!-- END GENERATED -->"
 
 #: the stages in flow order: top-level modules and the folders of ag_uav
-STAGES = ("config", "seeds", "_jit", "world", "vehicle", "navigation", "engine", "record", "analysis",
-          "jobs", "cli")
+STAGES = ("config", "seeds", "_jit", "world", "vehicle", "navigation", "engine", "record",
+          "analysis", "jobs", "cli")
 #: stages every other one may read; no arrows are drawn for them
 SHARED = ("config", "seeds", "_jit")
 #: the stage of the modules at the top level that are not stages themselves (the package)

@@ -803,7 +803,7 @@ class RunLog:
                 log(msg, tn)
 
     def _maybe_flush(self, t: float) -> None:
-        now = time.perf_counter()
+        now = _perf_counter()
         if now - self._last_flush_wall >= self._flush_wall_s or (
             t - self._last_flush_sim >= self._flush_sim_s
         ):
@@ -928,14 +928,7 @@ class RunLog:
         rows = self._rows
         if rows.open:
             rows.commit()
-        now = _perf_counter()
-        if now - self._last_flush_wall >= self._flush_wall_s or (
-            t - self._last_flush_sim >= self._flush_sim_s
-        ):
-            self._drain()
-            self._writer.flush()
-            self._last_flush_wall = now
-            self._last_flush_sim = t
+        self._maybe_flush(t)
         nx = self._next
         mask = 0
         if t >= nx["tf"]:
