@@ -322,7 +322,7 @@ class BatchSprayer:
         self._out = np.zeros((2, n), bool)
         self._on, self._reset = self._out[0], self._out[1]
         self._logged = [(i, sp) for i, sp in enumerate(self.sprayers)
-                        if sp.log is not None and hasattr(sp.log, "spray_state")]
+                        if sp.log is not None and hasattr(sp.log, "spray_row")]
         self._log_next = -math.inf  # the earliest time a logged vehicle's spray state is due
         if push_initial:
             for sp in self.sprayers:
@@ -411,24 +411,18 @@ class BatchSprayer:
     def _log(self, k: int, t: float, vx: np.ndarray, vy: np.ndarray,
              active: np.ndarray) -> None:
         """``log.spray_state`` every 0.1 s of the vehicles that have a log."""
-        st, rec = self._st, self._rec
+        st, rec, tab, on_ = self._st, self._rec, self._tab, self._rec_on
         for i, sp in self._logged:
             if not active[i] or not t >= sp._next_log:
                 continue
             sp._next_log = t + 0.1 - 1e-9
-            due = getattr(sp.log, "spray_due", None)
-            if due is not None and not due(t):  # the log's own rate (light: 5 Hz)
-                continue
             j = int(self._off[i]) + k
-            on = bool(self._rec_on[j])
+            on = bool(on_[j])
             x, y = float(vx[i]), float(vy[i])
-            _, mass, power, soc = rec[:, j].tolist()
-            sti = st[i].tolist()
-            sp.log.spray_state(t, tank_l=sti[S_TANK], mass_kg=mass,
-                               flow_lps=sp.lpm * math.sqrt(x * x + y * y) if on else 0.0,
-                               nozzles=on, power_w=power, energy_wh=sti[S_ETOT] / 3600.0,
-                               soc=soc, sortie=int(self._ist[i, I_CUR]) + 1,
-                               ground=bool(self._tab[1, j]))
+            flow = sp.lpm * math.sqrt(x * x + y * y) if on else 0.0
+            sp.log.spray_row(t, (st[i, S_TANK], rec[1, j], flow, 1.0 if on else 0.0, rec[2, j],
+                                 st[i, S_ETOT] / 3600.0, rec[3, j], self._ist[i, I_CUR] + 1,
+                                 tab[1, j]))
         self._log_next = min((sp._next_log for i, sp in self._logged if active[i]),
                              default=math.inf)
 

@@ -350,12 +350,9 @@ class BatchInsFeedback:
             log = self.fbs[i].log
             if log is None:
                 continue
-            log.set_truth(p[i])
-            P = self.bank.P
-            pd = np.diagonal(P, axis1=1, axis2=2)  # a view: the log copies the values now
-            xo, row = self.bank.x_out, i * self.nr
-            for j, name in enumerate(self.names):
-                log.estimator(t, name, xo[row + j], pd[row + j], None)
+            r = i * self.nr
+            pd = np.diagonal(self.bank.P[r:r + self.nr], axis1=1, axis2=2)  # views: copied now
+            log.estimator_bank(t, self.names, self.bank.x_out[r:r + self.nr], pd, p[i])
 
     def _fix(self, i: int, k: int, t: float) -> None:
         fb = self.fbs[i]

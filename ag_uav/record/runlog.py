@@ -514,6 +514,17 @@ class _EstChan(_FlatRows):
         self.next_t = -_INF
         self.ix, self.ip, self.ii, self.it = 1, 1 + n, 1 + 2 * n, 1 + 2 * n + m
 
+    def encode(self, pending: list[tuple[Any, bytes, int]]) -> None:
+        """The rows hold the position and the truth: ``err`` = position − truth and its
+        horizontal norm are computed here for the whole block, then encoded."""
+        n = self.rows.n
+        if n:
+            a, it = self.rows.a[:n], self.it
+            d = a[:, it + 3:it + 6]
+            np.subtract(a[:, it:it + 3], d, out=d)
+            a[:, it + 6] = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+        super().encode(pending)
+
 
 def _os_error(e: OSError, path: Path) -> OSError:
     """The SDK's OSError (errno only in its text, "... (os error 28)") with errno and path."""
@@ -1036,11 +1047,15 @@ class RunLog:
         """Spray job state (ag_uav.world.spray_job) -> ``/drone/spray`` (``ag_uav.SprayState``:
         tank, vehicle mass, flow, nozzles on, electrical power, energy used, battery fraction left,
         sortie number, on the ground at the base). Logged at the ``state`` group's rate."""
-        if self.closed or self._period["state"] == _INF:
+        self.spray_row(t, (tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w,
+                           energy_wh, soc, sortie, 1.0 if ground else 0.0))
+
+    def spray_row(self, t: float, values: Sequence[float]) -> None:
+        """:meth:`spray_state` with its values as one sequence in :data:`SPRAY_FIELDS` order
+        after ``t`` (nozzles and ground as 1.0 / 0.0): the engine's way, no keywords."""
+        if t < self._next_spray:  # inf when off or closed
             return
-        if t < self._next_spray:
-            return
-        self._next_spray = t + self._period["state"] - 1e-9
+        self._next_spray = t + self._p_state
         if self._ch_spray is None:
             schema = FlatSchema("ag_uav.SprayState", [(k, 0) for k in self.SPRAY_FIELDS])
             self._ch_spray = _FlatRows(schema, self._fg.Channel(
@@ -1050,8 +1065,11 @@ class RunLog:
                 context=self._ctx).base.log)
             self._flat_rows.append(self._ch_spray)
             self._write_layout()
-        self._ch_spray.put((t, tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w,
-                            energy_wh, soc, sortie, 1.0 if ground else 0.0))
+        row = self._ch_spray.rows.open_row()
+        row[0] = t
+        row[1:] = values
+        self._ch_spray.rows.commit()
+        self._ch_spray.count += 1
 
     def spray_due(self, t: float) -> bool:
         """Would :meth:`spray_state` log at sim time ``t``? (no side effects)"""
@@ -1125,7 +1143,6 @@ class RunLog:
         else:
             pf = _fit(list(pl), 2)
             px, py, pz = pf[0], pf[1], (tz if len(pl) == 2 else _NAN)
-        dx, dy, dz = px - tx, py - ty, pz - tz
         row = ec.rows.open_row()
         row[0] = t
         row[ec.ix:ec.ip] = x if xa else _fit(_flat(x), n)
@@ -1137,12 +1154,39 @@ class RunLog:
             row[ec.ip:ec.ii] = _fit(_flat(p_diag), n)
         if ec.m:
             row[ec.ii:ec.it] = _NAN if innovation is None else _fit(_flat(innovation), ec.m)
-        row[ec.it:ec.it + 7] = (px, py, pz, dx, dy, dz, math.sqrt(dx * dx + dy * dy))
+        row[ec.it:ec.it + 7] = (px, py, pz, tx, ty, tz, _NAN)  # err: at the flush (_EstChan)
         if ec.keys:
             g = (extra or {}).get
             row[ec.it + 7:] = [g(k, _NAN) for k in ec.keys]
         ec.rows.commit()
         ec.count += 1
+
+    def estimator_bank(self, t: float, names: Sequence[str], x: np.ndarray,
+                       p_diag: np.ndarray, p_true: Sequence[float]) -> None:
+        """:meth:`estimator` for a bank of filters of one vehicle at once (no innovation, no
+        extras; position first in the state): row j of ``x`` (k, n) and of ``p_diag`` (k, ≤ n)
+        is filter ``names[j]``, ``err`` against ``p_true``.  The same messages as k calls of
+        :meth:`set_truth` and :meth:`estimator`, with one copy per filter."""
+        self.set_truth(p_true)
+        truth = np.array(self._last_true)
+        est, np_ = self._est, p_diag.shape[1]
+        for j, name in enumerate(names):
+            ec = est.get(name)
+            if ec is None or ec.m or ec.keys or ec.n != x.shape[1]:  # first call: the general way
+                self.estimator(t, name, x[j], p_diag[j])
+                continue
+            if t < ec.next_t:  # inf once closed
+                continue
+            ec.next_t = t + self._p_est
+            row = ec.rows.open_row()
+            row[0] = t
+            row[ec.ix:ec.ip] = x[j]
+            row[ec.ip:ec.ip + np_] = p_diag[j]
+            row[ec.ip + np_:ec.it] = _NAN
+            row[ec.it:ec.it + 3] = x[j, :3]
+            row[ec.it + 3:ec.it + 6] = truth
+            ec.rows.commit()
+            ec.count += 1
 
     def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> _EstChan:
         m = len(_flat(innovation)) if innovation is not None else 0
