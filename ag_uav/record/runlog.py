@@ -471,12 +471,12 @@ class _FlatRows:
     """A :class:`FlatSchema` channel whose messages wait as rows of values (column 0 the sim
     time) and are encoded together at the flush (:func:`ag_uav.record.encode.encode_flat`)."""
 
-    __slots__ = ("rows", "tmpl", "slots", "log", "count")
+    __slots__ = ("rows", "tmpl", "slots", "lid", "count")
 
-    def __init__(self, schema: FlatSchema, log: Any):
+    def __init__(self, schema: FlatSchema, lid: int):
         self.rows = _Rows(schema.n_values, cap=16)
         self.tmpl, self.slots = _template(schema.prefixes)
-        self.log = log
+        self.lid = lid  # the channel's index in its RunLog's log functions
         self.count = 0
 
     def put(self, values: Any) -> None:
@@ -485,8 +485,9 @@ class _FlatRows:
         self.rows.commit()
         self.count += 1
 
-    def encode(self, pending: list[tuple[Any, bytes, int]]) -> None:
-        """The waiting rows -> ``(log, message, log_time)`` appended to ``pending``."""
+    def encode(self, pending: list[tuple[int, bytes, int]]) -> None:
+        """The waiting rows -> ``(channel index, message, log_time)`` appended to
+        ``pending``."""
         from .encode import encode_flat
 
         n = self.rows.n
@@ -496,9 +497,9 @@ class _FlatRows:
         size = len(self.tmpl)
         out = np.empty(n * size, dtype=np.uint8)
         encode_flat(r, self.tmpl, self.slots, out, np.empty(n + 1, dtype=np.int64))
-        buf, log, ap = out.tobytes(), self.log, pending.append
+        buf, lid, ap = out.tobytes(), self.lid, pending.append
         for j, t in enumerate(r[:, 0].tolist()):
-            ap((log, buf[j * size:(j + 1) * size], ns(t)))
+            ap((lid, buf[j * size:(j + 1) * size], ns(t)))
 
 
 class _EstChan(_FlatRows):
@@ -507,14 +508,14 @@ class _EstChan(_FlatRows):
 
     __slots__ = ("topic", "n", "m", "keys", "next_t", "ix", "ip", "ii", "it")
 
-    def __init__(self, schema: FlatSchema, log: Any, topic: str, n: int, m: int,
+    def __init__(self, schema: FlatSchema, lid: int, topic: str, n: int, m: int,
                  keys: tuple[str, ...]):
-        super().__init__(schema, log)
+        super().__init__(schema, lid)
         self.topic, self.n, self.m, self.keys = topic, n, m, keys
         self.next_t = -_INF
         self.ix, self.ip, self.ii, self.it = 1, 1 + n, 1 + 2 * n, 1 + 2 * n + m
 
-    def encode(self, pending: list[tuple[Any, bytes, int]]) -> None:
+    def encode(self, pending: list[tuple[int, bytes, int]]) -> None:
         """The rows hold the position and the truth: ``err`` = position − truth and its
         horizontal norm are computed here for the whole block, then encoded."""
         n = self.rows.n
@@ -660,10 +661,13 @@ class RunLog:
         self._counts: dict[str, int] = {}  # rare topics; the frequent ones count in _n_*
         self._n_tf = self._n_pose = self._n_pose_est = self._n_state = self._n_gps = 0
         self._est: dict[str, _EstChan] = {}
-        # encoded messages (log, bytes, log_time) not yet handed to the writer: they go in one
-        # burst at each flush (and before any other write), which keeps the writer's work out
-        # of the control loop's way; a SIGKILL loses them with the unfinished chunk
-        self._pending: list[tuple[Any, bytes, int]] = []
+        # encoded messages (channel index in _logs, bytes, log_time) not yet handed to the
+        # writer: they go in one burst at each flush (and before any other write), which keeps
+        # the writer's work out of the control loop's way; a SIGKILL loses them with the
+        # unfinished chunk.  Only ints and bytes in them: the garbage collector drops such
+        # tuples from its lists at its first pass, so they never reach the old generation
+        self._pending: list[tuple[int, bytes, int]] = []
+        self._logs: list[Any] = []
         self._flat_rows: list[_FlatRows] = []  # estimator and spray channels, encoded at flush
         self._ch_spray: _FlatRows | None = None
         self._ch_dose: Any = None
@@ -710,6 +714,7 @@ class RunLog:
             self._log_pose_est = raw("/drone/pose_est", pose_schema).base.log
             self._log_pose_ref = raw("/drone/pose_ref", pose_schema).base.log
         self._log_gps = raw("/gps", pose_schema).base.log if en["gps"] else None
+        self._gps_id = self._lid(self._log_gps)
         self._child = {"base_link": _str_field(3, "base_link")}
         self._tf_mid = _WORLD2 + self._child["base_link"]
         self._tf_mid_a = np.frombuffer(self._tf_mid, dtype=np.uint8).copy()
@@ -810,8 +815,9 @@ class RunLog:
             pend.sort(key=_LOG_TIME)
         if pend:
             self._pending = []  # swapped first: a signal handler's close() drains only the rest
-            for log, msg, tn in pend:
-                log(msg, tn)
+            logs = self._logs
+            for i, msg, tn in pend:
+                logs[i](msg, tn)
 
     def _maybe_flush(self, t: float) -> None:
         now = _perf_counter()
@@ -861,6 +867,12 @@ class RunLog:
     def want_frame(self, t: float) -> bool:
         """True when a camera frame at sim time ``t`` would be logged: render only then."""
         return self.want("camera", t)
+
+    def _lid(self, log: Any) -> int:
+        """A channel's log function -> its index in :attr:`_logs` (what pending messages
+        carry)."""
+        self._logs.append(log)
+        return len(self._logs) - 1
 
     def _ts(self, t_ns: int) -> Any:
         return self._M.Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)
@@ -916,6 +928,7 @@ class RunLog:
         self._kind_logs = [self._log_tf] + ([self._log_pose, self._log_pose_ref,
                                               self._log_pose_est] if self._period["pose"] < _INF
                                              else [None] * 3) + [self._log_state]
+        self._kind_ids = [self._lid(f) for f in self._kind_logs]
         self._row_bytes = _ROW_POSE_BYTES + len(st[0])
 
     def bind_ticks(self, n_motors: int, ctrl_keys: Sequence[str], ctrl_src: Sequence[int],
@@ -1024,12 +1037,12 @@ class RunLog:
                          tf, self._tf_mid_a, self._pose_mid_a, out, starts, kinds, tns)
         s = starts[:m + 1].tolist()
         buf = out[:s[-1]].tobytes()
-        logs = self._kind_logs
         if self._pending:  # merged with the other topics' messages by the caller
-            ap = self._pending.append
+            ap, ids = self._pending.append, self._kind_ids
             for j, k, tn in zip(range(m), kinds[:m].tolist(), tns[:m].tolist(), strict=True):
-                ap((logs[k], buf[s[j]:s[j + 1]], tn))
+                ap((ids[k], buf[s[j]:s[j + 1]], tn))
         else:  # nothing else pending: straight to the writer
+            logs = self._kind_logs
             for j, k, tn in zip(range(m), kinds[:m].tolist(), tns[:m].tolist(), strict=True):
                 logs[k](buf[s[j]:s[j + 1]], tn)
         c = np.bincount(kinds[:m], minlength=5).tolist()
@@ -1058,11 +1071,11 @@ class RunLog:
         self._next_spray = t + self._p_state
         if self._ch_spray is None:
             schema = FlatSchema("ag_uav.SprayState", [(k, 0) for k in self.SPRAY_FIELDS])
-            self._ch_spray = _FlatRows(schema, self._fg.Channel(
+            self._ch_spray = _FlatRows(schema, self._lid(self._fg.Channel(
                 "/drone/spray", message_encoding="protobuf",
                 schema=self._fg.Schema(name="ag_uav.SprayState", encoding="protobuf",
                                        data=schema.schema_data),
-                context=self._ctx).base.log)
+                context=self._ctx).base.log))
             self._flat_rows.append(self._ch_spray)
             self._write_layout()
         row = self._ch_spray.rows.open_row()
@@ -1083,7 +1096,7 @@ class RunLog:
         self._next["gps"] = t + self._p_gps
         tn = ns(t)
         z = fix_xyz[2] if len(fix_xyz) > 2 else 0.0
-        self._pending.append((self._log_gps, _ts_field(tn) + _POSE_MID
+        self._pending.append((self._gps_id, _ts_field(tn) + _POSE_MID
                               + _POSE.pack(b"\x0a\x1b", 9, fix_xyz[0], 17, fix_xyz[1], 25, z,
                                            b"\x12\x24", 9, 0.0, 17, 0.0, 25, 0.0, 33, 1.0),
                               tn))
@@ -1210,7 +1223,7 @@ class RunLog:
                                    data=schema.schema_data),
             context=self._ctx,
         )
-        ec = _EstChan(schema, ch.base.log, topic, n, m, keys)
+        ec = _EstChan(schema, self._lid(ch.base.log), topic, n, m, keys)
         self._flat_rows.append(ec)
         return ec
 
@@ -1353,9 +1366,9 @@ class RunLog:
             return
         self._next_dose = t + self._dose_period - 1e-9
         if self._ch_dose is None:
-            self._ch_dose = self._fg.Channel(
+            self._ch_dose = self._lid(self._fg.Channel(
                 "/dose", message_encoding="protobuf", schema=self._M.Grid.get_schema(),
-                context=self._ctx).base.log
+                context=self._ctx).base.log)
         tn = ns(t)
         self._pending.append((self._ch_dose, enc_grid(_ts_pb(tn), float(x0), float(y0), 0.02,
                                                       float(cell), l_per_ha), tn))
