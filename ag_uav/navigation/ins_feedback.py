@@ -346,12 +346,13 @@ class BatchInsFeedback:
     def _log(self, t: float, p: np.ndarray) -> None:
         """``/estimator/<rule>`` of the vehicles that fused a fix this tick: the output state
         (16) and the core's P diagonal (15), as the position-filter bank logs its filters."""
+        pdiag = np.diagonal(self.bank.P, axis1=1, axis2=2)  # a view: the log copies it now
         for i in np.flatnonzero(np.isfinite(self.gnss[:, 0])):
             log = self.fbs[i].log
             if log is None:
                 continue
             r = i * self.nr
-            pd = np.diagonal(self.bank.P[r:r + self.nr], axis1=1, axis2=2)  # views: copied now
+            pd = pdiag[r:r + self.nr]
             log.estimator_bank(t, self.names, self.bank.x_out[r:r + self.nr], pd, p[i])
 
     def _fix(self, i: int, k: int, t: float) -> None:

@@ -321,8 +321,15 @@ class _Rows:
         self.open = True
         return self.a[self.n]
 
-    def commit(self) -> None:
-        self.n += 1
+    def open_block(self, k: int) -> np.ndarray:
+        """The next ``k`` rows (committed together by ``commit(k)``)."""
+        while self.n + k > len(self.a):
+            self.a = np.concatenate([self.a, np.empty_like(self.a)])
+        self.open = True
+        return self.a[self.n:self.n + k]
+
+    def commit(self, k: int = 1) -> None:
+        self.n += k
         self.open = False
 
     def take(self) -> np.ndarray:
@@ -527,6 +534,42 @@ class _EstChan(_FlatRows):
         super().encode(pending)
 
 
+class _EstBank(_FlatRows):
+    """The ``/estimator/<name>`` channels of one filter bank (one schema, position first, no
+    innovation or extras; :meth:`RunLog.estimator_bank`): their rows share one block whose
+    last column is the row's channel index, encoded with one call per flush."""
+
+    __slots__ = ("topics", "lids", "n", "it", "next_t")
+
+    def __init__(self, schema: FlatSchema, lids: list[int], topics: list[str], n: int):
+        self.rows = _Rows(schema.n_values + 1, cap=64)
+        self.tmpl, self.slots = _template(schema.prefixes)
+        self.lid, self.count = -1, 0  # count: messages per channel
+        self.lids, self.topics = np.array(lids, dtype=float), topics
+        self.n, self.it = n, 1 + 2 * n
+        self.next_t = -_INF
+
+    def encode(self, pending: list[tuple[int, bytes, int]]) -> None:
+        """``err`` = position − truth and its horizontal norm for the whole block, then the
+        rows -> ``(channel index, message, log_time)`` appended to ``pending``."""
+        from .encode import encode_flat
+
+        n = self.rows.n
+        if not n:
+            return
+        a, it = self.rows.take(), self.it
+        d = a[:, it + 3:it + 6]
+        np.subtract(a[:, it:it + 3], d, out=d)
+        a[:, it + 6] = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+        size = len(self.tmpl)
+        out = np.empty(n * size, dtype=np.uint8)
+        encode_flat(a, self.tmpl, self.slots, out, np.empty(n + 1, dtype=np.int64))
+        buf, ap = out.tobytes(), pending.append
+        for j, (t, lid) in enumerate(zip(a[:, 0].tolist(), a[:, -1].astype(np.int64).tolist(),
+                                         strict=True)):
+            ap((lid, buf[j * size:(j + 1) * size], ns(t)))
+
+
 def _os_error(e: OSError, path: Path) -> OSError:
     """The SDK's OSError (errno only in its text, "... (os error 28)") with errno and path."""
     m = re.search(r"os error (\d+)", str(e))
@@ -661,6 +704,7 @@ class RunLog:
         self._counts: dict[str, int] = {}  # rare topics; the frequent ones count in _n_*
         self._n_tf = self._n_pose = self._n_pose_est = self._n_state = self._n_gps = 0
         self._est: dict[str, _EstChan] = {}
+        self._banks: dict[tuple[str, ...], _EstBank] = {}
         # encoded messages (channel index in _logs, bytes, log_time) not yet handed to the
         # writer: they go in one burst at each flush (and before any other write), which keeps
         # the writer's work out of the control loop's way; a SIGKILL loses them with the
@@ -795,6 +839,9 @@ class RunLog:
         for ec in self._est.values():
             if ec.count:
                 out[ec.topic] = ec.count
+        for bank in self._banks.values():
+            if bank.count:
+                out.update(dict.fromkeys(bank.topics, bank.count))
         if self._ch_spray is not None and self._ch_spray.count:
             out["/drone/spray"] = self._ch_spray.count
         return out
@@ -1177,29 +1224,43 @@ class RunLog:
     def estimator_bank(self, t: float, names: Sequence[str], x: np.ndarray,
                        p_diag: np.ndarray, p_true: Sequence[float]) -> None:
         """:meth:`estimator` for a bank of filters of one vehicle at once (no innovation, no
-        extras; position first in the state): row j of ``x`` (k, n) and of ``p_diag`` (k, ≤ n)
-        is filter ``names[j]``, ``err`` against ``p_true``.  The same messages as k calls of
-        :meth:`set_truth` and :meth:`estimator`, with one copy per filter."""
-        self.set_truth(p_true)
-        truth = np.array(self._last_true)
-        est, np_ = self._est, p_diag.shape[1]
-        for j, name in enumerate(names):
-            ec = est.get(name)
-            if ec is None or ec.m or ec.keys or ec.n != x.shape[1]:  # first call: the general way
-                self.estimator(t, name, x[j], p_diag[j])
-                continue
-            if t < ec.next_t:  # inf once closed
-                continue
-            ec.next_t = t + self._p_est
-            row = ec.rows.open_row()
-            row[0] = t
-            row[ec.ix:ec.ip] = x[j]
-            row[ec.ip:ec.ip + np_] = p_diag[j]
-            row[ec.ip + np_:ec.it] = _NAN
-            row[ec.it:ec.it + 3] = x[j, :3]
-            row[ec.it + 3:ec.it + 6] = truth
-            ec.rows.commit()
-            ec.count += 1
+        extras; position first in the state): row j of ``x`` (k, n) and of ``p_diag`` (k, ≤ n;
+        NaN-padded) is filter ``names[j]`` on ``/estimator/<name>``, ``err`` against
+        ``p_true``.  The bank's channels share one block of rows (:class:`_EstBank`): a fix
+        costs a few array copies, a flush one encoding call."""
+        key = tuple(names)
+        bank = self._banks.get(key)
+        if bank is None:
+            if self.closed or self._period["estimator"] == _INF:
+                return
+            bank = self._banks[key] = self._make_bank(key, x.shape[1])
+        if t < bank.next_t:  # inf once closed
+            return
+        bank.next_t = t + self._p_est
+        k, n, m, it = len(key), bank.n, p_diag.shape[1], bank.it
+        blk = bank.rows.open_block(k)
+        blk[:, 0] = t
+        blk[:, 1:1 + n] = x
+        blk[:, 1 + n:1 + n + m] = p_diag
+        blk[:, 1 + n + m:it] = _NAN
+        blk[:, it:it + 3] = x[:, :3]
+        blk[:, it + 3:it + 6] = p_true
+        blk[:, it + 7] = bank.lids
+        bank.rows.commit(k)
+        bank.count += 1
+
+    def _make_bank(self, names: tuple[str, ...], n: int) -> _EstBank:
+        schema = FlatSchema("ag_uav.EstimatorState", [("t", 0), ("x", n), ("p_diag", n)]
+                            + [(f"pos.{a}", 0) for a in "xyz"]
+                            + [(f"err.{a}", 0) for a in ("x", "y", "z", "horiz")])
+        topics = [f"/estimator/{sanitize_name(nm)}" for nm in names]
+        lids = [self._lid(self._fg.Channel(
+            tp, message_encoding="protobuf", context=self._ctx,
+            schema=self._fg.Schema(name="ag_uav.EstimatorState", encoding="protobuf",
+                                   data=schema.schema_data)).base.log) for tp in topics]
+        bank = _EstBank(schema, lids, topics, n)
+        self._flat_rows.append(bank)
+        return bank
 
     def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> _EstChan:
         m = len(_flat(innovation)) if innovation is not None else 0
@@ -1462,7 +1523,9 @@ class RunLog:
             if not cams and not final and self._period["camera"] < _INF:
                 cams = ("chase", "down")
             write_foxglove_layout(self.path.parent / "layout.json", cameras=cams,
-                                  estimators=tuple(sanitize_name(n) for n in self._est),
+                                  estimators=tuple(sanitize_name(n) for n in
+                                                   [*self._est, *(n for b in self._banks
+                                                                  for n in b)]),
                                   ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4,
                                   spray=self._ch_spray is not None)
         except Exception:  # noqa: BLE001 - a missing layout never stops a run
@@ -1479,6 +1542,8 @@ class RunLog:
             self._next[g] = _INF
         for ec in self._est.values():
             ec.next_t = _INF
+        for bank in self._banks.values():
+            bank.next_t = _INF
         self._next_spray = _INF
         try:
             self._drain(partial)
