@@ -77,6 +77,7 @@ from __future__ import annotations
 
 import atexit
 import errno
+import itertools
 import json
 import math
 import operator
@@ -127,6 +128,13 @@ def ns(t: float) -> int:
     """Sim time in seconds -> integer nanoseconds (the MCAP log time; clamped at 0)."""
     v = round(t * 1e9)
     return v if v > 0 else 0
+
+
+def _ns_list(t: np.ndarray) -> list[int]:
+    """:func:`ns` of each of ``t`` (both round half to even)."""
+    v = np.rint(t * 1e9)
+    np.maximum(v, 0.0, out=v)
+    return v.astype(np.int64).tolist()
 
 
 def sanitize_name(key: str) -> str:
@@ -504,9 +512,10 @@ class _FlatRows:
         size = len(self.tmpl)
         out = np.empty(n * size, dtype=np.uint8)
         encode_flat(r, self.tmpl, self.slots, out, np.empty(n + 1, dtype=np.int64))
-        buf, lid, ap = out.tobytes(), self.lid, pending.append
-        for j, t in enumerate(r[:, 0].tolist()):
-            ap((lid, buf[j * size:(j + 1) * size], ns(t)))
+        buf = out.tobytes()
+        pending.extend(zip(itertools.repeat(self.lid, n),
+                           [buf[j:j + size] for j in range(0, n * size, size)],
+                           _ns_list(r[:, 0]), strict=False))
 
 
 class _EstChan(_FlatRows):
@@ -564,10 +573,10 @@ class _EstBank(_FlatRows):
         size = len(self.tmpl)
         out = np.empty(n * size, dtype=np.uint8)
         encode_flat(a, self.tmpl, self.slots, out, np.empty(n + 1, dtype=np.int64))
-        buf, ap = out.tobytes(), pending.append
-        for j, (t, lid) in enumerate(zip(a[:, 0].tolist(), a[:, -1].astype(np.int64).tolist(),
-                                         strict=True)):
-            ap((lid, buf[j * size:(j + 1) * size], ns(t)))
+        buf = out.tobytes()
+        pending.extend(zip(a[:, -1].astype(np.int64).tolist(),
+                           [buf[j:j + size] for j in range(0, n * size, size)],
+                           _ns_list(a[:, 0]), strict=True))
 
 
 def _os_error(e: OSError, path: Path) -> OSError:
@@ -1085,9 +1094,10 @@ class RunLog:
         s = starts[:m + 1].tolist()
         buf = out[:s[-1]].tobytes()
         if self._pending:  # merged with the other topics' messages by the caller
-            ap, ids = self._pending.append, self._kind_ids
-            for j, k, tn in zip(range(m), kinds[:m].tolist(), tns[:m].tolist(), strict=True):
-                ap((ids[k], buf[s[j]:s[j + 1]], tn))
+            ids = self._kind_ids
+            self._pending.extend(zip([ids[k] for k in kinds[:m].tolist()],
+                                     [buf[a:b] for a, b in zip(s, s[1:], strict=False)],
+                                     tns[:m].tolist(), strict=True))
         else:  # nothing else pending: straight to the writer
             logs = self._kind_logs
             for j, k, tn in zip(range(m), kinds[:m].tolist(), tns[:m].tolist(), strict=True):
