@@ -147,3 +147,50 @@ def test_grid_encoding_decodes_as_the_sdk_message():
     cls = message_factory.GetMessageClass(pool.FindMessageTypeByName("foxglove.Grid"))
     a, b = cls.FromString(ours), cls.FromString(sdk)
     assert a == b and a.column_count == 4 and len(a.data) == 48
+
+
+def test_gps_block_equals_the_one_message_encoder():
+    """``/gps`` fixes are kept as rows and encoded at the flush (``encode_poses``): each
+    message is the PoseInFrame of :func:`enc_pose_in_frame` at the fix, identity rotation."""
+    from ag_uav.record.encode import encode_poses
+
+    rows = np.array([[0.0, 1.5, -2.25, 3.0], [0.05, 1e3, 2e-3, -7.0],
+                     [128.0, -0.0, 5.0, 1.0], [20000.123456789, 4.0, 5.0, 6.0]])
+    mid = np.frombuffer(R._POSE_MID, np.uint8).copy()
+    out = np.zeros(4096, np.uint8)
+    starts, tns = np.zeros(5, np.int64), np.zeros(4, np.int64)
+    end = encode_poses(rows, R._POSE_TMPL, R._POSE_SLOTS, mid, out, starts, tns)
+    assert starts[4] == end
+    for j, (t, x, y, z) in enumerate(rows):
+        tn = R.ns(t)
+        assert tns[j] == tn
+        ref = R.enc_pose_in_frame(R._ts_pb(tn), (x, y, z), (1.0, 0.0, 0.0, 0.0))
+        assert out[starts[j]:starts[j + 1]].tobytes() == ref
+
+
+def test_estimator_bank_writes_what_one_call_per_filter_writes(tmp_path):
+    """``estimator_bank`` (the INS bank's way: one block per fix) and ``estimator`` called per
+    filter give the same ``/estimator/<name>`` messages, byte for byte."""
+    from mcap.reader import make_reader
+
+    rng = np.random.default_rng(3)
+    names = ["kf", "mckf", "pca-kf"]
+    fixes = [(0.1 * k, rng.normal(size=(3, 16)), rng.random((3, 15)), rng.normal(size=3))
+             for k in range(1, 30)]
+    msgs = {}
+    for way in ("bank", "calls"):
+        with R.RunLog(tmp_path / f"{way}.mcap", channels=["estimator"], layout=False) as log:
+            for t, x, pd, truth in fixes:
+                if way == "bank":
+                    log.estimator_bank(t, names, x, pd, truth)
+                else:
+                    log.set_truth(truth)
+                    for j, nm in enumerate(names):
+                        log.estimator(t, nm, x[j], pd[j], None)
+            counts = log.counts
+        with open(tmp_path / f"{way}.mcap", "rb") as f:
+            msgs[way] = [(c.topic, m.log_time, m.data) for _, c, m in
+                         make_reader(f).iter_messages(log_time_order=False)]
+        assert counts == {f"/estimator/{R.sanitize_name(nm)}": len(fixes) for nm in names}
+    assert len(msgs["bank"]) == 3 * len(fixes)
+    assert sorted(msgs["bank"]) == sorted(msgs["calls"])

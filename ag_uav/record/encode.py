@@ -177,3 +177,25 @@ def encode_flat(rows: np.ndarray, tmpl: np.ndarray, slots: np.ndarray, out: np.n
         starts[r] = o
         o = _fill(out, o, tmpl, slots, rows[r], f8, b8)
     starts[rows.shape[0]] = o
+
+
+@njit(cache=True)
+def encode_poses(rows: np.ndarray, pose_tmpl: np.ndarray, pose_slots: np.ndarray,
+                 pose_head: np.ndarray, out: np.ndarray, starts: np.ndarray,
+                 tns: np.ndarray) -> int:
+    """Rows ``(t, x, y, z)`` -> ``foxglove.PoseInFrame`` messages at the position with the
+    identity orientation (``/gps``): message ``r`` is ``out[starts[r]:starts[r + 1]]`` at log
+    time ``tns[r]``; returns the end of the last."""
+    f8 = np.empty(1)
+    b8 = f8.view(np.uint8)
+    pv = np.array((0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
+    o = 0
+    for r in range(rows.shape[0]):
+        tn = int(np.rint(rows[r, 0] * 1e9))
+        tn = tn if tn > 0 else 0
+        starts[r], tns[r] = o, tn
+        pv[0], pv[1], pv[2] = rows[r, 1], rows[r, 2], rows[r, 3]
+        o = _fill(out, _copy(out, _stamp(out, o, tn), pose_head), pose_tmpl, pose_slots, pv,
+                  f8, b8)
+    starts[rows.shape[0]] = o
+    return o

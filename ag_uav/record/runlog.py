@@ -768,6 +768,7 @@ class RunLog:
             self._log_pose_ref = raw("/drone/pose_ref", pose_schema).base.log
         self._log_gps = raw("/gps", pose_schema).base.log if en["gps"] else None
         self._gps_id = self._lid(self._log_gps)
+        self._gps_rows = _Rows(4, cap=16)  # (t, x, y, z) of the fixes since the last flush
         self._child = {"base_link": _str_field(3, "base_link")}
         self._tf_mid = _WORLD2 + self._child["base_link"]
         self._tf_mid_a = np.frombuffer(self._tf_mid, dtype=np.uint8).copy()
@@ -865,6 +866,8 @@ class RunLog:
         pend = self._pending
         for fr in self._flat_rows:
             fr.encode(pend)
+        if self._gps_rows.n:
+            self._gps_block(pend)
         if rows.n:
             self._encode_ticks(rows.take())
         if pend:  # the topics' messages, merged by log time
@@ -1108,6 +1111,20 @@ class RunLog:
         self._n_pose_est += c[3]
         self._n_state += c[4]
 
+    def _gps_block(self, pending: list[tuple[int, bytes, int]]) -> None:
+        """The fixes since the last flush -> ``/gps`` messages appended to ``pending``."""
+        from .encode import encode_poses
+
+        r = self._gps_rows.take()
+        n = len(r)
+        out = np.empty(n * (len(_POSE_MID) + 80), dtype=np.uint8)
+        starts, tns = np.empty(n + 1, dtype=np.int64), np.empty(n, dtype=np.int64)
+        end = encode_poses(r, _POSE_TMPL, _POSE_SLOTS, self._pose_mid_a, out, starts, tns)
+        buf, s = out[:end].tobytes(), starts.tolist()
+        pending.extend(zip(itertools.repeat(self._gps_id, n),
+                           [buf[a:b] for a, b in zip(s, s[1:], strict=False)], tns.tolist(),
+                           strict=False))
+
     SPRAY_FIELDS = ("t", "tank_l", "mass_kg", "flow_lps", "nozzles", "power_w", "energy_wh",
                     "battery_frac", "sortie", "ground")
 
@@ -1151,12 +1168,11 @@ class RunLog:
         if t < self._next["gps"]:  # inf when off or closed
             return
         self._next["gps"] = t + self._p_gps
-        tn = ns(t)
-        z = fix_xyz[2] if len(fix_xyz) > 2 else 0.0
-        self._pending.append((self._gps_id, _ts_field(tn) + _POSE_MID
-                              + _POSE.pack(b"\x0a\x1b", 9, fix_xyz[0], 17, fix_xyz[1], 25, z,
-                                           b"\x12\x24", 9, 0.0, 17, 0.0, 25, 0.0, 33, 1.0),
-                              tn))
+        row = self._gps_rows.open_row()
+        row[0] = t
+        row[1], row[2] = fix_xyz[0], fix_xyz[1]
+        row[3] = fix_xyz[2] if len(fix_xyz) > 2 else 0.0
+        self._gps_rows.commit()
         self._n_gps += 1
 
     def set_truth(self, p_true: Sequence[float]) -> None:
