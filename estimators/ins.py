@@ -24,7 +24,9 @@ Prediction, one IMU sample (Solà eqs 5.3.3 / 260 without the gravity state; a =
 Ω_i = σ_ωw² Δt).  ``σ_a``, ``σ_g`` are the per-sample white-noise standard deviations of the
 IMU (density over the Nyquist band of the sample rate, plus vibration, as the simulator's IMU
 draws them: :meth:`INSConfig.from_imu`), ``σ_ba``, ``σ_bg`` the bias random walks.
-``F P Fᵀ`` runs on the 45 non-zeros of F (compressed rows), the upper triangle mirrored.
+``F P Fᵀ`` is written out on F's blocks (``M = F P`` on its first 9 rows, then the upper
+triangle of ``M Fᵀ``, mirrored; the bias block, where F = I, is P's own), each entry summed in
+F's column order.
 
 Measurements (h, and H = ∂h/∂δx; R [r]× from ∂(R Exp(δθ) r)/∂δθ = −R [r]×):
 
@@ -133,21 +135,6 @@ _QW = 19
 # GNSS input row: age, p(3), v(3), yaw, var p(3), var v(3), var yaw
 _GIN = 15
 
-# non-zero columns of F per row (error layout δp 0:3, δv 3:6, δθ 6:9, δb_a 9:12, δb_g 12:15)
-_fc: list[list[int]] = []
-for _r in range(15):
-    a = _r % 3
-    if _r < 3:
-        _fc.append([_r, 3 + a])
-    elif _r < 6:
-        _fc.append([_r, 6, 7, 8, 9, 10, 11])
-    elif _r < 9:
-        _fc.append([6, 7, 8, 12 + a])
-    else:
-        _fc.append([_r])
-_FPTR = np.array([0] + list(np.cumsum([len(c) for c in _fc])), dtype=np.int64)
-_FIDX = np.array([c for cols in _fc for c in cols], dtype=np.int64)
-del _fc, _r, a
 
 
 # ------------------------------------------------------------------------ quaternion algebra
@@ -220,11 +207,8 @@ def _skew_mul(M, r, out):
 
 # ------------------------------------------------------------------------ prediction
 @njit
-def nominal_step(x, u, dt, g, S3, w):
-    """One IMU sample u = (f̃, ω̃) on the nominal x = [p, v, q, b_a, b_g] (module docstring).
-    ``S3`` (≥ 1, 3, 3), ``w`` (≥ 14): scratch (the per-tick path allocates nothing)."""
-    R = S3[0]
-    quat_to_rot(x[6:10], R)
+def _nominal_R(x, u, dt, g, R, w):
+    """:func:`nominal_step` given R = R(q) of the current x; ``w`` (≥ 14): scratch."""
     a = w[0:3]
     for k in range(3):
         a[k] = u[k] - x[10 + k]
@@ -247,54 +231,85 @@ def nominal_step(x, u, dt, g, S3, w):
 
 
 @njit
-def _fill_F(x, u, dt, F, S3, w):
-    """The non-zero blocks of F (dense 15×15 work array; only the pattern _FIDX is read);
-    ``S3`` (≥ 3, 3, 3), ``w`` (≥ 10): scratch."""
-    R = S3[0]
-    quat_to_rot(x[6:10], R)
+def nominal_step(x, u, dt, g, S3, w):
+    """One IMU sample u = (f̃, ω̃) on the nominal x = [p, v, q, b_a, b_g] (module docstring).
+    ``S3`` (≥ 1, 3, 3), ``w`` (≥ 14): scratch (the per-tick path allocates nothing)."""
+    quat_to_rot(x[6:10], S3[0])
+    _nominal_R(x, u, dt, g, S3[0], w)
+
+
+@njit
+def _fill_F(x, u, dt, R, S3, w):
+    """F's non-identity blocks from R = R(q): S3[1] = F_vθ = −R [a]× Δt, S3[2] = F_vba = −R Δt,
+    S3[3] = F_θθ = Exp(−ω Δt) as a rotation matrix (F_pv = I Δt, F_θbg = −I Δt are scalars);
+    ``S3`` (≥ 5, 3, 3), ``w`` (≥ 10): scratch."""
     a = w[0:3]
     phi = w[3:6]
     for k in range(3):
         a[k] = u[k] - x[10 + k]
         phi[k] = -(u[3 + k] - x[13 + k]) * dt
-    Ra = S3[1]
+    Ra = S3[4]
     _skew_mul(R, a, Ra)
     dq = w[6:10]
     quat_exp(phi, dq)  # Exp(ω Δt)ᵀ = Exp(−ω Δt)
-    E = S3[2]
-    quat_to_rot(dq, E)
+    quat_to_rot(dq, S3[3])
+    Fv, Fa = S3[1], S3[2]
     for i in range(3):
-        F[i, i] = 1.0
-        F[i, 3 + i] = dt
-        F[3 + i, 3 + i] = 1.0
-        F[6 + i, 12 + i] = -dt
-        F[9 + i, 9 + i] = 1.0
-        F[12 + i, 12 + i] = 1.0
         for j in range(3):
-            F[3 + i, 6 + j] = -Ra[i, j] * dt
-            F[3 + i, 9 + j] = -R[i, j] * dt
-            F[6 + i, 6 + j] = E[i, j]
+            Fv[i, j] = -Ra[i, j] * dt
+            Fa[i, j] = -R[i, j] * dt
 
 
 @njit
-def cov_step(P, x, u, prm, F, M, S3, w):
-    """P ← F P Fᵀ + Q on the sparse pattern of F (F, M: 15×15 work arrays; S3, w: scratch)."""
-    _fill_F(x, u, prm[_P_DT], F, S3, w)
-    for r in range(15):
+def _fp_rows(P, dt, Fv, Fa, E, M):
+    """M[0:9] = rows 0-8 of F P (rows 9-14 of F P are P's), each entry summed in F's column
+    order; M[3:6, 0:3] and M[6:9, 0:6] are not needed by :func:`cov_step` and not formed."""
+    mdt = -dt
+    for i in range(3):
         for c in range(15):
-            s = 0.0
-            for k in range(_FPTR[r], _FPTR[r + 1]):
-                j = _FIDX[k]
-                s += F[r, j] * P[j, c]
-            M[r, c] = s
-    for r in range(15):
-        for c in range(r, 15):
-            s = 0.0
-            for k in range(_FPTR[c], _FPTR[c + 1]):
-                j = _FIDX[k]
-                s += M[r, j] * F[c, j]
+            M[i, c] = P[i, c] + dt * P[3 + i, c]
+        for c in range(3, 15):
+            M[3 + i, c] = (P[3 + i, c] + Fv[i, 0] * P[6, c] + Fv[i, 1] * P[7, c]
+                           + Fv[i, 2] * P[8, c] + Fa[i, 0] * P[9, c] + Fa[i, 1] * P[10, c]
+                           + Fa[i, 2] * P[11, c])
+        for c in range(6, 15):
+            M[6 + i, c] = (E[i, 0] * P[6, c] + E[i, 1] * P[7, c] + E[i, 2] * P[8, c]
+                           + mdt * P[12 + i, c])
+
+
+@njit
+def cov_step(P, x, u, prm, R, M, S3, w):
+    """P ← F P Fᵀ + Q with F's blocks written out (module docstring), R = R(q) of x; M (≥ 9,
+    15), S3 (≥ 5, 3, 3), w (≥ 10): scratch.  M = F P (first 9 rows), then the upper triangle
+    of M Fᵀ, mirrored: the 15×15 block of the bias rows (F = I there) is P's own."""
+    dt = prm[_P_DT]
+    _fill_F(x, u, dt, R, S3, w)
+    Fv, Fa, E = S3[1], S3[2], S3[3]
+    _fp_rows(P, dt, Fv, Fa, E, M)
+    mdt = -dt
+    for r in range(9):
+        for c in range(r, 3):
+            s = M[r, c] + M[r, 3 + c] * dt
             P[r, c] = s
             P[c, r] = s
+        for c in range(max(r, 3), 6):
+            i = c - 3
+            s = (M[r, c] + M[r, 6] * Fv[i, 0] + M[r, 7] * Fv[i, 1] + M[r, 8] * Fv[i, 2]
+                 + M[r, 9] * Fa[i, 0] + M[r, 10] * Fa[i, 1] + M[r, 11] * Fa[i, 2])
+            P[r, c] = s
+            P[c, r] = s
+        for c in range(max(r, 6), 9):
+            i = c - 6
+            s = M[r, 6] * E[i, 0] + M[r, 7] * E[i, 1] + M[r, 8] * E[i, 2] + M[r, 12 + i] * mdt
+            P[r, c] = s
+            P[c, r] = s
+        for c in range(9, 15):
+            s = M[r, c]
+            P[r, c] = s
+            P[c, r] = s
+    for r in range(9, 15):
+        for c in range(r + 1, 15):
+            P[c, r] = P[r, c]
     for b in range(4):
         q = prm[_P_QV + b]
         for k in range(3):
@@ -546,7 +561,7 @@ def _enqueue(ints, mq, prm, kind, age_ticks, z, o, nz, zp, var, ov):
 
 # ------------------------------------------------------------------------ one row, one tick
 @njit
-def _advance(xc, P, ib, ints, u, prm, F, M, S3, w):
+def _advance(xc, P, ib, ints, u, prm, M, S3, w):
     """now += 1, store u; the core takes the sample D ticks back once the ring holds it."""
     B = int(prm[_P_B])
     D = int(prm[_P_D])
@@ -556,8 +571,10 @@ def _advance(xc, P, ib, ints, u, prm, F, M, S3, w):
         ib[now % B, k] = u[k]
     if now - D > ints[_I_CORE]:
         uc = ib[(now - D) % B]
-        cov_step(P, xc, uc, prm, F, M, S3, w)
-        nominal_step(xc, uc, prm[_P_DT], prm[_P_G], S3, w)
+        R = S3[0]
+        quat_to_rot(xc[6:10], R)   # one R(q) for F and the nominal step
+        cov_step(P, xc, uc, prm, R, M, S3, w)
+        _nominal_R(xc, uc, prm[_P_DT], prm[_P_G], R, w)
         ints[_I_CORE] = now - D
 
 
@@ -587,9 +604,8 @@ def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm,
     N = xc.shape[0]
     NV = imu.shape[0]
     nr = N // NV
-    F = np.zeros((15, 15))
-    M = np.empty((15, 15))
-    S3 = np.empty((3, 3, 3))  # the prediction's scratch
+    M = np.empty((9, 15))
+    S3 = np.empty((5, 3, 3))  # the prediction's scratch
     w = np.empty(16)
     zp = np.empty(3)
     nan3 = np.full(3, np.nan)
@@ -605,7 +621,7 @@ def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm,
         has_r = np.isfinite(rin[v, 0])
         for i in range(v * nr, (v + 1) * nr):
             if predict:
-                _advance(xc[i], P[i], ib[i], ints[i], imu[v], prm, F, M, S3, w)
+                _advance(xc[i], P[i], ib[i], ints[i], imu[v], prm, M, S3, w)
             if has_g:
                 age = int(round(g[0] / dt))
                 _enqueue(ints[i], mq[i], prm, 0.0, age, g, 1, 7, zp, g, 8)
