@@ -17,6 +17,9 @@ write them a second time.  It binds the bank's row functions (``estimators.kf.kf
     (adaptive 0/1, λ, clip): with adaptive = 1 the kernels come from the adaptive bandwidth
     rule instead (``estimators.mckf.mckf_adaptive_update_row``: base widths ``sig``, n + m
     values, state ŝ in ``ast[0]``), as :class:`estimators.MCKF` with ``adaptive_sigma=True``.
+``kf_fuse_b(dx, P, R, H, nu, buf)``, ``mckf_fuse_w(…, ast, w, kxa, kya)``
+    The same on the caller's work (``buf`` ≥ ``kf_work_size(n, m)`` floats, whose views are the
+    work arrays; ``w`` = ``mckf_work(n, m)``, ``kxa`` (n), ``kya`` (m) the adaptive kernels).
 ``pca_row(buf, pcs, z, Nw, L, r, mode, zf)``
     The PCA block (Candan & Li §III.C) on one window.
 
@@ -29,29 +32,39 @@ import numpy as np
 
 from ._jit import njit
 from .kf import kf_update_row as _kf_row
-from .kf import kf_work as _kf_work
+from .kf import kf_work_in, kf_work_size
 from .mckf import mckf_adaptive_update_row as _mckf_adaptive_row
 from .mckf import mckf_update_row as _mckf_row
-from .mckf import mckf_work as _mckf_work
+from .mckf import mckf_work
 from .pca import pca_row
 
-__all__ = ["kf_fuse", "mckf_fuse", "pca_row", "SOURCE"]
+__all__ = ["kf_fuse", "kf_fuse_b", "kf_work_size", "mckf_fuse", "mckf_fuse_w", "mckf_work",
+           "pca_row", "SOURCE"]
 
 SOURCE = "row functions of estimators.kf / mckf / pca"
 
 
 @njit
-def kf_fuse(dx, P, R, H, nu):
-    n, m = dx.shape[0], nu.shape[0]
-    a0, a1, a2, a3, a4, a5, a6, a7, a8 = _kf_work(n, m)
+def kf_fuse_b(dx, P, R, H, nu, buf):
+    a0, a1, a2, a3, a4, a5, a6, a7, a8 = kf_work_in(buf, dx.shape[0], nu.shape[0])
     return _kf_row(dx, P, R, H, nu, a0, a1, a2, a3, a4, a5, a6, a7, a8)
 
 
 @njit
-def mckf_fuse(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast):
-    w = _mckf_work(dx.shape[0], nu.shape[0])
+def kf_fuse(dx, P, R, H, nu):
+    return kf_fuse_b(dx, P, R, H, nu, np.empty(kf_work_size(dx.shape[0], nu.shape[0])))
+
+
+@njit
+def mckf_fuse_w(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast, w, kxa, kya):
     if apar[0] > 0.0:
-        return _mckf_adaptive_row(dx, P, R, H, nu, sig, apar[1], apar[2], ast,
-                                  np.empty(dx.shape[0]), np.empty(nu.shape[0]), fpar, ipar, ist,
-                                  wy, w)
+        return _mckf_adaptive_row(dx, P, R, H, nu, sig, apar[1], apar[2], ast, kxa, kya, fpar,
+                                  ipar, ist, wy, w)
     return _mckf_row(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, w)
+
+
+@njit
+def mckf_fuse(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast):
+    return mckf_fuse_w(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast,
+                       mckf_work(dx.shape[0], nu.shape[0]), np.empty(dx.shape[0]),
+                       np.empty(nu.shape[0]))

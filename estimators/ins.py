@@ -24,7 +24,9 @@ Prediction, one IMU sample (Solà eqs 5.3.3 / 260 without the gravity state; a =
 Ω_i = σ_ωw² Δt).  ``σ_a``, ``σ_g`` are the per-sample white-noise standard deviations of the
 IMU (density over the Nyquist band of the sample rate, plus vibration, as the simulator's IMU
 draws them: :meth:`INSConfig.from_imu`), ``σ_ba``, ``σ_bg`` the bias random walks.
-``F P Fᵀ`` runs on the 45 non-zeros of F (compressed rows), the upper triangle mirrored.
+``F P Fᵀ`` is written out on F's blocks (``M = F P`` on its first 9 rows, then the upper
+triangle of ``M Fᵀ``, mirrored; the bias block, where F = I, is P's own), each entry summed in
+F's column order.
 
 Measurements (h, and H = ∂h/∂δx; R [r]× from ∂(R Exp(δθ) r)/∂δθ = −R [r]×):
 
@@ -97,7 +99,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._ins_laws import kf_fuse, mckf_fuse, pca_row
+from ._ins_laws import kf_fuse_b, mckf_fuse_w, mckf_work, pca_row
 from ._jit import njit
 
 __all__ = ["KERNELS", "RULES", "BatchINS", "INS", "INSConfig", "quat_to_rot", "quat_exp",
@@ -133,21 +135,33 @@ _QW = 19
 # GNSS input row: age, p(3), v(3), yaw, var p(3), var v(3), var yaw
 _GIN = 15
 
-# non-zero columns of F per row (error layout δp 0:3, δv 3:6, δθ 6:9, δb_a 9:12, δb_g 12:15)
-_fc: list[list[int]] = []
-for _r in range(15):
-    a = _r % 3
-    if _r < 3:
-        _fc.append([_r, 3 + a])
-    elif _r < 6:
-        _fc.append([_r, 6, 7, 8, 9, 10, 11])
-    elif _r < 9:
-        _fc.append([6, 7, 8, 12 + a])
-    else:
-        _fc.append([_r])
-_FPTR = np.array([0] + list(np.cumsum([len(c) for c in _fc])), dtype=np.int64)
-_FIDX = np.array([c for cols in _fc for c in cols], dtype=np.int64)
-del _fc, _r, a
+
+
+# the tick's scratch, one flat buffer per bank shared by its rows (the per-tick path allocates
+# nothing): H, ν, R for m = 3 and m = 1, δx, the models' (3, 3, 3) and vector, the adaptive
+# MCKF kernels kx, ky; F P (9, 15), the prediction's (5, 3, 3) and vector, the PCA'd fix, three
+# NaNs; the KF work (estimators.kf.kf_work_size(15, 3) floats)
+_W_H3, _W_NU3, _W_R3, _W_H1, _W_NU1, _W_R1, _W_DX, _W_S3, _W_V = 0, 45, 48, 57, 72, 73, 74, 89, 116
+_W_KX, _W_KY, _W_M, _W_S3P, _W_W, _W_ZP, _W_NAN, _W_KF = 124, 139, 142, 277, 322, 338, 341, 344
+_NW = _W_KF + 3 + 3 * 15 * 3 + 2 * 3 * 3 + 15 + 2 * 15 * 15
+
+
+@njit(inline="always")
+def _w2(fb, o, r, c):
+    """The (r, c) view of the scratch at offset o."""
+    return fb[o:o + r * c].reshape((r, c))
+
+
+@njit(inline="always")
+def _w3(fb, o):
+    """The (3, 3, 3) view of the scratch at offset o."""
+    return fb[o:o + 27].reshape((3, 3, 3))
+
+
+@njit(inline="always")
+def _w3p(fb, o):
+    """The (5, 3, 3) view of the scratch at offset o."""
+    return fb[o:o + 45].reshape((5, 3, 3))
 
 
 # ------------------------------------------------------------------------ quaternion algebra
@@ -220,11 +234,8 @@ def _skew_mul(M, r, out):
 
 # ------------------------------------------------------------------------ prediction
 @njit
-def nominal_step(x, u, dt, g, S3, w):
-    """One IMU sample u = (f̃, ω̃) on the nominal x = [p, v, q, b_a, b_g] (module docstring).
-    ``S3`` (≥ 1, 3, 3), ``w`` (≥ 14): scratch (the per-tick path allocates nothing)."""
-    R = S3[0]
-    quat_to_rot(x[6:10], R)
+def _nominal_R(x, u, dt, g, R, w):
+    """:func:`nominal_step` given R = R(q) of the current x; ``w`` (≥ 14): scratch."""
     a = w[0:3]
     for k in range(3):
         a[k] = u[k] - x[10 + k]
@@ -247,54 +258,85 @@ def nominal_step(x, u, dt, g, S3, w):
 
 
 @njit
-def _fill_F(x, u, dt, F, S3, w):
-    """The non-zero blocks of F (dense 15×15 work array; only the pattern _FIDX is read);
-    ``S3`` (≥ 3, 3, 3), ``w`` (≥ 10): scratch."""
-    R = S3[0]
-    quat_to_rot(x[6:10], R)
+def nominal_step(x, u, dt, g, S3, w):
+    """One IMU sample u = (f̃, ω̃) on the nominal x = [p, v, q, b_a, b_g] (module docstring).
+    ``S3`` (≥ 1, 3, 3), ``w`` (≥ 14): scratch (the per-tick path allocates nothing)."""
+    quat_to_rot(x[6:10], S3[0])
+    _nominal_R(x, u, dt, g, S3[0], w)
+
+
+@njit
+def _fill_F(x, u, dt, R, S3, w):
+    """F's non-identity blocks from R = R(q): S3[1] = F_vθ = −R [a]× Δt, S3[2] = F_vba = −R Δt,
+    S3[3] = F_θθ = Exp(−ω Δt) as a rotation matrix (F_pv = I Δt, F_θbg = −I Δt are scalars);
+    ``S3`` (≥ 5, 3, 3), ``w`` (≥ 10): scratch."""
     a = w[0:3]
     phi = w[3:6]
     for k in range(3):
         a[k] = u[k] - x[10 + k]
         phi[k] = -(u[3 + k] - x[13 + k]) * dt
-    Ra = S3[1]
+    Ra = S3[4]
     _skew_mul(R, a, Ra)
     dq = w[6:10]
     quat_exp(phi, dq)  # Exp(ω Δt)ᵀ = Exp(−ω Δt)
-    E = S3[2]
-    quat_to_rot(dq, E)
+    quat_to_rot(dq, S3[3])
+    Fv, Fa = S3[1], S3[2]
     for i in range(3):
-        F[i, i] = 1.0
-        F[i, 3 + i] = dt
-        F[3 + i, 3 + i] = 1.0
-        F[6 + i, 12 + i] = -dt
-        F[9 + i, 9 + i] = 1.0
-        F[12 + i, 12 + i] = 1.0
         for j in range(3):
-            F[3 + i, 6 + j] = -Ra[i, j] * dt
-            F[3 + i, 9 + j] = -R[i, j] * dt
-            F[6 + i, 6 + j] = E[i, j]
+            Fv[i, j] = -Ra[i, j] * dt
+            Fa[i, j] = -R[i, j] * dt
 
 
 @njit
-def cov_step(P, x, u, prm, F, M, S3, w):
-    """P ← F P Fᵀ + Q on the sparse pattern of F (F, M: 15×15 work arrays; S3, w: scratch)."""
-    _fill_F(x, u, prm[_P_DT], F, S3, w)
-    for r in range(15):
+def _fp_rows(P, dt, Fv, Fa, E, M):
+    """M[0:9] = rows 0-8 of F P (rows 9-14 of F P are P's), each entry summed in F's column
+    order; M[3:6, 0:3] and M[6:9, 0:6] are not needed by :func:`cov_step` and not formed."""
+    mdt = -dt
+    for i in range(3):
         for c in range(15):
-            s = 0.0
-            for k in range(_FPTR[r], _FPTR[r + 1]):
-                j = _FIDX[k]
-                s += F[r, j] * P[j, c]
-            M[r, c] = s
-    for r in range(15):
-        for c in range(r, 15):
-            s = 0.0
-            for k in range(_FPTR[c], _FPTR[c + 1]):
-                j = _FIDX[k]
-                s += M[r, j] * F[c, j]
+            M[i, c] = P[i, c] + dt * P[3 + i, c]
+        for c in range(3, 15):
+            M[3 + i, c] = (P[3 + i, c] + Fv[i, 0] * P[6, c] + Fv[i, 1] * P[7, c]
+                           + Fv[i, 2] * P[8, c] + Fa[i, 0] * P[9, c] + Fa[i, 1] * P[10, c]
+                           + Fa[i, 2] * P[11, c])
+        for c in range(6, 15):
+            M[6 + i, c] = (E[i, 0] * P[6, c] + E[i, 1] * P[7, c] + E[i, 2] * P[8, c]
+                           + mdt * P[12 + i, c])
+
+
+@njit
+def cov_step(P, x, u, prm, R, M, S3, w):
+    """P ← F P Fᵀ + Q with F's blocks written out (module docstring), R = R(q) of x; M (≥ 9,
+    15), S3 (≥ 5, 3, 3), w (≥ 10): scratch.  M = F P (first 9 rows), then the upper triangle
+    of M Fᵀ, mirrored: the 15×15 block of the bias rows (F = I there) is P's own."""
+    dt = prm[_P_DT]
+    _fill_F(x, u, dt, R, S3, w)
+    Fv, Fa, E = S3[1], S3[2], S3[3]
+    _fp_rows(P, dt, Fv, Fa, E, M)
+    mdt = -dt
+    for r in range(9):
+        for c in range(r, 3):
+            s = M[r, c] + M[r, 3 + c] * dt
             P[r, c] = s
             P[c, r] = s
+        for c in range(max(r, 3), 6):
+            i = c - 3
+            s = (M[r, c] + M[r, 6] * Fv[i, 0] + M[r, 7] * Fv[i, 1] + M[r, 8] * Fv[i, 2]
+                 + M[r, 9] * Fa[i, 0] + M[r, 10] * Fa[i, 1] + M[r, 11] * Fa[i, 2])
+            P[r, c] = s
+            P[c, r] = s
+        for c in range(max(r, 6), 9):
+            i = c - 6
+            s = M[r, 6] * E[i, 0] + M[r, 7] * E[i, 1] + M[r, 8] * E[i, 2] + M[r, 12 + i] * mdt
+            P[r, c] = s
+            P[c, r] = s
+        for c in range(9, 15):
+            s = M[r, c]
+            P[r, c] = s
+            P[c, r] = s
+    for r in range(9, 15):
+        for c in range(r + 1, 15):
+            P[c, r] = P[r, c]
     for b in range(4):
         q = prm[_P_QV + b]
         for k in range(3):
@@ -304,33 +346,32 @@ def cov_step(P, x, u, prm, F, M, S3, w):
 
 # ------------------------------------------------------------------------ error injection
 @njit
-def inject_reset(x, P, dx):
-    """x ← x ⊕ δx, then P ← G P Gᵀ with G_θθ = I − [½ δθ]× (Solà eqs 282-287)."""
+def _inject_reset(x, P, dx, w):
+    """:func:`inject_reset` with ``w`` (≥ 8) as scratch."""
     for k in range(6):
         x[k] += dx[k]
     for k in range(6):
         x[10 + k] += dx[9 + k]
-    dq = np.empty(4)
+    dq = w[0:4]
     quat_exp(dx[6:9], dq)
-    qn = np.empty(4)
+    qn = w[4:8]
     quat_mul(x[6:10], dq, qn)
     nrm = math.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
     for k in range(4):
         x[6 + k] = qn[k] / nrm
     h0, h1, h2 = 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8]
-    G = np.array([[1.0, h2, -h1], [-h2, 1.0, h0], [h1, -h0, 1.0]])
-    T = np.empty((3, 15))
-    for i in range(3):
-        for c in range(15):
-            T[i, c] = G[i, 0] * P[6, c] + G[i, 1] * P[7, c] + G[i, 2] * P[8, c]
-    for i in range(3):
-        for c in range(15):
-            P[6 + i, c] = T[i, c]
+    # G = [[1, h2, −h1], [−h2, 1, h0], [h1, −h0, 1]]: rows 6-8 ← G P[6:9], then cols ← · Gᵀ
+    g01, g02, g10, g12, g20, g21 = h2, -h1, -h2, h0, h1, -h0
+    for c in range(15):
+        p6, p7, p8 = P[6, c], P[7, c], P[8, c]
+        P[6, c] = 1.0 * p6 + g01 * p7 + g02 * p8
+        P[7, c] = g10 * p6 + 1.0 * p7 + g12 * p8
+        P[8, c] = g20 * p6 + g21 * p7 + 1.0 * p8
     for r in range(15):
-        t0 = P[r, 6] * G[0, 0] + P[r, 7] * G[0, 1] + P[r, 8] * G[0, 2]
-        t1 = P[r, 6] * G[1, 0] + P[r, 7] * G[1, 1] + P[r, 8] * G[1, 2]
-        t2 = P[r, 6] * G[2, 0] + P[r, 7] * G[2, 1] + P[r, 8] * G[2, 2]
-        P[r, 6], P[r, 7], P[r, 8] = t0, t1, t2
+        p6, p7, p8 = P[r, 6], P[r, 7], P[r, 8]
+        P[r, 6] = p6 * 1.0 + p7 * g01 + p8 * g02
+        P[r, 7] = p6 * g10 + p7 * 1.0 + p8 * g12
+        P[r, 8] = p6 * g20 + p7 * g21 + p8 * 1.0
     for r in range(15):  # keep P exactly symmetric
         for c in range(r + 1, 15):
             s = 0.5 * (P[r, c] + P[c, r])
@@ -338,14 +379,20 @@ def inject_reset(x, P, dx):
             P[c, r] = s
 
 
-# ------------------------------------------------------------------------ measurement models
 @njit
-def h_gnss_pos(x, prm, z, nu, H):
-    """ν = z − (p + R r_ant), H = [I, 0, −R [r_ant]×, 0, 0]."""
-    R = np.empty((3, 3))
+def inject_reset(x, P, dx):
+    """x ← x ⊕ δx, then P ← G P Gᵀ with G_θθ = I − [½ δθ]× (Solà eqs 282-287)."""
+    _inject_reset(x, P, dx, np.empty(8))
+
+
+# ------------------------------------------------------------------------ measurement models
+# Each model h_* has a twin _h_* taking its scratch (S3 (≥ 2, 3, 3), a vector w): the tick's
+# path allocates nothing; the public h_* allocate it (tests, callers outside the kernel).
+@njit
+def _h_gnss_pos(x, prm, z, nu, H, S3):
+    R, S = S3[0], S3[1]
     quat_to_rot(x[6:10], R)
     r = prm[_P_RANT:_P_RANT + 3]
-    S = np.empty((3, 3))
     _skew_mul(R, r, S)
     for i in range(3):
         nu[i] = z[i] - (x[i] + R[i, 0] * r[0] + R[i, 1] * r[1] + R[i, 2] * r[2])
@@ -357,21 +404,21 @@ def h_gnss_pos(x, prm, z, nu, H):
 
 
 @njit
-def h_gnss_vel(x, w, prm, z, nu, H):
-    """ν = z − (v + R (ω × r_ant)), H = [0, I, −R [ω × r_ant]×, 0, R [r_ant]×]; w = ω̃."""
-    R = np.empty((3, 3))
+def h_gnss_pos(x, prm, z, nu, H):
+    """ν = z − (p + R r_ant), H = [I, 0, −R [r_ant]×, 0, 0]."""
+    _h_gnss_pos(x, prm, z, nu, H, np.empty((2, 3, 3)))
+
+
+@njit
+def _h_gnss_vel(x, w, prm, z, nu, H, S3, wr):
+    R, S1, S2 = S3[0], S3[1], S3[2]
     quat_to_rot(x[6:10], R)
     r = prm[_P_RANT:_P_RANT + 3]
-    om = np.empty(3)
-    for k in range(3):
-        om[k] = w[k] - x[13 + k]
-    wr = np.empty(3)
-    wr[0] = om[1] * r[2] - om[2] * r[1]
-    wr[1] = om[2] * r[0] - om[0] * r[2]
-    wr[2] = om[0] * r[1] - om[1] * r[0]
-    S1 = np.empty((3, 3))
+    o0, o1, o2 = w[0] - x[13], w[1] - x[14], w[2] - x[15]
+    wr[0] = o1 * r[2] - o2 * r[1]
+    wr[1] = o2 * r[0] - o0 * r[2]
+    wr[2] = o0 * r[1] - o1 * r[0]
     _skew_mul(R, wr, S1)
-    S2 = np.empty((3, 3))
     _skew_mul(R, r, S2)
     for i in range(3):
         nu[i] = z[i] - (x[3 + i] + R[i, 0] * wr[0] + R[i, 1] * wr[1] + R[i, 2] * wr[2])
@@ -384,11 +431,14 @@ def h_gnss_vel(x, w, prm, z, nu, H):
 
 
 @njit
-def h_heading(x, prm, z, nu, H):
-    """Yaw from the baseline b = R r_b: ψ̂ = atan2(b_y, b_x) − atan2(r_b,y, r_b,x) (the body
-    yaw when level), ν = wrap(z − ψ̂), H_θ as the module docstring.  False when the baseline
-    is (nearly) vertical."""
-    R = np.empty((3, 3))
+def h_gnss_vel(x, w, prm, z, nu, H):
+    """ν = z − (v + R (ω × r_ant)), H = [0, I, −R [ω × r_ant]×, 0, R [r_ant]×]; w = ω̃."""
+    _h_gnss_vel(x, w, prm, z, nu, H, np.empty((3, 3, 3)), np.empty(3))
+
+
+@njit
+def _h_heading(x, prm, z, nu, H, S3):
+    R, S = S3[0], S3[1]
     quat_to_rot(x[6:10], R)
     r = prm[_P_RB:_P_RB + 3]
     bx = R[0, 0] * r[0] + R[0, 1] * r[1] + R[0, 2] * r[2]
@@ -398,7 +448,6 @@ def h_heading(x, prm, z, nu, H):
         return False
     d = z[0] - (math.atan2(by, bx) - math.atan2(r[1], r[0]))
     nu[0] = math.atan2(math.sin(d), math.cos(d))
-    S = np.empty((3, 3))
     _skew_mul(R, r, S)
     for c in range(15):
         H[0, c] = 0.0
@@ -408,10 +457,16 @@ def h_heading(x, prm, z, nu, H):
 
 
 @njit
-def h_radar(x, prm, z, nu, H):
-    """Slant range along body −z to the plane z = z_g (docstring); False = not usable (tilt
-    above the beam limit, sensor below the ground, or beyond the maximum range)."""
-    R = np.empty((3, 3))
+def h_heading(x, prm, z, nu, H):
+    """Yaw from the baseline b = R r_b: ψ̂ = atan2(b_y, b_x) − atan2(r_b,y, r_b,x) (the body
+    yaw when level), ν = wrap(z − ψ̂), H_θ as the module docstring.  False when the baseline
+    is (nearly) vertical."""
+    return _h_heading(x, prm, z, nu, H, np.empty((2, 3, 3)))
+
+
+@njit
+def _h_radar(x, prm, z, nu, H, S3):
+    R, S = S3[0], S3[1]
     quat_to_rot(x[6:10], R)
     r = prm[_P_RRAD:_P_RRAD + 3]
     c = R[2, 2]
@@ -421,86 +476,108 @@ def h_radar(x, prm, z, nu, H):
     if h <= 0.0 or h / c > prm[_P_RMAX] or z[0] > prm[_P_RMAX]:
         return False
     nu[0] = z[0] - h / c
-    S = np.empty((3, 3))
     _skew_mul(R, r, S)
-    # (R [e_z]×)_2j = (R_21, −R_20, 0)
-    ez = np.array((R[2, 1], -R[2, 0], 0.0))
     for k in range(15):
         H[0, k] = 0.0
     H[0, 2] = 1.0 / c
-    for j in range(3):
-        H[0, 6 + j] = -S[2, j] / c + h / (c * c) * ez[j]
+    # (R [e_z]×)_2j = (R_21, −R_20, 0)
+    hc = h / (c * c)
+    H[0, 6] = -S[2, 0] / c + hc * R[2, 1]
+    H[0, 7] = -S[2, 1] / c + hc * -R[2, 0]
+    H[0, 8] = -S[2, 2] / c + hc * 0.0
     return True
+
+
+@njit
+def h_radar(x, prm, z, nu, H):
+    """Slant range along body −z to the plane z = z_g (docstring); False = not usable (tilt
+    above the beam limit, sensor below the ground, or beyond the maximum range)."""
+    return _h_radar(x, prm, z, nu, H, np.empty((2, 3, 3)))
 
 
 # ------------------------------------------------------------------------ one measurement
 @njit
-def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg):
+def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg, fb):
     """δx = 0, the KF or MCKF update of (H, R, ν), then inject and reset; returns the NIS
     (not finite: not fused).  The MCKF kernels are fixed (mpar's kx, ky) or adaptive (apar[0]
     = 1: from the base widths σ and the row's ŝ, dg[_D_S2]); diag C_y goes to dg[_D_WY:]."""
-    dx = np.zeros(15)
+    dx = fb[_W_DX:_W_DX + 15]
+    dx[:] = 0.0
     if use_mckf:
-        v = mckf_fuse(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F], mpar[_M_F:_M_A],
-                      ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG], mpar[_M_SIG:_NMPAR],
-                      dg[_D_S2:_D_S2 + 1])
+        v = mckf_fuse_w(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F],
+                        mpar[_M_F:_M_A], ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG],
+                        mpar[_M_SIG:_NMPAR], dg[_D_S2:_D_S2 + 1],
+                        mckf_work(15, nu.shape[0]), fb[_W_KX:_W_KX + 15],
+                        fb[_W_KY:_W_KY + nu.shape[0]])
     else:
-        v = kf_fuse(dx, P, Rm, H, nu)
+        v = kf_fuse_b(dx, P, Rm, H, nu, fb[_W_KF:])
     if np.isfinite(v):
-        inject_reset(x, P, dx)
+        _inject_reset(x, P, dx, fb[_W_V:_W_V + 8])
     return v
 
 
 @njit
-def _diag_R(var, o, m):
-    Rm = np.zeros((m, m))
+def _diag_R(var, o, Rm):
+    """Rm = diag(var[o], …) (m × m, off-diagonal zero)."""
+    m = Rm.shape[0]
     for a in range(m):
+        for b in range(m):
+            Rm[a, b] = 0.0
         Rm[a, a] = var[o + a]
     return Rm
 
 
 @njit
-def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg):
+def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg, fb):
     """A GNSS record: position (the rule's law, on the PCA'd fix for rules 2-3), then velocity
-    and heading (KF), each present when finite."""
-    H3 = np.empty((3, 15))
-    nu3 = np.empty(3)
+    and heading (KF), each present when finite; ``fb``: the scratch (``_W_*``)."""
+    H3, nu3, R3 = _w2(fb, _W_H3, 3, 15), fb[_W_NU3:_W_NU3 + 3], _w2(fb, _W_R3, 3, 3)
+    H1, nu1, R1 = _w2(fb, _W_H1, 1, 15), fb[_W_NU1:_W_NU1 + 1], _w2(fb, _W_R1, 1, 1)
+    S3, wv = _w3(fb, _W_S3), fb[_W_V:_W_V + 8]
     z = rec[_Q_ZP:_Q_ZP + 3] if rule >= 2 else rec[_Q_Z:_Q_Z + 3]
     if np.isfinite(z[0] + z[1] + z[2]):
-        h_gnss_pos(x, prm, z, nu3, H3)
+        _h_gnss_pos(x, prm, z, nu3, H3, S3)
         use_mckf = rule == 1 or rule == 3
-        v = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V, 3), use_mckf, mpar, ipar,
-                      ints[_I_MST:_I_MST + 4], dg)
+        v = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V, R3), use_mckf, mpar, ipar,
+                      ints[_I_MST:_I_MST + 4], dg, fb)
         dg[_D_NISP] = v
         ints[_I_NGNSS] += 1
     zv = rec[_Q_Z + 3:_Q_Z + 6]
     if np.isfinite(zv[0] + zv[1] + zv[2]):
-        h_gnss_vel(x, w, prm, zv, nu3, H3)
-        dg[_D_NISV] = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V + 3, 3), False, mpar, ipar,
-                                ints[_I_MST:_I_MST + 4], dg)
+        _h_gnss_vel(x, w, prm, zv, nu3, H3, S3, wv)
+        dg[_D_NISV] = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V + 3, R3), False, mpar, ipar,
+                                ints[_I_MST:_I_MST + 4], dg, fb)
     zy = rec[_Q_Z + 6:_Q_Z + 7]
     if np.isfinite(zy[0]):
-        H1 = np.empty((1, 15))
-        nu1 = np.empty(1)
-        if h_heading(x, prm, zy, nu1, H1):
-            dg[_D_NISY] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V + 6, 1), False, mpar,
-                                    ipar, ints[_I_MST:_I_MST + 4], dg)
+        if _h_heading(x, prm, zy, nu1, H1, S3):
+            dg[_D_NISY] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V + 6, R1), False, mpar,
+                                    ipar, ints[_I_MST:_I_MST + 4], dg, fb)
 
 
 @njit
-def _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg):
-    H1 = np.empty((1, 15))
-    nu1 = np.empty(1)
-    if np.isfinite(rec[_Q_Z]) and h_radar(x, prm, rec[_Q_Z:_Q_Z + 1], nu1, H1):
-        dg[_D_NISR] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V, 1), False, mpar, ipar,
-                                ints[_I_MST:_I_MST + 4], dg)
+def _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg, fb):
+    H1, nu1, R1 = _w2(fb, _W_H1, 1, 15), fb[_W_NU1:_W_NU1 + 1], _w2(fb, _W_R1, 1, 1)
+    S3 = _w3(fb, _W_S3)
+    if np.isfinite(rec[_Q_Z]) and _h_radar(x, prm, rec[_Q_Z:_Q_Z + 1], nu1, H1, S3):
+        dg[_D_NISR] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V, R1), False, mpar, ipar,
+                                ints[_I_MST:_I_MST + 4], dg, fb)
         ints[_I_NRAD] += 1
     else:
         ints[_I_RDROP] += 1
 
 
 @njit
-def _fuse_due(x, P, ib, ints, mq, dg, mpar, ipar, rule, prm):
+def _any_due(ints, mq):
+    """Whether a queued record's tick ≤ the core tick (the scratch is passed only then)."""
+    core = ints[_I_CORE]
+    for j in range(ints[_I_QN]):
+        if mq[j, _Q_T] <= core:
+            return True
+    return False
+
+
+@njit
+def _fuse_due(x, P, ib, ints, mq, dg, mpar, ipar, rule, prm, fb):
     """Fuse every queued record whose tick ≤ the core tick (in arrival order); compact."""
     core = ints[_I_CORE]
     B = int(prm[_P_B])
@@ -517,9 +594,9 @@ def _fuse_due(x, P, ib, ints, mq, dg, mpar, ipar, rule, prm):
         if t < core:
             ints[_I_LATE] += 1
         if rec[_Q_K] == 0.0:
-            _fuse_gnss(x, P, rec, ib[core % B, 3:6], rule, prm, mpar, ipar, ints, dg)
+            _fuse_gnss(x, P, rec, ib[core % B, 3:6], rule, prm, mpar, ipar, ints, dg, fb)
         else:
-            _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg)
+            _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg, fb)
         ints[_I_DIRTY] = 1
     ints[_I_QN] = keep
 
@@ -546,7 +623,7 @@ def _enqueue(ints, mq, prm, kind, age_ticks, z, o, nz, zp, var, ov):
 
 # ------------------------------------------------------------------------ one row, one tick
 @njit
-def _advance(xc, P, ib, ints, u, prm, F, M, S3, w):
+def _advance(xc, P, ib, ints, u, prm, M, S3, w):
     """now += 1, store u; the core takes the sample D ticks back once the ring holds it."""
     B = int(prm[_P_B])
     D = int(prm[_P_D])
@@ -556,8 +633,10 @@ def _advance(xc, P, ib, ints, u, prm, F, M, S3, w):
         ib[now % B, k] = u[k]
     if now - D > ints[_I_CORE]:
         uc = ib[(now - D) % B]
-        cov_step(P, xc, uc, prm, F, M, S3, w)
-        nominal_step(xc, uc, prm[_P_DT], prm[_P_G], S3, w)
+        R = S3[0]
+        quat_to_rot(xc[6:10], R)   # one R(q) for F and the nominal step
+        cov_step(P, xc, uc, prm, R, M, S3, w)
+        _nominal_R(xc, uc, prm[_P_DT], prm[_P_G], R, w)
         ints[_I_CORE] = now - D
 
 
@@ -580,19 +659,15 @@ def _refresh_output(xc, xo, ib, ints, prm, predicted, S3, w):
 
 @njit
 def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm, popt,
-                 imu, predict, gin, rin):
+                 imu, predict, gin, rin, fb):
     """One tick of every row (row i belongs to vehicle i // n_rules): predict with imu[v] (if
     ``predict``), queue the vehicle's GNSS fix gin[v] (a NaN age: none) and radar range rin[v]
-    (NaN: none), fuse what is due, refresh the output."""
+    (NaN: none), fuse what is due, refresh the output; ``fb``: the scratch (``_W_*``)."""
     N = xc.shape[0]
     NV = imu.shape[0]
     nr = N // NV
-    F = np.zeros((15, 15))
-    M = np.empty((15, 15))
-    S3 = np.empty((3, 3, 3))  # the prediction's scratch
-    w = np.empty(16)
-    zp = np.empty(3)
-    nan3 = np.full(3, np.nan)
+    M, S3, w = _w2(fb, _W_M, 9, 15), _w3p(fb, _W_S3P), fb[_W_W:_W_W + 16]
+    zp, nan3 = fb[_W_ZP:_W_ZP + 3], fb[_W_NAN:_W_NAN + 3]
     dt = prm[_P_DT]
     Nw, L, r, mode, any_pca = popt[0], popt[1], popt[2], popt[3], popt[4]
     for v in range(NV):
@@ -605,15 +680,16 @@ def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm,
         has_r = np.isfinite(rin[v, 0])
         for i in range(v * nr, (v + 1) * nr):
             if predict:
-                _advance(xc[i], P[i], ib[i], ints[i], imu[v], prm, F, M, S3, w)
+                _advance(xc[i], P[i], ib[i], ints[i], imu[v], prm, M, S3, w)
             if has_g:
                 age = int(round(g[0] / dt))
                 _enqueue(ints[i], mq[i], prm, 0.0, age, g, 1, 7, zp, g, 8)
             if has_r:
                 _enqueue(ints[i], mq[i], prm, 1.0, int(round(rin[v, 2] / dt)), rin[v], 0, 1,
                          nan3, rin[v], 1)
-            _fuse_due(xc[i], P[i], ib[i], ints[i], mq[i], dg[i], mpar[i], ipar[i], rules[i],
-                      prm)
+            if _any_due(ints[i], mq[i]):
+                _fuse_due(xc[i], P[i], ib[i], ints[i], mq[i], dg[i], mpar[i], ipar[i],
+                          rules[i], prm, fb)
             _refresh_output(xc[i], xo[i], ib[i], ints[i], prm, predict, S3, w)
 
 
@@ -796,6 +872,8 @@ class BatchINS:
         self._no_g = np.full((self.NV, _GIN), np.nan)
         self._no_r = np.full((self.NV, 3), np.nan)
         self._no_imu = np.zeros((self.NV, 6))
+        self._fb = np.empty(_NW)
+        self._fb[_W_NAN:_W_NAN + 3] = np.nan
 
     # -- state ------------------------------------------------------------------------------
     def reset(self, p, v, q, ba=None, bg=None, P0=None) -> None:
@@ -849,14 +927,15 @@ class BatchINS:
                      self.prm, self._popt,
                      self._no_imu if imu is None else np.ascontiguousarray(imu, dtype=float),
                      pred, self._no_g if gnss is None else np.ascontiguousarray(gnss, dtype=float),
-                     self._no_r if radar is None else np.ascontiguousarray(radar, dtype=float))
+                     self._no_r if radar is None else np.ascontiguousarray(radar, dtype=float),
+                     self._fb)
 
     def step_raw(self, imu, gnss, radar) -> None:
         """:meth:`step` with all three inputs given as C-contiguous float64 arrays (the
         caller's own buffers: no conversion), always predicting."""
         _step_kernel(self.x_core, self.P, self.x_out, self._ib, self._ints, self._mq,
                      self._dg, self._mpar, self._ipar, self._pbuf, self._pcs, self._rules,
-                     self.prm, self._popt, imu, True, gnss, radar)
+                     self.prm, self._popt, imu, True, gnss, radar, self._fb)
 
     def predict(self, imu) -> None:
         self.step(imu)

@@ -42,6 +42,7 @@ from ._linalg import add_into, copy_vec, inv_small_into, mat_mul, mat_vec, quad_
 
 __all__ = ["KF", "inv_small", "as_fix", "block3", "csr", "joseph_row", "kf_gain_row",
            "kf_innovation_row", "kf_input_row", "kf_predict_row", "kf_update_row", "kf_work",
+           "kf_work_in", "kf_work_size",
            "predict_b3_row", "predict_csr_row"]
 
 _dot = np.dot
@@ -248,11 +249,33 @@ def joseph_row(Pb, K, H, R, Pout, A, AP, KR):
 
 
 @njit
+def kf_work_size(n, m):
+    """Length of a buffer holding :func:`kf_work_in`'s arrays."""
+    return m + 3 * n * m + 2 * m * m + n + 2 * n * n
+
+
+@njit(inline="always")
+def kf_work_in(buf, n, m):
+    """The work arrays of one update (ν, P Hᵀ, S, S⁻¹, K, x̂, I − K H, (I − K H) P̄, K R) as
+    views of ``buf`` (≥ :func:`kf_work_size`): a per-tick caller allocates nothing."""
+    o1 = m
+    o2 = o1 + n * m
+    o3 = o2 + m * m
+    o4 = o3 + m * m
+    o5 = o4 + n * m
+    o6 = o5 + n
+    o7 = o6 + n * n
+    o8 = o7 + n * n
+    return (buf[0:o1], buf[o1:o2].reshape((n, m)), buf[o2:o3].reshape((m, m)),
+            buf[o3:o4].reshape((m, m)), buf[o4:o5].reshape((n, m)), buf[o5:o6],
+            buf[o6:o7].reshape((n, n)), buf[o7:o8].reshape((n, n)),
+            buf[o8:o8 + n * m].reshape((n, m)))
+
+
+@njit
 def kf_work(n, m):
     """Work arrays of one update: ν, P Hᵀ, S, S⁻¹, K, x̂, I − K H, (I − K H) P̄, K R."""
-    return (np.empty(m), np.empty((n, m)), np.empty((m, m)), np.empty((m, m)),
-            np.empty((n, m)), np.empty(n), np.empty((n, n)), np.empty((n, n)),
-            np.empty((n, m)))
+    return kf_work_in(np.empty(kf_work_size(n, m)), n, m)
 
 
 @njit
