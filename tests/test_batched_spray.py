@@ -48,11 +48,19 @@ class RecordingCascade:
 
 
 class RecordingLog:
+    """Records the spray state each way the log takes it (the reference's keywords, the
+    engine's row) as the one row the log writes."""
+
     def __init__(self):
         self.calls: list[tuple] = []
 
-    def spray_state(self, t, **kw):
-        self.calls.append((t, kw))
+    def spray_state(self, t, *, tank_l, mass_kg, flow_lps, nozzles, power_w, energy_wh, soc,
+                    sortie, ground):
+        self.spray_row(t, (tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w,
+                           energy_wh, soc, sortie, 1.0 if ground else 0.0))
+
+    def spray_row(self, t, values):
+        self.calls.append((t, tuple(float(v) for v in values)))
 
 
 @dataclasses.dataclass

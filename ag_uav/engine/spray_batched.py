@@ -17,7 +17,7 @@ few ticks, found from the kernel's per-row flags:
   Sprayer's :meth:`~ag_uav.engine.sprayer.Sprayer._set_mass` runs for that vehicle (the MjModel
   body updates); its cascade is replaced by a :class:`MassSink`, which forwards the composite
   mass and the attitude inertia to the engine's ``set_mass(i, total_mass_kg, J_xyz)`` callback;
-* the optional log (``log.spray_state`` every 0.1 s).
+* the optional log (``log.spray_row`` every 0.1 s).
 
 The per-sortie totals (litres, energy, minimum state of charge, ran-dry and landing times) are
 accumulated in the kernel's state and written into the Sprayers' ``per`` dicts when a sortie
@@ -410,7 +410,7 @@ class BatchSprayer:
 
     def _log(self, k: int, t: float, vx: np.ndarray, vy: np.ndarray,
              active: np.ndarray) -> None:
-        """``log.spray_state`` every 0.1 s of the vehicles that have a log."""
+        """``log.spray_row`` every 0.1 s of the vehicles that have a log."""
         st, rec, tab, on_ = self._st, self._rec, self._tab, self._rec_on
         for i, sp in self._logged:
             if not active[i] or not t >= sp._next_log:
