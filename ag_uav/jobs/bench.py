@@ -168,7 +168,8 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
     Each repeat flies the unlogged loop and right after it the logged ones, so every ratio is
     taken between neighbouring runs (a load change on a shared machine hits both); the ratios
     are the medians of those per-repeat ratios, with their min and max as the spread.  The
-    ``*_cpu`` ratios are the same from the loop's process CPU time.
+    ``*_cpu`` ratios are the same from the loop's process CPU time; ``*_us_per_message`` is the
+    logged loop's added wall time (the medians' difference) over the messages the log wrote.
     """
     import tempfile
     from pathlib import Path
@@ -180,6 +181,8 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
     c.log.render = False
     ce = with_overrides(c, ESTIMATOR_LOG_OVERRIDES)
 
+    msgs: dict[str, int] = {}
+
     def fly(conf: Config, path: Path | None, channels: str = "full") -> tuple[float, float]:
         hook = _LoopCpu()
         if path is None:
@@ -188,6 +191,7 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
         with RunLog(path, channels=channels, rates={"camera": 0.0}, metadata={},
                     config_toml="", layout=False) as log:
             wall = simulate(conf, log=log, tick_hook=hook).summary["loop_wall_time_s"]
+            msgs[path.stem.rstrip("0123456789")] = sum(log.counts.values())
         return wall, hook.seconds
 
     runs: dict[str, list[tuple[float, float]]] = {
@@ -212,6 +216,10 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
 
     r_full, r_light, r_est = ratios("full", "plain"), ratios("light", "plain"), ratios(
         "e_full", "e_plain")
+
+    def us_per_msg(num: str, den: str, key: str) -> float:  # the log's added time per message
+        return round((wall(num) - wall(den)) / max(msgs.get(key, 0), 1) * 1e6, 2)
+
     return {"unlogged_loop_s": wall("plain"), "full_log_loop_s": wall("full"),
             "light_log_loop_s": wall("light"),
             "full_over_unlogged": round(med(r_full), 3),
@@ -219,12 +227,16 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
             "full_over_unlogged_cpu": round(med(ratios("full", "plain", 1)), 3),
             "light_over_unlogged": round(med(r_light), 3),
             "full_log_mb": round(size / 1e6, 2),
+            "full_log_messages": msgs.get("full", 0),
+            "full_log_us_per_message": us_per_msg("full", "plain", "full"),
             "estimators_unlogged_loop_s": wall("e_plain"),
             "estimators_full_log_loop_s": wall("e_full"),
             "estimators_ratio": round(med(r_est), 3),
             "estimators_ratio_spread": _spread(r_est),
             "estimators_ratio_cpu": round(med(ratios("e_full", "e_plain", 1)), 3),
             "estimators_full_log_mb": round(e_size / 1e6, 2),
+            "estimators_full_log_messages": msgs.get("est", 0),
+            "estimators_full_log_us_per_message": us_per_msg("e_full", "e_plain", "est"),
             "estimators_config": ", ".join(f"{k}={v}" for k, v in
                                            ESTIMATOR_LOG_OVERRIDES.items())}
 
