@@ -27,11 +27,16 @@ Every law is a numba kernel over the batch axis that never mixes rows, and every
 comes from the vehicle's own Generators, so a mission's trajectory does not depend on the batch
 it flies in (tested bit for bit). A vehicle leaves the batch when its mission ends, crashes or
 diverges (with its reason); the others go on, and finished vehicles are no longer stepped.
+
+The loop runs with the objects that existed before it frozen (``gc.freeze``; unfrozen after):
+the garbage collector's full collections then scan what the loop made, not the whole heap of
+numba, MuJoCo and the run's set-up (about 45 ms each otherwise, one every few seconds of loop).
 """
 
 from __future__ import annotations
 
 import copy
+import gc
 import math
 import sys
 import time
@@ -424,6 +429,9 @@ def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
     n_max = max(e.b.n_max for e in lanes)
     pool = ThreadPoolExecutor(len(lanes) - 1) if len(lanes) > 1 else None
     alive = [True] * len(lanes)
+    freeze = gc.get_freeze_count() == 0  # (a caller's own frozen objects are left as they are)
+    if freeze:  # the loop's full collections scan only what the loop made, not the whole heap
+        gc.freeze()
     wall = time.perf_counter()
     compile_s, bar_next = 0.0, 1.0
     try:
@@ -437,6 +445,8 @@ def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
                 bar.update(1)
                 bar_next += 1.0
     finally:
+        if freeze:
+            gc.unfreeze()
         if pool is not None:
             pool.shutdown()
     return time.perf_counter() - wall, compile_s
