@@ -310,8 +310,9 @@ def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
 
     fpar = (kernel_floor, ε², reject_weight, inflate, inflate_gate), ipar = (max_iter,
     lockout_n, recovery 0/1/2 = None/"kf"/"inflate", inflate_jmax), ist = (n_rejected, n_iter,
-    rejected, recovered) (updated), wy ← diag C_y, w = :func:`mckf_work`; after a fix w holds
-    ν (w[0]), S (w[2]), K̃ (w[4]) and C_x (w[25], valid when n_iter > 1)."""
+    rejected, recovered) (updated), wy ← diag C_y, w = :func:`mckf_work` (or
+    :func:`mckf_work_in` on the caller's buffer); after a fix w holds ν (w[0]), S (w[2]), K̃
+    (w[4]) and C_x (w[25], valid when n_iter > 1)."""
     (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn, be, q, u,
      o, e, c, Nm, V, Pa, PaHT, Sa, Sai) = w
     v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
