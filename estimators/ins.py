@@ -504,14 +504,15 @@ def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg, fb):
     = 1: from the base widths σ and the row's ŝ, dg[_D_S2]); diag C_y goes to dg[_D_WY:]."""
     dx = fb[_W_DX:_W_DX + 15]
     dx[:] = 0.0
+    wk = fb[_W_KF:]  # the KF or MCKF work (estimators.mckf.mckf_work_in)
     if use_mckf:
         v = mckf_fuse_b(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F],
                         mpar[_M_F:_M_A], ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG],
                         mpar[_M_SIG:_NMPAR], dg[_D_S2:_D_S2 + 1],
-                        fb[_W_KF:], fb[_W_KX:_W_KX + 15],
+                        wk, fb[_W_KX:_W_KX + 15],
                         fb[_W_KY:_W_KY + nu.shape[0]])
     else:
-        v = kf_fuse_b(dx, P, Rm, H, nu, fb[_W_KF:])
+        v = kf_fuse_b(dx, P, Rm, H, nu, wk)
     if np.isfinite(v):
         _inject_reset(x, P, dx, fb[_W_V:_W_V + 8])
     return v
