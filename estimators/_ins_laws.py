@@ -17,9 +17,10 @@ write them a second time.  It binds the bank's row functions (``estimators.kf.kf
     (adaptive 0/1, λ, clip): with adaptive = 1 the kernels come from the adaptive bandwidth
     rule instead (``estimators.mckf.mckf_adaptive_update_row``: base widths ``sig``, n + m
     values, state ŝ in ``ast[0]``), as :class:`estimators.MCKF` with ``adaptive_sigma=True``.
-``kf_fuse_b(dx, P, R, H, nu, buf)``, ``mckf_fuse_w(…, ast, w, kxa, kya)``
-    The same on the caller's work (``buf`` ≥ ``kf_work_size(n, m)`` floats, whose views are the
-    work arrays; ``w`` = ``mckf_work(n, m)``, ``kxa`` (n), ``kya`` (m) the adaptive kernels).
+``kf_fuse_b(dx, P, R, H, nu, buf)``, ``mckf_fuse_b(…, ast, buf, kxa, kya)``
+    The same on the caller's work: ``buf`` ≥ ``kf_work_size(n, m)`` / ``mckf_work_size(n, m)``
+    floats, whose views are the work arrays (``estimators.kf.kf_work_in``,
+    ``estimators.mckf.mckf_work_in``); ``kxa`` (n), ``kya`` (m) the adaptive kernels.
 ``pca_row(buf, pcs, z, Nw, L, r, mode, zf)``
     The PCA block (Candan & Li §III.C) on one window.
 
@@ -35,10 +36,10 @@ from .kf import kf_update_row as _kf_row
 from .kf import kf_work_in, kf_work_size
 from .mckf import mckf_adaptive_update_row as _mckf_adaptive_row
 from .mckf import mckf_update_row as _mckf_row
-from .mckf import mckf_work
+from .mckf import mckf_work_in, mckf_work_size
 from .pca import pca_row
 
-__all__ = ["kf_fuse", "kf_fuse_b", "kf_work_size", "mckf_fuse", "mckf_fuse_w", "mckf_work",
+__all__ = ["kf_fuse", "kf_fuse_b", "kf_work_size", "mckf_fuse", "mckf_fuse_b", "mckf_work_size",
            "pca_row", "SOURCE"]
 
 SOURCE = "row functions of estimators.kf / mckf / pca"
@@ -56,7 +57,8 @@ def kf_fuse(dx, P, R, H, nu):
 
 
 @njit
-def mckf_fuse_w(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast, w, kxa, kya):
+def mckf_fuse_b(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast, buf, kxa, kya):
+    w = mckf_work_in(buf, dx.shape[0], nu.shape[0])
     if apar[0] > 0.0:
         return _mckf_adaptive_row(dx, P, R, H, nu, sig, apar[1], apar[2], ast, kxa, kya, fpar,
                                   ipar, ist, wy, w)
@@ -65,6 +67,6 @@ def mckf_fuse_w(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast, w,
 
 @njit
 def mckf_fuse(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast):
-    return mckf_fuse_w(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast,
-                       mckf_work(dx.shape[0], nu.shape[0]), np.empty(dx.shape[0]),
-                       np.empty(nu.shape[0]))
+    n, m = dx.shape[0], nu.shape[0]
+    return mckf_fuse_b(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast,
+                       np.empty(mckf_work_size(n, m)), np.empty(n), np.empty(m))

@@ -99,7 +99,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._ins_laws import kf_fuse_b, mckf_fuse_w, mckf_work, pca_row
+from ._ins_laws import kf_fuse_b, mckf_fuse_b, pca_row
 from ._jit import njit
 
 __all__ = ["KERNELS", "RULES", "BatchINS", "INS", "INSConfig", "quat_to_rot", "quat_exp",
@@ -140,10 +140,11 @@ _GIN = 15
 # the tick's scratch, one flat buffer per bank shared by its rows (the per-tick path allocates
 # nothing): H, ν, R for m = 3 and m = 1, δx, the models' (3, 3, 3) and vector, the adaptive
 # MCKF kernels kx, ky; F P (9, 15), the prediction's (5, 3, 3) and vector, the PCA'd fix, three
-# NaNs; the KF work (estimators.kf.kf_work_size(15, 3) floats)
+# NaNs; the KF / MCKF work of one update (estimators.mckf.mckf_work_size(15, 3) floats, whose
+# head is the KF work: the two updates never run at once)
 _W_H3, _W_NU3, _W_R3, _W_H1, _W_NU1, _W_R1, _W_DX, _W_S3, _W_V = 0, 45, 48, 57, 72, 73, 74, 89, 116
 _W_KX, _W_KY, _W_M, _W_S3P, _W_W, _W_ZP, _W_NAN, _W_KF = 124, 139, 142, 277, 322, 338, 341, 344
-_NW = _W_KF + 3 + 3 * 15 * 3 + 2 * 3 * 3 + 15 + 2 * 15 * 15
+_NW = _W_KF + 621 + 777  # mckf_work_size(15, 3): kf_work_size(15, 3) = 621, then the MCKF part
 
 
 @njit(inline="always")
@@ -503,14 +504,15 @@ def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg, fb):
     = 1: from the base widths σ and the row's ŝ, dg[_D_S2]); diag C_y goes to dg[_D_WY:]."""
     dx = fb[_W_DX:_W_DX + 15]
     dx[:] = 0.0
+    wk = fb[_W_KF:]  # the KF or MCKF work (estimators.mckf.mckf_work_in)
     if use_mckf:
-        v = mckf_fuse_w(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F],
+        v = mckf_fuse_b(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F],
                         mpar[_M_F:_M_A], ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG],
                         mpar[_M_SIG:_NMPAR], dg[_D_S2:_D_S2 + 1],
-                        mckf_work(15, nu.shape[0]), fb[_W_KX:_W_KX + 15],
+                        wk, fb[_W_KX:_W_KX + 15],
                         fb[_W_KY:_W_KY + nu.shape[0]])
     else:
-        v = kf_fuse_b(dx, P, Rm, H, nu, fb[_W_KF:])
+        v = kf_fuse_b(dx, P, Rm, H, nu, wk)
     if np.isfinite(v):
         _inject_reset(x, P, dx, fb[_W_V:_W_V + 8])
     return v

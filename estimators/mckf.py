@@ -90,11 +90,20 @@ from ._linalg import (
     safe_cholesky_into,
     scale,
 )
-from .kf import LinearGaussianBase, _mat, _vec, joseph_row, kf_gain_row, kf_innovation_row
+from .kf import (
+    LinearGaussianBase,
+    _mat,
+    _vec,
+    joseph_row,
+    kf_gain_row,
+    kf_innovation_row,
+    kf_work_in,
+    kf_work_size,
+)
 
 __all__ = ["MCKF", "REL_PIVOT", "RECOVERY", "adapt_kernel_row", "kernel_coeffs",
            "mckf_adaptive_update_row", "mckf_fixed_point_row", "mckf_update_row", "mckf_work",
-           "safe_cholesky"]
+           "mckf_work_in", "mckf_work_size", "safe_cholesky"]
 
 #: Cholesky pivots below REL_PIVOT · P̄_jj send P̄ to :func:`safe_cholesky` (jitter), so the
 #: positive-definite decision never hinges on the summation order
@@ -221,18 +230,50 @@ def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, floor, eps2, max_iter,
 
 
 @njit
+def mckf_work_size(n, m):
+    """Length of a buffer holding :func:`mckf_work_in`'s arrays."""
+    return kf_work_size(n, m) + 2 * n * n + 8 * m * m + 4 * n * m + 4 * n + 5 * m
+
+
+@njit(inline="always")
+def mckf_work_in(buf, n, m):
+    """The work arrays of one MCKF update (:func:`mckf_update_row`) as views of ``buf`` (≥
+    :func:`mckf_work_size`): those of :func:`estimators.kf.kf_work_in` (ν, P Hᵀ, S, S⁻¹, K,
+    x̂, …) then the fixed point's — a per-tick caller allocates nothing."""
+    nu, PHT, S, Si, K, xo, A, AP, KR = kf_work_in(buf, n, m)
+    o = kf_work_size(n, m)
+    nn, mm, mn = n * n, m * m, m * n
+    Lp = buf[o:o + nn].reshape((n, n))
+    o += nn
+    Lr, Brinv = buf[o:o + mm].reshape((m, m)), buf[o + mm:o + 2 * mm].reshape((m, m))
+    o += 2 * mm
+    G, Aw = buf[o:o + mn].reshape((m, n)), buf[o + mn:o + 2 * mn].reshape((m, n))
+    o += 2 * mn
+    nw = buf[o:o + m]
+    o += m
+    T, M = buf[o:o + mm].reshape((m, m)), buf[o + mm:o + 2 * mm].reshape((m, m))
+    Mi = buf[o + 2 * mm:o + 3 * mm].reshape((m, m))
+    o += 3 * mm
+    s, sn, be = buf[o:o + m], buf[o + m:o + 2 * m], buf[o + 2 * m:o + 3 * m]
+    o += 3 * m
+    q, u, ox = buf[o:o + n], buf[o + n:o + 2 * n], buf[o + 2 * n:o + 3 * n]
+    o += 3 * n
+    e, c = buf[o:o + m], buf[o + m:o + m + n]
+    o += m + n
+    Nm, V = buf[o:o + mm].reshape((m, m)), buf[o + mm:o + mm + mn].reshape((n, m))
+    o += mm + mn
+    Pa, PaHT = buf[o:o + nn].reshape((n, n)), buf[o + nn:o + nn + mn].reshape((n, m))
+    o += nn + mn
+    Sa, Sai = buf[o:o + mm].reshape((m, m)), buf[o + mm:o + 2 * mm].reshape((m, m))
+    return (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn, be,
+            q, u, ox, e, c, Nm, V, Pa, PaHT, Sa, Sai)
+
+
+@njit
 def mckf_work(n, m):
-    """Work arrays of one MCKF update (:func:`mckf_update_row`): those of
-    :func:`estimators.kf.kf_work` (ν, P Hᵀ, S, S⁻¹, K, x̂, …) then the fixed point's."""
-    return (np.empty(m), np.empty((n, m)), np.empty((m, m)), np.empty((m, m)),
-            np.empty((n, m)), np.empty(n), np.empty((n, n)), np.empty((n, n)),
-            np.empty((n, m)),
-            np.empty((n, n)), np.empty((m, m)), np.empty((m, m)), np.empty((m, n)),
-            np.empty((m, n)), np.empty(m), np.empty((m, m)), np.empty((m, m)),
-            np.empty((m, m)), np.empty(m), np.empty(m), np.empty(m), np.empty(n),
-            np.empty(n), np.empty(n), np.empty(m), np.empty(n), np.empty((m, m)),
-            np.empty((n, m)), np.empty((n, n)), np.empty((n, m)), np.empty((m, m)),
-            np.empty((m, m)))
+    """Work arrays of one MCKF update (:func:`mckf_update_row`), freshly allocated:
+    :func:`mckf_work_in` on a new buffer."""
+    return mckf_work_in(np.empty(mckf_work_size(n, m)), n, m)
 
 
 @njit
@@ -269,8 +310,9 @@ def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
 
     fpar = (kernel_floor, ε², reject_weight, inflate, inflate_gate), ipar = (max_iter,
     lockout_n, recovery 0/1/2 = None/"kf"/"inflate", inflate_jmax), ist = (n_rejected, n_iter,
-    rejected, recovered) (updated), wy ← diag C_y, w = :func:`mckf_work`; after a fix w holds
-    ν (w[0]), S (w[2]), K̃ (w[4]) and C_x (w[25], valid when n_iter > 1)."""
+    rejected, recovered) (updated), wy ← diag C_y, w = :func:`mckf_work` (or
+    :func:`mckf_work_in` on the caller's buffer); after a fix w holds ν (w[0]), S (w[2]), K̃
+    (w[4]) and C_x (w[25], valid when n_iter > 1)."""
     (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn, be, q, u,
      o, e, c, Nm, V, Pa, PaHT, Sa, Sai) = w
     v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
