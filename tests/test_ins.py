@@ -395,3 +395,12 @@ if __name__ == "__main__":  # pragma: no cover
     for k, (p, g, a) in bench().items():
         print(f"{k:26s} predict tick {p:6.2f} µs, GNSS tick {g:6.2f} µs, mean {a:6.2f} µs "
               "(per vehicle)")
+
+
+def test_the_bank_scratch_holds_the_mckf_work():
+    """The INS bank's flat scratch reserves exactly the MCKF update's work (15 states, 3 rows)
+    after the KF offset: the KF and the MCKF updates share that region."""
+    from estimators import ins
+    from estimators.mckf import mckf_work_size
+
+    assert ins._NW - ins._W_KF == mckf_work_size(15, 3)
