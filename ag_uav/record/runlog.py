@@ -86,6 +86,7 @@ import platform
 import re
 import signal
 import struct
+import sys
 import threading
 import time
 import weakref
@@ -579,6 +580,37 @@ class _EstBank(_FlatRows):
                            _ns_list(a[:, 0]), strict=True))
 
 
+_WARMED = False
+
+
+def _warm_encoders() -> None:
+    """Load the block encoders (:mod:`ag_uav.record.encode`; compiled on a fresh checkout) now,
+    with the argument types the flushes use, so that no loading or compiling lands inside a
+    flight's timed loop; a compile says so once."""
+    global _WARMED
+    if _WARMED:
+        return
+    from .encode import encode_flat, encode_poses, encode_ticks
+
+    t0 = time.perf_counter()
+    rows = np.zeros((2, TICK_HEAD + 4))
+    rows[:, 1] = 15.0
+    out, idx = np.empty(4096, dtype=np.uint8), np.empty((3, 17), dtype=np.int64)
+    st = _template([b"\x09"] * 37 + [b"\x12\x20"] + [b"\x09"] * 3)
+    encode_ticks(rows, 4, np.zeros(0, dtype=np.intp), st[0], st[1], _POSE_TMPL, _POSE_SLOTS,
+                 _TF_TMPL, np.frombuffer(_WORLD2, dtype=np.uint8).copy(),
+                 np.frombuffer(_POSE_MID, dtype=np.uint8).copy(), out, idx[0], idx[1], idx[2])
+    flat = _template([b"\x09"] * 3)
+    encode_flat(np.zeros((2, 3)), flat[0], flat[1], out, idx[0])
+    encode_poses(np.zeros((2, 4)), _POSE_TMPL, _POSE_SLOTS,
+                 np.frombuffer(_POSE_MID, dtype=np.uint8).copy(), out, idx[0], idx[1])
+    took = time.perf_counter() - t0
+    if took > 1.0:
+        print(f"compiling the log's encoders: first run only, ~{took:.0f} s (cached for later "
+              "runs)", file=sys.stderr, flush=True)
+    _WARMED = True
+
+
 def _os_error(e: OSError, path: Path) -> OSError:
     """The SDK's OSError (errno only in its text, "... (os error 28)") with errno and path."""
     m = re.search(r"os error (\d+)", str(e))
@@ -813,6 +845,7 @@ class RunLog:
         self._write_layout()
         _OPEN.add(self)
         _install_handlers()
+        _warm_encoders()
 
     # ---------------------------------------------------------------- context manager
     def __enter__(self) -> RunLog:
