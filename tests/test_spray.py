@@ -402,9 +402,9 @@ def test_spray_disabled_is_the_plain_mission():
 # ------------------------------------------------------------------------------ 38 ha job
 _INS_38HA_CRASH = (
     "found 2026-11-24: on the default INS chain the sixth sortie's landing at the base hits the "
-    "ground at 1.2 m/s (t = 6697.6 s): at 1.3 m height the estimate jumps 0.5 m up and 0.6 m "
-    "sideways (a DGPS fix the honest receiver still reports as RTK fixed, taken after the MCKF's "
-    "lock-out recovery) and the controller descends on it; the true-state chain flies the job")
+    "ground at 1.2 m/s (t = 6697.6 s): a DGPS episode reported as RTK fixed for its first second "
+    "(fixes 1.25 m high) ends in the MCKF's lock-out recovery taking one, the estimate jumps 0.5 m "
+    "up at 1.3 m height and the controller descends on it; the true-state chain flies the job")
 
 
 @pytest.mark.slow
