@@ -510,13 +510,28 @@ class _FlatRows:
         if not n:
             return
         r = self.rows.take()
+        self._derive(r)
         size = len(self.tmpl)
         out = np.empty(n * size, dtype=np.uint8)
         encode_flat(r, self.tmpl, self.slots, out, np.empty(n + 1, dtype=np.int64))
         buf = out.tobytes()
-        pending.extend(zip(itertools.repeat(self.lid, n),
-                           [buf[j:j + size] for j in range(0, n * size, size)],
+        pending.extend(zip(self._lids(r), [buf[j:j + size] for j in range(0, n * size, size)],
                            _ns_list(r[:, 0]), strict=False))
+
+    def _derive(self, r: np.ndarray) -> None:
+        """Columns computed per block before encoding (none here)."""
+
+    def _lids(self, r: np.ndarray) -> Iterable[int]:
+        """The channel index of each row (here the channel's own)."""
+        return itertools.repeat(self.lid, len(r))
+
+
+def _est_err(r: np.ndarray, it: int) -> None:
+    """An estimator row block's tail: position (``it``…), the truth (``it + 3``…) -> ``err`` =
+    position − truth in place of the truth, and its horizontal norm at ``it + 6``."""
+    d = r[:, it + 3:it + 6]
+    np.subtract(r[:, it:it + 3], d, out=d)
+    r[:, it + 6] = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
 
 
 class _EstChan(_FlatRows):
@@ -532,16 +547,8 @@ class _EstChan(_FlatRows):
         self.next_t = -_INF
         self.ix, self.ip, self.ii, self.it = 1, 1 + n, 1 + 2 * n, 1 + 2 * n + m
 
-    def encode(self, pending: list[tuple[int, bytes, int]]) -> None:
-        """The rows hold the position and the truth: ``err`` = position − truth and its
-        horizontal norm are computed here for the whole block, then encoded."""
-        n = self.rows.n
-        if n:
-            a, it = self.rows.a[:n], self.it
-            d = a[:, it + 3:it + 6]
-            np.subtract(a[:, it:it + 3], d, out=d)
-            a[:, it + 6] = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
-        super().encode(pending)
+    def _derive(self, r: np.ndarray) -> None:
+        _est_err(r, self.it)
 
 
 class _EstBank(_FlatRows):
@@ -559,25 +566,11 @@ class _EstBank(_FlatRows):
         self.n, self.it = n, 1 + 2 * n
         self.next_t = -_INF
 
-    def encode(self, pending: list[tuple[int, bytes, int]]) -> None:
-        """``err`` = position − truth and its horizontal norm for the whole block, then the
-        rows -> ``(channel index, message, log_time)`` appended to ``pending``."""
-        from .encode import encode_flat
+    def _derive(self, r: np.ndarray) -> None:
+        _est_err(r, self.it)
 
-        n = self.rows.n
-        if not n:
-            return
-        a, it = self.rows.take(), self.it
-        d = a[:, it + 3:it + 6]
-        np.subtract(a[:, it:it + 3], d, out=d)
-        a[:, it + 6] = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
-        size = len(self.tmpl)
-        out = np.empty(n * size, dtype=np.uint8)
-        encode_flat(a, self.tmpl, self.slots, out, np.empty(n + 1, dtype=np.int64))
-        buf = out.tobytes()
-        pending.extend(zip(a[:, -1].astype(np.int64).tolist(),
-                           [buf[j:j + size] for j in range(0, n * size, size)],
-                           _ns_list(a[:, 0]), strict=True))
+    def _lids(self, r: np.ndarray) -> Iterable[int]:
+        return r[:, -1].astype(np.int64).tolist()
 
 
 _WARMED = False
