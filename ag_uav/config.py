@@ -343,6 +343,14 @@ class EstimatorConfig:
     ins_recovery: str = _f("kf", "nav = ins, MCKF rules: lock-out recovery after 10 rejected "
                            "fixes (none / inflate / kf; measured in docs/ins.md)",
                            choices=("none", "inflate", "kf"))
+    ins_range_aid_m: float = _f(5.0, "nav = ins: range aid (PX4 EKF2_RNG_CTRL = 1, "
+                                "conditional; EKF2_RNG_A_HMAX = 5 m): while the radar reads "
+                                "less than this (m) and the receiver's horizontal speed is under "
+                                "ins_range_aid_mps, the fixes' height is not fused and the radar "
+                                "is the height source (take-off, landing, hover); 0 = off",
+                                ge=0, le=50)
+    ins_range_aid_mps: float = _f(1.0, "nav = ins: the range aid's speed limit (m/s; PX4 "
+                                  "EKF2_RNG_A_VMAX = 1 m/s)", gt=0, le=20)
     mckf_kernel: str = _f("fixed", "nav = ins, MCKF rules: kernel of the GNSS position update: "
                           "fixed = estimator.sigma on every row; adaptive = sigma x max(1, "
                           "sqrt(s)), s the clipped running mean of NIS/3 (estimators.mckf); "

@@ -400,20 +400,12 @@ def test_spray_disabled_is_the_plain_mission():
 
 
 # ------------------------------------------------------------------------------ 38 ha job
-_INS_38HA_CRASH = (
-    "found 2026-11-24: on the default INS chain the sixth sortie's landing at the base hits the "
-    "ground at 1.2 m/s (t = 6697.6 s): a DGPS episode reported as RTK fixed for its first second "
-    "(fixes 1.25 m high) ends in the MCKF's lock-out recovery taking one, the estimate jumps 0.5 m "
-    "up at 1.3 m height and the controller descends on it; the true-state chain flies the job")
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("chain", [
-    "true", pytest.param("ins", marks=pytest.mark.xfail(strict=True, reason=_INS_38HA_CRASH))])
+@pytest.mark.parametrize("chain", ["true", "ins"])
 def test_38ha_job_multi_sortie_acceptance(chain):
     """Issue 11 acceptance: the 0.69 x 0.56 km rectangle, >= 2 sorties, >= 98 %: the job's
-    mechanics on the true state, and the default chain (the INS), which does not land every
-    sortie yet (strict xfail: it fails loudly once it does)."""
+    mechanics on the true state, and on the default chain (the INS; it lands every sortie since
+    the range aid: without it the sixth landing hit the ground at 1.2 m/s, docs/ins.md)."""
     over = {**NOLOG, "mission.field": FIELD_38HA, "sim.max_time_s": 21600}
     if chain == "true":
         over["estimator.name"] = "true"

@@ -39,6 +39,19 @@ accuracy carries the per-episode calibration error), else the preset's nominal v
 velocity ``gps.velocity_sigma_mps²``, heading ``gps.heading_sigma_deg²``, radar
 ``gps.radar_sigma_m²``.
 
+**Range aid** (PX4 EKF2's conditional range aid, ``EKF2_RNG_CTRL = 1``, with its defaults
+``EKF2_RNG_A_HMAX`` = 5 m and ``EKF2_RNG_A_VMAX`` = 1 m/s: ``estimator.ins_range_aid_m``,
+``estimator.ins_range_aid_mps``; 0 m = off): while the radar's last reading is below 5 m and the
+fix's horizontal velocity below 1 m/s (take-off, landing, hover), the fix's height gets the
+variance :data:`NOT_FUSED_VAR` (σ = 1 km: its gain is ~10⁻¹⁰, the height is not fused) and the
+radar is the height source; the horizontal position, the velocity and the heading are fused as
+always. The decision reads sensors only (the radar and the receiver's velocity), so every filter
+of the bank gets the same fix. Counted in the summary's ``range_aid_fixes``. Without it the
+GNSS height rules the landing: a DGPS episode the honest receiver reports as RTK fixed moves the
+estimate by decimetres at 1 m height (the 38 ha job's sixth landing hit the ground at 1.2 m/s;
+docs/ins.md). PX4's innovation-consistency check of the range before switching is left out:
+the ground here is flat at z = 0, the datum of the fixes too.
+
 **Scores** (per filter, over the mission ticks): horizontal position error RMS / max, 3-D
 velocity error RMS, tilt error (angle between the true and estimated body z axes) RMS / max,
 yaw error RMS, and the NEES of the 15-state error at every GNSS fix (the core state against the
@@ -62,6 +75,8 @@ from ..vehicle.gps import ReceiverReport, derive_seed
 from .feedback import Feedback
 
 R_FLOOR = 1e-4
+#: the variance (m², σ = 1 km) that keeps a fix's height out of the update under range aid
+NOT_FUSED_VAR = 1e6
 DEG = math.pi / 180.0
 #: IMU → GNSS antenna (body axes, m): the antenna mast above the IMU (engineering judgement for
 #: an M350-class airframe; the filter is given the same installed value, as it is calibrated)
@@ -137,6 +152,10 @@ class InsFeedback(Feedback):
         # scoring only: the IMU's turn-on biases (the engine's IMU draws them from this stream)
         self.bias0 = ImuSensor(cfg.imu, cfg.sim.control_hz, seeds["imu"], block=1).bias0
         self.fixes = 0
+        #: range aid (module docstring): radar range and horizontal speed limits, and the fixes
+        #: whose height it kept out of the filter
+        self.aid_m, self.aid_mps = e.ins_range_aid_m, e.ins_range_aid_mps
+        self.range_aid_fixes = 0
         #: forced GNSS outages (t0, t1): no position, velocity or heading inside (the radar
         #: goes on), e.g. ``ag-uav experiment ins-nav --what outage``
         self.outages: list[tuple[float, float]] = []
@@ -235,6 +254,8 @@ class InsFeedback(Feedback):
             "gps_latency_s": round(self.D * self.dt, 4),
             "ins_counters": self.rec.get("counters"),
             **self.att}
+        if self.aid_m > 0:
+            s["range_aid_fixes"] = self.range_aid_fixes
         if self.report is not None:
             s["false_fix_episodes"] = self.report.n_false
             s["false_fix_fixes"] = self.report.false_fixes
@@ -279,6 +300,7 @@ class BatchInsFeedback:
         self.radar_on = f0.radar
         self.gnss = np.full((NV, 15), np.nan)
         self.radar = np.full((NV, 3), np.nan)
+        self.range_last = np.full(NV, np.nan)  # each vehicle's latest radar reading (range aid)
         self.p_out, self.v_out = np.zeros((NV, 3)), np.zeros((NV, 3))
         self.R_out = np.tile(np.eye(3).ravel(), (NV, 1))
         self.bias0 = np.stack([fb.bias0 for fb in fbs])
@@ -368,6 +390,9 @@ class BatchInsFeedback:
             if abs(float(np.linalg.norm(self.imu[i, :3])) - 9.81) < 0.5:  # at rest: levels
                 self._initialise(i, k, row)
             return
+        if self.range_last[i] < fb.aid_m and math.hypot(row[4], row[5]) < fb.aid_mps:
+            row[10] = NOT_FUSED_VAR  # range aid: the radar is the height source
+            fb.range_aid_fixes += 1
         self.gnss[i] = row
 
     def _initialise(self, i: int, k: int, row: np.ndarray) -> None:
@@ -397,6 +422,7 @@ class BatchInsFeedback:
             self.noise_i[i] = j + 1
             rng = self.ring[i, k % (self.D + 1), 16]
             self.radar[i] = (rng + sig * self.noise[i][j], sig * sig, 0.0)
+            self.range_last[i] = self.radar[i, 0]  # NaN: a dropout (no range aid then)
 
     def _pre_init(self, act: np.ndarray) -> None:
         """Vehicles without a fix yet: radar height, zero velocity, levelled attitude."""
