@@ -74,3 +74,30 @@ def test_nested_defaults_survive_partial_tables():
 def test_control_rate_must_divide_physics_rate():
     with pytest.raises(ConfigError, match="sim.control_hz"):
         config_from_dict({"sim": {"control_hz": 33.0}})
+
+
+def test_progress_bars_redraw_rarely_into_a_log_file(tmp_path):
+    """A bar whose output is not a terminal (a batch job's log) redraws at most every 30 s:
+    100 quick updates write its first and last state, not 100 lines."""
+    from ag_uav._progress import PIPE_INTERVAL_S, progress_bar
+
+    with open(tmp_path / "job.log", "w") as f:
+        bar = progress_bar(file=f, total=100, desc="batch x", mininterval=0.1)
+        assert bar.mininterval == PIPE_INTERVAL_S == 30.0
+        for _ in range(100):
+            bar.update(1)
+        bar.close()
+    text = (tmp_path / "job.log").read_text()
+    assert text.count("batch x") <= 3 and "100/100" in text
+
+    class Tty:  # a terminal keeps the caller's interval
+        def isatty(self):
+            return True
+
+        def write(self, s):
+            pass
+
+        def flush(self):
+            pass
+
+    assert progress_bar(file=Tty(), total=3, mininterval=0.5, disable=False).mininterval == 0.5

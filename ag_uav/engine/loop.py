@@ -544,11 +544,11 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
     b0 = engines[0].b
     bar = None
     if progress:
-        from tqdm import tqdm
+        from .._progress import progress_bar
 
         n_max = max(e.b.n_max for e in engines)
-        bar = tqdm(total=round(n_max * b0.dt), unit="sim-s", desc="flying", leave=False,
-                   dynamic_ncols=True, mininterval=0.5)
+        bar = progress_bar(total=round(n_max * b0.dt), unit="sim-s", desc="flying",
+                           leave=False, dynamic_ncols=True, mininterval=0.5)
     try:
         wall, compile_s = _run(engines, bar)
     finally:

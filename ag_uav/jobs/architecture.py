@@ -29,10 +29,10 @@ BEGIN = "<!-- BEGIN GENERATED: python -m ag_uav.jobs.architecture --write -->"
 END = "<!-- END GENERATED -->"
 
 #: the stages in flow order: top-level modules and the folders of ag_uav
-STAGES = ("config", "seeds", "_jit", "world", "vehicle", "navigation", "engine", "record",
-          "analysis", "jobs", "cli")
+STAGES = ("config", "seeds", "_jit", "_progress", "world", "vehicle", "navigation", "engine",
+          "record", "analysis", "jobs", "cli")
 #: stages every other one may read; no arrows are drawn for them
-SHARED = ("config", "seeds", "_jit")
+SHARED = ("config", "seeds", "_jit", "_progress")
 #: the stage of the modules at the top level that are not stages themselves (the package)
 TOP = "ag_uav"
 

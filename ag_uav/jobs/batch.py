@@ -1087,10 +1087,10 @@ class _BatchRun:
                  on_row: Callable[[dict[str, Any]], None] | None) -> None:
         self.bar = None
         if progress:
-            from tqdm import tqdm
+            from .._progress import progress_bar
 
-            self.bar = tqdm(total=n, initial=n_done, unit="run", desc=f"batch {name}",
-                            dynamic_ncols=True, smoothing=0.05)
+            self.bar = progress_bar(total=n, initial=n_done, unit="run", desc=f"batch {name}",
+                                    dynamic_ncols=True, smoothing=0.05)
         self._warn, self.on_row = warn, on_row
         self.n_bad = self.n_lost = 0
 

@@ -800,10 +800,11 @@ class _EvalLog:
         self.cache: dict[str, dict[str, Any]] = {}
         self.bar = None
         if progress:
-            from tqdm import tqdm
+            from .._progress import progress_bar
 
-            self.bar = tqdm(total=n_iter * spec.pop, initial=it0 * spec.pop, unit="eval",
-                            desc=f"tune {spec.name}", dynamic_ncols=True, smoothing=0.05)
+            self.bar = progress_bar(total=n_iter * spec.pop, initial=it0 * spec.pop,
+                                    unit="eval", desc=f"tune {spec.name}", dynamic_ncols=True,
+                                    smoothing=0.05)
         if path.exists():  # finished evaluations (resume: those of the current iteration)
             repair_jsonl(path)
             recs, bad = read_jsonl(path)

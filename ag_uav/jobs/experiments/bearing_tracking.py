@@ -456,9 +456,9 @@ def main(args: argparse.Namespace) -> int:
     results: list[dict[str, Any] | None] = [None] * len(tasks)
     bar = None
     if not args.quiet:
-        from tqdm import tqdm
+        from ..._progress import progress_bar
 
-        bar = tqdm(total=len(tasks), desc="bearing-tracking", unit="run")
+        bar = progress_bar(total=len(tasks), desc="bearing-tracking", unit="run")
     workers = args.workers
     if workers == 1 or len(tasks) == 1:
         it = ((i, run_one(t)) for i, t in enumerate(tasks))

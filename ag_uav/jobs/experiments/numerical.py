@@ -501,9 +501,9 @@ def run_experiment(setup: Setup, cases: list[str], ests: list[str], n_runs: int,
     results: list[Any] = [None] * len(jobs)
     bar = None
     if progress:
-        from tqdm import tqdm
+        from ..._progress import progress_bar
 
-        bar = tqdm(total=n_runs * len(cases), unit="run", desc="numerical")
+        bar = progress_bar(total=n_runs * len(cases), unit="run", desc="numerical")
     with make_executor(workers) as ex:
         for i, res in ex.map_unordered(chunk_task, jobs):
             results[i] = res
