@@ -413,8 +413,11 @@ def test_38ha_job_multi_sortie_acceptance(chain):
     s = simulate(cfg).summary
     assert s["field_area_m2"] == pytest.approx(386_400, rel=0.01)
     assert s["completed"] and not s["crashed"]
-    assert s["sorties"] >= 2
-    assert s["coverage_fraction"] >= 0.98
+    # every planned sortie flown (15 on 2026-11-24); covered 99.98 % (true) and 99.67 % (INS)
+    assert s["sorties"] == s["sorties_planned"] >= 2
+    assert s["coverage_fraction"] >= 0.99
+    if chain == "ins":  # the landings on the radar (take-offs, landings, waits at the base)
+        assert s["range_aid_fixes"] > 1000
     assert not s["battery_below_reserve"] and not s["tank_ran_dry"]
     assert s["off_target_m2"] < 10.0
     assert s["litres_sprayed_l"] == pytest.approx(s["litres_planned"], rel=0.01)
