@@ -46,6 +46,7 @@ ROWS = [
     ("tilt_error_max_deg", "tilt error max (INS, flown)", "{:.3f}", "°"),
     ("yaw_error_rms_deg", "yaw error RMS (INS, flown)", "{:.3f}", "°"),
     ("false_fix_episodes", "GNSS false-fix episodes", "{}", ""),
+    ("range_aid_fixes", "fixes on radar height", "{}", ""),
     ("sim_time_s", "sim time", "{:.1f}", "s"),
     ("wall_time_s", "wall time", "{:.2f}", "s"),
     ("real_time_factor", "loop speed", "{:.0f}", "× real time"),
