@@ -171,3 +171,20 @@ def test_range_aid_keeps_a_wrong_gnss_height_out_at_take_off(monkeypatch, aid_m)
         assert abs(dz) < 0.15 and s["range_aid_fixes"] >= 35
     else:
         assert dz < -0.5 and "range_aid_fixes" not in s
+
+
+def test_the_log_shows_when_the_radar_is_the_height_source(tmp_path):
+    """``/drone/state``'s ``ctrl.nav.range_aid``: 1 through the take-off hover (fixes' height
+    not fused), 0 once the vehicle is on its way (faster than 1 m/s, from ~5 s)."""
+    from ag_uav.analysis import viewing
+    from ag_uav.record.runlog import RunLog
+
+    cfg = _cfg(sim__max_time_s=8.0)
+    with RunLog(tmp_path / "r.mcap", channels="full", rates={"camera": 0.0},
+                layout=False) as log:
+        s = simulate(cfg, log=log).summary
+    st = viewing.read_run(tmp_path / "r.mcap", images=False).series["/drone/state"]
+    aid, t = st["ctrl.nav.range_aid"], st.t
+    assert set(np.unique(aid)) == {0.0, 1.0}
+    assert np.all(aid[(t > 0.5) & (t < 4.0)] == 1.0) and np.all(aid[t > 6.5] == 0.0)
+    assert s["range_aid_fixes"] >= 35

@@ -154,11 +154,15 @@ class LogObserver(Observer):
             log.dose(t, g.x0, g.y0, g.cell * (1 << f), dep.l_per_ha_now(j, f))
 
     def _bind(self, view: TickView) -> None:
-        """The row layout: the controller's state row, the IMU record, the nozzle's valve and
-        flow after the motors; the ctrl keys name their columns in it."""
+        """The row layout: the controller's state row, the INS's range aid flag, the IMU record,
+        the nozzle's valve and flow after the motors; the ctrl keys name their columns in it."""
         bc, i = self.control.bc, self.i
         cols = list(bc.internal_columns(i))
         base = bc.state.shape[1]
+        aid = getattr(self.fb, "aid_on", None)  # the INS's range aid flag (a 1-element view)
+        if aid is not None:
+            cols.append(("nav.range_aid", base))
+            base += 1
         self._imu = self.sensing.row(i, view.k) is not None
         if self._imu:
             cols += [(k, base + j) for j, k in enumerate(IMU_KEYS)]
@@ -172,6 +176,8 @@ class LogObserver(Observer):
         parts += (b.p_fb[i], b.v_fb[i]) if self._est else _NAN6
         self._jf, self._f = len(parts) + 2, b.f
         parts += (b.w[i], b.spray[i:i + 1], b.f[i], bc.state[i])
+        if aid is not None:
+            parts.append(aid)
         if self._imu:
             parts.append(self.sensing.row(i, view.k))
         if self.dose is not None:

@@ -156,6 +156,7 @@ class InsFeedback(Feedback):
         #: whose height it kept out of the filter
         self.aid_m, self.aid_mps = e.ins_range_aid_m, e.ins_range_aid_mps
         self.range_aid_fixes = 0
+        self.aid_on: np.ndarray | None = None  # set by the batch (a view of its flags)
         #: forced GNSS outages (t0, t1): no position, velocity or heading inside (the radar
         #: goes on), e.g. ``ag-uav experiment ins-nav --what outage``
         self.outages: list[tuple[float, float]] = []
@@ -301,6 +302,11 @@ class BatchInsFeedback:
         self.gnss = np.full((NV, 15), np.nan)
         self.radar = np.full((NV, 3), np.nan)
         self.range_last = np.full(NV, np.nan)  # each vehicle's latest radar reading (range aid)
+        #: 1.0 while the vehicle's last fix had its height kept out (range aid), else 0.0; each
+        #: feedback sees its own element (``aid_on``, a view: the log records it per tick)
+        self.aid_on = np.zeros(NV)
+        for i, fb in enumerate(fbs):
+            fb.aid_on = self.aid_on[i:i + 1]
         self.p_out, self.v_out = np.zeros((NV, 3)), np.zeros((NV, 3))
         self.R_out = np.tile(np.eye(3).ravel(), (NV, 1))
         self.bias0 = np.stack([fb.bias0 for fb in fbs])
@@ -390,9 +396,11 @@ class BatchInsFeedback:
             if abs(float(np.linalg.norm(self.imu[i, :3])) - 9.81) < 0.5:  # at rest: levels
                 self._initialise(i, k, row)
             return
-        if self.range_last[i] < fb.aid_m and math.hypot(row[4], row[5]) < fb.aid_mps:
+        aid = self.range_last[i] < fb.aid_m and math.hypot(row[4], row[5]) < fb.aid_mps
+        if aid:
             row[10] = NOT_FUSED_VAR  # range aid: the radar is the height source
             fb.range_aid_fixes += 1
+        self.aid_on[i] = 1.0 if aid else 0.0
         self.gnss[i] = row
 
     def _initialise(self, i: int, k: int, row: np.ndarray) -> None:
