@@ -141,7 +141,8 @@ with RunLog({path!r}, channels="full", metadata={{}}, config_toml="") as log:
 
 
 def test_sigkill_of_a_real_flight_loses_under_a_sim_second(node_checker, tmp_path):
-    """A real MuJoCo mission logging the full channel set, SIGKILLed at a random moment."""
+    """A real MuJoCo mission logging the full channel set, SIGKILLed at a random moment with
+    its log writer process (the worst case: the writer holds what it has not written yet)."""
     import os
     import signal
     import struct
@@ -156,13 +157,14 @@ def test_sigkill_of_a_real_flight_loses_under_a_sim_second(node_checker, tmp_pat
     path = tmp_path / "run.mcap"
     t_target = float(np.random.default_rng(7).uniform(20.0, 200.0))
     proc = subprocess.Popen([sys.executable, "-c", _REAL_CHILD.format(
-        root=str(root), shm=str(shm), path=str(path))], stderr=subprocess.PIPE)
+        root=str(root), shm=str(shm), path=str(path))], stderr=subprocess.PIPE,
+        start_new_session=True)
     deadline = time.monotonic() + 120
     while struct.unpack("<d", shm.read_bytes()[:8])[0] < t_target:
         assert proc.poll() is None, proc.stderr.read().decode()[-2000:]
         assert time.monotonic() < deadline
         time.sleep(0.002)
-    os.kill(proc.pid, signal.SIGKILL)
+    os.killpg(proc.pid, signal.SIGKILL)  # the flight and its log writer
     proc.wait(timeout=10)
     t_kill = struct.unpack("<d", shm.read_bytes()[:8])[0]
     times = []

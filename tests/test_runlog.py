@@ -223,7 +223,7 @@ def _spawn(tmp_path, duration, sleep):
     code = _CHILD.format(root=str(ROOT), shm=str(shm), path=str(path), duration=duration,
                          sleep=sleep)
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE)
+                            stderr=subprocess.PIPE, start_new_session=True)
     return proc, path, shm
 
 
@@ -250,14 +250,15 @@ def test_sigterm_finishes_the_file(tmp_path):
 
 
 def test_sigkill_loses_at_most_one_sim_second_and_recovers(tmp_path):
-    """SIGKILL at a random moment: a streaming read keeps everything up to >= t_kill - 1 s."""
+    """SIGKILL of the flying process and its log writer (the process group) at a random
+    moment: a streaming read keeps everything up to >= t_kill - 1 s."""
     from ag_uav.analysis.viewing import recover
 
     rng = np.random.default_rng(1234)
     t_kill_target = float(rng.uniform(2.0, 6.0))
     proc, path, shm = _spawn(tmp_path, 600.0, 0.0002)
     _wait_for_t(shm, t_kill_target)
-    proc.kill()
+    os.killpg(proc.pid, signal.SIGKILL)
     proc.wait(timeout=10)
     t_kill = struct.unpack("<d", shm.read_bytes()[:8])[0]
     times = []
@@ -275,6 +276,45 @@ def test_sigkill_loses_at_most_one_sim_second_and_recovers(tmp_path):
         r = make_reader(f)
         assert r.get_summary().statistics.message_count == n
         assert {m.name for m in r.iter_metadata()} >= {"run", "versions"}
+
+
+def test_sigkill_of_the_flying_process_alone_leaves_a_finished_file(tmp_path):
+    """The log's writer process outlives a SIGKILLed flight: it writes every row handed to it
+    (all but the last 0.3 s of flight and one state tick) and finishes the file."""
+    proc, path, shm = _spawn(tmp_path, 600.0, 0.0002)
+    _wait_for_t(shm, 3.0)
+    proc.kill()
+    proc.wait(timeout=10)
+    t_kill = struct.unpack("<d", shm.read_bytes()[:8])[0]
+    deadline = time.monotonic() + 20
+    while True:  # the writer finishes on its own, a moment later
+        try:
+            with open(path, "rb") as f:
+                summary = make_reader(f).get_summary()
+            if summary is not None:
+                break
+        except Exception:  # noqa: BLE001 - not finished yet
+            pass
+        assert time.monotonic() < deadline, "the writer did not finish the file"
+        time.sleep(0.05)
+    with open(path, "rb") as f:
+        times = [m.log_time * 1e-9 for _, _, m in make_reader(f).iter_messages()]
+    assert len(times) == summary.statistics.message_count
+    assert max(times) >= t_kill - 0.4, (max(times), t_kill)  # 0.3 s, a state tick, the next
+
+
+def test_the_writer_process_and_the_inline_writer_write_the_same_messages(tmp_path):
+    logs = {}
+    for writer in ("process", "inline"):
+        p = tmp_path / f"{writer}.mcap"
+        with RunLog(p, channels="full", metadata={}, config_toml="", layout=False,
+                    writer=writer, flush_sim_s=0.9) as log:
+            synthetic_run(log, 4.0, seed=3)
+            logs[writer] = log.counts
+        logs[writer + "_msgs"] = [(topic, t, m.SerializeToString()) for topic, t, m in _decoded(p)]
+    assert logs["process"] == logs["inline"]
+    assert logs["process_msgs"] == logs["inline_msgs"] and len(logs["inline_msgs"]) > 300
+    assert sum(logs["inline"].values()) == len(logs["inline_msgs"])
 
 
 def test_synthetic_run_is_deterministic(tmp_path):

@@ -501,7 +501,9 @@ def run_task(task: RunTask) -> dict[str, Any]:
             cfg.log.enabled = True
             cfg.log.channels = "light"
             cfg.log.render = False
-            res, _ = fly(cfg, out_root=task.logs_dir, run_id=task.run_id)
+            # inline: a batch keeps every core busy already (and a Dask worker's threads
+            # make a fork unsafe)
+            res, _ = fly(cfg, out_root=task.logs_dir, run_id=task.run_id, log_writer="inline")
         else:
             from ..engine.missions import simulate
 

@@ -168,8 +168,10 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
     Each repeat flies the unlogged loop and right after it the logged ones, so every ratio is
     taken between neighbouring runs (a load change on a shared machine hits both); the ratios
     are the medians of those per-repeat ratios, with their min and max as the spread.  The
-    ``*_cpu`` ratios are the same from the loop's process CPU time; ``*_us_per_message`` is the
-    logged loop's added wall time (the medians' difference) over the messages the log wrote.
+    ``*_cpu`` ratios are the same from the loop's process CPU time, ``*_cpu_with_writer`` with
+    the log's writer process's CPU time added (the log's encoding, compression and writes run
+    there, on another core: :mod:`ag_uav.record.sink`); ``*_us_per_message`` is the logged
+    loop's added wall time (the medians' difference) over the messages the log wrote.
     """
     import tempfile
     from pathlib import Path
@@ -183,18 +185,18 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
 
     msgs: dict[str, int] = {}
 
-    def fly(conf: Config, path: Path | None, channels: str = "full") -> tuple[float, float]:
+    def fly(conf: Config, path: Path | None, channels: str = "full") -> tuple[float, ...]:
         hook = _LoopCpu()
         if path is None:
             wall = simulate(conf, tick_hook=hook).summary["loop_wall_time_s"]
-            return wall, hook.seconds
+            return wall, hook.seconds, hook.seconds
         with RunLog(path, channels=channels, rates={"camera": 0.0}, metadata={},
                     config_toml="", layout=False) as log:
             wall = simulate(conf, log=log, tick_hook=hook).summary["loop_wall_time_s"]
             msgs[path.stem.rstrip("0123456789")] = sum(log.counts.values())
-        return wall, hook.seconds
+        return wall, hook.seconds, hook.seconds + log.writer_cpu_s
 
-    runs: dict[str, list[tuple[float, float]]] = {
+    runs: dict[str, list[tuple[float, ...]]] = {
         k: [] for k in ("plain", "full", "light", "e_plain", "e_full")}
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
@@ -225,6 +227,7 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
             "full_over_unlogged": round(med(r_full), 3),
             "full_over_unlogged_spread": _spread(r_full),
             "full_over_unlogged_cpu": round(med(ratios("full", "plain", 1)), 3),
+            "full_over_unlogged_cpu_with_writer": round(med(ratios("full", "plain", 2)), 3),
             "light_over_unlogged": round(med(r_light), 3),
             "full_log_mb": round(size / 1e6, 2),
             "full_log_messages": msgs.get("full", 0),
@@ -234,6 +237,7 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
             "estimators_ratio": round(med(r_est), 3),
             "estimators_ratio_spread": _spread(r_est),
             "estimators_ratio_cpu": round(med(ratios("e_full", "e_plain", 1)), 3),
+            "estimators_ratio_cpu_with_writer": round(med(ratios("e_full", "e_plain", 2)), 3),
             "estimators_full_log_mb": round(e_size / 1e6, 2),
             "estimators_full_log_messages": msgs.get("est", 0),
             "estimators_full_log_us_per_message": us_per_msg("e_full", "e_plain", "est"),

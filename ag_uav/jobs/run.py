@@ -64,7 +64,7 @@ class RunOutputError(OSError):
         self.result, self.run_dir, self.summary_written = result, run_dir, summary_written
 
 
-def _open_log(cfg: Config, run_dir: Path):
+def _open_log(cfg: Config, run_dir: Path, writer: str = "process"):
     if not (cfg.log.enabled and cfg.log.channels != "none"):
         return None
     from .. import __version__
@@ -75,12 +75,15 @@ def _open_log(cfg: Config, run_dir: Path):
                   metadata={"run_id": run_dir.name, "seed": cfg.seed,
                             "ag_uav": __version__, "field": cfg.mission.field,
                             "estimator": cfg.estimator.name},
-                  config_toml=cfg.to_toml())
+                  config_toml=cfg.to_toml(), writer=writer)
 
 
 def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None,
-        progress: bool = False, feedback=None) -> tuple[RunResult, Path]:
+        progress: bool = False, feedback=None, log_writer: str = "process",
+        ) -> tuple[RunResult, Path]:
     """Fly ``cfg`` once into ``out_root/run_id``; returns the result and the run folder.
+    ``log_writer``: the run log's writer (:class:`ag_uav.record.runlog.RunLog`'s ``writer``:
+    ``"process"``, its own process on another core, or ``"inline"``).
 
     A log that cannot be written mid-flight (disk full) stops the flight with an
     :class:`OSError` naming it (the log stays readable up to its last complete chunk); a
@@ -88,7 +91,7 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     :class:`RunOutputError`, which carries the result."""
     run_dir = Path(out_root) / (run_id or default_run_id(cfg))
     run_dir.mkdir(parents=True, exist_ok=True)
-    log = _open_log(cfg, run_dir)
+    log = _open_log(cfg, run_dir, log_writer)
     try:
         res = simulate(cfg, feedback=feedback, progress=progress, log=log)
     except BaseException as e:

@@ -326,6 +326,8 @@ class BatchInsFeedback:
         self.n_upd = 0
         self.n_calls = 0
         self.logging = any(fb.log is not None for fb in fbs)
+        self._logged: list[tuple[int, Any]] | None = None
+        self._pdiag = np.zeros((0, 0))
 
     def truth_tap(self, R: np.ndarray, omega: np.ndarray) -> None:
         """The engine's true attitude (N, 9) and body rate (N, 3) arrays (written in place each
@@ -374,14 +376,14 @@ class BatchInsFeedback:
     def _log(self, t: float, p: np.ndarray) -> None:
         """``/estimator/<rule>`` of the vehicles that fused a fix this tick: the output state
         (16) and the core's P diagonal (15), as the position-filter bank logs its filters."""
-        pdiag = np.diagonal(self.bank.P, axis1=1, axis2=2)  # a view: the log copies it now
-        for i in np.flatnonzero(np.isfinite(self.gnss[:, 0])):
-            log = self.fbs[i].log
-            if log is None:
-                continue
-            r = i * self.nr
-            pd = pdiag[r:r + self.nr]
-            log.estimator_bank(t, self.names, self.bank.x_out[r:r + self.nr], pd, p[i])
+        if self._logged is None:  # (vehicle, its log); the P diagonal as a view, once
+            self._logged = [(i, fb.log) for i, fb in enumerate(self.fbs) if fb.log is not None]
+            self._pdiag = np.diagonal(self.bank.P, axis1=1, axis2=2)
+        gnss, x, pd, nr = self.gnss, self.bank.x_out, self._pdiag, self.nr
+        for i, log in self._logged:
+            if math.isfinite(gnss[i, 0]):
+                r = i * nr
+                log.estimator_bank(t, self.names, x[r:r + nr], pd[r:r + nr], p[i])
 
     def _fix(self, i: int, k: int, t: float) -> None:
         fb = self.fbs[i]

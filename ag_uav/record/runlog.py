@@ -76,14 +76,10 @@ being filled when a signal closes the log is dropped, not written half-done.
 from __future__ import annotations
 
 import atexit
-import errno
-import itertools
 import json
 import math
-import operator
 import os
 import platform
-import re
 import signal
 import struct
 import sys
@@ -129,13 +125,6 @@ def ns(t: float) -> int:
     """Sim time in seconds -> integer nanoseconds (the MCAP log time; clamped at 0)."""
     v = round(t * 1e9)
     return v if v > 0 else 0
-
-
-def _ns_list(t: np.ndarray) -> list[int]:
-    """:func:`ns` of each of ``t`` (both round half to even)."""
-    v = np.rint(t * 1e9)
-    np.maximum(v, 0.0, out=v)
-    return v.astype(np.int64).tolist()
 
 
 def sanitize_name(key: str) -> str:
@@ -358,8 +347,6 @@ _POSE_TMPL, _POSE_SLOTS = _template([b"\x0a\x1b\x09", b"\x11", b"\x19", b"\x12\x
 _TF_TMPL = _POSE_TMPL.copy()
 _TF_TMPL[[0, 29]] = (0x22, 0x2A)  # FrameTransform: translation (4), rotation (5)
 _NO_BYTES = np.zeros(0, dtype=np.uint8)
-#: the most bytes one tick row's messages take, besides the state message
-_ROW_POSE_BYTES = 4 * (2 + 14 + 32 + 67)
 
 
 # --------------------------------------------------------------------------------------------
@@ -422,7 +409,6 @@ _POSE_MID = _WORLD2 + b"\x1a\x43"  # PoseInFrame: frame_id "world", then the 67-
 _DEG = 57.29577951308232
 _D = struct.Struct("<d")
 _perf_counter = time.perf_counter
-_LOG_TIME = operator.itemgetter(2)
 _PACKD: dict[int, struct.Struct] = {}
 
 
@@ -485,15 +471,18 @@ _HANDLERS_INSTALLED = False
 
 class _FlatRows:
     """A :class:`FlatSchema` channel whose messages wait as rows of values (column 0 the sim
-    time) and are encoded together at the flush (:func:`ag_uav.record.encode.encode_flat`)."""
+    time), handed to the writer at the flush and encoded there together
+    (:func:`ag_uav.record.encode.encode_flat`)."""
 
-    __slots__ = ("rows", "tmpl", "slots", "lid", "count")
+    __slots__ = ("rows", "tmpl", "slots", "lid", "count", "fid", "it")
 
     def __init__(self, schema: FlatSchema, lid: int):
         self.rows = _Rows(schema.n_values, cap=16)
         self.tmpl, self.slots = _template(schema.prefixes)
-        self.lid = lid  # the channel's index in its RunLog's log functions
+        self.lid = lid  # the channel's index; < 0: each row's, in its last column
         self.count = 0
+        self.fid = -1  # the writer's index of this block format
+        self.it = -1  # >= 0: the error columns are derived from the position at it
 
     def put(self, values: Any) -> None:
         """One message's values (the schema's order)."""
@@ -501,44 +490,16 @@ class _FlatRows:
         self.rows.commit()
         self.count += 1
 
-    def encode(self, pending: list[tuple[int, bytes, int]]) -> None:
-        """The waiting rows -> ``(channel index, message, log_time)`` appended to
-        ``pending``."""
-        from .encode import encode_flat
-
-        n = self.rows.n
-        if not n:
-            return
-        r = self.rows.take()
-        self._derive(r)
-        size = len(self.tmpl)
-        out = np.empty(n * size, dtype=np.uint8)
-        encode_flat(r, self.tmpl, self.slots, out, np.empty(n + 1, dtype=np.int64))
-        buf = out.tobytes()
-        pending.extend(zip(self._lids(r), [buf[j:j + size] for j in range(0, n * size, size)],
-                           _ns_list(r[:, 0]), strict=False))
-
-    def _derive(self, r: np.ndarray) -> None:
-        """Columns computed per block before encoding (none here)."""
-
-    def _lids(self, r: np.ndarray) -> Iterable[int]:
-        """The channel index of each row (here the channel's own)."""
-        return itertools.repeat(self.lid, len(r))
-
-
-def _est_err(r: np.ndarray, it: int) -> None:
-    """An estimator row block's tail: position (``it``…), the truth (``it + 3``…) -> ``err`` =
-    position − truth in place of the truth, and its horizontal norm at ``it + 6``."""
-    d = r[:, it + 3:it + 6]
-    np.subtract(r[:, it:it + 3], d, out=d)
-    r[:, it + 6] = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+    def take(self) -> np.ndarray | None:
+        """The rows since the last flush, or None."""
+        return self.rows.take() if self.rows.n else None
 
 
 class _EstChan(_FlatRows):
     """One ``/estimator/<name>`` channel: its clock and rows; a row is t, x[n], p_diag[n],
-    innovation[m], then the tail (position, error, extras)."""
+    innovation[m], then the tail (position, truth -> error, extras)."""
 
-    __slots__ = ("topic", "n", "m", "keys", "next_t", "ix", "ip", "ii", "it")
+    __slots__ = ("topic", "n", "m", "keys", "next_t", "ix", "ip", "ii")
 
     def __init__(self, schema: FlatSchema, lid: int, topic: str, n: int, m: int,
                  keys: tuple[str, ...]):
@@ -547,30 +508,49 @@ class _EstChan(_FlatRows):
         self.next_t = -_INF
         self.ix, self.ip, self.ii, self.it = 1, 1 + n, 1 + 2 * n, 1 + 2 * n + m
 
-    def _derive(self, r: np.ndarray) -> None:
-        _est_err(r, self.it)
-
 
 class _EstBank(_FlatRows):
     """The ``/estimator/<name>`` channels of one filter bank (one schema, position first, no
-    innovation or extras; :meth:`RunLog.estimator_bank`): their rows share one block whose
-    last column is the row's channel index, encoded with one call per flush."""
+    innovation or extras; :meth:`RunLog.estimator_bank`).  A fix is one compact row (t, the
+    k states, the k covariance diagonals, the truth); at the flush the rows become the
+    channels' message rows (last column: the row's channel index), encoded in one call."""
 
-    __slots__ = ("topics", "lids", "n", "it", "next_t")
+    __slots__ = ("topics", "lids", "n", "m", "k", "next_t", "raw")
 
-    def __init__(self, schema: FlatSchema, lids: list[int], topics: list[str], n: int):
-        self.rows = _Rows(schema.n_values + 1, cap=64)
+    def __init__(self, schema: FlatSchema, lids: list[int], topics: list[str], n: int, m: int):
         self.tmpl, self.slots = _template(schema.prefixes)
-        self.lid, self.count = -1, 0  # count: messages per channel
+        self.lid, self.count, self.fid = -1, 0, -1  # count: messages per channel
         self.lids, self.topics = np.array(lids, dtype=float), topics
-        self.n, self.it = n, 1 + 2 * n
+        self.n, self.m, self.k, self.it = n, m, len(lids), 1 + 2 * n
         self.next_t = -_INF
+        self.raw = _Rows(1 + self.k * (n + m) + 3, cap=16)
 
-    def _derive(self, r: np.ndarray) -> None:
-        _est_err(r, self.it)
+    def put_fix(self, t: float, x: np.ndarray, p_diag: np.ndarray, p_true: Any) -> None:
+        row = self.raw.open_row()
+        row[0] = t
+        a = 1 + self.k * self.n
+        row[1:a] = x.ravel()
+        row[a:-3] = p_diag.ravel()
+        row[-3:] = p_true
+        self.raw.commit()
+        self.count += 1
 
-    def _lids(self, r: np.ndarray) -> Iterable[int]:
-        return r[:, -1].astype(np.int64).tolist()
+    def take(self) -> np.ndarray | None:
+        """The fixes since the last flush as message rows (k per fix), or None."""
+        if not self.raw.n:
+            return None
+        r = self.raw.take()
+        f, k, n, m, it = len(r), self.k, self.n, self.m, self.it
+        a = 1 + k * n
+        x = r[:, 1:a].reshape(f, k, n)
+        out = np.full((f, k, it + 8), _NAN)
+        out[:, :, 0] = r[:, :1]
+        out[:, :, 1:1 + n] = x
+        out[:, :, 1 + n:1 + n + m] = r[:, a:a + k * m].reshape(f, k, m)
+        out[:, :, it:it + 3] = x[:, :, :3]
+        out[:, :, it + 3:it + 6] = r[:, None, -3:]
+        out[:, :, it + 7] = self.lids
+        return out.reshape(f * k, it + 8)
 
 
 _WARMED = False
@@ -602,13 +582,6 @@ def _warm_encoders() -> None:
         print(f"compiling the log's encoders: first run only, ~{took:.0f} s (cached for later "
               "runs)", file=sys.stderr, flush=True)
     _WARMED = True
-
-
-def _os_error(e: OSError, path: Path) -> OSError:
-    """The SDK's OSError (errno only in its text, "... (os error 28)") with errno and path."""
-    m = re.search(r"os error (\d+)", str(e))
-    code = e.errno if e.errno is not None else (int(m.group(1)) if m else errno.EIO)
-    return OSError(code, os.strerror(code), str(path))
 
 
 def _close_all(partial: bool = False) -> None:
@@ -684,11 +657,17 @@ class RunLog:
     :param metadata: run metadata (seed, scenario, ...) -> MCAP metadata record ``run``.
     :param config_toml: the resolved config -> attachment ``config.toml``.
     :param flush_wall_s: finish the chunk and flush to the OS at least this often (wall time).
-    :param flush_sim_s: ... and at least this often in sim time (bounds SIGKILL loss).
+    :param flush_sim_s: ... and hand the rows to the writer at least this often in sim time
+        (at the first logged tick after it: a SIGKILL loses at most this plus one tick period of
+        the log).  Default 0.3 s with the writer process (killed with it, it may also lose the
+        one hand-over it had not written yet), else 0.9 s.
     :param layout: write ``layout.json`` beside the log.
     :param chunk_size: the writer's chunk size in bytes (chunks end sooner, at each flush).
     :param compression: chunk compression: ``"lz4"`` (default), a
         ``foxglove.mcap.MCAPCompression`` member, or ``None`` for none.
+    :param writer: ``"process"`` (default): the encoding and the SDK's writer run in a writer
+        process forked now (:class:`ag_uav.record.sink.ProcessSink`; in this process where
+        ``os.fork`` is missing); ``"inline"``: in this process, at each flush.
     """
 
     def __init__(
@@ -700,10 +679,11 @@ class RunLog:
         metadata: dict[str, Any] | None = None,
         config_toml: str = "",
         flush_wall_s: float = 1.0,
-        flush_sim_s: float = 0.9,
+        flush_sim_s: float | None = None,
         layout: bool = True,
         chunk_size: int = 1 << 20,
         compression: Any = "lz4",
+        writer: str = "process",
     ):
         self.path = Path(path)
         self._write_failed = False  # the writer failed once (disk full): close() quietly
@@ -739,13 +719,11 @@ class RunLog:
         self._n_tf = self._n_pose = self._n_pose_est = self._n_state = self._n_gps = 0
         self._est: dict[str, _EstChan] = {}
         self._banks: dict[tuple[str, ...], _EstBank] = {}
-        # encoded messages (channel index in _logs, bytes, log_time) not yet handed to the
-        # writer: they go in one burst at each flush (and before any other write), which keeps
-        # the writer's work out of the control loop's way; a SIGKILL loses them with the
-        # unfinished chunk.  Only ints and bytes in them: the garbage collector drops such
-        # tuples from its lists at its first pass, so they never reach the old generation
+        # encoded messages (channel index, bytes, log_time) not yet handed to the writer (the
+        # dose maps): they go with the rows at the next flush
         self._pending: list[tuple[int, bytes, int]] = []
-        self._logs: list[Any] = []
+        self._ops: list[tuple[Any, ...]] = []  # declarations for the writer's next hand-over
+        self._n_chan = 0
         self._flat_rows: list[_FlatRows] = []  # estimator and spray channels, encoded at flush
         self._ch_spray: _FlatRows | None = None
         self._ch_dose: Any = None
@@ -754,61 +732,35 @@ class RunLog:
             return
 
         import foxglove
-        from foxglove import channels as fc
-        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 
-        self._fg = foxglove
+        from .sink import open_sink
+
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._ctx = foxglove.Context()
-        try:
-            self._writer = foxglove.open_mcap(
-                str(self.path),
-                allow_overwrite=True,
-                context=self._ctx,
-                writer_options=MCAPWriteOptions(
-                    compression=(MCAPCompression.Lz4 if compression == "lz4" else compression),
-                    chunk_size=chunk_size,
-                    compression_threads=0,
-                    profile="",
-                ),
-            )
-        except OSError as e:  # the SDK's: "Read-only file system (os error 30)", no file name
-            raise _os_error(e, self.path) from None
-        ctx = self._ctx
+        _warm_encoders()  # before a writer process is forked: it inherits them
+        self._sink = open_sink(str(self.path), compression, chunk_size, writer)
+        if flush_sim_s is None:
+            flush_sim_s = 0.3 if self._sink.process else 0.9
         en = {g: self._period[g] < _INF for g in GROUPS}
         M = foxglove.messages
-        pose_schema = M.PoseInFrame.get_schema()
-
-        def raw(topic: str, schema: Any) -> Any:
-            return foxglove.Channel(topic, message_encoding="protobuf", schema=schema,
-                                    context=ctx)
-
-        # the hot channels log through the SDK's BaseChannel.log (bytes, log_time) directly:
-        # the Python Channel.log wrapper only re-checks the encoding and the type
-        self._ch_tf = raw("/tf", M.FrameTransforms.get_schema()) if en["tf"] else None
-        self._log_tf = self._ch_tf.base.log if en["tf"] else None
+        self._M = M
+        pose = M.PoseInFrame
+        self._tf_id = self._chan("/tf", M.FrameTransforms) if en["tf"] else -1
         if en["pose"]:
-            self._log_pose = raw("/drone/pose", pose_schema).base.log
-            self._log_pose_est = raw("/drone/pose_est", pose_schema).base.log
-            self._log_pose_ref = raw("/drone/pose_ref", pose_schema).base.log
-        self._log_gps = raw("/gps", pose_schema).base.log if en["gps"] else None
-        self._gps_id = self._lid(self._log_gps)
+            self._pose_ids = [self._chan(tp, pose) for tp in
+                              ("/drone/pose", "/drone/pose_est", "/drone/pose_ref")]
+        self._gps_id = self._chan("/gps", pose) if en["gps"] else -1
+        self._ops.append(("posefmt", _POSE_TMPL, _POSE_SLOTS,
+                          np.frombuffer(_POSE_MID, dtype=np.uint8).copy(),
+                          np.frombuffer(_WORLD2 + _str_field(3, "base_link"),
+                                        dtype=np.uint8).copy()))
         self._gps_rows = _Rows(4, cap=16)  # (t, x, y, z) of the fixes since the last flush
-        self._child = {"base_link": _str_field(3, "base_link")}
-        self._tf_mid = _WORLD2 + self._child["base_link"]
-        self._tf_mid_a = np.frombuffer(self._tf_mid, dtype=np.uint8).copy()
-        self._pose_mid_a = np.frombuffer(_POSE_MID, dtype=np.uint8).copy()
-        self._log_state = None  # created at the first tick (schema depends on ctrl keys)
         self._state_schema: FlatSchema | None = None
         self._ctrl_keys: tuple[str, ...] = ()
         self._n_motors = 0
-        self._ctrl_cols = np.zeros(0, dtype=np.intp)
         self._rows = _Rows(TICK_HEAD)  # the tick rows to encode (re-made by the state schema)
-        self._enc_out = _NO_BYTES
-        self._enc_idx = np.zeros((3, 1), dtype=np.int64)
         self._last_row: np.ndarray | None = None
         self._cam: dict[str, Any] = {}
-        self._scene_ch: dict[str, Any] = {}
+        self._scene_ch: dict[str, int] = {}
         self._next_est: dict[str, float] = {}  # per-camera clocks
         pe = self._period
         self._p_tf, self._p_pose, self._p_state = (pe["tf"] - 1e-9, pe["pose"] - 1e-9,
@@ -821,24 +773,21 @@ class RunLog:
         self._flush_sim_s = float(flush_sim_s)
         self._last_flush_wall = time.perf_counter()
         self._last_flush_sim = -_INF
-        self._fc = fc
-        self._M = foxglove.messages
 
         md = {k: _meta_str(v) for k, v in (metadata or {}).items()}
         md.setdefault("channels", channels if isinstance(channels, str) else ",".join(channels))
         md.setdefault("rates_hz", json.dumps(self.rates))
         md.setdefault("created_utc", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
-        self._writer.write_metadata("run", md)
-        self._writer.write_metadata("versions", _versions())
+        self._ops += [("meta", "run", md), ("meta", "versions", _versions())]
         if config_toml:
-            self._writer.attach(log_time=0, create_time=time.time_ns(), name="config.toml",
-                                media_type="application/toml",
-                                data=config_toml.encode("utf-8"))
+            self._ops.append(("attach", {"log_time": 0, "create_time": time.time_ns(),
+                                         "name": "config.toml", "media_type": "application/toml",
+                                         "data": config_toml.encode("utf-8")}))
+        self._send([])
         self._layout = layout
         self._write_layout()
         _OPEN.add(self)
         _install_handlers()
-        _warm_encoders()
 
     # ---------------------------------------------------------------- context manager
     def __enter__(self) -> RunLog:
@@ -861,15 +810,10 @@ class RunLog:
     def counts(self) -> dict[str, int]:
         """Messages written so far, per topic."""
         out = dict(self._counts)
-        r = self._rows  # the tick rows not encoded yet count too (they will be written)
-        m = r.a[:r.n + r.open, 1].astype(np.int64)
-        n_pose = self._n_pose + int(np.count_nonzero(m & 2))
-        n_est = self._n_pose_est + int(np.count_nonzero((m & 10) == 10))
-        for topic, n in (("/tf", self._n_tf + int(np.count_nonzero(m & 1))),
-                         ("/drone/pose", n_pose), ("/drone/pose_ref", n_pose),
-                         ("/drone/pose_est", n_est),
-                         ("/drone/state", self._n_state + int(np.count_nonzero(m & 4))),
-                         ("/gps", self._n_gps)):
+        n_pose = self._n_pose  # the tick rows count when they are handed out
+        for topic, n in (("/tf", self._n_tf), ("/drone/pose", n_pose),
+                         ("/drone/pose_ref", n_pose), ("/drone/pose_est", self._n_pose_est),
+                         ("/drone/state", self._n_state), ("/gps", self._n_gps)):
             if n:
                 out[topic] = out.get(topic, 0) + n
         for ec in self._est.values():
@@ -882,43 +826,66 @@ class RunLog:
             out["/drone/spray"] = self._ch_spray.count
         return out
 
-    def _drain(self, partial: bool = False) -> None:
-        """Encode the tick rows, then hand the pending messages to the writer.  ``partial``: a
-        row still being filled (a signal arrived mid-tick) is dropped, not written half-done."""
+    @property
+    def writer_cpu_s(self) -> float:
+        """CPU seconds of the writer process once the log is closed (0 with the inline writer,
+        whose work is this process's own)."""
+        sink = getattr(self, "_sink", None)
+        return sink.cpu_s if sink is not None else 0.0
+
+    def _send(self, ops: list[tuple[Any, ...]]) -> None:
+        """Hand the declarations made since the last hand-over, then ``ops``, to the writer."""
+        if self._ops:
+            ops = self._ops + ops
+            self._ops = []
+        self._sink.send(ops)
+
+    def _drain(self, partial: bool = False, flush: bool = False) -> None:
+        """Hand the rows and messages waiting since the last hand-over to the writer (it
+        encodes them and writes them merged by log time; ``flush``: then finishes the chunk and
+        writes it to the OS).  ``partial``: a row still being filled (a signal arrived
+        mid-tick) is dropped, not written half-done."""
         rows = self._rows
         if rows.open and not partial:
             rows.commit()
+        elif rows.open:  # dropped: uncounted
+            m = int(rows.a[rows.n, 1])
+            self._n_tf -= m & 1
+            self._n_pose -= (m & 2) >> 1
+            self._n_pose_est -= (m & 10) == 10
+            self._n_state -= (m & 4) >> 2
         rows.open = False
-        pend = self._pending
+        ops: list[tuple[Any, ...]] = []
+        if self._pending:
+            ops.append(("msgs", self._pending))
+            self._pending = []  # swapped first: a signal handler's close() sends only the rest
         for fr in self._flat_rows:
-            fr.encode(pend)
+            r = fr.take()
+            if r is not None:
+                ops.append(("block", fr.fid, r))
         if self._gps_rows.n:
-            self._gps_block(pend)
+            ops.append(("gps", self._gps_id, self._gps_rows.take()))
         if rows.n:
-            self._encode_ticks(rows.take())
-        if pend:  # the topics' messages, merged by log time
-            pend.sort(key=_LOG_TIME)
-        if pend:
-            self._pending = []  # swapped first: a signal handler's close() drains only the rest
-            logs = self._logs
-            for i, msg, tn in pend:
-                logs[i](msg, tn)
+            ops.append(("ticks", rows.take()))
+        ops.append(("emit",))
+        if flush:
+            ops.append(("flush",))
+        self._send(ops)
 
     def _maybe_flush(self, t: float) -> None:
         now = _perf_counter()
         if now - self._last_flush_wall >= self._flush_wall_s or (
             t - self._last_flush_sim >= self._flush_sim_s
         ):
-            self._drain()
-            self._writer.flush()
+            self._drain(flush=True)
             self._last_flush_wall = now
             self._last_flush_sim = t
 
     def flush(self) -> None:
-        """Finish the current chunk and hand everything to the OS now."""
+        """Finish the current chunk and hand everything to the OS now (with the writer
+        process: hand it to the writer, which does so)."""
         if not self.closed:
-            self._drain()
-            self._writer.flush()
+            self._drain(flush=True)
             self._last_flush_wall = time.perf_counter()
 
     def want(self, group: str, t: float) -> bool:
@@ -953,11 +920,18 @@ class RunLog:
         """True when a camera frame at sim time ``t`` would be logged: render only then."""
         return self.want("camera", t)
 
-    def _lid(self, log: Any) -> int:
-        """A channel's log function -> its index in :attr:`_logs` (what pending messages
-        carry)."""
-        self._logs.append(log)
-        return len(self._logs) - 1
+    def _chan(self, topic: str, schema: Any, data: bytes | None = None) -> int:
+        """A new channel on ``topic`` -> its index, which the writer's operations name.
+        ``schema``: a foxglove message class (its well-known schema), or the schema's name
+        with ``data`` (a protobuf FileDescriptorSet)."""
+        if data is None:
+            sc = schema.get_schema()
+            name, enc, data = sc.name, sc.encoding, bytes(sc.data)
+        else:
+            name, enc = schema, "protobuf"
+        self._ops.append(("chan", topic, name, enc, data))
+        self._n_chan += 1
+        return self._n_chan - 1
 
     def _ts(self, t_ns: int) -> Any:
         return self._M.Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)
@@ -1000,21 +974,15 @@ class RunLog:
         self._ctrl_cols = np.array([base + pos[k] for k in self._ctrl_keys], dtype=np.intp)
         self._rows = _Rows(base + (len(given) if extra is None else int(extra)))
         on = self._period["state"] < _INF
-        if on:
-            self._log_state = self._fg.Channel(
-                "/drone/state", message_encoding="protobuf",
-                schema=self._fg.Schema(name="ag_uav.DroneState", encoding="protobuf",
-                                       data=self._state_schema.schema_data),
-                context=self._ctx,
-            ).base.log
+        state_id = self._chan("/drone/state", "ag_uav.DroneState", schema.schema_data) if on else -1
         st = _template(schema.prefixes) if on else (_NO_BYTES, np.zeros(0, dtype=np.int64))
-        self._enc_tmpl = (st, _POSE_TMPL if self._period["pose"] < _INF else _NO_BYTES,
-                          _TF_TMPL if self._log_tf is not None else _NO_BYTES)
-        self._kind_logs = [self._log_tf] + ([self._log_pose, self._log_pose_ref,
-                                              self._log_pose_est] if self._period["pose"] < _INF
-                                             else [None] * 3) + [self._log_state]
-        self._kind_ids = [self._lid(f) for f in self._kind_logs]
-        self._row_bytes = _ROW_POSE_BYTES + len(st[0])
+        pose_on = self._period["pose"] < _INF
+        pose_ids = self._pose_ids if pose_on else [-1] * 3
+        # kinds (encode.TF, POSE, REF, EST, STATE) -> channels
+        kind_ids = [self._tf_id, pose_ids[0], pose_ids[2], pose_ids[1], state_id]
+        self._ops.append(("tickfmt", n_motors, self._ctrl_cols, st[0], st[1],
+                          _POSE_TMPL if pose_on else _NO_BYTES,
+                          _TF_TMPL if self._tf_id >= 0 else _NO_BYTES, kind_ids))
 
     def bind_ticks(self, n_motors: int, ctrl_keys: Sequence[str], ctrl_src: Sequence[int],
                    extra: int) -> None:
@@ -1043,12 +1011,17 @@ class RunLog:
         if t >= nx["tf"]:
             nx["tf"] = t + self._p_tf
             mask = 1
+            self._n_tf += 1
         if t >= nx["pose"]:
             nx["pose"] = t + self._p_pose
             mask |= 2
+            self._n_pose += 1
+            if est:
+                self._n_pose_est += 1
         if t >= nx["state"]:
             nx["state"] = t + self._p_state
             mask |= 4
+            self._n_state += 1
         nt = nx["tf"]
         if nx["pose"] < nt:
             nt = nx["pose"]
@@ -1106,51 +1079,6 @@ class RunLog:
         row[TICK_HEAD + nm:] = [g(k, _NAN) for k in self._ctrl_keys]
         self._rows.commit()
 
-    def _encode_ticks(self, r: np.ndarray) -> None:
-        """The committed tick rows ``r`` -> ``/tf``, ``/drone/pose``, ``pose_ref``,
-        ``pose_est`` and ``/drone/state`` messages (:func:`ag_uav.record.encode.encode_ticks`),
-        appended to the pending list."""
-        from .encode import encode_ticks
-
-        n = len(r)
-        if len(self._enc_out) < n * self._row_bytes:
-            self._enc_out = np.empty(2 * n * self._row_bytes, dtype=np.uint8)
-            self._enc_idx = np.empty((3, 8 * n + 1), dtype=np.int64)
-        out, (starts, kinds, tns) = self._enc_out, self._enc_idx
-        st, pose, tf = self._enc_tmpl
-        m = encode_ticks(r, self._n_motors, self._ctrl_cols, st[0], st[1], pose, _POSE_SLOTS,
-                         tf, self._tf_mid_a, self._pose_mid_a, out, starts, kinds, tns)
-        s = starts[:m + 1].tolist()
-        buf = out[:s[-1]].tobytes()
-        if self._pending:  # merged with the other topics' messages by the caller
-            ids = self._kind_ids
-            self._pending.extend(zip([ids[k] for k in kinds[:m].tolist()],
-                                     [buf[a:b] for a, b in zip(s, s[1:], strict=False)],
-                                     tns[:m].tolist(), strict=True))
-        else:  # nothing else pending: straight to the writer
-            logs = self._kind_logs
-            for j, k, tn in zip(range(m), kinds[:m].tolist(), tns[:m].tolist(), strict=True):
-                logs[k](buf[s[j]:s[j + 1]], tn)
-        c = np.bincount(kinds[:m], minlength=5).tolist()
-        self._n_tf += c[0]
-        self._n_pose += c[1]
-        self._n_pose_est += c[3]
-        self._n_state += c[4]
-
-    def _gps_block(self, pending: list[tuple[int, bytes, int]]) -> None:
-        """The fixes since the last flush -> ``/gps`` messages appended to ``pending``."""
-        from .encode import encode_poses
-
-        r = self._gps_rows.take()
-        n = len(r)
-        out = np.empty(n * (len(_POSE_MID) + 80), dtype=np.uint8)
-        starts, tns = np.empty(n + 1, dtype=np.int64), np.empty(n, dtype=np.int64)
-        end = encode_poses(r, _POSE_TMPL, _POSE_SLOTS, self._pose_mid_a, out, starts, tns)
-        buf, s = out[:end].tobytes(), starts.tolist()
-        pending.extend(zip(itertools.repeat(self._gps_id, n),
-                           [buf[a:b] for a, b in zip(s, s[1:], strict=False)], tns.tolist(),
-                           strict=False))
-
     SPRAY_FIELDS = ("t", "tank_l", "mass_kg", "flow_lps", "nozzles", "power_w", "energy_wh",
                     "battery_frac", "sortie", "ground")
 
@@ -1171,12 +1099,8 @@ class RunLog:
         self._next_spray = t + self._p_state
         if self._ch_spray is None:
             schema = FlatSchema("ag_uav.SprayState", [(k, 0) for k in self.SPRAY_FIELDS])
-            self._ch_spray = _FlatRows(schema, self._lid(self._fg.Channel(
-                "/drone/spray", message_encoding="protobuf",
-                schema=self._fg.Schema(name="ag_uav.SprayState", encoding="protobuf",
-                                       data=schema.schema_data),
-                context=self._ctx).base.log))
-            self._flat_rows.append(self._ch_spray)
+            self._ch_spray = self._flat(_FlatRows(schema, self._chan(
+                "/drone/spray", "ag_uav.SprayState", schema.schema_data)))
             self._write_layout()
         row = self._ch_spray.rows.open_row()
         row[0] = t
@@ -1285,34 +1209,19 @@ class RunLog:
         if bank is None:
             if self.closed or self._period["estimator"] == _INF:
                 return
-            bank = self._banks[key] = self._make_bank(key, x.shape[1])
+            bank = self._banks[key] = self._make_bank(key, x.shape[1], p_diag.shape[1])
         if t < bank.next_t:  # inf once closed
             return
         bank.next_t = t + self._p_est
-        k, n, m, it = len(key), bank.n, p_diag.shape[1], bank.it
-        blk = bank.rows.open_block(k)
-        blk[:, 0] = t
-        blk[:, 1:1 + n] = x
-        blk[:, 1 + n:1 + n + m] = p_diag
-        blk[:, 1 + n + m:it] = _NAN
-        blk[:, it:it + 3] = x[:, :3]
-        blk[:, it + 3:it + 6] = p_true
-        blk[:, it + 7] = bank.lids
-        bank.rows.commit(k)
-        bank.count += 1
+        bank.put_fix(t, x, p_diag, p_true)
 
-    def _make_bank(self, names: tuple[str, ...], n: int) -> _EstBank:
+    def _make_bank(self, names: tuple[str, ...], n: int, m: int) -> _EstBank:
         schema = FlatSchema("ag_uav.EstimatorState", [("t", 0), ("x", n), ("p_diag", n)]
                             + [(f"pos.{a}", 0) for a in "xyz"]
                             + [(f"err.{a}", 0) for a in ("x", "y", "z", "horiz")])
         topics = [f"/estimator/{sanitize_name(nm)}" for nm in names]
-        lids = [self._lid(self._fg.Channel(
-            tp, message_encoding="protobuf", context=self._ctx,
-            schema=self._fg.Schema(name="ag_uav.EstimatorState", encoding="protobuf",
-                                   data=schema.schema_data)).base.log) for tp in topics]
-        bank = _EstBank(schema, lids, topics, n)
-        self._flat_rows.append(bank)
-        return bank
+        lids = [self._chan(tp, "ag_uav.EstimatorState", schema.schema_data) for tp in topics]
+        return self._flat(_EstBank(schema, lids, topics, n, m))
 
     def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> _EstChan:
         m = len(_flat(innovation)) if innovation is not None else 0
@@ -1330,27 +1239,27 @@ class RunLog:
             schema = FlatSchema("ag_uav.EstimatorState", [f for f in fields
                                                            if not f[0].startswith("extra.")])
         topic = f"/estimator/{sanitize_name(name)}"
-        ch = self._fg.Channel(
-            topic, message_encoding="protobuf",
-            schema=self._fg.Schema(name="ag_uav.EstimatorState", encoding="protobuf",
-                                   data=schema.schema_data),
-            context=self._ctx,
-        )
-        ec = _EstChan(schema, self._lid(ch.base.log), topic, n, m, keys)
-        self._flat_rows.append(ec)
-        return ec
+        lid = self._chan(topic, "ag_uav.EstimatorState", schema.schema_data)
+        return self._flat(_EstChan(schema, lid, topic, n, m, keys))
+
+    def _flat(self, fr: _FlatRows) -> Any:
+        """Register a flat-schema channel's row block with the writer (its encoding)."""
+        fr.fid = len(self._flat_rows)
+        self._ops.append(("flat", fr.fid, fr.tmpl, fr.slots, fr.lid, fr.it))
+        self._flat_rows.append(fr)
+        return fr
 
     # ---------------------------------------------------------------- scene
     def _scene_entities(self, t: float, entities: list[Any], topic: str) -> None:
         if self.closed or self._period["scene"] == _INF:
             return
-        ch = self._scene_ch.get(topic)
-        if ch is None:
-            ch = self._scene_ch[topic] = self._fc.SceneUpdateChannel(topic, context=self._ctx)
+        lid = self._scene_ch.get(topic)
+        if lid is None:
+            lid = self._scene_ch[topic] = self._chan(topic, self._M.SceneUpdate)
         self._drain()
-        ch.log(self._M.SceneUpdate(entities=entities), log_time=ns(t))
+        self._send([("log", lid, self._M.SceneUpdate(entities=entities).encode(), ns(t)),
+                    ("flush",)])
         self._count(topic)
-        self._writer.flush()
 
     def _triangles(self, polys: list[Any], z: float, rgba: tuple[float, ...]) -> list[Any]:
         """Fill shapely polygons with a TriangleListPrimitive (constrained Delaunay)."""
@@ -1479,9 +1388,7 @@ class RunLog:
             return
         self._next_dose = t + self._dose_period - 1e-9
         if self._ch_dose is None:
-            self._ch_dose = self._lid(self._fg.Channel(
-                "/dose", message_encoding="protobuf", schema=self._M.Grid.get_schema(),
-                context=self._ctx).base.log)
+            self._ch_dose = self._chan("/dose", self._M.Grid)
         tn = ns(t)
         self._pending.append((self._ch_dose, enc_grid(_ts_pb(tn), float(x0), float(y0), 0.02,
                                                       float(cell), l_per_ha), tn))
@@ -1511,30 +1418,29 @@ class RunLog:
         ch = self._cam.get(camera)
         if ch is None:
             base = f"/camera/{sanitize_name(camera)}"
-            ch = self._cam[camera] = (
-                self._fc.CompressedImageChannel(base, context=self._ctx),
-                self._fc.CameraCalibrationChannel(base + "/calibration", context=self._ctx),
-                base,
-            )
+            ch = self._cam[camera] = (self._chan(base, M.CompressedImage),
+                                      self._chan(base + "/calibration", M.CameraCalibration),
+                                      base)
         img, cal, base = ch
         self._drain()
         fy = 0.5 * height / math.tan(math.radians(fovy_deg) / 2.0)
         fx = fy
         cx, cy = 0.5 * width, 0.5 * height
-        img.log(M.CompressedImage(timestamp=ts, frame_id=frame_id, data=bytes(jpeg),
-                                  format="jpeg"), log_time=tn)
-        cal.log(M.CameraCalibration(
-            timestamp=ts, frame_id=frame_id, width=int(width), height=int(height),
-            distortion_model="plumb_bob", D=[0.0] * 5,
-            K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
-            R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-            P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]), log_time=tn)
+        ops = [("log", img, M.CompressedImage(timestamp=ts, frame_id=frame_id, data=bytes(jpeg),
+                                               format="jpeg").encode(), tn),
+               ("log", cal, M.CameraCalibration(
+                   timestamp=ts, frame_id=frame_id, width=int(width), height=int(height),
+                   distortion_model="plumb_bob", D=[0.0] * 5,
+                   K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+                   R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                   P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]).encode(), tn)]
         self._count(base)
         self._count(base + "/calibration")
-        if pose is not None and self._ch_tf is not None:
-            self._ch_tf.log(enc_transform(_ts_pb(tn), _str_field(3, frame_id), pose[0], pose[1]),
-                            log_time=tn)
+        if pose is not None and self._tf_id >= 0:
+            ops.append(("log", self._tf_id, enc_transform(_ts_pb(tn), _str_field(3, frame_id),
+                                                          pose[0], pose[1]), tn))
             self._count("/tf")
+        self._send(ops)
         self._maybe_flush(t)
 
     def _due_cam(self, camera: str, t: float) -> bool:
@@ -1557,10 +1463,10 @@ class RunLog:
         if self.closed:
             return
         self._drain()
-        self._writer.write_metadata("summary", {k: _meta_str(v) for k, v in summary.items()})
-        self._writer.attach(log_time=ns(self._t_last), create_time=time.time_ns(),
-                            name="summary.json", media_type="application/json",
-                            data=json.dumps(summary, default=str, indent=1).encode())
+        self._send([("meta", "summary", {k: _meta_str(v) for k, v in summary.items()}),
+                    ("attach", {"log_time": ns(self._t_last), "create_time": time.time_ns(),
+                                "name": "summary.json", "media_type": "application/json",
+                                "data": json.dumps(summary, default=str, indent=1).encode()})])
 
     def _write_layout(self, final: bool = False) -> None:
         """``layout.json`` beside the log, for the channels seen so far (before any frame: the
@@ -1598,8 +1504,10 @@ class RunLog:
             bank.next_t = _INF
         self._next_spray = _INF
         try:
-            self._drain(partial)
-            self._writer.close()
+            try:
+                self._drain(partial)
+            finally:
+                self._sink.close()
         except RuntimeError as e:  # the SDK's writer errors: an OSError naming the file
             err = self.write_error(e)
             if err is None:

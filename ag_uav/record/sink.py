@@ -1,0 +1,549 @@
+"""The writing half of a run log: the foxglove-sdk MCAP writer, its channels and the block
+encoders, fed a list of operations per flush by :class:`ag_uav.record.runlog.RunLog`.
+
+:class:`Backend` executes the operations.  It runs either in the flying process
+(:class:`InlineSink`) or in a writer process forked when the log opens (:class:`ProcessSink`,
+the default where ``os.fork`` exists), so that a flush's encoding, compression and write to
+the OS run on another core while the loop flies on: the loop only fills rows and, at each
+flush, hands them over in one pickled write to a pipe.  PX4's logger (a writer thread fed from
+a ring buffer) and ROS's bag recorder (its own process) split the work the same way; a
+Python thread cannot here, because the SDK's calls hold the GIL.
+
+The operations (tuples, executed in order):
+
+``("chan", topic, schema_name, schema_encoding, schema_data)``
+    a channel; its index (from 0, in order) is the ``lid`` the other operations name.
+``("flat", fid, tmpl, slots, lid, it)``
+    a flat-schema block format (:func:`ag_uav.record.encode.encode_flat`): ``lid`` < 0 takes
+    each row's channel from its last column; ``it`` >= 0: the error columns are derived from
+    the position at ``it`` and the truth after it.
+``("posefmt", tmpl, slots, head, tf_head)``
+    the pose encoding (``/gps`` and the ticks' poses; ``head``: the bytes between the stamp
+    and the pose, ``tf_head`` a transform's).
+``("tickfmt", n_motors, ctrl_cols, st_tmpl, st_slots, pose_tmpl, tf_tmpl, kind_lids)``
+    the tick rows' encoding (:func:`ag_uav.record.encode.encode_ticks`).
+``("msgs", [(lid, bytes, tn), ...])``, ``("block", fid, rows)``, ``("gps", lid, rows)``,
+``("ticks", rows)``
+    messages for the next ``emit`` (all merged by log time).
+``("emit",)``, ``("log", lid, bytes, tn)``, ``("flush",)``, ``("meta", name, dict)``,
+``("attach", kwargs)``, ``("close",)``.
+
+Crash safety with the writer process: a SIGKILL of the flying process loses only the rows it
+had not handed over (less than ``flush_sim_s`` of flight); the writer reads what was sent to
+the end of its pipe, finishes the file (summary, indexes) and exits.  A SIGKILL of both (a
+process group) loses also what the writer had not written out, at most one more hand-over.
+"""
+
+from __future__ import annotations
+
+import errno
+import itertools
+import mmap
+import operator
+import os
+import pickle
+import re
+import select
+import signal
+import struct
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Backend", "InlineSink", "ProcessSink", "open_sink"]
+
+_LOG_TIME = operator.itemgetter(2)
+_LEN = struct.Struct("<Q")
+_F8 = np.dtype(np.float64)
+_OPS = "\0ops"  # marks a framed list of operations (replies are tuples of strings)
+#: the most bytes one tick row's messages take, besides the state message
+_ROW_POSE_BYTES = 4 * (2 + 14 + 32 + 67)
+#: pipes of the writer processes this process holds open (a forked writer closes the others')
+_LIVE_FDS: set[int] = set()
+
+
+def _ns_list(t: np.ndarray) -> list[int]:
+    """Sim times (s) -> log times (ns, >= 0) as Python ints."""
+    return np.maximum(np.rint(t * 1e9), 0).astype(np.int64).tolist()
+
+
+def _est_err(r: np.ndarray, it: int) -> None:
+    """An estimator row block's tail: position (``it``…), the truth (``it + 3``…) -> ``err`` =
+    position − truth in place of the truth, and its horizontal norm at ``it + 6``."""
+    d = r[:, it + 3:it + 6]
+    np.subtract(r[:, it:it + 3], d, out=d)
+    r[:, it + 6] = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+
+
+def os_error(e: OSError, path: Path) -> OSError:
+    """The SDK's OSError (errno only in its text, "... (os error 28)") with errno and path."""
+    m = re.search(r"os error (\d+)", str(e))
+    code = e.errno if e.errno is not None else (int(m.group(1)) if m else errno.EIO)
+    return OSError(code, os.strerror(code), str(path))
+
+
+class Backend:
+    """The MCAP file: foxglove-sdk's writer (LZ4 chunks), its channels and the encoders."""
+
+    def __init__(self, path: str, compression: Any, chunk_size: int):
+        import foxglove
+        from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+
+        self._fg = foxglove
+        self._ctx = foxglove.Context()
+        try:
+            self._writer = foxglove.open_mcap(
+                path, allow_overwrite=True, context=self._ctx,
+                writer_options=MCAPWriteOptions(
+                    compression=(MCAPCompression.Lz4 if compression == "lz4" else compression),
+                    chunk_size=chunk_size, compression_threads=0, profile=""))
+        except OSError as e:  # the SDK's: "Read-only file system (os error 30)", no file name
+            raise os_error(e, Path(path)) from None
+        self._channels: list[Any] = []
+        self._logs: list[Any] = []
+        self._flats: dict[int, tuple[Any, ...]] = {}
+        self._tick: tuple[Any, ...] = ()
+        self._pend: list[tuple[int, bytes, int]] = []
+        self._out = np.zeros(0, dtype=np.uint8)
+        self._idx = np.zeros((3, 1), dtype=np.int64)
+        self.closed = False
+
+    def run(self, ops: list[tuple[Any, ...]]) -> None:
+        """Execute ``ops`` in order (see the module docstring)."""
+        for op in ops:
+            getattr(self, "_" + op[0])(*op[1:])
+
+    # ------------------------------------------------------------------ declarations
+    def _chan(self, topic: str, name: str, encoding: str, data: bytes) -> None:
+        fg = self._fg
+        ch = fg.Channel(topic, message_encoding="protobuf", context=self._ctx,
+                        schema=fg.Schema(name=name, encoding=encoding, data=data))
+        self._channels.append(ch)
+        self._logs.append(ch.base.log)
+
+    def _flat(self, fid: int, tmpl: np.ndarray, slots: np.ndarray, lid: int, it: int) -> None:
+        self._flats[fid] = (tmpl, slots, lid, it)
+
+    def _posefmt(self, tmpl: np.ndarray, slots: np.ndarray, head: np.ndarray,
+                 tf_head: np.ndarray) -> None:
+        self._pose = (tmpl, slots, head, tf_head)
+
+    def _tickfmt(self, n_motors: int, ctrl_cols: np.ndarray, st_tmpl: np.ndarray,
+                 st_slots: np.ndarray, pose_tmpl: np.ndarray, tf_tmpl: np.ndarray,
+                 kind_lids: list[int]) -> None:
+        _, slots, head, tf_head = self._pose
+        self._tick = (n_motors, ctrl_cols, st_tmpl, st_slots, pose_tmpl, slots, tf_tmpl,
+                      tf_head, head)
+        self._kind_lids = kind_lids
+        self._row_bytes = _ROW_POSE_BYTES + len(st_tmpl)
+
+    # ------------------------------------------------------------------ messages
+    def _msgs(self, msgs: list[tuple[int, bytes, int]]) -> None:
+        self._pend.extend(msgs)
+
+    def _block(self, fid: int, r: np.ndarray) -> None:
+        from .encode import encode_flat
+
+        tmpl, slots, lid, it = self._flats[fid]
+        if it >= 0:
+            _est_err(r, it)
+        n, size = len(r), len(tmpl)
+        out = np.empty(n * size, dtype=np.uint8)
+        encode_flat(r, tmpl, slots, out, np.empty(n + 1, dtype=np.int64))
+        buf = out.tobytes()
+        lids = itertools.repeat(lid, n) if lid >= 0 else r[:, -1].astype(np.int64).tolist()
+        self._pend.extend(zip(lids, [buf[j:j + size] for j in range(0, n * size, size)],
+                              _ns_list(r[:, 0]), strict=False))
+
+    def _gps(self, lid: int, r: np.ndarray) -> None:
+        from .encode import encode_poses
+
+        tmpl, slots, head, _ = self._pose
+        n = len(r)
+        out = np.empty(n * (len(head) + 80), dtype=np.uint8)
+        starts, tns = np.empty(n + 1, dtype=np.int64), np.empty(n, dtype=np.int64)
+        end = encode_poses(r, tmpl, slots, head, out, starts, tns)
+        buf, s = out[:end].tobytes(), starts.tolist()
+        self._pend.extend(zip(itertools.repeat(lid, n),
+                              [buf[a:b] for a, b in zip(s, s[1:], strict=False)], tns.tolist(),
+                              strict=False))
+
+    def _ticks(self, r: np.ndarray) -> None:
+        """Tick rows -> ``/tf``, the poses and ``/drone/state``; straight to the writer when
+        nothing else waits (else merged by the next ``emit``)."""
+        from .encode import encode_ticks
+
+        n = len(r)
+        if len(self._out) < n * self._row_bytes:
+            self._out = np.empty(2 * n * self._row_bytes, dtype=np.uint8)
+            self._idx = np.empty((3, 8 * n + 1), dtype=np.int64)
+        out, (starts, kinds, tns) = self._out, self._idx
+        nm, cc, st, sl, pose, psl, tf, tf_mid, pose_mid = self._tick
+        m = encode_ticks(r, nm, cc, st, sl, pose, psl, tf, tf_mid, pose_mid, out, starts,
+                         kinds, tns)
+        s = starts[:m + 1].tolist()
+        buf = out[:s[-1]].tobytes()
+        ids = self._kind_lids
+        if self._pend:
+            self._pend.extend(zip([ids[k] for k in kinds[:m].tolist()],
+                                  [buf[a:b] for a, b in zip(s, s[1:], strict=False)],
+                                  tns[:m].tolist(), strict=True))
+            return
+        logs = self._logs
+        for j, k, tn in zip(range(m), kinds[:m].tolist(), tns[:m].tolist(), strict=True):
+            logs[ids[k]](buf[s[j]:s[j + 1]], tn)
+
+    def _emit(self) -> None:
+        pend = self._pend
+        if pend:
+            pend.sort(key=_LOG_TIME)
+            self._pend = []
+            logs = self._logs
+            for i, msg, tn in pend:
+                logs[i](msg, tn)
+
+    def _log(self, lid: int, msg: bytes, tn: int) -> None:
+        self._logs[lid](msg, tn)
+
+    # ------------------------------------------------------------------ the file
+    def _flush(self) -> None:
+        self._writer.flush()
+
+    def _meta(self, name: str, md: dict[str, str]) -> None:
+        self._writer.write_metadata(name, md)
+
+    def _attach(self, kw: dict[str, Any]) -> None:
+        self._writer.attach(**kw)
+
+    def _close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self._writer.close()
+
+
+class InlineSink:
+    """The backend in this process: every hand-over is executed before it returns."""
+
+    process = False
+    cpu_s = 0.0  # its CPU time is the flying process's
+
+    def __init__(self, path: str, compression: Any, chunk_size: int):
+        self._back = Backend(path, compression, chunk_size)
+
+    def send(self, ops: list[tuple[Any, ...]]) -> None:
+        self._back.run(ops)
+
+    def close(self) -> None:
+        self._back.run([("close",)])
+
+
+# ---------------------------------------------------------------------------- the process
+def _write_all(fd: int, parts: list[Any]) -> None:
+    """Write every byte of ``parts`` (bytes-like) to ``fd`` (one ``writev`` when it fits)."""
+    views = [memoryview(p).cast("B") for p in parts]
+    while views:
+        n = os.writev(fd, views)
+        while views and n >= len(views[0]):
+            n -= len(views[0])
+            views.pop(0)
+        if n:
+            views[0] = views[0][n:]
+
+
+def _read_exact(fd: int, n: int) -> bytearray | None:
+    """``n`` bytes from ``fd`` (blocking), or None at end of file."""
+    buf = bytearray(n)
+    view, got = memoryview(buf), 0
+    while got < n:
+        k = os.readv(fd, [view[got:]])
+        if not k:
+            return None
+        got += k
+    return buf
+
+
+def _frame(obj: Any) -> list[Any]:
+    """``obj`` (a list of operations, or a reply) as one framed message: its length, the
+    pickle's length, the pickle, then the raw bytes of the operations' row blocks (an
+    operation whose last item is a C-contiguous float64 array goes with the array's shape in
+    its place: no pickling of numpy arrays in the loop)."""
+    raws: list[Any] = []
+    if type(obj) is list:
+        idx = []
+        for j, op in enumerate(obj):
+            a = op[-1]
+            if type(a) is np.ndarray and a.dtype == _F8 and a.flags.c_contiguous:
+                idx.append(j)
+                raws.append(a.data)
+                obj[j] = op[:-1] + (a.shape,)
+        obj = (_OPS, obj, idx)
+    data = pickle.dumps(obj, protocol=5)
+    total = 8 + len(data) + sum(r.nbytes for r in raws)
+    return [_LEN.pack(total), _LEN.pack(len(data)), data, *raws]
+
+
+def _unframe(buf: bytearray) -> Any:
+    """The object of a message framed by :func:`_frame` (its length already read); the row
+    blocks are arrays over ``buf`` (writable)."""
+    n = _LEN.unpack_from(buf)[0]
+    obj = pickle.loads(memoryview(buf)[8:8 + n])
+    if obj[0] != _OPS:
+        return obj
+    _, ops, idx = obj
+    o = 8 + n
+    for j in idx:
+        op = ops[j]
+        shape = op[-1]
+        k = int(np.prod(shape))
+        ops[j] = op[:-1] + (np.frombuffer(buf, dtype=_F8, count=k, offset=o).reshape(shape),)
+        o += 8 * k
+    return ops
+
+
+def _read_msg(fd: int) -> Any:
+    """The next framed message on ``fd`` (blocking), or None at end of file."""
+    head = _read_exact(fd, _LEN.size)
+    body = None if head is None else _read_exact(fd, _LEN.unpack(head)[0])
+    return None if body is None else _unframe(body)
+
+
+def _err_tuple(e: BaseException) -> tuple[str, Any]:
+    if isinstance(e, OSError):
+        return ("OSError", (e.errno, e.strerror, e.filename))
+    return (type(e).__name__, str(e))
+
+
+def _as_exception(err: tuple[str, Any]) -> BaseException:
+    kind, args = err
+    if kind == "OSError":
+        return OSError(*args) if args[2] is not None else OSError(args[0], args[1])
+    if kind == "RuntimeError":  # the SDK's errors ("FoxgloveError: ..."): as they were
+        return RuntimeError(args)
+    return RuntimeError(f"{kind}: {args}")
+
+
+class _Ring:
+    """A one-writer, one-reader byte ring in shared memory, made before the fork: the flying
+    process copies a hand-over in and moves its counter (no system call, so no wake-up of the
+    writer process on this core); the writer process polls it every millisecond.  The two
+    counters (bytes written, bytes read) are aligned 8-byte integers on their own cache lines
+    ahead of the data, each written by one side in one store (x86 and ARM keep an aligned
+    8-byte store whole; the data is copied before the counter moves)."""
+
+    def __init__(self, size: int = 2 << 20):
+        self.mm = mmap.mmap(-1, 128 + size)
+        self.mm.write(bytes(128 + size))  # touched now: no page faults in the flight
+        self.ctr = np.frombuffer(self.mm, dtype=np.int64, count=16)  # [0] written, [8] read
+        self.size = size
+        self.pos = 0  # this side's counter (written, or read)
+
+    def put(self, parts: list[Any], wait: Any) -> None:
+        """Write ``parts`` (bytes-like), publishing as it goes (a part larger than the free
+        space streams through); ``wait()`` is called while the ring is full."""
+        mm, size, ctr = self.mm, self.size, self.ctr
+        for p in parts:
+            v = memoryview(p).cast("B")
+            while v:
+                free = size - (self.pos - int(ctr[8]))
+                if not free:
+                    wait()
+                    continue
+                o = self.pos % size
+                k = min(len(v), free, size - o)
+                mm[128 + o:128 + o + k] = v[:k]
+                v = v[k:]
+                self.pos += k
+                ctr[0] = self.pos
+
+    def read(self, n: int, wait: Any) -> bytearray | None:
+        """``n`` bytes; ``wait()`` is called while none are there and returns False when no
+        more will come (then None)."""
+        out = bytearray(n)
+        mm, size, ctr, got = self.mm, self.size, self.ctr, 0
+        while got < n:
+            avail = int(ctr[0]) - self.pos
+            if not avail:
+                if not wait() and int(ctr[0]) == self.pos:
+                    return None
+                continue
+            o = self.pos % size
+            k = min(n - got, avail, size - o)
+            out[got:got + k] = mm[128 + o:128 + o + k]
+            got += k
+            self.pos += k
+            ctr[8] = self.pos
+        return out
+
+    def close(self) -> None:
+        del self.ctr
+        self.mm.close()
+
+
+def _child(ring: _Ring, alive_fd: int, reply_fd: int, path: str, compression: Any,
+           chunk_size: int) -> None:
+    """The writer process: the backend, fed from ``ring`` until ``close``, or until the
+    flying process is gone (``alive_fd`` hangs up: the file is finished with what arrived)."""
+    code = 0
+    try:
+        for sig in (signal.SIGINT, signal.SIGTERM):  # the flying process decides when to close
+            signal.signal(sig, signal.SIG_IGN)
+        for fd in _LIVE_FDS - {alive_fd, reply_fd}:  # other logs' pipes: theirs to hold
+            os.close(fd)
+        try:
+            back = Backend(path, compression, chunk_size)
+        except BaseException as e:  # noqa: BLE001 - reported to the flying process
+            _write_all(reply_fd, _frame(("error", _err_tuple(e))))
+            return
+        _write_all(reply_fd, _frame(("ok",)))
+        poller = select.poll()
+        poller.register(alive_fd, select.POLLIN)
+
+        def wait() -> bool:  # False once the flying process is gone
+            return not poller.poll(1)
+
+        _serve(back, ring, wait, reply_fd)
+    except BaseException:  # noqa: BLE001
+        code = 1
+    finally:
+        os._exit(code)
+
+
+def _serve(back: Backend, ring: _Ring, wait: Any, reply_fd: int) -> None:
+    """Run the hand-overs until ``close`` (acknowledged) or the end of the flying process."""
+    err = None
+    while True:
+        head = ring.read(_LEN.size, wait)
+        body = None if head is None else ring.read(_LEN.unpack(head)[0], wait)
+        if body is None:  # the flying process is gone: finish the file
+            if err is None:
+                back.run([("emit",), ("close",)])
+            return
+        ops = _unframe(body)
+        closing = ops and ops[-1][0] == "close"
+        if err is None:
+            try:
+                back.run(ops)
+            except BaseException as e:  # noqa: BLE001 - reported, the rest is dropped
+                err = _err_tuple(e)
+                _write_all(reply_fd, _frame(("error", err)))
+        if closing:
+            if not back.closed:
+                try:
+                    back.run([("close",)])
+                except BaseException:  # noqa: BLE001 - the first error was reported
+                    pass
+            _write_all(reply_fd, _frame(("closed",)))
+            return
+
+
+class ProcessSink:
+    """The backend in a forked writer process, fed through a shared-memory ring (see the
+    module docstring).  Its errors (a full disk) are raised at the next hand-over, or at
+    :meth:`close`."""
+
+    process = True
+    cpu_s = 0.0  #: the writer process's CPU time (user + system), once it has exited
+
+    def __init__(self, path: str, compression: Any, chunk_size: int):
+        self.path = path
+        self._ring = _Ring()
+        alive_r, alive_w = os.pipe()
+        rep_r, rep_w = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            os.close(alive_w)
+            os.close(rep_r)
+            _child(self._ring, alive_r, rep_w, path, compression, chunk_size)
+        os.close(alive_r)
+        os.close(rep_w)
+        self.pid, self._alive, self._r = pid, alive_w, rep_r
+        _LIVE_FDS.update((alive_w, rep_r))
+        self._poll = select.poll()
+        self._poll.register(rep_r, select.POLLIN)
+        self._failed = False
+        first = self._reply(block=True)
+        if first is None or first[0] != "ok":
+            self._end()
+            raise (_as_exception(first[1]) if first else
+                   OSError(errno.EPIPE, "the run log's writer process did not start", path))
+
+    def _reply(self, block: bool) -> tuple[Any, ...] | None:
+        """The next reply of the writer (None: none yet, or the writer is gone)."""
+        while not self._poll.poll(1000 if block else 0):
+            if not block or self._exited():
+                return None
+        return _read_msg(self._r)
+
+    def _exited(self) -> bool:
+        """The writer process has exited (reaped now)."""
+        if self.pid and os.waitpid(self.pid, os.WNOHANG)[0]:
+            self.pid = 0
+        return not self.pid
+
+    def _check(self) -> None:
+        """Raise the writer's error (once); after it the hand-overs are dropped."""
+        if self._failed:
+            return
+        msg = self._reply(block=False)
+        if msg is not None and msg[0] == "error":
+            self._failed = True
+            raise _as_exception(msg[1])
+
+    def _full(self) -> None:
+        """The ring is full: wait for the writer (or find it gone)."""
+        if self._exited():
+            self._failed = True
+            raise OSError(errno.EPIPE, "the run log's writer process exited", self.path)
+        time.sleep(0.0005)
+
+    def send(self, ops: list[tuple[Any, ...]]) -> None:
+        self._check()
+        if not self._failed:
+            self._ring.put(_frame(ops), self._full)
+
+    def close(self) -> None:
+        """Hand over ``close``, wait for the writer to finish the file; raise its error if it
+        had one that was not raised yet."""
+        err = None
+        try:
+            self._ring.put(_frame([("close",)]), self._full)  # after an error too
+            while True:
+                msg = self._reply(block=True)
+                if msg is None or msg[0] == "closed":
+                    break
+                if msg[0] == "error" and not self._failed:
+                    self._failed = True
+                    err = _as_exception(msg[1])
+        except OSError:
+            pass
+        finally:
+            self._end()
+        if err is not None:
+            raise err
+
+    def _end(self) -> None:
+        for fd in (self._alive, self._r):
+            _LIVE_FDS.discard(fd)
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        if self.pid:
+            try:
+                ru = os.wait4(self.pid, 0)[2]
+                self.cpu_s = ru.ru_utime + ru.ru_stime
+            except ChildProcessError:
+                pass
+        self._ring.close()
+
+
+def open_sink(path: str, compression: Any, chunk_size: int, writer: str) -> Any:
+    """``writer``: ``"process"`` (a forked writer process; in-process where ``os.fork`` is
+    missing) or ``"inline"``."""
+    if writer not in ("process", "inline"):
+        raise ValueError(f"writer must be 'process' or 'inline', not {writer!r}")
+    if writer == "process" and hasattr(os, "fork"):
+        return ProcessSink(path, compression, chunk_size)
+    return InlineSink(path, compression, chunk_size)
