@@ -54,6 +54,9 @@ class RecordingLog:
     def __init__(self):
         self.calls: list[tuple] = []
 
+    def spray_due(self, t):  # every call the engine makes (its own 10 Hz clock)
+        return True
+
     def spray_state(self, t, *, tank_l, mass_kg, flow_lps, nozzles, power_w, energy_wh, soc,
                     sortie, ground):
         self.spray_row(t, (tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w,

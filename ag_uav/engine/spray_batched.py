@@ -416,6 +416,8 @@ class BatchSprayer:
             if not active[i] or not t >= sp._next_log:
                 continue
             sp._next_log = t + 0.1 - 1e-9
+            if not sp.log.spray_due(t):  # the log's own rate (the light set's is lower)
+                continue
             j = int(self._off[i]) + k
             on = bool(on_[j])
             x, y = float(vx[i]), float(vy[i])

@@ -335,27 +335,27 @@ class _Ring:
     def __init__(self, size: int = 2 << 20):
         self.mm = mmap.mmap(-1, 128 + size)
         self.mm.write(bytes(128 + size))  # touched now: no page faults in the flight
-        self.ctr = np.frombuffer(self.mm, dtype=np.int64, count=16)  # [0] written, [8] read
+        # [0] bytes written, [8] bytes read, [15] the reader has replied (an error)
+        self.ctr = np.frombuffer(self.mm, dtype=np.int64, count=16)
         self.size = size
         self.pos = 0  # this side's counter (written, or read)
 
     def put(self, parts: list[Any], wait: Any) -> None:
-        """Write ``parts`` (bytes-like), publishing as it goes (a part larger than the free
-        space streams through); ``wait()`` is called while the ring is full."""
+        """Write ``parts`` (bytes-like) as one piece, publishing as it goes (a piece larger
+        than the free space streams through); ``wait()`` is called while the ring is full."""
         mm, size, ctr = self.mm, self.size, self.ctr
-        for p in parts:
-            v = memoryview(p).cast("B")
-            while v:
-                free = size - (self.pos - int(ctr[8]))
-                if not free:
-                    wait()
-                    continue
-                o = self.pos % size
-                k = min(len(v), free, size - o)
-                mm[128 + o:128 + o + k] = v[:k]
-                v = v[k:]
-                self.pos += k
-                ctr[0] = self.pos
+        v = memoryview(b"".join(parts))
+        while v:
+            free = size - (self.pos - int(ctr[8]))
+            if not free:
+                wait()
+                continue
+            o = self.pos % size
+            k = min(len(v), free, size - o)
+            mm[128 + o:128 + o + k] = v[:k]
+            v = v[k:]
+            self.pos += k
+            ctr[0] = self.pos
 
     def read(self, n: int, wait: Any) -> bytearray | None:
         """``n`` bytes; ``wait()`` is called while none are there and returns False when no
@@ -428,6 +428,7 @@ def _serve(back: Backend, ring: _Ring, wait: Any, reply_fd: int) -> None:
             except BaseException as e:  # noqa: BLE001 - reported, the rest is dropped
                 err = _err_tuple(e)
                 _write_all(reply_fd, _frame(("error", err)))
+                ring.ctr[15] = 1  # the flying process reads the reply at its next hand-over
         if closing:
             if not back.closed:
                 try:
@@ -484,9 +485,9 @@ class ProcessSink:
 
     def _check(self) -> None:
         """Raise the writer's error (once); after it the hand-overs are dropped."""
-        if self._failed:
+        if self._failed or not self._ring.ctr[15]:
             return
-        msg = self._reply(block=False)
+        msg = self._reply(block=True)
         if msg is not None and msg[0] == "error":
             self._failed = True
             raise _as_exception(msg[1])
