@@ -18,18 +18,17 @@ Usage (the simulation loop calls this; everything is in sim time, seconds -> ns)
         log.summary({"rmse_m": ..})
     # -> run.mcap and layout.json (Foxglove app-export layout) beside it
 
-Writer, chosen by measurement (figures in the README's Speed section; ``ag-uav bench``
-measures the logging cost): ``foxglove-sdk`` (Rust MCAP writer, LZ4 chunks) fed pre-encoded
-protobuf bytes through ``BaseChannel.log``; the pure-Python ``mcap`` writer and the SDK's typed
-message objects cost several times more per message.  The frequent messages are hand-encoded:
-PoseInFrame / FrameTransform as one ``struct.pack`` with memoised timestamp bytes; our own numeric
-channels (``/drone/state``, ``/estimator/<name>``) are protobuf messages whose schema is generated
-at the first call (all fields ``double``, nested groups, packed vectors) and encoded with one
-``struct.pack`` (see :class:`FlatSchema`), float64 numpy vectors going in as their raw bytes (a
-packed ``repeated double`` is exactly that); they decode with any protobuf reader.  The encoded
-messages of the per-tick channels wait in a list and reach the writer in one burst at each flush
-(and before any frame, scene or metadata write), so the control loop does not interleave with the
-writer's bookkeeping.
+Writer, chosen by measurement (figures in docs/speed.md; ``ag-uav bench`` measures the logging
+cost): ``foxglove-sdk`` (Rust MCAP writer, LZ4 chunks) fed pre-encoded protobuf bytes through
+``BaseChannel.log``, in a writer process of its own (:mod:`ag_uav.record.sink`; ``writer="inline"``
+keeps it in this process); the pure-Python ``mcap`` writer and the SDK's typed message objects
+cost several times more per message.  The frequent messages are hand-encoded in blocks
+(:mod:`ag_uav.record.encode`): PoseInFrame / FrameTransform, and our own numeric channels
+(``/drone/state``, ``/estimator/<name>``), protobuf messages whose schema is generated at the
+first call (all fields ``double``, nested groups, packed vectors; see :class:`FlatSchema`); they
+decode with any protobuf reader.  The rows of the per-tick channels wait in this process and
+reach the writer in one hand-over (and before any frame, scene or metadata write), so the control
+loop does not interleave with the writer's bookkeeping.
 
 Channels (Foxglove well-known schemas where one fits; groups in brackets):
   [tf]        ``/tf``                 foxglove.FrameTransforms world->base_link
@@ -60,16 +59,20 @@ camera), ``"none"`` (no file; every method returns at once), or an iterable of g
 
 Crash safety: use ``with`` (or call :meth:`RunLog.close`); SIGTERM/SIGINT close every open log
 and then behave as before (KeyboardInterrupt / exit status 128+signal); an ``atexit`` hook closes
-the rest.  The writer finishes its chunk and flushes to the OS every ``flush_wall_s`` of wall time
-or ``flush_sim_s`` of sim time, whichever comes first (the buffered messages go in first), so
-a SIGKILL loses at most that much;
+the rest.  The rows are handed to the writer every ``flush_wall_s`` of wall time or
+``flush_sim_s`` of sim time, whichever comes first, and the writer finishes its chunk and
+flushes it to the OS at each hand-over.  With the writer process (:mod:`ag_uav.record.sink`, the
+default) a SIGKILL of the flight loses only the rows not handed over yet (< 0.3 s of flight and
+one log tick); the writer then finishes the file.  Killed together (a process group), they lose
+also the one hand-over the writer had not written yet;
 ``ag_uav.analysis.viewing.recover`` turns a truncated file into a finished, indexed one.
 
-Cost: between two flushes nothing is encoded.  A tick is one row of raw values
+Cost: between two hand-overs nothing is encoded.  A tick is one row of raw values
 (:meth:`RunLog.tick_slot`: the engine copies its arrays into it in one ``np.concatenate``;
 :meth:`RunLog.tick` fills one from its arguments), an estimator or spray-state message one row of
-its flat schema; at the flush :mod:`ag_uav.record.encode` turns the rows into protobuf messages in
-one compiled call per topic group, and they go to the writer merged by log time.  A row still
+its flat schema, a filter bank's fix one compact row; at the hand-over the rows go to the writer,
+where :mod:`ag_uav.record.encode` turns them into protobuf messages in one compiled call per
+topic group and they are written merged by log time.  A row still
 being filled when a signal closes the log is dropped, not written half-done.
 """
 
