@@ -515,8 +515,8 @@ class _EstChan(_FlatRows):
 class _EstBank(_FlatRows):
     """The ``/estimator/<name>`` channels of one filter bank (one schema, position first, no
     innovation or extras; :meth:`RunLog.estimator_bank`).  A fix is one compact row (t, the
-    k states, the k covariance diagonals, the truth); at the flush the rows become the
-    channels' message rows (last column: the row's channel index), encoded in one call."""
+    k states, the k covariance diagonals, the truth); the writer makes the channels' message
+    rows of them (last column: the row's channel index) and encodes them in one call."""
 
     __slots__ = ("topics", "lids", "n", "m", "k", "next_t", "raw")
 
@@ -539,21 +539,9 @@ class _EstBank(_FlatRows):
         self.count += 1
 
     def take(self) -> np.ndarray | None:
-        """The fixes since the last flush as message rows (k per fix), or None."""
-        if not self.raw.n:
-            return None
-        r = self.raw.take()
-        f, k, n, m, it = len(r), self.k, self.n, self.m, self.it
-        a = 1 + k * n
-        x = r[:, 1:a].reshape(f, k, n)
-        out = np.full((f, k, it + 8), _NAN)
-        out[:, :, 0] = r[:, :1]
-        out[:, :, 1:1 + n] = x
-        out[:, :, 1 + n:1 + n + m] = r[:, a:a + k * m].reshape(f, k, m)
-        out[:, :, it:it + 3] = x[:, :, :3]
-        out[:, :, it + 3:it + 6] = r[:, None, -3:]
-        out[:, :, it + 7] = self.lids
-        return out.reshape(f * k, it + 8)
+        """The fixes since the last flush (compact rows: the writer makes the k messages of
+        each, :func:`ag_uav.record.sink._bank_rows`), or None."""
+        return self.raw.take() if self.raw.n else None
 
 
 _WARMED = False
@@ -1248,7 +1236,9 @@ class RunLog:
     def _flat(self, fr: _FlatRows) -> Any:
         """Register a flat-schema channel's row block with the writer (its encoding)."""
         fr.fid = len(self._flat_rows)
-        self._ops.append(("flat", fr.fid, fr.tmpl, fr.slots, fr.lid, fr.it))
+        bank = ((fr.k, fr.n, fr.m, fr.lids.astype(int).tolist()) if isinstance(fr, _EstBank)
+                else None)
+        self._ops.append(("flat", fr.fid, fr.tmpl, fr.slots, fr.lid, fr.it, bank))
         self._flat_rows.append(fr)
         return fr
 

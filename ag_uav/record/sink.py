@@ -13,10 +13,11 @@ The operations (tuples, executed in order):
 
 ``("chan", topic, schema_name, schema_encoding, schema_data)``
     a channel; its index (from 0, in order) is the ``lid`` the other operations name.
-``("flat", fid, tmpl, slots, lid, it)``
+``("flat", fid, tmpl, slots, lid, it, bank)``
     a flat-schema block format (:func:`ag_uav.record.encode.encode_flat`): ``lid`` < 0 takes
     each row's channel from its last column; ``it`` >= 0: the error columns are derived from
-    the position at ``it`` and the truth after it.
+    the position at ``it`` and the truth after it; ``bank`` = (k, n, m, channels): the block's
+    rows are a filter bank's compact fix rows, k messages each.
 ``("posefmt", tmpl, slots, head, tf_head)``
     the pose encoding (``/gps`` and the ticks' poses; ``head``: the bytes between the stamp
     and the pose, ``tf_head`` a transform's).
@@ -77,6 +78,22 @@ def _est_err(r: np.ndarray, it: int) -> None:
     r[:, it + 6] = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
 
 
+def _bank_rows(r: np.ndarray, k: int, n: int, m: int, lids: list[int]) -> np.ndarray:
+    """A filter bank's compact fix rows (t, the k states of n, the k covariance diagonals of
+    m, the truth) -> k message rows per fix (t, x[n], p_diag[n] NaN-padded, position, truth,
+    NaN, channel index), as :meth:`_block` encodes them."""
+    f, it, a = len(r), 1 + 2 * n, 1 + k * n
+    x = r[:, 1:a].reshape(f, k, n)
+    out = np.full((f, k, it + 8), np.nan)
+    out[:, :, 0] = r[:, :1]
+    out[:, :, 1:1 + n] = x
+    out[:, :, 1 + n:1 + n + m] = r[:, a:a + k * m].reshape(f, k, m)
+    out[:, :, it:it + 3] = x[:, :, :3]
+    out[:, :, it + 3:it + 6] = r[:, None, -3:]
+    out[:, :, it + 7] = lids
+    return out.reshape(f * k, it + 8)
+
+
 def os_error(e: OSError, path: Path) -> OSError:
     """The SDK's OSError (errno only in its text, "... (os error 28)") with errno and path."""
     m = re.search(r"os error (\d+)", str(e))
@@ -123,8 +140,9 @@ class Backend:
         self._channels.append(ch)
         self._logs.append(ch.base.log)
 
-    def _flat(self, fid: int, tmpl: np.ndarray, slots: np.ndarray, lid: int, it: int) -> None:
-        self._flats[fid] = (tmpl, slots, lid, it)
+    def _flat(self, fid: int, tmpl: np.ndarray, slots: np.ndarray, lid: int, it: int,
+              bank: tuple[int, int, int, list[int]] | None = None) -> None:
+        self._flats[fid] = (tmpl, slots, lid, it, bank)
 
     def _posefmt(self, tmpl: np.ndarray, slots: np.ndarray, head: np.ndarray,
                  tf_head: np.ndarray) -> None:
@@ -146,7 +164,9 @@ class Backend:
     def _block(self, fid: int, r: np.ndarray) -> None:
         from .encode import encode_flat
 
-        tmpl, slots, lid, it = self._flats[fid]
+        tmpl, slots, lid, it, bank = self._flats[fid]
+        if bank is not None:
+            r = _bank_rows(r, *bank)
         if it >= 0:
             _est_err(r, it)
         n, size = len(r), len(tmpl)
