@@ -54,9 +54,6 @@ class RecordingLog:
     def __init__(self):
         self.calls: list[tuple] = []
 
-    def spray_due(self, t):  # every call the engine makes (its own 10 Hz clock)
-        return True
-
     def spray_state(self, t, *, tank_l, mass_kg, flow_lps, nozzles, power_w, energy_wh, soc,
                     sortie, ground):
         self.spray_row(t, (tank_l, mass_kg, flow_lps, 1.0 if nozzles else 0.0, power_w,
@@ -64,6 +61,14 @@ class RecordingLog:
 
     def spray_row(self, t, values):
         self.calls.append((t, tuple(float(v) for v in values)))
+
+    def spray_slot(self, t):  # the engine's way: a row it fills in place
+        self._row = np.full(10, np.nan)
+        self._row[0] = t
+        return self._row
+
+    def spray_commit(self):
+        self.calls.append((float(self._row[0]), tuple(float(v) for v in self._row[1:])))
 
 
 @dataclasses.dataclass

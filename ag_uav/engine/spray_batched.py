@@ -65,6 +65,24 @@ F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
 
 
 @njit(cache=True)
+def _spray_log_row(row, st, rec, tab, rec_on, ist, i, j, vx, vy, lpm):
+    """Vehicle ``i``'s spray state at its record ``j`` -> ``row[1:10]`` in
+    :attr:`ag_uav.record.runlog.RunLog.SPRAY_FIELDS` order: tank, mass, flow (the nominal rate
+    at the speed when the nozzles are on), nozzles, power, energy (Wh), battery fraction,
+    sortie (from 1), on the ground."""
+    on = rec_on[j]
+    row[1] = st[i, S_TANK]
+    row[2] = rec[1, j]
+    row[3] = lpm * math.sqrt(vx * vx + vy * vy) if on else 0.0
+    row[4] = 1.0 if on else 0.0
+    row[5] = rec[2, j]
+    row[6] = st[i, S_ETOT] / 3600.0
+    row[7] = rec[3, j]
+    row[8] = ist[i, I_CUR] + 1
+    row[9] = tab[1, j]
+
+
+@njit(cache=True)
 def _sortie_row(i, s, par, st, ist):  # pragma: no cover
     """A sortie change: close the last one, refill and a fresh battery, open the new one.
     Returns the event flags."""
@@ -410,21 +428,17 @@ class BatchSprayer:
 
     def _log(self, k: int, t: float, vx: np.ndarray, vy: np.ndarray,
              active: np.ndarray) -> None:
-        """``log.spray_row`` every 0.1 s of the vehicles that have a log."""
-        st, rec, tab, on_ = self._st, self._rec, self._tab, self._rec_on
+        """The spray state row of the vehicles that have a log, every 0.1 s (at most; the log's
+        own rate may be lower): filled in place by :func:`_spray_log_row`."""
         for i, sp in self._logged:
             if not active[i] or not t >= sp._next_log:
                 continue
             sp._next_log = t + 0.1 - 1e-9
-            if not sp.log.spray_due(t):  # the log's own rate (the light set's is lower)
-                continue
-            j = int(self._off[i]) + k
-            on = bool(on_[j])
-            x, y = float(vx[i]), float(vy[i])
-            flow = sp.lpm * math.sqrt(x * x + y * y) if on else 0.0
-            sp.log.spray_row(t, (st[i, S_TANK], rec[1, j], flow, 1.0 if on else 0.0, rec[2, j],
-                                 st[i, S_ETOT] / 3600.0, rec[3, j], self._ist[i, I_CUR] + 1,
-                                 tab[1, j]))
+            row = sp.log.spray_slot(t)
+            if row is not None:
+                _spray_log_row(row, self._st, self._rec, self._tab, self._rec_on, self._ist, i,
+                               int(self._off[i]) + k, float(vx[i]), float(vy[i]), sp.lpm)
+                sp.log.spray_commit()
         self._log_next = min((sp._next_log for i, sp in self._logged if active[i]),
                              default=math.inf)
 

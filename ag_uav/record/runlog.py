@@ -1084,9 +1084,18 @@ class RunLog:
 
     def spray_row(self, t: float, values: Sequence[float]) -> None:
         """:meth:`spray_state` with its values as one sequence in :data:`SPRAY_FIELDS` order
-        after ``t`` (nozzles and ground as 1.0 / 0.0): the engine's way, no keywords."""
+        after ``t`` (nozzles and ground as 1.0 / 0.0)."""
+        row = self.spray_slot(t)
+        if row is not None:
+            row[1:] = values
+            self.spray_commit()
+
+    def spray_slot(self, t: float) -> np.ndarray | None:
+        """The ``/drone/spray`` row to fill at sim time ``t`` (None when none is due): column 0
+        holds ``t``, the caller fills the :data:`SPRAY_FIELDS` after it and calls
+        :meth:`spray_commit` (the engine's way)."""
         if t < self._next_spray:  # inf when off or closed
-            return
+            return None
         self._next_spray = t + self._p_state
         if self._ch_spray is None:
             schema = FlatSchema("ag_uav.SprayState", [(k, 0) for k in self.SPRAY_FIELDS])
@@ -1095,7 +1104,10 @@ class RunLog:
             self._write_layout()
         row = self._ch_spray.rows.open_row()
         row[0] = t
-        row[1:] = values
+        return row
+
+    def spray_commit(self) -> None:
+        """The row of the last :meth:`spray_slot` is complete."""
         self._ch_spray.rows.commit()
         self._ch_spray.count += 1
 
