@@ -16,6 +16,9 @@ def test_logging_cost_reports_ratios_and_the_cost_per_message():
     for key in ("full_over_unlogged", "estimators_ratio", "light_over_unlogged",
                 "full_over_unlogged_cpu", "estimators_ratio_cpu"):
         assert math.isfinite(r[key]) and r[key] > 0, key
+    # the writer process's CPU time is counted too: it can only add to the loop's own
+    assert r["full_over_unlogged_cpu_with_writer"] > r["full_over_unlogged_cpu"]
+    assert r["estimators_ratio_cpu_with_writer"] > r["estimators_ratio_cpu"]
     # full set over 6 s: /tf at 10 Hz, three poses at 10 Hz, /drone/state at 20 Hz (ticks only)
     assert r["full_log_messages"] >= 6 * (10 + 30 + 20) - 10
     # the estimator set adds /gps and the four /estimator/<rule> channels

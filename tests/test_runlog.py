@@ -419,3 +419,28 @@ def test_state_attitude_and_numpy_inputs(tmp_path):
         assert (d.rpy.roll, d.rpy.pitch, d.rpy.yaw) == pytest.approx(expect, abs=1e-12)
         assert (d.pos.x, d.pos.y, d.pos.z) == (1.0, 2.0, 3.0)
     assert len(st) == 2
+
+
+def test_a_writer_process_killed_on_its_own_is_not_silent(tmp_path):
+    """The flight notices a dead writer within about a second of wall time (an OSError naming
+    the log, as for a full disk) instead of flying on into a log nobody writes."""
+    path = tmp_path / "run.mcap"
+    log = RunLog(path, channels="full", metadata={}, config_toml="", layout=False)
+    log.tick(0.0, **_tick_kwargs((0.0, 0.0, 1.0)))
+    log.flush()
+    time.sleep(0.1)  # the writer polls its ring every millisecond
+    os.kill(log._sink.pid, signal.SIGKILL)
+    time.sleep(1.1)
+    with pytest.raises(OSError, match="writer process exited") as e:
+        for k in range(1, 200):
+            log.tick(k * 0.01, **_tick_kwargs((k * 0.01, 0.0, 1.0)))
+    assert e.value.filename == str(path)
+    log.close()  # quietly: the error was raised once
+    with open(path, "rb") as f:  # what it wrote before it died is there
+        times = []
+        try:
+            for _, _, m in NonSeekingReader(f).iter_messages(log_time_order=False):
+                times.append(m.log_time)
+        except Exception:  # noqa: BLE001 - no footer
+            pass
+    assert times and min(times) == 0

@@ -484,6 +484,7 @@ class ProcessSink:
         self._poll = select.poll()
         self._poll.register(rep_r, select.POLLIN)
         self._failed = False
+        self._alive_at = time.monotonic()
         first = self._reply(block=True)
         if first is None or first[0] != "ok":
             self._end()
@@ -512,36 +513,50 @@ class ProcessSink:
             self._failed = True
             raise _as_exception(msg[1])
 
+    def _gone(self) -> OSError:
+        self._failed = True
+        return OSError(errno.EPIPE, "the run log's writer process exited before finishing the "
+                                    "file (`ag-uav recover` indexes what it wrote)", self.path)
+
     def _full(self) -> None:
         """The ring is full: wait for the writer (or find it gone)."""
         if self._exited():
-            self._failed = True
-            raise OSError(errno.EPIPE, "the run log's writer process exited", self.path)
+            raise self._gone()
         time.sleep(0.0005)
 
     def send(self, ops: list[tuple[Any, ...]]) -> None:
         self._check()
-        if not self._failed:
-            self._ring.put(_frame(ops), self._full)
+        if self._failed:
+            return
+        now = time.monotonic()
+        if now - self._alive_at > 1.0:  # a writer killed on its own is noticed within ~1 s
+            self._alive_at = now
+            if self._exited():
+                raise self._gone()
+        self._ring.put(_frame(ops), self._full)
 
     def close(self) -> None:
         """Hand over ``close``, wait for the writer to finish the file; raise its error if it
-        had one that was not raised yet."""
-        err = None
+        had one that was not raised yet (or an OSError if it died without finishing)."""
+        raised = self._failed  # an error was raised already: not again
+        err: BaseException | None = None
         try:
             self._ring.put(_frame([("close",)]), self._full)  # after an error too
             while True:
                 msg = self._reply(block=True)
-                if msg is None or msg[0] == "closed":
+                if msg is None:  # gone without finishing the file
+                    err = err or self._gone()
                     break
-                if msg[0] == "error" and not self._failed:
-                    self._failed = True
-                    err = _as_exception(msg[1])
-        except OSError:
-            pass
+                if msg[0] == "closed":
+                    break
+                if msg[0] == "error":
+                    err = err or _as_exception(msg[1])
+        except OSError as e:  # the writer went away while the ring was full
+            err = err or e
         finally:
             self._end()
-        if err is not None:
+        if err is not None and not raised:
+            self._failed = True
             raise err
 
     def _end(self) -> None:
