@@ -1203,10 +1203,10 @@ class RunLog:
     def estimator_bank(self, t: float, names: Sequence[str], x: np.ndarray,
                        p_diag: np.ndarray, p_true: Sequence[float]) -> None:
         """:meth:`estimator` for a bank of filters of one vehicle at once (no innovation, no
-        extras; position first in the state): row j of ``x`` (k, n) and of ``p_diag`` (k, ≤ n;
-        NaN-padded) is filter ``names[j]`` on ``/estimator/<name>``, ``err`` against
-        ``p_true``.  The bank's channels share one block of rows (:class:`_EstBank`): a fix
-        costs a few array copies, a flush one encoding call."""
+        extras; position first in the state): row j of ``x`` (k, n) and of ``p_diag`` (k, m ≤ n,
+        NaN-padded to n; the shapes of the bank's first call) is filter ``names[j]`` on
+        ``/estimator/<name>``, ``err`` against ``p_true``.  A fix is one compact row of the
+        bank (:class:`_EstBank`); the writer makes the messages of a flush's rows in one call."""
         key = tuple(names)
         bank = self._banks.get(key)
         if bank is None:

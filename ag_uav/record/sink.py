@@ -5,9 +5,11 @@ encoders, fed a list of operations per flush by :class:`ag_uav.record.runlog.Run
 (:class:`InlineSink`) or in a writer process forked when the log opens (:class:`ProcessSink`,
 the default where ``os.fork`` exists), so that a flush's encoding, compression and write to
 the OS run on another core while the loop flies on: the loop only fills rows and, at each
-flush, hands them over in one pickled write to a pipe.  PX4's logger (a writer thread fed from
-a ring buffer) and ROS's bag recorder (its own process) split the work the same way; a
-Python thread cannot here, because the SDK's calls hold the GIL.
+flush, copies them into a shared-memory ring (:class:`_Ring`: a small pickle of the operations,
+the rows as raw bytes; no system call, so no wake-up of the writer on the loop's core), which
+the writer polls every millisecond.  PX4's logger (a writer thread fed from a ring buffer) and
+ROS's bag recorder (its own process) split the work the same way; a Python thread cannot here,
+because the SDK's calls hold the GIL.  Measured in docs/guides/foxglove.md.
 
 The operations (tuples, executed in order):
 
@@ -30,9 +32,11 @@ The operations (tuples, executed in order):
 ``("attach", kwargs)``, ``("close",)``.
 
 Crash safety with the writer process: a SIGKILL of the flying process loses only the rows it
-had not handed over (less than ``flush_sim_s`` of flight); the writer reads what was sent to
-the end of its pipe, finishes the file (summary, indexes) and exits.  A SIGKILL of both (a
-process group) loses also what the writer had not written out, at most one more hand-over.
+had not handed over (less than ``flush_sim_s`` of flight and one log tick); the writer reads
+what is left in the ring, finishes the file (summary, indexes) and exits.  A SIGKILL of both (a
+process group) loses also what the writer had not written out, at most one more hand-over.  A
+writer that dies on its own is noticed within about a second (an OSError naming the log), and
+its error (a full disk) is raised at the flight's next hand-over.
 """
 
 from __future__ import annotations
