@@ -444,3 +444,18 @@ def test_a_writer_process_killed_on_its_own_is_not_silent(tmp_path):
         except Exception:  # noqa: BLE001 - no footer
             pass
     assert times and min(times) == 0
+
+
+def test_a_log_past_the_spare_cores_writes_in_process_and_says_so(tmp_path, monkeypatch):
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)  # one spare core: one writer process
+    a = RunLog(tmp_path / "a.mcap", metadata={}, config_toml="", layout=False)
+    with pytest.warns(UserWarning, match=r"b\.mcap: written in this process \(1 writer"):
+        b = RunLog(tmp_path / "b.mcap", metadata={}, config_toml="", layout=False)
+    assert a._sink.process and not b._sink.process
+    for log in (a, b):
+        log.tick(0.0, **_tick_kwargs((1.0, 2.0, 3.0)))
+        log.close()
+    c = RunLog(tmp_path / "c.mcap", metadata={}, config_toml="", layout=False)
+    assert c._sink.process  # a's writer is gone: the core is spare again
+    c.close()
+    assert [len(_decoded(tmp_path / f"{x}.mcap")) for x in "ab"] == [5, 5]

@@ -52,6 +52,7 @@ import select
 import signal
 import struct
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -470,6 +471,7 @@ class ProcessSink:
 
     process = True
     cpu_s = 0.0  #: the writer process's CPU time (user + system), once it has exited
+    live = 0  #: writer processes of this process not closed yet
 
     def __init__(self, path: str, compression: Any, chunk_size: int):
         self.path = path
@@ -485,6 +487,8 @@ class ProcessSink:
         os.close(rep_w)
         self.pid, self._alive, self._r = pid, alive_w, rep_r
         _LIVE_FDS.update((alive_w, rep_r))
+        ProcessSink.live += 1
+        self._counted = True
         self._poll = select.poll()
         self._poll.register(rep_r, select.POLLIN)
         self._failed = False
@@ -564,6 +568,9 @@ class ProcessSink:
             raise err
 
     def _end(self) -> None:
+        if getattr(self, "_counted", False):
+            ProcessSink.live -= 1
+            self._counted = False
         for fd in (self._alive, self._r):
             _LIVE_FDS.discard(fd)
             try:
@@ -580,10 +587,18 @@ class ProcessSink:
 
 
 def open_sink(path: str, compression: Any, chunk_size: int, writer: str) -> Any:
-    """``writer``: ``"process"`` (a forked writer process; in-process where ``os.fork`` is
-    missing) or ``"inline"``."""
+    """``writer``: ``"process"`` (a forked writer process) or ``"inline"``.  A writer process
+    needs ``os.fork`` and a spare core: where ``os.fork`` is missing, or one writer process per
+    spare core is open already (say, a batch of many logged vehicles in one engine), the log
+    writes in this process, with a warning naming it."""
     if writer not in ("process", "inline"):
         raise ValueError(f"writer must be 'process' or 'inline', not {writer!r}")
-    if writer == "process" and hasattr(os, "fork"):
-        return ProcessSink(path, compression, chunk_size)
+    if writer == "process":
+        spare = max(1, (os.cpu_count() or 1) - 1)
+        why = ("os.fork is missing here" if not hasattr(os, "fork") else
+               f"{spare} writer process(es) are open already, one per spare core"
+               if ProcessSink.live >= spare else "")
+        if not why:
+            return ProcessSink(path, compression, chunk_size)
+        warnings.warn(f"run log {path}: written in this process ({why})", stacklevel=3)
     return InlineSink(path, compression, chunk_size)
