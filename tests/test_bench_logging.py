@@ -14,7 +14,8 @@ def test_logging_cost_reports_ratios_and_the_cost_per_message():
     c.sim.max_time_s = 6.0
     r = logging_cost(c, repeats=1)
     for key in ("full_over_unlogged", "estimators_ratio", "light_over_unlogged",
-                "full_over_unlogged_cpu", "estimators_ratio_cpu"):
+                "full_over_unlogged_cpu", "estimators_ratio_cpu",
+                "full_over_unlogged_inline_writer", "estimators_ratio_inline_writer"):
         assert math.isfinite(r[key]) and r[key] > 0, key
     # the writer process's CPU time is counted too: it can only add to the loop's own
     assert r["full_over_unlogged_cpu_with_writer"] > r["full_over_unlogged_cpu"]

@@ -170,8 +170,10 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
     are the medians of those per-repeat ratios, with their min and max as the spread.  The
     ``*_cpu`` ratios are the same from the loop's process CPU time, ``*_cpu_with_writer`` with
     the log's writer process's CPU time added (the log's encoding, compression and writes run
-    there, on another core: :mod:`ag_uav.record.sink`); ``*_us_per_message`` is the logged
-    loop's added wall time (the medians' difference) over the messages the log wrote.
+    there, on another core: :mod:`ag_uav.record.sink`); ``*_inline_writer`` the wall ratio with
+    the writer in the loop's process (``RunLog(writer="inline")``, what a batch's logs use);
+    ``*_us_per_message`` is the logged loop's added wall time (the medians' difference) over the
+    messages the log wrote.
     """
     import tempfile
     from pathlib import Path
@@ -185,27 +187,30 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
 
     msgs: dict[str, int] = {}
 
-    def fly(conf: Config, path: Path | None, channels: str = "full") -> tuple[float, ...]:
+    def fly(conf: Config, path: Path | None, channels: str = "full",
+            writer: str = "process") -> tuple[float, ...]:
         hook = _LoopCpu()
         if path is None:
             wall = simulate(conf, tick_hook=hook).summary["loop_wall_time_s"]
             return wall, hook.seconds, hook.seconds
         with RunLog(path, channels=channels, rates={"camera": 0.0}, metadata={},
-                    config_toml="", layout=False) as log:
+                    config_toml="", layout=False, writer=writer) as log:
             wall = simulate(conf, log=log, tick_hook=hook).summary["loop_wall_time_s"]
             msgs[path.stem.rstrip("0123456789")] = sum(log.counts.values())
         return wall, hook.seconds, hook.seconds + log.writer_cpu_s
 
     runs: dict[str, list[tuple[float, ...]]] = {
-        k: [] for k in ("plain", "full", "light", "e_plain", "e_full")}
+        k: [] for k in ("plain", "full", "light", "inline", "e_plain", "e_full", "e_inline")}
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         for i in range(repeats):
             runs["plain"].append(fly(c, None))
             runs["full"].append(fly(c, d / f"full{i}.mcap"))
             runs["light"].append(fly(c, d / f"light{i}.mcap", "light"))
+            runs["inline"].append(fly(c, d / f"inline{i}.mcap", writer="inline"))
             runs["e_plain"].append(fly(ce, None))
             runs["e_full"].append(fly(ce, d / f"est{i}.mcap"))
+            runs["e_inline"].append(fly(ce, d / f"einline{i}.mcap", writer="inline"))
         size = (d / "full0.mcap").stat().st_size
         e_size = (d / "est0.mcap").stat().st_size
     med = statistics.median
@@ -228,6 +233,7 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
             "full_over_unlogged_spread": _spread(r_full),
             "full_over_unlogged_cpu": round(med(ratios("full", "plain", 1)), 3),
             "full_over_unlogged_cpu_with_writer": round(med(ratios("full", "plain", 2)), 3),
+            "full_over_unlogged_inline_writer": round(med(ratios("inline", "plain")), 3),
             "light_over_unlogged": round(med(r_light), 3),
             "full_log_mb": round(size / 1e6, 2),
             "full_log_messages": msgs.get("full", 0),
@@ -238,6 +244,7 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
             "estimators_ratio_spread": _spread(r_est),
             "estimators_ratio_cpu": round(med(ratios("e_full", "e_plain", 1)), 3),
             "estimators_ratio_cpu_with_writer": round(med(ratios("e_full", "e_plain", 2)), 3),
+            "estimators_ratio_inline_writer": round(med(ratios("e_inline", "e_plain")), 3),
             "estimators_full_log_mb": round(e_size / 1e6, 2),
             "estimators_full_log_messages": msgs.get("est", 0),
             "estimators_full_log_us_per_message": us_per_msg("e_full", "e_plain", "est"),
