@@ -296,14 +296,14 @@ def _frame(obj: Any) -> list[Any]:
     its place: no pickling of numpy arrays in the loop)."""
     raws: list[Any] = []
     if type(obj) is list:
-        idx = []
-        for j, op in enumerate(obj):
+        idx, ops = [], list(obj)  # the caller's list is left as it was
+        for j, op in enumerate(ops):
             a = op[-1]
             if type(a) is np.ndarray and a.dtype == _F8 and a.flags.c_contiguous:
                 idx.append(j)
                 raws.append(a.data)
-                obj[j] = op[:-1] + (a.shape,)
-        obj = (_OPS, obj, idx)
+                ops[j] = op[:-1] + (a.shape,)
+        obj = (_OPS, ops, idx)
     data = pickle.dumps(obj, protocol=5)
     total = 8 + len(data) + sum(r.nbytes for r in raws)
     return [_LEN.pack(total), _LEN.pack(len(data)), data, *raws]
