@@ -343,9 +343,16 @@ def batch_key(cfg: Config) -> tuple:
            and e.imu and cfg.imu.model == "mems")
     # the same filters (names, flown one first) share the batched bank
     filters = (e.source, e.name, tuple(s for s in e.shadow if s != e.name), e.model, e.nav,
-               round(cfg.gps.latency_s * cfg.sim.control_hz) if e.nav == "ins" else 0)
+               round(cfg.gps.latency_s * cfg.sim.control_hz) if e.nav == "ins" else 0,
+               _ins_key(cfg) if e.nav == "ins" and imu else None)
     return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled, filters,
             model_layout(cfg))
+
+
+def _ins_key(cfg: Config) -> tuple:
+    from ..navigation.ins_feedback import ins_bank_key
+
+    return ins_bank_key(cfg)
 
 
 _LAYOUTS: dict[str, str] = {}

@@ -101,6 +101,15 @@ def ins_config(cfg: Config) -> INSConfig:
         pca_window=e.window, pca_mode=e.pca_mode)
 
 
+def ins_bank_key(cfg: Config) -> tuple:
+    """What an INS bank takes from its first vehicle for all (the filter settings, the radar's
+    source, rate and noise, the IMU bias figures of the initial covariance): runs whose keys
+    differ cannot share a :class:`BatchInsFeedback` (``batch_key`` keeps them apart)."""
+    g, im = cfg.gps, cfg.imu
+    return (repr(ins_config(cfg)), g.altitude_source, g.radar_hz, g.radar_sigma_m,
+            im.accel_bias_mg, im.gyro_bias_dps)
+
+
 class InsFeedback(Feedback):
     """One run's INS navigation (see the module docstring); flown through
     :class:`BatchInsFeedback`."""
@@ -194,9 +203,11 @@ class InsFeedback(Feedback):
         kinds = {type(fb) for fb in feedbacks}
         f0 = feedbacks[0]
         if kinds != {InsFeedback} or any(fb.names != f0.names or fb.D != f0.D
+                                         or ins_bank_key(fb.cfg) != ins_bank_key(f0.cfg)
                                          for fb in feedbacks):
-            raise ValueError("BatchInsFeedback: the vehicles' INS banks differ (filters or "
-                             "latency); batch_key keeps such runs apart")
+            raise ValueError("BatchInsFeedback: the vehicles' INS banks differ (filters, "
+                             "latency, filter settings or radar); batch_key keeps such runs "
+                             "apart")
         return BatchInsFeedback(feedbacks, n_max)
 
     # -- scores ----------------------------------------------------------------------------
@@ -316,7 +327,7 @@ class BatchInsFeedback:
         nrec = max(nr, 1)
         # herr, verr, tilt, yaw; tick-major (one tick's rows contiguous: cache-friendly writes)
         self.err = np.full((n_max, NV, 4, nrec), np.nan)
-        n_fix = int(n_max * f0.gps.rate_hz * self.dt) + 4
+        n_fix = int(n_max * max(fb.gps.rate_hz for fb in fbs) * self.dt) + 4
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
         self.nees = np.full((NV, n_fix, 3, nrec), np.nan)   # NEES15, NIS(pos), NEES(pos)
         self.n_fix = np.zeros(NV, dtype=np.int64)
