@@ -1,7 +1,8 @@
 """numba for the application's kernels, in one place: ``njit`` and ``register_jitable`` are
 numba's; without numba (a declared dependency) they return the function itself and the kernels
-run as plain Python, correct and slow.  Kernels use ``@njit(cache=True)``; no ``fastmath`` (a
-vehicle's results must not depend on the batch it flies in)."""
+run as plain Python, correct and slow.  Kernels use ``@njit(cache=True)`` and release the GIL
+(an engine's lanes run in threads); no ``fastmath`` (a vehicle's results must not depend on the
+batch it flies in)."""
 
 from __future__ import annotations
 
@@ -11,10 +12,16 @@ from typing import Any
 __all__ = ["HAVE_NUMBA", "njit", "register_jitable"]
 
 try:
-    from numba import njit
+    import numba as _numba
     from numba.extending import register_jitable
 
     HAVE_NUMBA = True
+
+    def njit(*args: Any, **kwargs: Any) -> Any:
+        """numba's ``njit``, releasing the GIL by default (``nogil=True``): an engine's lanes
+        run their kernels in threads of their own."""
+        kwargs.setdefault("nogil", True)
+        return _numba.njit(*args, **kwargs)
 except ImportError:  # pragma: no cover - numba is a dependency
     HAVE_NUMBA = False
 

@@ -25,10 +25,12 @@ except ImportError:  # pragma: no cover
 
 
 def njit(func: Callable[..., Any] | None = None, **options: Any) -> Any:
-    """Compile ``func`` with ``numba.njit(cache=True, **options)``; without numba return it
+    """Compile ``func`` with ``numba.njit(cache=True, nogil=True, **options)`` (the GIL released:
+    callers may run kernels in several threads); without numba return it
     unchanged.  Use as ``@njit`` or ``@njit(inline="always")``."""
     if func is None:
         return lambda f: njit(f, **options)
     if _numba is None:  # pragma: no cover
         return func
+    options.setdefault("nogil", True)
     return _numba.njit(cache=True, **options)(func)

@@ -10,6 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import ag_uav
+from ag_uav.engine import loop
 from ag_uav.engine.loop import Flight, fly
 from ag_uav.engine.missions import batch_key, mission_setup, simulate, simulate_many
 from ag_uav.engine.physics import RolloutStepper, check_data, model_signature
@@ -155,16 +156,21 @@ def rect_field(tmp_path_factory):
 @given(data=st.data())
 def test_any_mix_flies_every_vehicle_as_alone(rect_field, data):
     """Batches drawn over fields (built-in and a file), payloads, motor lags, winds, GPS
-    presets, filter sets and controllers, grouped by batch key as the batch runner does: each
-    vehicle's whole mission (sorties included) equals the same config flown alone."""
+    presets, filter sets and controllers, grouped by batch key as the batch runner does, one
+    engine or split into lanes (each in a thread of its own): each vehicle's whole mission
+    (sorties included) equals the same config flown alone."""
     cfgs = data.draw(st.lists(_run(rect_field), min_size=2, max_size=5))
+    lane_min = data.draw(st.sampled_from([1, loop.LANE_MIN]), label="LANE_MIN")
     groups: dict[tuple, list[int]] = {}
     for i, c in enumerate(cfgs):
         groups.setdefault(batch_key(c), []).append(i)
     results: dict[int, object] = {}
-    for idx in groups.values():
-        for i, r in zip(idx, simulate_many([cfgs[i] for i in idx]), strict=True):
-            results[i] = r
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(loop, "LANE_MIN", lane_min)
+        mp.setenv("AG_UAV_ENGINE_THREADS", "2")
+        for idx in groups.values():
+            for i, r in zip(idx, simulate_many([cfgs[i] for i in idx]), strict=True):
+                results[i] = r
     for i, c in enumerate(cfgs):
         _same_mission(simulate(c), results[i])
 
@@ -195,7 +201,7 @@ def test_the_physics_replay_reproduces_the_flights_bit_for_bit():
     assert any(o.sprayer.mass_events for o in outs)
     models = [o.vehicle.model for o in outs]
     body = outs[0].vehicle.body_id
-    for way in (None, "lanes"):
+    for way in (None, "lanes", "threads"):
         _, S = replay_physics(models, body, 5, [o.s0 for o in outs],
                               [o.controls[:-1] for o in outs], 2, way,
                               [o.sprayer for o in outs])
@@ -204,13 +210,55 @@ def test_the_physics_replay_reproduces_the_flights_bit_for_bit():
             assert np.array_equal(S[i, 1:4], o.rec[-1, :3])
 
 
-def test_lanes_change_nothing():
-    """A batch split into lanes (engines over disjoint parts whose physics overlaps the next
-    lane's Python tick; off by default, measured no faster here) flies every vehicle as one
-    engine does."""
-    cfgs = [_cfg(s, **{"sim.max_time_s": 4.0}) for s in range(5)]
+@pytest.mark.parametrize("lanes", [2, 3])
+def test_lanes_change_nothing(lanes):
+    """A batch split into lanes (engines over disjoint parts, each flying in a thread of its
+    own) flies every vehicle as one engine does, on the truth and on the INS bank."""
+    for name in ("true", "pca-mckf"):
+        cfgs = [_cfg(s, **{"sim.max_time_s": 4.0, "estimator.name": name}) for s in range(5)]
+        ref = mission_setup(cfgs[0])[2]
+        one = fly([Flight(c, ref, 4.0) for c in cfgs], lanes=1)
+        many = fly([Flight(c, ref, 4.0) for c in cfgs], lanes=lanes)
+        for a, b in zip(one, many, strict=True):
+            assert np.array_equal(a.rec, b.rec)
+            assert (a.imu is None) == (b.imu is None)
+            if a.imu is not None:
+                assert np.array_equal(a.imu, b.imu)
+
+
+def test_big_batches_fly_in_lanes_unless_watched(monkeypatch):
+    """One lane per thread for batches of at least LANE_MIN vehicles per thread; a batch with
+    an observer (a log, frames or a tick hook) stays one engine, served from this thread."""
+    monkeypatch.setattr(loop, "LANE_MIN", 2)
+    cfgs = [_cfg(s) for s in range(4)]
     ref = mission_setup(cfgs[0])[2]
-    one = fly([Flight(c, ref, 4.0) for c in cfgs], lanes=1)
-    two = fly([Flight(c, ref, 4.0) for c in cfgs], lanes=2)
-    for a, b in zip(one, two, strict=True):
-        assert np.array_equal(a.rec, b.rec)
+    assert len(loop._lanes([Flight(c, ref, 1.0) for c in cfgs], 2, None)) == 2
+    hooked = [Flight(c, ref, 1.0, tick_hook=(lambda t, d: None) if i == 0 else None)
+              for i, c in enumerate(cfgs)]
+    assert len(loop._lanes(hooked, 2, None)) == 1
+    assert len(loop._lanes([Flight(c, ref, 1.0) for c in cfgs], 1, None)) == 1
+
+
+def test_ins_scores_alone_and_beside_a_slower_receiver():
+    """An INS batch mixing receivers of different fix rates (rtk-m350 and rtk): every vehicle's
+    NEES and NIS records hold all its fixes, so its scores equal its solo run's (the records
+    were once sized by the first vehicle's rate, and the faster receiver lost its later fixes;
+    found by the property test above)."""
+    base = {"estimator.name": "pca-mckf", "estimator.shadow": ["kf"], "sim.max_time_s": 8.0}
+    cfgs = [_cfg(0, **base, **{"gps.preset": p}) for p in ("rtk-m350", "rtk")]
+    for c, r in zip(cfgs, simulate_many(cfgs), strict=True):
+        _same_mission(simulate(c), r)
+
+
+def test_ins_runs_with_other_filter_settings_do_not_share_a_bank():
+    """What an INS bank takes from its first vehicle (the filter settings, the radar) is in
+    batch_key, and the bank refuses vehicles that differ in it."""
+    from ag_uav.navigation.ins_feedback import InsFeedback
+    from ag_uav.seeds import seed_sequences
+
+    a = _cfg(0, **{"estimator.name": "pca-mckf"})
+    b = _cfg(1, **{"estimator.name": "pca-mckf", "estimator.sigma": a.estimator.sigma * 2})
+    assert batch_key(a) != batch_key(b)
+    fbs = [InsFeedback(c, seed_sequences(c.seed)) for c in (a, b)]
+    with pytest.raises(ValueError, match="INS banks differ"):
+        InsFeedback.batch(fbs, 10)

@@ -41,7 +41,7 @@ import math
 import sys
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -69,9 +69,9 @@ __all__ = ["REC_COLUMNS", "Flight", "LoopOutput", "fly"]
 
 #: fewest vehicles per lane for the batch to be split into one lane per thread
 LANE_MIN = 8
-#: split big batches into lanes unless asked otherwise (see ``ag-uav bench``: lanes against one
-#: engine on the rollout's thread pool)
-LANES_BY_DEFAULT = False
+#: split big batches into lanes unless asked otherwise (``ag-uav bench``: one engine on the
+#: rollout's thread pool against lanes, ``batched.*_one_engine``)
+LANES_BY_DEFAULT = True
 #: first-tick time above which the numba kernels are taken to have been compiled (not loaded)
 COMPILE_THRESHOLD_S = 3.0
 _announced = False
@@ -114,6 +114,7 @@ class LoopOutput:
     s0: np.ndarray | None = None          # with capture: the initial full physics state
     controls: np.ndarray | None = None    # with capture: (n, 7) rotor commands (4), force (3)
     dose: Any = None                      # the dose map (ag_uav.world.deposition.DoseMap) or None
+    lanes: int = 1                        # the lanes its batch flew in (threads of the engine)
 
 
 # ------------------------------------------------------------------------------------ setup
@@ -339,6 +340,7 @@ class _Engine:
         self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
         self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
         self._pre_next = -math.inf  # the earliest time a pre-physics observer is due
+        self.k = -1  # the last tick flown
 
     def before_physics(self, k: int, t: float) -> bool:
         """Guard, sense, feed back, control, spray, disturb, deposit, record, observe; False
@@ -364,6 +366,17 @@ class _Engine:
     def physics(self) -> None:
         b = self.b
         self.stepper.step(b.S, b.sens, b.f, b.xf, b.act)
+
+    def tick(self, k: int) -> bool:
+        """Tick ``k`` whole (stages, physics, the observers of the stepped state); False when
+        no vehicle of this lane is left to fly."""
+        t = k * self.b.dt
+        if not self.before_physics(k, t):
+            return False
+        self.physics()
+        self.after_physics(k, t)
+        self.k = k
+        return True
 
     def after_physics(self, k: int, t: float) -> None:
         if self.post_obs:
@@ -421,56 +434,54 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
 def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
     """Every tick until no vehicle is left; (loop wall seconds, compile seconds of tick 0).
 
-    With several lanes (disjoint parts of the batch, each a whole engine over its rows) the
-    physics of every lane but the last runs in a worker thread (MuJoCo releases the GIL) while
-    this thread runs the next lane's stages: the Python tick overlaps the physics. Rows never
-    mix, so the lanes change nothing in the results."""
-    dt = lanes[0].b.dt
-    n_max = max(e.b.n_max for e in lanes)
-    pool = ThreadPoolExecutor(len(lanes) - 1) if len(lanes) > 1 else None
-    alive = [True] * len(lanes)
+    Tick 0 of every lane runs here (on a fresh checkout it compiles the kernels). Then one
+    lane flies on in this thread, or several lanes (disjoint parts of the batch, each a whole
+    engine over its rows with a one-thread rollout) each fly to the end in a thread of their
+    own: MuJoCo and the kernels release the GIL, so one lane's stages run while another's
+    physics does, and no lane waits for another at every tick. Rows never mix, so the lanes
+    change nothing in the results."""
     freeze = gc.get_freeze_count() == 0  # (a caller's own frozen objects are left as they are)
     if freeze:  # the loop's full collections scan only what the loop made, not the whole heap
         gc.freeze()
     wall = time.perf_counter()
-    compile_s, bar_next = 0.0, 1.0
     try:
-        for k in range(n_max):
-            t = k * dt
-            if not _tick(lanes, alive, pool, k, t):
-                break
-            if k == 0:
-                compile_s, wall = _first_tick(wall)
-            if bar is not None and t >= bar_next:
-                bar.update(1)
-                bar_next += 1.0
+        flying = [e for e in lanes if e.tick(0)]
+        compile_s, wall = _first_tick(wall)
+        if len(flying) == 1:
+            _fly_on(flying[0], bar)
+        elif flying:
+            _fly_lanes(flying, bar)
     finally:
         if freeze:
             gc.unfreeze()
-        if pool is not None:
-            pool.shutdown()
     return time.perf_counter() - wall, compile_s
 
 
-def _tick(lanes: list[_Engine], alive: list[bool], pool: Any, k: int, t: float) -> bool:
-    """One tick of every lane that still flies; False when none does."""
-    futures = []
-    last = len(lanes) - 1
-    for j, e in enumerate(lanes):
-        alive[j] = alive[j] and e.before_physics(k, t)
-        if not alive[j]:
-            continue
-        if j < last:
-            futures.append((e, pool.submit(e.physics)))
-            time.sleep(0)  # hand the GIL to the worker now: it starts the physics (which runs
-            # without the GIL) instead of waiting for this thread's switch interval
-        else:
-            e.physics()
-            e.after_physics(k, t)
-    for e, fut in futures:
-        fut.result()
-        e.after_physics(k, t)
-    return any(alive)
+def _fly_on(e: _Engine, bar: Any = None) -> None:
+    """Lane ``e``'s ticks from its next one until none of its vehicles is left."""
+    dt, bar_next = e.b.dt, 1.0
+    for k in range(e.k + 1, e.b.n_max):
+        t = k * dt
+        if not e.tick(k):
+            return
+        if bar is not None and t >= bar_next:
+            bar.update(1)
+            bar_next += 1.0
+
+
+def _fly_lanes(lanes: list[_Engine], bar: Any) -> None:
+    """Each lane to its end in a thread of its own; this thread keeps the progress bar."""
+    with ThreadPoolExecutor(len(lanes), thread_name_prefix="ag-uav-lane") as pool:
+        futs = [pool.submit(_fly_on, e) for e in lanes]
+        pending = set(futs)
+        while pending:
+            _, pending = wait(pending, timeout=0.5)
+            if bar is not None:
+                done = int(min(e.k for e in lanes) * lanes[0].b.dt)
+                if done > bar.n:
+                    bar.update(done - bar.n)
+        for fu in futs:
+            fu.result()
 
 
 def _first_tick(wall0: float) -> tuple[float, float]:
@@ -509,19 +520,31 @@ def _outputs(e: _Engine, wall: float, compile_s: float) -> list[LoopOutput]:
     return outs
 
 
-def _lanes(flights: list[Flight], nthread: int | None, lanes: int | None,
-           capture: bool = False) -> list[_Engine]:
-    """The batch as ``lanes`` engines over contiguous parts (default: one per thread when each
-    gets at least :data:`LANE_MIN` vehicles), each stepping its physics in one thread; or one
-    engine whose rollout uses ``nthread`` threads."""
+def lane_count(flights: Sequence[Flight], nthread: int | None = None,
+               lanes: int | None = None) -> int:
+    """How many lanes :func:`fly` splits ``flights`` into: ``lanes`` if given, else one per
+    thread when each gets at least :data:`LANE_MIN` vehicles and no flight has an observer (a
+    log, camera frames or a tick hook are served from the caller's thread), else 1."""
     n = len(flights)
     threads = default_threads(n) if nthread is None else nthread
     if lanes is None:
-        lanes = threads if LANES_BY_DEFAULT and threads > 1 and n >= LANE_MIN * threads else 1
-    lanes = max(1, min(lanes, n))
+        watched = any(fl.log is not None or fl.render or fl.tick_hook is not None
+                      for fl in flights)
+        lanes = (threads if LANES_BY_DEFAULT and not watched and threads > 1
+                 and n >= LANE_MIN * threads else 1)
+    return max(1, min(lanes, n))
+
+
+def _lanes(flights: list[Flight], nthread: int | None, lanes: int | None,
+           capture: bool = False) -> list[_Engine]:
+    """The batch as :func:`lane_count` engines over contiguous parts, each flying in a thread
+    of its own with a one-thread rollout; or one engine whose rollout uses ``nthread``
+    threads."""
+    lanes = lane_count(flights, nthread, lanes)
     if lanes == 1:
+        threads = default_threads(len(flights)) if nthread is None else nthread
         return [_build(flights, threads, capture)]
-    cuts = np.linspace(0, n, lanes + 1).round().astype(int)
+    cuts = np.linspace(0, len(flights), lanes + 1).round().astype(int)
     return [_build(flights[a:b], 0, capture) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
 
 
@@ -531,9 +554,10 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
 
     All flights must share ``sim.control_hz`` and ``sim.timestep_s``. ``nthread``: threads
     (default: ``$AG_UAV_ENGINE_THREADS`` or the machine's cores, at most the batch size; a
-    single vehicle is stepped in this thread). ``lanes``: engines the batch is split into, whose
-    physics overlaps the next lane's Python tick (default: one per thread for batches of at least
-    :data:`LANE_MIN` vehicles per thread; 1: one engine, the rollout on ``nthread`` threads).
+    single vehicle is stepped in this thread). ``lanes``: engines the batch is split into, each
+    flying in a thread of its own (default: one per thread for batches of at least
+    :data:`LANE_MIN` vehicles per thread and no observer; 1: one engine, the rollout on
+    ``nthread`` threads).
     ``capture``: each output also holds its initial physics state and the controls the physics
     was handed each tick (``s0``, ``controls``: what ``ag-uav bench`` replays)."""
     flights = list(flights)
@@ -560,4 +584,6 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
     for e in engines:
         e.finish()
         outs += _outputs(e, wall, compile_s)
+    for o in outs:
+        o.lanes = len(engines)
     return outs

@@ -319,10 +319,12 @@ def simulate_many(cfgs: list[Config], *, progress: bool = False, errors: str = "
     return res
 
 
-def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = False) -> list[Any]:
+def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = False,
+             lanes: int | None = None) -> list[Any]:
     """The loop outputs (:class:`~ag_uav.engine.loop.LoopOutput`, no metrics) of every config's
     mission flown as one engine batch, or the exception of a run that could not be set up.
-    ``capture``: with the initial states and controls (:func:`ag_uav.engine.loop.fly`)."""
+    ``capture``: with the initial states and controls; ``lanes``: as
+    :func:`ag_uav.engine.loop.fly`'s."""
     preps: list[Any] = []
     for c in cfgs:
         try:
@@ -330,7 +332,8 @@ def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = Fals
         except Exception as e:  # noqa: BLE001 - reported per run
             preps.append(e)
     ok = [p for p in preps if isinstance(p, _Prepared)]
-    outs = (iter(fly([p.flight for p in ok], progress=progress, capture=capture)) if ok
+    outs = (iter(fly([p.flight for p in ok], progress=progress, capture=capture, lanes=lanes))
+            if ok
             else iter(()))
     return [next(outs) if isinstance(p, _Prepared) else p for p in preps]
 

@@ -322,71 +322,104 @@ def replay_physics(models: list, body: int, nsub: int, s0: list, controls: list,
     ``controls[i]`` ((n_i, 7): rotor commands, applied force) held over each control period, as
     the engine hands them to the physics, and the spray job's liquid-mass changes
     (``masses[i]``: its Sprayer, whose ``mass_events`` are replayed at their ticks); the same
-    bits as the flight. ``chunk_size``: the rollout pool's chunking (None: MuJoCo's default),
-    or ``"lanes"``: one single-thread rollout per thread on its own part of the batch, in Python
-    threads (the engine's lanes). Returns (wall seconds, final states)."""
-    import numpy as np
-    from mujoco import rollout
+    bits as the flight. ``chunk_size``: the rollout pool's chunking (None: MuJoCo's default);
+    ``"lanes"``: one single-thread rollout per thread on its own part of the batch, the parts
+    kept in step tick by tick; ``"threads"``: the same parts, each thread replaying its part to
+    the end on its own (the engine's lanes). Returns (wall seconds, final states)."""
+    from concurrent.futures import ThreadPoolExecutor
 
     from ..engine.kernels import controls as pack
-    from ..engine.physics import CTRL_SPEC, STATE_SPEC
 
-    N, m0 = len(models), models[0]
+    N = len(models)
     n_i = np.array([len(c) for c in controls])
     C = np.zeros((int(n_i.max()), N, 7))
     for i, c in enumerate(controls):
         C[:len(c), i] = c
     S = np.array(s0, dtype=float)
-    xcol = m0.nu + 6 * body
-    parts = [np.arange(N)]
-    if chunk_size == "lanes" and nthread > 1:
-        parts = np.array_split(np.arange(N), nthread)
-    lanes = len(parts) > 1
-    runners = [rollout.Rollout(nthread=0 if lanes else nthread) for _ in parts]
-    data = [[mujoco.MjData(m0) for _ in range(1 if lanes else max(nthread, 1))] for _ in parts]
-    U = np.zeros((N, nsub, mujoco.mj_stateSize(m0, CTRL_SPEC)))
-    ns = mujoco.mj_stateSize(m0, STATE_SPEC)
-    bufs = [(np.empty((len(p), nsub, ns)), np.empty((len(p), nsub, m0.nsensordata)),
-             np.zeros((len(p), m0.nv))) for p in parts]
-    chunk = None if chunk_size == "lanes" else chunk_size
-    dt = nsub * m0.opt.timestep
-    events: dict[int, list] = {}
-    for sp in masses or ():
-        if sp is not None and sp.mass_events is not None:
-            sp._set_mass(sp.job.fill_l * sp.rho)
-            for t, m in sp.mass_events:
-                events.setdefault(int(round(t / dt)), []).append((sp, m))
+    split = chunk_size in ("lanes", "threads") and nthread > 1
+    parts = np.array_split(np.arange(N), nthread) if split else [np.arange(N)]
+    reps = [_Replayer(models, p, body, nsub, S, 0 if split else nthread,
+                      None if chunk_size in ("lanes", "threads") else chunk_size) for p in parts]
+    events = _mass_events(masses, nsub * models[0].opt.timestep, parts)
+    xcol = models[0].nu + 6 * body
+    pool = ThreadPoolExecutor(len(parts)) if split else None
 
-    def step(j: int, act: np.ndarray) -> None:
-        ii = parts[j][act[parts[j]]]
-        so, se, warm = (b[:len(ii)] for b in bufs[j])
-        if len(ii):
-            runners[j].rollout([models[i] for i in ii], data[j], S[ii], U[ii],
-                               control_spec=CTRL_SPEC, nstep=nsub, initial_warmstart=warm,
-                               state=so, sensordata=se, skip_checks=True, chunk_size=chunk)
-            S[ii] = so[:, -1]
+    def lane(j: int, ks: range) -> None:
+        rep, ev = reps[j], events[j]
+        for k in ks:
+            for sp, m in ev.get(k, ()):
+                sp._set_mass(m)
+            act = k < n_i
+            pack(rep.U, C[k, rep.ii, :4], C[k, rep.ii, 4:], xcol, act[rep.ii])
+            rep.step(S, act)
 
-    from concurrent.futures import ThreadPoolExecutor
-
-    pool = ThreadPoolExecutor(len(parts) - 1) if len(parts) > 1 else None
     try:
         t0 = time.perf_counter()
-        for k in range(len(C)):
-            act = k < n_i
-            for sp, m in events.get(k, ()):
-                sp._set_mass(m)
-            pack(U, C[k, :, :4], C[k, :, 4:], xcol, act)
-            futs = [pool.submit(step, j, act) for j in range(1, len(parts))] if pool else []
-            step(0, act)
-            for fu in futs:
+        if chunk_size == "threads" and pool is not None:
+            for fu in [pool.submit(lane, j, range(len(C))) for j in range(len(parts))]:
                 fu.result()
+        else:
+            for k in range(len(C)):
+                futs = [pool.submit(lane, j, range(k, k + 1)) for j in range(1, len(parts))
+                        ] if pool else []
+                lane(0, range(k, k + 1))
+                for fu in futs:
+                    fu.result()
         wall = time.perf_counter() - t0
     finally:
-        for r in runners:
-            r.close()
+        for r in reps:
+            r.runner.close()
         if pool is not None:
             pool.shutdown()
     return wall, S
+
+
+def _mass_events(masses: list | None, dt: float, parts: list[np.ndarray]
+                 ) -> list[dict[int, list]]:
+    """Each part's liquid-mass changes by tick ((the vehicle's Sprayer, the mass) pairs), the
+    tanks filled first."""
+    events: list[dict[int, list]] = [{} for _ in parts]
+    for j, part in enumerate(parts):
+        for i in part:
+            sp = masses[i] if masses else None
+            if sp is not None and sp.mass_events is not None:
+                sp._set_mass(sp.job.fill_l * sp.rho)
+                for t, m in sp.mass_events:
+                    events[j].setdefault(int(round(t / dt)), []).append((sp, m))
+    return events
+
+
+class _Replayer:
+    """One part of a replay: its rows ``ii``, a rollout on ``nthread`` threads and buffers."""
+
+    def __init__(self, models: list, ii: np.ndarray, body: int, nsub: int, S: np.ndarray,
+                 nthread: int, chunk: int | None) -> None:
+        from mujoco import rollout
+
+        from ..engine.physics import CTRL_SPEC
+
+        m0 = models[0]
+        self.models, self.ii, self.nsub, self.chunk = models, ii, nsub, chunk
+        self.runner = rollout.Rollout(nthread=nthread)
+        self.data = [mujoco.MjData(m0) for _ in range(max(nthread, 1))]
+        n = len(ii)
+        self.U = np.zeros((n, nsub, mujoco.mj_stateSize(m0, CTRL_SPEC)))
+        self.so = np.empty((n, nsub, S.shape[1]))
+        self.se = np.empty((n, nsub, m0.nsensordata))
+        self.warm = np.zeros((n, m0.nv))
+
+    def step(self, S: np.ndarray, act: np.ndarray) -> None:
+        from ..engine.physics import CTRL_SPEC
+
+        a = act[self.ii]
+        ii, n = self.ii[a], int(a.sum())
+        if n:
+            self.runner.rollout([self.models[i] for i in ii], self.data, S[ii], self.U[a],
+                                control_spec=CTRL_SPEC, nstep=self.nsub,
+                                initial_warmstart=self.warm[:n], state=self.so[:n],
+                                sensordata=self.se[:n], skip_checks=True,
+                                chunk_size=self.chunk)
+            S[ii] = self.so[:n, -1]
 
 
 def best_replay(outs: list, nthread: int, repeats: int) -> tuple[float, str]:
@@ -404,7 +437,7 @@ def best_replay(outs: list, nthread: int, repeats: int) -> tuple[float, str]:
     s0, ctl = [o.s0 for o in outs], [o.controls for o in outs]
     sprayers = [o.sprayer for o in outs]
     n = len(outs)
-    ways: list[Any] = [None, "lanes"] + sorted({max(1, -(-n // (k * max(nthread, 1))))
+    ways: list[Any] = [None, "lanes", "threads"] + sorted({max(1, -(-n // (k * max(nthread, 1))))
                                                 for k in (1, 2, 4, 8)})
     walls = {str(w): min(replay_physics(models, body, nsub, s0, ctl, nthread, w, sprayers)[0]
                          for _ in range(max(1, repeats)))
@@ -413,15 +446,21 @@ def best_replay(outs: list, nthread: int, repeats: int) -> tuple[float, str]:
     return walls[best], best
 
 
-def batched_capture(cfg: Config, n: int, sim_s: float) -> tuple[float, float, list]:
+def batched_capture(cfg: Config, n: int, sim_s: float, lanes: int | None = None
+                    ) -> tuple[float, float, list]:
     """Vehicle-sim-seconds, loop wall seconds and the captured outputs (initial states and
     controls) of ``n`` missions of ``cfg`` (seeds 0…n-1, cut at ``sim_s``) as one engine
-    batch."""
+    batch (``lanes``: the engine's default split, or 1 for one engine)."""
     from ..engine.missions import fly_many
 
-    outs = fly_many(_batch_cfgs(cfg, n, sim_s), capture=True)
+    outs = fly_many(_batch_cfgs(cfg, n, sim_s), capture=True, lanes=lanes)
     dt = 1.0 / cfg.sim.control_hz
     return sum(len(o.t) for o in outs) * dt, outs[0].wall_loop_s, outs
+
+
+_HOW = {"None": "rollout pool, default chunks",
+        "lanes": "one single-thread rollout per thread, kept in step every tick",
+        "threads": "one single-thread rollout per thread, each on its part to the end"}
 
 
 def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
@@ -431,27 +470,33 @@ def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     (initial states and controls captured from the engine) on the same threads, at its best
     way of spreading them (:func:`best_replay`); ``ratio_vs_hover_physics``, MuJoCo alone
     stepping hovering copies (no ground contacts: a cheaper reference); ``ratio_vs_raw``, one
-    raw ``mj_step`` loop."""
+    raw ``mj_step`` loop. The engine flies in its default lanes (one per thread, each in a
+    thread of its own: ``lanes``); ``one_engine_*`` is the same batch as one engine whose
+    rollout uses every thread (the engine before lanes), against the same reference."""
     from ..engine.physics import default_threads
 
     n, sim_s = (16, 20.0) if quick else (64, 60.0)
     threads = default_threads(n)
     ce = with_overrides(c, ESTIMATOR_LOG_OVERRIDES)
     batched_capture(ce, 2, 1.0)  # load the compiled kernels outside the timed loops
-    hover = _median_rate(lambda: physics_alone(c, n, sim_s, threads, "lanes"), repeats)
+    hover = _median_rate(lambda: physics_alone(c, n, sim_s, threads, "threads"), repeats)
     out: dict[str, Any] = {}
     for key, conf in (("batched", c), ("batched_estimators", ce)):
         raw = _median_rate(lambda: raw_stepping(c, sim_s, 1), repeats)
         runs = [batched_capture(conf, n, sim_s) for _ in range(repeats)]
         rate = statistics.median(r[0] / r[1] for r in runs)
         sim = runs[0][0]
+        one = batched_capture(conf, n, sim_s, lanes=1)
         phys_wall, how = best_replay(runs[0][2], threads, 1)
         physics = sim / phys_wall
         out[key] = {"vehicles": n, "mission_sim_s": sim_s, "engine_threads": threads,
+                    "lanes": runs[0][2][0].lanes,
                     "sim_s_per_wall_s": round(rate, 1),
                     "physics_sim_s_per_wall_s": round(physics, 1),
-                    "physics_how": how if how != "None" else "rollout pool, default chunks",
+                    "physics_how": _HOW.get(how, f"rollout pool, chunks of {how}"),
                     "ratio_vs_physics": round(rate / physics, 3),
+                    "one_engine_sim_s_per_wall_s": round(one[0] / one[1], 1),
+                    "one_engine_ratio_vs_physics": round(one[0] / one[1] / physics, 3),
                     "hover_physics_sim_s_per_wall_s": round(hover, 1),
                     "ratio_vs_hover_physics": round(rate / hover, 3),
                     "raw_per_step_sim_s_per_wall_s": round(raw, 1),
