@@ -262,3 +262,24 @@ def test_ins_runs_with_other_filter_settings_do_not_share_a_bank():
     fbs = [InsFeedback(c, seed_sequences(c.seed)) for c in (a, b)]
     with pytest.raises(ValueError, match="INS banks differ"):
         InsFeedback.batch(fbs, 10)
+
+
+def test_a_lane_that_fails_halts_the_others_and_its_error_reaches_the_caller():
+    cfgs = [_cfg(s, **{"sim.max_time_s": 10.0}) for s in range(4)]
+    ref = mission_setup(cfgs[0])[2]
+    lanes = loop._lanes([Flight(c, ref, 10.0) for c in cfgs], 2, 2)
+    tick = lanes[0].tick
+
+    def broken(k):
+        if k == 50:
+            raise RuntimeError("lane 0 broke")
+        return tick(k)
+
+    lanes[0].tick = broken
+    try:
+        with pytest.raises(RuntimeError, match="lane 0 broke"):
+            loop._run(lanes, None)
+        assert lanes[1].halt and lanes[1].k < lanes[1].b.n_max - 1
+    finally:
+        for e in lanes:
+            e.close()

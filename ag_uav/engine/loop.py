@@ -41,7 +41,7 @@ import math
 import sys
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -341,6 +341,7 @@ class _Engine:
         self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
         self._pre_next = -math.inf  # the earliest time a pre-physics observer is due
         self.k = -1  # the last tick flown
+        self.halt = False  # set from outside: stop before the next tick
 
     def before_physics(self, k: int, t: float) -> bool:
         """Guard, sense, feed back, control, spray, disturb, deposit, record, observe; False
@@ -458,11 +459,12 @@ def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
 
 
 def _fly_on(e: _Engine, bar: Any = None) -> None:
-    """Lane ``e``'s ticks from its next one until none of its vehicles is left."""
+    """Lane ``e``'s ticks from its next one until none of its vehicles is left (or it is told
+    to halt: another lane failed, or the caller was interrupted)."""
     dt, bar_next = e.b.dt, 1.0
     for k in range(e.k + 1, e.b.n_max):
         t = k * dt
-        if not e.tick(k):
+        if e.halt or not e.tick(k):
             return
         if bar is not None and t >= bar_next:
             bar.update(1)
@@ -470,16 +472,23 @@ def _fly_on(e: _Engine, bar: Any = None) -> None:
 
 
 def _fly_lanes(lanes: list[_Engine], bar: Any) -> None:
-    """Each lane to its end in a thread of its own; this thread keeps the progress bar."""
+    """Each lane to its end in a thread of its own; this thread keeps the progress bar. A lane
+    that raises halts the others, and so does an interrupt here (Ctrl-C)."""
     with ThreadPoolExecutor(len(lanes), thread_name_prefix="ag-uav-lane") as pool:
         futs = [pool.submit(_fly_on, e) for e in lanes]
         pending = set(futs)
-        while pending:
-            _, pending = wait(pending, timeout=0.5)
-            if bar is not None:
-                done = int(min(e.k for e in lanes) * lanes[0].b.dt)
-                if done > bar.n:
-                    bar.update(done - bar.n)
+        try:
+            while pending:
+                done, pending = wait(pending, timeout=0.5, return_when=FIRST_EXCEPTION)
+                if any(fu.exception() is not None for fu in done):
+                    break
+                if bar is not None:
+                    flown = int(min(e.k for e in lanes) * lanes[0].b.dt)
+                    if flown > bar.n:
+                        bar.update(flown - bar.n)
+        finally:
+            for e in lanes:
+                e.halt = True
         for fu in futs:
             fu.result()
 
