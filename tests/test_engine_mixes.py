@@ -283,3 +283,24 @@ def test_a_lane_that_fails_halts_the_others_and_its_error_reaches_the_caller():
     finally:
         for e in lanes:
             e.close()
+
+
+def test_a_lane_left_alone_takes_up_the_idle_cores_and_flies_the_same():
+    """Vehicle i flies in lane i mod L; when a lane's vehicles are all done, the lanes still
+    flying are offered its core and their rollouts widen, with the same results."""
+    cfgs = [_cfg(s, **{"sim.max_time_s": 10.0}) for s in range(4)]
+    ref = mission_setup(cfgs[0])[2]
+    durations = (1.0, 5.0, 1.0, 5.0)   # lane 0: vehicles 0 and 2 (short); lane 1: 1 and 3
+    flights = [Flight(c, ref, d) for c, d in zip(cfgs, durations, strict=True)]
+    lanes = loop._lanes(flights, 2, 2)
+    assert [e.rows for e in lanes] == [[0, 2], [1, 3]]
+    try:
+        loop._run(lanes, None)
+        assert lanes[1].stepper.nthread == 2 and lanes[0].stepper.nthread == 0
+    finally:
+        for e in lanes:
+            e.close()
+    one = fly([Flight(c, ref, d) for c, d in zip(cfgs, durations, strict=True)], lanes=1)
+    two = fly([Flight(c, ref, d) for c, d in zip(cfgs, durations, strict=True)], lanes=2)
+    for a, b in zip(one, two, strict=True):
+        assert np.array_equal(a.rec, b.rec) and b.lanes == 2

@@ -20,8 +20,12 @@ observers (:mod:`ag_uav.engine.observers`), then runs every tick as the flow rea
 * **record**: the tick's row (arrays); **observe**: logs, camera frames and tick hooks, all
   through one view of the batch;
 * **physics**: one control period of every active vehicle (``mj_step`` for one vehicle,
-  ``mujoco.rollout`` on a thread pool for many; one MjModel per vehicle, so payload, motor lag
-  and drag may differ; the models of a batch share their sizes, since the field is scenery).
+  ``mujoco.rollout`` for many; one MjModel per vehicle, so payload, motor lag and drag may
+  differ; the models of a batch share their sizes, since the field is scenery).
+
+A big batch with no observer flies in **lanes** (:func:`lane_count`): one engine per thread over
+its part of the batch, each flying to its end in a thread of its own with a one-thread rollout.
+MuJoCo and the kernels release the GIL, so one lane's stages run while another's physics does.
 
 Every law is a numba kernel over the batch axis that never mixes rows, and every random draw
 comes from the vehicle's own Generators, so a mission's trajectory does not depend on the batch
@@ -41,7 +45,7 @@ import math
 import sys
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -342,6 +346,8 @@ class _Engine:
         self._pre_next = -math.inf  # the earliest time a pre-physics observer is due
         self.k = -1  # the last tick flown
         self.halt = False  # set from outside: stop before the next tick
+        self.threads = getattr(stepper, "nthread", 0)  # offered from outside (lanes finished)
+        self.rows: list[int] = []  # its vehicles' places in the fly() call
 
     def before_physics(self, k: int, t: float) -> bool:
         """Guard, sense, feed back, control, spray, disturb, deposit, record, observe; False
@@ -460,11 +466,16 @@ def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
 
 def _fly_on(e: _Engine, bar: Any = None) -> None:
     """Lane ``e``'s ticks from its next one until none of its vehicles is left (or it is told
-    to halt: another lane failed, or the caller was interrupted)."""
+    to halt: another lane failed, or the caller was interrupted). Between ticks it takes up
+    the threads it is offered (``e.threads``: cores that lanes done before it left idle)."""
     dt, bar_next = e.b.dt, 1.0
     for k in range(e.k + 1, e.b.n_max):
         t = k * dt
-        if e.halt or not e.tick(k):
+        if e.halt:
+            return
+        if e.threads != e.stepper.nthread:
+            e.stepper.set_threads(e.threads)
+        if not e.tick(k):
             return
         if bar is not None and t >= bar_next:
             bar.update(1)
@@ -472,16 +483,23 @@ def _fly_on(e: _Engine, bar: Any = None) -> None:
 
 
 def _fly_lanes(lanes: list[_Engine], bar: Any) -> None:
-    """Each lane to its end in a thread of its own; this thread keeps the progress bar. A lane
-    that raises halts the others, and so does an interrupt here (Ctrl-C)."""
+    """Each lane to its end in a thread of its own; this thread keeps the progress bar and,
+    as lanes finish, offers their cores to the lanes still flying (their rollouts widen). A
+    lane that raises halts the others, and so does an interrupt here (Ctrl-C)."""
+    cores = len(lanes)
     with ThreadPoolExecutor(len(lanes), thread_name_prefix="ag-uav-lane") as pool:
-        futs = [pool.submit(_fly_on, e) for e in lanes]
+        futs = {pool.submit(_fly_on, e): e for e in lanes}
         pending = set(futs)
         try:
             while pending:
-                done, pending = wait(pending, timeout=0.5, return_when=FIRST_EXCEPTION)
+                done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
                 if any(fu.exception() is not None for fu in done):
                     break
+                if done and pending:
+                    left = [futs[fu] for fu in pending]
+                    for j, e in enumerate(left):
+                        t = cores // len(left) + (j < cores % len(left))
+                        e.threads = 0 if t == 1 else t
                 if bar is not None:
                     flown = int(min(e.k for e in lanes) * lanes[0].b.dt)
                     if flown > bar.n:
@@ -546,15 +564,23 @@ def lane_count(flights: Sequence[Flight], nthread: int | None = None,
 
 def _lanes(flights: list[Flight], nthread: int | None, lanes: int | None,
            capture: bool = False) -> list[_Engine]:
-    """The batch as :func:`lane_count` engines over contiguous parts, each flying in a thread
-    of its own with a one-thread rollout; or one engine whose rollout uses ``nthread``
-    threads."""
-    lanes = lane_count(flights, nthread, lanes)
-    if lanes == 1:
+    """The batch as :func:`lane_count` engines, vehicle i in lane i mod L (so a batch ordered
+    by field or length spreads its long missions over the lanes), each flying in a thread of
+    its own with a one-thread rollout; or one engine whose rollout uses ``nthread`` threads.
+    Each engine's ``rows`` are its vehicles' places in ``flights``."""
+    n_lanes = lane_count(flights, nthread, lanes)
+    if n_lanes == 1:
         threads = default_threads(len(flights)) if nthread is None else nthread
-        return [_build(flights, threads, capture)]
-    cuts = np.linspace(0, len(flights), lanes + 1).round().astype(int)
-    return [_build(flights[a:b], 0, capture) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+        e = _build(flights, threads, capture)
+        e.rows = list(range(len(flights)))
+        return [e]
+    out = []
+    for j in range(n_lanes):
+        rows = list(range(j, len(flights), n_lanes))
+        e = _build([flights[i] for i in rows], 0, capture)
+        e.rows = rows
+        out.append(e)
+    return out
 
 
 def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | None = None,
@@ -589,10 +615,10 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
             e.close()
         if bar is not None:
             bar.close()
-    outs: list[LoopOutput] = []
+    outs: list[Any] = [None] * len(flights)
     for e in engines:
         e.finish()
-        outs += _outputs(e, wall, compile_s)
-    for o in outs:
-        o.lanes = len(engines)
+        for i, o in zip(e.rows, _outputs(e, wall, compile_s), strict=True):
+            o.lanes = len(engines)
+            outs[i] = o
     return outs

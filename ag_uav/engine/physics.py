@@ -78,6 +78,11 @@ class Stepper:
 class DirectStepper(Stepper):
     """One vehicle, its own ``MjData``, ``mj_step(m, d, nsub)`` per control period."""
 
+    nthread = 0
+
+    def set_threads(self, nthread: int) -> None:
+        """One vehicle steps in the caller's thread whatever it is offered."""
+
     def __init__(self, model: mujoco.MjModel, body: int, nsub: int, S0: np.ndarray) -> None:
         self.model, self.nsub = model, nsub
         self.data = mujoco.MjData(model)
@@ -103,18 +108,30 @@ class RolloutStepper(Stepper):
                  nthread: int) -> None:
         self.models, self.nsub = list(models), nsub
         m0 = self.models[0]
-        self.data = [mujoco.MjData(m0) for _ in range(max(nthread, 1))]
+        self.data = [mujoco.MjData(m0)]
         for i, m in enumerate(self.models):
             check_data(m, self.data[0], f"the rollout's data (vehicle 0's layout, vehicle {i})")
         N = len(self.models)
         self.xcol = m0.nu + 6 * body
-        self.runner = _rollout.Rollout(nthread=nthread)
-        self.n_chunks = CHUNKS_PER_THREAD * max(nthread, 1)
+        self.runner = None
+        self.set_threads(nthread)
         self.U = np.zeros((N, nsub, mujoco.mj_stateSize(m0, CTRL_SPEC)))
         self.S_out = np.empty((N, nsub, mujoco.mj_stateSize(m0, STATE_SPEC)))
         self.sens_out = np.empty((N, nsub, m0.nsensordata))
         self.warm = np.zeros((N, m0.nv))
         self.idx = np.arange(N)
+
+    def set_threads(self, nthread: int) -> None:
+        """Step on ``nthread`` threads from now on (0: the caller's); the results do not
+        depend on it (each vehicle's steps are its own)."""
+        nthread = 0 if nthread == 1 else nthread  # a one-thread pool only adds its hand-off
+        if self.runner is not None:
+            self.runner.close()
+        self.nthread = nthread
+        self.runner = _rollout.Rollout(nthread=nthread)
+        m0 = self.models[0]
+        self.data += [mujoco.MjData(m0) for _ in range(max(nthread, 1) - len(self.data))]
+        self.n_chunks = CHUNKS_PER_THREAD * max(nthread, 1)
 
     def step(self, S, sens, f, xf, act) -> None:
         controls(self.U, f, xf, self.xcol, act)
@@ -127,7 +144,8 @@ class RolloutStepper(Stepper):
     def _run(self, models, S0, U, S, sens, ii) -> None:
         n = len(models)
         so, se = self.S_out[:n], self.sens_out[:n]
-        self.runner.rollout(models, self.data, S0, U, control_spec=CTRL_SPEC, nstep=self.nsub,
+        self.runner.rollout(models, self.data[:max(self.nthread, 1)], S0, U,
+                            control_spec=CTRL_SPEC, nstep=self.nsub,
                             initial_warmstart=self.warm[:n], state=so, sensordata=se,
                             skip_checks=True, chunk_size=-(-n // self.n_chunks))
         if ii is None:
