@@ -148,6 +148,9 @@ class InsFeedback(Feedback):
                 bias_m=g.false_fix_bias_m, calibration_sigma=g.accuracy_calibration_sigma,
                 report_lag_s=g.fix_type_report_lag_s)
         self.aux_rng = np.random.default_rng(derive_seed(spare, "gnss_aux"))
+        self._aux: list[float] = []
+        self._aux_j = 0
+        self.gnss_buf = np.empty(15)   # the fix row fix() returns (overwritten by the next)
         self.radar = g.altitude_source == "radar"
         self.radar_rng = np.random.default_rng(seeds["altimeter"])
         var = np.asarray(self.gps.variance, dtype=float).reshape(-1)
@@ -175,24 +178,37 @@ class InsFeedback(Feedback):
 
     def fix(self, t: float, p_ant, v_ant, yaw) -> np.ndarray | None:
         """The receiver's fix of this tick from the delayed antenna truth, as one
-        :meth:`BatchINS.gnss_row` (None: no fix due, or lost)."""
+        :meth:`BatchINS.gnss_row` (None: no fix due, or lost). Python floats where numpy's
+        per-call cost would dominate (the same IEEE operations, so the same bits)."""
         z = self.gps.measure(t, p_ant)
-        if z is None or any(a <= t < b for a, b in self.outages):
+        if z is None or (self.outages and any(a <= t < b for a, b in self.outages)):
             return None
         true_type = self.gps.last_fix_type
         rep, scale = true_type, 1.0
         if self.report is not None:
             bias, rep, scale = self.report.step(true_type)
             z = z + bias
-        var_p = self.var_by_type.get(rep, self.var_nominal) * scale * scale
-        n = self.aux_rng.standard_normal(4)
-        vel = np.asarray(v_ant) + self.cfg.gps.velocity_sigma_mps * n[:3]
-        psi = yaw + self.cfg.gps.heading_sigma_deg * DEG * n[3]
+        vp = self.var_by_type.get(rep, self.var_nominal)
+        n = self._aux4()
+        sv, g = self.cfg.gps.velocity_sigma_mps, self.gnss_buf
         self.fixes += 1
         if self.log is not None:
             self.log.gps(t, z)
-        return BatchINS.gnss_row(z, vel, psi, var_p, (self.var_v,) * 3, self.var_yaw,
-                                 age_s=self.D * self.dt)
+        g[:] = (self.D * self.dt, z[0], z[1], z[2],
+                v_ant[0] + sv * n[0], v_ant[1] + sv * n[1], v_ant[2] + sv * n[2],
+                yaw + self.cfg.gps.heading_sigma_deg * DEG * n[3],
+                vp[0] * scale * scale, vp[1] * scale * scale, vp[2] * scale * scale,
+                self.var_v, self.var_v, self.var_v, self.var_yaw)
+        return g
+
+    def _aux4(self) -> list[float]:
+        """The next four standard normals of the receiver's auxiliary stream (velocity noise,
+        heading noise), drawn in blocks: the same sequence as four at a time."""
+        j = self._aux_j
+        if j + 4 > len(self._aux):
+            self._aux, j = self.aux_rng.standard_normal(4096).tolist(), 0
+        self._aux_j = j + 4
+        return self._aux[j:j + 4]
 
     def update(self, t, p_true, v_true, imu=None):
         raise NotImplementedError("InsFeedback flies through the engine's batch "
@@ -331,7 +347,7 @@ class BatchInsFeedback:
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
         self.nees = np.full((NV, n_fix, 3, nrec), np.nan)   # NEES15, NIS(pos), NEES(pos)
         self.n_fix = np.zeros(NV, dtype=np.int64)
-        self.noise = [fb.radar_rng.standard_normal(4096) for fb in fbs]
+        self.noise = np.stack([fb.radar_rng.standard_normal(4096) for fb in fbs])
         self.noise_i = np.zeros(NV, dtype=np.int64)
         self.upd_ns = 0
         self.n_upd = 0
@@ -399,11 +415,12 @@ class BatchInsFeedback:
     def _fix(self, i: int, k: int, t: float) -> None:
         fb = self.fbs[i]
         r = self.ring[i, max(k - self.D, 0) % (self.D + 1)]
-        if not np.isfinite(r[0]):   # before D ticks of history: the oldest there is
+        if not math.isfinite(r[0]):   # before D ticks of history: the oldest there is
             r = self.ring[i, 0]
         row = fb.fix(t, r[0:3], r[3:6], float(r[6]))
         self.next_t[i] = fb.gps._next_k * fb.gps.dt
-        if row is None or not np.all(np.isfinite(row[1:4])):
+        if row is None or not (math.isfinite(row[1]) and math.isfinite(row[2])
+                               and math.isfinite(row[3])):
             return
         if not self.init[i]:
             if abs(float(np.linalg.norm(self.imu[i, :3])) - 9.81) < 0.5:  # at rest: levels
@@ -434,16 +451,20 @@ class BatchInsFeedback:
         self.k0[i] = k - 1   # the reset state is the tick before: this tick's step moves it on
 
     def _radar(self, k: int, act: np.ndarray) -> None:
+        """The radar's slant range of every active vehicle (its noise from the vehicle's own
+        stream, drawn in blocks of 4096)."""
         sig = self.cfg.gps.radar_sigma_m
-        for i in np.flatnonzero(act):
-            j = self.noise_i[i]
-            if j >= len(self.noise[i]):
-                self.noise[i] = self.fbs[i].radar_rng.standard_normal(4096)
-                j = 0
-            self.noise_i[i] = j + 1
-            rng = self.ring[i, k % (self.D + 1), 16]
-            self.radar[i] = (rng + sig * self.noise[i][j], sig * sig, 0.0)
-            self.range_last[i] = self.radar[i, 0]  # NaN: a dropout (no range aid then)
+        ii = np.flatnonzero(act)
+        for i in ii[self.noise_i[ii] >= self.noise.shape[1]].tolist():
+            self.noise[i] = self.fbs[i].radar_rng.standard_normal(self.noise.shape[1])
+            self.noise_i[i] = 0
+        j = self.noise_i[ii]
+        self.noise_i[ii] = j + 1
+        z = self.ring[ii, k % (self.D + 1), 16] + sig * self.noise[ii, j]
+        self.radar[ii, 0] = z
+        self.radar[ii, 1] = sig * sig
+        self.radar[ii, 2] = 0.0
+        self.range_last[ii] = z  # NaN: a dropout (no range aid then)
 
     def _pre_init(self, act: np.ndarray) -> None:
         """Vehicles without a fix yet: radar height, zero velocity, levelled attitude."""
