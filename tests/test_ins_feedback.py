@@ -188,3 +188,23 @@ def test_the_log_shows_when_the_radar_is_the_height_source(tmp_path):
     assert set(np.unique(aid)) == {0.0, 1.0}
     assert np.all(aid[(t > 0.5) & (t < 4.0)] == 1.0) and np.all(aid[t > 6.5] == 0.0)
     assert s["range_aid_fixes"] >= 35
+
+
+def test_quad_inv_matches_numpy_and_refuses_an_indefinite_matrix():
+    """The NEES's eᵀ P⁻¹ e (allocation-free Cholesky) against numpy's solve, on the whole matrix
+    and on its leading block; NaN where the block is not positive definite."""
+    from ag_uav.navigation.ins_feedback import quad_inv
+
+    rng = np.random.default_rng(3)
+    L, y = np.empty((15, 15)), np.empty(15)
+    for _ in range(20):
+        A = rng.standard_normal((15, 15))
+        P = A @ A.T + 1e-3 * np.eye(15)
+        e = rng.standard_normal(15)
+        for n in (15, 3):
+            ref = float(e[:n] @ np.linalg.solve(P[:n, :n], e[:n]))
+            assert quad_inv(P, e, n, L, y) == pytest.approx(ref, rel=1e-9)
+    P = np.eye(15)
+    P[4, 4] = -1.0
+    assert np.isnan(quad_inv(P, np.ones(15), 15, L, y))
+    assert quad_inv(P, np.ones(15), 3, L, y) == pytest.approx(3.0)

@@ -604,7 +604,7 @@ def _rot_to_quat(R, q):  # pragma: no cover
 
 
 @njit(cache=True)
-def _nees15(x, P, tr, bias0, q_t, dth, e):  # pragma: no cover
+def _nees15(x, P, tr, bias0, q_t, dth, e, L, y):  # pragma: no cover
     """eᵀ P⁻¹ e of one row's core state against the truth ``tr`` (a ring row): e = [p, v,
     Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the turn-on biases."""
     if not np.isfinite(tr[17]):
@@ -618,9 +618,34 @@ def _nees15(x, P, tr, bias0, q_t, dth, e):  # pragma: no cover
         e[6 + a] = dth[a]
         e[9 + a] = bias0[a] - x[10 + a]
         e[12 + a] = bias0[3 + a] - x[13 + a]
-    L = np.linalg.cholesky(P)
-    y = np.linalg.solve(L, e)
-    return float(np.dot(y, y))
+    return quad_inv(P, e, 15, L, y)
+
+
+@njit(cache=True)
+def quad_inv(P, e, n, L, y):  # pragma: no cover
+    """eᵀ P⁻¹ e over the leading ``n`` × ``n`` block of a symmetric positive definite ``P``:
+    Cholesky P = L Lᵀ into the scratch ``L``, forward substitution L y = e (scratch ``y``),
+    then yᵀ y. Allocates nothing; NaN when the block is not positive definite."""
+    for j in range(n):
+        d = P[j, j]
+        for m in range(j):
+            d -= L[j, m] * L[j, m]
+        if not d > 0.0:
+            return np.nan
+        L[j, j] = math.sqrt(d)
+        for i in range(j + 1, n):
+            s = P[i, j]
+            for m in range(j):
+                s -= L[i, m] * L[j, m]
+            L[i, j] = s / L[j, j]
+    q = 0.0
+    for i in range(n):
+        s = e[i]
+        for m in range(i):
+            s -= L[i, m] * y[m]
+        y[i] = s / L[i, i]
+        q += y[i] * y[i]
+    return q
 
 
 @njit(cache=True)
@@ -652,6 +677,8 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
     dth = np.empty(3)
     e = np.empty(15)
     o = np.empty(4)
+    L = np.empty((15, 15))
+    y = np.empty(15)
     for i in range(act.shape[0]):
         if not (act[i] and init[i]):
             continue
@@ -673,8 +700,7 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
                 err[k, i, c, j] = o[c]
             if at_fix:
                 tr = ring[i, (k0[i] + core[row]) % B]
-                nees[i, rec, 0, j] = _nees15(xc[row], P[row], tr, bias0[i], q_t, dth, e)
+                nees[i, rec, 0, j] = _nees15(xc[row], P[row], tr, bias0[i], q_t, dth, e, L, y)
                 nees[i, rec, 1, j] = nis[row, 0]
                 if np.isfinite(e[0]):   # the position block alone (3 dof)
-                    y = np.linalg.solve(P[row, :3, :3], e[:3])
-                    nees[i, rec, 2, j] = e[0] * y[0] + e[1] * y[1] + e[2] * y[2]
+                    nees[i, rec, 2, j] = quad_inv(P[row], e, 3, L, y)
