@@ -500,8 +500,9 @@ def _fly_lanes(lanes: list[_Engine], bar: Any) -> None:
                     for j, e in enumerate(left):
                         t = cores // len(left) + (j < cores % len(left))
                         e.threads = 0 if t == 1 else t
-                if bar is not None:
-                    flown = int(min(e.k for e in lanes) * lanes[0].b.dt)
+                if bar is not None:  # the slowest lane still flying
+                    flying = [futs[fu] for fu in pending] or lanes
+                    flown = int(min(e.k for e in flying) * lanes[0].b.dt)
                     if flown > bar.n:
                         bar.update(flown - bar.n)
         finally:

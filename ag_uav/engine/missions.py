@@ -332,9 +332,8 @@ def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = Fals
         except Exception as e:  # noqa: BLE001 - reported per run
             preps.append(e)
     ok = [p for p in preps if isinstance(p, _Prepared)]
-    outs = (iter(fly([p.flight for p in ok], progress=progress, capture=capture, lanes=lanes))
-            if ok
-            else iter(()))
+    flown = fly([p.flight for p in ok], progress=progress, capture=capture, lanes=lanes)
+    outs = iter(flown)
     return [next(outs) if isinstance(p, _Prepared) else p for p in preps]
 
 

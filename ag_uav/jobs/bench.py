@@ -350,7 +350,7 @@ def replay_physics(models: list, body: int, nsub: int, s0: list, controls: list,
             for sp, m in ev.get(k, ()):
                 sp._set_mass(m)
             act = k < n_i
-            pack(rep.U, C[k, rep.ii, :4], C[k, rep.ii, 4:], xcol, act[rep.ii])
+            pack(rep.U, C[k, rep.sl, :4], C[k, rep.sl, 4:], xcol, act[rep.sl])
             rep.step(S, act)
 
     try:
@@ -390,7 +390,8 @@ def _mass_events(masses: list | None, dt: float, parts: list[np.ndarray]
 
 
 class _Replayer:
-    """One part of a replay: its rows ``ii``, a rollout on ``nthread`` threads and buffers."""
+    """One part of a replay: its rows (a contiguous range), a rollout on ``nthread`` threads
+    and its buffers; with every row active it hands MuJoCo views, as the engine does."""
 
     def __init__(self, models: list, ii: np.ndarray, body: int, nsub: int, S: np.ndarray,
                  nthread: int, chunk: int | None) -> None:
@@ -399,7 +400,9 @@ class _Replayer:
         from ..engine.physics import CTRL_SPEC
 
         m0 = models[0]
-        self.models, self.ii, self.nsub, self.chunk = models, ii, nsub, chunk
+        self.ii, self.nsub, self.chunk, self.spec = ii, nsub, chunk, CTRL_SPEC
+        self.sl = slice(int(ii[0]), int(ii[-1]) + 1) if len(ii) else slice(0, 0)
+        self.models = [models[i] for i in ii]
         self.runner = rollout.Rollout(nthread=nthread)
         self.data = [mujoco.MjData(m0) for _ in range(max(nthread, 1))]
         n = len(ii)
@@ -409,17 +412,20 @@ class _Replayer:
         self.warm = np.zeros((n, m0.nv))
 
     def step(self, S: np.ndarray, act: np.ndarray) -> None:
-        from ..engine.physics import CTRL_SPEC
-
-        a = act[self.ii]
-        ii, n = self.ii[a], int(a.sum())
-        if n:
-            self.runner.rollout([self.models[i] for i in ii], self.data, S[ii], self.U[a],
-                                control_spec=CTRL_SPEC, nstep=self.nsub,
-                                initial_warmstart=self.warm[:n], state=self.so[:n],
-                                sensordata=self.se[:n], skip_checks=True,
-                                chunk_size=self.chunk)
-            S[ii] = self.so[:n, -1]
+        a = act[self.sl]
+        n = int(a.sum())
+        if n == len(a):
+            models, S0, U, rows = self.models, S[self.sl], self.U, self.sl
+        elif n:
+            j = np.flatnonzero(a)
+            models, S0, U = [self.models[i] for i in j], S[self.sl][j], self.U[j]
+            rows = self.ii[j]
+        else:
+            return
+        self.runner.rollout(models, self.data, S0, U, control_spec=self.spec, nstep=self.nsub,
+                            initial_warmstart=self.warm[:n], state=self.so[:n],
+                            sensordata=self.se[:n], skip_checks=True, chunk_size=self.chunk)
+        S[rows] = self.so[:n, -1]
 
 
 def best_replay(outs: list, nthread: int, repeats: int) -> tuple[float, str]:
