@@ -74,7 +74,7 @@ __all__ = ["REC_COLUMNS", "Flight", "LoopOutput", "fly"]
 #: fewest vehicles per lane for the batch to be split into one lane per thread
 LANE_MIN = 8
 #: split big batches into lanes unless asked otherwise (``ag-uav bench``: one engine on the
-#: rollout's thread pool against lanes, ``batched.*_one_engine``)
+#: rollout's thread pool against lanes, ``batched.one_engine_*``)
 LANES_BY_DEFAULT = True
 #: first-tick time above which the numba kernels are taken to have been compiled (not loaded)
 COMPILE_THRESHOLD_S = 3.0
