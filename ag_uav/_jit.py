@@ -7,7 +7,10 @@ batch it flies in)."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
+
+from controllers._jit import package_dir, sweep_stale_caches
 
 __all__ = ["HAVE_NUMBA", "njit", "register_jitable"]
 
@@ -30,3 +33,7 @@ except ImportError:  # pragma: no cover - numba is a dependency
 
     def register_jitable(f: Callable[..., Any]) -> Callable[..., Any]:  # type: ignore[no-redef]
         return f
+
+if HAVE_NUMBA:  # the application's kernels call the estimators' and the controllers'
+    sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent, package_dir("estimators"),
+                                               package_dir("controllers")])

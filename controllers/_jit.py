@@ -9,10 +9,14 @@ operations kept), to ~1e-12.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import hashlib
+import importlib.util
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ["HAVE_NUMBA", "njit"]
+__all__ = ["HAVE_NUMBA", "njit", "package_dir", "sweep_stale_caches"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -36,3 +40,65 @@ def njit(fn: F) -> F:
     if not hasattr(out, "py_func"):  # no numba, or NUMBA_DISABLE_JIT=1
         out.py_func = fn
     return out  # type: ignore[no-any-return]
+
+
+#: the stamp each package keeps in its ``__pycache__``: the hash of the sources its kernels were
+#: compiled from
+STAMP = "numba-sources.stamp"
+
+
+def package_dir(name: str) -> Path:
+    """The folder of the top-level package ``name``, found without importing it."""
+    spec = importlib.util.find_spec(name)
+    if spec is None or not spec.submodule_search_locations:
+        raise ImportError(f"package {name!r} not found")
+    return Path(list(spec.submodule_search_locations)[0])
+
+
+def sources_hash(sources: Sequence[Path]) -> str:
+    """blake2b of every ``.py`` file under ``sources`` (relative names and bytes, sorted)."""
+    h = hashlib.blake2b(digest_size=16)
+    for d in sources:
+        for f in sorted(d.rglob("*.py")):
+            h.update(f.relative_to(d.parent).as_posix().encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def sweep_stale_caches(own: Path, sources: Sequence[Path]) -> int:
+    """Delete the numba cache files (``__pycache__/*.nbi``, ``*.nbc``) under the package ``own``
+    when the sources of ``sources`` (the package and every package its kernels call) differ from
+    those the cache was compiled from; returns how many were deleted.
+
+    numba keys a kernel's cache on its own file's time stamp only: a kernel that inlines a law
+    from another file (the INS calls :mod:`estimators.kf`'s update; the engine's kernels call
+    the controllers') would keep running the old law after that file alone changes, silently.
+    Called once at import, before any kernel runs (numba reads an index at a kernel's first
+    call).  A concurrent process at worst recompiles.  Caches under ``NUMBA_CACHE_DIR`` or a
+    user-wide directory (a read-only install, whose files change together) are not swept."""
+    try:
+        key = sources_hash(sources)
+        stamp = own / "__pycache__" / STAMP
+        if stamp.is_file() and stamp.read_text() == key:
+            return 0
+    except OSError:
+        return 0
+    n = 0
+    for f in [*own.rglob("__pycache__/*.nbi"), *own.rglob("__pycache__/*.nbc")]:
+        try:
+            f.unlink()
+            n += 1
+        except OSError:
+            pass
+    try:
+        stamp.parent.mkdir(exist_ok=True)
+        tmp = stamp.with_name(f"{STAMP}.{os.getpid()}")
+        tmp.write_text(key)
+        os.replace(tmp, stamp)
+    except OSError:
+        pass
+    return n
+
+
+if _numba is not None:
+    sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent])

@@ -11,7 +11,10 @@ bit-identical in a scalar filter and in any row of any batch.
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
+
+from controllers._jit import package_dir, sweep_stale_caches
 
 __all__ = ["HAVE_NUMBA", "njit"]
 
@@ -22,6 +25,9 @@ try:  # pragma: no cover - depends on the environment
 except ImportError:  # pragma: no cover
     _numba = None
     HAVE_NUMBA = False
+
+if _numba is not None:  # the estimators use the controllers (estimators.pso_r): both are keys
+    sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent, package_dir("controllers")])
 
 
 def njit(func: Callable[..., Any] | None = None, **options: Any) -> Any:
