@@ -29,14 +29,12 @@ from typing import Any
 
 import pytest
 import tomli_w
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
-
-from ag_uav import cli  # noqa: E402
-from ag_uav import config as C  # noqa: E402
-from ag_uav.vehicle.gps import available_presets, gps_preset  # noqa: E402
+from ag_uav import cli
+from ag_uav import config as C
+from ag_uav.vehicle.gps import available_presets, gps_preset
 
 FUZZ = settings(max_examples=100, deadline=None, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,

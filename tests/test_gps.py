@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import tomllib
 
 import numpy as np
 import pytest
@@ -26,8 +27,6 @@ from ag_uav.vehicle.gps import (
     make_component,
     validate_overrides,
 )
-
-tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
 
 N = 300_000
 

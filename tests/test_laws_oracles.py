@@ -13,7 +13,6 @@ from estimators import KF, MCKF, PCAKF, PCAMCKF, PCABlock, motion_model
 from tests.oracles.mckf import OracleMCKF
 from tests.oracles.pca import OraclePCABlock
 
-filterpy = pytest.importorskip("filterpy.kalman")
 T = 400
 
 
@@ -43,6 +42,7 @@ def _model(kind: str, dim):
 
 
 def _filterpy_kf(mdl, x0, P0):
+    filterpy = pytest.importorskip("filterpy.kalman")  # the oracle (a dev extra)
     f = filterpy.KalmanFilter(mdl.n, mdl.m)
     f.F, f.H, f.Q, f.R = mdl.F.copy(), mdl.H.copy(), mdl.Q.copy(), mdl.R.copy()
     f.x, f.P = x0.reshape(-1, 1).copy(), P0.copy()

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import io
 
+import mujoco
 import numpy as np
 import pytest
+from PIL import Image
 
 from ag_uav.record.render import Renderer, RenderUnavailable, optical_quat
-
-mujoco = pytest.importorskip("mujoco")
-from PIL import Image  # noqa: E402
 
 XML = """
 <mujoco>
