@@ -28,7 +28,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .kf import LinearGaussianBase, inv_small
+from .kf import LinearGaussianBase, inv_small, joseph
 
 __all__ = ["EKF", "NonlinearModelMixin"]
 
@@ -118,8 +118,7 @@ class EKF(NonlinearModelMixin, LinearGaussianBase):
             return False
         K = _dot(PHT, Si)
         self.x = x + _dot(K, y)
-        IKH = self._I - _dot(K, H)
-        self.P = _dot(_dot(IKH, P), IKH.T) + _dot(_dot(K, self._R), K.T)
+        self.P = joseph(P, K, H, self._R)
         self._H, self._HT = H, HT
         self.y, self.S, self.K, self.nis = y, S, K, nis
         return True

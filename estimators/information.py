@@ -51,7 +51,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import linalg
 
-from .kf import KF, LinearGaussianBase
+from .kf import KF, LinearGaussianBase, joseph
 
 __all__ = ["InformationKF", "StateDependentNoiseKF", "rls_solution"]
 
@@ -209,7 +209,6 @@ class StateDependentNoiseKF(KF):
             return False
         K = P @ H.T @ Si
         self.x = x + K @ y
-        IKH = self._I - K @ H
-        self.P = IKH @ P @ IKH.T + K @ Re @ K.T
+        self.P = joseph(P, K, H, Re)
         self.y, self.S, self.K, self.nis = y, S, K, nis
         return True

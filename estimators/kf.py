@@ -38,9 +38,18 @@ import math
 import numpy as np
 
 from ._jit import njit
-from ._linalg import add_into, copy_vec, inv_small_into, mat_mul, mat_vec, quad_form
+from ._linalg import (
+    add_into,
+    copy_vec,
+    inv_small_into,
+    mat_mul,
+    mat_mul_bt_sparse,
+    mat_mul_sparse,
+    mat_vec,
+    quad_form,
+)
 
-__all__ = ["KF", "inv_small", "as_fix", "block3", "csr", "joseph_row", "kf_gain_row",
+__all__ = ["KF", "inv_small", "as_fix", "block3", "csr", "joseph", "joseph_row", "kf_gain_row",
            "kf_innovation_row", "kf_input_row", "kf_predict_row", "kf_update_row", "kf_work",
            "kf_work_in", "kf_work_size",
            "predict_b3_row", "predict_csr_row"]
@@ -197,8 +206,8 @@ def kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si):
     mat_vec(H, x, nu)
     for a in range(z.shape[0]):
         nu[a] = z[a] - nu[a]
-    mat_mul(P, H.T, PHT)
-    mat_mul(H, PHT, S)
+    mat_mul_bt_sparse(P, H, PHT)
+    mat_mul_sparse(H, PHT, S)
     add_into(S, R)
     inv_small_into(S, Si)
     return quad_form(Si, nu)
@@ -215,37 +224,36 @@ def kf_gain_row(x, PHT, Si, nu, K, xo):
 
 @njit
 def joseph_row(Pb, K, H, R, Pout, A, AP, KR):
-    """Pout = (I − K H) Pb (I − K H)ᵀ + K R Kᵀ (Pout may alias Pb); A, AP (n, n), KR (n, m)
-    scratch.  Joseph's form, evaluated through the rank-m structure of K H (m ≤ n) instead of
-    forming I − K H: B = (I − K H) Pb = Pb − K (H Pb), then B (I − K H)ᵀ = B − (B Hᵀ) Kᵀ; the
-    O(n²m) products replace two O(n³) ones, and the result is the same sum of the two
-    outer-product terms (Bucy & Joseph 1968; Simon 2006 eq 5.19)."""
+    """Pout = (I − K H) Pb (I − K H)ᵀ + K R Kᵀ for a symmetric Pb (Pout may alias Pb); A (n, ≥ m),
+    AP (≥ m, ≥ m), KR (n, m) scratch.  Joseph's form (Bucy & Joseph 1968; Simon 2006 eq 5.19),
+    expanded on A = Pb Hᵀ and S = H A + R:  (I − K H) Pb (I − K H)ᵀ + K R Kᵀ
+    = Pb − K Aᵀ − A Kᵀ + (K S) Kᵀ, exact for ANY gain K (so it keeps Joseph's first-order
+    insensitivity to an error in K: the MCKF passes its own K̃).  O(n² m) instead of two O(n³)
+    products; the upper triangle is formed and mirrored (Pout exactly symmetric), and H's zero
+    entries are skipped (a measurement touches few states: the sums are unchanged)."""
     n, m = Pb.shape[0], H.shape[0]
-    for j in range(m):  # A[:m] = H Pb
-        for c in range(n):
-            s = 0.0
-            for k in range(n):
-                s += H[j, k] * Pb[k, c]
-            A[j, c] = s
-    for r in range(n):  # AP = B = Pb − K (H Pb)
-        for c in range(n):
+    Am, S = A[:, :m], AP[:m, :m]
+    mat_mul_bt_sparse(Pb, H, Am)  # A = Pb Hᵀ
+    mat_mul_sparse(H, Am, S)  # S = H A + R
+    add_into(S, R)
+    mat_mul(K, S, KR)  # K S
+    for r in range(n):  # Pout = Pb − K Aᵀ − A Kᵀ + (K S) Kᵀ, upper triangle, mirrored
+        for c in range(r, n):
             s = Pb[r, c]
             for j in range(m):
-                s -= K[r, j] * A[j, c]
-            AP[r, c] = s
-    for r in range(n):  # A[:, :m] = B Hᵀ
-        for j in range(m):
-            s = 0.0
-            for k in range(n):
-                s += AP[r, k] * H[j, k]
-            A[r, j] = s
-    mat_mul(K, R, KR)
-    for r in range(n):  # Pout = B − (B Hᵀ) Kᵀ + K R Kᵀ
-        for c in range(n):
-            s = AP[r, c]
-            for j in range(m):
-                s += KR[r, j] * K[c, j] - A[r, j] * K[c, j]
+                s += (KR[r, j] - A[r, j]) * K[c, j] - K[r, j] * A[c, j]
             Pout[r, c] = s
+            Pout[c, r] = s
+
+
+def joseph(P, K, H, R) -> np.ndarray:
+    """(I − K H) P (I − K H)ᵀ + K R Kᵀ as a new array, by :func:`joseph_row`: the one Joseph
+    update, for the filters that work on numpy arrays (EKF, information filter, route KF)."""
+    P, K, H, R = (np.ascontiguousarray(a, dtype=float) for a in (P, K, H, R))
+    n, m = P.shape[0], H.shape[0]
+    out = np.empty((n, n))
+    joseph_row(P, K, H, R, out, np.empty((n, n)), np.empty((n, n)), np.empty((n, m)))
+    return out
 
 
 @njit
@@ -256,8 +264,8 @@ def kf_work_size(n, m):
 
 @njit(inline="always")
 def kf_work_in(buf, n, m):
-    """The work arrays of one update (ν, P Hᵀ, S, S⁻¹, K, x̂, I − K H, (I − K H) P̄, K R) as
-    views of ``buf`` (≥ :func:`kf_work_size`): a per-tick caller allocates nothing."""
+    """The work arrays of one update (ν, P Hᵀ, S, S⁻¹, K, x̂, and :func:`joseph_row`'s A, AP,
+    K S) as views of ``buf`` (≥ :func:`kf_work_size`): a per-tick caller allocates nothing."""
     o1 = m
     o2 = o1 + n * m
     o3 = o2 + m * m
@@ -274,7 +282,7 @@ def kf_work_in(buf, n, m):
 
 @njit
 def kf_work(n, m):
-    """Work arrays of one update: ν, P Hᵀ, S, S⁻¹, K, x̂, I − K H, (I − K H) P̄, K R."""
+    """Work arrays of one update (:func:`kf_work_in`)."""
     return kf_work_in(np.empty(kf_work_size(n, m)), n, m)
 
 
@@ -318,7 +326,6 @@ class LinearGaussianBase:
         if H.shape[1] != n:
             raise ValueError(f"H must have {n} columns, got {H.shape}")
         self.n, self.m = n, H.shape[0]
-        self._I = np.eye(n)
         self.F = F
         self.H = H
         self.Q = Q
@@ -387,10 +394,7 @@ class LinearGaussianBase:
     def _joseph(self, P: np.ndarray, K: np.ndarray) -> np.ndarray:
         """(I − K H) P (I − K H)ᵀ + K R Kᵀ (:func:`joseph_row`)."""
         n = self.n
-        out = np.empty((n, n))
-        joseph_row(_mat(P, "P", (n, n)), _mat(K, "K", (n, self.m)), self._H, self._R, out,
-                   np.empty((n, n)), np.empty((n, n)), np.empty((n, self.m)))
-        return out
+        return joseph(_mat(P, "P", (n, n)), _mat(K, "K", (n, self.m)), self._H, self._R)
 
     def _fix(self, z) -> np.ndarray | None:
         """``z`` as a C-contiguous float64 (m,) vector, or None (no fix)."""

@@ -70,7 +70,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import linalg, stats
 
-from .kf import KF
+from .kf import KF, joseph
 
 __all__ = ["Route", "RouteConstrainedKF", "chi2_gate", "paper_gate", "singer_model"]
 
@@ -338,8 +338,7 @@ class RouteConstrainedKF(KF):
             return False
         K = _dot(PHT, Si)
         self.x = x + _dot(K, nu)
-        IKH = self._I - _dot(K, H)
-        self.P = _dot(_dot(IKH, P), IKH.T) + _dot(_dot(K, R), K.T)
+        self.P = joseph(P, K, H, R)
         self.y, self.S, self.K, self.nis = nu, S, K, nis
         return True
 

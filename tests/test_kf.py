@@ -17,8 +17,6 @@ from estimators.models import (
     transition,
 )
 
-filterpy = pytest.importorskip("filterpy.kalman")
-
 
 # ---------------------------------------------------------------------------------- models
 def test_paper_model_is_eq_8_to_11():
@@ -72,6 +70,7 @@ def test_2d_alt_and_model_helpers():
 
 # ------------------------------------------------------------------------------------- KF
 def _filterpy_kf(F, H, Q, R, x0, P0):
+    filterpy = pytest.importorskip("filterpy.kalman")  # the oracle (a dev extra)
     f = filterpy.KalmanFilter(F.shape[0], H.shape[0])
     f.F, f.H, f.Q, f.R = F.copy(), H.copy(), Q.copy(), R.copy()
     f.x, f.P = x0.reshape(-1, 1).copy(), P0.copy()
@@ -315,3 +314,27 @@ def test_inv_small_closed_forms(m):
         np.testing.assert_allclose(inv_small(S), np.linalg.inv(S), rtol=1e-10, atol=1e-12)
         B = rng.normal(size=(m, m)) + 3 * np.eye(m)  # not symmetric: general formula
         np.testing.assert_allclose(inv_small(B), np.linalg.inv(B), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("m, cols", [(1, [2, 6, 7, 8]), (3, [0, 1, 2, 6, 7, 8]), (2, range(15))])
+def test_joseph_is_the_product_form_for_any_gain_and_exactly_symmetric(m, cols) -> None:
+    """joseph_row's expansion Pb − K Aᵀ − A Kᵀ + (K S) Kᵀ against the textbook product
+    (I − K H) P (I − K H)ᵀ + K R Kᵀ, for the optimal gain and for another one (the MCKF's K̃),
+    with a sparse H (its zeros skipped) and a dense one."""
+    from estimators.kf import joseph
+
+    rng = np.random.default_rng(m)
+    A = rng.standard_normal((15, 15))
+    P = A @ A.T / 15 + np.eye(15)
+    P = 0.5 * (P + P.T)
+    H = np.zeros((m, 15))
+    H[:, list(cols)] = rng.standard_normal((m, len(list(cols))))
+    B = rng.standard_normal((m, m))
+    R = B @ B.T + 0.1 * np.eye(m)
+    K_opt = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+    for K in (K_opt, K_opt * 0.7 + 0.01 * rng.standard_normal(K_opt.shape)):
+        I_KH = np.eye(15) - K @ H
+        want = I_KH @ P @ I_KH.T + K @ R @ K.T
+        got = joseph(P, K, H, R)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+        assert np.array_equal(got, got.T)
