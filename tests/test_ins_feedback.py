@@ -208,3 +208,32 @@ def test_quad_inv_matches_numpy_and_refuses_an_indefinite_matrix():
     P[4, 4] = -1.0
     assert np.isnan(quad_inv(P, np.ones(15), 15, L, y))
     assert quad_inv(P, np.ones(15), 3, L, y) == pytest.approx(3.0)
+
+
+class _Indefinite(BatchInsFeedback):
+    """The kf shadow's covariance (row 1 of each vehicle) made indefinite for ticks K..K+20."""
+
+    K = 600   # in the mission (after take-off)
+
+    def update(self, k, t, p, v, imu, act):
+        if self.K <= k <= self.K + 20:
+            self.bank.P[1::self.nr, 11, 11] = -1.0   # accelerometer z bias: no fix resets it
+        return super().update(k, t, p, v, imu, act)
+
+
+def test_a_covariance_that_is_not_positive_definite_is_counted_not_hidden(monkeypatch):
+    """Such a fix has no NEES: it leaves the mean, and the count reaches the scores and the
+    report's table (it used to drop out silently)."""
+    from rich.console import Console
+
+    from ag_uav.analysis.report import estimator_table
+
+    monkeypatch.setattr(InsFeedback, "batch",
+                        classmethod(lambda cls, fbs, n_max: _Indefinite(fbs, n_max)))
+    est = simulate(_cfg()).summary["estimators"]
+    assert est["kf"]["nees15_not_pd"] >= 2          # 10 Hz fixes over 0.2 s
+    assert all(est[n]["nees15_not_pd"] == 0 for n in ("pca-mckf", "mckf", "pca-kf"))
+    assert est["kf"]["nees15_mean"] is not None       # the other fixes still score
+    console = Console(width=200, record=True)
+    console.print(estimator_table(est))
+    assert "not positive definite: kf " in " ".join(console.export_text().split())

@@ -119,6 +119,10 @@ def _ins_table(scores: dict[str, dict[str, Any]]) -> Table:
     if len(bands) == 1:
         lo, hi = next(iter(bands))
         caption += f", 95 % band of the mean {lo:.1f}–{hi:.1f}"
+    not_pd = {n: s["nees15_not_pd"] for n, s in scores.items() if s.get("nees15_not_pd")}
+    if not_pd:
+        caption += ("; fixes left out of the NEES, their P not positive definite: "
+                    + ", ".join(f"{n} {k}" for n, k in not_pd.items()))
     t = Table(title="estimators (INS; same fixes; * = flown)", caption=caption + ")",
               show_header=True, header_style="bold", box=box.SIMPLE_HEAD)
     for col in ("rule", "pos", "max", "vel", "tilt", "yaw", "NEES15", "NIS (3)"):

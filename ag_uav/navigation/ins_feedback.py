@@ -56,7 +56,8 @@ the ground here is flat at z = 0, the datum of the fixes too.
 velocity error RMS, tilt error (angle between the true and estimated body z axes) RMS / max,
 yaw error RMS, and the NEES of the 15-state error at every GNSS fix (the core state against the
 truth at the core's tick; bias truth = the IMU's turn-on biases, whose random walk is left out),
-with NIS of the position update.
+with NIS of the position update. A fix whose core P is not positive definite (its Cholesky fails)
+has no NEES: it is left out of the mean and counted (``nees15_not_pd``; the report says so).
 """
 
 from __future__ import annotations
@@ -244,6 +245,7 @@ class InsFeedback(Feedback):
             nis = r["nis"][sel, j]
             npos = r["nees_pos"][sel, j]
             npos = npos[np.isfinite(npos)]
+            not_pd = int(np.nansum(r["not_pd"][sel, j]))
             nees = nees[np.isfinite(nees)]
             nis = nis[np.isfinite(nis)]
 
@@ -262,6 +264,7 @@ class InsFeedback(Feedback):
                 "yaw_error_rms_deg": rms(ye / DEG),
                 "nees15_mean": round(float(nees.mean()), 3) if nees.size else None,
                 "nees15_band95": _chi2_band(15, nees.size),
+                "nees15_not_pd": not_pd,
                 "nees_pos_mean": round(float(npos.mean()), 3) if npos.size else None,
                 "nis_mean": round(float(nis.mean()), 3) if nis.size else None,
                 "update_us": r["update_us"],
@@ -345,7 +348,8 @@ class BatchInsFeedback:
         self.err = np.full((n_max, NV, 4, nrec), np.nan)
         n_fix = int(n_max * max(fb.gps.rate_hz for fb in fbs) * self.dt) + 4
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
-        self.nees = np.full((NV, n_fix, 3, nrec), np.nan)   # NEES15, NIS(pos), NEES(pos)
+        # NEES15, NIS(pos), NEES(pos), 1 where the core P was not positive definite (no NEES)
+        self.nees = np.full((NV, n_fix, 4, nrec), np.nan)
         self.n_fix = np.zeros(NV, dtype=np.int64)
         self.noise = np.stack([fb.radar_rng.standard_normal(4096) for fb in fbs])
         self.noise_i = np.zeros(NV, dtype=np.int64)
@@ -489,6 +493,7 @@ class BatchInsFeedback:
             fb.rec = {"herr": e[:, 0], "verr": e[:, 1], "tilt": e[:, 2], "yaw": e[:, 3],
                       "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, 0],
                       "nis": self.nees[i, :nf, 1], "nees_pos": self.nees[i, :nf, 2],
+                      "not_pd": self.nees[i, :nf, 3],
                       "update_us": us,
                       "counters": {key: [int(x) for x in val[i * self.nr:(i + 1) * self.nr]]
                                    for key, val in counters.items()}}
@@ -704,3 +709,4 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
                 nees[i, rec, 1, j] = nis[row, 0]
                 if np.isfinite(e[0]):   # the position block alone (3 dof)
                     nees[i, rec, 2, j] = quad_inv(P[row], e, 3, L, y)
+                    nees[i, rec, 3, j] = 0.0 if np.isfinite(nees[i, rec, 0, j]) else 1.0
