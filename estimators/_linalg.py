@@ -48,7 +48,8 @@ def mat_mul(A, B, out):
 @njit(inline="always")
 def mat_mul_sparse(A, B, out):
     """out = A B skipping A's zero entries (a measurement matrix H: few states per row).  The
-    sums are those of :func:`mat_mul` (a skipped term adds an exact 0) for finite B."""
+    sums are those of :func:`mat_mul` (a skipped term adds an exact 0) for finite B.  P Hᵀ is
+    ``mat_mul_sparse(H, P.T, PHT.T)``: the same products, summed in the same order."""
     for r in range(A.shape[0]):
         for c in range(B.shape[1]):
             s = 0.0
@@ -56,19 +57,6 @@ def mat_mul_sparse(A, B, out):
                 a = A[r, k]
                 if a != 0.0:
                     s += a * B[k, c]
-            out[r, c] = s
-
-
-@njit(inline="always")
-def mat_mul_bt_sparse(A, B, out):
-    """out = A Bᵀ skipping B's zero entries (P Hᵀ); the sums of ``mat_mul(A, B.T, out)``."""
-    for r in range(A.shape[0]):
-        for c in range(B.shape[0]):
-            s = 0.0
-            for k in range(A.shape[1]):
-                b = B[c, k]
-                if b != 0.0:
-                    s += A[r, k] * b
             out[r, c] = s
 
 

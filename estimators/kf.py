@@ -43,7 +43,6 @@ from ._linalg import (
     copy_vec,
     inv_small_into,
     mat_mul,
-    mat_mul_bt_sparse,
     mat_mul_sparse,
     mat_vec,
     quad_form,
@@ -206,7 +205,7 @@ def kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si):
     mat_vec(H, x, nu)
     for a in range(z.shape[0]):
         nu[a] = z[a] - nu[a]
-    mat_mul_bt_sparse(P, H, PHT)
+    mat_mul_sparse(H, P.T, PHT.T)  # P Hᵀ, H's zeros skipped
     mat_mul_sparse(H, PHT, S)
     add_into(S, R)
     inv_small_into(S, Si)
@@ -233,7 +232,7 @@ def joseph_row(Pb, K, H, R, Pout, A, AP, KR):
     entries are skipped (a measurement touches few states: the sums are unchanged)."""
     n, m = Pb.shape[0], H.shape[0]
     Am, S = A[:, :m], AP[:m, :m]
-    mat_mul_bt_sparse(Pb, H, Am)  # A = Pb Hᵀ
+    mat_mul_sparse(H, Pb.T, Am.T)  # A = Pb Hᵀ
     mat_mul_sparse(H, Am, S)  # S = H A + R
     add_into(S, R)
     mat_mul(K, S, KR)  # K S
