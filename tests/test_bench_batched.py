@@ -14,3 +14,21 @@ def test_each_engine_batch_is_paired_with_the_replay_of_its_own_flights() -> Non
     assert out["sim_s_per_wall_s"] > 0 and out["physics_sim_s_per_wall_s"] > 0
     assert out["physics_best_of_ways_sim_s_per_wall_s"] > 0
     assert out["physics_how"] and out["lanes"] >= 1
+
+
+def test_stage_costs_add_up_to_the_loop_and_restore_the_engine() -> None:
+    """``stages``: every stage and the physics timed per vehicle-tick, the rest of the loop
+    small; the stage classes are left as they were."""
+    from ag_uav.engine import loop, stages
+    from ag_uav.jobs.bench import _stages
+
+    before = (stages.Guard.start, stages.Depositing.step, loop._Engine.physics)
+    cfg = with_overrides(load_config(None), TRUE_STATE_OVERRIDES)
+    out = _stages(cfg, 1, True)["stages_us_per_vehicle_tick"]
+    for key in ("true_state", "ins_bank"):
+        row = out[key]
+        assert row["physics"] > 0 and row["guard"] > 0 and row["cascade"] > 0
+        assert 0 < row["stages_over_physics"] < 10
+        assert abs(row["loop_rest"]) < row["physics"]
+    assert out["ins_bank"]["feedback"] > 5 * out["true_state"]["feedback"]   # the INS bank
+    assert (stages.Guard.start, stages.Depositing.step, loop._Engine.physics) == before

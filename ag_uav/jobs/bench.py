@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 import statistics
 import time
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import mujoco
@@ -572,8 +575,73 @@ def _deposition(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
         "batched_vehicles": n, "mission_sim_s": sim_s, "target": 0.15}}
 
 
+#: the engine's stages as :func:`_stages` times them: (class in engine.stages, method, key)
+_STAGES = (("Guard", "start", "guard"), ("Sensing", "step", "imu"),
+           ("Feedback", "step", "feedback"), ("Control", "step", "cascade"),
+           ("Spraying", "step", "spray_job"), ("Disturbance", "step", "wind"),
+           ("Depositing", "step", "dose_model"), ("Recorder", "step", "record"))
+
+
+@contextmanager
+def _timed_stages(acc: Counter) -> Iterator[None]:
+    """Every stage's method (and the physics step) wrapped to add its wall time to ``acc`` for
+    the duration of the block; the classes are restored after it."""
+    from ..engine import loop, stages
+
+    saved = [(getattr(stages, c), m, k) for c, m, k in _STAGES] + [(loop._Engine, "physics",
+                                                                     "physics")]
+    originals = [(cls, m, getattr(cls, m)) for cls, m, _ in saved]
+
+    def timed(f: Callable[..., Any], key: str) -> Callable[..., Any]:
+        def g(*a: Any, **kw: Any) -> Any:
+            t0 = time.perf_counter()
+            try:
+                return f(*a, **kw)
+            finally:
+                acc[key] += time.perf_counter() - t0
+        return g
+
+    try:
+        for (cls, m, f), (_, _, key) in zip(originals, saved, strict=True):
+            setattr(cls, m, timed(f, key))
+        yield
+    finally:
+        for cls, m, f in originals:
+            setattr(cls, m, f)
+
+
+def _stages(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    """``stages``: where one lane's time goes. N missions as one engine on one thread (a lane
+    of a 2N batch on 2 cores), each stage's wall time per vehicle and tick, the physics' too,
+    and the stages' total ÷ the physics (a batch's ``ratio_vs_physics`` is about 1 / (1 + it),
+    less the lanes' contention); a second batch, the first warms the memory and kernels."""
+    n, sim_s = (8, 10.0) if quick else (32, 20.0)
+    out: dict[str, Any] = {"vehicles": n, "mission_sim_s": sim_s}
+    prev = os.environ.get("AG_UAV_ENGINE_THREADS")
+    os.environ["AG_UAV_ENGINE_THREADS"] = "1"
+    try:
+        for key, conf in (("true_state", c), ("ins_bank", with_overrides(
+                c, ESTIMATOR_LOG_OVERRIDES))):
+            batched_capture(conf, n, sim_s, lanes=1)
+            acc: Counter = Counter()
+            with _timed_stages(acc):
+                sim, wall, _ = batched_capture(conf, n, sim_s, lanes=1)
+            vt = sim * conf.sim.control_hz   # vehicle-ticks
+            row = {k: round(v / vt * 1e6, 2) for k, v in acc.most_common()}
+            staged = sum(v for k, v in acc.items() if k != "physics")
+            row["loop_rest"] = round((wall - staged - acc["physics"]) / vt * 1e6, 2)
+            row["stages_over_physics"] = round((wall - acc["physics"]) / acc["physics"], 3)
+            out[key] = row
+    finally:
+        if prev is None:
+            os.environ.pop("AG_UAV_ENGINE_THREADS", None)
+        else:
+            os.environ["AG_UAV_ENGINE_THREADS"] = prev
+    return {"stages_us_per_vehicle_tick": out}
+
+
 _EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers, _batched,
-                                                               _deposition]
+                                                               _deposition, _stages]
 
 
 def print_bench(out: dict[str, Any]) -> None:
