@@ -1,8 +1,10 @@
 """numba for the application's kernels, in one place: ``njit`` and ``register_jitable`` are
 numba's; without numba (a declared dependency) they return the function itself and the kernels
-run as plain Python, correct and slow.  Kernels use ``@njit(cache=True)`` and release the GIL
-(an engine's lanes run in threads); no ``fastmath`` (a vehicle's results must not depend on the
-batch it flies in)."""
+run as plain Python, correct and slow. Kernels use ``@njit(cache=True)`` and release the GIL (an
+engine's lanes run in threads); no ``fastmath`` (a vehicle's results must not depend on the
+batch it flies in). At import the kernels' cache is swept when any source of ``ag_uav``,
+``estimators`` or ``controllers`` changed (:func:`controllers._jit.sweep_stale_caches`: numba
+alone would keep a kernel that inlined an old law from another file)."""
 
 from __future__ import annotations
 
