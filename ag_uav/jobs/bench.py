@@ -509,16 +509,17 @@ def _paired(conf: Config, n: int, sim_s: float, threads: int, repeats: int) -> d
 
 
 def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
-    """``batched`` (true state) and ``batched_estimators`` (:data:`ESTIMATOR_LOG_OVERRIDES`):
-    N missions in one engine batch, vehicle-sim-s per wall-s, against what the engine drives,
-    measured in this run: ``ratio_vs_physics``, MuJoCo alone replaying the very same flights
-    (initial states and controls captured from the engine) on the same threads, at its best
-    way of spreading them, paired run by run with the engine (:func:`_paired`);
-    ``ratio_vs_hover_physics``, MuJoCo alone stepping hovering copies (no ground contacts: a
-    cheaper reference); ``ratio_vs_raw``, one raw ``mj_step`` loop. The engine flies in its
-    default lanes (one per thread, each in a thread of its own: ``lanes``); ``one_engine_*``
-    is the same batch as one engine whose rollout uses every thread (the engine before lanes),
-    against the same reference."""
+    """``batched`` (true state), ``batched_estimators`` (:data:`ESTIMATOR_LOG_OVERRIDES`: the
+    INS bank) and ``batched_ideal_attitude`` (the same four rules as position filters on the
+    idealised attitude, the bank batches flew before the INS): N missions in one engine batch,
+    vehicle-sim-s per wall-s, against what the engine drives, measured in this run:
+    ``ratio_vs_physics``, MuJoCo alone replaying the very same flights (initial states and
+    controls captured from the engine) on the same threads, at its best way of spreading them,
+    paired run by run with the engine (:func:`_paired`); ``ratio_vs_hover_physics``, MuJoCo
+    alone stepping hovering copies (no ground contacts: a cheaper reference); ``ratio_vs_raw``,
+    one raw ``mj_step`` loop. The engine flies in its default lanes (one per thread, each in a
+    thread of its own: ``lanes``); ``one_engine_*`` is the same batch as one engine whose
+    rollout uses every thread (the engine before lanes), against the same reference."""
     from ..engine.physics import default_threads
 
     n, sim_s = (16, 20.0) if quick else (64, 60.0)
@@ -527,7 +528,9 @@ def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     batched_capture(ce, 2, 1.0)  # load the compiled kernels outside the timed loops
     hover = _median_rate(lambda: physics_alone(c, n, sim_s, threads, "threads"), repeats)
     out: dict[str, Any] = {}
-    for key, conf in (("batched", c), ("batched_estimators", ce)):
+    ci = with_overrides(ce, {"estimator.nav": "ideal-attitude"})
+    for key, conf in (("batched", c), ("batched_estimators", ce),
+                      ("batched_ideal_attitude", ci)):
         raw = _median_rate(lambda: raw_stepping(c, sim_s, 1), repeats)
         pr = _paired(conf, n, sim_s, threads, repeats)
         rate, physics = pr["sim_s_per_wall_s"], pr["physics_sim_s_per_wall_s"]
@@ -543,6 +546,8 @@ def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
                     "ratio_vs_raw": round(rate / raw, 3)}
     out["batched_estimators"]["config"] = ", ".join(
         f"{k}={v}" for k, v in ESTIMATOR_LOG_OVERRIDES.items())
+    out["batched_ideal_attitude"]["config"] = (out["batched_estimators"]["config"]
+                                               + ", estimator.nav=ideal-attitude")
     return out
 
 
