@@ -1,8 +1,10 @@
 """numba for the application's kernels, in one place: ``njit`` and ``register_jitable`` are
 numba's; without numba (a declared dependency) they return the function itself and the kernels
-run as plain Python, correct and slow. Kernels use ``@njit(cache=True)`` and release the GIL (an
-engine's lanes run in threads); no ``fastmath`` (a vehicle's results must not depend on the
-batch it flies in). At import the kernels' cache is swept when any source of ``ag_uav``,
+run as plain Python, correct and slow. Kernels use ``@njit(cache=True)`` and keep the GIL
+(numba's default): they are the engine's short per-tick kernels, and a lane that released the
+GIL at each of them handed it to another lane's Python and waited to get it back
+(docs/speed.md); no ``fastmath`` (a vehicle's results must not depend on the batch it flies
+in). At import the kernels' cache is swept when any source of ``ag_uav``,
 ``estimators`` or ``controllers`` changed (:func:`controllers._jit.sweep_stale_caches`: numba
 alone would keep a kernel that inlined an old law from another file)."""
 
@@ -23,9 +25,7 @@ try:
     HAVE_NUMBA = True
 
     def njit(*args: Any, **kwargs: Any) -> Any:
-        """numba's ``njit``, releasing the GIL by default (``nogil=True``): an engine's lanes
-        run their kernels in threads of their own."""
-        kwargs.setdefault("nogil", True)
+        """numba's ``njit`` (the GIL kept unless ``nogil=True`` is passed: see the module)."""
         return _numba.njit(*args, **kwargs)
 except ImportError:  # pragma: no cover - numba is a dependency
     HAVE_NUMBA = False

@@ -30,13 +30,14 @@ HAVE_NUMBA: bool = _numba is not None
 
 
 def njit(fn: F) -> F:
-    """Compile ``fn`` with ``numba.njit(cache=True, nogil=True)`` (the GIL released: callers may
-    run kernels in several threads); without numba return it unchanged.
+    """Compile ``fn`` with ``numba.njit(cache=True)`` (the GIL kept, numba's default: the batched
+    cascade is a short per-tick kernel, and releasing the GIL at each call costs a thread
+    hand-off when other threads want it); without numba return it unchanged.
 
     Without numba (or with ``NUMBA_DISABLE_JIT=1``) the function gets a ``py_func`` attribute
     pointing to itself, so callers and tests can use ``kernel.py_func`` either way.
     """
-    out = fn if _numba is None else _numba.njit(cache=True, nogil=True)(fn)
+    out = fn if _numba is None else _numba.njit(cache=True)(fn)
     if not hasattr(out, "py_func"):  # no numba, or NUMBA_DISABLE_JIT=1
         out.py_func = fn
     return out  # type: ignore[no-any-return]

@@ -32,7 +32,8 @@ if _numba is not None:  # the estimators use the controllers (estimators.pso_r):
 
 def njit(func: Callable[..., Any] | None = None, **options: Any) -> Any:
     """Compile ``func`` with ``numba.njit(cache=True, nogil=True, **options)`` (the GIL released:
-    callers may run kernels in several threads); without numba return it
+    a batch of filters is long work, and callers may run it in several threads, as an engine's
+    lanes do with the INS bank); without numba return it
     unchanged.  Use as ``@njit`` or ``@njit(inline="always")``."""
     if func is None:
         return lambda f: njit(f, **options)
