@@ -48,16 +48,17 @@ def mat_mul(A, B, out):
 @njit(inline="always")
 def mat_mul_sparse(A, B, out):
     """out = A B skipping A's zero entries (a measurement matrix H: few states per row).  The
-    sums are those of :func:`mat_mul` (a skipped term adds an exact 0) for finite B.  P Hᵀ is
+    sums are those of :func:`mat_mul` (a skipped term adds an exact 0) for finite B: each
+    out[r, c] starts at 0 and takes A[r, k] B[k, c] in ascending k.  P Hᵀ is
     ``mat_mul_sparse(H, P.T, PHT.T)``: the same products, summed in the same order."""
     for r in range(A.shape[0]):
         for c in range(B.shape[1]):
-            s = 0.0
-            for k in range(A.shape[1]):
-                a = A[r, k]
-                if a != 0.0:
-                    s += a * B[k, c]
-            out[r, c] = s
+            out[r, c] = 0.0
+        for k in range(A.shape[1]):
+            a = A[r, k]
+            if a != 0.0:
+                for c in range(B.shape[1]):
+                    out[r, c] += a * B[k, c]
 
 
 @njit

@@ -225,16 +225,24 @@ def kf_gain_row(x, PHT, Si, nu, K, xo):
 def joseph_row(Pb, K, H, R, Pout, A, AP, KR):
     """Pout = (I − K H) Pb (I − K H)ᵀ + K R Kᵀ for a symmetric Pb (Pout may alias Pb); A (n, ≥ m),
     AP (≥ m, ≥ m), KR (n, m) scratch.  Joseph's form (Bucy & Joseph 1968; Simon 2006 eq 5.19),
-    expanded on A = Pb Hᵀ and S = H A + R:  (I − K H) Pb (I − K H)ᵀ + K R Kᵀ
-    = Pb − K Aᵀ − A Kᵀ + (K S) Kᵀ, exact for ANY gain K (so it keeps Joseph's first-order
-    insensitivity to an error in K: the MCKF passes its own K̃).  O(n² m) instead of two O(n³)
-    products; the upper triangle is formed and mirrored (Pout exactly symmetric), and H's zero
-    entries are skipped (a measurement touches few states: the sums are unchanged)."""
-    n, m = Pb.shape[0], H.shape[0]
+    expanded on A = Pb Hᵀ and S = H A + R (:func:`joseph_from`); H's zero entries are skipped
+    (a measurement touches few states: the sums are unchanged)."""
+    m = H.shape[0]
     Am, S = A[:, :m], AP[:m, :m]
     mat_mul_sparse(H, Pb.T, Am.T)  # A = Pb Hᵀ
     mat_mul_sparse(H, Am, S)  # S = H A + R
     add_into(S, R)
+    joseph_from(Pb, K, Am, S, Pout, KR)
+
+
+@njit
+def joseph_from(Pb, K, A, S, Pout, KR):
+    """Joseph's form given A = Pb Hᵀ and S = H A + R (an update has both from its innovation):
+    (I − K H) Pb (I − K H)ᵀ + K R Kᵀ = Pb − K Aᵀ − A Kᵀ + (K S) Kᵀ, exact for ANY gain K (so it
+    keeps Joseph's first-order insensitivity to an error in K: the MCKF passes its own K̃).
+    O(n² m) instead of two O(n³) products; the upper triangle is formed and mirrored (Pout
+    exactly symmetric; Pout may alias Pb); KR (n, m) scratch."""
+    n, m = Pb.shape[0], K.shape[1]
     mat_mul(K, S, KR)  # K S
     for r in range(n):  # Pout = Pb − K Aᵀ − A Kᵀ + (K S) Kᵀ, upper triangle, mirrored
         for c in range(r, n):
@@ -295,7 +303,7 @@ def kf_update_row(x, P, R, H, z, nu, PHT, S, Si, K, xo, A, AP, KR):
         return v
     kf_gain_row(x, PHT, Si, nu, K, xo)
     copy_vec(xo, x)
-    joseph_row(P, K, H, R, P, A, AP, KR)
+    joseph_from(P, K, PHT, S, P, KR)  # A = P Hᵀ and S as the innovation formed them
     return v
 
 

@@ -94,6 +94,7 @@ from .kf import (
     LinearGaussianBase,
     _mat,
     _vec,
+    joseph_from,
     joseph_row,
     kf_gain_row,
     kf_innovation_row,
@@ -337,8 +338,12 @@ def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
     else:
         ist[0] = 0
     copy_vec(xo, x)
-    # the original P̄ and R, or the inflated prior after an "inflate" reset
-    joseph_row(Pa if rec == 2 else P, K, H, R, P, A, AP, KR)
+    # the original P̄ and R (P̄ Hᵀ and S as the innovation formed them), or the inflated prior
+    # after an "inflate" reset
+    if rec == 2:
+        joseph_row(Pa, K, H, R, P, A, AP, KR)
+    else:
+        joseph_from(P, K, PHT, S, P, KR)
     ist[1] = it
     ist[2] = 1 if rejected else 0
     ist[3] = 1 if rec else 0
