@@ -67,38 +67,77 @@ def sources_hash(sources: Sequence[Path]) -> str:
 
 
 def sweep_stale_caches(own: Path, sources: Sequence[Path]) -> int:
-    """Delete the numba cache files (``__pycache__/*.nbi``, ``*.nbc``) under the package ``own``
-    when the sources of ``sources`` (the package and every package its kernels call) differ from
-    those the cache was compiled from; returns how many were deleted.
+    """Delete the numba cache files (``*.nbi``, ``*.nbc``) of the package ``own`` when the
+    sources of ``sources`` (the package and every package its kernels call) differ from those
+    the cache was compiled from; returns how many were deleted.
 
     numba keys a kernel's cache on its own file's time stamp only: a kernel that inlines a law
     from another file (the INS calls :mod:`estimators.kf`'s update; the engine's kernels call
     the controllers') would keep running the old law after that file alone changes, silently.
     Called once at import, before any kernel runs (numba reads an index at a kernel's first
-    call).  A concurrent process at worst recompiles.  Caches under ``NUMBA_CACHE_DIR`` or a
-    user-wide directory (a read-only install, whose files change together) are not swept."""
+    call).  A concurrent process at worst recompiles.  Both places numba may keep them are
+    swept, each with its own stamp: the package's ``__pycache__`` folders and, when
+    ``NUMBA_CACHE_DIR`` is set, numba's folders for the package's source folders there.  A
+    user-wide cache (numba's fallback for a read-only install, whose files change together) is
+    not swept."""
     try:
         key = sources_hash(sources)
-        stamp = own / "__pycache__" / STAMP
-        if stamp.is_file() and stamp.read_text() == key:
-            return 0
     except OSError:
         return 0
     n = 0
-    for f in [*own.rglob("__pycache__/*.nbi"), *own.rglob("__pycache__/*.nbc")]:
+    places = [(own / "__pycache__" / STAMP,
+               [*own.rglob("__pycache__/*.nbi"), *own.rglob("__pycache__/*.nbc")])]
+    user = _user_cache_dirs(own)
+    if user:
+        tag = hashlib.sha1(str(own.resolve()).encode()).hexdigest()[:16]
+        places.append((user[0].parent / "ag-uav-stamps" / f"{own.name}-{tag}",
+                       [f for d in user for f in (*d.glob("*.nbi"), *d.glob("*.nbc"))]))
+    for stamp, files in places:
+        try:
+            if stamp.is_file() and stamp.read_text() == key:
+                continue
+        except OSError:
+            continue
+        n += _unlink_all(files)
+        _write_stamp(stamp, key)
+    return n
+
+
+def _user_cache_dirs(own: Path) -> list[Path]:
+    """Where numba keeps the kernels of ``own``'s modules when ``NUMBA_CACHE_DIR`` is set: one
+    folder per source folder, named by numba's own ``UserProvidedCacheLocator``; [] when it is
+    not set."""
+    if _numba is None:  # pragma: no cover
+        return []
+    from numba.core import config
+    from numba.core.caching import UserProvidedCacheLocator
+
+    if not config.CACHE_DIR:
+        return []
+    dirs = sorted({f.parent for f in own.rglob("*.py")})
+    return [Path(config.CACHE_DIR) / UserProvidedCacheLocator.get_suitable_cache_subpath(
+        str(d / "_.py")) for d in dirs]
+
+
+def _unlink_all(files: Sequence[Path]) -> int:
+    n = 0
+    for f in files:
         try:
             f.unlink()
             n += 1
         except OSError:
             pass
+    return n
+
+
+def _write_stamp(stamp: Path, key: str) -> None:
     try:
-        stamp.parent.mkdir(exist_ok=True)
-        tmp = stamp.with_name(f"{STAMP}.{os.getpid()}")
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        tmp = stamp.with_name(f"{stamp.name}.{os.getpid()}")
         tmp.write_text(key)
         os.replace(tmp, stamp)
     except OSError:
         pass
-    return n
 
 
 if _numba is not None:

@@ -9,6 +9,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 from controllers._jit import STAMP, sweep_stale_caches
 
 
@@ -54,13 +56,20 @@ def kernel(x):
 """
 
 
-def test_a_kernel_follows_a_law_changed_in_another_file(tmp_path: Path) -> None:
+@pytest.mark.parametrize("where", ["__pycache__", "NUMBA_CACHE_DIR"])
+def test_a_kernel_follows_a_law_changed_in_another_file(tmp_path: Path, where: str) -> None:
     """The real thing: a cached kernel inlines a law from another file; the law's file alone
-    changes; the next process runs the new law (numba alone would load the stale kernel)."""
+    changes; the next process runs the new law (numba alone would load the stale kernel), with
+    the cache in the package's ``__pycache__`` or in ``$NUMBA_CACHE_DIR``."""
     pkg = tmp_path / "lawpkg"
     pkg.mkdir()
     (pkg / "__init__.py").write_text(textwrap.dedent(_KERNEL))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), *sys.path])}
+    env.pop("NUMBA_CACHE_DIR", None)
+    cached = pkg / "__pycache__"
+    if where == "NUMBA_CACHE_DIR":
+        env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba-cache")
+        cached = tmp_path / "numba-cache"
 
     def run() -> str:
         out = subprocess.run([sys.executable, "-c", "import lawpkg; print(lawpkg.kernel(1))"],
@@ -69,6 +78,6 @@ def test_a_kernel_follows_a_law_changed_in_another_file(tmp_path: Path) -> None:
 
     (pkg / "law.py").write_text(_LAW.format(1))
     assert run() == "20"
-    assert list((pkg / "__pycache__").glob("*.nbi"))   # the kernel was cached
+    assert list(cached.rglob("*.nbi"))   # the kernel was cached there
     (pkg / "law.py").write_text(_LAW.format(2) + "# changed\n")
     assert run() == "30"
