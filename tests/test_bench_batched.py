@@ -32,3 +32,16 @@ def test_stage_costs_add_up_to_the_loop_and_restore_the_engine() -> None:
         assert abs(row["loop_rest"]) < row["physics"]
     assert out["ins_bank"]["feedback"] > 5 * out["true_state"]["feedback"]   # the INS bank
     assert (stages.Guard.start, stages.Depositing.step, loop._Engine.physics) == before
+
+
+def test_the_as_filed_batches_are_also_paired_without_the_dose_model() -> None:
+    """``ratio_vs_physics_without_deposition``: the workload issue 17's targets were set on,
+    paired with its own replay like the default one."""
+    from ag_uav.jobs.bench import AS_FILED, _as_filed
+
+    assert AS_FILED == ("batched", "batched_ideal_attitude")
+    cfg = with_overrides(load_config(None), TRUE_STATE_OVERRIDES)
+    out = _as_filed(cfg, 4, 1.0, 2, 2)
+    spread = out["ratio_vs_physics_without_deposition_spread"]
+    assert 0.0 < spread["min"] <= out["ratio_vs_physics_without_deposition"] <= spread["max"]
+    assert out["sim_s_per_wall_s_without_deposition"] > 0
