@@ -14,6 +14,7 @@ def test_each_engine_batch_is_paired_with_the_replay_of_its_own_flights() -> Non
     assert out["sim_s_per_wall_s"] > 0 and out["physics_sim_s_per_wall_s"] > 0
     assert out["physics_best_of_ways_sim_s_per_wall_s"] > 0
     assert out["physics_how"] and out["lanes"] >= 1
+    assert 0.0 < out["loop_cores_busy"] <= 2.2   # CPU ÷ wall of the loop, at most the threads
 
 
 def test_stage_costs_add_up_to_the_loop_and_restore_the_engine() -> None:

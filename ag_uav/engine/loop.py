@@ -115,6 +115,7 @@ class LoopOutput:
     imu_bias0: np.ndarray | None = None   # turn-on biases (accel m/s², gyro rad/s)
     sprayer: Any = None
     compile_s: float = 0.0                # kernels compiled on the first tick (not in wall_loop_s)
+    cpu_loop_s: float = 0.0               # the process's CPU seconds (all threads) over wall_loop_s
     s0: np.ndarray | None = None          # with capture: the initial full physics state
     controls: np.ndarray | None = None    # with capture: (n, 7) rotor commands (4), force (3)
     dose: Any = None                      # the dose map (ag_uav.world.deposition.DoseMap) or None
@@ -438,8 +439,9 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
                    sprayers, vehs, depositing, capture)
 
 
-def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
-    """Every tick until no vehicle is left; (loop wall seconds, compile seconds of tick 0).
+def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float, float]:
+    """Every tick until no vehicle is left; (loop wall seconds, compile seconds of tick 0, the
+    process's CPU seconds over the same span: every thread's, so CPU ÷ wall is the cores kept busy).
 
     Tick 0 of every lane runs here (on a fresh checkout it compiles the kernels). Then one
     lane flies on in this thread, or several lanes (disjoint parts of the batch, each a whole
@@ -450,10 +452,12 @@ def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
     freeze = gc.get_freeze_count() == 0  # (a caller's own frozen objects are left as they are)
     if freeze:  # the loop's full collections scan only what the loop made, not the whole heap
         gc.freeze()
-    wall = time.perf_counter()
+    wall, cpu = time.perf_counter(), time.process_time()
     try:
         flying = [e for e in lanes if e.tick(0)]
         compile_s, wall = _first_tick(wall)
+        if compile_s:
+            cpu = time.process_time()
         if len(flying) == 1:
             _fly_on(flying[0], bar)
         elif flying:
@@ -461,7 +465,7 @@ def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float]:
     finally:
         if freeze:
             gc.unfreeze()
-    return time.perf_counter() - wall, compile_s
+    return time.perf_counter() - wall, compile_s, time.process_time() - cpu
 
 
 def _fly_on(e: _Engine, bar: Any = None) -> None:
@@ -527,7 +531,7 @@ def _first_tick(wall0: float) -> tuple[float, float]:
     return took, now
 
 
-def _outputs(e: _Engine, wall: float, compile_s: float) -> list[LoopOutput]:
+def _outputs(e: _Engine, wall: float, compile_s: float, cpu: float) -> list[LoopOutput]:
     b = e.b
     frames = frames_of(e.observers, b.n)
     imu = e.sensing.imu
@@ -536,7 +540,8 @@ def _outputs(e: _Engine, wall: float, compile_s: float) -> list[LoopOutput]:
         n = int(b.flown[i])
         out = LoopOutput(t=np.arange(n) * b.dt, rec=e.recorder.of(i, n),
                          crash_reason=b.crash_reason[i], crash_time=b.crash_time[i],
-                         wall_loop_s=wall, vehicle=e.vehicles[i], frames=int(frames[i]),
+                         wall_loop_s=wall, cpu_loop_s=cpu, vehicle=e.vehicles[i],
+                         frames=int(frames[i]),
                          notes=b.notes[i], sprayer=e.sprayers[i], compile_s=compile_s,
                          dose=e.depositing.dose_map(i) if e.depositing is not None else None)
         if imu is not None:
@@ -610,7 +615,7 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
         bar = progress_bar(total=round(n_max * b0.dt), unit="sim-s", desc="flying",
                            leave=False, dynamic_ncols=True, mininterval=0.5)
     try:
-        wall, compile_s = _run(engines, bar)
+        wall, compile_s, cpu = _run(engines, bar)
     finally:
         for e in engines:
             e.close()
@@ -619,7 +624,7 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
     outs: list[Any] = [None] * len(flights)
     for e in engines:
         e.finish()
-        for i, o in zip(e.rows, _outputs(e, wall, compile_s), strict=True):
+        for i, o in zip(e.rows, _outputs(e, wall, compile_s, cpu), strict=True):
             o.lanes = len(engines)
             outs[i] = o
     return outs

@@ -490,16 +490,20 @@ def _paired(conf: Config, n: int, sim_s: float, threads: int, repeats: int) -> d
     every way once (:func:`best_replay`) to pick the best; then ``repeats`` pairs, each an
     engine batch and, right after it, the replay of its very flights that way. The rates are
     medians and the ratio the median of the pairs' ratios (a pair shares the machine's state
-    of the moment; a best-of-seven reference against a median engine would flatter MuJoCo)."""
+    of the moment; a best-of-seven reference against a median engine would flatter MuJoCo).
+    ``loop_cores_busy``: the engine loop's process CPU time over its wall time (median): at the
+    core count, the loop waits for nothing and its ratio is the physics' share of the work."""
     first = batched_capture(conf, n, sim_s)
     sel_wall, how = best_replay(first[2], threads, 1)
     pairs = [first[:2] + (replay_wall(first[2], threads, _way(how)),)]
+    busy = [first[2][0].cpu_loop_s / first[1]]
     for _ in range(max(1, repeats) - 1):
         sim, wall, outs = batched_capture(conf, n, sim_s)
         pairs.append((sim, wall, replay_wall(outs, threads, _way(how))))
+        busy.append(outs[0].cpu_loop_s / wall)
     sim = pairs[0][0]
     ratios = [p[2] / p[1] for p in pairs]
-    return {"lanes": first[2][0].lanes,
+    return {"lanes": first[2][0].lanes, "loop_cores_busy": round(statistics.median(busy), 3),
             "sim_s_per_wall_s": statistics.median(p[0] / p[1] for p in pairs),
             "physics_sim_s_per_wall_s": statistics.median(sim / p[2] for p in pairs),
             "physics_how": _HOW.get(how, f"rollout pool, chunks of {how}"),
