@@ -9,14 +9,16 @@ operations kept), to ~1e-12.
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import importlib.util
+import json
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
-__all__ = ["HAVE_NUMBA", "njit", "package_dir", "sweep_stale_caches"]
+__all__ = ["HAVE_NUMBA", "module_closures", "njit", "package_dir", "sweep_stale_caches"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -56,51 +58,130 @@ def package_dir(name: str) -> Path:
     return Path(list(spec.submodule_search_locations)[0])
 
 
-def sources_hash(sources: Sequence[Path]) -> str:
-    """blake2b of every ``.py`` file under ``sources`` (relative names and bytes, sorted)."""
-    h = hashlib.blake2b(digest_size=16)
+def _module_name(f: Path, root: Path) -> str:
+    parts = list(f.relative_to(root.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imported(tree: ast.AST, mod: str, is_pkg: bool) -> set[str]:
+    """Every dotted name ``mod``'s source imports (function-local imports too), relative ones
+    resolved; ``from a import b`` names both ``a`` and ``a.b`` (``b`` may be a module)."""
+    out: set[str] = set()
+    base = mod.split(".") if is_pkg else mod.split(".")[:-1]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            head = base[:len(base) - node.level + 1] if node.level else []
+            name = ".".join([*head, *([node.module] if node.module else [])])
+            out.add(name)
+            out.update(f"{name}.{a.name}" for a in node.names)
+    return out
+
+
+def module_closures(sources: Sequence[Path], memo: dict | None = None,
+                    only: str | None = None) -> dict[str, str]:
+    """For each module under ``sources``: a hash of its source and of the sources of every
+    module under ``sources`` it imports, transitively (parent packages included).
+
+    A cached kernel can only call code its module reaches by imports, so a kernel is stale
+    exactly when its module's closure hash changed.  ``memo`` (``{module: [digest, imports]}``)
+    spares parsing files whose bytes did not change; it is updated in place.  ``only``: the
+    closures of that top-level package's modules alone."""
+    memo = {} if memo is None else memo
+    digest: dict[str, str] = {}
+    deps: dict[str, set[str]] = {}
     for d in sources:
         for f in sorted(d.rglob("*.py")):
-            h.update(f.relative_to(d.parent).as_posix().encode())
-            h.update(f.read_bytes())
-    return h.hexdigest()
+            mod, data = _module_name(f, d), f.read_bytes()
+            h = hashlib.blake2b(data, digest_size=16).hexdigest()
+            if memo.get(mod, [None])[0] != h:
+                tree = ast.parse(data)
+                memo[mod] = [h, sorted(_imported(tree, mod, f.name == "__init__.py"))]
+            digest[mod] = h
+            deps[mod] = set(memo[mod][1])
+    for mod in digest:  # a module's parents run before it; only modules under sources count
+        parts = mod.split(".")
+        deps[mod].update(".".join(parts[:i]) for i in range(1, len(parts)))
+        deps[mod] = {n for n in deps[mod] if n in digest and n != mod}
+    out = {}
+    for mod in digest:
+        if only is not None and mod.split(".")[0] != only:
+            continue
+        seen, todo = {mod}, [mod]
+        while todo:
+            for n in deps[todo.pop()]:
+                if n not in seen:
+                    seen.add(n)
+                    todo.append(n)
+        h = hashlib.blake2b(digest_size=16)
+        for n in sorted(seen):
+            h.update(f"{n}={digest[n]};".encode())
+        out[mod] = h.hexdigest()
+    return out
 
 
 def sweep_stale_caches(own: Path, sources: Sequence[Path]) -> int:
-    """Delete the numba cache files (``*.nbi``, ``*.nbc``) of the package ``own`` when the
-    sources of ``sources`` (the package and every package its kernels call) differ from those
-    the cache was compiled from; returns how many were deleted.
+    """Delete the numba cache files (``*.nbi``, ``*.nbc``) of each module of the package
+    ``own`` whose source, or the source of any module of ``sources`` it imports (transitively),
+    differs from what its cache was compiled from; returns how many were deleted.
 
     numba keys a kernel's cache on its own file's time stamp only: a kernel that inlines a law
     from another file (the INS calls :mod:`estimators.kf`'s update; the engine's kernels call
     the controllers') would keep running the old law after that file alone changes, silently.
     Called once at import, before any kernel runs (numba reads an index at a kernel's first
-    call).  A concurrent process at worst recompiles.  Both places numba may keep them are
-    swept, each with its own stamp: the package's ``__pycache__`` folders and, when
+    call).  A module whose imports do not reach the changed file keeps its kernels (an edit of
+    the command line does not recompile the physics).  A concurrent process at worst
+    recompiles.  Both places numba may keep them are swept, each with its own stamp (a JSON
+    of every module's closure hash): the package's ``__pycache__`` folders and, when
     ``NUMBA_CACHE_DIR`` is set, numba's folders for the package's source folders there.  A
     user-wide cache (numba's fallback for a read-only install, whose files change together) is
     not swept."""
-    try:
-        key = sources_hash(sources)
-    except OSError:
-        return 0
-    n = 0
-    places = [(own / "__pycache__" / STAMP,
-               [*own.rglob("__pycache__/*.nbi"), *own.rglob("__pycache__/*.nbc")])]
+    srcs = _source_dirs(own)
+    places = [(own / "__pycache__" / STAMP, [d / "__pycache__" for d in srcs])]
     user = _user_cache_dirs(own)
     if user:
         tag = hashlib.sha1(str(own.resolve()).encode()).hexdigest()[:16]
-        places.append((user[0].parent / "ag-uav-stamps" / f"{own.name}-{tag}",
-                       [f for d in user for f in (*d.glob("*.nbi"), *d.glob("*.nbc"))]))
-    for stamp, files in places:
+        places.append((user[0].parent / "ag-uav-stamps" / f"{own.name}-{tag}", user))
+    n = 0
+    for stamp, caches in places:
+        old = _read_stamp(stamp)
+        memo = old.get("parsed", {})
         try:
-            if stamp.is_file() and stamp.read_text() == key:
-                continue
-        except OSError:
-            continue
+            closures = module_closures(sources, memo, own.name)
+        except (OSError, SyntaxError, ValueError):
+            return n
+        was = old.get("closures", {})
+        stale = {m for m, h in closures.items() if was.get(m) != h}
+        files = [f for src, cache in zip(srcs, caches, strict=True)
+                 for f in _cache_files(src, cache, own, stale)]
         n += _unlink_all(files)
-        _write_stamp(stamp, key)
+        if closures != was:
+            _write_stamp(stamp, json.dumps({"closures": closures, "parsed": memo}))
     return n
+
+
+def _source_dirs(own: Path) -> list[Path]:
+    """The package's source folders, sorted (numba keeps a cache folder for each)."""
+    return sorted({f.parent for f in own.rglob("*.py")})
+
+
+def _cache_files(src: Path, cache: Path, own: Path, stale: set[str]) -> list[Path]:
+    """The cache files in ``cache`` (numba's folder for source folder ``src``) of the modules
+    in ``stale``: numba names them ``<file stem>.<qualname>-<line>.pyXY[.N].nbi|nbc``."""
+    if not cache.is_dir():
+        return []
+    return [f for f in (*cache.glob("*.nbi"), *cache.glob("*.nbc"))
+            if _module_name(src / (f.name.split(".", 1)[0] + ".py"), own) in stale]
+
+
+def _read_stamp(stamp: Path) -> dict:
+    """The stamp's record, ``{}`` when there is none or it is unreadable (all stale)."""
+    try:
+        rec = json.loads(stamp.read_text())
+    except (OSError, ValueError):
+        return {}
+    return rec if isinstance(rec, dict) else {}
 
 
 def _user_cache_dirs(own: Path) -> list[Path]:

@@ -1,5 +1,6 @@
-"""numba's cache is keyed on a kernel's own file: the packages sweep it when any source changes
-(controllers._jit.sweep_stale_caches), so a kernel never keeps running an old law."""
+"""numba's cache is keyed on a kernel's own file: the packages sweep a module's kernels when any
+source it imports changes (controllers._jit.sweep_stale_caches), so a kernel never keeps running
+an old law, and an edit that no kernel reaches recompiles nothing."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from controllers._jit import STAMP, sweep_stale_caches
+from controllers._jit import STAMP, module_closures, sweep_stale_caches
 
 
 def _fake_cache(pkg: Path) -> list[Path]:
@@ -22,12 +23,14 @@ def _fake_cache(pkg: Path) -> list[Path]:
     return files
 
 
-def test_sweep_deletes_the_cache_once_per_change_of_any_source(tmp_path: Path) -> None:
+def test_sweep_deletes_a_modules_cache_when_a_source_it_imports_changes(tmp_path: Path) -> None:
     pkg, dep = tmp_path / "pkg", tmp_path / "dep"
     pkg.mkdir()
     dep.mkdir()
-    (pkg / "k.py").write_text("A = 1\n")
+    (pkg / "k.py").write_text("from dep.law import B\n")
+    (pkg / "cli.py").write_text("from . import k\n")
     (dep / "law.py").write_text("B = 1\n")
+    (dep / "other.py").write_text("C = 1\n")
     files = _fake_cache(pkg)
     (pkg / "__pycache__" / "k.cpython-311.pyc").write_bytes(b"keep")
     assert sweep_stale_caches(pkg, [pkg, dep]) == 2   # no stamp yet: the cache's sources unknown
@@ -36,10 +39,30 @@ def test_sweep_deletes_the_cache_once_per_change_of_any_source(tmp_path: Path) -
     assert (pkg / "__pycache__" / STAMP).is_file()
     files = _fake_cache(pkg)
     assert sweep_stale_caches(pkg, [pkg, dep]) == 0   # same sources: the cache is kept
+    (pkg / "cli.py").write_text("from . import k\nX = 2\n")   # a module importing k changed
+    (dep / "other.py").write_text("C = 2\n")                    # a file k does not import
+    assert sweep_stale_caches(pkg, [pkg, dep]) == 0
     assert all(f.exists() for f in files)
-    (dep / "law.py").write_text("B = 2\n")            # another package's law changed
+    (dep / "law.py").write_text("B = 2\n")            # another package's law k imports
     assert sweep_stale_caches(pkg, [pkg, dep]) == 2
     assert not any(f.exists() for f in files)
+
+
+def test_closures_follow_relative_function_local_and_parent_imports(tmp_path: Path) -> None:
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "sub" / "a.py").write_text("def f():\n    from ..b import g\n    return g\n")
+    (pkg / "b.py").write_text("G = 1\n")
+    (pkg / "c.py").write_text("H = 1\n")
+    before = module_closures([pkg])
+    (pkg / "b.py").write_text("G = 2\n")
+    after = module_closures([pkg])
+    changed = {m for m in before if before[m] != after[m]}
+    assert changed == {"pkg.b", "pkg.sub.a"}
+    (pkg / "__init__.py").write_text("X = 1\n")   # a parent package runs before its modules
+    assert module_closures([pkg])["pkg.c"] != after["pkg.c"]
 
 
 _LAW = "from controllers._jit import njit\n\n\n@njit\ndef law(x):\n    return x + {}\n"
