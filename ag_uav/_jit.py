@@ -4,9 +4,10 @@ run as plain Python, correct and slow. Kernels use ``@njit(cache=True)`` and kee
 (numba's default): they are the engine's short per-tick kernels, and a lane that released the
 GIL at each of them handed it to another lane's Python and waited to get it back
 (docs/speed.md); no ``fastmath`` (a vehicle's results must not depend on the batch it flies
-in). At import the kernels' cache is swept when any source of ``ag_uav``,
-``estimators`` or ``controllers`` changed (:func:`controllers._jit.sweep_stale_caches`: numba
-alone would keep a kernel that inlined an old law from another file)."""
+in). At import a module's kernels are swept from the cache when its source or any
+source it imports (in ``ag_uav``, ``estimators`` or ``controllers``) changed
+(:func:`controllers._jit.sweep_stale_caches`: numba alone would keep a kernel that inlined an old
+law from another file)."""
 
 from __future__ import annotations
 
