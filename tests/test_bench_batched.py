@@ -46,3 +46,15 @@ def test_the_as_filed_batches_are_also_paired_without_the_dose_model() -> None:
     spread = out["ratio_vs_physics_without_deposition_spread"]
     assert 0.0 < spread["min"] <= out["ratio_vs_physics_without_deposition"] <= spread["max"]
     assert out["sim_s_per_wall_s_without_deposition"] > 0
+
+
+def test_first_run_compile_spans_count_nested_kernels_once() -> None:
+    """A kernel's own compile time is its span less its callees' spans; the total is the
+    outermost spans' sum (numba's compile events nest)."""
+    from ag_uav.jobs.first_run import compile_spans
+
+    ev = [(0.0, "a", True), (1.0, "b", True), (3.0, "c", True), (4.0, "c", False),
+          (6.0, "b", False), (10.0, "a", False), (11.0, "d", True), (12.5, "d", False)]
+    total, own = compile_spans(ev)
+    assert total == 11.5
+    assert own == {"a": 5.0, "b": 4.0, "c": 1.0, "d": 1.5}

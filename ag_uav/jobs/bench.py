@@ -668,8 +668,16 @@ def _stages(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     return {"stages_us_per_vehicle_tick": out}
 
 
+def _first_run(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    """``first_run``: the default mission's first run in a fresh process with an empty numba
+    cache (:mod:`ag_uav.jobs.first_run`): its wall time and the compile, kernel by kernel."""
+    from .first_run import measure_first_run
+
+    return {"first_run": measure_first_run()}
+
+
 _EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers, _batched,
-                                                               _deposition, _stages]
+                                                               _deposition, _stages, _first_run]
 
 
 def print_bench(out: dict[str, Any]) -> None:

@@ -1,0 +1,117 @@
+"""What a new user waits for: the first run on a fresh checkout, compile included.
+
+:func:`measure_first_run` starts a fresh Python process whose numba cache is an empty folder
+(``NUMBA_CACHE_DIR``; numba then neither reads nor writes the package's ``__pycache__``), flies
+the default mission for :data:`FLY_S` simulated seconds with the full log (no renders), and
+reports the process's wall time, the seconds spent compiling and the kernels that cost most.
+The compile is read from numba's own ``numba:compile`` events: each event spans a kernel's
+compile including the kernels it compiles on the way, so a kernel's *own* time is its span less
+its nested spans, and the total is the sum of the outermost spans.  ``ag-uav bench`` reports it
+as ``first_run``; ``python -m ag_uav.jobs.first_run`` prints it alone.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from typing import Any
+
+__all__ = ["FLY_S", "compile_spans", "measure_first_run"]
+
+#: simulated seconds the child flies: every per-tick kernel and the log's encoders run in them
+FLY_S = 2.0
+
+
+def compile_spans(events: list[tuple[float, str, bool]]) -> tuple[float, dict[str, float]]:
+    """(total, own seconds by kernel) from ``(time, kernel, is_start)`` events in time order.
+
+    Spans nest (a kernel compiles its callees inside its own compile); a kernel's own time is
+    its span less the spans nested in it, and the total is the sum of the outermost spans."""
+    total, own, stack = 0.0, {}, []
+    for t, name, start in events:
+        if start:
+            stack.append([name, t, 0.0])
+            continue
+        name, t0, nested = stack.pop()
+        span = t - t0
+        own[name] = own.get(name, 0.0) + span - nested
+        if stack:
+            stack[-1][2] += span
+        else:
+            total += span
+    return total, own
+
+
+def _child(out_dir: str) -> dict[str, Any]:
+    """Fly the default mission briefly with numba's compile events recorded (in the child)."""
+    t0 = time.perf_counter()
+    from numba.core import event
+
+    from ..cli import main as cli_main
+
+    events: list[tuple[float, str, bool]] = []
+
+    class _Rec(event.Listener):
+        def on_start(self, ev: event.Event) -> None:
+            events.append((time.perf_counter(), _kernel_name(ev), True))
+
+        def on_end(self, ev: event.Event) -> None:
+            events.append((time.perf_counter(), _kernel_name(ev), False))
+
+    with event.install_listener("numba:compile", _Rec()):
+        rc = cli_main(["fly", "--no-render", "--quiet", "--out", out_dir, "--run-id", "first",
+                       "--set", f"sim.max_time_s={FLY_S}"])
+    wall = time.perf_counter() - t0
+    total, own = compile_spans(events)
+    top = sorted(own.items(), key=lambda kv: -kv[1])[:10]
+    return {"exit_code": rc, "wall_s": round(wall, 2), "compile_s": round(total, 2),
+            "kernels_compiled": len(own),
+            "top_kernels_s": {k: round(v, 2) for k, v in top}}
+
+
+def _kernel_name(ev: Any) -> str:
+    disp = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
+    fn = getattr(disp, "py_func", None)
+    if fn is None:
+        return "?"
+    return f"{fn.__module__}.{fn.__qualname__}"
+
+
+def measure_first_run(timeout_s: float = 900.0) -> dict[str, Any]:
+    """The first run of a fresh checkout, measured in a child process with an empty numba
+    cache: ``wall_s`` (interpreter start to the summary), ``compile_s`` (all kernels, the log's
+    encoders included), ``kernels_compiled`` and ``top_kernels_s`` (the ten costliest, own
+    time)."""
+    with tempfile.TemporaryDirectory(prefix="ag-uav-first-run-") as tmp:
+        env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(tmp, "numba")}
+        t0 = time.perf_counter()
+        p = subprocess.run([sys.executable, "-m", "ag_uav.jobs.first_run", "--child", tmp],
+                           env=env, capture_output=True, text=True, timeout=timeout_s)
+        process_s = time.perf_counter() - t0
+    if p.returncode != 0:
+        tail = (p.stderr or p.stdout).strip().splitlines()[-1:] or ["no output"]
+        raise RuntimeError(f"first-run child exited {p.returncode}: {tail[0]}")
+    out = json.loads(p.stdout.strip().splitlines()[-1])
+    out["process_s"] = round(process_s, 2)
+    out["fly_sim_s"] = FLY_S
+    return out
+
+
+def _print(out: dict[str, Any]) -> None:
+    print(f"first run, fresh numba cache: {out['process_s']:.1f} s in all, "
+          f"{out['compile_s']:.1f} s compiling {out['kernels_compiled']} kernels")
+    for k, v in out["top_kernels_s"].items():
+        print(f"  {v:7.2f} s  {k}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 3 and sys.argv[1] == "--child":
+        res = _child(sys.argv[2])
+        sys.stdout.flush()
+        print(json.dumps(res))
+    else:
+        _print(measure_first_run())
