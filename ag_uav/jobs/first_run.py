@@ -51,7 +51,8 @@ def _child(out_dir: str) -> dict[str, Any]:
     t0 = time.perf_counter()
     from numba.core import event
 
-    from ..cli import main as cli_main
+    from ..config import load_config
+    from .run import fly
 
     events: list[tuple[float, str, bool]] = []
 
@@ -62,14 +63,14 @@ def _child(out_dir: str) -> dict[str, Any]:
         def on_end(self, ev: event.Event) -> None:
             events.append((time.perf_counter(), _kernel_name(ev), False))
 
+    cfg = load_config(None, {"sim.max_time_s": FLY_S, "log.render": False})
     with event.install_listener("numba:compile", _Rec()):
-        rc = cli_main(["fly", "--no-render", "--quiet", "--out", out_dir, "--run-id", "first",
-                       "--set", f"sim.max_time_s={FLY_S}"])
+        res, _ = fly(cfg, out_root=out_dir, run_id="first", progress=False)
     wall = time.perf_counter() - t0
     total, own = compile_spans(events)
     top = sorted(own.items(), key=lambda kv: -kv[1])[:10]
-    return {"exit_code": rc, "wall_s": round(wall, 2), "compile_s": round(total, 2),
-            "kernels_compiled": len(own),
+    return {"sim_time_s": res.summary["sim_time_s"], "wall_s": round(wall, 2),
+            "compile_s": round(total, 2), "kernels_compiled": len(own),
             "top_kernels_s": {k: round(v, 2) for k, v in top}}
 
 
