@@ -459,3 +459,28 @@ def test_a_log_past_the_spare_cores_writes_in_process_and_says_so(tmp_path, monk
     assert c._sink.process  # a's writer is gone: the core is spare again
     c.close()
     assert [len(_decoded(tmp_path / f"{x}.mcap")) for x in "ab"] == [5, 5]
+
+
+def test_dose_maps_period_doubles_after_each_quota_of_bytes(tmp_path: Path, monkeypatch) -> None:
+    """A long flight over a big field logs its dose maps at a period that doubles after each
+    DOSE_QUOTA_B of them (the log grows with the log of the duration, not with it); the final
+    map is always logged."""
+    import ag_uav.record.runlog as rl
+
+    grid = np.ones((100, 100))          # 40 kB of float32 a map
+    monkeypatch.setattr(rl, "DOSE_QUOTA_B", 400_000)   # ~10 maps a quota
+    times = []
+    with RunLog(tmp_path / "d.mcap", channels="full", metadata={}) as log:
+        for k in range(20_000):
+            t = 0.5 * k
+            if log.want_dose(t):
+                log.dose(t, 0.0, 0.0, 1.0, grid)
+                times.append(t)
+        log.dose(10_000.0, 0.0, 0.0, 1.0, grid, final=True)
+    gaps = np.diff(times)
+    assert gaps[0] == 5.0 and gaps.max() >= 5.0 * 2 ** 4
+    assert np.all(np.diff(gaps) >= 0)                    # the period never shrinks
+    assert len(times) < 80                               # 2,000 maps at a fixed 5 s
+    summ = make_reader(open(tmp_path / "d.mcap", "rb")).get_summary()
+    counts = {summ.channels[c].topic: n for c, n in summ.statistics.channel_message_counts.items()}
+    assert counts["/dose"] == len(times) + 1

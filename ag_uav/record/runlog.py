@@ -45,8 +45,8 @@ Channels (Foxglove well-known schemas where one fits; groups in brackets):
                                       err (pos - last true position), extra{...}
   [scene]     ``/field`` (field polygon + planned path), ``/sprayed`` (sprayed area),
               foxglove.SceneUpdate (separate topics so a seek shows both);
-              ``/dose`` foxglove.Grid: the dose on the ground (L/ha), every 5 s (light: 30 s) and at
-              the end
+              ``/dose`` foxglove.Grid: the dose on the ground (L/ha), every 5 s (light: 30 s;
+              the period doubles after each 8 MB of maps) and at the end
   [camera]    ``/camera/<name>`` foxglove.CompressedImage (JPEG) and
               ``/camera/<name>/calibration`` foxglove.CameraCalibration
   always      metadata records ``run`` and ``versions`` (and ``summary``), attachments
@@ -122,6 +122,10 @@ _INF = float("inf")
 #: sim seconds between two dose maps on ``/dose`` during a flight (and one at the end), per
 #: channel set: a map sums the whole fine dose grid, the light set's budget takes one in six
 DOSE_PERIOD_S = {"full": 5.0, "light": 30.0}
+#: bytes of dose maps after which their period doubles (and again after each as many more): a
+#: long job over a big field logs O(log duration) quotas of maps instead of one map every period
+#: (the 38 ha job's 3,377 whole maps were 1.36 GB of its log); the final map is always logged
+DOSE_QUOTA_B = 8_000_000
 
 
 def ns(t: float) -> int:
@@ -718,6 +722,7 @@ class RunLog:
         self._flat_rows: list[_FlatRows] = []  # estimator and spray channels, encoded at flush
         self._ch_spray: _FlatRows | None = None
         self._ch_dose: Any = None
+        self._dose_bytes = 0  # bytes of dose maps logged (their period doubles per quota)
         self._next_spray = -_INF if self._period["state"] < _INF and self.enabled else _INF
         if not self.enabled:
             return
@@ -1385,19 +1390,20 @@ class RunLog:
              final: bool = False) -> None:
         """The dose map on the ground (L/ha, (ny, nx), row j at y0 + j·cell) -> ``/dose``
         foxglove.Grid (one float32 field ``l_per_ha``, lower-left corner at (x0, y0), 2 cm above
-        the ground), at most every :data:`DOSE_PERIOD_S` of sim time (``final``: always). Part
-        of the ``scene`` group."""
+        the ground), at most every :data:`DOSE_PERIOD_S` of sim time, doubled after each
+        :data:`DOSE_QUOTA_B` of maps (``final``: always). Part of the ``scene`` group."""
         if self.closed or self._period["scene"] == _INF:
             return
         if not final and t < getattr(self, "_next_dose", -_INF):
             return
-        self._next_dose = t + self._dose_period - 1e-9
         if self._ch_dose is None:
             self._ch_dose = self._chan("/dose", self._M.Grid)
         tn = ns(t)
-        self._pending.append((self._ch_dose, enc_grid(_ts_pb(tn), float(x0), float(y0), 0.02,
-                                                      float(cell), l_per_ha), tn))
+        msg = enc_grid(_ts_pb(tn), float(x0), float(y0), 0.02, float(cell), l_per_ha)
+        self._pending.append((self._ch_dose, msg, tn))
         self._count("/dose")
+        self._dose_bytes += len(msg)
+        self._next_dose = t + self._dose_period * 2 ** (self._dose_bytes // DOSE_QUOTA_B) - 1e-9
 
     # ---------------------------------------------------------------- camera
     def frame(
