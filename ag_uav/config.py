@@ -189,8 +189,22 @@ class SprayConfig:
                         "(ASABE S572 via GRDC: 19 % of the volume below 150 um)", gt=1, le=5000)
     dv50_um: float = _f(250.0, "volume median diameter Dv50 (um)", gt=1, le=5000)
     dv90_um: float = _f(420.0, "droplet spectrum Dv90 (um)", gt=1, le=5000)
-    n_classes: int = _f(5, "droplet classes (equal volume) the spectrum is split into", ge=1,
-                        le=20)
+    n_classes: int = _f(10, "droplet classes the spectrum is split into (bins even in the "
+                        "normal score of ln D, the fine tail that drifts with its own classes)",
+                        ge=1, le=40)
+    temperature_c: float = _f(20.0, "air temperature (C): with rh_percent, the wet-bulb "
+                              "depression that drives evaporation (d2 law)", ge=-20, le=50)
+    rh_percent: float = _f(60.0, "relative humidity (%); Stull's wet-bulb fit holds for 5-99",
+                           ge=5, le=99)
+    nonvolatile_fraction: float = _f(0.05, "volume share of the tank mix that does not "
+                                     "evaporate (a droplet stops shrinking at its diameter)",
+                                     ge=1e-4, le=1)
+    roughness_m: float = _f(0.05, "roughness length z0 of the log-law wind profile (m); "
+                            "0.01-0.05 short grass or bare soil, 0.1-0.2 a low crop", ge=1e-4,
+                            le=2)
+    wake_escape: float = _f(0.3, "share of the spray sheet at the rotor wake's edge, where "
+                            "fines escape as the wake skews (an assumed constant, see "
+                            "docs/spray_deposition.md)", ge=0, le=1)
     cell_m: float = _f(0.5, "cell of the dose map (m); coarsened (doubling) if the map would "
                        "exceed max_cells", ge=0.05, le=10)
     buffer_m: float = _f(10.0, "the dose map covers the field plus this buffer (m); what lands "

@@ -395,6 +395,7 @@ def dose_summary(cfg: Config, fld: Field, dose: Any, tank_l: float | None = None
         out["nozzle_minus_tank_l"] = m["sprayed_l"] - tank_l
     out["dose_cell_m"] = dose.grid.cell
     out["dose_mass_balance_error"] = m["mass_balance_error"]
+    out["evaporated_fraction"] = m["evaporated_fraction"]
     return out
 
 

@@ -28,49 +28,62 @@ integrated exactly over the tick (piecewise-constant target): the volume of a ti
 **Droplet classes.** The volume spectrum is log-normal through the nozzle's Dv10 / Dv50 / Dv90
 (ASABE S572 reports a spectrum by these; S572 classes are relative to reference nozzles, so
 figures, not a category name, define it): ln D split-normal about ln Dv50 with s_lo =
-ln(Dv50/Dv10)/1.2816 below and s_hi = ln(Dv90/Dv50)/1.2816 above (all three matched);
-``n_classes`` classes of equal volume at the quantiles (k + ½)/K. The default (120 / 250 /
-420 µm) puts 19 % of the volume below 150 µm, a *medium* spray by the GRDC's reading of S572
-(medium: up to 20 % below 150 µm; coarse < 10 %); DJI's AGRAS T40 quotes 50–300 µm droplets.
+ln(Dv50/Dv10)/1.2816 below and s_hi = ln(Dv90/Dv50)/1.2816 above (all three matched). The
+``n_classes`` (10) bins split the normal score z evenly over [−3.5, 2] (end bins open), so the
+fine tail that drifts has classes of its own (default: 41, 57, 77 µm … 516 µm; the 5.5 % of the
+volume below 100 µm is carried by the classes below 105 µm); each class sits at its bin's
+volume median. The default (120 / 250 / 420 µm) is a *medium* spray by the GRDC's reading of
+S572.
 
 **Terminal velocity** from the drag balance (π/6) d³ (ρ_l − ρ_a) g = C_D · ½ ρ_a v_t² · π d²/4
 with Schiller & Naumann (1933, Z. Ver. Dtsch. Ing. 77:318) C_D = 24/Re · (1 + 0.15 Re^0.687) for
-Re = ρ_a v_t d / μ ≤ 1000 (0.44 above; Stokes' law is its Re → 0 limit), solved by bisection
-once per class. Relaxation time τ_p = v_t / g. Evaporation is **not** modelled (AGDISP does it;
-fines would shrink and drift further in warm dry air).
+Re = ρ_a v_t d / μ ≤ 1000 (0.44 above), solved by bisection. Relaxation time τ_p = v_t / g.
+
+**Evaporation** (:func:`evaporation`): the d² law d(d²)/dt = −λ (1 + 0.27 Re^½), λ = 84.76 ΔT
+µm²/s (Goering et al. 1972, as in AGDISP), ΔT the wet-bulb depression from the temperature and
+RH (Stull 2011, :func:`wet_bulb_c`), the ventilation factor of Williamson & Threadgill (1974); a
+droplet stops at the diameter of its non-volatile share d₀ f^⅓. Per class, once per config,
+:func:`fall_tables` integrates the still-air fall distance H(t) and the volume left (d/d₀)³ on
+a 48-point time grid to ``airborne_after_s``; the kernels read them by interpolation.
 
 **Downwash** (momentum theory, Leishman, *Principles of Helicopter Aerodynamics* §2.3, §2.14):
 hover induced velocity v_h = sqrt(T / (2 ρ A)), A = n_rotors · π D²/4, from the *actual* total
-thrust T; in forward flight at horizontal airspeed V (Glauert, wake nearly horizontal-disc
-approximation) v_i⁴ + V² v_i² = v_h⁴, so v_i² = (−V² + sqrt(V⁴ + 4 v_h⁴)) / 2. The far wake
-reaches 2 v_i in a contracted tube of diameter D/√2 and then decays as a round turbulent jet:
-u(s) = 2 v_i for s < s₀ and 2 v_i · s₀ / s beyond, s₀ = B · D/√2 (depth s below the rotor plane;
-B ≈ 6, the centre-line decay constant of a round jet, 6.11 at Re = 19,400 in Abdel-Rahman et
-al., Mech. Res. Commun. 23(3):313, 1996). The wake blows along −ẑ_body (cosine c = R₂₂).
+thrust T; in forward flight at horizontal airspeed V_a (wind included; Glauert) v_i⁴ + V_a² v_i²
+= v_h⁴. The wake skews back by χ, tan χ = V_a / v_i (≈ 50° at 5 m/s for the M350 class). The far
+wake reaches 2 v_i and then decays as a round turbulent jet along its skewed axis: u = 2 v_i for
+axial distance s < s₀ and 2 v_i s₀ / s beyond, s₀ = B · D/√2 (B ≈ 6, Abdel-Rahman et al., Mech.
+Res. Commun. 23(3):313, 1996). At depth z below the rotor the axial distance is z / cos χ, so the
+wake's vertical speed is a = 2 v_i c for z < z₀ = s₀ cos χ and a z₀ / z beyond (c = R₂₂: the
+wake blows along −ẑ_body): a skewed wake decays within a shorter depth.
 
-**Fall and drift** (Lagrangian parcel; droplets follow the air plus their settling velocity, as
-τ_p ≪ fall time). A droplet falls from the nozzle depth s_n to the ground depth s_g at
-ds/dt = v_t + c·u(s), in closed form::
+**The wake part** of a class falls from the nozzle depth s_n to the ground depth s_g at
+ds/dt = v_t + u(s), in closed form::
 
-    t(s₁→s₂) = (s₂ − s₁) / (v_t + a)                                  (s < s₀, a = c·2v_i)
-    t(s₁→s₂) = [(s₂ − s₁) − (a s₀ / v_t) ln((v_t s₂ + a s₀) / (v_t s₁ + a s₀))] / v_t   (s ≥ s₀)
+    t(s₁→s₂) = (s₂ − s₁) / (v_t + a)                                  (s < z₀)
+    t(s₁→s₂) = [(s₂ − s₁) − (a z₀ / v_t) ln((v_t s₂ + a z₀) / (v_t s₁ + a z₀))] / v_t   (s ≥ z₀)
 
-The wake carries it D_w = (s_g − s_n) − v_t t_f of the way down. Its mean landing point is::
+lands about x = x_nozzle + W t_f + (ẑ-tilt) D_w / c + (v − W) τ_p (1 − e^{−t_f/τ_p}) (D_w =
+(s_g − s_n) − v_t t_f the wake's share of the fall, W the wind at the vehicle) with the variance
+σ² = σ₀² + (i_w D_w)² + (δ u_g / v_t)² + (σ_a t_f)² (σ₀ the nozzle sheet, i_w ≈ 0.25 the jet's
+turbulence intensity, δ u_g / v_t the ground outwash of speed u_g in a layer δ, σ_a ambient
+turbulence not in the per-tick wind samples). δ = 0.17 m is calibrated (docs: DJI's 11 m T40
+swath).
 
-    x = x_nozzle + W t_f + (ẑ-tilt) D_w / c + (v − W) τ_p (1 − e^{−t_f/τ_p})
-
-(W: the wind at the vehicle, gusts included, frozen over the fall; v: vehicle velocity, which
-the droplet sheds over τ_p). The footprint is Gaussian about it with the variance::
-
-    σ² = σ₀² + (i_w D_w)² + (δ u_g / v_t)² + (σ_a t_f)²
-
-σ₀: nozzle sheet at release (``release_sigma_m``); i_w D_w: the wake's turbulence (axial
-intensity i_w ≈ 0.25 on a round jet's axis); δ u_g / v_t: the ground outwash, where the wake
-arriving with speed u_g turns radially in a layer of thickness δ (``outwash_layer_m``) that a
-droplet crosses in δ / v_t (the fines go furthest); σ_a t_f: ambient turbulence not already in
-the per-tick wind samples (``ambient_sigma_mps``, default 0: the engine's wind carries the Dryden
-gusts, so successive ticks sample them). δ is the one calibrated constant (docs: against DJI's
-published 11 m effective swath of the T40 at 2.5 m and 7 m/s).
+**The escaped part.** At the wake's edge the shear layer's eddies (velocity σ_s = i_w 2 v_i,
+size ℓ = ``shear_eddy_m``) carry droplets out as the wake skews; a droplet follows them by the
+response 1 / (1 + St), St = τ_p σ_s / ℓ (Stokes number). The escaped share of class k is ε =
+ε₀ sin χ / (1 + St) (ε₀ = ``wake_escape``, an assumed constant: 0 in hover, most for the fines).
+It then settles from the nozzle height h through the surface layer: a log-law wind
+u(z) = (u*/κ) ln(z/z₀) (u* from the wind at the vehicle's height, z₀ = ``roughness_m``) whose
+mean over the layer below h advects it, and a vertical eddy diffusivity K = κ u* h/2; the first
+passage of a settling droplet through a diffusing layer is the inverse Gaussian IG(μ_T, λ_T)
+(Chhikara & Folks 1989), μ_T the still-air fall time from the table (evaporating), λ_T = h²/(2K).
+The landing distance is ū·T along the wind; across it the spread is σ_v T (σ_v = 1.9 u*,
+Panofsky & Dutton 1984; Taylor's short-time limit), plus the wake's edge ring. What has not
+landed after ``airborne_after_s`` (P(T > T_max)) is **airborne**; the volume lost on the way
+is **evaporated** (at the mean fall time). In the dose grid the escaped part is splatted as the
+Gaussian of the same mean and variance; the drift trial (:mod:`ag_uav.jobs.experiments.drift`)
+evaluates the inverse-Gaussian law itself, so the far field has no cut-off.
 
 **Splatting.** Per (nozzle, class) the released volume and its landing moments (volume, first
 and second moments) are accumulated over a window of at most ``flush_cells`` cells of travel
@@ -80,9 +93,9 @@ integrals (erf differences), truncated at ±4σ and rescaled so that the grid re
 analytic in-grid probability; wide kernels go to coarser levels (cells 2^l larger, at most ~17×17
 cells touched), summed into the fine map on read. Classes whose kernel is wider than twice the
 nozzle radius merge their nozzles into one Gaussian (same moments). Mass bookkeeping is exact by
-construction: sprayed = in grid + deposited outside the grid + drift, where the part landing
-outside the grid counts as **drift** (airborne past the buffer) if it was released over the grid
-and as **deposited outside** otherwise.
+construction: sprayed = in grid + deposited outside the grid + drift + airborne + evaporated,
+where the part landing outside the grid counts as **drift** (carried past the buffer) if it was
+released over the grid and as **deposited outside** otherwise.
 
 **Memory.** Dense float64 levels over the field's bounding box plus the buffer (≈ 1.33 × the
 fine cells); a grid above ``max_cells`` fine cells coarsens the cell (doubling) until it fits,
@@ -93,7 +106,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -107,13 +119,21 @@ else:  # pragma: no cover
 
 __all__ = ["DepositionConfig", "Deposition", "DepositionBatch", "DoseMap", "droplet_classes",
            "terminal_velocity", "dose_metrics", "INPUT_WIDTH", "GridSpec", "pack_input",
-           "pack_params"]
+           "pack_params", "footprints", "evaporation", "wet_bulb_c", "Air", "fall_tables"]
 
 G = 9.81
 #: columns of one input row: pos 3, vel 3, R 9 (row-major), thrust, wind 3, cmd
 INPUT_WIDTH = 20
 _M350_NOZZLES = ((0.3164, -0.3164, -0.15), (0.3164, 0.3164, -0.15),
                  (-0.3164, 0.3164, -0.15), (-0.3164, -0.3164, -0.15))
+
+
+#: (key, low, high) of the air and tank-mix keys (Stull's wet-bulb fit holds for −20–50 °C and
+#: 5–99 % RH)
+_LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
+           ("nonvolatile_fraction", 1e-4, 1.0), ("roughness_m", 1e-4, 2.0),
+           ("wake_escape", 0.0, 1.0), ("shear_eddy_m", 1e-3, 10.0),
+           ("airborne_after_s", 1.0, 1e5), ("n_classes", 1, 40))
 
 
 @dataclass(frozen=True)
@@ -128,7 +148,7 @@ class DepositionConfig:
     dv10_um: float = 120.0
     dv50_um: float = 250.0
     dv90_um: float = 420.0
-    n_classes: int = 5
+    n_classes: int = 10                           # tail-weighted classes (droplet_classes)
     nozzle_on_delay_s: float = 0.1                # AC_SPRAYER_DEFAULT_TURN_ON_DELAY
     nozzle_off_delay_s: float = 1.0               # AC_SPRAYER_DEFAULT_SHUT_OFF_DELAY
     cmd_off_immediate: bool = True                # AC_Sprayer::run(false) stops at once
@@ -143,9 +163,16 @@ class DepositionConfig:
     liquid_density: float = 1000.0
     jet_decay_b: float = 6.0
     wake_turbulence: float = 0.25
-    outwash_layer_m: float = 0.155
+    outwash_layer_m: float = 0.17
     release_sigma_m: float = 0.1
     ambient_sigma_mps: float = 0.0
+    temperature_c: float = 20.0                   # air temperature (°C)
+    rh_percent: float = 60.0                      # relative humidity (%)
+    nonvolatile_fraction: float = 0.05            # volume share of the mix that never evaporates
+    roughness_m: float = 0.05                     # z0 of the log-law wind profile (m)
+    wake_escape: float = 0.3                      # ε₀: share of the sheet at the wake's edge
+    shear_eddy_m: float = 0.05                    # eddy length of the wake's shear layer (m)
+    airborne_after_s: float = 600.0               # still aloft after this: counted airborne
     cell_m: float = 0.5
     buffer_m: float = 10.0
     max_cells: int = 4_000_000
@@ -154,6 +181,12 @@ class DepositionConfig:
     levels: int = 6
     merge_ratio: float = 2.0
     extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for key, lo, hi in _LIMITS:
+            v = getattr(self, key)
+            if not lo <= v <= hi:
+                raise ValueError(f"{key} = {v}: must be within [{lo:g}, {hi:g}]")
 
     @classmethod
     def from_config(cls, cfg: Any, **over: Any) -> DepositionConfig:
@@ -200,32 +233,169 @@ def terminal_velocity(d_m: float, rho_l: float = 1000.0, rho_a: float = 1.225,
     return 0.5 * (lo + hi)
 
 
+#: the standard-normal range of ln D that the class bins split evenly (the lower tail, where the
+#: drift is, gets more room); the two end bins run on to ∓∞
+Z_LO, Z_HI = -3.5, 2.0
+
+
 def droplet_classes(dv10_um: float, dv50_um: float, dv90_um: float,
                     k: int) -> tuple[np.ndarray, np.ndarray]:
-    """``k`` equal-volume classes of a split log-normal volume spectrum through Dv10/Dv50/Dv90
-    (ln D normal with its own spread on each side of Dv50, so all three are matched):
-    (diameters in m at the volume quantiles (i + ½)/k, volume fractions)."""
+    """``k`` classes of a split log-normal volume spectrum through Dv10/Dv50/Dv90 (ln D normal
+    with its own spread on each side of Dv50, so all three are matched): (diameters in m, volume
+    fractions). The bins split z = Φ⁻¹(volume share) evenly over [Z_LO, Z_HI] (end bins open),
+    so the fine tail that drifts has its own classes; each class sits at its bin's volume
+    median. ``k = 1``: Dv50."""
     if not 0 < dv10_um < dv50_um < dv90_um:
         raise ValueError("droplet spectrum: need 0 < Dv10 < Dv50 < Dv90")
-    nd = NormalDist()
-    z9 = nd.inv_cdf(0.9)
+    from scipy.stats import norm
+
+    z9 = norm.ppf(0.9)
     s_lo, s_hi = math.log(dv50_um / dv10_um) / z9, math.log(dv90_um / dv50_um) / z9
-    zs = [nd.inv_cdf((i + 0.5) / k) for i in range(k)]
-    d = np.array([dv50_um * math.exp((s_lo if z < 0 else s_hi) * z) for z in zs]) * 1e-6
-    return d, np.full(k, 1.0 / k)
+    if k == 1:
+        return np.array([dv50_um * 1e-6]), np.ones(1)
+    edges = np.concatenate([[-np.inf], np.linspace(Z_LO, Z_HI, k + 1)[1:-1], [np.inf]])
+    cdf = norm.cdf(edges)
+    frac = np.diff(cdf)
+    z = norm.ppf(0.5 * (cdf[:-1] + cdf[1:]))
+    d = dv50_um * np.exp(np.where(z < 0, s_lo, s_hi) * z) * 1e-6
+    return d, frac / frac.sum()
+
+
+def wet_bulb_c(t_c: float, rh_percent: float) -> float:
+    """Wet-bulb temperature (°C) at sea-level pressure from the air temperature and relative
+    humidity: Stull (2011, J. Appl. Meteor. Climatol. 50:2267, eq. 1; within 1 °C for 5–99 % RH
+    and −20–50 °C)."""
+    t, rh = t_c, rh_percent
+    return (t * math.atan(0.151977 * math.sqrt(rh + 8.313659)) + math.atan(t + rh)
+            - math.atan(rh - 1.676331) + 0.00391838 * rh ** 1.5 * math.atan(0.023101 * rh)
+            - 4.686035)
+
+
+#: d² law evaporation constant per °C of wet-bulb depression (µm²/s): λ = 84.76·ΔT (Goering et
+#: al. 1972, Trans. ASAE 15(2):220, as used in AGDISP, Teske et al. 2002)
+EVAP_K_UM2 = 84.76
+
+
+def _vt_array(d: np.ndarray, rho_l: float, rho_a: float, mu: float) -> np.ndarray:
+    """:func:`terminal_velocity` of many diameters at once (the same drag balance, vectorised
+    bisection)."""
+    d = np.asarray(d, float)
+    w = math.pi / 6.0 * d ** 3 * (rho_l - rho_a) * G
+    lo, hi = np.zeros_like(d), np.full_like(d, 30.0)
+    for _ in range(60):
+        v = 0.5 * (lo + hi)
+        re = rho_a * v * d / mu
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cd = np.where(re <= 1000.0, 24.0 / re * (1.0 + 0.15 * re ** 0.687), 0.44)
+        drag = cd * 0.5 * rho_a * v * v * math.pi * d * d / 4.0
+        low = drag < w
+        lo, hi = np.where(low, v, lo), np.where(low, hi, v)
+    return 0.5 * (lo + hi)
+
+
+@dataclass(frozen=True)
+class Air:
+    """What the evaporation and the fall need of the air and the mix."""
+
+    t_c: float = 20.0
+    rh_percent: float = 60.0
+    nonvolatile: float = 0.05
+    rho_l: float = 1000.0
+    rho_a: float = 1.225
+    mu: float = 1.81e-5
+
+    @classmethod
+    def of(cls, c: DepositionConfig) -> Air:
+        return cls(c.temperature_c, c.rh_percent, c.nonvolatile_fraction, c.liquid_density,
+                   c.air_density, c.air_viscosity)
+
+    @property
+    def lam_m2(self) -> float:
+        """λ of the d² law (m²/s) without ventilation."""
+        return EVAP_K_UM2 * max(self.t_c - wet_bulb_c(self.t_c, self.rh_percent), 0.0) * 1e-12
+
+
+def evaporation(d0_m: np.ndarray, t_s: np.ndarray, air: Air, ventilation: bool = True,
+                substeps: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """Diameters (len(d0), len(t)) and still-air fall distances of droplets falling at their
+    terminal velocity while they evaporate: the d² law d(d²)/dt = −λ·(1 + 0.27·Re^½) (Williamson
+    & Threadgill 1974, Trans. ASAE 17(2):254, ventilation factor; Re = ρ_a v_t d / μ), λ =
+    84.76·ΔT µm²/s, ΔT the wet-bulb depression; a droplet stops shrinking at the diameter of its
+    non-volatile share d₀·f^⅓. Integrated by RK4 with ``substeps`` steps between the times
+    ``t_s`` (increasing, t_s[0] = 0); the fall distance by the trapezoid rule on the same steps.
+    Without ventilation the law is d² = d₀² − λ t exactly (the test oracle)."""
+    d0 = np.atleast_1d(np.asarray(d0_m, float))
+    lam = air.lam_m2
+    dmin2 = (d0 * air.nonvolatile ** (1.0 / 3.0)) ** 2
+    grid = np.geomspace(0.1e-6, 3e-3, 400)
+    vgrid = _vt_array(grid, air.rho_l, air.rho_a, air.mu)
+    lg, lv = np.log(grid), np.log(vgrid)
+
+    def vt(d2):
+        return np.exp(np.interp(0.5 * np.log(np.maximum(d2, 1e-18)), lg, lv))
+
+    def rate(d2):
+        if not ventilation:
+            return np.where(d2 > dmin2, -lam, 0.0)
+        d = np.sqrt(np.maximum(d2, 1e-18))
+        re = air.rho_a * vt(d2) * d / air.mu
+        return np.where(d2 > dmin2, -lam * (1.0 + 0.27 * np.sqrt(re)), 0.0)
+
+    n = len(t_s)
+    dd = np.empty((len(d0), n))
+    fall = np.zeros((len(d0), n))
+    d2 = d0 * d0
+    dd[:, 0] = d0
+    for j in range(1, n):
+        h = (t_s[j] - t_s[j - 1]) / substeps
+        f = fall[:, j - 1].copy()
+        for _ in range(substeps):
+            v0 = vt(d2)
+            k1 = rate(d2)
+            k2 = rate(d2 + 0.5 * h * k1)
+            k3 = rate(d2 + 0.5 * h * k2)
+            k4 = rate(d2 + h * k3)
+            d2 = np.maximum(d2 + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4), dmin2)
+            f += 0.5 * h * (v0 + vt(d2))
+        dd[:, j] = np.sqrt(d2)
+        fall[:, j] = f
+    return dd, fall
+
+
+#: the time grid of the per-class fall and evaporation tables: 0, then geometric
+N_TAB = 48
+
+
+def fall_tables(c: DepositionConfig, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per class (rows): still-air fall distance H(t) and remaining volume share (d/d₀)³ on the
+    time grid t (0 and geometric 0.02 s … ``airborne_after_s``), built once per config."""
+    t = np.concatenate([[0.0], np.geomspace(0.02, c.airborne_after_s, N_TAB - 1)])
+    dd, fall = evaporation(d, t, Air.of(c))
+    return t, fall, (dd / d[:, None]) ** 3
 
 
 # ------------------------------------------------------------------------------ packed params
 # header slots of the parameter vector (float64); arrays follow at the offsets stored in it
 (P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF, P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0, P_ROTZ, P_IW,
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
- P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN) = range(34)
-P_HEADER = 40
-# state slots per row; accumulators (M·K × 6: V, Sx, Sy, Sxx, Syy, Svar) follow at S_ACC
+ P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
+ P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE) = range(42)
+P_HEADER = 48
+# state slots per row; accumulators (M·K·2 × 6: V, Sx, Sy, Sxx, Syy, Svar) follow at S_ACC
 (S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
- S_DRIFT, S_PENDING, S_LITRES_TICK) = range(14)
+ S_DRIFT, S_PENDING, S_LITRES_TICK, S_AIR, S_EVAP) = range(16)
 S_ACC = 16
 NACC = 6
+#: von Kármán's constant; σ_v / u* of the neutral surface layer (Panofsky & Dutton 1984,
+#: *Atmospheric Turbulence*, §7: σ_u, σ_v, σ_w ≈ 2.4, 1.9, 1.25 u*)
+KAPPA = 0.41
+SIGV_USTAR = 1.9
+#: slots of the per-tick environment (:func:`_environment`) and of one class's footprint
+#: (:func:`_class_footprint`)
+NENV = 16
+(F_WAKE, F_WX, F_WY, F_WVAR, F_WLAND, F_ESC, F_EX, F_EY, F_EVX, F_EVY, F_MUT, F_LAMT, F_PAIR,
+ F_RLAND, F_RAIR, F_UX, F_UY) = range(17)
+NFOOT = 17
 
 
 @njit(cache=True)
@@ -298,45 +468,46 @@ def _splat(par, buf, vol, mx, my, vx, vy, scratch) -> float:
 
 @njit(cache=True)
 def _flush(par, st, buf, scratch) -> None:
-    """Splat every pending (nozzle, class) footprint; book what misses the grid."""
+    """Splat every pending (nozzle, class, wake/escaped) footprint; book what misses the grid."""
     m_n, k_n = int(par[P_M]), int(par[P_K])
     merge_r = par[P_MERGE] * par[P_NOZC]
     drift = st[S_INSIDE] > 0.5
     for k in range(k_n):
-        # merged moments over nozzles of class k
-        V = Sx = Sy = Sxx = Syy = Svar = 0.0
-        for m in range(m_n):
-            a = S_ACC + (m * k_n + k) * NACC
-            V += st[a]
-            Sx += st[a + 1]
-            Sy += st[a + 2]
-            Sxx += st[a + 3]
-            Syy += st[a + 4]
-            Svar += st[a + 5]
-        if V <= 0.0:
-            continue
-        merge = math.sqrt(Svar / V) >= merge_r
-        for m in range(m_n if not merge else 1):
-            if merge:
-                v, sx, sy, sxx, syy = V, Sx, Sy, Sxx, Syy
-            else:
-                a = S_ACC + (m * k_n + k) * NACC
-                v, sx, sy, sxx, syy = st[a], st[a + 1], st[a + 2], st[a + 3], st[a + 4]
-            if v <= 0.0:
+        for part in range(2):
+            # merged moments over nozzles of class k, part
+            V = Sx = Sy = Sxx = Syy = Svar = 0.0
+            for m in range(m_n):
+                a = S_ACC + ((m * k_n + k) * 2 + part) * NACC
+                V += st[a]
+                Sx += st[a + 1]
+                Sy += st[a + 2]
+                Sxx += st[a + 3]
+                Syy += st[a + 4]
+                Svar += st[a + 5]
+            if V <= 0.0:
                 continue
-            mx, my = sx / v, sy / v
-            vx = max(sxx / v - mx * mx, 1e-12)
-            vy = max(syy / v - my * my, 1e-12)
-            put = _splat(par, buf, v, mx, my, vx, vy, scratch)
-            st[S_INGRID] += put
-            if drift:
-                st[S_DRIFT] += v - put
-            else:
-                st[S_OUTSIDE] += v - put
-        for m in range(m_n):
-            a = S_ACC + (m * k_n + k) * NACC
-            for q in range(NACC):
-                st[a + q] = 0.0
+            merge = math.sqrt(Svar / V) >= merge_r
+            for m in range(m_n if not merge else 1):
+                a = S_ACC + ((m * k_n + k) * 2 + part) * NACC
+                if merge:
+                    v, sx, sy, sxx, syy = V, Sx, Sy, Sxx, Syy
+                else:
+                    v, sx, sy, sxx, syy = st[a], st[a + 1], st[a + 2], st[a + 3], st[a + 4]
+                if v <= 0.0:
+                    continue
+                mx, my = sx / v, sy / v
+                vx = max(sxx / v - mx * mx, 1e-12)
+                vy = max(syy / v - my * my, 1e-12)
+                put = _splat(par, buf, v, mx, my, vx, vy, scratch)
+                st[S_INGRID] += put
+                if drift:
+                    st[S_DRIFT] += v - put
+                else:
+                    st[S_OUTSIDE] += v - put
+            for m in range(m_n):
+                a = S_ACC + ((m * k_n + k) * 2 + part) * NACC
+                for q in range(NACC):
+                    st[a + q] = 0.0
     st[S_PENDING] = 0.0
     st[S_TRAVEL] = 0.0
     st[S_TICKS] = 0.0
@@ -376,18 +547,77 @@ def _flow(par, st, dt: float, speed: float) -> float:
 
 
 @njit(cache=True)
-def _release(par, st, inp, litres: float) -> None:
-    """Landing moments of this tick's litres, accumulated per (nozzle, class)."""
-    m_n, k_n = int(par[P_M]), int(par[P_K])
+def _ig_cdf(t: float, mu: float, lam: float) -> float:
+    """CDF of the inverse Gaussian IG(μ, λ) (first-passage time of a drifting Brownian motion;
+    Chhikara & Folks 1989, eq. 2.3), its second term in log space (no overflow of e^{2λ/μ})."""
+    if t <= 0.0:
+        return 0.0
+    r = math.sqrt(lam / t)
+    c1 = 0.5 * math.erfc(-r * (t / mu - 1.0) / math.sqrt(2.0))
+    x = r * (t / mu + 1.0) / math.sqrt(2.0)
+    if x < 5.0:
+        c2 = math.exp(2.0 * lam / mu) * 0.5 * math.erfc(x)
+    else:  # erfc(x) ~ e^{-x²}/(x√π)(1 − 1/(2x²) + 3/(4x⁴)); exponent combined: −λ(t−μ)²/(2tμ²)
+        e = -lam * (t - mu) ** 2 / (2.0 * t * mu * mu)
+        c2 = 0.5 * math.exp(e) / (x * math.sqrt(math.pi)) * (1.0 - 0.5 / x ** 2 + 0.75 / x ** 4)
+    return min(max(c1 + c2, 0.0), 1.0)
+
+
+@njit(cache=True)
+def _tab_time(par, k: int, h: float) -> float:
+    """Still-air fall time (s) of class ``k`` through ``h`` metres, evaporating (the table of
+    :func:`fall_tables`, linear between its points, the last speed beyond it)."""
+    n, o_t = N_TAB, int(par[P_O_TT])
+    o = int(par[P_O_H]) + k * n
+    if h <= 0.0:
+        return 0.0
+    if h >= par[o + n - 1]:
+        v = (par[o + n - 1] - par[o + n - 2]) / (par[o_t + n - 1] - par[o_t + n - 2])
+        return par[o_t + n - 1] + (h - par[o + n - 1]) / max(v, 1e-12)
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if par[o + mid] <= h:
+            lo = mid
+        else:
+            hi = mid
+    f = (h - par[o + lo]) / max(par[o + hi] - par[o + lo], 1e-300)
+    return par[o_t + lo] + f * (par[o_t + hi] - par[o_t + lo])
+
+
+@njit(cache=True)
+def _tab_left(par, k: int, t: float) -> float:
+    """Share of class ``k``'s volume left after ``t`` s of evaporation (table, linear)."""
+    n, o_t = N_TAB, int(par[P_O_TT])
+    o = int(par[P_O_R]) + k * n
+    if t >= par[o_t + n - 1]:
+        return par[o + n - 1]
+    if t <= 0.0:
+        return 1.0
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) >> 1
+        if par[o_t + mid] <= t:
+            lo = mid
+        else:
+            hi = mid
+    f = (t - par[o_t + lo]) / (par[o_t + hi] - par[o_t + lo])
+    return par[o + lo] + f * (par[o + hi] - par[o + lo])
+
+
+@njit(cache=True)
+def _environment(par, inp):
+    """What every class of one tick shares: nozzle and ground depths below the rotor plane, the
+    wake (speed a, skew, decay depth), the wind and the surface layer. Laws in the module
+    docstring. Returns (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin χ, u*, h_n, f_u,
+    σ_s)."""
+    m_n = int(par[P_M])
     o_noz, o_share = int(par[P_O_NOZ]), int(par[P_O_SHARE])
-    o_vt, o_tp, o_fr = int(par[P_O_VT]), int(par[P_O_TAUP]), int(par[P_O_FRAC])
-    px, py, pz = inp[0], inp[1], inp[2]
-    vx, vy = inp[3], inp[4]
+    pz, vx, vy = inp[2], inp[3], inp[4]
     r = inp[6:15]
     thrust, wx, wy = inp[15], inp[16], inp[17]
     cz = r[8] if r[8] > 0.3 else 0.3                 # cosine of the tilt; wake along -z_body
     tx, ty = -r[2] / cz, -r[5] / cz                  # horizontal wake drift per metre of fall
-    # rotor-plane height and mean nozzle height above the ground (z = 0)
     zr = pz + r[8] * par[P_ROTZ]
     zn = 0.0
     for m in range(m_n):
@@ -395,35 +625,125 @@ def _release(par, st, inp, litres: float) -> None:
         zn += par[o_share + m] * (pz + r[6] * par[b] + r[7] * par[b + 1] + r[8] * par[b + 2])
     zn = max(zn, 0.0)
     s_n, s_g = max(zr - zn, 0.0), max(zr, 0.0)
-    # momentum theory (Glauert in forward flight)
+    # momentum theory (Glauert in forward flight) and the wake skew tan χ = V_a / v_i
     vh2 = max(thrust, 0.0) / (2.0 * par[P_RHOA] * par[P_AREA])
     va2 = (vx - wx) ** 2 + (vy - wy) ** 2
     vi = math.sqrt(0.5 * (-va2 + math.sqrt(va2 * va2 + 4.0 * vh2 * vh2)))
+    hyp = math.sqrt(va2 + vi * vi)
+    cos_chi = vi / hyp if hyp > 0.0 else 1.0
+    sin_chi = math.sqrt(va2) / hyp if hyp > 0.0 else 0.0
     a = 2.0 * vi * cz
-    s0 = par[P_S0]
-    u_g = a if s_g < s0 else a * s0 / max(s_g, 1e-9)
-    sig0, iw, delta, siga = par[P_SIG0], par[P_IW], par[P_DELTA], par[P_SIGA]
+    z0w = par[P_S0] * cos_chi                        # the jet's core ends s₀ along the skewed axis
+    u_g = a if s_g < z0w else a * z0w / max(s_g, 1e-9)
+    # log-law surface layer: u* from the wind at the vehicle's height
+    z0 = par[P_Z0]
+    w = math.sqrt(wx * wx + wy * wy)
+    ust, fu = 0.0, 0.0
+    if pz > 1.01 * z0:
+        lnv = math.log(pz / z0)
+        ust = KAPPA * w / lnv
+        if zn > z0:                                  # mean of u(z) over the layer below the nozzle
+            fu = (zn * math.log(zn / z0) - zn + z0) / ((zn - z0) * lnv)
+    return (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, zn, fu,
+            par[P_IW] * 2.0 * vi)
+
+
+@njit(cache=True)
+def _class_footprint(par, k: int, env):
+    """Class ``k``'s landing law at one tick (offsets from the nozzle; laws in the module
+    docstring): the wake part (share, mean, variance, volume left on landing) and the escaped
+    part (share, mean, axis variances, fall-time law IG(μ_T, λ_T), airborne share, volume left
+    on landing and when counted airborne, mean wind). Slots F_*."""
+    (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, h_n, fu, sig_s) = env
+    vt, tp = par[int(par[P_O_VT]) + k], par[int(par[P_O_TAUP]) + k]
+    sig0 = par[P_SIG0]
+    # wake: carried down the decaying skewed jet
+    tf = _fall_time(vt, a, z0w, s_n, s_g) if s_g > s_n else 0.0
+    dw = max((s_g - s_n) - vt * tf, 0.0)
+    relax = tp * (1.0 - math.exp(-tf / tp))
+    wxo = wx * tf + tx * dw + (vx - wx) * relax
+    wyo = wy * tf + ty * dw + (vy - wy) * relax
+    wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + (par[P_DELTA] * u_g / vt) ** 2
+            + (par[P_SIGA] * tf) ** 2)
+    wland = _tab_left(par, k, tf)
+    # escape at the wake's edge: ε₀ sin χ, damped by the droplet's response 1/(1 + St)
+    st_k = tp * sig_s / par[P_ELL]
+    esc = par[P_ESC] * sin_chi / (1.0 + st_k)
+    # escaped: settles from the nozzle height through the surface layer (first passage)
+    mu_t = _tab_time(par, k, h_n)
+    kz = KAPPA * ust * 0.5 * h_n
+    lam_t = h_n * h_n / (2.0 * kz) if kz > 1e-12 else 1e30
+    tmax = par[P_TMAX]
+    pair = 1.0 - _ig_cdf(tmax, mu_t, lam_t) if mu_t > 0.0 else 0.0
+    ux, uy = fu * wx, fu * wy
+    erel = tp * (1.0 - math.exp(-mu_t / tp)) if mu_t > 0.0 else 0.0
+    exo = (vx - wx) * erel + ux * mu_t
+    eyo = (vy - wy) * erel + uy * mu_t
+    u2 = ux * ux + uy * uy
+    val = u2 * mu_t ** 3 / lam_t                     # along the wind: X = ū·T, T ~ IG
+    vlat = (SIGV_USTAR * ust * mu_t) ** 2            # across it: σ_v·t (Taylor, short times)
+    s0e = sig0 * sig0 + 0.5 * par[P_EDGE] ** 2        # leaves from the wake's edge (a ring)
+    if u2 > 0.0:
+        ex2 = ux * ux / u2
+        evx = s0e + val * ex2 + vlat * (1.0 - ex2)
+        evy = s0e + val * (1.0 - ex2) + vlat * ex2
+    else:
+        evx = evy = s0e + vlat
+    rland = _tab_left(par, k, mu_t)
+    rair = _tab_left(par, k, tmax)
+    return (1.0 - esc, wxo, wyo, wvar, wland, esc, exo, eyo, evx, evy, mu_t, lam_t, pair,
+            rland, rair, ux, uy)
+
+
+@njit(cache=True)
+def _footprints(par, inp, out) -> None:
+    """Every class's :func:`_class_footprint` at the tick ``inp`` into ``out`` (K, NFOOT): what
+    the drift trial evaluates analytically."""
+    env = _environment(par, inp)
+    for k in range(int(par[P_K])):
+        f = _class_footprint(par, k, env)
+        for j in range(NFOOT):
+            out[k, j] = f[j]
+
+
+@njit(cache=True)
+def _accumulate(st, q, v, x, y, vx, vy) -> None:
+    st[q] += v
+    st[q + 1] += v * x
+    st[q + 2] += v * y
+    st[q + 3] += v * (x * x + vx)
+    st[q + 4] += v * (y * y + vy)
+    st[q + 5] += v * 0.5 * (vx + vy)
+
+
+@njit(cache=True)
+def _release(par, st, inp, litres: float) -> None:
+    """Landing moments of this tick's litres per (nozzle, class, wake/escaped); the volume
+    airborne and evaporated booked at once (so sprayed = landed + airborne + evaporated)."""
+    m_n, k_n = int(par[P_M]), int(par[P_K])
+    o_noz, o_share, o_fr = int(par[P_O_NOZ]), int(par[P_O_SHARE]), int(par[P_O_FRAC])
+    px, py = inp[0], inp[1]
+    r = inp[6:15]
+    env = _environment(par, inp)
     for k in range(k_n):
-        vt, tp = par[o_vt + k], par[o_tp + k]
-        tf = _fall_time(vt, a, s0, s_n, s_g) if s_g > s_n else 0.0
-        dw = max((s_g - s_n) - vt * tf, 0.0)
-        relax = tp * (1.0 - math.exp(-tf / tp))
-        ox = wx * tf + tx * dw + (vx - wx) * relax
-        oy = wy * tf + ty * dw + (vy - wy) * relax
-        var = sig0 * sig0 + (iw * dw) ** 2 + (delta * u_g / vt) ** 2 + (siga * tf) ** 2
+        f = _class_footprint(par, k, env)
         vk = litres * par[o_fr + k]
+        vw, ve = vk * f[F_WAKE], vk * f[F_ESC]
+        land_e = ve * (1.0 - f[F_PAIR]) * f[F_RLAND]
+        air = ve * f[F_PAIR] * f[F_RAIR]
+        st[S_AIR] += air
+        st[S_EVAP] += vw * (1.0 - f[F_WLAND]) + (ve - land_e - air)
         for m in range(m_n):
             b = o_noz + 3 * m
-            x = px + r[0] * par[b] + r[1] * par[b + 1] + r[2] * par[b + 2] + ox
-            y = py + r[3] * par[b] + r[4] * par[b + 1] + r[5] * par[b + 2] + oy
-            v = vk * par[o_share + m]
-            q = S_ACC + (m * k_n + k) * NACC
-            st[q] += v
-            st[q + 1] += v * x
-            st[q + 2] += v * y
-            st[q + 3] += v * (x * x + var)
-            st[q + 4] += v * (y * y + var)
-            st[q + 5] += v * var
+            x = px + r[0] * par[b] + r[1] * par[b + 1] + r[2] * par[b + 2]
+            y = py + r[3] * par[b] + r[4] * par[b + 1] + r[5] * par[b + 2]
+            sh = par[o_share + m]
+            q = S_ACC + (m * k_n + k) * 2 * NACC
+            _accumulate(st, q, vw * f[F_WLAND] * sh, x + f[F_WX], y + f[F_WY], f[F_WVAR],
+                        f[F_WVAR])
+            if land_e > 0.0:
+                _accumulate(st, q + NACC, land_e * sh, x + f[F_EX], y + f[F_EY], f[F_EVX],
+                            f[F_EVY])
 
 
 @njit(cache=True)
@@ -572,7 +892,9 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
     d, frac = droplet_classes(c.dv10_um, c.dv50_um, c.dv90_um, c.n_classes)
     vt = np.array([terminal_velocity(x, c.liquid_density, c.air_density, c.air_viscosity)
                    for x in d])
-    arrays = [noz.ravel(), share, vt, vt / G, frac, np.asarray(g.offsets[:-1], float)]
+    tt, hh, rr = fall_tables(c, d)
+    arrays = [noz.ravel(), share, vt, vt / G, frac, np.asarray(g.offsets[:-1], float), tt,
+              hh.ravel(), rr.ravel()]
     par = np.zeros(P_HEADER + sum(len(a) for a in arrays))
     head = {P_RATE: c.rate_l_per_ha, P_SWATH: c.swath_m, P_VMIN: c.speed_min_mps,
             P_DON: c.nozzle_on_delay_s, P_DOFF: c.nozzle_off_delay_s,
@@ -583,16 +905,38 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
             P_SIG0: c.release_sigma_m, P_X0: g.x0, P_Y0: g.y0, P_CELL: g.cell, P_NX: g.nx,
             P_NY: g.ny, P_NLEV: g.levels, P_FLUSHD: c.flush_cells * g.cell,
             P_FLUSHT: c.flush_ticks, P_M: len(noz), P_K: len(d), P_MERGE: c.merge_ratio,
-            P_NOZC: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))), P_QMIN: c.flow_min_l_per_s}
+            P_NOZC: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))), P_QMIN: c.flow_min_l_per_s,
+            P_ESC: c.wake_escape, P_ELL: c.shear_eddy_m, P_Z0: c.roughness_m,
+            P_TMAX: c.airborne_after_s,
+            P_EDGE: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))) + 0.5 * c.rotor_diameter_m}
     for k, v in head.items():
         par[k] = v
     o = P_HEADER
-    for slot, arr in zip((P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV), arrays,
-                         strict=True):
+    for slot, arr in zip((P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_O_TT,
+                          P_O_H, P_O_R), arrays, strict=True):
         par[slot] = o
         par[o:o + len(arr)] = arr
         o += len(arr)
     return par
+
+
+def footprints(cfg: DepositionConfig, inp: np.ndarray, par: np.ndarray | None = None
+               ) -> dict[str, np.ndarray]:
+    """Every droplet class's landing law for one input row (:func:`pack_input` layout), as the
+    loop computes it (the same compiled :func:`_class_footprint`): a dict of arrays over the
+    classes, keys ``d_m``, ``frac`` and the F_* names in lower case (``wake``, ``wx``, ``wy``,
+    ``wvar``, ``wland``, ``esc``, ``ex``, ``ey``, ``evx``, ``evy``, ``mut``, ``lamt``,
+    ``pair``, ``rland``, ``rair``, ``ux``, ``uy``); offsets are from the nozzle centroid."""
+    if par is None:
+        par = pack_params(cfg, GridSpec(0.0, 0.0, 1.0, 1, 1, 1, (0, 1)))
+    out = np.zeros((int(par[P_K]), NFOOT))
+    _footprints(par, np.asarray(inp, float).reshape(-1)[:INPUT_WIDTH], out)
+    d, frac = droplet_classes(cfg.dv10_um, cfg.dv50_um, cfg.dv90_um, cfg.n_classes)
+    names = ("wake", "wx", "wy", "wvar", "wland", "esc", "ex", "ey", "evx", "evy", "mut",
+             "lamt", "pair", "rland", "rair", "ux", "uy")
+    res = {n: out[:, i].copy() for i, n in enumerate(names)}
+    res.update(d_m=d, frac=frac)
+    return res
 
 
 def pack_input(pos, vel, R, thrust, wind, cmd, out: np.ndarray | None = None) -> np.ndarray:
@@ -620,6 +964,8 @@ class DoseMap:
     sprayed_l: float
     outside_grid_l: float
     drift_l: float
+    airborne_l: float = 0.0       # still aloft after ``airborne_after_s``
+    evaporated_l: float = 0.0     # water evaporated on the way down
 
     @classmethod
     def from_buffer(cls, g: GridSpec, buf: np.ndarray, st: np.ndarray) -> DoseMap:
@@ -633,7 +979,8 @@ class DoseMap:
             elif a.any():
                 f = 1 << lev
                 out += np.repeat(np.repeat(a, f, axis=0), f, axis=1) / (f * f)
-        return cls(g, out, float(st[S_SPRAYED]), float(st[S_OUTSIDE]), float(st[S_DRIFT]))
+        return cls(g, out, float(st[S_SPRAYED]), float(st[S_OUTSIDE]), float(st[S_DRIFT]),
+                   float(st[S_AIR]), float(st[S_EVAP]))
 
     @property
     def l_per_ha(self) -> np.ndarray:
@@ -665,7 +1012,8 @@ class DoseMap:
         g = self.grid
         return {"litres": self.litres, "l_per_ha": self.l_per_ha, "x0": g.x0, "y0": g.y0,
                 "cell": g.cell, "sprayed_l": self.sprayed_l,
-                "outside_grid_l": self.outside_grid_l, "drift_l": self.drift_l}
+                "outside_grid_l": self.outside_grid_l, "drift_l": self.drift_l,
+                "airborne_l": self.airborne_l, "evaporated_l": self.evaporated_l}
 
     @classmethod
     def load(cls, path: Any) -> DoseMap:
@@ -675,8 +1023,10 @@ class DoseMap:
             ny, nx = lit.shape
             g = GridSpec(float(z["x0"]), float(z["y0"]), float(z["cell"]), nx, ny, 1,
                          (0, nx * ny))
+            extra = [float(z[k]) if k in z.files else 0.0
+                     for k in ("airborne_l", "evaporated_l")]
             return cls(g, lit, float(z["sprayed_l"]), float(z["outside_grid_l"]),
-                       float(z["drift_l"]))
+                       float(z["drift_l"]), *extra)
 
 
 def dose_metrics(dm: DoseMap, fld: Any, target: float, margin_m: float = 0.0) -> dict:
@@ -685,22 +1035,26 @@ def dose_metrics(dm: DoseMap, fld: Any, target: float, margin_m: float = 0.0) ->
     share of those cells below 80 % / above 120 % of ``target``;
     ``offtarget_deposit_fraction``: litres on grid cells outside the field or over holes plus
     litres deposited outside the grid, over the sprayed litres; ``drift_fraction``: litres carried
-    airborne past the buffer over the sprayed litres; ``mass_balance_error``: sprayed − all
-    destinations, over sprayed."""
+    airborne past the buffer (landing beyond it, or still aloft after ``airborne_after_s``) over
+    the sprayed litres; ``evaporated_fraction``: water evaporated on the way down over sprayed;
+    ``mass_balance_error``: sprayed − all destinations, over sprayed."""
     inside = dm.field_mask(fld, 0.0)
     interior = inside if margin_m <= 0 else dm.field_mask(fld, margin_m)
     rate = dm.l_per_ha[interior]
     mean = float(rate.mean()) if rate.size else 0.0
     sprayed = max(dm.sprayed_l, 1e-300)
     off = float(dm.litres[~inside].sum()) + dm.outside_grid_l
-    total = float(dm.litres.sum()) + dm.outside_grid_l + dm.drift_l
+    total = (float(dm.litres.sum()) + dm.outside_grid_l + dm.drift_l + dm.airborne_l
+             + dm.evaporated_l)
     return {
         "dose_mean_l_per_ha": mean,
         "dose_cv": float(rate.std() / mean) if mean > 0 else math.nan,
         "underdosed_fraction": float(np.mean(rate < 0.8 * target)) if rate.size else math.nan,
         "overdosed_fraction": float(np.mean(rate > 1.2 * target)) if rate.size else math.nan,
         "offtarget_deposit_fraction": off / sprayed if dm.sprayed_l > 0 else 0.0,
-        "drift_fraction": dm.drift_l / sprayed if dm.sprayed_l > 0 else 0.0,
+        "drift_fraction": ((dm.drift_l + dm.airborne_l) / sprayed if dm.sprayed_l > 0
+                           else 0.0),
+        "evaporated_fraction": dm.evaporated_l / sprayed if dm.sprayed_l > 0 else 0.0,
         "sprayed_l": dm.sprayed_l,
         "mass_balance_error": (dm.sprayed_l - total) / sprayed if dm.sprayed_l > 0 else 0.0,
     }
@@ -720,7 +1074,7 @@ class DepositionBatch:
         self.grid = GridSpec.around(fld.bounds if fld is not None else bounds, cfg.buffer_m,
                                     cfg.cell_m, cfg.levels, cfg.max_cells)
         self.par = pack_params(cfg, self.grid)
-        nst = S_ACC + int(self.par[P_M]) * int(self.par[P_K]) * NACC
+        nst = S_ACC + int(self.par[P_M]) * int(self.par[P_K]) * 2 * NACC
         self.st = np.zeros((n, nst))
         self.st[:, S_INC] = -1.0
         self.st[:, S_INSIDE] = -1.0

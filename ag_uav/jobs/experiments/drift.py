@@ -1,0 +1,288 @@
+"""``ag-uav experiment drift``: a simulated field drift trial in the manner of ISO 22866.
+
+A treated strip (``--passes`` back-and-forth passes at the lane spacing ``swath_m``, the outer
+pass half a lane inside the strip's downwind edge) is sprayed upwind of collector lines at 1,
+2, 3, 5, 10, 15, 20, 30 and 50 m from the edge; the wind blows across the passes, towards the
+collectors. The vehicle is kinematic (:func:`ag_uav.jobs.experiments.swath.pass_states`: the
+tilt and thrust of a steady level pass), and every droplet class's landing law is the one the
+loop uses (:func:`ag_uav.world.deposition.footprints`, the same compiled function). The deposit
+is evaluated analytically, not on a bounded grid: per class, the part the wake carries down
+lands as a Gaussian, the part that escapes at the wake's edge as the inverse-Gaussian first
+passage of a settling droplet through the turbulent surface layer (``scipy.stats.invgauss``)
+blurred by the edge ring, so the tail runs on to any distance. Deposits are of the tracer (what
+a trial's collectors measure): evaporation shrinks the droplets but keeps their tracer; what is
+still aloft after ``airborne_after_s`` is not deposited.
+
+Writes into ``--out`` (``runs/experiment-drift``): ``drift.csv`` (one row per case and
+distance: crosswind, release height, speed, spectrum, temperature, RH, distance, deposit in %
+of the applied rate), ``cases.csv`` (per case: buffers for < 1 % and < 0.1 %, evaporated and
+airborne shares of the sprayed volume), ``drift.png`` (deposit against distance, log scale, with
+the published curves) and ``drift.md`` (the buffer table and the comparison with the published
+field measurements, with the ratio at each distance).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import itertools
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ...world.deposition import DepositionConfig, footprints, pack_input
+from .swath import _floats, _overrides, pass_states
+
+NAME = "drift"
+HELP = ("simulated drift trial (ISO 22866 style): a treated strip upwind of collector lines at "
+        "1-50 m; deposit in %% of the applied rate against crosswind, release height, speed, "
+        "droplet spectrum, temperature and humidity, with buffers and published curves")
+
+DISTANCES = (1.0, 2.0, 3.0, 5.0, 10.0, 15.0, 20.0, 30.0, 50.0)
+#: illustrative spectra (Dv10, Dv50, Dv90 in µm); "medium" is the product default
+SPECTRA = {"fine": (80.0, 160.0, 290.0), "medium": (120.0, 250.0, 420.0),
+           "coarse": (180.0, 360.0, 600.0)}
+DY = 0.02              # m, the grid the single-pass profile is evaluated on
+FAR = 400.0            # m, the furthest distance the profile (and the buffers) are evaluated to
+
+#: JKI basic drift values, % of the applied rate, 90th percentile, one application (JKI 2010
+#: "Tabelle der Abdrifteckwerte", Rautmann, Streloke & Winkler 2001, Mitt. Biol. Bundesanst.
+#: Land- Forstwirtsch. 383:133-141; as tabulated in the R package pfm, ``drift_data_JKI``)
+JKI = {
+    "JKI field crops (ground boom)": {1: 2.77, 3: 0.95, 5: 0.57, 10: 0.29, 15: 0.20, 20: 0.15,
+                                      30: 0.10, 50: 0.06},
+    "JKI fruit, late (orchard airblast)": {3: 15.73, 5: 8.41, 10: 3.60, 15: 1.81, 20: 1.09,
+                                           30: 0.54, 50: 0.22},
+    "JKI fruit, early (orchard airblast)": {3: 29.20, 5: 19.89, 10: 11.81, 15: 5.55,
+                                            20: 2.77, 30: 1.04, 50: 0.30},
+}
+#: Bonds et al. 2024 (J. ASABE 67(1):27-41, review of published UASS trials): UASS drift is
+#: "lower than aerial, higher than ground boom, and similar to orchard airblast"; so the band
+#: from the field-crop curve to the early-fruit curve is where a drone's deposit is expected.
+BAND = ("JKI field crops (ground boom)", "JKI fruit, early (orchard airblast)")
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    wind: float
+    height: float
+    speed: float
+    spectrum: str
+    temp_c: float
+    rh: float
+
+
+def _ig_pdf(t: np.ndarray, mu: float, lam: float) -> np.ndarray:
+    from scipy.stats import invgauss
+
+    out = np.zeros_like(t)
+    pos = t > 0
+    out[pos] = invgauss.pdf(t[pos], mu / lam, scale=lam)
+    return out
+
+
+def single_pass_profile(cfg: DepositionConfig, case: Case, mass_kg: float = 6.47,
+                        drag_lin: float = 0.25, drag_quad: float = 0.18
+                        ) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Tracer deposit density across one pass (1/m; integrates to the landed share): y grid,
+    density, and the volume book of the pass (shares of the sprayed volume)."""
+    R, thrust = pass_states(case.speed, case.height, case.wind, mass_kg, drag_lin, drag_quad)
+    inp = pack_input([0.0, 0.0, case.height], [case.speed, 0.0, 0.0], R, thrust,
+                     [0.0, case.wind, 0.0], 1)
+    fp = footprints(cfg, inp)
+    noz = np.asarray(cfg.nozzle_xyz_m, float).reshape(-1, 3)
+    ym = noz @ R.reshape(3, 3)[1]                    # nozzle y in the world frame
+    share = np.asarray(cfg.nozzle_share, float)
+    y = np.arange(-30.0, FAR + 30.0, DY)
+    dens = np.zeros_like(y)
+    edge2 = np.max(np.hypot(noz[:, 0], noz[:, 1])) + 0.5 * cfg.rotor_diameter_m
+    s_e = math.sqrt(cfg.release_sigma_m ** 2 + 0.5 * edge2 ** 2)
+    kern_y = np.arange(-5 * s_e, 5 * s_e + DY, DY)
+    kern = np.exp(-0.5 * (kern_y / s_e) ** 2)
+    kern /= kern.sum()
+    for k in range(len(fp["frac"])):
+        f = fp["frac"][k]
+        sw = math.sqrt(fp["wvar"][k])
+        esc = np.zeros_like(y)
+        uy = fp["uy"][k]
+        if fp["esc"][k] > 0 and uy > 1e-9:
+            y0 = fp["ey"][k] - uy * fp["mut"][k]     # where the escaped part starts to settle
+            esc = _ig_pdf((y - y0) / uy, fp["mut"][k], fp["lamt"][k]) / uy
+            esc = np.convolve(esc, kern, mode="same")
+        elif fp["esc"][k] > 0:
+            esc = np.exp(-0.5 * ((y - fp["ey"][k]) / s_e) ** 2) / (s_e * math.sqrt(2 * math.pi))
+        for m in range(len(ym)):
+            g = np.exp(-0.5 * ((y - ym[m] - fp["wy"][k]) / sw) ** 2) / (sw * math.sqrt(2 * math.pi))
+            e = np.interp(y - ym[m], y, esc, left=0.0, right=0.0)
+            dens += share[m] * f * (fp["wake"][k] * g + fp["esc"][k] * e)
+    book = {"evaporated": float(np.sum(fp["frac"] * (
+        fp["wake"] * (1 - fp["wland"]) + fp["esc"] * ((1 - fp["pair"]) * (1 - fp["rland"])
+                                                      + fp["pair"] * (1 - fp["rair"]))))),
+            "airborne": float(np.sum(fp["frac"] * fp["esc"] * fp["pair"] * fp["rair"])),
+            "escaped": float(np.sum(fp["frac"] * fp["esc"]))}
+    return y, dens, book
+
+
+def strip_deposit(y: np.ndarray, dens: np.ndarray, lane: float, passes: int,
+                  dist: np.ndarray) -> np.ndarray:
+    """Deposit (% of the applied rate) at ``dist`` past the strip's downwind edge: passes at
+    −(j + ½)·lane, each laying ``lane`` × density (the applied rate per pass and metre)."""
+    out = np.zeros(len(dist))
+    for j in range(passes):
+        out += np.interp(dist + (j + 0.5) * lane, y, dens, left=0.0, right=0.0)
+    return 100.0 * lane * out
+
+
+def buffer_m(dist: np.ndarray, dep: np.ndarray, thr: float) -> float:
+    """The distance beyond which the deposit stays below ``thr`` % (nan: not within FAR)."""
+    above = np.nonzero(dep >= thr)[0]
+    if not len(above):
+        return float(dist[0])
+    i = above[-1]
+    return float(dist[i + 1]) if i + 1 < len(dist) else math.nan
+
+
+def run_cases(base: DepositionConfig, cases: list[Case], passes: int, mass_kg: float
+              ) -> tuple[list[dict], list[dict], dict]:
+    """Every case: rows per distance, one summary row per case, and the fine curves."""
+    from ..._progress import progress_bar
+
+    rows, summ, curves = [], [], {}
+    fine = np.arange(0.5, FAR + 1e-9, 0.5)
+    bar = progress_bar(total=len(cases), desc="drift", unit="case")
+    for c in cases:
+        bar.update(1)
+        dv = SPECTRA[c.spectrum]
+        cfg = dataclasses.replace(base, dv10_um=dv[0], dv50_um=dv[1], dv90_um=dv[2],
+                                  temperature_c=c.temp_c, rh_percent=c.rh)
+        y, dens, book = single_pass_profile(cfg, c, mass_kg)
+        dep = strip_deposit(y, dens, cfg.swath_m, passes, np.asarray(DISTANCES))
+        depf = strip_deposit(y, dens, cfg.swath_m, passes, fine)
+        curves[c] = (fine, depf)
+        for d, v in zip(DISTANCES, dep, strict=True):
+            rows.append({"crosswind_mps": c.wind, "release_height_m": c.height,
+                         "speed_mps": c.speed, "spectrum": c.spectrum, "temperature_c": c.temp_c,
+                         "rh_percent": c.rh, "distance_m": d, "deposit_percent": float(v)})
+        summ.append({"crosswind_mps": c.wind, "release_height_m": c.height,
+                     "speed_mps": c.speed, "spectrum": c.spectrum, "temperature_c": c.temp_c,
+                     "rh_percent": c.rh, "buffer_1pct_m": buffer_m(fine, depf, 1.0),
+                     "buffer_0p1pct_m": buffer_m(fine, depf, 0.1),
+                     "escaped_fraction": book["escaped"],
+                     "evaporated_fraction": book["evaporated"],
+                     "airborne_fraction": book["airborne"]})
+    bar.close()
+    return rows, summ, curves
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--winds", default="1,3,5", help="crosswinds at the release height (m/s)")
+    p.add_argument("--heights", default="2,3", help="release heights (m)")
+    p.add_argument("--speeds", default="5", help="ground speeds (m/s)")
+    names = ", ".join(f"{k} {v[0]:g}/{v[1]:g}/{v[2]:g}" for k, v in SPECTRA.items())
+    p.add_argument("--spectra", default="fine,medium,coarse",
+                   help=f"droplet spectra (Dv10/Dv50/Dv90: {names} µm)")
+    p.add_argument("--temps", default="20", help="air temperatures (°C)")
+    p.add_argument("--rhs", default="40,60,80", help="relative humidities (%%)")
+    p.add_argument("--passes", type=int, default=10, help="passes of the treated strip")
+    p.add_argument("--mass", type=float, default=6.47, help="vehicle mass (kg)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a DepositionConfig field (e.g. wake_escape=0.2)")
+    p.add_argument("--out", default="runs/experiment-drift", metavar="DIR", help="output folder")
+
+
+def _plot(path: Path, curves: dict, base_cases: list[Case]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    for c in base_cases:
+        if c in curves:
+            x, d = curves[c]
+            keep = x <= 60
+            ax.plot(x[keep], np.maximum(d[keep], 1e-6),
+                    label=f"model {c.height:g} m, {c.wind:g} m/s, {c.spectrum}")
+    for name, vals in JKI.items():
+        ax.plot(list(vals), list(vals.values()), "o--", ms=4, label=name)
+    ax.set_yscale("log")
+    ax.set_xlabel("distance from the treated strip's edge (m)")
+    ax.set_ylabel("deposit (% of the applied rate)")
+    ax.set_ylim(1e-3, 100)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    ax.set_title("Drift trial (ISO 22866 style): model against JKI basic drift values")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _comparison(rows: list[dict], base_cases: list[Case]) -> tuple[list[str], list[list[str]]]:
+    header = ["case", "curve"] + [f"{d:g} m" for d in DISTANCES]
+    table = []
+    for c in base_cases:
+        dep = {r["distance_m"]: r["deposit_percent"] for r in rows
+               if (r["crosswind_mps"], r["release_height_m"], r["speed_mps"], r["spectrum"],
+                   r["temperature_c"], r["rh_percent"]) == dataclasses.astuple(c)}
+        if not dep:
+            continue
+        label = f"{c.height:g} m, {c.wind:g} m/s"
+        table.append([label, "model (%)"] + [f"{dep[d]:.3g}" for d in DISTANCES])
+        for name, vals in JKI.items():
+            table.append([label, f"model / {name}"]
+                         + [f"{dep[d] / vals[d]:.2g}" if d in vals else "—" for d in DISTANCES])
+    for name, vals in JKI.items():
+        table.append(["published", f"{name} (%)"]
+                     + [f"{vals[d]:g}" if d in vals else "—" for d in DISTANCES])
+    return header, table
+
+
+def main(args: argparse.Namespace) -> int:
+    from ..batch import markdown_table, print_table
+    from . import write_csv
+
+    try:
+        base = DepositionConfig(**_overrides(args.set))
+        spectra = [s.strip() for s in args.spectra.split(",") if s.strip()]
+        bad = [s for s in spectra if s not in SPECTRA]
+        if bad:
+            raise ValueError(f"--spectra {bad[0]}: expected one of {', '.join(SPECTRA)}")
+        cases = [Case(*v) for v in itertools.product(
+            _floats(args.winds), _floats(args.heights), _floats(args.speeds), spectra,
+            _floats(args.temps), _floats(args.rhs))]
+        for c in cases:
+            DepositionConfig(temperature_c=c.temp_c, rh_percent=c.rh)   # validates
+    except (ValueError, TypeError) as e:
+        print(f"error: {e}")
+        return 2
+    t0 = time.perf_counter()
+    rows, summ, curves = run_cases(base, cases, args.passes, args.mass)
+    wall = time.perf_counter() - t0
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "drift.csv", rows)
+    write_csv(out / "cases.csv", summ)
+    mid_t = _floats(args.temps)[0]
+    rh_mid = sorted(_floats(args.rhs))[len(_floats(args.rhs)) // 2]
+    spec = "medium" if "medium" in spectra else spectra[0]
+    base_cases = [Case(w, h, _floats(args.speeds)[0], spec, mid_t, rh_mid)
+                  for h in _floats(args.heights) for w in _floats(args.winds)]
+    _plot(out / "drift.png", curves, base_cases)
+    bh = ["wind (m/s)", "h (m)", "v (m/s)", "spectrum", "T (°C)", "RH (%)", "< 1 % beyond (m)",
+          "< 0.1 % beyond (m)", "escaped", "evaporated", "airborne"]
+    bt = [[f"{s['crosswind_mps']:g}", f"{s['release_height_m']:g}", f"{s['speed_mps']:g}",
+           s["spectrum"], f"{s['temperature_c']:g}", f"{s['rh_percent']:g}",
+           f"{s['buffer_1pct_m']:g}", f"{s['buffer_0p1pct_m']:g}",
+           f"{100 * s['escaped_fraction']:.1f} %", f"{100 * s['evaporated_fraction']:.2f} %",
+           f"{100 * s['airborne_fraction']:.3f} %"] for s in summ]
+    print_table(bh, bt, f"Drift trial: buffers ({len(cases)} cases, {wall:.1f} s)")
+    ch, ct = _comparison(rows, base_cases)
+    print_table(ch, ct, "Deposit (% of the applied rate) beside the JKI basic drift values")
+    (out / "drift.md").write_text(
+        "## Buffers\n\n" + markdown_table(bh, bt) + "\n## Against published measurements\n\n"
+        + markdown_table(ch, ct))
+    print(f"wrote {out / 'drift.csv'}, {out / 'cases.csv'}, {out / 'drift.png'}, "
+          f"{out / 'drift.md'}")
+    return 0
