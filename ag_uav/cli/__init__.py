@@ -69,7 +69,8 @@ def cmd_fly(args: argparse.Namespace) -> int:
     from ..jobs.run import RunOutputError
 
     try:
-        res, run_dir = fly(cfg, out_root=args.out, run_id=args.run_id, progress=not args.quiet)
+        res, run_dir = fly(cfg, out_root=args.out, run_id=args.run_id, progress=not args.quiet,
+                           overwrite=args.overwrite)
     except RunOutputError as e:  # flown, but an output failed: the summary goes to the terminal
         print_summary(e.result.summary, e.run_dir)
         if not e.summary_written:
@@ -149,7 +150,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_config_args(f)
     f.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run "
                    "folder (default: runs)")
-    f.add_argument("--run-id", help="run folder name (default: time-field-seed)")
+    f.add_argument("--run-id", help="run folder name (default: time-field-seed, with a -2, -3, "
+                   "... suffix where that folder exists)")
+    f.add_argument("--overwrite", action="store_true", help="replace the outputs of a previous "
+                   "run in the --run-id folder (removed first; without it such a folder is "
+                   "refused)")
     f.add_argument("--no-render", action="store_true", help="no camera frames in the log")
     f.add_argument("--no-log", action="store_true", help="no MCAP log (summary.json only)")
     f.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
@@ -208,21 +213,67 @@ def _register_optional(sub) -> None:
         m.register(sub)
 
 
+def _sigterm_handler(signum: int, frame: object) -> None:
+    from .batch import Terminated
+
+    raise Terminated()
+
+
+def _install_sigterm() -> object:
+    """SIGTERM raises :class:`~ag_uav.cli.batch.Terminated` in the main thread (so ``finally``
+    blocks close the log and the line below is printed); returns the previous handler."""
+    import signal
+
+    try:
+        return signal.signal(signal.SIGTERM, _sigterm_handler)
+    except ValueError:  # not the main thread
+        return None
+
+
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")
     parser = build_parser()
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
+    prev = _install_sigterm()
+    try:
+        return _dispatch(args, t0)
+    finally:
+        if prev is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, prev)
+
+
+def _dispatch(args: argparse.Namespace, t0: float) -> int:
+    from ..jobs.outdir import FolderInUse, RunFolderExists
+    from .batch import Terminated
+
     try:
         return int(args.func(args) or 0)
     except ConfigError as e:
         print(f"ag-uav: config error: {e}", file=sys.stderr)
         return 2
+    except RunFolderExists as e:
+        print(f"ag-uav: {e}", file=sys.stderr)
+        return 2
+    except FolderInUse as e:
+        print(f"ag-uav: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"ag-uav: interrupted after {time.perf_counter() - t0:.1f} s", file=sys.stderr)
         return 130
-    except BrokenPipeError:
-        return 0
+    except Terminated:
+        print(f"ag-uav: terminated (SIGTERM) after {time.perf_counter() - t0:.1f} s",
+              file=sys.stderr)
+        return 143
+    except BrokenPipeError as e:
+        if e.filename is None:  # standard output closed early (`ag-uav show | head`): done
+            return 0
+        from ..record.atomic import disk_error_line
+
+        print(f"ag-uav: {disk_error_line(e)}", file=sys.stderr)
+        return 1
     except FileNotFoundError as e:
         print(f"ag-uav: {e}", file=sys.stderr)
         return 2

@@ -503,7 +503,8 @@ def run_task(task: RunTask) -> dict[str, Any]:
             cfg.log.render = False
             # inline: a batch keeps every core busy already (and a Dask worker's threads
             # make a fork unsafe)
-            res, _ = fly(cfg, out_root=task.logs_dir, run_id=task.run_id, log_writer="inline")
+            res, _ = fly(cfg, out_root=task.logs_dir, run_id=task.run_id, log_writer="inline",
+                         overwrite=True)  # a re-run (--resume) replaces what it left
         else:
             from ..engine.missions import simulate
 
@@ -1023,12 +1024,25 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
 
     ``resume``: skip runs already in ``out_dir/journal.jsonl``; ``fresh``: discard an existing
     journal. With neither, an existing journal is an error (nothing is overwritten silently).
+    ``out_dir`` belongs to this batch while it runs (:func:`ag_uav.jobs.outdir.hold`: a second
+    batch on it raises :class:`~ag_uav.jobs.outdir.FolderInUse`).
     ``results.csv`` is written however the call ends (an interrupt or SIGTERM included). When
     the executor is lost (:class:`~ag_uav.jobs.executor.ExecutorLost`), raises
     :class:`BatchStopped` after writing it. Warnings (unreadable journal lines, engine batches
     that fell back to one run at a time) go to ``warn`` (default: one line on stderr).
     """
-    out = Path(out_dir)
+    from .outdir import hold
+
+    with hold(out_dir, "batch", "wait for it to finish, or choose another --out"):
+        return _run_batch(spec, Path(out_dir), executor, resume=resume, fresh=fresh, logs=logs,
+                          progress=progress, report=report, tasks=tasks, on_row=on_row,
+                          warn=warn)
+
+
+def _run_batch(spec: BatchSpec, out: Path, executor: Executor | None, *, resume: bool,
+               fresh: bool, logs: bool, progress: bool, report: bool,
+               tasks: list[RunTask] | None, on_row: Callable[[dict[str, Any]], None] | None,
+               warn: Callable[[str], None] | None) -> BatchResult:
     tasks = tasks if tasks is not None else expand(spec)
     journal = Journal(out / "journal.jsonl")
     if journal.path.exists() and not (resume or fresh):

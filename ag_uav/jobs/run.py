@@ -80,17 +80,32 @@ def _open_log(cfg: Config, run_dir: Path, writer: str = "process"):
 
 def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None,
         progress: bool = False, feedback=None, log_writer: str = "process",
-        ) -> tuple[RunResult, Path]:
+        overwrite: bool = False) -> tuple[RunResult, Path]:
     """Fly ``cfg`` once into ``out_root/run_id``; returns the result and the run folder.
     ``log_writer``: the run log's writer (:class:`ag_uav.record.runlog.RunLog`'s ``writer``:
     ``"process"``, its own process on another core, or ``"inline"``).
+
+    The run folder belongs to this run (:mod:`ag_uav.jobs.outdir`): without ``run_id`` a new
+    one is made (time, field, seed, and a counter suffix where that name is taken); a folder
+    another run is writing into raises :class:`~ag_uav.jobs.outdir.FolderInUse`, and one that
+    holds a previous run's outputs raises :class:`~ag_uav.jobs.outdir.RunFolderExists` unless
+    ``overwrite`` (which removes them first).
 
     A log that cannot be written mid-flight (disk full) stops the flight with an
     :class:`OSError` naming it (the log stays readable up to its last complete chunk); a
     finished flight whose log end or ``summary.json`` cannot be written raises
     :class:`RunOutputError`, which carries the result."""
-    run_dir = Path(out_root) / (run_id or default_run_id(cfg))
-    run_dir.mkdir(parents=True, exist_ok=True)
+    from .outdir import check_reuse, hold, unique_run_dir
+
+    run_dir = (Path(out_root) / run_id if run_id else
+               unique_run_dir(out_root, default_run_id(cfg)))
+    with hold(run_dir, "run", "wait for it to finish, or choose another --run-id"):
+        check_reuse(run_dir, overwrite)
+        return _fly_into(cfg, run_dir, progress, feedback, log_writer)
+
+
+def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
+              log_writer: str) -> tuple[RunResult, Path]:
     log = _open_log(cfg, run_dir, log_writer)
     try:
         res = simulate(cfg, feedback=feedback, progress=progress, log=log)
@@ -108,6 +123,12 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
             log.close()
         except OSError as e:
             log_err = e
+        log_err = log.lost or log_err
+    if log_err is not None:  # the summary says so too (a log that stops early is no success)
+        from ..record.atomic import disk_error_line
+
+        res.summary["log_error"] = (f"the log stops at t = {log.lost_at:.1f} s: "
+                                    if log.lost is not None else "") + disk_error_line(log_err)
     res.summary["run_dir"] = str(run_dir)
     try:  # the summary first: on a full disk it is the file that must not be lost
         write_summary(res.summary, run_dir / "summary.json")

@@ -714,8 +714,20 @@ def run_tune(spec: TuneSpec, out_dir: str | Path, executor: Executor | None = No
     per iteration, :attr:`TuneResult.n_fallback`, ``tune.json``); evaluations lost to a dead
     worker are resubmitted :data:`LOST_RETRIES` times, then :class:`TuneStopped` (a lost
     executor: :class:`~ag_uav.jobs.executor.ExecutorLost`) ends the call, never a made-up cost.
+    ``out_dir`` belongs to this tune while it runs (:func:`ag_uav.jobs.outdir.hold`).
     """
-    out = Path(out_dir)
+    from .outdir import hold
+
+    with hold(out_dir, "tune", "wait for it to finish, or choose another --out"):
+        return _run_tune(spec, Path(out_dir), executor, resume=resume, fresh=fresh, iters=iters,
+                         progress=progress, outputs=outputs, on_iteration=on_iteration,
+                         warn=warn)
+
+
+def _run_tune(spec: TuneSpec, out: Path, executor: Executor | None, *, resume: bool,
+              fresh: bool, iters: int | None, progress: bool, outputs: bool,
+              on_iteration: Callable[[int, dict[str, Any]], None] | None,
+              warn: Callable[[str], None] | None) -> TuneResult:
     ck_path, ev_path = out / "checkpoint.json", out / "evals.jsonl"
     if (ck_path.exists() or ev_path.exists()) and not (resume or fresh):
         raise ConfigError(f'--out = "{out}": already holds a tuning checkpoint; use --resume to '

@@ -96,6 +96,7 @@ from typing import Any
 import numpy as np
 
 from .atomic import silent_write_failure
+from .sink import WriterLost
 
 __all__ = [
     "RunLog",
@@ -682,6 +683,10 @@ class RunLog:
     ):
         self.path = Path(path)
         self._write_failed = False  # the writer failed once (disk full): close() quietly
+        #: the writer process died mid-flight (:class:`~ag_uav.record.sink.WriterLost`): the
+        #: log ends there, the flight goes on unlogged
+        self.lost: OSError | None = None
+        self.lost_at = 0.0  #: the sim time of the last hand-over before the loss
         if isinstance(channels, str):
             if channels not in PRESETS:
                 raise ValueError(f"channels must be one of {list(PRESETS)} or a list of groups")
@@ -834,7 +839,32 @@ class RunLog:
         if self._ops:
             ops = self._ops + ops
             self._ops = []
-        self._sink.send(ops)
+        try:
+            self._sink.send(ops)
+        except WriterLost as e:  # the flight goes on unlogged; its summary names the loss
+            self._stop_writing(e)
+
+    def _stop_writing(self, err: OSError) -> None:
+        """The writer is gone: record ``err`` in :attr:`lost`, log nothing more (every group's
+        clock goes to infinity), reap the writer."""
+        self.lost, self.lost_at = err, self._t_last
+        self._stop_clocks()
+        _OPEN.discard(self)
+        try:
+            self._sink.close()
+        except Exception:  # noqa: BLE001 - reaping the dead writer is best effort
+            pass
+
+    def _stop_clocks(self) -> None:
+        self.closed = True
+        self._next_tick = _INF
+        for g in self._next:
+            self._next[g] = _INF
+        for ec in self._est.values():
+            ec.next_t = _INF
+        for bank in self._banks.values():
+            bank.next_t = _INF
+        self._next_spray = _INF
 
     def _drain(self, partial: bool = False, flush: bool = False) -> None:
         """Hand the rows and messages waiting since the last hand-over to the writer (it
@@ -1505,20 +1535,16 @@ class RunLog:
         (which pass ``partial``: a tick row still being filled is dropped)."""
         if self.closed:
             return
-        self.closed = True
-        self._next_tick = _INF
-        for g in self._next:
-            self._next[g] = _INF
-        for ec in self._est.values():
-            ec.next_t = _INF
-        for bank in self._banks.values():
-            bank.next_t = _INF
-        self._next_spray = _INF
+        self._stop_clocks()
         try:
             try:
                 self._drain(partial)
             finally:
-                self._sink.close()
+                if self.lost is None:
+                    self._sink.close()
+        except WriterLost as e:
+            self.lost, self.lost_at = e, self._t_last
+            raise
         except RuntimeError as e:  # the SDK's writer errors: an OSError naming the file
             err = self.write_error(e)
             if err is None:

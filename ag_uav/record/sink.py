@@ -403,7 +403,10 @@ class _Ring:
 
     def close(self) -> None:
         del self.ctr
-        self.mm.close()
+        try:
+            self.mm.close()
+        except BufferError:  # a view is still held (a traceback's frame): freed with it
+            pass
 
 
 def _child(ring: _Ring, alive_fd: int, reply_fd: int, path: str, compression: Any,
@@ -462,6 +465,12 @@ def _serve(back: Backend, ring: _Ring, wait: Any, reply_fd: int) -> None:
                     pass
             _write_all(reply_fd, _frame(("closed",)))
             return
+
+
+class WriterLost(OSError):
+    """The log's writer process is gone (killed, crashed) before finishing the file.  Its own
+    class, not the :class:`BrokenPipeError` an ``OSError(EPIPE)`` would be: a broken pipe on
+    standard output (``ag-uav show | head``) is not an error, a lost log is."""
 
 
 class ProcessSink:
@@ -523,8 +532,9 @@ class ProcessSink:
 
     def _gone(self) -> OSError:
         self._failed = True
-        return OSError(errno.EPIPE, "the run log's writer process exited before finishing the "
-                                    "file (`ag-uav recover` indexes what it wrote)", self.path)
+        return WriterLost(errno.EPIPE, "the run log's writer process exited before finishing "
+                                       "the file (`ag-uav recover` indexes what it wrote)",
+                          self.path)
 
     def _full(self) -> None:
         """The ring is full: wait for the writer (or find it gone)."""
