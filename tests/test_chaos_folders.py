@@ -70,10 +70,10 @@ def test_two_flights_into_one_run_folder(tmp_path):
                                   tmp_path, "--run-id", "x"), env=ENV, stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True)
     log = tmp_path / "x" / "run.mcap"
-    _wait(lambda: log.exists() and log.stat().st_size > 20000, 120, first)
+    _wait(lambda: log.exists() and log.stat().st_size > 20000, 600, first)
     second = subprocess.run(_cli("fly", *SHORT, "--set", "sim.max_time_s=2", "--out", tmp_path,
                                  "--run-id", "x", "--overwrite"), env=ENV,
-                            capture_output=True, text=True, timeout=120)
+                            capture_output=True, text=True, timeout=600)
     assert first.poll() is None, "the first flight ended before the second started"
     assert second.returncode == 1, second.stderr
     line = _one(second.stderr)
@@ -130,11 +130,11 @@ def test_killed_log_writer_is_an_error_with_the_summary_kept(tmp_path):
                                  "--run-id", "k"), env=ENV, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     log = tmp_path / "k" / "run.mcap"
-    _wait(lambda: log.exists() and log.stat().st_size > 20000 and _children(proc.pid), 120,
+    _wait(lambda: log.exists() and log.stat().st_size > 20000 and _children(proc.pid), 600,
           proc)
     (writer,) = _children(proc.pid)
     os.kill(writer, signal.SIGKILL)
-    _, err = proc.communicate(timeout=120)
+    _, err = proc.communicate(timeout=600)
     assert proc.returncode == 1, err
     line = _one(err)
     assert line.startswith(f"ag-uav: {log}: the run log's writer process exited"), line
@@ -149,7 +149,7 @@ def test_sigterm_prints_one_line(tmp_path):
                                  "--run-id", "t"), env=ENV, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     log = tmp_path / "t" / "run.mcap"
-    _wait(lambda: log.exists() and log.stat().st_size > 20000, 120, proc)
+    _wait(lambda: log.exists() and log.stat().st_size > 20000, 600, proc)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143
@@ -166,13 +166,13 @@ def test_second_batch_on_one_out_is_refused(tmp_path):
     for extra in ([], ["--resume"]):
         with outdir.hold(out, "batch", "hint"):  # held by this process: another batch runs
             r = subprocess.run(_cli("batch", spec, "--out", out, "-q", "-j", "1", *extra),
-                               env=ENV, capture_output=True, text=True, timeout=120)
+                               env=ENV, capture_output=True, text=True, timeout=600)
         assert r.returncode == 1
         line = _one(r.stderr)
         assert line.startswith(f"ag-uav: {out} is in use by another batch (pid {os.getpid()} "
                                "holds"), line
         assert not (out / "journal.jsonl").exists()
     r = subprocess.run(_cli("batch", spec, "--out", out, "-q", "-j", "1", "--resume"), env=ENV,
-                       capture_output=True, text=True, timeout=120)
+                       capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     assert len((out / "journal.jsonl").read_text().splitlines()) == 2
