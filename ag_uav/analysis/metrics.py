@@ -170,6 +170,33 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     }
 
 
+#: a vehicle whose highest point is less than this above its start never left the ground (m)
+TAKEOFF_MIN_CLIMB_M = 0.5
+
+
+def incomplete_reason(summary: dict[str, Any], res, cfg: Config) -> str | None:
+    """Why a flight that did not crash is not completed, in one line (None when it completed,
+    crashed, or nothing more specific than a cut by ``sim.max_time_s`` is known): it never
+    left the ground (its highest point under :data:`TAKEOFF_MIN_CLIMB_M` above the start: say,
+    a take-off weight over the rotors' thrust), never reached the first leg, flew only some
+    legs, or stopped short of the plan's end."""
+    if summary.get("completed") or summary.get("crashed") or not len(res.t):
+        return None
+    z = np.asarray(res.p_true[:, 2], dtype=float)
+    climb = float(np.max(z) - z[0])
+    if climb < TAKEOFF_MIN_CLIMB_M:
+        return (f"never took off: the highest point is {climb:.2f} m above the start (mission "
+                f"altitude {cfg.mission.altitude_m:g} m; vehicle.thrust_to_weight = "
+                f"{cfg.vehicle.thrust_to_weight:g})")
+    legs, flown = summary.get("legs", 0), summary.get("legs_flown", 0)
+    if legs and not flown:
+        return "never reached the first leg"
+    if flown < legs:
+        return f"flew {flown} of {legs} legs"
+    return (f"ended {summary.get('final_position_error_m', float('nan')):.2f} m from the "
+            "plan's end")
+
+
 def add_sortie_areas(summary: dict[str, Any], res, swath: float) -> None:
     """Add ``area_m2`` (the union of the swath footprints sprayed in that sortie, as the
     coverage computes them) to each row of ``summary["sortie_table"]``."""

@@ -111,15 +111,41 @@ def cmd_plan(args: argparse.Namespace) -> int:
     m, sp = cfg.mission, cfg.spray
     leads = nozzle_leads(m.speed_mps, sp.nozzle_on_delay_s, sp.nozzle_off_delay_s,
                          sp.cmd_off_immediate)
+    kw = {"altitude": m.altitude_m, "speed": m.speed_mps, "origin": origin,
+          "simplify_m": args.simplify, "leads": leads}
     try:
-        info = write_plan(plan, args.output, altitude=m.altitude_m, speed=m.speed_mps,
-                          origin=origin, simplify_m=args.simplify, leads=leads)
+        info = write_plan(plan, args.output, **kw)
     except ValueError as e:
         raise ConfigError(f'-o = "{args.output}": {e}') from None
     items = f", {info['items']} mission items" if "items" in info else ""
     print(f"{args.output}: {info['format']}, {info['waypoints']} waypoints{items}, "
           f"{info['spray_switches']} nozzle switches; {plan.summary()}")
+    _write_sorties(cfg, Path(args.output), kw)
     return 0
+
+
+def _write_sorties(cfg, out: Path, kw: dict) -> None:
+    """A job that needs several sorties (tank or battery, :mod:`ag_uav.world.spray_job`): one
+    mission per sortie beside ``out`` (``NAME-sortie01.EXT``, ...: take-off at the base,
+    transit to the resume point, the legs, transit home), and a line that says so; ``out``
+    keeps the whole coverage path for reference."""
+    from ..engine.missions import mission_setup
+    from ..world.plan_export import write_plan
+
+    if not cfg.spray.enabled:
+        return
+    _, _, ref = mission_setup(cfg)
+    pieces = getattr(ref, "pieces", None)
+    if not pieces or len(pieces) < 2:
+        return
+    paths = []
+    for i, (r, _) in enumerate(pieces, 1):
+        p = out.with_name(f"{out.stem}-sortie{i:02d}{out.suffix}")
+        write_plan(r.plan, p, **kw)
+        paths.append(p)
+    print(f"the job needs {len(pieces)} sorties (spray.tank_l = {cfg.spray.tank_l:g} L, "
+          f"battery.capacity_wh = {cfg.battery.capacity_wh:g} Wh): {out} is the whole path "
+          f"without sortie breaks; one mission per sortie: {paths[0]} ... {paths[-1].name}")
 
 
 def cmd_bench(args: argparse.Namespace) -> int:

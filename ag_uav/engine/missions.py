@@ -340,12 +340,14 @@ def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = Fals
 def batch_key(cfg: Config) -> tuple:
     """Configs with equal keys can fly in one engine batch (same control and physics rates,
     same sensing and spray-job structure)."""
+    from ..navigation.estimation import gnss_latency_s
+
     e = cfg.estimator
     imu = ((e.source == "bearings" or e.name != "true" or bool(e.shadow))
            and e.imu and cfg.imu.model == "mems")
     # the same filters (names, flown one first) share the batched bank
     filters = (e.source, e.name, tuple(s for s in e.shadow if s != e.name), e.model, e.nav,
-               round(cfg.gps.latency_s * cfg.sim.control_hz) if e.nav == "ins" else 0,
+               round(gnss_latency_s(cfg) * cfg.sim.control_hz) if e.nav == "ins" else 0,
                _ins_key(cfg) if e.nav == "ins" and imu else None)
     return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled, filters,
             model_layout(cfg))
@@ -417,8 +419,13 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
     summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
                              reference=ref)
     cut = _cut_by_max_time(cfg, ref, out, summ)
+    why = metrics.incomplete_reason(summ, res, cfg)
+    if why is not None and (cut is None or why.startswith("never took off")):
+        cut = f"{why}; {cut}" if cut else why
     if cut:
         summ["incomplete_reason"] = cut
+    if not summ["legs_flown"]:  # the end of a mission never flown is no mission time
+        summ["mission_time_s"] = None
     if getattr(ref, "plan_cut", None) is not None:  # the sortie plan covers this much path
         summ["planned_to_m"] = round(ref.plan_cut.planned_m, 1)
     if out.sprayer is not None:

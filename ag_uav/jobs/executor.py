@@ -322,7 +322,8 @@ class DaskExecutor(Executor):
             _check_address(address)
             self._mute_logs()
             try:
-                self._client = Client(address, timeout="20s")
+                _probe_scheduler(address, min(10.0, self.lost_timeout_s))
+                self._client = Client(address, timeout=f"{min(20.0, self.lost_timeout_s):g}s")
             except BaseException:
                 self._unmute_logs()
                 raise
@@ -445,6 +446,29 @@ def _check_address(address: str) -> None:
     if not re.fullmatch(r"([a-z]+://)?[^\s:/]+:\d{1,5}", address):
         raise ValueError(f'"{address}": not a Dask scheduler address; expected "local" or '
                          "tcp://HOST:PORT")
+
+
+def _probe_scheduler(address: str, timeout_s: float) -> None:
+    """Raise :class:`TimeoutError` (one line) unless the ``tcp://`` endpoint at ``address``
+    speaks first, as a Dask scheduler does: its listener writes its handshake as soon as a
+    connection opens (``distributed.comm.core.Listener.on_connection``), whereas an HTTP
+    server (a dashboard port, say) waits for a request, and Dask's client, which reads first,
+    would wait on it with no bound.  Other protocols are left to Dask."""
+    import socket
+
+    if "://" in address and not address.startswith("tcp://"):
+        return
+    host, port = address.rsplit("/", 1)[-1].rsplit(":", 1)
+    with socket.create_connection((host, int(port)), timeout=timeout_s) as s:
+        s.settimeout(timeout_s)
+        try:
+            first = s.recv(1)
+        except TimeoutError:
+            first = None
+    if not first:
+        why = "closed the connection" if first == b"" else f"sent nothing in {timeout_s:g} s"
+        raise TimeoutError(f"the endpoint {why}, where a Dask scheduler sends its handshake at "
+                           "once: not a scheduler (a dashboard or other HTTP port?)")
 
 
 def make_executor(workers: int | None = None, dask: str | None = None,

@@ -52,6 +52,16 @@ from .feedback import Feedback
 R_FLOOR = 1e-4
 
 
+def gnss_latency_s(cfg: Config) -> float:
+    """The receiver latency the INS chain applies (s): ``gps.overrides.latency_s`` where it is
+    given (the sensor's own key, which the ideal-attitude chain's sensor reads), else
+    ``gps.latency_s``."""
+    v = cfg.gps.overrides.get("latency_s", cfg.gps.latency_s)
+    if isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= 1.0:
+        raise ConfigError(f"gps.overrides.latency_s = {v!r}: must be a number in [0, 1] s")
+    return float(v)
+
+
 def make_gps(cfg: Config, seed: np.random.SeedSequence) -> GpsSensor:
     g = cfg.gps
     ov: dict[str, Any] = dict(g.overrides)

@@ -90,14 +90,17 @@ INS_RULES = ("kf", "mckf", "pca-kf", "pca-mckf")
 def ins_config(cfg: Config) -> INSConfig:
     """The INS's settings from the run config (IMU figures at the control rate, latency,
     MCKF σ, kernel and recovery, PCA window)."""
+    from .estimation import gnss_latency_s
+
     e, im = cfg.estimator, cfg.imu
     rec = None if e.ins_recovery == "none" else e.ins_recovery
+    lat = gnss_latency_s(cfg)
     return INSConfig.from_imu(
         cfg.sim.control_hz, accel_nd_ug=im.accel_noise_density_ug,
         gyro_nd_mdps=im.gyro_noise_density_mdps, vibration=im.vibration_sigma_mps2,
         accel_rw=max(im.accel_bias_rw, 1e-6), gyro_rw_dps=max(im.gyro_bias_rw, 1e-6),
-        lever_arm=ANTENNA, radar_offset=RADAR, delay_s=cfg.gps.latency_s,
-        delayed=cfg.gps.latency_s > 0, sigma=e.sigma, mckf_kernel=e.mckf_kernel,
+        lever_arm=ANTENNA, radar_offset=RADAR, delay_s=lat,
+        delayed=lat > 0, sigma=e.sigma, mckf_kernel=e.mckf_kernel,
         max_iter=e.max_iter, recovery=rec,
         pca_window=e.window, pca_mode=e.pca_mode)
 
@@ -120,7 +123,7 @@ class InsFeedback(Feedback):
 
     def __init__(self, cfg: Config, seeds: dict[str, np.random.SeedSequence]) -> None:
         from ..vehicle.imu import ImuSensor
-        from .estimation import make_gps
+        from .estimation import gnss_latency_s, make_gps
 
         e, g = cfg.estimator, cfg.gps
         self.cfg = cfg
@@ -139,7 +142,7 @@ class InsFeedback(Feedback):
         self.gps = make_gps(cfg, seeds["gps"])
         self.gps.latency_s = 0.0     # the latency is applied from the truth ring (exact ticks)
         self.dt = 1.0 / cfg.sim.control_hz
-        self.D = int(round(g.latency_s / self.dt))
+        self.D = int(round(gnss_latency_s(cfg) / self.dt))  # gps.overrides' latency wins
         spare = seeds["spare4"]
         self.report = None
         if g.receiver == "honest" and self.gps.fix_types:
