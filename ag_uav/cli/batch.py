@@ -89,11 +89,32 @@ def _add_exec_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
 
+#: more worker processes per core than this is refused (each is a process with its own engine)
+MAX_WORKERS_PER_CORE = 4
+
+
+def _check_workers(n: int | None) -> None:
+    """``--workers``: >= 1 and at most :data:`MAX_WORKERS_PER_CORE` per core (one line, exit
+    2); more than the cores is a warning (they compete for the cores: no speed-up, and the
+    process tree holds workers × one run's memory)."""
+    import os
+
+    if n is None:
+        return
+    cores = os.cpu_count() or 1
+    if n < 1 or n > MAX_WORKERS_PER_CORE * cores:
+        raise ConfigError(f"--workers = {n}: must be in [1, {MAX_WORKERS_PER_CORE * cores}] "
+                          f"({MAX_WORKERS_PER_CORE} per core, {cores} cores here)")
+    if n > cores:
+        print(f"ag-uav: warning: --workers = {n} on {cores} cores: oversubscribed (the workers "
+              "share the cores, so no speed-up, and memory grows with each worker)",
+              file=sys.stderr)
+
+
 def _executor(args: argparse.Namespace):
     from ..jobs.executor import make_executor
 
-    if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"--workers = {args.workers}: must be >= 1")
+    _check_workers(args.workers)
     if args.resume and args.fresh:
         raise ConfigError("--resume and --fresh: choose one")
     if not args.dask_timeout > 0:
@@ -158,9 +179,9 @@ def cmd_tune(args: argparse.Namespace) -> int:
     if args.optimizer and args.optimizer != spec.optimizer:
         spec = dataclasses.replace(spec, optimizer=args.optimizer, optimizer_options={})
     if args.pop is not None:
-        if args.pop < 2:
-            raise ConfigError(f"--pop = {args.pop}: must be >= 2")
-        spec = dataclasses.replace(spec, pop=args.pop)
+        from ..jobs.tune import check_pop
+
+        spec = dataclasses.replace(spec, pop=check_pop(args.pop, "--pop"))
     if args.iters is not None and args.iters < 1:
         raise ConfigError(f"--iters = {args.iters}: must be >= 1")
     out = Path(args.out or f"runs/tune-{spec.name}")

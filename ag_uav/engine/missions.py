@@ -118,19 +118,37 @@ def preflight_notice(cfg: Config, ref: Any) -> str | None:
             "(raise sim.max_time_s to fly it all)")
 
 
-def check_memory_budget(cfg: Config, duration_s: float, what: str) -> None:
+def dose_map_mb(cfg: Config, fld: Field | None) -> float:
+    """MB one vehicle's dose map holds (``spray.deposition`` over a field): the level buffer
+    (:class:`~ag_uav.world.deposition.GridSpec`, ≈ 1.33 × the fine cells, float64), the fine map
+    summed from it at the end and the copy the log encodes (two fine grids more)."""
+    if fld is None or not cfg.spray.deposition:
+        return 0.0
+    from ..world.deposition import DepositionConfig, GridSpec
+
+    dc = DepositionConfig.from_config(cfg)
+    g = GridSpec.around(fld.bounds, dc.buffer_m, dc.cell_m, dc.levels, dc.max_cells)
+    return (g.size + 2 * g.nx * g.ny) * 8 / 2**20
+
+
+def check_memory_budget(cfg: Config, duration_s: float, what: str,
+                        fld: Field | None = None) -> None:
     """Refuse (:class:`ConfigError`, one line) a run whose tables for ``duration_s`` of flight
-    (cut at ``sim.max_time_s``) would exceed ``sim.memory_budget_mb``
-    (:data:`TABLE_BYTES_PER_TICK` a control tick)."""
+    (cut at ``sim.max_time_s``; :data:`TABLE_BYTES_PER_TICK` a control tick) and dose map over
+    ``fld`` (:func:`dose_map_mb`) would exceed ``sim.memory_budget_mb``."""
     s = cfg.sim
     flown = min(duration_s, s.max_time_s)
     ticks = int(math.ceil(flown * s.control_hz))
-    need_mb = ticks * TABLE_BYTES_PER_TICK / 2**20
-    if need_mb > s.memory_budget_mb:
+    tables = ticks * TABLE_BYTES_PER_TICK / 2**20
+    dose = dose_map_mb(cfg, fld)
+    if tables + dose > s.memory_budget_mb:
+        parts = f"{tables:.0f} MB of tables ({ticks} control ticks: {flown:.0f} s at " \
+                f"{s.control_hz:g} Hz)"
+        if dose:
+            parts += f" and {dose:.0f} MB of dose map (spray.cell_m = {cfg.spray.cell_m:g})"
         raise ConfigError(f"sim.memory_budget_mb = {s.memory_budget_mb:g}: {what} needs about "
-                          f"{need_mb:.0f} MB of tables ({ticks} control ticks: {flown:.0f} s at "
-                          f"{s.control_hz:g} Hz); raise sim.memory_budget_mb or lower "
-                          "sim.max_time_s")
+                          f"{tables + dose:.0f} MB: {parts}; raise sim.memory_budget_mb or lower "
+                          "sim.max_time_s" + (" (or coarsen spray.cell_m)" if dose else ""))
 
 
 # -------------------------------------------------------------------------------------- result
@@ -207,13 +225,13 @@ def mission_setup(cfg: Config) -> tuple[Field, Any, Any]:
         fld = build_field(cfg)
         plan = build_plan(cfg, fld)
         # refused before the reference is built (the whole path at cruise speed: a lower bound)
-        check_memory_budget(cfg, plan.length / cfg.mission.speed_mps, "the plan")
+        check_memory_budget(cfg, plan.length / cfg.mission.speed_mps, "the plan", fld)
         ref = build_reference(cfg, plan, horizon_s=cfg.sim.max_time_s)
         if len(_SETUP_CACHE) > 8:
             _SETUP_CACHE.clear()
         hit = _SETUP_CACHE[key] = (fld, plan, ref)
     else:  # the budget is no mission key: the same check on a cached setup
-        check_memory_budget(cfg, hit[1].length / cfg.mission.speed_mps, "the plan")
+        check_memory_budget(cfg, hit[1].length / cfg.mission.speed_mps, "the plan", hit[0])
     return hit
 
 
@@ -223,7 +241,7 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
     wall0 = time.perf_counter()
     streams = rng_streams(cfg.seed)
     fld, plan, ref = mission_setup(cfg)
-    check_memory_budget(cfg, ref.duration, "the reference")
+    check_memory_budget(cfg, ref.duration, "the reference", fld)
     m = cfg.mission
     bounds = fld.bounds
     job = getattr(ref, "spray_job", None)

@@ -179,6 +179,19 @@ def _num(v: Any, where: str, *, gt: float | None = None, ge: float | None = None
     return float(v)
 
 
+#: the largest population: every member is flown on every scenario each iteration, and the
+#: optimiser holds pop × params arrays (a population of 10^8 filled GBs before its first run)
+MAX_POP = 10_000
+
+
+def check_pop(v: Any, where: str = "pop") -> int:
+    """``pop`` as an integer in [2, :data:`MAX_POP`] (else one ConfigError line)."""
+    if isinstance(v, bool) or not isinstance(v, int) or not 2 <= v <= MAX_POP:
+        raise ConfigError(f"{where} = {_fmt(v)}: expected an integer in [2, {MAX_POP}] (each "
+                          "member is flown on every scenario each iteration)")
+    return v
+
+
 def _int(v: Any, where: str, lo: int) -> int:
     if isinstance(v, bool) or not isinstance(v, int) or v < lo:
         raise ConfigError(f"{where} = {_fmt(v)}: expected an integer >= {lo}")
@@ -289,7 +302,7 @@ def spec_from_dict(data: dict[str, Any], *, base_dir: str | Path = ".", name: st
     nm = data.get("name", name)
     return TuneSpec(
         name=str(nm), base=base, params=params, scenarios=scenarios, optimizer=opt,
-        pop=_int(data.get("pop", 20), "pop", 2), iters=_int(data.get("iters", 20), "iters", 1),
+        pop=check_pop(data.get("pop", 20), "pop"), iters=_int(data.get("iters", 20), "iters", 1),
         seed=_int(data.get("seed", 0), "seed", 0),
         noise_seed=_int(data.get("noise_seed", 0), "noise_seed", 0), metric=metric,
         crash_penalty=_num(data.get("crash_penalty", 1000.0), "crash_penalty", gt=0.0),

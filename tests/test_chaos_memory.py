@@ -1,0 +1,82 @@
+"""Chaos: memory guards.  The per-run budget counts the dose map; a tune's population and a
+batch's worker count are bounded, one line each; more workers than cores is said."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+import tomli_w
+
+import ag_uav
+from ag_uav.cli import batch as cli_batch
+from ag_uav.cli import main
+from ag_uav.config import ConfigError
+from ag_uav.engine.missions import check_memory_budget, dose_map_mb
+from ag_uav.world.mission import build_field, build_plan
+
+
+def _need(cfg) -> tuple[float, object]:
+    fld = build_field(cfg)
+    return build_plan(cfg, fld).length / cfg.mission.speed_mps, fld
+
+
+def test_the_budget_counts_the_dose_map():
+    fine = ag_uav.load_config(None, {"spray.cell_m": 0.05})
+    coarse = ag_uav.load_config(None, {"spray.cell_m": 0.5})
+    d_fine, d_coarse = dose_map_mb(fine, build_field(fine)), dose_map_mb(coarse,
+                                                                        build_field(coarse))
+    # 0.05 m over this field passes spray.max_cells, so the map coarsens to 0.1 m: 25x the cells
+    # of 0.5 m (up to the grid's block rounding)
+    assert 18 < d_fine / d_coarse < 30 and d_fine > 30
+    dur, fld = _need(fine)
+    tables = dur * fine.sim.control_hz * 1536 / 2**20
+    budget = tables + 0.5 * d_fine  # enough for the tables, not for the map
+    fine.sim.memory_budget_mb = coarse.sim.memory_budget_mb = budget
+    with pytest.raises(ConfigError, match=r"MB of dose map \(spray.cell_m = 0.05\)"):
+        check_memory_budget(fine, dur, "the plan", fld)
+    check_memory_budget(coarse, dur, "the plan", fld)  # the coarse map fits
+    off = ag_uav.load_config(None, {"spray.cell_m": 0.05, "spray.deposition": False})
+    off.sim.memory_budget_mb = budget
+    check_memory_budget(off, dur, "the plan", fld)  # no dose model, no map
+
+
+def _tune_spec(tmp_path, pop) -> str:
+    p = tmp_path / "t.toml"
+    p.write_text(tomli_w.dumps({"name": "t", "pop": pop, "iters": 1,
+                                "params": {"controller.xy.k0": {"lo": 0.5, "hi": 15.0}},
+                                "scenarios": [{"kind": "step", "axis": "x", "size": 1.0,
+                                               "duration": 2.0}]}))
+    return str(p)
+
+
+def test_pop_is_bounded(tmp_path, capsys):
+    rc = main(["tune", _tune_spec(tmp_path, 100_000_000), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert err[0].startswith("ag-uav: config error: pop = 100000000: expected an integer in "
+                             "[2, 10000]"), err
+    rc = main(["tune", _tune_spec(tmp_path, 20), "--pop", "20000", "--out",
+               str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and err[0].startswith("ag-uav: config error: --pop = 20000: expected"), err
+    assert not (tmp_path / "o").exists()
+
+
+def test_workers_are_bounded_and_oversubscription_is_said(tmp_path, capsys):
+    spec = tmp_path / "b.toml"
+    spec.write_text(tomli_w.dumps({"name": "b", "base": {"sim.max_time_s": 1.0},
+                                   "axes": {"seed": [0]}}))
+    cores = os.cpu_count() or 1
+    too_many = cli_batch.MAX_WORKERS_PER_CORE * cores + 1
+    rc = main(["batch", str(spec), "--out", str(tmp_path / "o"), "-j", str(too_many)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1, err
+    assert err[0] == (f"ag-uav: config error: --workers = {too_many}: must be in "
+                      f"[1, {too_many - 1}] (4 per core, {cores} cores here)")
+    cli_batch._check_workers(cores)
+    assert capsys.readouterr().err == ""
+    cli_batch._check_workers(cores + 1)
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f"ag-uav: warning: --workers = {cores + 1} on {cores} cores: "
+                           "oversubscribed")
