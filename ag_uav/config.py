@@ -88,6 +88,19 @@ class MissionConfig:
     altitude_m: float = _f(3.0, "spray altitude above ground (m)", gt=0.5, le=50)
     accel_max_mps2: float = _f(1.5, "acceleration bound of the reference (m/s^2)", ge=0.05,
                                   le=8)
+    origin_lat_deg: float | str = _f("auto", "latitude of the local frame's origin (WGS-84 "
+                                     "degrees), or \"auto\": a lon/lat field's own origin (the "
+                                     "mean of its vertices), the built-in default field's "
+                                     "46.725 (the Palouse, Idaho); a lon/lat field is projected "
+                                     "about the origin given", choices=("auto",), gt=-90, lt=90)
+    origin_lon_deg: float | str = _f("auto", "longitude of the origin (WGS-84 degrees), or "
+                                     "\"auto\" (with origin_lat_deg: both, or neither); the "
+                                     "default field's -117.02", choices=("auto",), ge=-180,
+                                     le=180)
+    origin_alt_m: float | str = _f("auto", "WGS-84 ellipsoidal height of the origin, the "
+                                   "ground (m), or \"auto\": 0 for a lon/lat field, 760 for "
+                                   "the default field (approximate)", choices=("auto",),
+                                   ge=-500, le=9000)
 
 
 @dataclass
@@ -690,6 +703,17 @@ def _check_field(name: str) -> None:
                       f"{'/'.join(FIELD_FILE_SUFFIXES)} file (optionally #KEY=VALUE)")
 
 
+def _check_origin(m: MissionConfig) -> None:
+    """``mission.origin_lat_deg`` and ``origin_lon_deg`` are set together (or both "auto")."""
+    lat_auto, lon_auto = m.origin_lat_deg == "auto", m.origin_lon_deg == "auto"
+    if lat_auto != lon_auto:
+        key, v = (("origin_lat_deg", m.origin_lat_deg) if not lat_auto
+                  else ("origin_lon_deg", m.origin_lon_deg))
+        other = "origin_lon_deg" if not lat_auto else "origin_lat_deg"
+        raise ConfigError(f"mission.{key} = {_fmt(v)}: must come with mission.{other} (now "
+                          f"mission.{other} = \"auto\"); set both, or leave both \"auto\"")
+
+
 def _check_nozzles(sp: SprayConfig) -> None:
     """The nozzle layout and the droplet spectrum of ``[spray]`` (rules across keys)."""
     n = len(sp.nozzle_xyz_m)
@@ -708,6 +732,7 @@ def _check_nozzles(sp: SprayConfig) -> None:
 def _validate(cfg: Config) -> None:
     """Checks across fields (one field's own range is :func:`_check_range`'s)."""
     _check_field(cfg.mission.field)
+    _check_origin(cfg.mission)
     s = cfg.sim
     ctrl_steps = 1.0 / (s.timestep_s * s.control_hz) if s.timestep_s * s.control_hz > 0 else 0.0
     if (not math.isfinite(ctrl_steps) or abs(ctrl_steps - round(ctrl_steps)) > 1e-6

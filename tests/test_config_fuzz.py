@@ -140,6 +140,8 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
     def g(k: str) -> Any:
         return vals.get(k, _get(DEFAULT, k))
 
+    if (g("mission.origin_lat_deg") == "auto") != (g("mission.origin_lon_deg") == "auto"):
+        return ["mission.origin_lat_deg", "mission.origin_lon_deg"]  # both, or neither
     if not _divides(g("sim.timestep_s"), g("sim.control_hz")):
         return ["sim.control_hz", "sim.timestep_s"]
     from ag_uav.vehicle.gps import gps_preset
@@ -164,7 +166,8 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
 
 CROSS = {"sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",
          "mission.altitude_m", "spray.nozzle_xyz_m", "spray.nozzle_share", "spray.dv10_um",
-         "spray.dv50_um", "spray.dv90_um", "gps.rate_hz", "gps.preset"}
+         "spray.dv50_um", "spray.dv90_um", "gps.rate_hz", "gps.preset",
+         "mission.origin_lat_deg", "mission.origin_lon_deg"}
 
 
 def allowed(leaf: Leaf, v: Any) -> bool:

@@ -168,14 +168,23 @@ def test_waypoints_spray_flags_follow_the_segments():
         assert (a.spray != b.spray) == (b.event is not None)
 
 
-def test_local_field_needs_an_origin(tmp_path, capsys):
+def _plan_lats(path) -> list[float]:
+    items = json.loads(path.read_text())["mission"]["items"]
+    return [it["params"][4] for it in items if it["command"] == 16]
+
+
+def test_local_field_takes_the_mission_origin(tmp_path, capsys):
+    """The default field (local metres) lies at the run's origin: ``mission.origin_*``, by
+    default DEFAULT_ORIGIN; ``--origin`` overrides it for the export."""
     out = tmp_path / "d.plan"
-    assert main(["plan", "default", "-o", str(out)]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--origin" in err[0] and 'mission.field = "default"' in err[0]
+    assert main(["plan", "default", "-o", str(out)]) == 0
+    lat = _plan_lats(out)  # the field reaches ~100 m north of DEFAULT_ORIGIN's 46.725
+    assert len(lat) >= 10 and all(46.7250 < v < 46.7260 for v in lat)
+    assert main(["plan", "default", "--set", "mission.origin_lat_deg=-35.3",
+                 "--set", "mission.origin_lon_deg=149.1", "-o", str(out)]) == 0
+    assert all(-35.3 < v < -35.299 for v in _plan_lats(out))
     assert main(["plan", "default", "--origin", "46.73,-117.0", "-o", str(out)]) == 0
-    items = json.loads(out.read_text())["mission"]["items"]
-    lat = [it["params"][4] for it in items if it["command"] == 16]
+    lat = _plan_lats(out)
     assert len(lat) >= 10 and all(46.729 < v < 46.732 for v in lat)
     assert main(["plan", "default", "--origin", "north", "-o", str(out)]) == 2
     assert main(["plan", "hole", "-o", str(tmp_path / "x.csv")]) == 2

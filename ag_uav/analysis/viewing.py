@@ -126,7 +126,7 @@ class RunData:
 
 
 _SERIES_TOPICS = ("/drone/state", "/gps", "/drone/pose", "/drone/pose_est", "/drone/pose_ref",
-                  "/drone/spray")
+                  "/drone/spray", "/geo/true")
 
 
 def _summary_json(d: RunData) -> dict[str, Any]:
@@ -267,6 +267,7 @@ def show(run: str | Path) -> str:
         lines.append(f"damaged: {skipped} (`ag-uav recover` keeps the rest)")
     if d.t_start == d.t_start:
         lines.append(f"sim time: {d.t_start:.2f} .. {d.t_end:.2f} s")
+    lines += _geo_lines(d)
     for name in ("run", "versions", "summary"):
         md = d.metadata.get(name)
         if not md:
@@ -289,6 +290,25 @@ def show(run: str | Path) -> str:
         lines.append("\n[config.toml]")
         lines += ["  " + ln for ln in cfg.decode("utf-8", "replace").splitlines()]
     return "\n".join(lines)
+
+
+def _geo_lines(d: RunData) -> list[str]:
+    """The run's geodetic origin (metadata ``geo``) and the lon/lat bounds of its true track
+    (``/geo/true``); none for a log without them."""
+    md = d.metadata.get("geo") or {}
+    try:
+        lat0, lon0 = float(md["origin_lat_deg"]), float(md["origin_lon_deg"])
+        h0 = float(md.get("origin_alt_m", "0"))
+    except (KeyError, ValueError):
+        return []
+    out = [f"origin: lat {lat0:.7f}, lon {lon0:.7f} (WGS-84 degrees), height {h0:.1f} m "
+           "(local frame: x east, y north, z up)"]
+    s = d.series.get("/geo/true")
+    if s is not None and len(s.t) and "latitude" in s and "longitude" in s:
+        la, lo = s["latitude"], s["longitude"]
+        out.append(f"flight bounds: lat {la.min():.7f} .. {la.max():.7f}, lon {lo.min():.7f} .. "
+                   f"{lo.max():.7f} ({len(s.t)} fixes on /geo/true)")
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -822,6 +842,32 @@ def _plot_cfg(title: str, paths: list[tuple[str, str]]) -> dict[str, Any]:
     }
 
 
+#: the Map panel's look per geographic topic: line colour (LocationFix topics; a GNSS fix is
+#: drawn in its fix type's colour, :data:`ag_uav.record.geo.FIX_COLORS`) and which messages it
+#: shows (``all`` the whole track, ``none`` the latest at the playback time)
+_MAP_TOPICS = {
+    "/geo/true": ({"historyMode": "all", "pointDisplayMode": "dot", "pointSize": 3},
+                  "#ffffff"),
+    "/geo/est": ({"historyMode": "all", "pointDisplayMode": "dot", "pointSize": 3}, "#4169e1"),
+    "/geo/gnss": ({"historyMode": "all", "pointDisplayMode": "cross", "pointSize": 5}, None),
+    "/geo/field": ({"historyMode": "all"}, None),
+    "/geo/plan": ({"historyMode": "all"}, None),
+    "/geo/sprayed": ({"historyMode": "none"}, None),
+    "/geo/dose": ({"historyMode": "none"}, None),
+}
+
+
+def _map_cfg(geo: tuple[str, ...]) -> dict[str, Any]:
+    """Foxglove's Map panel (``foxglove.layouts.MapConfig``'s keys) over the satellite layer,
+    following the true position, naming only the geographic topics ``geo`` the log holds."""
+    topics = [t for t in _MAP_TOPICS if t in geo]
+    colors = {t: _MAP_TOPICS[t][1] for t in topics if _MAP_TOPICS[t][1]}
+    return {"layer": "satellite", "zoomLevel": 18, "maxNativeZoom": 18,
+            "followTopic": "/geo/true" if "/geo/true" in topics else "",
+            "disabledTopics": [], "topicColors": colors,
+            "topicConfig": {t: dict(_MAP_TOPICS[t][0], order=k) for k, t in enumerate(topics)}}
+
+
 def write_foxglove_layout(
     path: str | Path,
     *,
@@ -831,14 +877,19 @@ def write_foxglove_layout(
     n_motors: int = 4,
     center: tuple[float, float] = (0.0, 0.0),
     spray: bool = False,
+    geo: tuple[str, ...] | list[str] = (),
 ) -> Path:
     """Write a Foxglove layout in app-export JSON (import with Layouts -> Import from file).
 
-    3D panel (field, plan, sprayed area, true/estimated/reference poses, GPS fixes, world
-    frame), one Image panel per camera, and plots: tracking and estimation errors, controller
-    outputs (``ctrl_keys`` ending in ``.u`` / ``.U`` first, up to 8), motor commands.
+    With ``geo`` (the run's geographic topics, :mod:`ag_uav.record.geo`) a Map panel first
+    (:func:`_map_cfg`), then a 3D panel (field, plan, sprayed area, true/estimated/reference
+    poses, GPS fixes, world frame), one Image panel per camera, and plots: tracking and
+    estimation errors, controller outputs (``ctrl_keys`` ending in ``.u`` / ``.U`` first, up to
+    8), motor commands.
     """
     cfg: dict[str, Any] = {}
+    if geo:
+        cfg["Map!aguavmap"] = _map_cfg(tuple(geo))
     cfg["3D!aguav3d"] = {
         "cameraState": {"distance": 80, "perspective": True, "phi": 55, "thetaOffset": 35,
                         "targetOffset": [center[0], center[1], 0], "target": [0, 0, 0],
@@ -896,7 +947,11 @@ def write_foxglove_layout(
                 "splitPercentage": 100.0 / len(items)}
 
     cams = [f"Image!cam{c}" for c in cameras]
-    left = chain(["3D!aguav3d", chain(cams, "row")], "column") if cams else "3D!aguav3d"
+    top: Any = "3D!aguav3d"
+    if geo:  # the map first, beside the 3D scene
+        top = {"direction": "row", "first": "Map!aguavmap", "second": top,
+               "splitPercentage": 50}
+    left = chain([top, chain(cams, "row")], "column") if cams else top
     if isinstance(left, dict):
         left["splitPercentage"] = 62
     plots = ["Plot!errors", "Plot!pos", "Plot!ctrl", "Plot!motors"]

@@ -250,6 +250,7 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
         bounds = (min(bounds[0], bx), min(bounds[1], by), max(bounds[2], bx), max(bounds[3], by))
     outline = field_outline(fld)
     if log is not None:
+        log.geo(fld.origin, dose_target_l_per_ha=cfg.spray.rate_l_per_ha)
         log.scene(0.0, outline[0], outline[1:],
                   [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],
                   m.swath_m, m.altitude_m,

@@ -285,8 +285,12 @@ class EstimatorFeedback(FilterBank, Feedback):
                 self._r_mode = mode
                 R_new = self.r_by_fix[mode]
         self.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
-        if self.log is not None:
-            self.log.gps(t, z)
+        if self.log is not None:  # what the receiver reports: its fix type and variance
+            mode = self.gps.last_fix_type
+            var = self.gps.reported_variance(mode)
+            if self.radar:
+                var = (var[0], var[1], self.radar_sigma**2)
+            self.log.gps(t, z, var, mode)
             self.log.set_truth(p_true)
         return z, R_new
 

@@ -196,8 +196,9 @@ class InsFeedback(Feedback):
         n = self._aux4()
         sv, g = self.cfg.gps.velocity_sigma_mps, self.gnss_buf
         self.fixes += 1
-        if self.log is not None:
-            self.log.gps(t, z)
+        if self.log is not None:  # the reported type and its variance (times the calibration)
+            v, s2 = self.gps.reported_variance(rep), scale * scale
+            self.log.gps(t, z, (v[0] * s2, v[1] * s2, v[2] * s2), rep)
         g[:] = (self.D * self.dt, z[0], z[1], z[2],
                 v_ant[0] + sv * n[0], v_ant[1] + sv * n[1], v_ant[2] + sv * n[2],
                 yaw + self.cfg.gps.heading_sigma_deg * DEG * n[3],

@@ -49,12 +49,17 @@ Channels (Foxglove well-known schemas where one fits; groups in brackets):
               the period doubles after each 8 MB of maps) and at the end
   [camera]    ``/camera/<name>`` foxglove.CompressedImage (JPEG) and
               ``/camera/<name>/calibration`` foxglove.CameraCalibration
+  [geo]       ``/geo/true``, ``/geo/est``, ``/geo/gnss`` foxglove.LocationFix (the GNSS fixes
+              at the ``gps`` group's rate) and ``/geo/field``, ``/geo/plan``, ``/geo/sprayed``,
+              ``/geo/dose`` foxglove.GeoJSON (with the ``scene`` group), once :meth:`RunLog.geo`
+              has given the run's geodetic origin (:mod:`ag_uav.record.geo`)
   always      metadata records ``run`` and ``versions`` (and ``summary``), attachments
               ``config.toml`` (and ``summary.json``)
 
 Channel sets: ``"full"`` (all groups; tf/pose 10 Hz, state 20 Hz, every GPS fix, each estimator at
-<= 10 Hz, camera 10 Hz), ``"light"`` (batch/tuning: pose/tf/state 5 Hz, GPS and estimators 1 Hz, no
-camera), ``"none"`` (no file; every method returns at once), or an iterable of group names.
+<= 10 Hz, camera 10 Hz, geo 5 Hz), ``"light"`` (batch/tuning: pose/tf/state 5 Hz, GPS, estimators
+and geo 1 Hz, no camera), ``"none"`` (no file; every method returns at once), or an iterable of
+group names.
 ``rates`` overrides per group in Hz (``None`` = every call, ``0`` = group off).
 
 Crash safety: use ``with`` (or call :meth:`RunLog.close`); SIGTERM/SIGINT close every open log
@@ -107,14 +112,14 @@ __all__ = [
     "ns",
 ]
 
-GROUPS = ("tf", "pose", "state", "gps", "estimator", "scene", "camera")
+GROUPS = ("tf", "pose", "state", "gps", "estimator", "scene", "camera", "geo")
 
 #: Default rates per channel set, Hz (None = every call).
 PRESETS: dict[str, dict[str, float | None]] = {
     "full": {"tf": 10.0, "pose": 10.0, "state": 20.0, "gps": None, "estimator": 10.0,
-             "scene": None, "camera": 10.0},
+             "scene": None, "camera": 10.0, "geo": 5.0},
     "light": {"tf": 5.0, "pose": 5.0, "state": 5.0, "gps": 1.0, "estimator": 1.0,
-              "scene": None, "camera": 0.0},
+              "scene": None, "camera": 0.0, "geo": 1.0},
     "none": {g: 0.0 for g in GROUPS},
 }
 
@@ -717,6 +722,10 @@ class RunLog:
                       for g in GROUPS}
         self._counts: dict[str, int] = {}  # rare topics; the frequent ones count in _n_*
         self._n_tf = self._n_pose = self._n_pose_est = self._n_state = self._n_gps = 0
+        self._n_geo = self._n_geo_est = self._n_geo_gnss = 0
+        self._geo: Any = None  # the GeoFrame once geo() has given the origin
+        self._geo_ids: dict[str, int] = {}  # geo topic key -> channel index
+        self._fix_codes: dict[str, int] = {}  # GNSS fix type -> its code in the gps rows
         self._est: dict[str, _EstChan] = {}
         self._banks: dict[tuple[str, ...], _EstBank] = {}
         # encoded messages (channel index, bytes, log_time) not yet handed to the writer (the
@@ -754,7 +763,8 @@ class RunLog:
                           np.frombuffer(_POSE_MID, dtype=np.uint8).copy(),
                           np.frombuffer(_WORLD2 + _str_field(3, "base_link"),
                                         dtype=np.uint8).copy()))
-        self._gps_rows = _Rows(4, cap=16)  # (t, x, y, z) of the fixes since the last flush
+        # (t, x, y, z, var e, n, u, fix type code) of the fixes since the last flush
+        self._gps_rows = _Rows(8, cap=16)
         self._state_schema: FlatSchema | None = None
         self._ctrl_keys: tuple[str, ...] = ()
         self._n_motors = 0
@@ -767,6 +777,8 @@ class RunLog:
         self._p_tf, self._p_pose, self._p_state = (pe["tf"] - 1e-9, pe["pose"] - 1e-9,
                                                    pe["state"] - 1e-9)
         self._p_gps, self._p_est = pe["gps"] - 1e-9, pe["estimator"] - 1e-9
+        self._p_geo = pe["geo"] - 1e-9
+        self._next["geo"] = _INF  # on once geo() gives the origin
         self._tick_groups = [g for g in ("tf", "pose", "state") if en[g]]
         self._next_tick = -_INF if self._tick_groups else _INF
         self._last_true = (_NAN, _NAN, _NAN)
@@ -814,7 +826,9 @@ class RunLog:
         n_pose = self._n_pose  # the tick rows count when they are handed out
         for topic, n in (("/tf", self._n_tf), ("/drone/pose", n_pose),
                          ("/drone/pose_ref", n_pose), ("/drone/pose_est", self._n_pose_est),
-                         ("/drone/state", self._n_state), ("/gps", self._n_gps)):
+                         ("/drone/state", self._n_state), ("/gps", self._n_gps),
+                         ("/geo/true", self._n_geo), ("/geo/est", self._n_geo_est),
+                         ("/geo/gnss", self._n_geo_gnss)):
             if n:
                 out[topic] = out.get(topic, 0) + n
         for ec in self._est.values():
@@ -880,6 +894,8 @@ class RunLog:
             self._n_pose -= (m & 2) >> 1
             self._n_pose_est -= (m & 10) == 10
             self._n_state -= (m & 4) >> 2
+            self._n_geo -= (m & 16) >> 4
+            self._n_geo_est -= (m & 24) == 24
         rows.open = False
         ops: list[tuple[Any, ...]] = []
         if self._pending:
@@ -1048,18 +1064,31 @@ class RunLog:
             nx["state"] = t + self._p_state
             mask |= 4
             self._n_state += 1
-        nt = nx["tf"]
-        if nx["pose"] < nt:
-            nt = nx["pose"]
-        if nx["state"] < nt:
-            nt = nx["state"]
-        self._next_tick = nt
+        if t >= nx["geo"]:
+            nx["geo"] = t + self._p_geo
+            mask |= 16
+            self._n_geo += 1
+            if est:
+                self._geo_est()
+        self._next_tick = self._tick_clock()
         row = rows.open_row()
         row[0] = t
         row[1] = mask | 8 if est else mask
         self._last_row = row
         self._last_true = None
         return row[TICK_P:]
+
+    def _tick_clock(self) -> float:
+        """The next sim time a tick row is due: the earliest of the per-tick groups' clocks."""
+        nx = self._next
+        nt = nx["tf"]
+        if nx["pose"] < nt:
+            nt = nx["pose"]
+        if nx["state"] < nt:
+            nt = nx["state"]
+        if nx["geo"] < nt:
+            nt = nx["geo"]
+        return nt
 
     def tick(
         self,
@@ -1151,8 +1180,11 @@ class RunLog:
         return t >= self._next_spray
 
 
-    def gps(self, t: float, fix_xyz: Sequence[float]) -> None:
-        """A GPS fix (local ENU metres) -> ``/gps`` PoseInFrame."""
+    def gps(self, t: float, fix_xyz: Sequence[float], var: Sequence[float] | None = None,
+            fix_type: str | None = None) -> None:
+        """A GPS fix (local ENU metres) -> ``/gps`` PoseInFrame and, once :meth:`geo` gave the
+        origin, ``/geo/gnss`` LocationFix with the receiver's reported variances ``var`` (east,
+        north, up, m²) and its ``fix_type`` (a colour and metadata ``fix_type``)."""
         if t < self._next["gps"]:  # inf when off or closed
             return
         self._next["gps"] = t + self._p_gps
@@ -1160,8 +1192,75 @@ class RunLog:
         row[0] = t
         row[1], row[2] = fix_xyz[0], fix_xyz[1]
         row[3] = fix_xyz[2] if len(fix_xyz) > 2 else 0.0
+        if var is None:
+            row[4:7] = _NAN
+        else:
+            row[4], row[5], row[6] = var[0], var[1], var[2]
+        code = 0
+        if fix_type is not None:
+            code = self._fix_codes.get(fix_type, 0)
+            if not code:
+                code = self._fix_code(fix_type)
+        row[7] = code
         self._gps_rows.commit()
         self._n_gps += 1
+        if self._geo is not None and "gnss" in self._geo_ids:
+            self._n_geo_gnss += 1
+
+    def _fix_code(self, fix_type: str) -> int:
+        """The code of a GNSS fix type in the gps rows (declared to the writer once)."""
+        code = self._fix_codes[fix_type] = len(self._fix_codes) + 1
+        self._ops.append(("fixtype", code, str(fix_type)))
+        return code
+
+    # ---------------------------------------------------------------- geographic topics
+    def geo(self, origin: Sequence[float], *, dose_target_l_per_ha: float | None = None) -> None:
+        """The run's geodetic origin (lat °, lon °, WGS-84 height m of the local frame's
+        origin): turns on the geographic topics (:mod:`ag_uav.record.geo`; group ``geo``):
+        LocationFix of the true position, the estimate and the GNSS fixes, and GeoJSON of the
+        field, plan, sprayed area and dose (in bands of ``dose_target_l_per_ha``) that
+        :meth:`scene`, :meth:`sprayed` and :meth:`dose` log from now on.  Also the metadata
+        record ``geo``.  Call once, before :meth:`scene`."""
+        if self.closed or self._period["geo"] == _INF or self._geo is not None:
+            return
+        from .geo import GeoFrame
+
+        self._geo = frame = GeoFrame(origin)
+        self._dose_target = float(dose_target_l_per_ha or 0.0)
+        M = self._M
+        ids = self._geo_ids
+        ids["true"] = self._chan("/geo/true", M.LocationFix)
+        if self._period["gps"] < _INF:
+            ids["gnss"] = self._chan("/geo/gnss", M.LocationFix)
+        self._ops.append(("geofmt", frame.origin, ids["true"], -1, ids.get("gnss", -1)))
+        lat, lon, h = frame.origin
+        self._ops.append(("meta", "geo", {
+            "origin_lat_deg": repr(lat), "origin_lon_deg": repr(lon), "origin_alt_m": repr(h),
+            "frame": "local ENU metres (x east, y north, z up) about the origin, WGS-84"}))
+        self._next["geo"] = -_INF
+        self._next_tick = self._tick_clock()
+
+    def _geo_est(self) -> None:
+        """``/geo/est``: declared at the first tick row with an estimate (a run without one
+        has no such topic)."""
+        self._n_geo_est += 1
+        if "est" not in self._geo_ids:
+            ids = self._geo_ids
+            ids["est"] = self._chan("/geo/est", self._M.LocationFix)
+            self._ops.append(("geofmt", self._geo.origin, ids["true"], ids["est"],
+                              ids.get("gnss", -1)))
+
+    def _geo_json(self, key: str, t: float, text: str) -> None:
+        """A GeoJSON message on ``/geo/<key>`` (declared at its first), sent with the next
+        hand-over."""
+        lid = self._geo_ids.get(key)
+        if lid is None:
+            from .geo import GEO_TOPICS
+
+            lid = self._geo_ids[key] = self._chan(GEO_TOPICS[key], self._M.GeoJson)
+        tn = ns(t)
+        self._pending.append((lid, _str_field(1, text), tn))
+        self._count(f"/geo/{key}")
 
     def set_truth(self, p_true: Sequence[float]) -> None:
         """The true position at the time of the next ``estimator`` calls (their ``err``): the
@@ -1386,7 +1485,18 @@ class RunLog:
                         for (a, b), c in zip(pts[:, :2], z, strict=True)],
                 color=M.Color(r=col[0], g=col[1], b=col[2], a=col[3])))
         plan = M.SceneEntity(timestamp=ts, frame_id="world", id="plan", lines=lines)
+        if self._geo is not None:
+            from .geo import field_geojson, plan_geojson
+
+            self._geo_json("field", t, field_geojson(self._geo, [(o, [np.asarray(h, float)
+                                                                    for h in hs])
+                                                                for o, (_, hs) in
+                                                                zip(outers, parts,
+                                                                    strict=True)]))
+            self._geo_json("plan", t, plan_geojson(self._geo, plan_segments))
         self._scene_entities(t, [field, plan], "/field")
+        if self._geo is not None:
+            self._write_layout()  # with its Map panel, should the run be cut short
 
     def sprayed(self, t: float, polygons_xy: list[Any]) -> None:
         """Sprayed area (shapely Polygon/MultiPolygon or Nx2 rings) -> ``/sprayed``."""
@@ -1408,6 +1518,10 @@ class RunLog:
             lines=self._loops([np.asarray(p.exterior.coords) for p in polys], 0.01,
                               (0.1, 0.7, 1.0, 1.0), 1.0),
         )
+        if self._geo is not None:
+            from .geo import sprayed_geojson
+
+            self._geo_json("sprayed", t, sprayed_geojson(self._geo, polys))
         self._scene_entities(t, [ent], "/sprayed")
 
     # ---------------------------------------------------------------- dose map
@@ -1434,6 +1548,14 @@ class RunLog:
         self._count("/dose")
         self._dose_bytes += len(msg)
         self._next_dose = t + self._dose_period * 2 ** (self._dose_bytes // DOSE_QUOTA_B) - 1e-9
+        if self._geo is not None and self._dose_target > 0:  # the bands: in the writer
+            lid = self._geo_ids.get("dose")
+            if lid is None:
+                lid = self._geo_ids["dose"] = self._chan("/geo/dose", self._M.GeoJson)
+            self._ops.append(("geodose", lid, tn, float(x0), float(y0), float(cell),
+                              self._dose_target,
+                              np.ascontiguousarray(l_per_ha, dtype=np.float64)))
+            self._count("/geo/dose")
 
     # ---------------------------------------------------------------- camera
     def frame(
@@ -1526,9 +1648,16 @@ class RunLog:
                                                    [*self._est, *(n for b in self._banks
                                                                   for n in b)]),
                                   ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4,
-                                  spray=self._ch_spray is not None)
+                                  spray=self._ch_spray is not None,
+                                  geo=self._geo_topics())
         except Exception:  # noqa: BLE001 - a missing layout never stops a run
             pass
+
+    def _geo_topics(self) -> tuple[str, ...]:
+        """The geographic topics declared so far (what the layout's Map panel names)."""
+        from .geo import GEO_TOPICS
+
+        return tuple(GEO_TOPICS[k] for k in GEO_TOPICS if k in self._geo_ids)
 
     def close(self, partial: bool = False) -> None:
         """Finish the file (summary, indexes, footer).  Idempotent; safe in signal handlers
@@ -1639,16 +1768,21 @@ def synthetic_run(
     seed: int = 0,
     estimators: Sequence[str] = ("kf", "mckf"),
     on_tick: Any = None,
+    origin: Sequence[float] | None = None,
 ) -> int:
-    """Drive ``log`` like the simulation would: ticks at ``1/dt``, GPS fixes, estimators.
+    """Drive ``log`` like the simulation would: ticks at ``1/dt``, GPS fixes (RTK fixed, one
+    in five RTK float), estimators.
 
     ``on_tick(t, p, q_wxyz)`` is called after each tick (e.g. to pose a body and render).
-    Returns the tick count.  Deterministic for a given ``seed``.
+    ``origin`` (lat, lon, h): the geographic topics too (:meth:`RunLog.geo`).  Returns the tick
+    count.  Deterministic for a given ``seed``.
     """
     rng = np.random.default_rng(seed)
     plan = lawnmower_plan()
     outer = np.array([[0, 0], [60, 0], [60, 40], [0, 40]], dtype=float)
     hole = np.array([[28, 18], [32, 18], [32, 22], [28, 22]], dtype=float)
+    if origin is not None:
+        log.geo(origin, dose_target_l_per_ha=1.0)
     log.scene(0.0, outer, [hole], plan, swath=8.0, altitude=3.0)
     pts = np.concatenate([s[1] for s in plan])
     seg_len = np.linalg.norm(np.diff(pts, axis=0), axis=1)
@@ -1689,7 +1823,9 @@ def synthetic_run(
                  spray=plan[min(i, len(plan) - 1)][2])
         if k % gps_every == 0:
             fix = p + rng.normal(0.0, 0.8, 3) * np.array([1, 1, 0.5])
-            log.gps(t, fix)
+            float_ = k % (5 * gps_every) == 0
+            log.gps(t, fix, (0.64, 0.64, 0.16) if float_ else (0.01, 0.01, 0.02),
+                    "rtk-float" if float_ else "rtk-fixed")
             for j, (name, x) in enumerate(est.items()):
                 a = 0.3 + 0.2 * j
                 innov = fix - x[:3]

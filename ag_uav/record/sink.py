@@ -25,8 +25,11 @@ The operations (tuples, executed in order):
     and the pose, ``tf_head`` a transform's).
 ``("tickfmt", n_motors, ctrl_cols, st_tmpl, st_slots, pose_tmpl, tf_tmpl, kind_lids)``
     the tick rows' encoding (:func:`ag_uav.record.encode.encode_ticks`).
+``("geofmt", origin, lid_true, lid_est, lid_gnss)``, ``("fixtype", code, name)``
+    the geographic topics (:mod:`ag_uav.record.geo`): the origin and the LocationFix channels
+    (< 0: none) the tick rows flagged 16 and the GNSS rows go to; a GNSS fix type's code.
 ``("msgs", [(lid, bytes, tn), ...])``, ``("block", fid, rows)``, ``("gps", lid, rows)``,
-``("ticks", rows)``
+``("ticks", rows)``, ``("geodose", lid, tn, x0, y0, cell, target, grid)``
     messages for the next ``emit`` (all merged by log time).
 ``("emit",)``, ``("log", lid, bytes, tn)``, ``("flush",)``, ``("meta", name, dict)``,
 ``("attach", kwargs)``, ``("close",)``.
@@ -66,6 +69,8 @@ _F8 = np.dtype(np.float64)
 _OPS = "\0ops"  # marks a framed list of operations (replies are tuples of strings)
 #: the most bytes one tick row's messages take, besides the state message
 _ROW_POSE_BYTES = 4 * (2 + 14 + 32 + 67)
+#: a LocationFix's ``frame_id`` (field 7): the true position is the body frame's
+_BASE_LINK7 = b"\x3a\x09base_link"
 #: pipes of the writer processes this process holds open (a forked writer closes the others')
 _LIVE_FDS: set[int] = set()
 
@@ -130,6 +135,8 @@ class Backend:
         self._pend: list[tuple[int, bytes, int]] = []
         self._out = np.zeros(0, dtype=np.uint8)
         self._idx = np.zeros((3, 1), dtype=np.int64)
+        self._geo: Any = None  # (GeoFrame, lid true, lid est, lid gnss)
+        self._fix_tail: dict[int, tuple[bytes, tuple[float, ...]]] = {}
         self.closed = False
 
     def run(self, ops: list[tuple[Any, ...]]) -> None:
@@ -162,9 +169,65 @@ class Backend:
         self._kind_lids = kind_lids
         self._row_bytes = _ROW_POSE_BYTES + len(st_tmpl)
 
+    def _geofmt(self, origin: tuple[float, float, float], lid_true: int, lid_est: int,
+                lid_gnss: int) -> None:
+        from .geo import GeoFrame
+
+        self._geo = (GeoFrame(origin), lid_true, lid_est, lid_gnss)
+
+    def _fixtype(self, code: int, name: str) -> None:
+        from .geo import fix_color, kv_metadata
+
+        self._fix_tail[code] = (kv_metadata("fix_type", name), fix_color(name))
+
     # ------------------------------------------------------------------ messages
     def _msgs(self, msgs: list[tuple[int, bytes, int]]) -> None:
         self._pend.extend(msgs)
+
+    def _geo_ticks(self, r: np.ndarray) -> None:
+        """``/geo/true`` (and ``/geo/est`` where the row holds an estimate) LocationFix of the
+        tick rows flagged 16."""
+        from .geo import location_fixes
+
+        frame, lid_true, lid_est, _ = self._geo
+        mask = r[:, 1].astype(np.int64)
+        g = r[(mask & 16) != 0]
+        if not len(g):
+            return
+        tns = _ns_list(g[:, 0])
+        self._pend.extend(zip(itertools.repeat(lid_true),
+                              location_fixes(tns, frame.lla(g[:, 2:5]), head=_BASE_LINK7),
+                              tns, strict=False))
+        e = (mask[(mask & 16) != 0] & 8) != 0
+        if lid_est >= 0 and e.any():
+            ge, te = g[e], [tn for tn, k in zip(tns, e, strict=True) if k]
+            self._pend.extend(zip(itertools.repeat(lid_est),
+                                  location_fixes(te, frame.lla(ge[:, 19:22])), te,
+                                  strict=False))
+
+    def _geo_gnss(self, r: np.ndarray) -> None:
+        """``/geo/gnss`` LocationFix of the GNSS rows (t, x, y, z, variances e n u, type)."""
+        from .geo import NO_TYPE_COLOR, location_fixes
+
+        frame, _, _, lid = self._geo
+        codes = r[:, 7].astype(np.int64).tolist()
+        no = (b"", NO_TYPE_COLOR)
+        tails = [self._fix_tail.get(c, no) for c in codes]
+        tns = _ns_list(r[:, 0])
+        self._pend.extend(zip(itertools.repeat(lid), location_fixes(
+            tns, frame.lla(r[:, 1:4]), var_enu=r[:, 4:7],
+            rgba=np.array([tl[1] for tl in tails]), tails=[tl[0] for tl in tails]), tns,
+            strict=False))
+
+    def _geodose(self, lid: int, tn: int, x0: float, y0: float, cell: float, target: float,
+                 grid: np.ndarray) -> None:
+        """``/geo/dose``: the dose map's bands as GeoJSON
+        (:func:`ag_uav.record.geo.dose_geojson`)."""
+        from .geo import dose_geojson
+        from .runlog import _str_field
+
+        text = dose_geojson(self._geo[0], x0, y0, cell, grid, target)
+        self._pend.append((lid, _str_field(1, text), tn))
 
     def _block(self, fid: int, r: np.ndarray) -> None:
         from .encode import encode_flat
@@ -185,6 +248,8 @@ class Backend:
     def _gps(self, lid: int, r: np.ndarray) -> None:
         from .encode import encode_poses
 
+        if self._geo is not None and self._geo[3] >= 0:
+            self._geo_gnss(r)
         tmpl, slots, head, _ = self._pose
         n = len(r)
         out = np.empty(n * (len(head) + 80), dtype=np.uint8)
@@ -200,6 +265,8 @@ class Backend:
         nothing else waits (else merged by the next ``emit``)."""
         from .encode import encode_ticks
 
+        if self._geo is not None:  # first: the tick messages below then merge with them
+            self._geo_ticks(r)
         n = len(r)
         if len(self._out) < n * self._row_bytes:
             self._out = np.empty(2 * n * self._row_bytes, dtype=np.uint8)

@@ -1400,6 +1400,17 @@ class GpsSensor:
             * np.asarray(self.axis_scale) ** 2
         return float(v[0]), float(v[1]), float(v[2])
 
+    def reported_variance(self, mode: str | None) -> tuple[float, float, float]:
+        """The per-axis variance a receiver reports with a fix of type ``mode``: the mode's
+        (:meth:`mode_variance`), or the nominal :attr:`variance` for no or an unknown type
+        (memoised: the run log asks at every fix)."""
+        memo = self.__dict__.setdefault("_reported", {})
+        v = memo.get(mode)
+        if v is None:
+            v = memo[mode] = (self.mode_variance(mode) if mode in self.fix_types
+                              else self.variance)
+        return v
+
 
 # ---------------------------------------------------------------------------------------------
 # what the receiver reports with each fix (issue 19: an honest receiver)

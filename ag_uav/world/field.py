@@ -45,8 +45,10 @@ projection: a point at ground distance d from the origin lands at R·sin(d/R) �
 relative length error of ~1e-9 at d = 500 m and ~1e-7 at 5 km (area error twice that); the
 dropped ``u`` (Earth curvature, ≈ -d²/2R) is 2 cm at 500 m and irrelevant to a planar plan. Edges
 of a lon/lat polygon are taken as straight lines in the plane (a parallel between two vertices
-100 m apart bows by < 1 mm). The inverse (:func:`enu_to_lonlat`) uses ECEF → geodetic with
-Bowring's iteration, accurate to < 1e-9 deg here.
+100 m apart bows by < 1 mm). A lon/lat field's vertices are projected at the origin's height
+``h0`` (the ground it lies on). The inverse (:func:`enu_to_geodetic`, :func:`enu_to_lonlat`) uses
+ECEF → geodetic with Bowring's iteration, accurate to < 1e-9 deg here; it is what the run log's
+geographic topics use (:mod:`ag_uav.record.geo`), so lon/lat → ENU → lon/lat round-trips.
 """
 
 from __future__ import annotations
@@ -67,8 +69,10 @@ from shapely.validation import explain_validity
 
 __all__ = [
     "BUILTIN_FIELDS",
+    "DEFAULT_ORIGIN",
     "FIELD_FILE_SUFFIXES",
     "Field",
+    "enu_to_geodetic",
     "enu_to_lonlat",
     "geodetic_to_ecef",
     "load_field",
@@ -120,11 +124,14 @@ def lonlat_to_enu(lon_deg, lat_deg, origin: Sequence[float], h=0.0) -> np.ndarra
     return (p - p0) @ _enu_rotation(lat0, lon0).T
 
 
-def enu_to_lonlat(e, n, origin: Sequence[float], u=0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Local ENU metres → (lon, lat) degrees; inverse of :func:`lonlat_to_enu`.
+def enu_to_geodetic(e, n, origin: Sequence[float], u=0.0
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Local ENU metres → (lon, lat, h): degrees and WGS-84 ellipsoidal height (m); the exact
+    inverse of :func:`lonlat_to_enu` (with its ``h``).
 
     ENU → ECEF by the transposed rotation, then ECEF → geodetic with Bowring's parametric-latitude
-    iteration (3 rounds; converged to ~1e-12 rad for terrestrial heights)."""
+    iteration (3 rounds; converged to ~1e-12 rad for terrestrial heights) and the height
+    ``h = p cosφ + z sinφ − a sqrt(1 − e² sin²φ)`` (valid at every latitude)."""
     lat0, lon0 = float(origin[0]), float(origin[1])
     h0 = float(origin[2]) if len(origin) > 2 else 0.0
     enu = np.stack(np.broadcast_arrays(np.asarray(e, float), np.asarray(n, float),
@@ -139,7 +146,16 @@ def enu_to_lonlat(e, n, origin: Sequence[float], u=0.0) -> tuple[np.ndarray, np.
         lat = np.arctan2(z + ep2 * WGS84_B * np.sin(beta) ** 3,
                          p - WGS84_E2 * WGS84_A * np.cos(beta) ** 3)
         beta = np.arctan2((1.0 - WGS84_F) * np.sin(lat), np.cos(lat))
-    return np.degrees(lon), np.degrees(lat)
+    s = np.sin(lat)
+    h = p * np.cos(lat) + z * s - WGS84_A * np.sqrt(1.0 - WGS84_E2 * s * s)
+    return np.degrees(lon), np.degrees(lat), h
+
+
+def enu_to_lonlat(e, n, origin: Sequence[float], u=0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Local ENU metres → (lon, lat) degrees; inverse of :func:`lonlat_to_enu`
+    (:func:`enu_to_geodetic` without the height)."""
+    lon, lat, _ = enu_to_geodetic(e, n, origin, u)
+    return lon, lat
 
 
 def _as_ring(pts: Iterable[Sequence[float]], what: str) -> np.ndarray:
@@ -288,7 +304,9 @@ class Field:
         else:
             org = (float(origin[0]), float(origin[1]),
                    float(origin[2]) if len(origin) > 2 else 0.0)
-        local = [[lonlat_to_enu(r[:, 0], r[:, 1], org)[:, :2] for r in rings] for rings in ll]
+        # vertices at the origin's height: the ground the field lies on
+        local = [[lonlat_to_enu(r[:, 0], r[:, 1], org, org[2])[:, :2] for r in rings]
+                 for rings in ll]
         f = cls.from_parts(local, name=name, origin=org)
         f.meta.update(meta or {})
         return f
@@ -747,6 +765,18 @@ BUILTIN_FIELDS = ("default", "l-shape", "hole", "two-part")
 
 _DEFAULT_OUTER = [(0.0, 0.0), (112.0, 5.0), (116.0, 96.0), (-3.0, 90.0)]
 
+#: The geodetic origin (lat °, lon °, WGS-84 ellipsoidal height m) given to the fields in local
+#: metres (the built-in ``"default"``) unless the config names one: a point in the Palouse
+#: wheat country about 1 km south-west of the lon/lat built-in fields, west of Moscow, Idaho, USA.
+#: The ground there lies about 780 m above sea level; 760 m is an approximate ellipsoidal
+#: height (the geoid lies some 15-20 m below the ellipsoid in the region), used only for the
+#: altitude the log's geographic topics report.
+DEFAULT_ORIGIN = (46.7250, -117.0200, 760.0)
+
+
+def _h(origin: Sequence[float]) -> float:
+    return float(origin[2]) if len(origin) > 2 else 0.0
+
 
 def split_field_spec(spec: str) -> tuple[str, str | None]:
     """``"path.geojson#name=North"`` → ``("path.geojson", "name=North")``; no ``#`` (or a file
@@ -757,21 +787,27 @@ def split_field_spec(spec: str) -> tuple[str, str | None]:
     return spec, None
 
 
-def load_field(name: str) -> Field:
+def load_field(name: str, origin: Sequence[float] | None = None) -> Field:
     """Load a built-in field (:data:`BUILTIN_FIELDS`) or a field file
     (:data:`FIELD_FILE_SUFFIXES`), optionally with a feature selector: ``PATH#KEY=VALUE`` or
-    ``PATH#VALUE`` (= ``#name=VALUE``). Raises ValueError with a one-line reason."""
+    ``PATH#VALUE`` (= ``#name=VALUE``). Raises ValueError with a one-line reason.
+
+    ``origin`` = (lat, lon[, h]): a lon/lat field is projected about it instead of its own
+    origin (the mean of its vertices, height 0); the local ``"default"`` field only takes it as
+    its :attr:`Field.origin` (its metres stay as they are)."""
     path, select = split_field_spec(name)
     key = path.strip().lower().replace("_", "-")
+    org = None if origin is None else tuple(float(v) for v in origin)
     if select is None and key == "default":
-        return Field.from_coords(_DEFAULT_OUTER, name="default")
+        return Field.from_coords(_DEFAULT_OUTER, name="default",
+                                 origin=None if org is None else (*org[:2], _h(org)))
     if select is None and key in BUILTIN_FIELDS:
         ref = resources.files("ag_uav") / "data" / f"{key}.geojson"
-        return Field.from_geojson(json.loads(ref.read_text()), name=key)
+        return Field.from_geojson(json.loads(ref.read_text()), name=key, origin=org)
     if key.endswith(FIELD_FILE_SUFFIXES):
         if not Path(path).exists():
             raise ValueError(f"file not found: {path}")
-        return Field.from_file(path, select=select)
+        return Field.from_file(path, select=select, origin=org)
     raise ValueError(f"unknown field {name!r}; built-in fields are {', '.join(BUILTIN_FIELDS)}"
                      f", or give a path to a {'/'.join(FIELD_FILE_SUFFIXES)} file "
                      "(optionally PATH#name=VALUE to pick one feature)")

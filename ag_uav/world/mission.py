@@ -7,15 +7,40 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import Config, ConfigError
-from .field import Field, load_field
+from .field import DEFAULT_ORIGIN, Field, load_field
 from .plan import CoveragePlan, plan_coverage
+
+#: how far (m) a field may reach from the origin a config names: the local tangent plane's
+#: length error is ~d²/6R² (1e-7 at 5 km; :mod:`ag_uav.world.field`)
+ORIGIN_REACH_M = 20_000.0
 
 
 def build_field(cfg: Config) -> Field:
+    """The field of ``mission.field`` with the run's geodetic origin (:attr:`Field.origin`):
+    ``mission.origin_*`` where given (a lon/lat field is then projected about it), else a
+    lon/lat field's own origin, else :data:`~ag_uav.world.field.DEFAULT_ORIGIN`."""
+    m = cfg.mission
+    given = None
+    if m.origin_lat_deg != "auto":
+        given = (float(m.origin_lat_deg), float(m.origin_lon_deg))
     try:
-        return load_field(cfg.mission.field)
+        fld = load_field(m.field)
+        if fld.origin is None or given is not None or m.origin_alt_m != "auto":
+            org = (given or (fld.origin or DEFAULT_ORIGIN)[:2])
+            alt = (float(m.origin_alt_m) if m.origin_alt_m != "auto" else
+                   (fld.origin or DEFAULT_ORIGIN)[2])
+            fld = load_field(m.field, origin=(*org, alt))
     except ValueError as e:
-        raise ConfigError(f'mission.field = "{cfg.mission.field}": {e}') from None
+        raise ConfigError(f'mission.field = "{m.field}": {e}') from None
+    reach = max(abs(v) for v in fld.bounds)
+    if reach > ORIGIN_REACH_M:
+        key, v = (("origin_lat_deg", m.origin_lat_deg) if given else
+                  ("origin_alt_m", m.origin_alt_m))
+        raise ConfigError(f"mission.{key} = {v}: the field reaches {reach / 1000:.1f} km from "
+                          f"the origin {fld.origin[0]:.6f}, {fld.origin[1]:.6f}; an origin must "
+                          f"lie within {ORIGIN_REACH_M / 1000:g} km of the field (a local "
+                          "tangent plane)")
+    return fld
 
 
 def build_plan(cfg: Config, fld: Field) -> CoveragePlan:

@@ -1,0 +1,333 @@
+"""Geographic topics of the run log, for Foxglove's Map panel: where on the farm the drone flew.
+
+Every run has a geodetic origin (:attr:`ag_uav.world.field.Field.origin`: a lon/lat field's own,
+``mission.origin_*``, or :data:`ag_uav.world.field.DEFAULT_ORIGIN`); the local ENU metres the
+simulation flies in are turned into WGS-84 latitude, longitude and ellipsoidal height by
+:func:`ag_uav.world.field.enu_to_geodetic`, the exact inverse of the projection a lon/lat field
+file was read with (so lon/lat → ENU → lon/lat round-trips to well under a millimetre).
+
+Topics (the schemas the Foxglove SDK defines, ``foxglove.messages.LocationFix`` and
+``foxglove.messages.GeoJson``; ``group`` is the run log's channel group):
+
+==============  =====================  ======================================================
+topic           schema                 what
+==============  =====================  ======================================================
+/geo/true       foxglove.LocationFix   the true position (group ``geo``: 5 Hz, light 1 Hz)
+/geo/est        foxglove.LocationFix   the estimate that is flown (same rate; with one only)
+/geo/gnss       foxglove.LocationFix   each GNSS fix as received (group ``gps``'s rate, needs
+                                       ``geo`` on too): the receiver's reported variances as a
+                                       diagonal ENU covariance (``DIAGONAL_KNOWN``; ``UNKNOWN``
+                                       where none is finite), its fix type as ``color``
+                                       (:data:`FIX_COLORS`) and as metadata ``fix_type``
+/geo/field      foxglove.GeoJSON       the field: every part with its holes (at the start)
+/geo/plan       foxglove.GeoJSON       the planned path: spray legs and transits
+/geo/sprayed    foxglove.GeoJSON       the sprayed area (at the end)
+/geo/dose       foxglove.GeoJSON       the dose on the ground in bands of the target rate
+                                       (:data:`DOSE_BANDS`), at the ``/dose`` cadence
+==============  =====================  ======================================================
+
+GeoJSON is RFC 7946: positions ``[lon, lat]``, rings closed, exterior rings counter-clockwise and
+holes clockwise (in lon/lat, as shapely's ``orient_polygons`` leaves them).  Each feature carries
+``properties.name`` (Foxglove shows it as a tooltip) and ``properties.style`` (Leaflet path
+options: ``color``, ``weight``, ``opacity``, ``fillColor``, ``fillOpacity``, ``dashArray``), which
+the Map panel applies to the feature.
+
+The LocationFix messages are hand-encoded (protobuf wire format, field numbers of the SDK's
+``foxglove.LocationFix``; checked in the tests by decoding with the SDK's schema and with
+Foxglove's TypeScript reader): a fixed-layout numpy record per message after its timestamp.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from ..world.field import enu_to_geodetic
+
+__all__ = [
+    "DOSE_BANDS",
+    "FIX_COLORS",
+    "GEO_TOPICS",
+    "GeoFrame",
+    "dose_geojson",
+    "field_geojson",
+    "fix_color",
+    "location_fixes",
+    "plan_geojson",
+    "sprayed_geojson",
+]
+
+GEO_TOPICS = {"true": "/geo/true", "est": "/geo/est", "gnss": "/geo/gnss",
+              "field": "/geo/field", "plan": "/geo/plan", "sprayed": "/geo/sprayed",
+              "dose": "/geo/dose"}
+
+#: RGBA of a GNSS fix on the map by its fix type (a name containing the key; first match):
+#: RTK fixed green, RTK float amber, differential (DGPS, SBAS) orange, a stand-alone fix red
+FIX_COLORS: tuple[tuple[str, tuple[float, float, float, float]], ...] = (
+    ("fixed", (0.10, 0.75, 0.25, 1.0)),
+    ("float", (1.00, 0.75, 0.00, 1.0)),
+    ("dgps", (1.00, 0.45, 0.00, 1.0)),
+    ("sbas", (1.00, 0.45, 0.00, 1.0)),
+    ("single", (0.90, 0.10, 0.10, 1.0)),
+    ("spp", (0.90, 0.10, 0.10, 1.0)),
+)
+#: a receiver that reports no fix type
+NO_TYPE_COLOR = (0.25, 0.55, 1.00, 1.0)
+
+#: the dose bands of ``/geo/dose``, as shares of the target rate: (low, high, name, colour);
+#: 0.8 and 1.2 are the under- and over-dose bounds of the dose metrics
+#: (:func:`ag_uav.world.deposition.dose_metrics`); below 5 % nothing is drawn
+DOSE_BANDS: tuple[tuple[float, float, str, str], ...] = (
+    (0.05, 0.8, "under-dosed (5-80 % of target)", "#ff8c00"),
+    (0.8, 1.2, "on target (80-120 %)", "#22aa44"),
+    (1.2, math.inf, "over-dosed (> 120 %)", "#8b00c8"),
+)
+
+#: decimal places of GeoJSON degrees: 1e-8 deg is ~1 mm
+_DP = 8
+
+
+def fix_color(fix_type: str | None) -> tuple[float, float, float, float]:
+    """The map colour of a GNSS fix of ``fix_type`` (:data:`FIX_COLORS`)."""
+    if not fix_type:
+        return NO_TYPE_COLOR
+    low = fix_type.lower()
+    for key, rgba in FIX_COLORS:
+        if key in low:
+            return rgba
+    return NO_TYPE_COLOR
+
+
+class GeoFrame:
+    """The run's local ENU frame on the WGS-84 ellipsoid: ``origin`` = (lat °, lon °, h m)."""
+
+    def __init__(self, origin: Sequence[float]):
+        lat, lon = float(origin[0]), float(origin[1])
+        h = float(origin[2]) if len(origin) > 2 else 0.0
+        if not (abs(lat) < 90.0 and abs(lon) <= 180.0 and math.isfinite(h)):
+            raise ValueError(f"origin ({lat}, {lon}, {h}) is out of range; expected lat, lon in "
+                             "degrees and a finite height")
+        self.origin = (lat, lon, h)
+
+    def lla(self, xyz: np.ndarray) -> np.ndarray:
+        """(n, 3) ENU metres → (n, 3) latitude °, longitude °, ellipsoidal height m."""
+        xyz = np.asarray(xyz, dtype=float)
+        lon, lat, h = enu_to_geodetic(xyz[:, 0], xyz[:, 1], self.origin, xyz[:, 2])
+        return np.stack([lat, lon, h], axis=1)
+
+    def lonlat(self, xy: Any) -> list[list[float]]:
+        """(n, 2) ENU metres on the ground plane → ``[[lon, lat], ...]`` (GeoJSON positions)."""
+        a = np.asarray(xy, dtype=float).reshape(-1, 2)
+        lon, lat, _ = enu_to_geodetic(a[:, 0], a[:, 1], self.origin)
+        return np.round(np.stack([lon, lat], axis=1), _DP).tolist()
+
+
+# --------------------------------------------------------------------------------------------
+# foxglove.LocationFix
+# --------------------------------------------------------------------------------------------
+
+def _fix_dtype(cov: bool, color: bool) -> np.dtype:
+    """The fixed part of a LocationFix: latitude (1), longitude (2), altitude (3), then the
+    packed covariance (4) and its type (5), then the colour (8), each with its tag bytes."""
+    f: list[tuple[Any, ...]] = [("t1", "u1"), ("lat", "<f8"), ("t2", "u1"), ("lon", "<f8"),
+                                ("t3", "u1"), ("alt", "<f8")]
+    if cov:
+        f += [("t4", "u1"), ("l4", "u1"), ("cov", "<f8", (9,)), ("t5", "u1"), ("ct", "u1")]
+    if color:
+        f += [("t8", "u1"), ("l8", "u1"), ("t81", "u1"), ("r", "<f8"), ("t82", "u1"),
+              ("g", "<f8"), ("t83", "u1"), ("b", "<f8"), ("t84", "u1"), ("a", "<f8")]
+    return np.dtype(f)
+
+
+def _tags(a: np.ndarray) -> None:
+    a["t1"], a["t2"], a["t3"] = 0x09, 0x11, 0x19
+    names = a.dtype.names
+    if "t4" in names:
+        a["t4"], a["l4"], a["t5"] = 0x22, 72, 0x28
+    if "t8" in names:
+        a["t8"], a["l8"] = 0x42, 36
+        a["t81"], a["t82"], a["t83"], a["t84"] = 0x09, 0x11, 0x19, 0x21
+
+
+def location_fixes(tns: Sequence[int], lla: np.ndarray, *, head: bytes = b"",
+                   var_enu: np.ndarray | None = None, rgba: np.ndarray | None = None,
+                   tails: Sequence[bytes] | None = None) -> list[bytes]:
+    """``foxglove.LocationFix`` messages, one per row of ``lla`` ((n, 3): latitude, longitude,
+    altitude) at log times ``tns`` (ns).  ``head``: bytes written after the timestamp (the
+    ``frame_id`` field); ``var_enu`` (n, 3): the position variances east, north, up (m²) as a
+    diagonal covariance, ``DIAGONAL_KNOWN`` where all three are finite, else ``UNKNOWN`` with
+    zeros; ``rgba`` (n, 4): the ``color``; ``tails[j]``: bytes after message j (metadata)."""
+    from .runlog import _ts_pb
+
+    n = len(lla)
+    a = np.zeros(n, dtype=_fix_dtype(var_enu is not None, rgba is not None))
+    _tags(a)
+    a["lat"], a["lon"], a["alt"] = lla[:, 0], lla[:, 1], lla[:, 2]
+    if var_enu is not None:
+        v = np.asarray(var_enu, dtype=float)
+        ok = np.all(np.isfinite(v), axis=1)
+        cov = a["cov"]
+        cov[:, 0], cov[:, 4], cov[:, 8] = v[:, 0], v[:, 1], v[:, 2]
+        cov[~ok] = 0.0
+        a["ct"] = np.where(ok, 2, 0)  # DIAGONAL_KNOWN / UNKNOWN
+    if rgba is not None:
+        c = np.asarray(rgba, dtype=float)
+        a["r"], a["g"], a["b"], a["a"] = c[:, 0], c[:, 1], c[:, 2], c[:, 3]
+    buf, size = a.tobytes(), a.dtype.itemsize
+    out = []
+    for j, tn in enumerate(tns):
+        ts = _ts_pb(int(tn))
+        msg = b"\x32" + bytes((len(ts),)) + ts + head + buf[j * size:(j + 1) * size]
+        out.append(msg + tails[j] if tails is not None else msg)
+    return out
+
+
+def kv_metadata(key: str, value: str) -> bytes:
+    """``metadata`` (field 9) entry ``key = value`` of a LocationFix (a KeyValuePair)."""
+    from .runlog import _str_field, _varint
+
+    body = _str_field(1, key) + _str_field(2, value)
+    return b"\x4a" + _varint(len(body)) + body
+
+
+# --------------------------------------------------------------------------------------------
+# foxglove.GeoJSON
+# --------------------------------------------------------------------------------------------
+
+def _style(**kw: Any) -> dict[str, Any]:
+    """Leaflet path options from snake_case keywords (``fill_color`` → ``fillColor``)."""
+    return {k.split("_")[0] + "".join(w.capitalize() for w in k.split("_")[1:]): v
+            for k, v in kw.items()}
+
+
+def _polygon_coords(frame: GeoFrame, poly: Any) -> list[list[list[float]]]:
+    """A shapely polygon in ENU metres → GeoJSON rings in lon/lat, oriented the RFC 7946 way
+    (exterior counter-clockwise, holes clockwise) and closed."""
+    import shapely
+
+    ll = shapely.Polygon(frame.lonlat(np.asarray(poly.exterior.coords)[:, :2]),
+                         [frame.lonlat(np.asarray(r.coords)[:, :2]) for r in poly.interiors])
+    ll = shapely.orient_polygons(ll, exterior_cw=False)
+    return [np.asarray(r.coords).tolist() for r in (ll.exterior, *ll.interiors)]
+
+
+def _polys(geom: Any) -> list[Any]:
+    """The polygons of a shapely geometry (a Polygon, MultiPolygon or collection)."""
+    if geom is None or geom.is_empty:
+        return []
+    if geom.geom_type == "Polygon":
+        return [geom]
+    return [g for part in getattr(geom, "geoms", []) for g in _polys(part)]
+
+
+def _multipolygon(frame: GeoFrame, polys: list[Any]) -> dict[str, Any] | None:
+    coords = [_polygon_coords(frame, p) for p in polys if not p.is_empty and p.area > 0]
+    if not coords:
+        return None
+    if len(coords) == 1:
+        return {"type": "Polygon", "coordinates": coords[0]}
+    return {"type": "MultiPolygon", "coordinates": coords}
+
+
+def _collection(features: list[dict[str, Any]]) -> str:
+    return json.dumps({"type": "FeatureCollection", "features": features},
+                      separators=(",", ":"))
+
+
+def field_geojson(frame: GeoFrame, parts: list[tuple[Any, list[Any]]], name: str = "field",
+                  ) -> str:
+    """The field (``parts`` = ``[(outer, [hole, ...]), ...]``, rings in ENU metres) as one
+    feature: a Polygon, or a MultiPolygon of several parts, holes kept."""
+    import shapely
+
+    polys = [shapely.Polygon(np.asarray(o, float)[:, :2], [np.asarray(h, float)[:, :2]
+                                                           for h in hs]) for o, hs in parts]
+    geom = _multipolygon(frame, polys)
+    feats = [] if geom is None else [{
+        "type": "Feature", "geometry": geom,
+        "properties": {"name": f"field {name}: {sum(p.area for p in polys) / 1e4:.2f} ha",
+                       "style": _style(color="#e0c040", weight=3, fill_color="#8c7340",
+                                       fill_opacity=0.25)}}]
+    return _collection(feats)
+
+
+def plan_geojson(frame: GeoFrame, segments: list[tuple[str, Any, bool]]) -> str:
+    """The planned path: one LineString feature per segment (spray legs green, transits grey
+    and dashed), in flight order."""
+    feats = []
+    for k, (kind, pts, spray) in enumerate(segments):
+        p = np.asarray(pts, dtype=float)
+        if len(p) < 2:
+            continue
+        st = (_style(color="#22cc44", weight=2, opacity=0.9) if spray else
+              _style(color="#909090", weight=2, opacity=0.8, dash_array="4 4"))
+        feats.append({"type": "Feature",
+                      "geometry": {"type": "LineString", "coordinates": frame.lonlat(p[:, :2])},
+                      "properties": {"name": f"{k + 1}: {kind}" + (" (spray)" if spray else ""),
+                                     "style": st}})
+    return _collection(feats)
+
+
+def sprayed_geojson(frame: GeoFrame, geoms: list[Any]) -> str:
+    """The sprayed area (shapely polygons in ENU metres) as one (Multi)Polygon feature."""
+    polys = [p for g in geoms for p in _polys(g)]
+    geom = _multipolygon(frame, polys)
+    feats = [] if geom is None else [{
+        "type": "Feature", "geometry": geom,
+        "properties": {"name": f"sprayed: {sum(p.area for p in polys) / 1e4:.2f} ha",
+                       "style": _style(color="#1ab2ff", weight=1, fill_color="#1ab2ff",
+                                       fill_opacity=0.35)}}]
+    return _collection(feats)
+
+
+def dose_bands(x0: float, y0: float, cell: float, l_per_ha: np.ndarray, target: float,
+               simplify_m: float | None = None) -> list[tuple[str, str, Any]]:
+    """The dose map ((ny, nx) L/ha, cell (j, i) centred at (x0 + (i + ½)·cell, y0 +
+    (j + ½)·cell)) cut into :data:`DOSE_BANDS` of ``target`` L/ha by filled contours
+    (contourpy, marching squares between cell centres): ``[(name, colour, shapely geometry in
+    ENU metres), ...]`` of the bands that hold any area.  ``simplify_m`` (default a quarter
+    cell) thins the contours."""
+    import contourpy
+    import shapely
+
+    a = np.asarray(l_per_ha, dtype=float)
+    if a.ndim != 2 or min(a.shape) < 2 or not target > 0:
+        return []
+    ny, nx = a.shape
+    xs = x0 + (np.arange(nx) + 0.5) * cell
+    ys = y0 + (np.arange(ny) + 0.5) * cell
+    gen = contourpy.contour_generator(xs, ys, np.nan_to_num(a / target),
+                                      fill_type=contourpy.FillType.OuterOffset)
+    tol = 0.25 * cell if simplify_m is None else simplify_m
+    out = []
+    for lo, hi, name, col in DOSE_BANDS:
+        points, offsets = gen.filled(lo, hi if math.isfinite(hi) else 1e30)
+        polys = []
+        for pts, offs in zip(points, offsets, strict=True):
+            rings = [pts[offs[k]:offs[k + 1]] for k in range(len(offs) - 1)]
+            if rings and len(rings[0]) >= 4:
+                polys.append(shapely.Polygon(rings[0], [r for r in rings[1:] if len(r) >= 4]))
+        geom = shapely.make_valid(shapely.union_all(polys)) if polys else None
+        if geom is not None and tol > 0:
+            geom = geom.simplify(tol)
+        if geom is not None and not geom.is_empty and geom.area > 0:
+            out.append((name, col, geom))
+    return out
+
+
+def dose_geojson(frame: GeoFrame, x0: float, y0: float, cell: float, l_per_ha: np.ndarray,
+                 target: float) -> str:
+    """The dose map as one (Multi)Polygon feature per :data:`DOSE_BANDS` band (filled in the
+    band's colour; the name gives the band and its area)."""
+    feats = []
+    for name, col, geom in dose_bands(x0, y0, cell, l_per_ha, target):
+        g = _multipolygon(frame, _polys(geom))
+        if g is not None:
+            feats.append({"type": "Feature", "geometry": g, "properties": {
+                "name": f"dose {name}: {geom.area:.0f} m²",
+                "style": _style(color=col, weight=0, fill_color=col, fill_opacity=0.45)}})
+    return _collection(feats)
