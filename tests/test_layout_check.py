@@ -32,6 +32,9 @@ SCENE_3D = POSES | IMAGES | {
     "foxglove.SceneUpdate", "foxglove.FrameTransform", "foxglove.FrameTransforms",
     "foxglove.CameraCalibration", "foxglove.PointCloud", "foxglove.LaserScan", "foxglove.Grid"}
 CALIBRATION = {"foxglove.CameraCalibration"}
+# the Map panel draws location fixes (a track it can follow) and GeoJSON
+FIXES = {"foxglove.LocationFix", "sensor_msgs/NavSatFix"}
+MAP = FIXES | {"foxglove.GeoJSON"}
 _TOKEN = re.compile(r"\.([A-Za-z_][A-Za-z0-9_]*)|\[(\d+)\]")
 
 
@@ -142,6 +145,13 @@ def check_layout(layout: dict[str, Any], log: LogIndex) -> list[str]:
         elif kind == "Plot":
             for p in cfg.get("paths", []):
                 problems += _resolve(log, panel, p["value"])
+        elif kind == "Map":
+            named = [*cfg.get("topicColors", {}), *cfg.get("topicConfig", {}),
+                     *cfg.get("disabledTopics", [])]
+            for topic in dict.fromkeys(named):
+                problems += _need(log, panel, topic, MAP)
+            if cfg.get("followTopic"):
+                problems += _need(log, panel, cfg["followTopic"], FIXES)
         else:
             problems.append(f"{panel}: panel kind {kind!r} is not checked (teach this test)")
     return problems
@@ -182,7 +192,13 @@ def test_every_panel_fits_the_log(run):
     assert summary["completed"]
     assert check_layout(layout, log) == []
     kinds = {p.split("!", 1)[0] for p in layout["configById"]}
-    assert kinds >= {"3D", "Plot"}
+    assert kinds >= {"3D", "Plot", "Map"}
+    # the Map panel opens on the field, the plan, the flown track, the estimate and the fixes
+    mp = layout["configById"]["Map!aguavmap"]
+    assert mp["followTopic"] == "/geo/true"
+    assert {"/geo/field", "/geo/plan", "/geo/true", "/geo/est", "/geo/gnss", "/geo/sprayed",
+            "/geo/dose"} <= set(mp["topicConfig"])
+    assert next(_panels(layout["layout"])) == "Map!aguavmap"  # the top-left panel
     if summary.get("frames"):  # the Image panels were checked against real frames
         assert {"Image!camchase", "Image!camdown"} <= set(layout["configById"])
     # what the check walked: the four filters' error plots and the spray-job plot
@@ -215,8 +231,14 @@ def _plant(layout: dict[str, Any], how: str) -> dict[str, Any]:
         cfg["Image!camextra"] = {"imageMode": {"imageTopic": "/drone/pose"}}
     elif how == "follow-frame":
         cfg["3D!aguav3d"]["followTf"] = "base_link_missing"
+    elif how == "map-topic":
+        cfg["Map!aguavmap"]["topicConfig"]["/geo/lidar"] = {"historyMode": "all"}
+    elif how == "map-schema":
+        cfg["Map!aguavmap"]["topicColors"]["/gps"] = "#ff0000"
+    elif how == "map-follow":
+        cfg["Map!aguavmap"]["followTopic"] = "/geo/field"
     elif how == "unknown-panel":
-        cfg["Map!gps"] = {"topic": "/gps"}
+        cfg["Gauge!speed"] = {"path": "/drone/state.speed"}
     return lay
 
 
@@ -230,7 +252,10 @@ PLANTS = {
     "image-topic": "topic /camera/extra is not in the log",
     "image-schema": "topic /drone/pose is foxglove.PoseInFrame, the panel needs",
     "follow-frame": "frame 'base_link_missing' is in no logged transform",
-    "unknown-panel": "panel kind 'Map' is not checked",
+    "map-topic": "topic /geo/lidar is not in the log",
+    "map-schema": "topic /gps is foxglove.PoseInFrame, the panel needs",
+    "map-follow": "topic /geo/field is foxglove.GeoJSON, the panel needs",
+    "unknown-panel": "panel kind 'Gauge' is not checked",
 }
 
 

@@ -1,5 +1,7 @@
 """Every log passes Foxglove's own TypeScript reader (@mcap/core + @mcap/nodejs + @mcap/support):
-indexed read with CRC validation, every message decoded, then a streaming read.
+indexed read with CRC validation, every message decoded, then a streaming read.  Every message
+of a Foxglove schema is decoded once more against Foxglove's published schema (@foxglove/schemas),
+the geographic topics (LocationFix, GeoJSON) included.
 
 Needs node + npm; packages are pinned by tests/node/package-lock.json and installed with
 ``npm ci`` when node_modules is missing (skipped, with the reason, where node is absent or
@@ -30,7 +32,9 @@ def node_checker():
     node, npm = shutil.which("node"), shutil.which("npm")
     if node is None or npm is None:
         pytest.skip("node/npm not installed: Foxglove TypeScript reader check not run")
-    if not (NODE_DIR / "node_modules" / "@mcap" / "support").exists():
+    mods = NODE_DIR / "node_modules"
+    if not all((mods / m).exists() for m in ("@mcap/support", "@foxglove/schemas",
+                                              "protobufjs")):
         r = subprocess.run([npm, "ci", "--no-audit", "--no-fund"], cwd=NODE_DIR,
                            capture_output=True, text=True, timeout=300)
         if r.returncode != 0:
@@ -45,6 +49,10 @@ def node_checker():
         return out
 
     return check
+
+
+#: the run's origin in the synthetic logs: the default farm (ag_uav.world.field.DEFAULT_ORIGIN)
+ORIGIN = (46.725, -117.02, 760.0)
 
 
 def _jpeg() -> bytes:
@@ -62,8 +70,12 @@ def full_log(tmp_path_factory):
         def on_tick(t, p, q):
             if log.want_frame(t):
                 log.frame(t, "down", jpg, 32, 24, 70.0, pose=(p, (0.0, 1.0, 0.0, 0.0)))
-        synthetic_run(log, 5.0, on_tick=on_tick, estimators=("kf", "mckf", "pca_kf"))
+        synthetic_run(log, 5.0, on_tick=on_tick, estimators=("kf", "mckf", "pca_kf"),
+                      origin=ORIGIN)
         log.sprayed(5.0, [shapely.box(0, 0, 10, 4).difference(shapely.box(4, 1, 5, 2))])
+        dose = np.zeros((40, 60))  # a sprayed strip: on target, its edges under-dosed
+        dose[10:20, 5:50], dose[9, 5:50], dose[20, 5:50] = 1.0, 0.5, 0.5
+        log.dose(5.0, 0.0, 0.0, 1.0, dose, final=True)
         log.summary({"rmse_m": 0.3})
     return d / "run.mcap"
 
@@ -85,6 +97,51 @@ def test_full_log_passes_typescript_reader(node_checker, full_log):
     # protobuf field names survive as written (Foxglove plot paths use them)
     assert set(out["indexed"]["field_names"]["/drone/state"]) >= {"pos", "err", "est_err",
                                                                    "ctrl", "motors"}
+    # every message of a Foxglove schema agrees with Foxglove's own schema, the geographic
+    # topics included (LocationFix: lat/lon in range; GeoJSON: it parses)
+    geo = {"/geo/true", "/geo/est", "/geo/gnss", "/geo/field", "/geo/plan", "/geo/sprayed",
+           "/geo/dose"}
+    by_topic, canon = out["indexed"]["by_topic"], out["indexed"]["canonical"]
+    assert geo <= set(by_topic)
+    with open(full_log, "rb") as f:
+        s = make_reader(f).get_summary()
+        foxglove = {ch.topic for ch in s.channels.values()
+                    if s.schemas[ch.schema_id].name.startswith("foxglove.")}
+    assert geo <= foxglove
+    assert canon == {t: by_topic[t] for t in foxglove}
+    assert set(out["indexed"]["field_names"]["/geo/gnss"]) >= {
+        "latitude", "longitude", "altitude", "position_covariance",
+        "position_covariance_type", "color", "metadata"}
+
+
+def test_a_schema_that_is_not_foxglove_s_fails_the_check(node_checker, tmp_path):
+    """A LocationFix written with a schema that swaps latitude and longitude (as the log's own
+    schema says) is caught by the second decode against Foxglove's schema."""
+    from google.protobuf import descriptor_pb2
+    from mcap.writer import Writer
+
+    fdp = descriptor_pb2.FileDescriptorProto(name="foxglove/LocationFix.proto",
+                                             package="foxglove", syntax="proto3")
+    msg = fdp.message_type.add(name="LocationFix")
+    F = descriptor_pb2.FieldDescriptorProto
+    msg.field.add(name="latitude", number=2, type=F.TYPE_DOUBLE, label=F.LABEL_OPTIONAL)
+    msg.field.add(name="longitude", number=1, type=F.TYPE_DOUBLE, label=F.LABEL_OPTIONAL)
+    data = descriptor_pb2.FileDescriptorSet(file=[fdp]).SerializeToString()
+    path = tmp_path / "swapped.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start()
+        sid = w.register_schema("foxglove.LocationFix", "protobuf", data)
+        cid = w.register_channel("/geo/true", "protobuf", sid)
+        body = b"\x09" + np.float64(46.7).tobytes() + b"\x11" + np.float64(-117.0).tobytes()
+        w.add_message(cid, log_time=0, data=body, publish_time=0)
+        w.finish()
+    r = subprocess.run([shutil.which("node"), str(NODE_DIR / "check_mcap.mjs"), str(path)],
+                       capture_output=True, text=True, timeout=120)
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert r.returncode == 1 and not out["ok"]
+    assert "/geo/true: field longitude is 46.7 by the log's schema, -117 by Foxglove's" in \
+        out["error"]
 
 
 def test_light_and_recovered_logs_pass_typescript_reader(node_checker, full_log, tmp_path):
@@ -114,8 +171,10 @@ def test_real_flight_log_passes_foxglove_reader(node_checker, tmp_path):
     with open(run_dir / "run.mcap", "rb") as f:
         topics = {ch.topic for ch in make_reader(f).get_summary().channels.values()}
     for t in ("/tf", "/drone/pose", "/drone/pose_est", "/drone/state", "/gps", "/field",
-              "/estimator/pca_mckf", "/estimator/kf"):
+              "/estimator/pca_mckf", "/estimator/kf", "/geo/true", "/geo/est", "/geo/gnss",
+              "/geo/field", "/geo/plan"):
         assert t in topics
+    assert out["indexed"]["canonical"]["/geo/gnss"] == out["indexed"]["by_topic"]["/gps"] > 0
     if res.summary["frames"]:
         assert {"/camera/chase", "/camera/down"} <= topics
     else:  # EGL unavailable: the run goes on and says why

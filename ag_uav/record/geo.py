@@ -46,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from ..world.field import enu_to_geodetic
+from ..world.field import ecef_to_geodetic, enu_frame
 
 __all__ = [
     "DOSE_BANDS",
@@ -103,7 +103,9 @@ def fix_color(fix_type: str | None) -> tuple[float, float, float, float]:
 
 
 class GeoFrame:
-    """The run's local ENU frame on the WGS-84 ellipsoid: ``origin`` = (lat °, lon °, h m)."""
+    """The run's local ENU frame on the WGS-84 ellipsoid: ``origin`` = (lat °, lon °, h m).
+    Converts with :mod:`ag_uav.world.field`'s law (:func:`~ag_uav.world.field.enu_frame`,
+    :func:`~ag_uav.world.field.ecef_to_geodetic`), the frame's constants computed once."""
 
     def __init__(self, origin: Sequence[float]):
         lat, lon = float(origin[0]), float(origin[1])
@@ -112,18 +114,22 @@ class GeoFrame:
             raise ValueError(f"origin ({lat}, {lon}, {h}) is out of range; expected lat, lon in "
                              "degrees and a finite height")
         self.origin = (lat, lon, h)
+        self._rot, self._p0 = enu_frame(self.origin)
 
     def lla(self, xyz: np.ndarray) -> np.ndarray:
         """(n, 3) ENU metres → (n, 3) latitude °, longitude °, ellipsoidal height m."""
-        xyz = np.asarray(xyz, dtype=float)
-        lon, lat, h = enu_to_geodetic(xyz[:, 0], xyz[:, 1], self.origin, xyz[:, 2])
+        lon, lat, h = ecef_to_geodetic(np.asarray(xyz, dtype=float) @ self._rot + self._p0)
         return np.stack([lat, lon, h], axis=1)
+
+    def lonlat_array(self, xy: np.ndarray) -> np.ndarray:
+        """(n, 2) ENU metres on the ground plane (u = 0) → (n, 2) lon, lat (°)."""
+        a = np.asarray(xy, dtype=float).reshape(-1, 2)
+        lon, lat, _ = ecef_to_geodetic(a @ self._rot[:2] + self._p0)
+        return np.stack([lon, lat], axis=1)
 
     def lonlat(self, xy: Any) -> list[list[float]]:
         """(n, 2) ENU metres on the ground plane → ``[[lon, lat], ...]`` (GeoJSON positions)."""
-        a = np.asarray(xy, dtype=float).reshape(-1, 2)
-        lon, lat, _ = enu_to_geodetic(a[:, 0], a[:, 1], self.origin)
-        return np.round(np.stack([lon, lat], axis=1), _DP).tolist()
+        return np.round(self.lonlat_array(xy), _DP).tolist()
 
 
 # --------------------------------------------------------------------------------------------
@@ -235,7 +241,7 @@ def _multipolygon(frame: GeoFrame, polys: list[Any]) -> dict[str, Any] | None:
 
 def _collection(features: list[dict[str, Any]]) -> str:
     return json.dumps({"type": "FeatureCollection", "features": features},
-                      separators=(",", ":"))
+                      separators=(",", ":"), ensure_ascii=False)
 
 
 def field_geojson(frame: GeoFrame, parts: list[tuple[Any, list[Any]]], name: str = "field",
@@ -284,50 +290,82 @@ def sprayed_geojson(frame: GeoFrame, geoms: list[Any]) -> str:
     return _collection(feats)
 
 
+#: the most contour vertices a ``/geo/dose`` message holds: a finer map is block-averaged
+#: (cells doubled) until its bands fit, which bounds the message (~40 bytes a vertex) and the
+#: writer's time on it, however ragged the dose
+DOSE_MAX_POINTS = 20_000
+
+
+def _ring_area(r: np.ndarray) -> float:
+    """Signed area of a closed ring (shoelace; > 0 counter-clockwise)."""
+    x, y = r[:, 0], r[:, 1]
+    return 0.5 * float(np.dot(x[:-1], y[1:]) - np.dot(x[1:], y[:-1]))
+
+
+def _coarsen(a: np.ndarray) -> np.ndarray:
+    """Block means of 2 × 2 cells (a last odd row or column padded with its edge)."""
+    a = np.pad(a, ((0, a.shape[0] % 2), (0, a.shape[1] % 2)), mode="edge")
+    return 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
+
+
 def dose_bands(x0: float, y0: float, cell: float, l_per_ha: np.ndarray, target: float,
-               simplify_m: float | None = None) -> list[tuple[str, str, Any]]:
+               max_points: int = DOSE_MAX_POINTS) -> tuple[float, list[tuple[Any, ...]]]:
     """The dose map ((ny, nx) L/ha, cell (j, i) centred at (x0 + (i + ½)·cell, y0 +
     (j + ½)·cell)) cut into :data:`DOSE_BANDS` of ``target`` L/ha by filled contours
-    (contourpy, marching squares between cell centres): ``[(name, colour, shapely geometry in
-    ENU metres), ...]`` of the bands that hold any area.  ``simplify_m`` (default a quarter
-    cell) thins the contours."""
+    (contourpy, marching squares between cell centres; the polygons of one band are disjoint).
+    Returns ``(cell used, [(name, colour, polygons, area m²), ...])`` of the bands that hold
+    any area, each polygon a list of closed (k, 2) rings in ENU metres, its exterior
+    counter-clockwise and its holes clockwise.  A map whose bands would exceed ``max_points``
+    vertices is block-averaged (cells doubled) until they fit."""
     import contourpy
-    import shapely
 
-    a = np.asarray(l_per_ha, dtype=float)
-    if a.ndim != 2 or min(a.shape) < 2 or not target > 0:
-        return []
-    ny, nx = a.shape
-    xs = x0 + (np.arange(nx) + 0.5) * cell
-    ys = y0 + (np.arange(ny) + 0.5) * cell
-    gen = contourpy.contour_generator(xs, ys, np.nan_to_num(a / target),
-                                      fill_type=contourpy.FillType.OuterOffset)
-    tol = 0.25 * cell if simplify_m is None else simplify_m
-    out = []
-    for lo, hi, name, col in DOSE_BANDS:
-        points, offsets = gen.filled(lo, hi if math.isfinite(hi) else 1e30)
-        polys = []
-        for pts, offs in zip(points, offsets, strict=True):
-            rings = [pts[offs[k]:offs[k + 1]] for k in range(len(offs) - 1)]
-            if rings and len(rings[0]) >= 4:
-                polys.append(shapely.Polygon(rings[0], [r for r in rings[1:] if len(r) >= 4]))
-        geom = shapely.make_valid(shapely.union_all(polys)) if polys else None
-        if geom is not None and tol > 0:
-            geom = geom.simplify(tol)
-        if geom is not None and not geom.is_empty and geom.area > 0:
-            out.append((name, col, geom))
-    return out
+    a = np.nan_to_num(np.asarray(l_per_ha, dtype=float) / target) if target > 0 else None
+    while a is not None and a.ndim == 2 and min(a.shape) >= 2:
+        ny, nx = a.shape
+        gen = contourpy.contour_generator(x0 + (np.arange(nx) + 0.5) * cell,
+                                          y0 + (np.arange(ny) + 0.5) * cell, a,
+                                          fill_type=contourpy.FillType.OuterOffset)
+        out, n = [], 0
+        for lo, hi, name, col in DOSE_BANDS:
+            points, offsets = gen.filled(lo, hi if math.isfinite(hi) else 1e30)
+            polys, area = [], 0.0
+            for pts, offs in zip(points, offsets, strict=True):
+                rings = []
+                for k in range(len(offs) - 1):
+                    r = pts[offs[k]:offs[k + 1]]
+                    sa = _ring_area(r)
+                    if len(r) >= 4 and sa != 0.0:
+                        rings.append(r if (sa > 0) == (k == 0) else r[::-1])
+                        area += abs(sa) if k == 0 else -abs(sa)
+                if rings and _ring_area(rings[0]) > 0:
+                    polys.append(rings)
+                    n += sum(len(r) for r in rings)
+            if polys:
+                out.append((name, col, polys, area))
+        if n <= max_points:
+            return cell, out
+        a, cell = _coarsen(a), 2.0 * cell
+    return cell, []
 
 
 def dose_geojson(frame: GeoFrame, x0: float, y0: float, cell: float, l_per_ha: np.ndarray,
                  target: float) -> str:
     """The dose map as one (Multi)Polygon feature per :data:`DOSE_BANDS` band (filled in the
-    band's colour; the name gives the band and its area)."""
+    band's colour; the name gives the band and its area), all vertices converted to lon/lat in
+    one call."""
+    used, bands = dose_bands(x0, y0, cell, l_per_ha, target)
+    rings = [r for _, _, polys, _ in bands for p in polys for r in p]
+    if not rings:
+        return _collection([])
+    ll = np.round(frame.lonlat_array(np.concatenate(rings)), _DP)
+    ends = np.cumsum([len(r) for r in rings])
+    it = iter(np.split(ll, ends[:-1]))
     feats = []
-    for name, col, geom in dose_bands(x0, y0, cell, l_per_ha, target):
-        g = _multipolygon(frame, _polys(geom))
-        if g is not None:
-            feats.append({"type": "Feature", "geometry": g, "properties": {
-                "name": f"dose {name}: {geom.area:.0f} m²",
-                "style": _style(color=col, weight=0, fill_color=col, fill_opacity=0.45)}})
+    for name, col, polys, area in bands:
+        coords = [[next(it).tolist() for _ in p] for p in polys]
+        geom = ({"type": "Polygon", "coordinates": coords[0]} if len(coords) == 1
+                else {"type": "MultiPolygon", "coordinates": coords})
+        feats.append({"type": "Feature", "geometry": geom, "properties": {
+            "name": f"dose {name}: {area:.0f} m² (contours of {used:g} m cells)",
+            "style": _style(color=col, weight=0, fill_color=col, fill_opacity=0.45)}})
     return _collection(feats)

@@ -136,6 +136,7 @@ class Backend:
         self._out = np.zeros(0, dtype=np.uint8)
         self._idx = np.zeros((3, 1), dtype=np.int64)
         self._geo: Any = None  # (GeoFrame, lid true, lid est, lid gnss)
+        self._geo_stash: list[tuple[Any, ...]] = []  # positions waiting for the emit
         self._fix_tail: dict[int, tuple[bytes, tuple[float, ...]]] = {}
         self.closed = False
 
@@ -185,39 +186,45 @@ class Backend:
         self._pend.extend(msgs)
 
     def _geo_ticks(self, r: np.ndarray) -> None:
-        """``/geo/true`` (and ``/geo/est`` where the row holds an estimate) LocationFix of the
-        tick rows flagged 16."""
-        from .geo import location_fixes
-
-        frame, lid_true, lid_est, _ = self._geo
+        """The tick rows flagged 16 -> ``/geo/true`` (and ``/geo/est`` where the row holds an
+        estimate), converted and encoded at the ``emit`` (:meth:`_geo_emit`)."""
+        _, lid_true, lid_est, _ = self._geo
         mask = r[:, 1].astype(np.int64)
-        g = r[(mask & 16) != 0]
-        if not len(g):
+        on = (mask & 16) != 0
+        if not on.any():
             return
-        tns = _ns_list(g[:, 0])
-        self._pend.extend(zip(itertools.repeat(lid_true),
-                              location_fixes(tns, frame.lla(g[:, 2:5]), head=_BASE_LINK7),
-                              tns, strict=False))
-        e = (mask[(mask & 16) != 0] & 8) != 0
+        g, tns = r[on], _ns_list(r[on, 0])
+        self._geo_stash.append((lid_true, tns, g[:, 2:5], None, None))
+        e = (mask[on] & 8) != 0
         if lid_est >= 0 and e.any():
-            ge, te = g[e], [tn for tn, k in zip(tns, e, strict=True) if k]
-            self._pend.extend(zip(itertools.repeat(lid_est),
-                                  location_fixes(te, frame.lla(ge[:, 19:22])), te,
-                                  strict=False))
+            self._geo_stash.append((lid_est, [tn for tn, k in zip(tns, e, strict=True) if k],
+                                    g[e, 19:22], None, None))
 
     def _geo_gnss(self, r: np.ndarray) -> None:
-        """``/geo/gnss`` LocationFix of the GNSS rows (t, x, y, z, variances e n u, type)."""
+        """The GNSS rows (t, x, y, z, variances e n u, type code) -> ``/geo/gnss``."""
+        self._geo_stash.append((self._geo[3], _ns_list(r[:, 0]), r[:, 1:4], r[:, 4:7],
+                                r[:, 7].astype(np.int64).tolist()))
+
+    def _geo_emit(self) -> None:
+        """The stashed positions of this hand-over -> LocationFix messages: one conversion to
+        lat/lon/altitude for all of them, then one encoding per kind."""
         from .geo import NO_TYPE_COLOR, location_fixes
 
-        frame, _, _, lid = self._geo
-        codes = r[:, 7].astype(np.int64).tolist()
-        no = (b"", NO_TYPE_COLOR)
-        tails = [self._fix_tail.get(c, no) for c in codes]
-        tns = _ns_list(r[:, 0])
-        self._pend.extend(zip(itertools.repeat(lid), location_fixes(
-            tns, frame.lla(r[:, 1:4]), var_enu=r[:, 4:7],
-            rgba=np.array([tl[1] for tl in tails]), tails=[tl[0] for tl in tails]), tns,
-            strict=False))
+        stash, self._geo_stash = self._geo_stash, []
+        lla = self._geo[0].lla(np.concatenate([x[2] for x in stash]))
+        o = 0
+        for lid, tns, xyz, var, codes in stash:
+            part, o = lla[o:o + len(xyz)], o + len(xyz)
+            if codes is None:
+                msgs = location_fixes(tns, part, head=_BASE_LINK7 if lid == self._geo[1]
+                                      else b"")
+            else:
+                no = (b"", NO_TYPE_COLOR)
+                tails = [self._fix_tail.get(c, no) for c in codes]
+                msgs = location_fixes(tns, part, var_enu=var,
+                                      rgba=np.array([tl[1] for tl in tails]),
+                                      tails=[tl[0] for tl in tails])
+            self._pend.extend(zip(itertools.repeat(lid), msgs, tns, strict=False))
 
     def _geodose(self, lid: int, tn: int, x0: float, y0: float, cell: float, target: float,
                  grid: np.ndarray) -> None:
@@ -278,7 +285,7 @@ class Backend:
         s = starts[:m + 1].tolist()
         buf = out[:s[-1]].tobytes()
         ids = self._kind_lids
-        if self._pend:
+        if self._pend or self._geo_stash:
             self._pend.extend(zip([ids[k] for k in kinds[:m].tolist()],
                                   [buf[a:b] for a, b in zip(s, s[1:], strict=False)],
                                   tns[:m].tolist(), strict=True))
@@ -288,6 +295,8 @@ class Backend:
             logs[ids[k]](buf[s[j]:s[j + 1]], tn)
 
     def _emit(self) -> None:
+        if self._geo_stash:
+            self._geo_emit()
         pend = self._pend
         if pend:
             pend.sort(key=_LOG_TIME)

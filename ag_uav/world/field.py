@@ -72,6 +72,8 @@ __all__ = [
     "DEFAULT_ORIGIN",
     "FIELD_FILE_SUFFIXES",
     "Field",
+    "ecef_to_geodetic",
+    "enu_frame",
     "enu_to_geodetic",
     "enu_to_lonlat",
     "geodetic_to_ecef",
@@ -127,16 +129,28 @@ def lonlat_to_enu(lon_deg, lat_deg, origin: Sequence[float], h=0.0) -> np.ndarra
 def enu_to_geodetic(e, n, origin: Sequence[float], u=0.0
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Local ENU metres → (lon, lat, h): degrees and WGS-84 ellipsoidal height (m); the exact
-    inverse of :func:`lonlat_to_enu` (with its ``h``).
-
-    ENU → ECEF by the transposed rotation, then ECEF → geodetic with Bowring's parametric-latitude
-    iteration (3 rounds; converged to ~1e-12 rad for terrestrial heights) and the height
-    ``h = p cosφ + z sinφ − a sqrt(1 − e² sin²φ)`` (valid at every latitude)."""
+    inverse of :func:`lonlat_to_enu` (with its ``h``): ENU → ECEF by the transposed rotation,
+    then :func:`ecef_to_geodetic`."""
     lat0, lon0 = float(origin[0]), float(origin[1])
     h0 = float(origin[2]) if len(origin) > 2 else 0.0
     enu = np.stack(np.broadcast_arrays(np.asarray(e, float), np.asarray(n, float),
                                        np.asarray(u, float)), axis=-1)
     xyz = enu @ _enu_rotation(lat0, lon0) + geodetic_to_ecef(lat0, lon0, h0)
+    return ecef_to_geodetic(xyz)
+
+
+def enu_frame(origin: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """(R, p0) of the ENU frame about ``origin`` = (lat, lon[, h]): ECEF = ENU @ R + p0 (what
+    :func:`enu_to_geodetic` computes per call, for a caller converting many batches)."""
+    lat0, lon0 = float(origin[0]), float(origin[1])
+    h0 = float(origin[2]) if len(origin) > 2 else 0.0
+    return _enu_rotation(lat0, lon0), geodetic_to_ecef(lat0, lon0, h0)
+
+
+def ecef_to_geodetic(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ECEF metres (..., 3) → (lon °, lat °, h m) on WGS-84: Bowring's parametric-latitude
+    iteration (3 rounds; converged to ~1e-12 rad for terrestrial heights) and the height
+    ``h = p cosφ + z sinφ − a sqrt(1 − e² sin²φ)`` (valid at every latitude)."""
     x, y, z = xyz[..., 0], xyz[..., 1], xyz[..., 2]
     lon = np.arctan2(y, x)
     p = np.hypot(x, y)
