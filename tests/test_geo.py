@@ -190,9 +190,9 @@ def test_geojson_messages_are_valid_and_close_their_rings(flight):
     area = sum(shapely.Polygon(local(p[0]), [local(r) for r in p[1:]]).area
                for p in _rings(sp["geometry"]))
     assert abs(area - res.summary["sprayed_area_m2"]) < 0.01 * res.summary["sprayed_area_m2"]
-    # the dose: at the /dose cadence, bands named from DOSE_BANDS
-    assert [t for t, _ in msgs["/geo/dose"]] == [t for t, _ in msgs["/dose"]]
-    assert len(msgs["/geo/dose"]) >= 6
+    # the dose: one /dose map in three (15 s of 5 s) and the last one, as bands
+    t_geo, t_dose = [t for t, _ in msgs["/geo/dose"]], [t for t, _ in msgs["/dose"]]
+    assert t_geo == t_dose[:-1:3] + t_dose[-1:] and len(t_geo) == 3
     last = json.loads(msgs["/geo/dose"][-1][1].geojson)["features"]
     names = {b[2] for b in DOSE_BANDS}
     assert last and all(f["properties"]["name"].split(":")[0][5:] in names for f in last)
@@ -206,7 +206,7 @@ def test_dose_bands_follow_the_dose(tmp_path):
     dose = np.zeros((30, 40))
     dose[10:20, 10:30] = 2.0  # L/ha: target 2
     dose[9, 9:31] = dose[20, 9:31] = dose[10:20, 9] = dose[10:20, 30] = 1.0
-    cell, out = dose_bands(5.0, -3.0, 0.5, dose, 2.0)
+    cell, out = dose_bands(5.0, -3.0, 0.5, dose, 2.0, simplify=0.0)
     assert cell == 0.5
     bands = {name: shapely.MultiPolygon([(p[0], p[1:]) for p in polys])
              for name, _, polys, _ in out}
@@ -220,23 +220,31 @@ def test_dose_bands_follow_the_dose(tmp_path):
     assert full - 4 * reach * reach / 2 - 1e-9 <= on.area <= full + 1e-9
     assert under.area > 0 and on.intersection(under).area < 1e-9
     assert under.disjoint(inner.buffer(0.5 * reach))
+    # simplified (the default: half a cell), each band stays within that of the exact one
+    simp = {name: shapely.MultiPolygon([(p[0], p[1:]) for p in polys])
+            for name, _, polys, _ in dose_bands(5.0, -3.0, 0.5, dose, 2.0)[1]}
+    assert simp.keys() == bands.keys()
+    assert all(simp[k].hausdorff_distance(bands[k]) <= 0.25 + 1e-9 for k in bands)
 
 
 def test_a_ragged_dose_map_is_coarsened_to_bound_the_message():
     """Noise around the band limits makes many small contours: the map is block-averaged until
-    its bands hold at most DOSE_MAX_POINTS vertices (here once), the banded area kept to a
-    few per cent."""
+    its bands hold at most ``max_points`` vertices, the banded area kept to a few per cent."""
     rng = np.random.default_rng(0)
     dose = np.zeros((136, 140))
     for j in range(10, 120, 6):  # sprayed strips whose dose straddles 0.8 and 1.2 of target
         dose[j:j + 5, 10:125] = rng.uniform(0.6, 1.4, (5, 115))
+
+    def n_vertices(out):
+        return sum(len(r) for _, _, polys, _ in out for p in polys for r in p)
+
     fine_cell, fine = dose_bands(-10.0, -10.0, 1.0, dose, 1.0, max_points=10**9)
-    cell, out = dose_bands(-10.0, -10.0, 1.0, dose, 1.0)
-    n = sum(len(r) for _, _, polys, _ in out for p in polys for r in p)
-    n_fine = sum(len(r) for _, _, polys, _ in fine for p in polys for r in p)
-    assert fine_cell == 1.0 and n_fine > 20_000 >= n and cell == 2.0
+    cell, out = dose_bands(-10.0, -10.0, 1.0, dose, 1.0, max_points=2000)
+    assert fine_cell == 1.0 and n_vertices(fine) > 2000 >= n_vertices(out) and cell > 1.0
     total = sum(a for *_, a in out)
     assert abs(total - sum(a for *_, a in fine)) < 0.1 * total
+    raw = dose_bands(-10.0, -10.0, 1.0, dose, 1.0, max_points=10**9, simplify=0.0)[1]
+    assert n_vertices(raw) > 2 * n_vertices(fine)  # the simplification's share
 
 
 # --------------------------------------------------------------------------------------------

@@ -291,15 +291,9 @@ def sprayed_geojson(frame: GeoFrame, geoms: list[Any]) -> str:
 
 
 #: the most contour vertices a ``/geo/dose`` message holds: a finer map is block-averaged
-#: (cells doubled) until its bands fit, which bounds the message (~40 bytes a vertex) and the
+#: (cells doubled) until its bands fit, which bounds the message (~30 bytes a vertex) and the
 #: writer's time on it, however ragged the dose
-DOSE_MAX_POINTS = 20_000
-
-
-def _ring_area(r: np.ndarray) -> float:
-    """Signed area of a closed ring (shoelace; > 0 counter-clockwise)."""
-    x, y = r[:, 0], r[:, 1]
-    return 0.5 * float(np.dot(x[:-1], y[1:]) - np.dot(x[1:], y[:-1]))
+DOSE_MAX_POINTS = 10_000
 
 
 def _coarsen(a: np.ndarray) -> np.ndarray:
@@ -308,15 +302,35 @@ def _coarsen(a: np.ndarray) -> np.ndarray:
     return 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
 
 
+def _band_polygons(points: list[np.ndarray], offsets: list[np.ndarray], tol: float) -> list[Any]:
+    """contourpy's filled polygons of one band (OuterOffset) → shapely polygons simplified to
+    ``tol`` (Douglas-Peucker; a polygon the simplification would make invalid or empty is kept
+    as it was), exteriors counter-clockwise, holes clockwise."""
+    import shapely
+
+    polys = np.array([shapely.Polygon(pts[offs[0]:offs[1]],
+                                      [pts[offs[k]:offs[k + 1]] for k in range(1, len(offs) - 1)])
+                      for pts, offs in zip(points, offsets, strict=True)], dtype=object)
+    if not len(polys):
+        return []
+    simp = shapely.simplify(polys, tol, preserve_topology=False) if tol > 0 else polys
+    ok = shapely.is_valid(simp) & ~shapely.is_empty(simp) & (shapely.get_type_id(simp) == 3)
+    polys = np.where(ok, simp, polys)
+    polys = polys[shapely.is_valid(polys) & (shapely.area(polys) > 0)]
+    return list(shapely.orient_polygons(polys, exterior_cw=False))
+
+
 def dose_bands(x0: float, y0: float, cell: float, l_per_ha: np.ndarray, target: float,
-               max_points: int = DOSE_MAX_POINTS) -> tuple[float, list[tuple[Any, ...]]]:
+               max_points: int = DOSE_MAX_POINTS, simplify: float = 0.5,
+               ) -> tuple[float, list[tuple[Any, ...]]]:
     """The dose map ((ny, nx) L/ha, cell (j, i) centred at (x0 + (i + ½)·cell, y0 +
     (j + ½)·cell)) cut into :data:`DOSE_BANDS` of ``target`` L/ha by filled contours
-    (contourpy, marching squares between cell centres; the polygons of one band are disjoint).
+    (contourpy, marching squares between cell centres; the polygons of one band are disjoint),
+    simplified to ``simplify`` cells (below the map's own resolution: the contours' staircase).
     Returns ``(cell used, [(name, colour, polygons, area m²), ...])`` of the bands that hold
     any area, each polygon a list of closed (k, 2) rings in ENU metres, its exterior
-    counter-clockwise and its holes clockwise.  A map whose bands would exceed ``max_points``
-    vertices is block-averaged (cells doubled) until they fit."""
+    counter-clockwise and its holes clockwise.  A map whose bands would still exceed
+    ``max_points`` vertices is block-averaged (cells doubled) until they fit."""
     import contourpy
 
     a = np.nan_to_num(np.asarray(l_per_ha, dtype=float) / target) if target > 0 else None
@@ -327,21 +341,14 @@ def dose_bands(x0: float, y0: float, cell: float, l_per_ha: np.ndarray, target: 
                                           fill_type=contourpy.FillType.OuterOffset)
         out, n = [], 0
         for lo, hi, name, col in DOSE_BANDS:
-            points, offsets = gen.filled(lo, hi if math.isfinite(hi) else 1e30)
-            polys, area = [], 0.0
-            for pts, offs in zip(points, offsets, strict=True):
-                rings = []
-                for k in range(len(offs) - 1):
-                    r = pts[offs[k]:offs[k + 1]]
-                    sa = _ring_area(r)
-                    if len(r) >= 4 and sa != 0.0:
-                        rings.append(r if (sa > 0) == (k == 0) else r[::-1])
-                        area += abs(sa) if k == 0 else -abs(sa)
-                if rings and _ring_area(rings[0]) > 0:
-                    polys.append(rings)
-                    n += sum(len(r) for r in rings)
+            polys = _band_polygons(*gen.filled(lo, hi if math.isfinite(hi) else 1e30),
+                                   simplify * cell)
             if polys:
-                out.append((name, col, polys, area))
+                rings = [[np.asarray(p.exterior.coords), *(np.asarray(r.coords)
+                                                           for r in p.interiors)]
+                         for p in polys]
+                n += sum(len(r) for p in rings for r in p)
+                out.append((name, col, rings, float(sum(p.area for p in polys))))
         if n <= max_points:
             return cell, out
         a, cell = _coarsen(a), 2.0 * cell
@@ -366,6 +373,6 @@ def dose_geojson(frame: GeoFrame, x0: float, y0: float, cell: float, l_per_ha: n
         geom = ({"type": "Polygon", "coordinates": coords[0]} if len(coords) == 1
                 else {"type": "MultiPolygon", "coordinates": coords})
         feats.append({"type": "Feature", "geometry": geom, "properties": {
-            "name": f"dose {name}: {area:.0f} m² (contours of {used:g} m cells)",
+            "name": f"dose {name}: {area:.0f} m² (contours of {used:g} m cells, simplified)",
             "style": _style(color=col, weight=0, fill_color=col, fill_opacity=0.45)}})
     return _collection(feats)

@@ -132,6 +132,9 @@ DOSE_PERIOD_S = {"full": 5.0, "light": 30.0}
 #: long job over a big field logs O(log duration) quotas of maps instead of one map every period
 #: (the 38 ha job's 3,377 whole maps were 1.36 GB of its log); the final map is always logged
 DOSE_QUOTA_B = 8_000_000
+#: sim seconds between two of those maps that also go to ``/geo/dose`` as GeoJSON bands (and
+#: the one at the end): contouring a map costs the writer ~10 ms, three times ``/dose``'s grid
+GEO_DOSE_PERIOD_S = {"full": 15.0, "light": 60.0}
 
 
 def ns(t: float) -> int:
@@ -707,8 +710,10 @@ class RunLog:
                 raise ValueError(f"unknown channel group {g!r}; known: {GROUPS}")
             base[g] = r
         self.rates = base
-        self._dose_period = DOSE_PERIOD_S.get(channels if isinstance(channels, str) else "",
-                                              DOSE_PERIOD_S["full"])
+        preset = channels if isinstance(channels, str) else ""
+        self._dose_period = DOSE_PERIOD_S.get(preset, DOSE_PERIOD_S["full"])
+        self._geo_dose_period = GEO_DOSE_PERIOD_S.get(preset, GEO_DOSE_PERIOD_S["full"])
+        self._next_geo_dose = -_INF
         # period per group: 0.0 = every call, inf = off
         self._period = {
             g: (0.0 if r is None else (_INF if r <= 0 else 1.0 / float(r))) for g, r in base.items()
@@ -1535,7 +1540,10 @@ class RunLog:
         """The dose map on the ground (L/ha, (ny, nx), row j at y0 + j·cell) -> ``/dose``
         foxglove.Grid (one float32 field ``l_per_ha``, lower-left corner at (x0, y0), 2 cm above
         the ground), at most every :data:`DOSE_PERIOD_S` of sim time, doubled after each
-        :data:`DOSE_QUOTA_B` of maps (``final``: always). Part of the ``scene`` group."""
+        :data:`DOSE_QUOTA_B` of maps (``final``: always). Part of the ``scene`` group.  With
+        :meth:`geo`, a logged map at least :data:`GEO_DOSE_PERIOD_S` after the last (and the
+        final one) also goes to ``/geo/dose``: the map in bands of the target rate, made by the
+        writer."""
         if self.closed or self._period["scene"] == _INF:
             return
         if not final and t < getattr(self, "_next_dose", -_INF):
@@ -1548,7 +1556,9 @@ class RunLog:
         self._count("/dose")
         self._dose_bytes += len(msg)
         self._next_dose = t + self._dose_period * 2 ** (self._dose_bytes // DOSE_QUOTA_B) - 1e-9
-        if self._geo is not None and self._dose_target > 0:  # the bands: in the writer
+        if (self._geo is not None and self._dose_target > 0
+                and (final or t >= self._next_geo_dose)):  # the bands: in the writer
+            self._next_geo_dose = t + self._geo_dose_period - 1e-9
             lid = self._geo_ids.get("dose")
             if lid is None:
                 lid = self._geo_ids["dose"] = self._chan("/geo/dose", self._M.GeoJson)
