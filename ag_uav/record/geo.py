@@ -136,6 +136,35 @@ class GeoFrame:
 # foxglove.LocationFix
 # --------------------------------------------------------------------------------------------
 
+def _varint(v: int) -> bytes:
+    """Protobuf base-128 varint of a non-negative int."""
+    out = bytearray()
+    while v >= 0x80:
+        out.append((v & 0x7F) | 0x80)
+        v >>= 7
+    out.append(v)
+    return bytes(out)
+
+
+def _str_field(num: int, s: str) -> bytes:
+    """A protobuf string field ``num``."""
+    b = s.encode()
+    return _varint((num << 3) | 2) + _varint(len(b)) + b
+
+
+def _stamp6(tn: int) -> bytes:
+    """LocationFix's ``timestamp`` (field 6): a google.protobuf.Timestamp of ``tn`` ns (zero
+    halves omitted)."""
+    sec, nsec = divmod(tn, 1_000_000_000)
+    body = (b"\x08" + _varint(sec) if sec else b"") + (b"\x10" + _varint(nsec) if nsec else b"")
+    return b"\x32" + bytes((len(body),)) + body
+
+
+def geojson_message(text: str) -> bytes:
+    """A ``foxglove.GeoJSON`` message (its one field, ``geojson``)."""
+    return _str_field(1, text)
+
+
 def _fix_dtype(cov: bool, color: bool) -> np.dtype:
     """The fixed part of a LocationFix: latitude (1), longitude (2), altitude (3), then the
     packed covariance (4) and its type (5), then the colour (8), each with its tag bytes."""
@@ -167,8 +196,6 @@ def location_fixes(tns: Sequence[int], lla: np.ndarray, *, head: bytes = b"",
     ``frame_id`` field); ``var_enu`` (n, 3): the position variances east, north, up (m²) as a
     diagonal covariance, ``DIAGONAL_KNOWN`` where all three are finite, else ``UNKNOWN`` with
     zeros; ``rgba`` (n, 4): the ``color``; ``tails[j]``: bytes after message j (metadata)."""
-    from .runlog import _ts_pb
-
     n = len(lla)
     a = np.zeros(n, dtype=_fix_dtype(var_enu is not None, rgba is not None))
     _tags(a)
@@ -186,16 +213,13 @@ def location_fixes(tns: Sequence[int], lla: np.ndarray, *, head: bytes = b"",
     buf, size = a.tobytes(), a.dtype.itemsize
     out = []
     for j, tn in enumerate(tns):
-        ts = _ts_pb(int(tn))
-        msg = b"\x32" + bytes((len(ts),)) + ts + head + buf[j * size:(j + 1) * size]
+        msg = _stamp6(int(tn)) + head + buf[j * size:(j + 1) * size]
         out.append(msg + tails[j] if tails is not None else msg)
     return out
 
 
 def kv_metadata(key: str, value: str) -> bytes:
     """``metadata`` (field 9) entry ``key = value`` of a LocationFix (a KeyValuePair)."""
-    from .runlog import _str_field, _varint
-
     body = _str_field(1, key) + _str_field(2, value)
     return b"\x4a" + _varint(len(body)) + body
 

@@ -1264,7 +1264,7 @@ class RunLog:
 
             lid = self._geo_ids[key] = self._chan(GEO_TOPICS[key], self._M.GeoJson)
         tn = ns(t)
-        self._pending.append((lid, _str_field(1, text), tn))
+        self._pending.append((lid, _str_field(1, text), tn))  # foxglove.GeoJSON.geojson
         self._count(f"/geo/{key}")
 
     def set_truth(self, p_true: Sequence[float]) -> None:
@@ -1493,11 +1493,9 @@ class RunLog:
         if self._geo is not None:
             from .geo import field_geojson, plan_geojson
 
-            self._geo_json("field", t, field_geojson(self._geo, [(o, [np.asarray(h, float)
-                                                                    for h in hs])
-                                                                for o, (_, hs) in
-                                                                zip(outers, parts,
-                                                                    strict=True)]))
+            rings = [(o, [np.asarray(h, float) for h in hs])
+                     for o, (_, hs) in zip(outers, parts, strict=True)]
+            self._geo_json("field", t, field_geojson(self._geo, rings))
             self._geo_json("plan", t, plan_geojson(self._geo, plan_segments))
         self._scene_entities(t, [field, plan], "/field")
         if self._geo is not None:

@@ -230,11 +230,10 @@ class Backend:
                  grid: np.ndarray) -> None:
         """``/geo/dose``: the dose map's bands as GeoJSON
         (:func:`ag_uav.record.geo.dose_geojson`)."""
-        from .geo import dose_geojson
-        from .runlog import _str_field
+        from .geo import dose_geojson, geojson_message
 
         text = dose_geojson(self._geo[0], x0, y0, cell, grid, target)
-        self._pend.append((lid, _str_field(1, text), tn))
+        self._pend.append((lid, geojson_message(text), tn))
 
     def _block(self, fid: int, r: np.ndarray) -> None:
         from .encode import encode_flat
