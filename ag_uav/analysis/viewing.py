@@ -26,6 +26,7 @@ import io
 import json
 import math
 import os
+import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -178,25 +179,54 @@ def _note(data: RunData, topic: str, schema: Any, channel: Any, message: Any) ->
     return t
 
 
-def read_run(run: str | Path, *, images: bool = True) -> RunData:
-    """Decode a run log: numeric channels to arrays, scenes, JPEG frames, metadata.
+#: the most samples a time series keeps when read for plots and videos (:func:`read_run`'s
+#: ``max_points``; a 38 ha job logs ~340,000 state rows)
+PLOT_POINTS = 20_000
+
+
+class _Thin:
+    """Streaming decimation of one topic to at most ``2 * cap`` rows: every ``stride``-th
+    message is kept; when the rows reach ``2 * cap``, every other one is dropped and the stride
+    doubles (the rows kept are always the messages whose index is a multiple of the stride)."""
+
+    __slots__ = ("cap", "n", "rows", "stride")
+
+    def __init__(self, cap: int | None):
+        self.cap, self.n, self.stride = cap, 0, 1
+        self.rows: list[tuple[float, dict[str, Any]]] = []
+
+    def wants(self) -> bool:
+        keep = self.n % self.stride == 0
+        self.n += 1
+        return keep
+
+    def add(self, row: tuple[float, dict[str, Any]]) -> None:
+        self.rows.append(row)
+        if self.cap and len(self.rows) >= 2 * self.cap:
+            self.rows = self.rows[::2]
+            self.stride *= 2
+
+
+def read_run(run: str | Path, *, images: bool = True, max_points: int | None = None) -> RunData:
+    """Decode a run log: numeric channels to arrays, the last scene and grid of each topic,
+    JPEG frames, metadata.
 
     The file is read chunk by chunk (:class:`~ag_uav.analysis.logscan.LogScan`): damaged chunks
     and a cut tail are skipped and described in ``RunData.report``; an empty or non-MCAP file
-    raises :class:`~ag_uav.analysis.logscan.NotMcapError`.
+    raises :class:`~ag_uav.analysis.logscan.NotMcapError`.  ``max_points``: decimate each
+    numeric channel as it streams (:class:`_Thin`; the counts in ``channels`` stay whole); a
+    scene or grid is decoded once, the last of its topic.
     """
     from mcap.records import Attachment, Message, Metadata
-    from mcap_protobuf.decoder import DecoderFactory
 
     from .logscan import LogScan
 
     path = mcap_path(run)
     scan = LogScan(path)
     data = RunData(path=path, finished=False, report=scan.report)
-    factory = DecoderFactory()
-    decoders: dict[int, Any] = {}
-    rows: dict[str, list[tuple[float, dict[str, Any]]]] = {}
-    scene_t: dict[str, float] = {}
+    dec = _Decoders()
+    rows: dict[str, _Thin] = {}
+    last: dict[str, tuple[float, Any, Any]] = {}  # scene/grid topic -> (t, channel, message)
     for rec in scan.records():
         if isinstance(rec, Metadata):
             data.metadata[rec.name] = dict(rec.metadata)
@@ -208,40 +238,60 @@ def read_run(run: str | Path, *, images: bool = True) -> RunData:
         schema = scan.schemas.get(channel.schema_id)
         topic = channel.topic
         t = _note(data, topic, schema, channel, rec)
-        numeric = topic in _SERIES_TOPICS or topic.startswith("/estimator/")
+        if schema is not None and schema.name in ("foxglove.SceneUpdate", "foxglove.Grid"):
+            if t >= last.get(topic, (-1.0,))[0]:
+                last[topic] = (t, channel, rec)
+            continue
         is_img = images and topic.startswith("/camera/") and not topic.endswith("/calibration")
-        is_scene = schema is not None and schema.name in ("foxglove.SceneUpdate",
-                                                          "foxglove.Grid")
-        if not (numeric or is_img or is_scene) or (is_scene and t < scene_t.get(topic, -1.0)):
-            continue
-        try:
-            dec = decoders.get(channel.id)
-            if dec is None:
-                dec = decoders[channel.id] = factory.decoder_for(channel.message_encoding,
-                                                                 schema)
-            msg = dec(rec.data)
-        except Exception:  # noqa: BLE001 - undecodable despite an intact chunk: skip it
-            data.undecodable += 1
-            continue
         if is_img:
-            data.images.setdefault(topic, []).append((t, bytes(msg.data)))
-        elif is_scene:
-            kept = data.grids if schema.name == "foxglove.Grid" else data.scenes
-            kept[topic], scene_t[topic] = msg, t
-        else:
-            rows.setdefault(topic, []).append((t, _flatten(msg)))
+            msg = dec(data, channel, schema, rec)
+            if msg is not None:
+                data.images.setdefault(topic, []).append((t, bytes(msg.data)))
+        elif topic in _SERIES_TOPICS or topic.startswith("/estimator/"):
+            thin = rows.get(topic) or rows.setdefault(topic, _Thin(max_points))
+            if thin.wants():
+                msg = dec(data, channel, schema, rec)
+                if msg is not None:
+                    thin.add((t, _flatten(msg)))
     if not (data.metadata or data.attachments or scan.channels):
         why = scan.report.describe(counts=False)
         raise LogError(f"{path}: nothing readable in this MCAP file" + (f" ({why})" if why
                                                                         else ""))
+    for topic, (_, channel, rec) in last.items():
+        schema = scan.schemas.get(channel.schema_id)
+        msg = dec(data, channel, schema, rec)
+        if msg is not None:
+            kept = data.grids if schema.name == "foxglove.Grid" else data.scenes
+            kept[topic] = msg
     data.finished = scan.report.finished
-    data.series = {topic: _series(rs) for topic, rs in rows.items()}
+    data.series = {topic: _series(th.rows) for topic, th in rows.items() if th.rows}
     for frames in data.images.values():
         frames.sort(key=lambda f: f[0])
     if data.channels:
         data.t_start = min(i["t0"] for i in data.channels.values())
         data.t_end = max(i["t1"] for i in data.channels.values())
     return data
+
+
+class _Decoders:
+    """Protobuf decoders per channel (mcap_protobuf's factory); a message that does not decode
+    despite an intact chunk is counted in ``RunData.undecodable`` and gives None."""
+
+    def __init__(self) -> None:
+        from mcap_protobuf.decoder import DecoderFactory
+
+        self.factory, self.by_channel = DecoderFactory(), {}
+
+    def __call__(self, data: RunData, channel: Any, schema: Any, rec: Any) -> Any:
+        try:
+            d = self.by_channel.get(channel.id)
+            if d is None:
+                d = self.by_channel[channel.id] = self.factory.decoder_for(
+                    channel.message_encoding, schema)
+            return d(rec.data)
+        except Exception:  # noqa: BLE001 - undecodable despite an intact chunk: skip it
+            data.undecodable += 1
+            return None
 
 
 def skipped_line(d: RunData) -> str:
@@ -257,9 +307,108 @@ def skipped_line(d: RunData) -> str:
 # --------------------------------------------------------------------------------------------
 
 
+_MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # a Message record's opcode, length and fixed fields
+
+
+def _index_rows(f: Any, ci: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(channel, log time ns, offset) of every message of one chunk, from its MessageIndex
+    records (the MCAP specification's "Message Index" record: opcode 0x07, channel id u16,
+    records of (log time u64, offset u64) little-endian) without reading the chunk."""
+    f.seek(ci.chunk_start_offset + ci.chunk_length)
+    buf = f.read(ci.message_index_length)
+    chans, recs, o = [], [], 0
+    while o + 9 <= len(buf):
+        op, n = buf[o], struct.unpack_from("<Q", buf, o + 1)[0]
+        if op == 0x07:
+            ch, m = struct.unpack_from("<HI", buf, o + 9)
+            r = np.frombuffer(buf, dtype="<u8", count=m // 8, offset=o + 15).reshape(-1, 2)
+            chans.append(np.full(len(r), ch, np.int64))
+            recs.append(r)
+        o += 9 + n
+    if not recs:
+        z = np.zeros(0, np.int64)
+        return z, z.astype(np.uint64), z.astype(np.uint64)
+    r = np.concatenate(recs)
+    return np.concatenate(chans), r[:, 0], r[:, 1]
+
+
+def _check_chunk(f: Any, ci: Any) -> np.ndarray:
+    """The decompressed records of the chunk at ``ci``; raises (McapError, ValueError,
+    RuntimeError) unless it reads whole: its record parses and its data decompresses to its
+    CRC (the chunk's messages are not parsed)."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader, get_chunk_data_stream
+
+    f.seek(ci.chunk_start_offset)
+    chunk = next(StreamReader(f, skip_magic=True, emit_chunks=True).records)
+    if not isinstance(chunk, Chunk):
+        raise ValueError("not a chunk")
+    stream, n = get_chunk_data_stream(chunk, validate_crc=True)
+    return np.frombuffer(stream.read(n), dtype=np.uint8)
+
+
+def read_summary(run: str | Path) -> RunData | None:
+    """What :func:`show` prints, from a finished log's summary section, its message indexes,
+    metadata and attachments (the MCAP specification's index records), without decompressing or
+    decoding one message (each chunk is decompressed once to check its CRC); None for a log
+    without them (unfinished, unindexed) or with a damaged chunk: then :func:`read_run` scans
+    it and says what it skipped."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    path = mcap_path(run)
+    try:
+        with open(path, "rb") as f:
+            r = make_reader(f)
+            s = r.get_summary()
+            if s is None or s.statistics is None or not s.chunk_indexes:
+                return None
+            d = RunData(path=path, finished=True)
+            for m in r.iter_metadata():
+                d.metadata[m.name] = dict(m.metadata)
+            for a in r.iter_attachments():
+                d.attachments[a.name] = bytes(a.data)
+            _index_channels(d, f, s)
+    except (McapError, OSError, ValueError, KeyError, EOFError, StopIteration, RuntimeError,
+            struct.error):  # damage (lz4 reports a bad checksum as a RuntimeError)
+        return None
+    return d
+
+
+def _index_channels(d: RunData, f: Any, s: Any) -> None:
+    """Per-channel counts, times and bytes of ``d`` from the chunks' message indexes."""
+    acc: dict[int, list[Any]] = {}
+    for ci in s.chunk_indexes:
+        raw = _check_chunk(f, ci)
+        ch, t, off = _index_rows(f, ci)
+        if not len(ch):
+            continue
+        off = off.astype(np.int64)
+        # each Message record's length field (u64 after its opcode) less its fixed fields
+        length = raw[off[:, None] + np.arange(1, 9)].copy().view("<u8").ravel()
+        size = length.astype(np.int64) - (_MSG_HEAD - 9)
+        for c in np.unique(ch):
+            k = ch == c
+            a = acc.setdefault(int(c), [0, math.inf, -math.inf, 0])
+            a[0] += int(k.sum())
+            a[1] = min(a[1], int(t[k].min()))
+            a[2] = max(a[2], int(t[k].max()))
+            a[3] += int(size[k].sum())
+    for cid, (n, t0, t1, nbytes) in acc.items():
+        c = s.channels[cid]
+        sch = s.schemas.get(c.schema_id)
+        d.channels[c.topic] = {"schema": sch.name if sch is not None else "", "count": n,
+                               "encoding": c.message_encoding, "t0": t0 * 1e-9,
+                               "t1": t1 * 1e-9, "bytes": nbytes}
+    if d.channels:
+        d.t_start = min(i["t0"] for i in d.channels.values())
+        d.t_end = max(i["t1"] for i in d.channels.values())
+
+
 def show(run: str | Path) -> str:
-    """A text report of a run from its MCAP alone."""
-    d = read_run(run, images=False)
+    """A text report of a run from its MCAP alone: from the summary section and indexes of a
+    finished log (:func:`read_summary`), else by scanning it (:func:`read_run`)."""
+    d = read_summary(run) or read_run(run, images=False)
     state = "finished, indexed" if d.finished else "NOT finished (truncated?): try recover"
     lines = [f"run log: {d.path}  ({d.path.stat().st_size / 1e6:.2f} MB, {state})"]
     skipped = skipped_line(d)
@@ -362,7 +511,8 @@ def _save(fig: Any, path: Path, dpi: int) -> Path:
 
 def _data(run: str | Path | RunData, images: bool) -> RunData:
     """``run`` read (a run folder or .mcap file), or ``run`` itself if already read."""
-    return run if isinstance(run, RunData) else read_run(run, images=images)
+    return run if isinstance(run, RunData) else read_run(run, images=images,
+                                                          max_points=PLOT_POINTS)
 
 
 def plot(run: str | Path | RunData, out_dir: str | Path) -> list[Path]:

@@ -45,10 +45,10 @@ def _show(args: argparse.Namespace) -> int:
 def _plot(args: argparse.Namespace) -> int:
     if args.controller is not None or args.run is None:
         return _plot_controller(args)
-    from ..analysis.viewing import mcap_path, plot, read_run
+    from ..analysis.viewing import PLOT_POINTS, mcap_path, plot, read_run
 
     out = Path(args.out) if args.out else mcap_path(args.run).parent / "plots"
-    d = read_run(args.run, images=False)
+    d = read_run(args.run, images=False, max_points=PLOT_POINTS)
     _warn_skipped(args, d)
     for p in plot(d, out):
         print(p)
@@ -73,12 +73,12 @@ def _plot_controller(args: argparse.Namespace) -> int:
 @_tool
 def _video(args: argparse.Namespace) -> int:
     from ..analysis.logscan import LogError
-    from ..analysis.viewing import read_run, video
+    from ..analysis.viewing import PLOT_POINTS, read_run, video
 
     fps = args.fps
     if not (math.isfinite(fps) and fps >= 0):
         raise LogError(f"--fps = {fps:g}: must be > 0 (or 0 for the logged rate)")
-    d = read_run(args.run, images=True)
+    d = read_run(args.run, images=True, max_points=PLOT_POINTS)
     _warn_skipped(args, d)
     print(video(d, args.out, camera=args.camera, fps=fps or None))
     return 0
