@@ -176,7 +176,7 @@ class DepositionConfig:
     cell_m: float = 0.5
     buffer_m: float = 10.0
     max_cells: int = 4_000_000
-    flush_cells: float = 1.0
+    flush_cells: float = 2.0
     flush_ticks: int = 50
     levels: int = 6
     merge_ratio: float = 2.0
@@ -381,11 +381,16 @@ def fall_tables(c: DepositionConfig, d: np.ndarray) -> tuple[np.ndarray, np.ndar
  P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
  P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE) = range(42)
 P_HEADER = 48
-# state slots per row; accumulators (M·K·2 × 6: V, Sx, Sy, Sxx, Syy, Svar) follow at S_ACC
+# state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
+# sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
 (S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
  S_DRIFT, S_PENDING, S_LITRES_TICK, S_AIR, S_EVAP) = range(16)
 S_ACC = 16
-NACC = 6
+NACC = 5
+#: per (class, wake/escaped) a wide part's gathered moments: V, Sx, Sy, Sxx, Syy, V·σx², V·σy²
+NSLOW = 7
+#: a wide part is splatted once its release points' variance reaches this share of its kernel's
+WIDE_SPREAD = 0.25
 #: von Kármán's constant; σ_v / u* of the neutral surface layer (Panofsky & Dutton 1984,
 #: *Atmospheric Turbulence*, §7: σ_u, σ_v, σ_w ≈ 2.4, 1.9, 1.25 u*)
 KAPPA = 0.41
@@ -467,50 +472,110 @@ def _splat(par, buf, vol, mx, my, vx, vy, scratch) -> float:
 
 
 @njit(cache=True)
-def _flush(par, st, buf, scratch) -> None:
-    """Splat every pending (nozzle, class, wake/escaped) footprint; book what misses the grid."""
+def _splat_part(par, st, buf, scratch, vol, mx, my, vx, vy, drift) -> None:
+    """Splat one Gaussian and book what misses the grid (drift or deposited outside)."""
+    if vol <= 0.0:
+        return
+    put = _splat(par, buf, vol, mx, my, vx, vy, scratch)
+    st[S_INGRID] += put
+    if drift:
+        st[S_DRIFT] += vol - put
+    else:
+        st[S_OUTSIDE] += vol - put
+
+
+@njit(cache=True)
+def _flush(par, st, buf, scratch, force: bool) -> None:
+    """The window's landing law, once: every class's footprint (:func:`_class_footprint`) at
+    the window's litre-weighted mean input row, convolved with each nozzle's release moments
+    (the along-track smear exactly); the wake and the escaped part of each (nozzle, class)
+    splatted (nozzles merged where the class's kernel is wider than ``merge_ratio`` × the
+    nozzle radius); airborne and evaporated volume booked."""
     m_n, k_n = int(par[P_M]), int(par[P_K])
+    o_fr = int(par[P_O_FRAC])
     merge_r = par[P_MERGE] * par[P_NOZC]
     drift = st[S_INSIDE] > 0.5
-    for k in range(k_n):
-        for part in range(2):
-            # merged moments over nozzles of class k, part
-            V = Sx = Sy = Sxx = Syy = Svar = 0.0
-            for m in range(m_n):
-                a = S_ACC + ((m * k_n + k) * 2 + part) * NACC
-                V += st[a]
-                Sx += st[a + 1]
-                Sy += st[a + 2]
-                Sxx += st[a + 3]
-                Syy += st[a + 4]
-                Svar += st[a + 5]
-            if V <= 0.0:
-                continue
-            merge = math.sqrt(Svar / V) >= merge_r
-            for m in range(m_n if not merge else 1):
-                a = S_ACC + ((m * k_n + k) * 2 + part) * NACC
-                if merge:
-                    v, sx, sy, sxx, syy = V, Sx, Sy, Sxx, Syy
-                else:
-                    v, sx, sy, sxx, syy = st[a], st[a + 1], st[a + 2], st[a + 3], st[a + 4]
-                if v <= 0.0:
+    vtot = st[S_ACC]
+    if vtot > 0.0:
+        row = scratch[2]
+        for j in range(INPUT_WIDTH):
+            row[j] = st[S_ACC + 1 + j] / vtot
+        env = _environment(par, row)
+        o = S_ACC + 1 + INPUT_WIDTH
+        V = Sx = Sy = Sxx = Syy = 0.0
+        for m in range(m_n):
+            a = o + m * NACC
+            V += st[a]
+            Sx += st[a + 1]
+            Sy += st[a + 2]
+            Sxx += st[a + 3]
+            Syy += st[a + 4]
+        for k in range(k_n):
+            f = _class_footprint(par, k, env)
+            vk = par[o_fr + k]
+            vw, ve = vk * f[F_WAKE], vk * f[F_ESC]
+            land_e = ve * (1.0 - f[F_PAIR]) * f[F_RLAND]
+            air = ve * f[F_PAIR] * f[F_RAIR]
+            st[S_AIR] += vtot * air
+            st[S_EVAP] += vtot * (vw * (1.0 - f[F_WLAND]) + (ve - land_e - air))
+            for part in range(2):
+                share = vw * f[F_WLAND] if part == 0 else land_e
+                if share <= 0.0:
                     continue
-                mx, my = sx / v, sy / v
-                vx = max(sxx / v - mx * mx, 1e-12)
-                vy = max(syy / v - my * my, 1e-12)
-                put = _splat(par, buf, v, mx, my, vx, vy, scratch)
-                st[S_INGRID] += put
-                if drift:
-                    st[S_DRIFT] += v - put
-                else:
-                    st[S_OUTSIDE] += v - put
-            for m in range(m_n):
-                a = S_ACC + ((m * k_n + k) * 2 + part) * NACC
-                for q in range(NACC):
-                    st[a + q] = 0.0
+                ox = f[F_WX] if part == 0 else f[F_EX]
+                oy = f[F_WY] if part == 0 else f[F_EY]
+                kvx = f[F_WVAR] if part == 0 else f[F_EVX]
+                kvy = f[F_WVAR] if part == 0 else f[F_EVY]
+                if math.sqrt(0.5 * (kvx + kvy)) >= merge_r:
+                    q = o + m_n * NACC + (2 * k + part) * NSLOW
+                    w = share * V
+                    st[q] += w
+                    st[q + 1] += share * (Sx + ox * V)
+                    st[q + 2] += share * (Sy + oy * V)
+                    st[q + 3] += share * (Sxx + 2.0 * ox * Sx + ox * ox * V)
+                    st[q + 4] += share * (Syy + 2.0 * oy * Sy + oy * oy * V)
+                    st[q + 5] += w * kvx
+                    st[q + 6] += w * kvy
+                    continue
+                for m in range(m_n):
+                    a = o + m * NACC
+                    v = st[a]
+                    if v <= 0.0:
+                        continue
+                    mx, my = st[a + 1] / v, st[a + 2] / v
+                    _splat_part(par, st, buf, scratch, share * v, mx + ox, my + oy,
+                                max(st[a + 3] / v - mx * mx, 0.0) + kvx,
+                                max(st[a + 4] / v - my * my, 0.0) + kvy, drift)
+        for j in range(S_ACC, o + m_n * NACC):
+            st[j] = 0.0
+    _flush_wide(par, st, buf, scratch, force)
     st[S_PENDING] = 0.0
     st[S_TRAVEL] = 0.0
     st[S_TICKS] = 0.0
+
+
+@njit(cache=True)
+def _flush_wide(par, st, buf, scratch, force: bool) -> None:
+    """The wide parts (nozzles merged) gather over several windows: each is splatted once the
+    spread of its release points reaches a quarter of its kernel's variance (so the smear
+    changes its shape by little; mean and variance are matched exactly), or when ``force``
+    (the end, the vehicle crossing the grid's edge)."""
+    m_n, k_n = int(par[P_M]), int(par[P_K])
+    drift = st[S_INSIDE] > 0.5
+    base = S_ACC + 1 + INPUT_WIDTH + m_n * NACC
+    for i in range(2 * k_n):
+        q = base + i * NSLOW
+        w = st[q]
+        if w <= 0.0:
+            continue
+        mx, my = st[q + 1] / w, st[q + 2] / w
+        px = max(st[q + 3] / w - mx * mx, 0.0)
+        py = max(st[q + 4] / w - my * my, 0.0)
+        kx, ky = st[q + 5] / w, st[q + 6] / w
+        if force or px + py >= WIDE_SPREAD * (kx + ky):
+            _splat_part(par, st, buf, scratch, w, mx, my, px + kx, py + ky, drift)
+            for j in range(NSLOW):
+                st[q + j] = 0.0
 
 
 @njit(cache=True)
@@ -707,43 +772,27 @@ def _footprints(par, inp, out) -> None:
 
 
 @njit(cache=True)
-def _accumulate(st, q, v, x, y, vx, vy) -> None:
-    st[q] += v
-    st[q + 1] += v * x
-    st[q + 2] += v * y
-    st[q + 3] += v * (x * x + vx)
-    st[q + 4] += v * (y * y + vy)
-    st[q + 5] += v * 0.5 * (vx + vy)
-
-
-@njit(cache=True)
 def _release(par, st, inp, litres: float) -> None:
-    """Landing moments of this tick's litres per (nozzle, class, wake/escaped); the volume
-    airborne and evaporated booked at once (so sprayed = landed + airborne + evaporated)."""
-    m_n, k_n = int(par[P_M]), int(par[P_K])
-    o_noz, o_share, o_fr = int(par[P_O_NOZ]), int(par[P_O_SHARE]), int(par[P_O_FRAC])
+    """This tick's litres into the window: the litre-weighted input row and each nozzle's
+    release moments (the landing law is applied once per window, in :func:`_flush`)."""
+    m_n = int(par[P_M])
+    o_noz, o_share = int(par[P_O_NOZ]), int(par[P_O_SHARE])
     px, py = inp[0], inp[1]
-    r = inp[6:15]
-    env = _environment(par, inp)
-    for k in range(k_n):
-        f = _class_footprint(par, k, env)
-        vk = litres * par[o_fr + k]
-        vw, ve = vk * f[F_WAKE], vk * f[F_ESC]
-        land_e = ve * (1.0 - f[F_PAIR]) * f[F_RLAND]
-        air = ve * f[F_PAIR] * f[F_RAIR]
-        st[S_AIR] += air
-        st[S_EVAP] += vw * (1.0 - f[F_WLAND]) + (ve - land_e - air)
-        for m in range(m_n):
-            b = o_noz + 3 * m
-            x = px + r[0] * par[b] + r[1] * par[b + 1] + r[2] * par[b + 2]
-            y = py + r[3] * par[b] + r[4] * par[b + 1] + r[5] * par[b + 2]
-            sh = par[o_share + m]
-            q = S_ACC + (m * k_n + k) * 2 * NACC
-            _accumulate(st, q, vw * f[F_WLAND] * sh, x + f[F_WX], y + f[F_WY], f[F_WVAR],
-                        f[F_WVAR])
-            if land_e > 0.0:
-                _accumulate(st, q + NACC, land_e * sh, x + f[F_EX], y + f[F_EY], f[F_EVX],
-                            f[F_EVY])
+    st[S_ACC] += litres
+    for j in range(INPUT_WIDTH):
+        st[S_ACC + 1 + j] += litres * inp[j]
+    o = S_ACC + 1 + INPUT_WIDTH
+    for m in range(m_n):
+        b = o_noz + 3 * m
+        x = px + inp[6] * par[b] + inp[7] * par[b + 1] + inp[8] * par[b + 2]
+        y = py + inp[9] * par[b] + inp[10] * par[b + 1] + inp[11] * par[b + 2]
+        v = litres * par[o_share + m]
+        a = o + m * NACC
+        st[a] += v
+        st[a + 1] += v * x
+        st[a + 2] += v * y
+        st[a + 3] += v * x * x
+        st[a + 4] += v * y * y
 
 
 @njit(cache=True)
@@ -759,8 +808,8 @@ def _row_step(par, inp, st, buf, dt: float, scratch) -> float:
     inside = (inp[0] >= x0 and inp[0] <= x0 + par[P_NX] * cell
               and inp[1] >= y0 and inp[1] <= y0 + par[P_NY] * cell)
     flag = 1.0 if inside else 0.0
-    if st[S_PENDING] > 0.0 and flag != st[S_INSIDE]:
-        _flush(par, st, buf, scratch)
+    if flag != st[S_INSIDE] and st[S_INSIDE] >= 0.0:
+        _flush(par, st, buf, scratch, True)       # what was released inside stays inside
     st[S_INSIDE] = flag
     if litres > 0.0:
         st[S_SPRAYED] += litres
@@ -771,9 +820,9 @@ def _row_step(par, inp, st, buf, dt: float, scratch) -> float:
         st[S_TICKS] += 1.0
         st[S_LX], st[S_LY] = inp[0], inp[1]
         if st[S_TRAVEL] >= par[P_FLUSHD] or st[S_TICKS] >= par[P_FLUSHT]:
-            _flush(par, st, buf, scratch)
+            _flush(par, st, buf, scratch, False)
     elif st[S_PENDING] > 0.0:
-        _flush(par, st, buf, scratch)
+        _flush(par, st, buf, scratch, False)
     return litres
 
 
@@ -841,8 +890,7 @@ def _levels_sum(buf, offs, nx, ny, nlev, f, out) -> None:
 @njit(cache=True)
 def _batch_flush(par, st, buf, scratch) -> None:
     for n in range(st.shape[0]):
-        if st[n, S_PENDING] > 0.0:
-            _flush(par, st[n], buf[n], scratch)
+        _flush(par, st[n], buf[n], scratch, True)
 
 
 # ------------------------------------------------------------------------------ grid and params
@@ -1074,14 +1122,15 @@ class DepositionBatch:
         self.grid = GridSpec.around(fld.bounds if fld is not None else bounds, cfg.buffer_m,
                                     cfg.cell_m, cfg.levels, cfg.max_cells)
         self.par = pack_params(cfg, self.grid)
-        nst = S_ACC + int(self.par[P_M]) * int(self.par[P_K]) * 2 * NACC
+        nst = (S_ACC + 1 + INPUT_WIDTH + int(self.par[P_M]) * NACC
+               + 2 * int(self.par[P_K]) * NSLOW)
         self.st = np.zeros((n, nst))
         self.st[:, S_INC] = -1.0
         self.st[:, S_INSIDE] = -1.0
         self.buf = np.zeros((n, self.grid.size))
         self.out = np.zeros(n)
         self.inp = np.zeros((n, INPUT_WIDTH))
-        self.scratch = np.zeros((2, max(self.grid.nx, self.grid.ny) + 2))
+        self.scratch = np.zeros((3, max(self.grid.nx, self.grid.ny, INPUT_WIDTH) + 2))
 
     @property
     def n(self) -> int:
