@@ -181,3 +181,27 @@ def test_bad_air_keys_name_the_key():
         DepositionConfig(rh_percent=120.0)
     with pytest.raises(ValueError, match="nonvolatile_fraction"):
         DepositionConfig(nonvolatile_fraction=0.0)
+
+
+def test_the_experiment_writes_its_tables_and_refuses_bad_input(tmp_path, capsys):
+    import argparse
+    import csv
+
+    from ag_uav.jobs.experiments import drift
+
+    p = argparse.ArgumentParser()
+    drift.add_arguments(p)
+    args = p.parse_args(["--winds", "3", "--heights", "2", "--spectra", "medium", "--rhs", "60",
+                         "--passes", "4", "--out", str(tmp_path)])
+    assert drift.main(args) == 0
+    rows = list(csv.DictReader((tmp_path / "drift.csv").open()))
+    assert [float(r["distance_m"]) for r in rows] == list(DISTANCES)
+    assert {"crosswind_mps", "release_height_m", "speed_mps", "spectrum", "temperature_c",
+            "rh_percent", "deposit_percent"} <= set(rows[0])
+    case = next(csv.DictReader((tmp_path / "cases.csv").open()))
+    assert 0 < float(case["buffer_1pct_m"]) < float(case["buffer_0p1pct_m"])
+    assert "JKI field crops" in (tmp_path / "drift.md").read_text()
+    assert (tmp_path / "drift.png").stat().st_size > 0
+    bad = p.parse_args(["--rhs", "120", "--out", str(tmp_path / "x")])
+    assert drift.main(bad) == 2
+    assert "rh_percent = 120" in capsys.readouterr().out

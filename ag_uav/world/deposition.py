@@ -85,14 +85,19 @@ is **evaporated** (at the mean fall time). In the dose grid the escaped part is 
 Gaussian of the same mean and variance; the drift trial (:mod:`ag_uav.jobs.experiments.drift`)
 evaluates the inverse-Gaussian law itself, so the far field has no cut-off.
 
-**Splatting.** Per (nozzle, class) the released volume and its landing moments (volume, first
-and second moments) are accumulated over a window of at most ``flush_cells`` cells of travel
-(or ``flush_ticks`` ticks), then splatted as one axis-aligned Gaussian whose mean and variance
-match the window's (the along-track smear adds its Δ²/12 exactly). Cell weights are exact cell
-integrals (erf differences), truncated at ±4σ and rescaled so that the grid receives exactly the
-analytic in-grid probability; wide kernels go to coarser levels (cells 2^l larger, at most ~17×17
-cells touched), summed into the fine map on read. Classes whose kernel is wider than twice the
-nozzle radius merge their nozzles into one Gaussian (same moments). Mass bookkeeping is exact by
+**Windows and splatting.** A tick adds its litres, the litre-weighted input row and each
+nozzle's release moments (volume, first and second moments) to a window of at most
+``flush_cells`` cells of travel (or ``flush_ticks`` ticks). At the window's end
+(:func:`_flush`) the landing law above is evaluated once, at the window's mean input row, for
+every class; each (nozzle, class, wake / escaped) part is one axis-aligned Gaussian: the release
+moments convolved with the class's kernel (mean and variance exact, the along-track smear
+included). Parts whose kernel is wider than ``merge_ratio`` × the nozzle radius merge their
+nozzles and gather over several windows (:func:`_flush_wide`) until their release points'
+variance reaches WIDE_SPREAD of the kernel's, then are splatted (always at the end and when the
+vehicle crosses the grid's edge). Cell weights are exact cell integrals (erf differences),
+truncated at ±4σ and rescaled so that the grid receives exactly the analytic in-grid
+probability; wide kernels go to coarser levels (cells 2^l larger, at most ~17×17
+cells touched), summed into the fine map on read. Mass bookkeeping is exact by
 construction: sprayed = in grid + deposited outside the grid + drift + airborne + evaporated,
 where the part landing outside the grid counts as **drift** (carried past the buffer) if it was
 released over the grid and as **deposited outside** otherwise.
