@@ -370,6 +370,29 @@ class EstimatorConfig:
     ins_recovery: str = _f("kf", "nav = ins, MCKF rules: lock-out recovery after 10 rejected "
                            "fixes (none / inflate / kf; measured in docs/ins.md)",
                            choices=("none", "inflate", "kf"))
+    ins_gate_sigma: float = _f(5.0, "nav = ins: innovation gate of the GNSS position, "
+                               "velocity and heading, common to the four rules (PX4 "
+                               "EKF2_GPS_GATE = 5): a fix fails when an axis's innovation^2 > "
+                               "gate^2 x its variance; 0 = no gate", ge=0, le=100)
+    ins_gate_reset_s: float = _f(5.0, "nav = ins: after this long (s) without a fused GNSS "
+                                 "position or velocity (no horizontal aiding), a fix the gate "
+                                 "rejects resets the position to the receiver (PX4 EKF2's reset "
+                                 "after its aiding timeout); 0 = never", ge=0, le=3600)
+    ins_gnss_colour: str = _f("consider", "nav = ins: the GNSS error's Gauss-Markov part: "
+                              "white = fused as white noise (R = the whole variance); inflate "
+                              "= R's Gauss-Markov part times the variance of its mean over "
+                              "ins_gnss_window_s (n f(n, rho), rho = exp(-dt/tau)); consider = "
+                              "R = the white part, the Gauss-Markov variance added to the "
+                              "position covariance the INS reports (measured in docs/ins.md)",
+                              choices=("white", "inflate", "consider"))
+    ins_gnss_window_s: float = _f(2.0, "nav = ins, ins_gnss_colour = inflate: the filter's "
+                                  "averaging window (s) for the R inflation", gt=0, le=600)
+    ins_q_accel: float = _f(2.0, "nav = ins: the filter's accelerometer white-noise variance "
+                            "(incl. vibration) is [imu]'s times this margin (an autopilot's "
+                            "noise parameters exceed the data sheet's: vibration, coning, model "
+                            "error); calibrated in docs/ins.md", gt=0, le=100)
+    ins_q_gyro: float = _f(2.0, "nav = ins: the filter's gyro white-noise variance is [imu]'s "
+                           "times this margin; calibrated in docs/ins.md", gt=0, le=100)
     ins_range_aid_m: float = _f(5.0, "nav = ins: range aid (PX4 EKF2_RNG_CTRL = 1, "
                                 "conditional; EKF2_RNG_A_HMAX = 5 m): while the radar reads "
                                 "less than this (m) and the receiver's horizontal speed is under "

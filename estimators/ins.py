@@ -69,7 +69,10 @@ fixes, run once per vehicle when a fix arrives.  The MCKF kernel (``INSConfig.mc
 ``"fixed"`` σ per row as given, ``"adaptive"`` the adaptive bandwidth of :class:`estimators.MCKF`
 (one row function for both, :func:`estimators.mckf.mckf_adaptive_update_row`; state ŝ per
 row), ``"multi"`` σ on the fix's rows, ∞ on the prior's.  Velocity, heading and radar use the
-KF update.  Each measurement is fused sequentially (R block-diagonal), then injected and reset
+KF update.  **The gate** in front of every rule (PX4 EKF2's innovation test, ``EKF2_GPS_GATE``
+= 5 σ; :func:`gate_ratio`): a fix's position, velocity or heading whose innovation exceeds
+``gate_sigma`` standard deviations on any axis is not fused; after ``gate_reset_s`` with
+neither position nor velocity fused, a rejected fix resets the position to it.  Each measurement is fused sequentially (R block-diagonal), then injected and reset
 (Solà §6.2-6.3, eqs 282-287)::
 
       p += δp, v += δv, q ← q ⊗ Exp(δθ), b += δb;   P ← G P Gᵀ, G_θθ = I − [½ δθ]×
@@ -116,16 +119,22 @@ DEG = math.pi / 180.0
 _P_DT, _P_G, _P_QV, _P_QT, _P_QBA, _P_QBG = 0, 1, 2, 3, 4, 5
 _P_RANT, _P_RB, _P_RRAD = 6, 9, 12
 _P_ZG, _P_COSMAX, _P_RMAX, _P_D, _P_DELAYED, _P_B, _P_QC = 15, 16, 17, 18, 19, 20, 21
-_NPRM = 22
+_P_GATE, _P_GRESET = 22, 23  # the innovation gate (σ; inf = off), its reset time (ticks)
+_NPRM = 24
 # ints (per row) layout
 _I_NOW, _I_CORE, _I_QN, _I_DIRTY, _I_LATE, _I_QDROP = 0, 1, 2, 3, 4, 5
 _I_MST = 6  # 6..9: MCKF (n_rejected, n_iter, rejected, recovered)
 _I_NGNSS, _I_NRAD, _I_RDROP = 10, 11, 12
-_NINT = 13
+# the gate: position / velocity / heading fixes rejected, position resets to the receiver,
+# the core ticks of the last fused (or reset) position and of the last fused velocity
+_I_GREJP, _I_GREJV, _I_GREJY, _I_GRESET, _I_GLAST, _I_GLASTV = 13, 14, 15, 16, 17, 18
+_NINT = 19
 # dg (per row diagnostics and the adaptive kernel's state)
 _D_NISP, _D_NISV, _D_NISY, _D_NISR, _D_WY = 0, 1, 2, 3, 4  # 4..6 diag C_y
 _D_S2 = 7  # ŝ of the adaptive bandwidth rule (1 after a reset)
-_NDG = 8
+_D_GATE = 8  # the last fix's position: 0 fused, 1 rejected by the gate, 2 reset (NaN: none)
+_D_RSUM, _D_RN = 9, 10  # the radar NIS summed over the fused ranges, and their number
+_NDG = 11
 # mpar (per row MCKF parameters) layout: kx(15), ky(3), fpar(5), apar(3), σ(18)
 _M_KX, _M_KY, _M_F, _M_A, _M_SIG, _NMPAR = 0, 15, 18, 23, 26, 44
 KERNELS = ("fixed", "adaptive", "multi")
@@ -530,30 +539,111 @@ def _diag_R(var, o, Rm):
 
 
 @njit
+def gate_ratio(P, H, Rm, nu, gate):
+    """The innovation test of PX4 EKF2 (docs.px4.io, *Using the ECL EKF*: "test ratio =
+    innovation² / (gate² · innovation variance)", ``EKF2_GPS_GATE`` = 5 σ): the largest over
+    the measurement's rows of ν_i² / (γ² S_ii), S_ii = h_i P h_iᵀ + R_ii.  Only H's non-zero
+    columns enter (at most 7 of 15 for the GNSS rows).  A ratio above 1 fails the gate."""
+    worst = 0.0
+    for i in range(H.shape[0]):
+        s = Rm[i, i]
+        for a in range(15):
+            ha = H[i, a]
+            if ha == 0.0:
+                continue
+            acc = 0.0
+            for b in range(15):
+                if H[i, b] != 0.0:
+                    acc += P[a, b] * H[i, b]
+            s += ha * acc
+        r = nu[i] * nu[i] / (gate * gate * s)
+        if r > worst:
+            worst = r
+    return worst
+
+
+@njit
+def _reset_pos(x, P, z, Rm, prm, S3):
+    """The position reset to the receiver after a run of rejected fixes (PX4 EKF2 resets to
+    GNSS after its fusion timeout): p = z − R r_ant, the position's cross-covariances zeroed
+    and its variance the fix's."""
+    R = S3[0]
+    quat_to_rot(x[6:10], R)
+    r = prm[_P_RANT:_P_RANT + 3]
+    for i in range(3):
+        x[i] = z[i] - (R[i, 0] * r[0] + R[i, 1] * r[1] + R[i, 2] * r[2])
+        for c in range(15):
+            P[i, c] = 0.0
+            P[c, i] = 0.0
+    for i in range(3):
+        P[i, i] = Rm[i, i]
+
+
+@njit
+def _fuse_pos(x, P, rec, rule, prm, mpar, ipar, ints, dg, fb):
+    """The fix's position through the gate (:func:`gate_ratio`; every rule's fix, the PCA'd
+    one for rules 2-3), then the rule's law.  Once neither a position nor a velocity has been
+    fused for ``_P_GRESET`` ticks (no horizontal aiding: the filter has drifted), a rejected
+    fix resets the position (:func:`_reset_pos`); while velocities are fused the position's
+    variance grows and the gate itself re-admits the fixes that fit it."""
+    H3, nu3, R3 = _w2(fb, _W_H3, 3, 15), fb[_W_NU3:_W_NU3 + 3], _w2(fb, _W_R3, 3, 3)
+    S3 = _w3(fb, _W_S3)
+    z = rec[_Q_ZP:_Q_ZP + 3] if rule >= 2 else rec[_Q_Z:_Q_Z + 3]
+    if not np.isfinite(z[0] + z[1] + z[2]):
+        return
+    _h_gnss_pos(x, prm, z, nu3, H3, S3)
+    Rm = _diag_R(rec, _Q_V, R3)
+    core = ints[_I_CORE]
+    if gate_ratio(P, H3, Rm, nu3, prm[_P_GATE]) > 1.0:
+        ints[_I_GREJP] += 1
+        dg[_D_GATE] = 1.0
+        if (core - ints[_I_GLAST] >= prm[_P_GRESET]
+                and core - ints[_I_GLASTV] >= prm[_P_GRESET]):
+            _reset_pos(x, P, z, Rm, prm, S3)
+            ints[_I_GRESET] += 1
+            ints[_I_GLAST] = core
+            dg[_D_GATE] = 2.0
+        return
+    use_mckf = rule == 1 or rule == 3
+    v = _fuse_one(x, P, H3, nu3, Rm, use_mckf, mpar, ipar, ints[_I_MST:_I_MST + 4], dg, fb)
+    dg[_D_NISP] = v
+    dg[_D_GATE] = 0.0
+    ints[_I_GLAST] = core
+    ints[_I_NGNSS] += 1
+
+
+@njit
 def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg, fb):
-    """A GNSS record: position (the rule's law, on the PCA'd fix for rules 2-3), then velocity
-    and heading (KF), each present when finite; ``fb``: the scratch (``_W_*``)."""
+    """A GNSS record: position (:func:`_fuse_pos`), then velocity and heading (KF, through the
+    same gate), each present when finite; ``fb``: the scratch (``_W_*``).  The record's NIS
+    (``dg``) are NaN for a part absent or rejected."""
     H3, nu3, R3 = _w2(fb, _W_H3, 3, 15), fb[_W_NU3:_W_NU3 + 3], _w2(fb, _W_R3, 3, 3)
     H1, nu1, R1 = _w2(fb, _W_H1, 1, 15), fb[_W_NU1:_W_NU1 + 1], _w2(fb, _W_R1, 1, 1)
     S3, wv = _w3(fb, _W_S3), fb[_W_V:_W_V + 8]
-    z = rec[_Q_ZP:_Q_ZP + 3] if rule >= 2 else rec[_Q_Z:_Q_Z + 3]
-    if np.isfinite(z[0] + z[1] + z[2]):
-        _h_gnss_pos(x, prm, z, nu3, H3, S3)
-        use_mckf = rule == 1 or rule == 3
-        v = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V, R3), use_mckf, mpar, ipar,
-                      ints[_I_MST:_I_MST + 4], dg, fb)
-        dg[_D_NISP] = v
-        ints[_I_NGNSS] += 1
+    for k in range(3):
+        dg[_D_NISP + k] = np.nan
+    dg[_D_GATE] = np.nan
+    _fuse_pos(x, P, rec, rule, prm, mpar, ipar, ints, dg, fb)
+    gate = prm[_P_GATE]
     zv = rec[_Q_Z + 3:_Q_Z + 6]
     if np.isfinite(zv[0] + zv[1] + zv[2]):
         _h_gnss_vel(x, w, prm, zv, nu3, H3, S3, wv)
-        dg[_D_NISV] = _fuse_one(x, P, H3, nu3, _diag_R(rec, _Q_V + 3, R3), False, mpar, ipar,
-                                ints[_I_MST:_I_MST + 4], dg, fb)
+        Rv = _diag_R(rec, _Q_V + 3, R3)
+        if gate_ratio(P, H3, Rv, nu3, gate) > 1.0:
+            ints[_I_GREJV] += 1
+        else:
+            dg[_D_NISV] = _fuse_one(x, P, H3, nu3, Rv, False, mpar, ipar,
+                                    ints[_I_MST:_I_MST + 4], dg, fb)
+            ints[_I_GLASTV] = ints[_I_CORE]
     zy = rec[_Q_Z + 6:_Q_Z + 7]
     if np.isfinite(zy[0]):
         if _h_heading(x, prm, zy, nu1, H1, S3):
-            dg[_D_NISY] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V + 6, R1), False, mpar,
-                                    ipar, ints[_I_MST:_I_MST + 4], dg, fb)
+            Ry = _diag_R(rec, _Q_V + 6, R1)
+            if gate_ratio(P, H1, Ry, nu1, gate) > 1.0:
+                ints[_I_GREJY] += 1
+            else:
+                dg[_D_NISY] = _fuse_one(x, P, H1, nu1, Ry, False, mpar, ipar,
+                                        ints[_I_MST:_I_MST + 4], dg, fb)
 
 
 @njit
@@ -561,8 +651,12 @@ def _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg, fb):
     H1, nu1, R1 = _w2(fb, _W_H1, 1, 15), fb[_W_NU1:_W_NU1 + 1], _w2(fb, _W_R1, 1, 1)
     S3 = _w3(fb, _W_S3)
     if np.isfinite(rec[_Q_Z]) and _h_radar(x, prm, rec[_Q_Z:_Q_Z + 1], nu1, H1, S3):
-        dg[_D_NISR] = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V, R1), False, mpar, ipar,
-                                ints[_I_MST:_I_MST + 4], dg, fb)
+        v = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V, R1), False, mpar, ipar,
+                      ints[_I_MST:_I_MST + 4], dg, fb)
+        dg[_D_NISR] = v
+        if np.isfinite(v):
+            dg[_D_RSUM] += v
+            dg[_D_RN] += 1.0
         ints[_I_NRAD] += 1
     else:
         ints[_I_RDROP] += 1
@@ -717,7 +811,12 @@ class INSConfig:
     rows, so only the fix is down-weighted, never the INS prior), ``max_iter``, ``eps``,
     ``recovery`` (``"kf"``, ``"inflate"`` or ``None``),
     ``lockout_n``, ``reject_weight``, ``inflate``; PCA block ``pca_window``, ``pca_mode``,
-    ``pca_embed``, ``pca_components`` (as :class:`estimators.PCABlock`).
+    ``pca_embed``, ``pca_components`` (as :class:`estimators.PCABlock`).  The innovation
+    gate, common to the four rules and applied to the GNSS position, velocity and heading
+    before any update (:func:`gate_ratio`): ``gate_sigma`` γ (PX4 ``EKF2_GPS_GATE``, default
+    5; ``inf`` = no gate) and ``gate_reset_s``: a rejected position fix that comes that long
+    after the last fused position and the last fused velocity resets the position to the
+    receiver (``inf`` = never).
     """
 
     dt: float = 0.01
@@ -749,6 +848,8 @@ class INSConfig:
     pca_mode: str = "hankel"
     pca_embed: int | None = None
     pca_components: int | None = None
+    gate_sigma: float = 5.0
+    gate_reset_s: float = 5.0
     extra: dict = field(default_factory=dict)
 
     @classmethod
@@ -784,6 +885,11 @@ class INSConfig:
         p[_P_RMAX] = self.radar_max_range
         D = self.delay_ticks()
         p[_P_D], p[_P_DELAYED], p[_P_B], p[_P_QC] = D, float(self.delayed), D + 1, self.queue
+        if not (self.gate_sigma > 0 and self.gate_reset_s > 0):
+            raise ValueError(f"gate_sigma and gate_reset_s must be > 0 (inf = off), got "
+                             f"{self.gate_sigma!r}, {self.gate_reset_s!r}")
+        p[_P_GATE] = self.gate_sigma
+        p[_P_GRESET] = self.gate_reset_s / dt
         return p
 
     def kernel_widths(self) -> np.ndarray:
@@ -859,6 +965,7 @@ class BatchINS:
         self._mq = np.zeros((N, cfg.queue, _QW))
         self._dg = np.full((N, _NDG), np.nan)
         self._dg[:, _D_S2] = 1.0
+        self._dg[:, _D_RSUM:_D_RN + 1] = 0.0
         mpar, ipar = cfg.mckf_params()
         self._mpar = np.tile(mpar, (N, 1))
         self._ipar = np.tile(ipar, (N, 1))
@@ -895,6 +1002,7 @@ class BatchINS:
         self._ints[:] = 0
         self._dg[:] = np.nan
         self._dg[:, _D_S2] = 1.0
+        self._dg[:, _D_RSUM:_D_RN + 1] = 0.0
         self._pcs[:] = 0
 
     def reset_vehicle(self, iv: int, p, v, q, ba=None, bg=None, P0=None) -> None:
@@ -915,6 +1023,7 @@ class BatchINS:
         self._ints[rows] = 0
         self._dg[rows] = np.nan
         self._dg[rows, _D_S2] = 1.0
+        self._dg[rows, _D_RSUM:_D_RN + 1] = 0.0
         self._pcs[iv] = 0
 
     # -- ticks ------------------------------------------------------------------------------
@@ -979,7 +1088,20 @@ class BatchINS:
         return {"gnss_fused": i[:, _I_NGNSS], "radar_fused": i[:, _I_NRAD],
                 "radar_dropped": i[:, _I_RDROP], "late": i[:, _I_LATE],
                 "queue_full": i[:, _I_QDROP], "mckf_n_iter": i[:, _I_MST + 1],
-                "mckf_rejected": i[:, _I_MST + 2], "mckf_recovered": i[:, _I_MST + 3]}
+                "mckf_rejected": i[:, _I_MST + 2], "mckf_recovered": i[:, _I_MST + 3],
+                "gate_rejected_pos": i[:, _I_GREJP], "gate_rejected_vel": i[:, _I_GREJV],
+                "gate_rejected_yaw": i[:, _I_GREJY], "gate_resets": i[:, _I_GRESET]}
+
+    @property
+    def gate_state(self) -> np.ndarray:
+        """(N,) the last fix's position per row: 0 fused, 1 rejected by the gate, 2 rejected
+        and reset to the receiver (NaN: no position in the last fix)."""
+        return self._dg[:, _D_GATE]
+
+    @property
+    def radar_nis(self) -> np.ndarray:
+        """(N, 2) the radar NIS summed over the fused ranges, and their number."""
+        return self._dg[:, _D_RSUM:_D_RN + 1]
 
 
 class INS:

@@ -30,7 +30,9 @@ def _fixes(n: int = 60) -> np.ndarray:
 
 
 def _ins(kernel: str, sigma=2.0, rule: str = "mckf") -> INS:
-    ins = INS(INSConfig(delayed=False, sigma=sigma, mckf_kernel=kernel), rule)
+    # the update laws alone: no innovation gate in front of them
+    ins = INS(INSConfig(delayed=False, sigma=sigma, mckf_kernel=kernel, gate_sigma=math.inf),
+              rule)
     ins.reset(np.array([1.0, 2.0, 5.0]), np.zeros(3), Q0, P0=P0)
     return ins
 

@@ -461,6 +461,8 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))
         scores = fb.scores(res.p_true, res.p_ref, mission)
         summ["estimators"] = scores
+        if getattr(fb, "series", None) is not None:   # per-fix score series (INS)
+            res.extra["nav_series"] = fb.series
         summ["nav"] = cfg.estimator.nav if cfg.estimator.source == "gps" else "bearings"
         if fb.name in scores:
             summ["estimate_rmse_m"] = scores[fb.name]["estimate_rmse_m"]

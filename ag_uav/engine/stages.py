@@ -180,7 +180,9 @@ class Feedback:
     def step(self, k: int, t: float) -> None:
         """``p_fb``, ``v_fb`` of every active vehicle; a feedback that estimates the attitude
         too returns it third ((N, 9) row-major body → world), and the controller flies on it
-        instead of the sensing stage's attitude."""
+        instead of the sensing stage's attitude; one that estimates the gyro bias returns the
+        corrected body rates fourth ((N, 3): ω̃ − b̂_g), and the rate loop flies on them, as an
+        autopilot's does, instead of the raw gyro."""
         b = self.b
         if self.all_true:
             pf, vf = b.p, b.v
@@ -190,6 +192,8 @@ class Feedback:
             pf, vf = out[0], out[1]
             if len(out) > 2:
                 b.Rc = out[2]
+            if len(out) > 3:
+                b.om = out[3]
         hold_on_ground(b.act, b.airborne, pf, vf, b.rp, b.rv, b.p_fb, b.v_fb)
 
     def _per_vehicle(self, t: float) -> tuple[np.ndarray, np.ndarray]:

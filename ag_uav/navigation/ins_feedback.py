@@ -36,8 +36,19 @@ reference).
 **R.** Position: ``max(r_scale · variance, (1 cm)²)`` of the *reported* fix type
 (``gps.r_from_fix_type``; with ``gps.receiver = "honest"`` the reported type lags and its
 accuracy carries the per-episode calibration error), else the preset's nominal variance;
-velocity ``gps.velocity_sigma_mps²``, heading ``gps.heading_sigma_deg²``, radar
-``gps.radar_sigma_m²``.
+the variance's Gauss–Markov part is inflated by :func:`colour_factor` for the window
+``estimator.ins_gnss_window_s`` (0, the default: fused as white); velocity
+``gps.velocity_sigma_mps²``, heading ``gps.heading_sigma_deg²``, radar ``gps.radar_sigma_m²``.
+
+**Gate** (PX4 EKF2's innovation test, common to the four rules: ``estimator.ins_gate_sigma``,
+``estimator.ins_gate_reset_s``; :func:`estimators.ins.gate_ratio`): every fix's position,
+velocity and heading is tested before its update; a rejected one is not fused, counted
+(summary ``gate_rejected`` per filter, ``ins_counters``) and its verdict kept per fix. After
+``ins_gate_reset_s`` with neither a position nor a velocity fused, a rejected fix resets the
+position to the receiver (``gate_resets``).
+
+**Rates.** The rate loop flies on the gyro less the flown filter's gyro-bias estimate (the
+fourth output of :meth:`BatchInsFeedback.update`), as an autopilot's does.
 
 **Range aid** (PX4 EKF2's conditional range aid, ``EKF2_RNG_CTRL = 1``, with its defaults
 ``EKF2_RNG_A_HMAX`` = 5 m and ``EKF2_RNG_A_VMAX`` = 1 m/s: ``estimator.ins_range_aid_m``,
@@ -54,10 +65,18 @@ the ground here is flat at z = 0, the datum of the fixes too.
 
 **Scores** (per filter, over the mission ticks): horizontal position error RMS / max, 3-D
 velocity error RMS, tilt error (angle between the true and estimated body z axes) RMS / max,
-yaw error RMS, and the NEES of the 15-state error at every GNSS fix (the core state against the
-truth at the core's tick; bias truth = the IMU's turn-on biases, whose random walk is left out),
-with NIS of the position update. A fix whose core P is not positive definite (its Cholesky fails)
-has no NEES: it is left out of the mean and counted (``nees15_not_pd``; the report says so).
+yaw error RMS, and at every GNSS fix the NEES of the 15-state error (the core state against the
+truth at the core's tick) and of each 3-state block on its marginal covariance
+(``nees_pos/vel/att/ba/bg_mean``), with the NIS of the fix's position, velocity and heading
+updates (``nis_mean``, ``nis_vel_mean``, ``nis_yaw_mean``; a rejected part has none) and of the
+radar over the flight (``nis_radar_mean``). Every state's truth: position and velocity of the
+IMU (the body origin) from the engine's state; attitude from the engine's rotation (the error
+``Log(q̂* ⊗ q)``); the biases are the IMU's **walked** biases of that tick, from a twin of the
+engine's IMU (same seed stream and block: :meth:`ImuSensor.walk_block`). A fix whose core P is
+not positive definite (its Cholesky fails) has no NEES: it is left out of the mean and counted
+(``nees15_not_pd``; the report says so). With the honest receiver's false fixes: the share of
+false-fix epochs the gate rejected (``false_fixes_rejected``) and the peak horizontal error from
+each episode's first false fix to 10 s after its last (``false_fix_peak_m``).
 """
 
 from __future__ import annotations
@@ -95,14 +114,18 @@ def ins_config(cfg: Config) -> INSConfig:
     e, im = cfg.estimator, cfg.imu
     rec = None if e.ins_recovery == "none" else e.ins_recovery
     lat = gnss_latency_s(cfg)
+    # the process noise's margins (the white-noise variances × ins_q_accel / ins_q_gyro)
+    ma, mg = math.sqrt(e.ins_q_accel), math.sqrt(e.ins_q_gyro)
     return INSConfig.from_imu(
-        cfg.sim.control_hz, accel_nd_ug=im.accel_noise_density_ug,
-        gyro_nd_mdps=im.gyro_noise_density_mdps, vibration=im.vibration_sigma_mps2,
+        cfg.sim.control_hz, accel_nd_ug=im.accel_noise_density_ug * ma,
+        gyro_nd_mdps=im.gyro_noise_density_mdps * mg, vibration=im.vibration_sigma_mps2 * ma,
         accel_rw=max(im.accel_bias_rw, 1e-6), gyro_rw_dps=max(im.gyro_bias_rw, 1e-6),
         lever_arm=ANTENNA, radar_offset=RADAR, delay_s=lat,
         delayed=lat > 0, sigma=e.sigma, mckf_kernel=e.mckf_kernel,
         max_iter=e.max_iter, recovery=rec,
-        pca_window=e.window, pca_mode=e.pca_mode)
+        pca_window=e.window, pca_mode=e.pca_mode,
+        gate_sigma=e.ins_gate_sigma if e.ins_gate_sigma > 0 else math.inf,
+        gate_reset_s=e.ins_gate_reset_s if e.ins_gate_reset_s > 0 else math.inf)
 
 
 def ins_bank_key(cfg: Config) -> tuple:
@@ -157,17 +180,26 @@ class InsFeedback(Feedback):
         self.gnss_buf = np.empty(15)   # the fix row fix() returns (overwritten by the next)
         self.radar = g.altitude_source == "radar"
         self.radar_rng = np.random.default_rng(seeds["altimeter"])
-        var = np.asarray(self.gps.variance, dtype=float).reshape(-1)
-        var = np.where(np.isfinite(var), var, 1.0)
-        self.var_nominal = np.maximum(e.r_scale * np.broadcast_to(var, (3,)), R_FLOOR)
-        self.var_by_type = {m: np.maximum(e.r_scale * np.asarray(self.gps.mode_variance(m)),
-                                          R_FLOOR)
-                            for m in self.gps.fix_types} if g.r_from_fix_type else {}
+        # R and the considered variance per reported fix type (module docstring, "R")
+        self.colour = e.ins_gnss_colour
+        self.n_window = max(1, int(round(e.ins_gnss_window_s * self.gps.rate_hz)))
+        self.var_nominal = self._r(None)
+        self.var_by_type = ({m: self._r(m) for m in self.gps.fix_types}
+                            if g.r_from_fix_type else {})
+        #: the Gauss-Markov variance of the last fused fix (consider: the position covariance
+        #: the INS reports is its P plus this; zero otherwise)
+        self.cvar = np.zeros(3)
         self.var_v = g.velocity_sigma_mps**2
         self.var_yaw = (g.heading_sigma_deg * DEG) ** 2
-        # scoring only: the IMU's turn-on biases (the engine's IMU draws them from this stream)
-        self.bias0 = ImuSensor(cfg.imu, cfg.sim.control_hz, seeds["imu"], block=1).bias0
+        # scoring only: a twin of the engine's IMU (the same seed stream and block), whose
+        # walk_block() gives the walked biases sample by sample: the bias states' truth
+        self.imu_twin = ImuSensor(cfg.imu, cfg.sim.control_hz, seeds["imu"])
+        self.bias0 = self.imu_twin.bias0
         self.fixes = 0
+        #: whether the last fix was a false fix, and the ticks of the false fixes delivered to
+        #: the filters (scores: the gate's rejections of them)
+        self.last_false = False
+        self.false_k: list[int] = []
         #: range aid (module docstring): radar range and horizontal speed limits, and the fixes
         #: whose height it kept out of the filter
         self.aid_m, self.aid_mps = e.ins_range_aid_m, e.ins_range_aid_mps
@@ -177,6 +209,7 @@ class InsFeedback(Feedback):
         #: goes on), e.g. ``ag-uav experiment ins-nav --what outage``
         self.outages: list[tuple[float, float]] = []
         self.log = None
+        self.series: dict[str, Any] | None = None
         self.rec: dict[str, Any] = {}
         self.att: dict[str, float] = {}
 
@@ -189,10 +222,13 @@ class InsFeedback(Feedback):
             return None
         true_type = self.gps.last_fix_type
         rep, scale = true_type, 1.0
+        self.last_false = False
         if self.report is not None:
             bias, rep, scale = self.report.step(true_type)
             z = z + bias
-        vp = self.var_by_type.get(rep, self.var_nominal)
+            self.last_false = bool(bias.any())   # a false fix carries its bias
+        vp, cv = self.var_by_type.get(rep, self.var_nominal)
+        self.cvar[:] = cv * (scale * scale)
         n = self._aux4()
         sv, g = self.cfg.gps.velocity_sigma_mps, self.gnss_buf
         self.fixes += 1
@@ -205,6 +241,24 @@ class InsFeedback(Feedback):
                 vp[0] * scale * scale, vp[1] * scale * scale, vp[2] * scale * scale,
                 self.var_v, self.var_v, self.var_v, self.var_yaw)
         return g
+
+    def _r(self, mode: str | None) -> tuple[np.ndarray, np.ndarray]:
+        """(R, considered variance) per axis of a fix of type ``mode`` (None: the preset's
+        nominal): "white" R = the whole variance; "inflate" its Gauss–Markov part times
+        :func:`colour_factor` over the window; "consider" R = the floored whole less the
+        Gauss–Markov part, which is considered (added to the position covariance the INS
+        reports, not estimated: Schmidt's consider covariance without its cross terms)."""
+        r_scale = self.cfg.estimator.r_scale
+        white, gm = fix_variance(self.gps, mode, 1)
+        if self.colour == "white":
+            return np.maximum(r_scale * (white + gm), R_FLOOR), np.zeros(3)
+        if self.colour == "inflate":
+            wi, gi = fix_variance(self.gps, mode, self.n_window)
+            return np.maximum(r_scale * (wi + gi), R_FLOOR), np.zeros(3)
+        # the floor applies to the whole reported variance (as EKF2's to hAcc); the considered
+        # part comes off after it
+        tot = np.maximum(r_scale * (white + gm), R_FLOOR)
+        return tot - r_scale * gm, r_scale * gm
 
     def _aux4(self) -> list[float]:
         """The next four standard normals of the receiver's auxiliary stream (velocity noise,
@@ -239,6 +293,11 @@ class InsFeedback(Feedback):
         r = self.rec
         n = len(p_true)
         lo, hi, _ = mission.indices(n)
+        fk = r["fix_k"]
+        sel = (fk >= lo) & (fk < hi)
+        #: the mission's per-fix NEES15 per filter, by fix tick (ag-uav experiment ins-nav)
+        self.series = {"tick": fk[sel], "dt": self.dt,
+                       **{name: r["nees"][sel, j] for j, name in enumerate(self.names)}}
         for j, name in enumerate(self.names):
             he, ve = r["herr"][lo:hi, j], r["verr"][lo:hi, j]
             te, ye = r["tilt"][lo:hi, j], r["yaw"][lo:hi, j]
@@ -246,12 +305,12 @@ class InsFeedback(Feedback):
             fk = r["fix_k"]
             sel = (fk >= lo) & (fk < hi)
             nees = r["nees"][sel, j]
-            nis = r["nis"][sel, j]
-            npos = r["nees_pos"][sel, j]
-            npos = npos[np.isfinite(npos)]
             not_pd = int(np.nansum(r["not_pd"][sel, j]))
             nees = nees[np.isfinite(nees)]
-            nis = nis[np.isfinite(nis)]
+            gate = r["gate"][sel, j]
+            ff = np.isin(fk, self.false_k) & sel
+            ffg = r["gate"][ff, j]
+            rsum, rn = r["nis_radar"][j]
 
             def rms(a: np.ndarray) -> float | None:
                 a = a[np.isfinite(a)]
@@ -269,8 +328,16 @@ class InsFeedback(Feedback):
                 "nees15_mean": round(float(nees.mean()), 3) if nees.size else None,
                 "nees15_band95": _chi2_band(15, nees.size),
                 "nees15_not_pd": not_pd,
-                "nees_pos_mean": round(float(npos.mean()), 3) if npos.size else None,
-                "nis_mean": round(float(nis.mean()), 3) if nis.size else None,
+                **{f"nees_{b}_mean": _mean(r[f"nees_{b}"][sel, j]) for b in BLOCKS},
+                "nis_mean": _mean(r["nis"][sel, j]),
+                "nis_vel_mean": _mean(r["nis_vel"][sel, j]),
+                "nis_yaw_mean": _mean(r["nis_yaw"][sel, j]),
+                "nis_radar_mean": round(rsum / rn, 3) if rn else None,
+                "gate_rejected": int(np.sum(gate >= 1)),
+                "gate_resets": int(np.sum(gate == 2)),
+                "false_fixes_rejected": (round(float(np.mean(ffg >= 1)), 4) if ffg.size
+                                         else None),
+                "false_fix_peak_m": mx(he[self._false_window(lo, hi)]) if self.false_k else None,
                 "update_us": r["update_us"],
                 "updates": int(sel.sum()),
                 "ticks": int(ok.sum()),
@@ -280,6 +347,17 @@ class InsFeedback(Feedback):
                 self.att = {k: out[name][k] for k in ("tilt_error_rms_deg", "tilt_error_max_deg",
                                                       "yaw_error_rms_deg")}
         return out
+
+    def _false_window(self, lo: int, hi: int) -> np.ndarray:
+        """Mask over the ticks ``lo:hi``: each false-fix episode (its false fixes, a gap of more
+        than 1 s starts another) from its first fix to 10 s after its last."""
+        m = np.zeros(hi - lo, dtype=bool)
+        ks = np.asarray(self.false_k)
+        per_s = int(round(1.0 / self.dt))
+        cut = np.flatnonzero(np.diff(ks) > per_s) + 1
+        for ep in np.split(ks, cut):
+            m[max(ep[0] - lo, 0):max(ep[-1] + 10 * per_s - lo, 0)] = True
+        return m
 
     def summary(self) -> dict[str, Any]:
         counts = self.gps.fix_type_counts
@@ -295,6 +373,56 @@ class InsFeedback(Feedback):
             s["false_fix_episodes"] = self.report.n_false
             s["false_fix_fixes"] = self.report.false_fixes
         return s
+
+
+def colour_factor(rho: float, n: int) -> float:
+    """``n f(n, ρ) = 1 + 2 Σ_{j=1}^{n−1} (1 − j/n) ρ^j``: the variance of the mean of ``n``
+    successive samples of a Gauss–Markov sequence with correlation ``ρ`` per sample, over the
+    σ²/n the same samples would have if white. A filter that averages about ``n`` fixes sees
+    the coloured part of the fix error ``n f`` times larger than white fusion assumes (→
+    (1+ρ)/(1−ρ) for n → ∞; 1 for n = 1). Inflating that part of R by it keeps the averaged
+    position's variance honest (Bar-Shalom, Li & Kirubarajan 2001, *Estimation with
+    Applications to Tracking and Navigation*, §8.1: coloured measurement noise)."""
+    if n <= 1 or rho <= 0.0:
+        return 1.0
+    j = np.arange(1, n)
+    return float(1.0 + 2.0 * np.sum((1.0 - j / n) * rho**j))
+
+
+def fix_variance(gps: Any, mode: str | None, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-axis variance of a fix of the receiver's error chain (the base components, plus
+    fix type ``mode``'s own) as (its white part, its Gauss–Markov / AR(1) part times
+    :func:`colour_factor` at the fix interval and the filter's window of ``n`` fixes); NaN
+    (no variance) reads 1 m²."""
+    dt = 1.0 / gps.rate_hz
+    comps = list(gps.components)
+    if mode is not None:
+        comps += list(gps.mode_components[gps.fix_types.index(mode)])
+    v = np.zeros((2, 3))
+    for _name, procs, scale in comps:
+        for ax in range(3):
+            if not scale[ax]:
+                continue
+            p = procs[ax]
+            var = float(p.variance)
+            if not math.isfinite(var):
+                var = 1.0
+            if hasattr(p, "rho_at"):
+                rho = p.rho_at(dt)
+            elif getattr(p, "tau_s", None):
+                rho = math.exp(-dt / p.tau_s)
+            else:
+                v[0, ax] += scale[ax] ** 2 * var
+                continue
+            v[1, ax] += scale[ax] ** 2 * var * colour_factor(rho, n)
+    v *= np.asarray(gps.axis_scale, dtype=float) ** 2
+    return v[0], v[1]
+
+
+def _mean(a: np.ndarray) -> float | None:
+    """The mean of the finite values (3 decimals), None if there are none."""
+    a = a[np.isfinite(a)]
+    return round(float(a.mean()), 3) if a.size else None
 
 
 def _chi2_band(dof: int, n: int) -> list[float] | None:
@@ -343,7 +471,16 @@ class BatchInsFeedback:
             fb.aid_on = self.aid_on[i:i + 1]
         self.p_out, self.v_out = np.zeros((NV, 3)), np.zeros((NV, 3))
         self.R_out = np.tile(np.eye(3).ravel(), (NV, 1))
+        #: the body rates the rate loop flies on: the gyro less the flown filter's bias estimate
+        self.w_out = np.zeros((NV, 3))
+        #: each vehicle's considered GNSS variance (the last fix's; InsFeedback.cvar)
+        self.cvar = np.zeros((NV, 3))
         self.bias0 = np.stack([fb.bias0 for fb in fbs])
+        #: the walked IMU biases of the current block of ticks (IMU sample k = tick k: every
+        #: vehicle's IMU is sampled from tick 0 while it flies), refilled from the twins
+        self.blk = f0.imu_twin.block
+        self.btru = np.zeros((NV, self.blk, 6))
+        self.b_next = 0
         self.prm = np.array([*ANTENNA, *RADAR, *self.icfg.heading_baseline,
                              math.cos(self.icfg.radar_max_tilt_deg * DEG),
                              self.icfg.radar_max_range])
@@ -352,8 +489,8 @@ class BatchInsFeedback:
         self.err = np.full((n_max, NV, 4, nrec), np.nan)
         n_fix = int(n_max * max(fb.gps.rate_hz for fb in fbs) * self.dt) + 4
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
-        # NEES15, NIS(pos), NEES(pos), 1 where the core P was not positive definite (no NEES)
-        self.nees = np.full((NV, n_fix, 4, nrec), np.nan)
+        # the per-fix score record (columns _N_*)
+        self.nees = np.full((NV, n_fix, _NREC, nrec), np.nan)
         self.n_fix = np.zeros(NV, dtype=np.int64)
         self.noise = np.stack([fb.radar_rng.standard_normal(4096) for fb in fbs])
         self.noise_i = np.zeros(NV, dtype=np.int64)
@@ -381,9 +518,13 @@ class BatchInsFeedback:
                               "\"mems\", estimator.imu = true)")
         if self.R_true is None:   # no engine tap: the sensors that need the attitude drop out
             self.truth_tap(np.full((self.NV, 9), np.nan), np.full((self.NV, 3), np.nan))
+        if k >= self.b_next:   # the next block of the walked biases (scoring truth)
+            for i, fb in enumerate(self.fbs):
+                self.btru[i] = fb.imu_twin.walk_block()
+            self.b_next += self.blk
         flags = _tick_in(self.ring, k, t, p, v, self.R_true, self.w_true, act, self.prm,
                          imu[0], imu[2], self.imu, self.gnss, self.radar, self.next_t,
-                         self.init, self.due)
+                         self.init, self.due, self.btru, k % self.blk)
         if flags & 1:
             for i in np.flatnonzero(self.due):
                 self._fix(int(i), k, t)
@@ -396,17 +537,18 @@ class BatchInsFeedback:
                 self.upd_ns += time.perf_counter_ns() - t0
                 self.n_upd += 1
             self.n_calls += 1
-            _outputs(self.bank.x_out, self.bank.x_core, self.bank.P, self.bank.nis,
+            _outputs(self.bank.x_out, self.bank.x_core, self.bank.P, self.bank._dg,
                      self.bank.core_tick, self.k0, k, self.nr, self.flown, act, self.init,
-                     self.gnss, p, v, self.R_true, self.ring, self.bias0, self.err, self.fix_k,
-                     self.nees, self.n_fix, self.p_out, self.v_out, self.R_out)
+                     self.gnss, p, v, self.R_true, self.ring, self.err, self.fix_k,
+                     self.nees, self.n_fix, self.p_out, self.v_out, self.R_out, self.imu,
+                     self.w_out, self.cvar)
         if flags & 2:
             self._pre_init(act)
         if self.logging and flags & 1:
             self._log(t, p)
         if self.flown < 0:   # estimator.name = "true": the controller flies on the truth
             return p, v
-        return self.p_out, self.v_out, self.R_out
+        return self.p_out, self.v_out, self.R_out, self.w_out
 
     def _log(self, t: float, p: np.ndarray) -> None:
         """``/estimator/<rule>`` of the vehicles that fused a fix this tick: the output state
@@ -440,6 +582,9 @@ class BatchInsFeedback:
             fb.range_aid_fixes += 1
         self.aid_on[i] = 1.0 if aid else 0.0
         self.gnss[i] = row
+        self.cvar[i] = fb.cvar
+        if fb.last_false:
+            fb.false_k.append(k)
 
     def _initialise(self, i: int, k: int, row: np.ndarray) -> None:
         """On the ground at the first fix (module docstring)."""
@@ -495,9 +640,15 @@ class BatchInsFeedback:
             n, nf = int(flown[i]), int(self.n_fix[i])
             e = np.ascontiguousarray(self.err[:n, i])
             fb.rec = {"herr": e[:, 0], "verr": e[:, 1], "tilt": e[:, 2], "yaw": e[:, 3],
-                      "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, 0],
-                      "nis": self.nees[i, :nf, 1], "nees_pos": self.nees[i, :nf, 2],
-                      "not_pd": self.nees[i, :nf, 3],
+                      "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, _N_NEES15],
+                      "nis": self.nees[i, :nf, _N_NISP], "nis_vel": self.nees[i, :nf, _N_NISV],
+                      "nis_yaw": self.nees[i, :nf, _N_NISY],
+                      **{f"nees_{b}": self.nees[i, :nf, _N_POS + m]
+                         for m, b in enumerate(BLOCKS)},
+                      "not_pd": self.nees[i, :nf, _N_NOTPD],
+                      "gate": self.nees[i, :nf, _N_GATE],
+                      "nis_radar": (self.bank.radar_nis[i * self.nr:(i + 1) * self.nr].tolist()
+                                    if self.bank is not None else []),
                       "update_us": us,
                       "counters": {key: [int(x) for x in val[i * self.nr:(i + 1) * self.nr]]
                                    for key, val in counters.items()}}
@@ -513,17 +664,29 @@ def _euler_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------- kernels
-#: ring layout per tick: antenna position, antenna velocity, heading, R, slant range, p, v
-_RW = 23
+#: the per-fix score record's columns (``BatchInsFeedback.nees[i, fix, :, row]``): NEES15,
+#: the NEES of the position, velocity, attitude, accel-bias and gyro-bias blocks (3 dof each),
+#: 1 where the core P was not positive definite (no NEES), the NIS of the fix's position,
+#: velocity and heading updates, the gate's verdict on the position (0 fused, 1 rejected,
+#: 2 rejected and reset to the receiver)
+(_N_NEES15, _N_POS, _N_VEL, _N_ATT, _N_BA, _N_BG, _N_NOTPD, _N_NISP, _N_NISV, _N_NISY,
+ _N_GATE) = range(11)
+_NREC = 11
+#: the NEES blocks' names (summary keys nees_<name>_mean), in record order from _N_POS
+BLOCKS = ("pos", "vel", "att", "ba", "bg")
+
+#: ring layout per tick: antenna position, antenna velocity, heading, R, slant range, p, v,
+#: the walked IMU biases (accel, gyro)
+_RW = 29
 
 
 @njit(cache=True)
-def _ring_write(ring, k, p, v, R, w, act, prm):  # pragma: no cover
+def _ring_write(ring, k, p, v, R, w, act, prm, bt, j):  # pragma: no cover
     """Tick k's sensor truth per vehicle (row ``k % B``): the antenna position p + R r_ant
     (0:3), the antenna velocity v + R(ω × r_ant) (3:6), the dual-antenna heading
     ψ = atan2(b_y, b_x) − atan2(r_b,y, r_b,x) with b = R r_b (6), R (7:16), the radar's slant
     range ρ = s_z / R₂₂ with s = p + R r_rad over the ground z = 0 (16; NaN beyond the radar's
-    cone or range), p (17:20), v (20:23)."""
+    cone or range), p (17:20), v (20:23), the IMU's walked biases ``bt[i, j]`` (23:29)."""
     B = ring.shape[1]
     ra = prm[0:3]
     rr = prm[3:6]
@@ -545,8 +708,10 @@ def _ring_write(ring, k, p, v, R, w, act, prm):  # pragma: no cover
         by = R[i, 3] * rb[0] + R[i, 4] * rb[1] + R[i, 5] * rb[2]
         psi = math.atan2(by, bx) - math.atan2(rb[1], rb[0])
         r[6] = math.atan2(math.sin(psi), math.cos(psi))
-        for j in range(9):
-            r[7 + j] = R[i, j]
+        for m in range(9):
+            r[7 + m] = R[i, m]
+        for m in range(6):
+            r[23 + m] = bt[i, j, m]
         c = R[i, 8]
         sz = p[i, 2] + R[i, 6] * rr[0] + R[i, 7] * rr[1] + R[i, 8] * rr[2]
         rho = sz / c if c > 0 else np.nan
@@ -555,11 +720,11 @@ def _ring_write(ring, k, p, v, R, w, act, prm):  # pragma: no cover
 
 @njit(cache=True)
 def _tick_in(ring, k, t, p, v, R, w, act, prm, f_m, om, imu, gnss, radar, next_t, init,
-             due):  # pragma: no cover
+             due, bt, j):  # pragma: no cover
     """The tick's truth ring row (:func:`_ring_write`), the IMU rows (f̃, ω̃), no fix and no
     radar yet, the vehicles with a fix due; returns 1 if any fix is due | 2 if an active
     vehicle is not initialised."""
-    _ring_write(ring, k, p, v, R, w, act, prm)
+    _ring_write(ring, k, p, v, R, w, act, prm, bt, j)
     flags = 0
     for i in range(act.shape[0]):
         for a in range(3):
@@ -613,9 +778,10 @@ def _rot_to_quat(R, q):  # pragma: no cover
 
 
 @njit(cache=True)
-def _nees15(x, P, tr, bias0, q_t, dth, e, L, y):  # pragma: no cover
+def _nees15(x, P, tr, q_t, dth, e, L, y):  # pragma: no cover
     """eᵀ P⁻¹ e of one row's core state against the truth ``tr`` (a ring row): e = [p, v,
-    Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the turn-on biases."""
+    Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the IMU's walked biases of that
+    tick (ring 23:29)."""
     if not np.isfinite(tr[17]):
         e[0] = np.nan
         return np.nan
@@ -625,9 +791,20 @@ def _nees15(x, P, tr, bias0, q_t, dth, e, L, y):  # pragma: no cover
         e[a] = tr[17 + a] - x[a]
         e[3 + a] = tr[20 + a] - x[3 + a]
         e[6 + a] = dth[a]
-        e[9 + a] = bias0[a] - x[10 + a]
-        e[12 + a] = bias0[3 + a] - x[13 + a]
+        e[9 + a] = tr[23 + a] - x[10 + a]
+        e[12 + a] = tr[26 + a] - x[13 + a]
     return quad_inv(P, e, 15, L, y)
+
+
+@njit(cache=True)
+def quad_inv_at(P, e, o, n, L, y, Pb, eb):  # pragma: no cover
+    """:func:`quad_inv` of the diagonal block ``P[o:o+n, o:o+n]`` with ``e[o:o+n]`` (the
+    block's own NEES: its marginal covariance); ``Pb`` (≥ n, ≥ n), ``eb`` (≥ n): scratch."""
+    for a in range(n):
+        eb[a] = e[o + a]
+        for b in range(n):
+            Pb[a, b] = P[o + a, o + b]
+    return quad_inv(Pb, eb, n, L, y)
 
 
 @njit(cache=True)
@@ -675,11 +852,16 @@ def _row_errors(x, p, v, Rt, Re, out):  # pragma: no cover
 
 
 @njit(cache=True)
-def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, ring, bias0,
-             err, fix_k, nees, n_fix, p_out, v_out, R_out):  # pragma: no cover
-    """The flown row's (p, v, R) per vehicle; per row the tick's errors (:func:`_row_errors`)
-    and, at a fix, the NEES of the core's 15-state error against the truth of the core's tick
-    (:func:`_nees15`) and the position NIS."""
+def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, ring,
+             err, fix_k, nees, n_fix, p_out, v_out, R_out, imu, w_out,
+             cvar):  # pragma: no cover
+    """The flown row's (p, v, R) per vehicle and the bias-corrected rates ω̃ − b̂_g (the raw
+    gyro before the filter is initialised); per row the tick's errors (:func:`_row_errors`)
+    and, at a fix, the record ``nees[i, fix, :, row]`` (columns ``_N_*``): the NEES of the
+    core's 15-state error against the truth of the core's tick (:func:`_nees15`), of each
+    3-state block on its marginal covariance, and the fix's NIS (position, velocity, heading;
+    NaN for a part not in the fix). The covariance scored is the one the INS reports: its P
+    plus the considered GNSS variance ``cvar`` on the position (zero unless "consider")."""
     B = ring.shape[1]
     Re = np.empty(9)
     q_t = np.empty(4)
@@ -688,14 +870,22 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
     o = np.empty(4)
     L = np.empty((15, 15))
     y = np.empty(15)
+    Pb = np.empty((3, 3))
+    eb = np.empty(3)
+    Pc = np.empty((15, 15))
     for i in range(act.shape[0]):
-        if not (act[i] and init[i]):
+        if not act[i]:
+            continue
+        for a in range(3):
+            w_out[i, a] = imu[i, 3 + a]
+        if not init[i]:
             continue
         if flown >= 0:
             x = xo[i * nr + flown]
             for a in range(3):
                 p_out[i, a] = x[a]
                 v_out[i, a] = x[3 + a]
+                w_out[i, a] = imu[i, 3 + a] - x[13 + a]
             quat_to_rot(x[6:10], R_out[i])
         rec = n_fix[i]
         at_fix = np.isfinite(gnss[i, 0]) and rec < fix_k.shape[1]
@@ -709,8 +899,16 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
                 err[k, i, c, j] = o[c]
             if at_fix:
                 tr = ring[i, (k0[i] + core[row]) % B]
-                nees[i, rec, 0, j] = _nees15(xc[row], P[row], tr, bias0[i], q_t, dth, e, L, y)
-                nees[i, rec, 1, j] = nis[row, 0]
-                if np.isfinite(e[0]):   # the position block alone (3 dof)
-                    nees[i, rec, 2, j] = quad_inv(P[row], e, 3, L, y)
-                    nees[i, rec, 3, j] = 0.0 if np.isfinite(nees[i, rec, 0, j]) else 1.0
+                rc = nees[i, rec, :, j]
+                Pc[:, :] = P[row]
+                for a in range(3):
+                    Pc[a, a] += cvar[i, a]
+                rc[_N_NEES15] = _nees15(xc[row], Pc, tr, q_t, dth, e, L, y)
+                rc[_N_NISP] = nis[row, 0]
+                rc[_N_NISV] = nis[row, 1]
+                rc[_N_NISY] = nis[row, 2]
+                rc[_N_GATE] = nis[row, 8]
+                if np.isfinite(e[0]):   # each 3-state block alone (3 dof)
+                    for b in range(5):
+                        rc[_N_POS + b] = quad_inv_at(Pc, e, 3 * b, 3, L, y, Pb, eb)
+                    rc[_N_NOTPD] = 0.0 if np.isfinite(rc[_N_NEES15]) else 1.0

@@ -270,6 +270,16 @@ class ImuSensor:
         self._err[0, :n] = err
         self._ist[0] = 0, n
 
+    def walk_block(self) -> np.ndarray:
+        """Draw this sensor's next block and return its walked bias ``b_k`` (block, 6): the
+        bias in force at each sample (accel m/s², gyro rad/s), drawn exactly as
+        :meth:`measure` draws it. A second sensor built from the same seed and block, called
+        block after block, therefore gives the engine's IMU's bias truth sample by sample (the
+        INS scores its bias states against it: ``ag_uav.navigation.ins_feedback``); the
+        returned array is overwritten by the next call."""
+        self._refill()
+        return self._last_bias_block
+
     def measure(self, f, w) -> tuple[list[float], list[float]]:
         if block_used_up(self._ist, 0):
             self._refill()

@@ -6,8 +6,11 @@
   in the loop, false-fix episodes on (``--set`` raises their rate so that short missions hold
   some); per rule the horizontal position error RMS over the mission, mean ± 95 % CI over
   seeds;
-* ``consistency``: the NEES of the 15-state error per rule on the ``rtk`` preset (no fix
-  types, so no fix-quality episodes) against the 95 % band of χ²(15);
+* ``consistency``: every NEES block (the 15 states; position, velocity, attitude, the
+  accelerometer and gyro biases) and every sensor's NIS over its dimension, per rule, in four
+  conditions (:data:`CONDITIONS`: clean fixes or false fixes, with or without the gate); the
+  gate's share of the false-fix epochs and the peak error through them, paired; ``nees.png``
+  the NEES15 over time with the 95 % band;
 * ``outage``: a forced ``--duration`` s GNSS outage 2 s into the first long sweep leg, flown on
   the KF: the INS (``nav = ins``) against the ideal-attitude stand-in; drift of the estimate at
   the end of the outage, peak estimate error and peak cross-track inside it;
@@ -42,7 +45,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sigmas", default="1,2,4,8,inf", help="sweep: fixed-kernel σ values")
     p.add_argument("--kernels", default="adaptive,multi",
                    help="sweep: estimator.mckf_kernel variants flown at σ = 2")
-    p.add_argument("--runs", type=int, default=10, help="seeds 0..runs-1")
+    p.add_argument("--runs", type=int, default=10, help="seeds seed0..seed0+runs-1")
+    p.add_argument("--conditions", default="", help="consistency: the conditions to fly "
+                   "(names separated by ';'; default all four)")
+    p.add_argument("--seed0", type=int, default=0, help="the first seed (consistency; the "
+                   "process-noise calibration used seeds from 100, which the comparisons do "
+                   "not use)")
     p.add_argument("--duration", type=float, default=10.0, help="outage length (s)")
     p.add_argument("--max-time", type=float, default=None, help="sim.max_time_s")
     p.add_argument("--out", default="runs/experiment-ins-nav", help="output folder")
@@ -97,29 +105,146 @@ def recovery(args: argparse.Namespace) -> list[dict[str, Any]]:
     return rows
 
 
+#: the consistency experiment's conditions: (name, config overrides); "clean" is the rtk
+#: preset (no fix types, so no false fixes), "false fixes" the rtk-m350 receiver with its
+#: honest reports and 30 false-fix episodes per hour of RTK fixed
+CONDITIONS = (
+    ("clean, gate", {"gps.preset": "rtk"}),
+    ("clean, no gate", {"gps.preset": "rtk", "estimator.ins_gate_sigma": 0.0}),
+    ("false fixes, gate", {"gps.false_fix_per_hour": 30.0}),
+    ("false fixes, no gate", {"gps.false_fix_per_hour": 30.0, "estimator.ins_gate_sigma": 0.0}),
+)
+#: (score key, its dimension) per NEES block and sensor NIS
+DIMS = (("nees15_mean", 15), ("nees_pos_mean", 3), ("nees_vel_mean", 3), ("nees_att_mean", 3),
+        ("nees_ba_mean", 3), ("nees_bg_mean", 3), ("nis_mean", 3), ("nis_vel_mean", 3),
+        ("nis_yaw_mean", 1), ("nis_radar_mean", 1))
+
+
+def _fly_seeds(cfg: Any, seeds: list[int], over: dict[str, Any]) -> list[Any]:
+    """One engine batch of ``seeds`` with the config overrides ``over``."""
+    import copy
+
+    from ...engine.missions import simulate_many
+
+    cfgs = []
+    for seed in seeds:
+        c = copy.deepcopy(cfg)
+        c.seed = seed
+        for k, v in over.items():
+            sec, key = k.split(".")
+            setattr(getattr(c, sec), key, v)
+        cfgs.append(c)
+    return simulate_many(cfgs)
+
+
 def consistency(args: argparse.Namespace) -> list[dict[str, Any]]:
-    cfg = _base(args, {"gps.preset": "rtk"})
-    rows = []
-    for seed in range(args.runs):
-        s = _fly(cfg, seed)
-        rows.append({"seed": seed, **{f"{r}.nees15": s["estimators"][r]["nees15_mean"]
-                                      for r in RULES},
-                     **{f"{r}.nis": s["estimators"][r]["nis_mean"] for r in RULES},
-                     **{f"{r}.nees_pos": s["estimators"][r]["nees_pos_mean"] for r in RULES},
-                     **{f"{r}.rmse": s["estimators"][r]["estimate_rmse_m"] for r in RULES},
-                     "band": s["estimators"]["kf"]["nees15_band95"],
-                     "updates": s["estimators"]["kf"]["updates"]})
+    """Per condition (:data:`CONDITIONS`) over ``--runs`` seeds: every NEES block and sensor
+    NIS divided by its dimension (1 = consistent; mean ± 95 % CI over seeds), the gate's
+    rejections, the share of false-fix epochs it rejects and the peak error through the
+    episodes; ``nees.png``: the seeds' mean NEES15 over time with the 95 % band of the mean of
+    N χ²(15) (Bar-Shalom, Li & Kirubarajan 2001, §5.4)."""
+
+    cfg = _base(args, {})
+    seeds = list(range(args.seed0, args.seed0 + args.runs))
+    rows, series = [], {}
+    only = [c.strip() for c in args.conditions.split(";") if c.strip()]
+    for name, over in CONDITIONS:
+        if only and name not in only:
+            continue
+        res = _fly_seeds(cfg, seeds, over)
+        series[name] = [r.extra.get("nav_series") for r in res]
+        for seed, r in zip(seeds, res, strict=True):
+            s = r.summary
+            for rule, e in s["estimators"].items():
+                rows.append({"condition": name, "seed": seed, "rule": rule,
+                             "flown": e["flown"], "crashed": s["crashed"],
+                             "false_fix_fixes": s.get("false_fix_fixes") or 0,
+                             **{k: e.get(k) for k, _ in DIMS},
+                             **{k: e.get(k) for k in ("estimate_rmse_m", "estimate_max_m",
+                                                      "gate_rejected", "gate_resets",
+                                                      "false_fixes_rejected",
+                                                      "false_fix_peak_m")},
+                             "cross_track_rmse_m": s.get("cross_track_rmse_m")})
+        _print_condition(name, [x for x in rows if x["condition"] == name])
+    _print_false_fix([x for x in rows if x["condition"].startswith("false")])
+    _plot_nees(series, Path(args.out) / "nees.png")
+    return rows
+
+
+def _print_condition(name: str, rows: list[dict[str, Any]]) -> None:
+    print(f"-- {name} ({len({x['seed'] for x in rows})} seeds)")
+    for rule in RULES:
+        sel = [x for x in rows if x["rule"] == rule]
+        if not sel:
+            continue
+        parts = []
+        for k, d in DIMS:
+            v = [x[k] / d for x in sel if x[k] is not None]
+            if v:
+                parts.append(f"{k.replace('_mean', '')}/{d} {_ci(v)}")
+        rej = sum(x["gate_rejected"] or 0 for x in sel)
+        print(f"{rule}: " + "; ".join(parts) + f"; RMSE {_ci([x['estimate_rmse_m'] for x in sel])}"
+              f" m; gate rejections {rej} (resets {sum(x['gate_resets'] or 0 for x in sel)})",
+              flush=True)
+
+
+def _print_false_fix(rows: list[dict[str, Any]]) -> None:
+    """The gate's share of the false-fix epochs, and the peak error through the episodes
+    paired with and without the gate (seeds that had episodes)."""
+    import numpy as np
+
+    for rule in RULES:
+        on = {x["seed"]: x for x in rows if x["rule"] == rule and x["condition"].endswith(" gate")
+              and not x["condition"].endswith("no gate")}
+        off = {x["seed"]: x for x in rows if x["rule"] == rule
+               and x["condition"].endswith("no gate")}
+        both = [k for k in on if k in off and on[k]["false_fix_peak_m"] is not None
+                and off[k]["false_fix_peak_m"] is not None]
+        if not both:
+            continue
+        w = np.array([on[k]["false_fix_fixes"] for k in both], float)
+        rej = np.array([on[k]["false_fixes_rejected"] for k in both], float)
+        pk_on = [on[k]["false_fix_peak_m"] for k in both]
+        pk_off = [off[k]["false_fix_peak_m"] for k in both]
+        print(f"{rule}: the gate rejects {np.sum(rej * w) / np.sum(w):.1%} of "
+              f"{int(w.sum())} false-fix epochs ({len(both)} seeds with episodes); peak error "
+              f"through them {_ci(pk_on)} m with the gate, {_ci(pk_off)} m without; ratio of "
+              f"the means {np.mean(pk_off) / np.mean(pk_on):.2f}; paired "
+              f"{_ci([b - a for a, b in zip(pk_on, pk_off, strict=True)])} m", flush=True)
+
+
+def _plot_nees(series: dict[str, list[Any]], path: Path) -> None:
+    """The seeds' mean NEES15 of the flown rule per fix time, with the 95 % band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
     from scipy.stats import chi2
 
-    n = sum(r["updates"] for r in rows)
-    lo, hi = chi2.ppf(0.025, 15 * n) / n, chi2.ppf(0.975, 15 * n) / n
-    for r in RULES:
-        v = [x[f"{r}.nees15"] for x in rows]
-        print(f"{r}: mean NEES15 over {len(rows)} seeds {_ci(v)} (95 % band of the mean over "
-              f"{n} updates {lo:.2f}-{hi:.2f}); NIS {_ci([x[f'{r}.nis'] for x in rows])}; "
-              f"NEES pos (3) {_ci([x[f'{r}.nees_pos'] for x in rows])}; RMSE "
-              f"{_ci([x[f'{r}.rmse'] for x in rows])}")
-    return rows
+    fig, ax = plt.subplots(figsize=(9, 4))
+    n = 1
+    for name, ser in series.items():
+        ser = [s for s in ser if s is not None]
+        if not ser or name.startswith("false"):
+            continue
+        rule = next(k for k in ser[0] if k not in ("tick", "dt"))
+        common = ser[0]["tick"]
+        for s in ser[1:]:
+            common = np.intersect1d(common, s["tick"])
+        m = np.nanmean([s[rule][np.isin(s["tick"], common)] for s in ser], axis=0)
+        ax.plot(common * ser[0]["dt"], m, lw=0.6, label=f"{name} ({rule}, {len(ser)} seeds)")
+        n = len(ser)
+    lo, hi = chi2.ppf([0.025, 0.975], 15 * n) / n
+    ax.axhspan(lo, hi, color="g", alpha=0.2, label=f"95 % band of the mean ({lo:.1f}-{hi:.1f})")
+    ax.set_yscale("log")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("mean NEES15 over seeds")
+    ax.legend(fontsize=8)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    print(f"wrote {path}")
 
 
 def outage(args: argparse.Namespace) -> list[dict[str, Any]]:

@@ -1,0 +1,178 @@
+"""The INS's consistency machinery: the scores' truth, the NEES arithmetic, the innovation gate
+and the covariance step's sparse form.
+
+* The bias states' truth is the IMU's *walked* bias: a twin :class:`ImuSensor` built from the
+  same seed, block after block (:meth:`ImuSensor.walk_block`), reproduces the sensor's bias
+  sample by sample.
+* NEES of a linear-Gaussian case: errors drawn from N(0, P) give a mean NEES inside the 95 %
+  band of χ²(n·N)/N, the whole 15 and each 3-state block on its marginal covariance.
+* The gate (``INSConfig.gate_sigma``, common to the four rules): a planted 0.3 m RTK-fixed bias
+  is rejected, clean fixes are accepted at the rate a consistent filter's innovations give.
+* ``cov_step`` (F's 45 non-zeros written out) equals the dense F P Fᵀ + Q to rounding.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2, norm
+
+from ag_uav.config import ImuConfig
+from ag_uav.navigation.ins_feedback import quad_inv, quad_inv_at
+from ag_uav.vehicle.imu import ImuSensor
+from estimators.ins import RULES, INSConfig, cov_step
+from tests.test_ins import figure8, run
+
+
+@pytest.fixture(scope="module")
+def truth():
+    return figure8(60.0)
+
+
+def test_walk_block_is_the_sensors_bias_sample_by_sample():
+    cfg = ImuConfig(accel_bias_rw=0.01, gyro_bias_rw=0.05)   # a walk that shows
+    ss = np.random.SeedSequence(7)
+    imu = ImuSensor(cfg, 100.0, ss, block=64)
+    twin = ImuSensor(cfg, 100.0, ss, block=64)
+    truth = np.concatenate([twin.walk_block().copy() for _ in range(3)])
+    got = []
+    for _ in range(3 * 64):
+        imu.measure([0.0, 0.0, 9.81], [0.0, 0.0, 0.0])
+        got.append(imu.bias)
+    got = np.array(got)
+    assert np.array_equal(got, truth)
+    assert np.abs(got[-1] - got[0]).max() > 1e-4   # it did walk
+
+
+def test_nees_of_a_linear_gaussian_case_is_chi2():
+    """e ~ N(0, P), P a random correlated 15×15: mean NEES within the 95 % band of the mean
+    of N χ²(15) draws; each block's NEES on its marginal covariance within that of χ²(3)."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(15, 15)) * np.r_[[0.1] * 3, [0.05] * 3, [0.01] * 3, [0.02] * 3,
+                                          [1e-3] * 3]
+    P = A @ A.T + np.diag(np.full(15, 1e-8))
+    Lc = np.linalg.cholesky(P)
+    N = 4000
+    L, y, Pb, eb = np.empty((15, 15)), np.empty(15), np.empty((3, 3)), np.empty(3)
+    whole, blocks = np.empty(N), np.empty((N, 5))
+    for i in range(N):
+        e = Lc @ rng.standard_normal(15)
+        whole[i] = quad_inv(P, e, 15, L, y)
+        for b in range(5):
+            blocks[i, b] = quad_inv_at(P, e, 3 * b, 3, L, y, Pb, eb)
+    lo, hi = chi2.ppf([0.025, 0.975], 15 * N) / N
+    assert lo <= whole.mean() <= hi
+    lo3, hi3 = chi2.ppf([0.025, 0.975], 3 * N) / N
+    assert np.all((blocks.mean(axis=0) >= lo3) & (blocks.mean(axis=0) <= hi3))
+    # the conditional (whole-matrix) block would not be the marginal: it over-counts
+    e = Lc @ rng.standard_normal(15)
+    assert quad_inv_at(P, e, 6, 3, L, y, Pb, eb) != pytest.approx(
+        float(e[6:9] @ np.linalg.inv(P)[6:9, 6:9] @ e[6:9]))
+
+
+def test_gate_rejects_a_planted_false_fix(truth):
+    """+0.3 m east for 20 s reported as RTK fixed (σ 8 mm): the gate rejects it (≥ 95 % of
+    the episode's fixes, every rule), and the KF's error through it stays a fraction of it;
+    without the gate the KF follows it."""
+    ff = (20.0, 40.0, (0.3, 0.0, 0.0))
+    r = run(truth, 4, RULES, INSConfig(), false_fix=ff, seed=61, t_end=45.0)
+    rej = r["ins"].counters["gate_rejected_pos"]
+    assert np.all(rej >= 0.95 * 200), rej
+    off = run(truth, 4, ("kf",), INSConfig(gate_sigma=math.inf), false_fix=ff, seed=61,
+              t_end=45.0)
+    e_on = np.linalg.norm(r["err_out"][2000:4000, 0::4, :2], axis=2).max()
+    e_off = np.linalg.norm(off["err_out"][2000:4000, :, :2], axis=2).max()
+    print(f"peak horizontal error through the false fix: gate {e_on:.3f} m, none {e_off:.3f}")
+    assert e_off > 0.25 and e_on < e_off / 3
+
+
+def test_gate_accepts_clean_fixes_at_the_nominal_rate(truth):
+    """Clean fixes: at γ = 5 no position fix of 4 × 600 is rejected (a consistent filter
+    rejects 3·2·Φ(−5) ≈ 1.7e-6 of them); at γ = 2 the rejected fraction is the nominal
+    1 − (1 − 2Φ(−2))³ ≈ 0.13 within sampling and the filter's slight conservatism."""
+    r5 = run(truth, 4, ("kf",), INSConfig(gate_sigma=5.0), seed=71)
+    n = r5["ins"].counters["gnss_fused"] + r5["ins"].counters["gate_rejected_pos"]
+    assert np.all(r5["ins"].counters["gate_rejected_pos"] == 0) and np.all(n >= 590)
+    r2 = run(truth, 4, ("kf",), INSConfig(gate_sigma=2.0), seed=71)
+    c = r2["ins"].counters
+    frac = c["gate_rejected_pos"].sum() / (c["gate_rejected_pos"] + c["gnss_fused"]).sum()
+    nominal = 1 - (1 - 2 * norm.sf(2.0)) ** 3
+    print(f"γ = 2: rejected {frac:.3f} of the fixes, nominal {nominal:.3f}")
+    assert 0.6 * nominal < frac < 1.3 * nominal
+
+
+def test_sparse_covariance_step_equals_the_dense_one():
+    rng = np.random.default_rng(5)
+    cfg = INSConfig()
+    prm = cfg.prm()
+    for _ in range(20):
+        A = rng.normal(size=(15, 15))
+        P = A @ A.T
+        x = np.zeros(16)
+        x[0:6] = rng.normal(size=6)
+        q = rng.normal(size=4)
+        x[6:10] = q / np.linalg.norm(q)
+        x[10:16] = rng.normal(size=6) * 0.01
+        u = np.r_[rng.normal(size=3) + (0, 0, 9.81), rng.normal(size=3) * 0.5]
+        R = np.empty((3, 3))
+        from estimators.ins import quat_to_rot
+        quat_to_rot(x[6:10], R)
+        F, Q = _dense_F_Q(x, u, R, cfg)
+        want = F @ P @ F.T + Q
+        got = P.copy()
+        cov_step(got, x, u, prm, R.copy(), np.empty((9, 15)), np.empty((5, 3, 3)),
+                 np.empty(16))
+        assert np.allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+
+
+def _dense_F_Q(x, u, R, cfg):
+    """F and Q of the module docstring as dense 15×15 matrices (Solà eqs 269-270)."""
+    from scipy.spatial.transform import Rotation
+
+    dt = cfg.dt
+    a = u[:3] - x[10:13]
+    w = u[3:] - x[13:16]
+    sk = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    F = np.eye(15)
+    F[0:3, 3:6] = np.eye(3) * dt
+    F[3:6, 6:9] = -R @ sk * dt
+    F[3:6, 9:12] = -R * dt
+    F[6:9, 6:9] = Rotation.from_rotvec(w * dt).as_matrix().T
+    F[6:9, 12:15] = -np.eye(3) * dt
+    Q = np.zeros((15, 15))
+    qd = [(cfg.accel_sigma * dt) ** 2, (cfg.gyro_sigma * dt) ** 2, cfg.accel_bias_rw**2 * dt,
+          cfg.gyro_bias_rw**2 * dt]
+    for b in range(4):
+        Q[3 + 3 * b:6 + 3 * b, 3 + 3 * b:6 + 3 * b] = np.eye(3) * qd[b]
+    return F, Q
+
+
+def test_colour_factor_is_the_variance_of_the_mean():
+    """n f(n, ρ) = n Var(mean of n AR(1) samples) / σ², from the Toeplitz covariance ρ^|i−j|;
+    1 at n = 1, (1+ρ)/(1−ρ) as n → ∞."""
+    from ag_uav.navigation.ins_feedback import colour_factor
+
+    for rho in (0.0, 0.5, math.exp(-0.1 / 30.0)):
+        for n in (1, 7, 40):
+            i = np.arange(n)
+            C = rho ** np.abs(i[:, None] - i[None, :])
+            assert colour_factor(rho, n) == pytest.approx(C.sum() / n, rel=1e-12)
+    rho = 0.9
+    assert colour_factor(rho, 20000) == pytest.approx((1 + rho) / (1 - rho), rel=1e-3)
+
+
+def test_fix_variance_splits_the_receivers_variance():
+    """White + Gauss–Markov parts at n = 1 add up to the receiver's own variance per fix type;
+    the consider split puts the rtk-m350 fixed mode's 60 % coloured share in the GM part."""
+    from ag_uav.config import load_config
+    from ag_uav.navigation.estimation import make_gps
+    from ag_uav.navigation.ins_feedback import fix_variance
+
+    gps = make_gps(load_config(None, {}), np.random.SeedSequence(0))
+    for m in gps.fix_types:
+        w, g = fix_variance(gps, m, 1)
+        assert np.allclose(w + g, gps.mode_variance(m), rtol=1e-12)
+    w, g = fix_variance(gps, None, 1)
+    assert np.allclose(g / (w + g), 0.6)
