@@ -72,7 +72,8 @@ row), ``"multi"`` σ on the fix's rows, ∞ on the prior's.  Velocity, heading a
 KF update.  **The gate** in front of every rule (PX4 EKF2's innovation test, ``EKF2_GPS_GATE``
 = 5 σ; :func:`gate_ratio`): a fix's position, velocity or heading whose innovation exceeds
 ``gate_sigma`` standard deviations on any axis is not fused; after ``gate_reset_s`` with
-neither position nor velocity fused, a rejected fix resets the position to it.  Each measurement is fused sequentially (R block-diagonal), then injected and reset
+neither position nor velocity fused, a rejected fix resets the position to it.  Each
+measurement is fused sequentially (R block-diagonal), then injected and reset
 (Solà §6.2-6.3, eqs 282-287)::
 
       p += δp, v += δv, q ← q ⊗ Exp(δθ), b += δb;   P ← G P Gᵀ, G_θθ = I − [½ δθ]×
