@@ -34,13 +34,14 @@ the Map panel applies to the feature.
 
 The LocationFix messages are hand-encoded (protobuf wire format, field numbers of the SDK's
 ``foxglove.LocationFix``; checked in the tests by decoding with the SDK's schema and with
-Foxglove's TypeScript reader): a fixed-layout numpy record per message after its timestamp.
+Foxglove's TypeScript reader): fixed-layout ``struct`` records after each timestamp.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import struct
 from collections.abc import Sequence
 from typing import Any
 
@@ -165,27 +166,9 @@ def geojson_message(text: str) -> bytes:
     return _str_field(1, text)
 
 
-def _fix_dtype(cov: bool, color: bool) -> np.dtype:
-    """The fixed part of a LocationFix: latitude (1), longitude (2), altitude (3), then the
-    packed covariance (4) and its type (5), then the colour (8), each with its tag bytes."""
-    f: list[tuple[Any, ...]] = [("t1", "u1"), ("lat", "<f8"), ("t2", "u1"), ("lon", "<f8"),
-                                ("t3", "u1"), ("alt", "<f8")]
-    if cov:
-        f += [("t4", "u1"), ("l4", "u1"), ("cov", "<f8", (9,)), ("t5", "u1"), ("ct", "u1")]
-    if color:
-        f += [("t8", "u1"), ("l8", "u1"), ("t81", "u1"), ("r", "<f8"), ("t82", "u1"),
-              ("g", "<f8"), ("t83", "u1"), ("b", "<f8"), ("t84", "u1"), ("a", "<f8")]
-    return np.dtype(f)
-
-
-def _tags(a: np.ndarray) -> None:
-    a["t1"], a["t2"], a["t3"] = 0x09, 0x11, 0x19
-    names = a.dtype.names
-    if "t4" in names:
-        a["t4"], a["l4"], a["t5"] = 0x22, 72, 0x28
-    if "t8" in names:
-        a["t8"], a["l8"] = 0x42, 36
-        a["t81"], a["t82"], a["t83"], a["t84"] = 0x09, 0x11, 0x19, 0x21
+_FIX = struct.Struct("<BdBdBd")  # latitude (1), longitude (2), altitude (3)
+_COV = struct.Struct("<BB9dBB")  # position_covariance (4, packed), its type (5)
+_COLOR = struct.Struct("<BBBdBdBdBd")  # color (8): r, g, b, a
 
 
 def location_fixes(tns: Sequence[int], lla: np.ndarray, *, head: bytes = b"",
@@ -196,24 +179,22 @@ def location_fixes(tns: Sequence[int], lla: np.ndarray, *, head: bytes = b"",
     ``frame_id`` field); ``var_enu`` (n, 3): the position variances east, north, up (m²) as a
     diagonal covariance, ``DIAGONAL_KNOWN`` where all three are finite, else ``UNKNOWN`` with
     zeros; ``rgba`` (n, 4): the ``color``; ``tails[j]``: bytes after message j (metadata)."""
-    n = len(lla)
-    a = np.zeros(n, dtype=_fix_dtype(var_enu is not None, rgba is not None))
-    _tags(a)
-    a["lat"], a["lon"], a["alt"] = lla[:, 0], lla[:, 1], lla[:, 2]
-    if var_enu is not None:
-        v = np.asarray(var_enu, dtype=float)
-        ok = np.all(np.isfinite(v), axis=1)
-        cov = a["cov"]
-        cov[:, 0], cov[:, 4], cov[:, 8] = v[:, 0], v[:, 1], v[:, 2]
-        cov[~ok] = 0.0
-        a["ct"] = np.where(ok, 2, 0)  # DIAGONAL_KNOWN / UNKNOWN
-    if rgba is not None:
-        c = np.asarray(rgba, dtype=float)
-        a["r"], a["g"], a["b"], a["a"] = c[:, 0], c[:, 1], c[:, 2], c[:, 3]
-    buf, size = a.tobytes(), a.dtype.itemsize
+    rows = np.asarray(lla, dtype=float).tolist()
+    var = None if var_enu is None else np.asarray(var_enu, dtype=float).tolist()
+    col = None if rgba is None else np.asarray(rgba, dtype=float).tolist()
     out = []
     for j, tn in enumerate(tns):
-        msg = _stamp6(int(tn)) + head + buf[j * size:(j + 1) * size]
+        lat, lon, alt = rows[j]
+        msg = _stamp6(int(tn)) + head + _FIX.pack(0x09, lat, 0x11, lon, 0x19, alt)
+        if var is not None:
+            e, n, u = var[j]
+            if math.isfinite(e) and math.isfinite(n) and math.isfinite(u):
+                msg += _COV.pack(0x22, 72, e, 0.0, 0.0, 0.0, n, 0.0, 0.0, 0.0, u, 0x28, 2)
+            else:
+                msg += _COV.pack(0x22, 72, *([0.0] * 9), 0x28, 0)
+        if col is not None:
+            r, g, b, a = col[j]
+            msg += _COLOR.pack(0x42, 36, 0x09, r, 0x11, g, 0x19, b, 0x21, a)
         out.append(msg + tails[j] if tails is not None else msg)
     return out
 
