@@ -284,6 +284,24 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
 _SAID: set[str] = set()
 
 
+def _preflight(cfg: Config) -> RunResult | None:
+    """The run of a vehicle the pre-flight check keeps on the ground
+    (:func:`ag_uav.navigation.estimation.preflight_gnss`): no flight, not completed, the reason
+    in ``incomplete_reason`` and ``preflight``; None when the check passes."""
+    from ..navigation.estimation import preflight_gnss
+
+    why = preflight_gnss(cfg)
+    if why is None:
+        return None
+    z = np.zeros((0, 3))
+    summ = {"completed": False, "crashed": False, "crash_reason": None,
+            "incomplete_reason": why, "preflight": why, "sim_time_s": 0.0,
+            "mission_time_s": None, "path_length_m": 0.0, "legs_flown": 0,
+            "coverage_fraction": 0.0, "seed": cfg.seed}
+    return RunResult(summary=summ, t=np.zeros(0), p_true=z, v_true=z, p_ref=z, p_fb=z,
+                     seg=np.zeros(0, int), spray=np.zeros(0, bool), motors=np.zeros((0, 4)))
+
+
 def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
              tick_hook: Callable[..., None] | None = None, log: Any = None) -> RunResult:
     """Fly ``cfg``'s mission once and return the trajectory and the summary metrics: the
@@ -293,6 +311,12 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
     ``log``: an open :class:`~ag_uav.record.runlog.RunLog` or None; with ``cfg.log.render`` camera
     frames go into it. ``tick_hook(t, data)`` is called after every control tick.
     """
+    grounded = _preflight(cfg) if feedback is None else None
+    if grounded is not None:
+        print(f"ag-uav: {grounded.summary['preflight']}", file=sys.stderr, flush=True)
+        if log is not None:
+            log.summary(grounded.summary)
+        return grounded
     prep = _prepare(cfg, feedback, tick_hook, log)
     if prep.notice and prep.notice not in _SAID:  # once per process: loops of runs repeat it
         _SAID.add(prep.notice)
@@ -314,7 +338,7 @@ def simulate_many(cfgs: list[Config], *, progress: bool = False, errors: str = "
     preps: list[Any] = []
     for c in cfgs:
         try:
-            preps.append(_prepare(c, None, None, None))
+            preps.append(_preflight(c) or _prepare(c, None, None, None))
         except Exception as e:  # noqa: BLE001 - reported per run
             if errors == "raise":
                 raise
@@ -323,6 +347,9 @@ def simulate_many(cfgs: list[Config], *, progress: bool = False, errors: str = "
     outs = iter(fly([p.flight for p in ok], progress=progress)) if ok else iter(())
     res: list[Any] = []
     for i, p in enumerate(preps):
+        if isinstance(p, RunResult):  # grounded by the pre-flight check
+            res.append(reduce(i, p) if reduce is not None else p)
+            continue
         if not isinstance(p, _Prepared):
             res.append(p)
             continue
@@ -347,7 +374,7 @@ def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = Fals
     preps: list[Any] = []
     for c in cfgs:
         try:
-            preps.append(_prepare(c, None, None, None))
+            preps.append(_preflight(c) or _prepare(c, None, None, None))
         except Exception as e:  # noqa: BLE001 - reported per run
             preps.append(e)
     ok = [p for p in preps if isinstance(p, _Prepared)]

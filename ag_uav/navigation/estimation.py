@@ -52,6 +52,22 @@ from .feedback import Feedback
 R_FLOOR = 1e-4
 
 
+def preflight_gnss(cfg: Config) -> str | None:
+    """The pre-flight check an autopilot makes before it arms: no take-off without a GNSS fix
+    (PX4's ``COM_ARM_WO_GPS`` default, ArduPilot's GPS arming check).  A run that flies on an
+    estimate (``estimator.name`` other than ``"true"``, or bearings) whose receiver starts in
+    an outage (``gps.overrides.outage.start_in_outage``) has no fix at take-off: the reason,
+    in one line (None when the check passes)."""
+    e = cfg.estimator
+    if e.source == "gps" and e.name == "true":
+        return None
+    out = cfg.gps.overrides.get("outage") or {}
+    if isinstance(out, dict) and out.get("start_in_outage") is True:
+        return ("pre-flight check: no GNSS fix at take-off (gps.overrides.outage."
+                "start_in_outage = true): not armed, the vehicle stays on the ground")
+    return None
+
+
 def gnss_latency_s(cfg: Config) -> float:
     """The receiver latency the INS chain applies (s): ``gps.overrides.latency_s`` where it is
     given (the sensor's own key, which the ideal-attitude chain's sensor reads), else
