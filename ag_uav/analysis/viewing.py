@@ -310,41 +310,52 @@ def skipped_line(d: RunData) -> str:
 _MSG_HEAD = 1 + 8 + 2 + 4 + 8 + 8  # a Message record's opcode, length and fixed fields
 
 
-def _index_rows(f: Any, ci: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(channel, log time ns, offset) of every message of one chunk, from its MessageIndex
-    records (the MCAP specification's "Message Index" record: opcode 0x07, channel id u16,
-    records of (log time u64, offset u64) little-endian) without reading the chunk."""
-    f.seek(ci.chunk_start_offset + ci.chunk_length)
-    buf = f.read(ci.message_index_length)
-    chans, recs, o = [], [], 0
+def _chunk_rows(f: Any, ci: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(channel, log time ns, data bytes) of every message of one chunk, from one read of the
+    chunk and its MessageIndex records (the MCAP specification's Chunk record: opcode 0x06,
+    start and end times, uncompressed size and CRC-32, compression, records; Message Index:
+    opcode 0x07, channel id u16, (log time u64, offset u64) pairs; little-endian).  The chunk is
+    decompressed once and checked against its CRC, its messages are not parsed; a damaged
+    chunk raises (ValueError, RuntimeError, struct.error)."""
+    import zlib
+
+    f.seek(ci.chunk_start_offset)
+    buf = f.read(ci.chunk_length + ci.message_index_length)
+    if len(buf) < ci.chunk_length or buf[0] != 0x06:
+        raise ValueError("not a chunk")
+    usize, crc, clen = struct.unpack_from("<QII", buf, 25)
+    comp = bytes(buf[41:41 + clen]).decode()
+    rlen = struct.unpack_from("<Q", buf, 41 + clen)[0]
+    data = buf[49 + clen:49 + clen + rlen]
+    if comp == "lz4":
+        import lz4.frame
+
+        data = lz4.frame.decompress(data)
+    elif comp == "zstd":
+        import zstandard
+
+        data = zstandard.ZstdDecompressor().decompress(data, max_output_size=usize)
+    elif comp:
+        raise ValueError(f"unknown compression {comp!r}")
+    if len(data) != usize or (crc and zlib.crc32(data) != crc):
+        raise ValueError("chunk CRC mismatch")
+    chans, recs, o = [], [], ci.chunk_length
     while o + 9 <= len(buf):
-        op, n = buf[o], struct.unpack_from("<Q", buf, o + 1)[0]
-        if op == 0x07:
+        n = struct.unpack_from("<Q", buf, o + 1)[0]
+        if buf[o] == 0x07:
             ch, m = struct.unpack_from("<HI", buf, o + 9)
-            r = np.frombuffer(buf, dtype="<u8", count=m // 8, offset=o + 15).reshape(-1, 2)
-            chans.append(np.full(len(r), ch, np.int64))
-            recs.append(r)
+            chans.append((ch, m // 16))
+            recs.append(np.frombuffer(buf, dtype="<u8", count=m // 8, offset=o + 15))
         o += 9 + n
     if not recs:
         z = np.zeros(0, np.int64)
-        return z, z.astype(np.uint64), z.astype(np.uint64)
-    r = np.concatenate(recs)
-    return np.concatenate(chans), r[:, 0], r[:, 1]
-
-
-def _check_chunk(f: Any, ci: Any) -> np.ndarray:
-    """The decompressed records of the chunk at ``ci``; raises (McapError, ValueError,
-    RuntimeError) unless it reads whole: its record parses and its data decompresses to its
-    CRC (the chunk's messages are not parsed)."""
-    from mcap.records import Chunk
-    from mcap.stream_reader import StreamReader, get_chunk_data_stream
-
-    f.seek(ci.chunk_start_offset)
-    chunk = next(StreamReader(f, skip_magic=True, emit_chunks=True).records)
-    if not isinstance(chunk, Chunk):
-        raise ValueError("not a chunk")
-    stream, n = get_chunk_data_stream(chunk, validate_crc=True)
-    return np.frombuffer(stream.read(n), dtype=np.uint8)
+        return z, z, z
+    r = np.concatenate(recs).reshape(-1, 2).astype(np.int64)
+    ch = np.repeat([c for c, _ in chans], [k for _, k in chans])
+    raw = np.frombuffer(data, dtype=np.uint8)
+    # each Message record's length field (u64 after its opcode) less its fixed fields
+    length = raw[r[:, 1, None] + np.arange(1, 9)].copy().view("<u8").ravel()
+    return ch, r[:, 0], length.astype(np.int64) - (_MSG_HEAD - 9)
 
 
 def read_summary(run: str | Path) -> RunData | None:
@@ -377,32 +388,26 @@ def read_summary(run: str | Path) -> RunData | None:
 
 def _index_channels(d: RunData, f: Any, s: Any) -> None:
     """Per-channel counts, times and bytes of ``d`` from the chunks' message indexes."""
-    acc: dict[int, list[Any]] = {}
-    for ci in s.chunk_indexes:
-        raw = _check_chunk(f, ci)
-        ch, t, off = _index_rows(f, ci)
-        if not len(ch):
-            continue
-        off = off.astype(np.int64)
-        # each Message record's length field (u64 after its opcode) less its fixed fields
-        length = raw[off[:, None] + np.arange(1, 9)].copy().view("<u8").ravel()
-        size = length.astype(np.int64) - (_MSG_HEAD - 9)
-        for c in np.unique(ch):
-            k = ch == c
-            a = acc.setdefault(int(c), [0, math.inf, -math.inf, 0])
-            a[0] += int(k.sum())
-            a[1] = min(a[1], int(t[k].min()))
-            a[2] = max(a[2], int(t[k].max()))
-            a[3] += int(size[k].sum())
-    for cid, (n, t0, t1, nbytes) in acc.items():
+    parts = [_chunk_rows(f, ci) for ci in s.chunk_indexes]
+    parts = [p for p in parts if len(p[0])]
+    if not parts:
+        return
+    ch, t, size = (np.concatenate(x) for x in zip(*parts, strict=True))
+    ids, inv = np.unique(ch, return_inverse=True)
+    n, nbytes = np.bincount(inv), np.bincount(inv, weights=size)
+    t0 = np.full(len(ids), np.iinfo(np.int64).max)
+    t1 = np.full(len(ids), np.iinfo(np.int64).min)
+    np.minimum.at(t0, inv, t)
+    np.maximum.at(t1, inv, t)
+    for j, cid in enumerate(ids.tolist()):
         c = s.channels[cid]
         sch = s.schemas.get(c.schema_id)
-        d.channels[c.topic] = {"schema": sch.name if sch is not None else "", "count": n,
-                               "encoding": c.message_encoding, "t0": t0 * 1e-9,
-                               "t1": t1 * 1e-9, "bytes": nbytes}
-    if d.channels:
-        d.t_start = min(i["t0"] for i in d.channels.values())
-        d.t_end = max(i["t1"] for i in d.channels.values())
+        d.channels[c.topic] = {"schema": sch.name if sch is not None else "",
+                               "count": int(n[j]), "encoding": c.message_encoding,
+                               "t0": int(t0[j]) * 1e-9, "t1": int(t1[j]) * 1e-9,
+                               "bytes": int(nbytes[j])}
+    d.t_start = min(i["t0"] for i in d.channels.values())
+    d.t_end = max(i["t1"] for i in d.channels.values())
 
 
 def show(run: str | Path) -> str:
