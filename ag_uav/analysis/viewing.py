@@ -180,8 +180,8 @@ def _note(data: RunData, topic: str, schema: Any, channel: Any, message: Any) ->
 
 
 #: the most samples a time series keeps when read for plots and videos (:func:`read_run`'s
-#: ``max_points``; a 38 ha job logs ~340,000 state rows)
-PLOT_POINTS = 20_000
+#: ``max_points``; a 38 ha job logs ~340,000 state rows; a figure is ~1,500 px wide)
+PLOT_POINTS = 5_000
 
 
 class _Thin:
