@@ -448,7 +448,8 @@ def show(run: str | Path) -> str:
 
 def _geo_lines(d: RunData) -> list[str]:
     """The run's geodetic origin (metadata ``geo``) and the lon/lat bounds of its true track
-    (``/geo/true``); none for a log without them."""
+    (metadata ``geo_bounds``, else the ``/geo/true`` messages read); none for a log without
+    them."""
     md = d.metadata.get("geo") or {}
     try:
         lat0, lon0 = float(md["origin_lat_deg"]), float(md["origin_lon_deg"])
@@ -457,11 +458,18 @@ def _geo_lines(d: RunData) -> list[str]:
         return []
     out = [f"origin: lat {lat0:.7f}, lon {lon0:.7f} (WGS-84 degrees), height {h0:.1f} m "
            "(local frame: x east, y north, z up)"]
+    b = d.metadata.get("geo_bounds") or {}  # a finished log: written by its writer
     s = d.series.get("/geo/true")
-    if s is not None and len(s.t) and "latitude" in s and "longitude" in s:
+    try:
+        box = [float(b[k]) for k in ("lat_min", "lat_max", "lon_min", "lon_max")]
+        n = int(b["fixes"])
+    except (KeyError, ValueError):  # a log cut short: from its messages, where read
+        if s is None or not len(s.t) or "latitude" not in s or "longitude" not in s:
+            return out
         la, lo = s["latitude"], s["longitude"]
-        out.append(f"flight bounds: lat {la.min():.7f} .. {la.max():.7f}, lon {lo.min():.7f} .. "
-                   f"{lo.max():.7f} ({len(s.t)} fixes on /geo/true)")
+        box, n = [la.min(), la.max(), lo.min(), lo.max()], len(s.t)
+    out.append(f"flight bounds: lat {box[0]:.7f} .. {box[1]:.7f}, lon {box[2]:.7f} .. "
+               f"{box[3]:.7f} ({n} fixes on /geo/true)")
     return out
 
 

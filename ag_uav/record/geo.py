@@ -215,15 +215,27 @@ def _style(**kw: Any) -> dict[str, Any]:
             for k, v in kw.items()}
 
 
-def _polygon_coords(frame: GeoFrame, poly: Any) -> list[list[list[float]]]:
-    """A shapely polygon in ENU metres → GeoJSON rings in lon/lat, oriented the RFC 7946 way
-    (exterior counter-clockwise, holes clockwise) and closed."""
+def _valid_ll(shell: Any, holes: list[Any]) -> list[list[list[list[float]]]]:
+    """A polygon of lon/lat rings (rounded to :data:`_DP` places) → GeoJSON polygons: valid
+    (a sliver the rounding made self-touching is repaired by ``make_valid``, which may split
+    it), oriented the RFC 7946 way (exterior counter-clockwise, holes clockwise), closed."""
     import shapely
 
-    ll = shapely.Polygon(frame.lonlat(np.asarray(poly.exterior.coords)[:, :2]),
-                         [frame.lonlat(np.asarray(r.coords)[:, :2]) for r in poly.interiors])
-    ll = shapely.orient_polygons(ll, exterior_cw=False)
-    return [np.asarray(r.coords).tolist() for r in (ll.exterior, *ll.interiors)]
+    poly = shapely.Polygon(shell, holes)
+    parts = [poly] if poly.is_valid else _polys(shapely.make_valid(poly))
+    out = []
+    for p in parts:
+        p = shapely.orient_polygons(p, exterior_cw=False)
+        if p.is_valid and p.area > 0:
+            out.append([np.round(np.asarray(r.coords), _DP).tolist()
+                        for r in (p.exterior, *p.interiors)])
+    return out
+
+
+def _polygon_coords(frame: GeoFrame, poly: Any) -> list[list[list[list[float]]]]:
+    """A shapely polygon in ENU metres → GeoJSON polygons in lon/lat (:func:`_valid_ll`)."""
+    return _valid_ll(frame.lonlat(np.asarray(poly.exterior.coords)[:, :2]),
+                     [frame.lonlat(np.asarray(r.coords)[:, :2]) for r in poly.interiors])
 
 
 def _polys(geom: Any) -> list[Any]:
@@ -236,7 +248,8 @@ def _polys(geom: Any) -> list[Any]:
 
 
 def _multipolygon(frame: GeoFrame, polys: list[Any]) -> dict[str, Any] | None:
-    coords = [_polygon_coords(frame, p) for p in polys if not p.is_empty and p.area > 0]
+    coords = [c for p in polys if not p.is_empty and p.area > 0
+              for c in _polygon_coords(frame, p)]
     if not coords:
         return None
     if len(coords) == 1:
@@ -374,7 +387,12 @@ def dose_geojson(frame: GeoFrame, x0: float, y0: float, cell: float, l_per_ha: n
     it = iter(np.split(ll, ends[:-1]))
     feats = []
     for name, col, polys, area in bands:
-        coords = [[next(it).tolist() for _ in p] for p in polys]
+        coords = []
+        for p in polys:
+            ring = [next(it) for _ in p]
+            coords += _valid_ll(ring[0], ring[1:])
+        if not coords:
+            continue
         geom = ({"type": "Polygon", "coordinates": coords[0]} if len(coords) == 1
                 else {"type": "MultiPolygon", "coordinates": coords})
         feats.append({"type": "Feature", "geometry": geom, "properties": {

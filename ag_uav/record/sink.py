@@ -137,6 +137,7 @@ class Backend:
         self._idx = np.zeros((3, 1), dtype=np.int64)
         self._geo: Any = None  # (GeoFrame, lid true, lid est, lid gnss)
         self._geo_stash: list[tuple[Any, ...]] = []  # positions waiting for the emit
+        self._geo_bounds: list[float] = []  # lat min, max, lon min, max, fixes of /geo/true
         self._fix_tail: dict[int, tuple[bytes, tuple[float, ...]]] = {}
         self.closed = False
 
@@ -215,9 +216,11 @@ class Backend:
         o = 0
         for lid, tns, xyz, var, codes in stash:
             part, o = lla[o:o + len(xyz)], o + len(xyz)
-            if codes is None:
-                msgs = location_fixes(tns, part, head=_BASE_LINK7 if lid == self._geo[1]
-                                      else b"")
+            if codes is None and lid == self._geo[1]:
+                msgs = location_fixes(tns, part, head=_BASE_LINK7)
+                self._bound(part)
+            elif codes is None:
+                msgs = location_fixes(tns, part)
             else:
                 no = (b"", NO_TYPE_COLOR)
                 tails = [self._fix_tail.get(c, no) for c in codes]
@@ -225,6 +228,16 @@ class Backend:
                                       rgba=np.array([tl[1] for tl in tails]),
                                       tails=[tl[0] for tl in tails])
             self._pend.extend(zip(itertools.repeat(lid), msgs, tns, strict=False))
+
+    def _bound(self, lla: np.ndarray) -> None:
+        """Widen the true track's lat/lon bounds (metadata ``geo_bounds`` at the close)."""
+        b = [float(lla[:, 0].min()), float(lla[:, 0].max()), float(lla[:, 1].min()),
+             float(lla[:, 1].max()), len(lla)]
+        if self._geo_bounds:
+            o = self._geo_bounds
+            b = [min(o[0], b[0]), max(o[1], b[1]), min(o[2], b[2]), max(o[3], b[3]),
+                 o[4] + b[4]]
+        self._geo_bounds = b
 
     def _geodose(self, lid: int, tn: int, x0: float, y0: float, cell: float, target: float,
                  grid: np.ndarray) -> None:
@@ -320,6 +333,11 @@ class Backend:
     def _close(self) -> None:
         if not self.closed:
             self.closed = True
+            if self._geo_bounds:  # what `ag-uav show` prints without reading the messages
+                b = self._geo_bounds
+                self._writer.write_metadata("geo_bounds", {
+                    "lat_min": repr(b[0]), "lat_max": repr(b[1]), "lon_min": repr(b[2]),
+                    "lon_max": repr(b[3]), "fixes": str(b[4])})
             self._writer.close()
 
 
