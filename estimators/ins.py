@@ -544,7 +544,8 @@ def gate_ratio(P, H, Rm, nu, gate):
     """The innovation test of PX4 EKF2 (docs.px4.io, *Using the ECL EKF*: "test ratio =
     innovation² / (gate² · innovation variance)", ``EKF2_GPS_GATE`` = 5 σ): the largest over
     the measurement's rows of ν_i² / (γ² S_ii), S_ii = h_i P h_iᵀ + R_ii.  Only H's non-zero
-    columns enter (at most 7 of 15 for the GNSS rows).  A ratio above 1 fails the gate."""
+    columns enter (at most 7 of 15 for the GNSS rows).  A ratio above 1 fails the gate; a row
+    whose S_ii is not positive (a singular covariance) fails it too (ratio ∞)."""
     worst = 0.0
     for i in range(H.shape[0]):
         s = Rm[i, i]
@@ -557,6 +558,8 @@ def gate_ratio(P, H, Rm, nu, gate):
                 if H[i, b] != 0.0:
                     acc += P[a, b] * H[i, b]
             s += ha * acc
+        if not s > 0.0:
+            return np.inf
         r = nu[i] * nu[i] / (gate * gate * s)
         if r > worst:
             worst = r

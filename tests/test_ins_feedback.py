@@ -240,3 +240,20 @@ def test_a_covariance_that_is_not_positive_definite_is_counted_not_hidden(monkey
     console = Console(width=200, record=True)
     console.print(estimator_table(est))
     assert "not positive definite: kf " in " ".join(console.export_text().split())
+
+
+def test_consider_never_fuses_a_fix_as_exact():
+    """A receiver whose error is all Gauss–Markov leaves "consider" no white part: the fused
+    R keeps R_WHITE_FLOOR (R = 0 made the position block singular and the gate divide by zero),
+    the rest is considered; the default receiver's R is its floored whole less the Gauss–Markov
+    part, above that floor."""
+    from ag_uav.navigation.ins_feedback import R_FLOOR, R_WHITE_FLOOR
+    from ag_uav.seeds import seed_sequences
+
+    gm = _cfg(gps__preset="perfect", gps__overrides={"components": [
+        {"type": "gauss-markov", "name": "bias", "sigma": 3.0, "tau_s": 1e7}]})
+    R, cv = InsFeedback(gm, seed_sequences(0)).var_nominal
+    assert np.all(R == R_WHITE_FLOOR) and np.allclose(cv[:2], 9.0)
+    R, cv = InsFeedback(_cfg(gps__preset="rtk"), seed_sequences(0)).var_nominal
+    assert np.all(R > R_WHITE_FLOOR)
+    assert np.allclose(R + cv, np.maximum(R + cv, R_FLOOR))

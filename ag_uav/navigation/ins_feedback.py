@@ -95,6 +95,9 @@ from ..vehicle.gps import ReceiverReport, derive_seed
 from .feedback import Feedback
 
 R_FLOOR = 1e-4
+#: the least variance (m², (5 mm)²) a "consider" fix is fused with: a receiver whose error is
+#: all Gauss–Markov leaves no white part, and R = 0 would make the position block singular
+R_WHITE_FLOOR = 2.5e-5
 #: the variance (m², σ = 1 km) that keeps a fix's height out of the update under range aid
 NOT_FUSED_VAR = 1e6
 DEG = math.pi / 180.0
@@ -256,9 +259,9 @@ class InsFeedback(Feedback):
             wi, gi = fix_variance(self.gps, mode, self.n_window)
             return np.maximum(r_scale * (wi + gi), R_FLOOR), np.zeros(3)
         # the floor applies to the whole reported variance (as EKF2's to hAcc); the considered
-        # part comes off after it
+        # part comes off after it, and what is fused keeps R_WHITE_FLOOR
         tot = np.maximum(r_scale * (white + gm), R_FLOOR)
-        return tot - r_scale * gm, r_scale * gm
+        return np.maximum(tot - r_scale * gm, R_WHITE_FLOOR), r_scale * gm
 
     def _aux4(self) -> list[float]:
         """The next four standard normals of the receiver's auxiliary stream (velocity noise,
