@@ -4,7 +4,7 @@ A config is a TOML file whose tables mirror the dataclasses below. Every key is 
 are the shipped mission); an unknown key, a wrong type or a value out of range raises
 :class:`ConfigError` whose message names the key, the value and what is allowed, e.g.::
 
-    mission.swath_m = -3.0: must be > 0
+    mission.swath_m = -3.0: must be >= 0.5
 
 Numbers must be finite and within ±``FLOAT_LIMIT``; integers are TOML's 64-bit ones (a float is
 no integer: ``seed = 1.5`` and ``estimator.max_iter = 1e9`` are refused). ``--set KEY=VALUE``
@@ -77,10 +77,17 @@ REDUCERS = ("km", "nt", "bmm", "zeta")
 class MissionConfig:
     field: str = _f("default", "built-in field (default, l-shape, hole, two-part) or a lon/lat "
                     ".geojson/.kml/.kmz/.shp path; PATH#name=VALUE picks one feature")
-    swath_m: float = _f(6.0, "spray swath width (m); >= 0.5 (spray drones: 3-11 m; 0.01 m made "
-                        "the planner hang)", ge=0.5)
-    headland_m: float = _f(6.0, "headland margin swept by laps along the boundary (m); 0 = none",
-                           ge=0)
+    swath_m: float | str = _f("auto", "spray swath width = lane spacing (m; >= 0.5), or "
+                              "\"auto\": the widest spacing whose overlaid single-pass deposit "
+                              "has CV <= swath_cv_max in the deposition model's pattern test at "
+                              "this mission's height, speed, mass, nozzles, droplets and mean "
+                              "wind (ag_uav.world.pattern)", ge=0.5, choices=("auto",))
+    swath_cv_max: float = _f(0.25, "swath_m = \"auto\": CV limit of the overlaid pattern (0.25: "
+                             "the effective swath, ASABE S386 / Martin et al. 2019)", gt=0,
+                             lt=1)
+    headland_m: float | str = _f("auto", "headland margin swept by laps along the boundary (m; "
+                                 "0 = none), or \"auto\": one lap of the lane spacing",
+                                 ge=0, choices=("auto",))
     direction_deg: float | str = _f("auto", "sweep direction in degrees from east "
                                     "(counter-clockwise), or \"auto\" (fewest turns)",
                                     choices=("auto",))

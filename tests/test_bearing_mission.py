@@ -104,7 +104,7 @@ def test_paper_noise_stays_within_a_swath_and_mcc_beats_ekf():
     s = res.summary
     assert not s["crashed"]
     d = res.p_fb[1:, :2] - res.p_true[1:, :2]
-    assert np.max(np.hypot(d[:, 0], d[:, 1])) < cfg.mission.swath_m
+    assert np.max(np.hypot(d[:, 0], d[:, 1])) < res.plan.swath
     sc = s["estimators"]
     assert sc["mcc-ekf"]["estimate_rmse_m"] < 3.0 and sc["ekf"]["estimate_rmse_m"] < 3.0
     # same bearings for both (shadow): the correntropy kernel discounts the outliers

@@ -290,7 +290,7 @@ def test_transits_to_the_base_go_around_holes():
     tr = res.seg == SEG_TRANSIT
     assert tr.sum() > 1000
     d = shapely.distance(shapely.points(res.p_true[tr, :2]), hole)
-    assert d.min() > 0.5 * 0.5 * cfg.mission.swath_m
+    assert d.min() > 0.5 * 0.5 * res.plan.swath
     assert s["off_target_holes_m2"] == 0.0
 
 

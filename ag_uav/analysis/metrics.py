@@ -102,8 +102,8 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     ct = cross_track(res, plan)
     ct_spray = ct[np.isfinite(ct)]
     tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
-    cov, ovl = spray_coverage(res.field, tracks, cfg.mission.swath_m) if tracks else (0.0, 0.0)
-    off = off_target(res.field, tracks, cfg.mission.swath_m, cfg.spray.offtarget_buffer_m)
+    cov, ovl = spray_coverage(res.field, tracks, plan.swath) if tracks else (0.0, 0.0)
+    off = off_target(res.field, tracks, plan.swath, cfg.spray.offtarget_buffer_m)
     steps = np.diff(res.p_true, axis=0)
     # motor effort: RMS rate of the rotor-thrust commands over the spraying part (N/s per rotor)
     f_mis = np.asarray(res.motors, dtype=float)[mission]
@@ -117,7 +117,7 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     final_err = float(np.hypot(*(res.p_true[-1, :2] - end))) if n else float("inf")
     legs = [i for i, s in enumerate(plan.segments) if s.kind == "leg"]
     legs_flown = 0
-    swath = cfg.mission.swath_m
+    swath = plan.swath
     for i in legs:
         idx = np.flatnonzero(res.seg == i)
         if not idx.size:

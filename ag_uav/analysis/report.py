@@ -77,7 +77,11 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
         if key == "crashed":
             s = "[red]yes[/]" if v else "[green]no[/]"
         t.add_row(label, f"{s} {unit}".strip())
+        if key == "legs" and isinstance(summary.get("lanes"), dict):
+            t.add_row("lane spacing", _lanes_cell(summary["lanes"]))
     console.print(t)
+    if isinstance(summary.get("lanes"), dict):
+        console.print(summary["lanes"]["text"], markup=False, highlight=False)
     est = summary.get("estimators")
     if est:
         console.print(estimator_table(est))
@@ -85,6 +89,14 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
         console.print(f"[yellow]note:[/] {note}")
     if run_dir is not None:
         console.print(f"run folder: {run_dir}")
+
+
+def _lanes_cell(lanes: dict[str, Any]) -> str:
+    """``4.75 m (auto; legs 4.51 m apart)``."""
+    s = f"{lanes['swath_m']:g} m ({lanes['source']}"
+    if lanes.get("leg_spacing_m") is not None:
+        s += f"; legs {lanes['leg_spacing_m']:.2f} m apart"
+    return s + ")"
 
 
 def estimator_table(scores: dict[str, dict[str, Any]]) -> Table:

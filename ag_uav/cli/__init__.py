@@ -120,6 +120,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     items = f", {info['items']} mission items" if "items" in info else ""
     print(f"{args.output}: {info['format']}, {info['waypoints']} waypoints{items}, "
           f"{info['spray_switches']} nozzle switches; {plan.summary()}")
+    print(plan.meta["lanes"].text())
     _write_sorties(cfg, Path(args.output), kw)
     return 0
 

@@ -283,12 +283,13 @@ def _depositing(b: Batch, flights: Sequence[Flight], act_adr: int, n_act: int
     """The dose maps of the flights that have a field and ``spray.deposition``: one
     :class:`~ag_uav.world.deposition.DepositionBatch` per (deposition config, field bounds)."""
     from ..world.deposition import DepositionBatch, DepositionConfig
+    from ..world.pattern import mission_swath
 
     keyed: dict[str, tuple[list[int], Any, Any]] = {}
     for i, fl in enumerate(flights):
         if fl.field is None or not fl.cfg.spray.deposition:
             continue
-        dc = DepositionConfig.from_config(fl.cfg)
+        dc = DepositionConfig.from_config(fl.cfg, swath_m=mission_swath(fl.cfg))
         key = repr((dc, tuple(fl.field.bounds)))
         keyed.setdefault(key, ([], dc, fl.field))[0].append(i)
     if not keyed:

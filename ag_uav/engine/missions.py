@@ -39,6 +39,7 @@ from ..seeds import rng_streams, seed_sequences
 from ..vehicle.mjcf import build_vehicle
 from ..world.field import Field
 from ..world.mission import build_field, build_plan, field_outline
+from ..world.pattern import lane_choice, mission_swath
 from ..world.reference import Reference
 from .loop import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
 
@@ -70,7 +71,7 @@ def reach_m(cfg: Config, horizon_s: float) -> float:
     m = cfg.mission
     v = m.speed_mps
     a_t = m.accel_max_mps2 * math.sqrt(1.0 - 0.7**2)
-    return v * (horizon_s + 5.0) + v * v / a_t + 4.0 * m.swath_m + 20.0
+    return v * (horizon_s + 5.0) + v * v / a_t + 4.0 * mission_swath(cfg) + 20.0
 
 
 def build_reference(cfg: Config, plan, *, spray: bool = True,
@@ -212,14 +213,15 @@ _SETUP_CACHE: dict[str, tuple[Field, Any, Any]] = {}
 
 def mission_setup(cfg: Config) -> tuple[Field, Any, Any]:
     """(field, plan, reference) of ``cfg``'s mission, cached: they depend on the mission keys
-    only (field, planner, speeds, spray job, vehicle mass), not on seeds, gains or filters, so a
-    batch of many runs on one field builds them once."""
+    only (field, planner, lanes, speeds, spray job, vehicle mass), not on seeds, gains or
+    filters, so a batch of many runs on one field builds them once."""
     import json
     from dataclasses import asdict
 
     key = json.dumps([asdict(cfg.mission), cfg.sim.takeoff, cfg.sim.hover_after_s,
                       cfg.sim.control_hz, cfg.sim.max_time_s, asdict(cfg.spray),
-                      asdict(cfg.battery), asdict(cfg.vehicle)], default=str, sort_keys=True)
+                      asdict(cfg.battery), asdict(cfg.vehicle), repr(lane_choice(cfg))],
+                     default=str, sort_keys=True)
     hit = _SETUP_CACHE.get(key)
     if hit is None:
         fld = build_field(cfg)
@@ -253,7 +255,7 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
         log.geo(fld.origin, dose_target_l_per_ha=cfg.spray.rate_l_per_ha)
         log.scene(0.0, outline[0], outline[1:],
                   [(s.kind, np.asarray(s.points), s.spray) for s in plan.segments],
-                  m.swath_m, m.altitude_m,
+                  plan.swath, m.altitude_m,
                   parts=[(np.asarray(o), [np.asarray(h) for h in hs]) for o, hs in fld.rings()])
     if feedback is None and cfg.estimator.source == "bearings":
         from ..navigation.bearing import BearingFeedback
@@ -452,7 +454,6 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
     from ..analysis import metrics
 
     cfg, fld, plan, ref, fb, log = prep.cfg, prep.fld, prep.plan, prep.ref, prep.fb, prep.log
-    m = cfg.mission
     arr = out.rec
     res = RunResult(
         summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
@@ -474,12 +475,14 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
         summ["mission_time_s"] = None
     if getattr(ref, "plan_cut", None) is not None:  # the sortie plan covers this much path
         summ["planned_to_m"] = round(ref.plan_cut.planned_m, 1)
+    if "lanes" in plan.meta:
+        summ["lanes"] = plan.meta["lanes"].summary(plan.spacing)
     if out.sprayer is not None:
         summ.update(out.sprayer.summary(sim_time))
         res.extra["spray"] = out.sprayer.series(len(out.t))
         from ..analysis.metrics import add_sortie_areas
 
-        add_sortie_areas(summ, res, m.swath_m)
+        add_sortie_areas(summ, res, plan.swath)
     if out.dose is not None:
         summ.update(dose_summary(cfg, fld, out.dose, summ.get("litres_sprayed_l")))
         res.extra["dose"] = out.dose
@@ -518,7 +521,7 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
             import shapely
 
             foot = shapely.union_all([shapely.LineString(tr).simplify(0.1).buffer(
-                0.5 * m.swath_m, cap_style="flat") for tr in tracks])
+                0.5 * plan.swath, cap_style="flat") for tr in tracks])
             log.sprayed(sim_time, [foot])
         if out.dose is not None:
             g = out.dose.grid

@@ -1,6 +1,7 @@
 """The mission's world from the config: the field (``mission.field``), the coverage plan over it
-and the field's outline. (The reference flown along the plan, which needs the vehicle for the
-spray job's landing height, is built by :func:`ag_uav.engine.missions.build_reference`.)"""
+(lanes from :func:`ag_uav.world.pattern.lane_choice`) and the field's outline. (The reference
+flown along the plan, which needs the vehicle for the spray job's landing height, is built by
+:func:`ag_uav.engine.missions.build_reference`.)"""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import numpy as np
 
 from ..config import Config, ConfigError
 from .field import DEFAULT_ORIGIN, Field, load_field
+from .pattern import lane_choice, mission_headland
 from .plan import CoveragePlan, plan_coverage
 
 #: how far (m) a field may reach from the origin a config names: the local tangent plane's
@@ -44,13 +46,22 @@ def build_field(cfg: Config) -> Field:
 
 
 def build_plan(cfg: Config, fld: Field) -> CoveragePlan:
+    """The coverage plan of ``cfg``'s mission over ``fld`` with the mission's lanes
+    (``plan.swath``; ``plan.meta["lanes"]`` is the :class:`~ag_uav.world.pattern.LaneChoice`)."""
     m = cfg.mission
     direction = None if m.direction_deg == "auto" else float(m.direction_deg)
+    lanes = lane_choice(cfg)
+    if lanes.swath_m <= 0:
+        raise ConfigError(f'mission.swath_m = "auto": {lanes.text()}; set mission.swath_m to a '
+                          "number or raise mission.swath_cv_max")
     try:
-        return plan_coverage(fld, swath=m.swath_m, headland=m.headland_m,
+        plan = plan_coverage(fld, swath=lanes.swath_m, headland=mission_headland(cfg),
                              direction_deg=direction)
     except ValueError as e:
-        raise ConfigError(f"mission.swath_m = {m.swath_m}: {e}") from None
+        what = m.swath_m if lanes.source == "config" else f'"auto" ({lanes.swath_m:g} m)'
+        raise ConfigError(f"mission.swath_m = {what}: {e}") from None
+    plan.meta["lanes"] = lanes
+    return plan
 
 
 def field_outline(fld: Field) -> list[np.ndarray]:

@@ -205,10 +205,15 @@ def _lead(pts: list[np.ndarray], kinds: list[str], sprays: list[bool], lead_on: 
 
 
 def _plan_props(plan: CoveragePlan, altitude: float, speed: float) -> dict[str, Any]:
-    return {"swath_m": plan.swath, "altitude_m_agl": altitude, "speed_mps": speed,
-            "legs": plan.legs, "path_length_m": round(plan.length, 2),
+    lanes = plan.meta.get("lanes")
+    out = {"swath_m": plan.swath, "leg_spacing_m": round(plan.spacing, 3),
+           "altitude_m_agl": altitude, "speed_mps": speed,
+           "legs": plan.legs, "path_length_m": round(plan.length, 2),
             "spray_length_m": round(plan.spray_length, 2),
             "parts": len(plan.field.parts)}
+    if lanes is not None:
+        out["lanes"] = lanes.text()
+    return out
 
 
 def _ll(x: np.ndarray, y: np.ndarray, org) -> list[list[float]]:

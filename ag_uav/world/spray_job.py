@@ -63,6 +63,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Config, ConfigError
+from .pattern import mission_swath
 from .reference import Reference, RefSample
 
 G = 9.81
@@ -116,8 +117,9 @@ def base_point(cfg: Config, field, takeoff_xy) -> np.ndarray:
 
 
 def liquid_l_per_m(cfg: Config) -> float:
-    """Litres per metre of sprayed track: R · w / 10⁴."""
-    return cfg.spray.rate_l_per_ha * cfg.mission.swath_m / 1e4
+    """Litres per metre of sprayed track: R · w / 10⁴ (w: the mission's lane spacing,
+    :func:`ag_uav.world.pattern.mission_swath`)."""
+    return cfg.spray.rate_l_per_ha * mission_swath(cfg) / 1e4
 
 
 # ------------------------------------------------------------------------------ the job
@@ -394,7 +396,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
     pieces: list[tuple[Reference, np.ndarray]] = []
     resume: tuple[int, np.ndarray] | None = None  # (segment, point)
     land_xy = base
-    clear = 0.5 * m.swath_m  # transits keep half a swath from the holes (obstacles)
+    clear = 0.5 * plan.swath  # transits keep half a swath from the holes (obstacles)
     t_acc = 0.0
     for si, (k, litres, e_j) in enumerate(cuts):
         last = si == len(cuts) - 1

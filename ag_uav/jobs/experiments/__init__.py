@@ -5,7 +5,8 @@ and ``main(args) -> int``. Add a module name to :data:`MODULES` to register it.
 """
 
 MODULES = ("numerical", "table2", "bearing_tracking", "route_prediction", "langevin",
-           "outage", "controllers", "swath", "ins_nav", "optimisers", "drift")
+           "outage", "controllers", "swath", "spray_settings", "ins_nav", "optimisers",
+           "drift")
 
 
 def write_csv(path, rows) -> None:

@@ -8,7 +8,8 @@ the middle of a 60 m pass; collectors every 0.25 m, out to 20 m on each side). T
 kinematic (:func:`pass_states`): constant ground
 speed along +x at y = 0, the tilt and thrust that balance its weight and the configured air drag
 at its airspeed (``vehicle.drag_linear`` / ``drag_quadratic``), no MuJoCo, so a case takes well
-under a second. The crosswind blows along +y (towards the collectors' positive side).
+under a second. The crosswind blows along +y (towards the collectors' positive side). The test
+itself lives in :mod:`ag_uav.world.pattern` (the planner chooses a mission's lanes by it).
 
 Overlaying the profile at lane spacing S (Σ_j p(y − jS); with symmetric nozzles the back-and-
 forth and racetrack overlays coincide in the ground frame) gives the CV against S; the effective
@@ -22,119 +23,28 @@ deposit beyond the buffer), ``profiles.csv`` (the deposit profiles) and ``swath.
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import math
 import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ...world.deposition import DepositionBatch, DepositionConfig
+from ...world.deposition import DepositionConfig
+from ...world.pattern import (  # noqa: F401 - the pattern test lives in the world stage
+    CV_LIMIT,
+    cv_vs_spacing,
+    effective_swath,
+    pass_states,
+    single_pass,
+    swath_pattern,
+)
 
 NAME = "swath"
 HELP = ("spray pattern test of the deposition model: single passes across a collector line at "
         "several heights, speeds and crosswinds; deposit profile, CV vs lane spacing, effective "
         "swath")
 
-PASS_M = 60.0          # length of the sprayed pass
-WINDOW_M = 10.0        # collectors: mean over this stretch of track in the middle
-CV_LIMIT = 0.25
-COLLECTOR_M = 0.25     # collector spacing = the map's cell in this test
-
 
 def _floats(s: str) -> list[float]:
     return [float(v) for v in s.split(",") if v.strip()]
-
-
-def pass_states(speed: float, height: float, wind_y: float, mass_kg: float,
-                drag_lin: float, drag_quad: float) -> tuple[np.ndarray, float]:
-    """Body→world R (row-major, 9) and total thrust of a steady level pass along +x: thrust
-    vector T = m g ẑ + (c₁ + c₂|v_a|) v_a balances weight and drag at airspeed v_a = v − W."""
-    va = np.array([speed, -wind_y, 0.0])
-    tv = np.array([0.0, 0.0, mass_kg * 9.81]) + (drag_lin + drag_quad * np.linalg.norm(va)) * va
-    z = tv / np.linalg.norm(tv)
-    x = np.array([1.0, 0.0, 0.0]) - z[0] * z
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    return np.column_stack([x, y, z]).ravel(), float(np.linalg.norm(tv))
-
-
-def single_pass(cfg: DepositionConfig, speed: float, height: float, wind_y: float,
-                mass_kg: float = 6.47, drag_lin: float = 0.25, drag_quad: float = 0.18,
-                dt: float = 0.01, turb: float = 0.2) -> tuple[np.ndarray, np.ndarray, dict]:
-    """One pass; returns (y of the collectors, deposit L/ha, bookkeeping dict). The steady pass
-    has no gust samples, so ambient turbulence enters as σ_a = ``turb`` × wind (0.2: the Dryden
-    "mean" preset's σ_u at 3 m, :mod:`ag_uav.world.wind`) unless the config sets its own."""
-    R, thrust = pass_states(speed, height, wind_y, mass_kg, drag_lin, drag_quad)
-    sig = cfg.ambient_sigma_mps or turb * abs(wind_y)
-    cfg = dataclasses.replace(cfg, cell_m=COLLECTOR_M, buffer_m=max(cfg.buffer_m, 20.0),
-                              ambient_sigma_mps=sig)
-    dep = DepositionBatch(cfg, None, 1, bounds=(-PASS_M / 2, -1.0, PASS_M / 2, 1.0))
-    x = -PASS_M / 2 - 2.0 * speed
-    n = int(round((PASS_M + 4.0 * speed) / (speed * dt)))
-    inp = np.zeros((1, 20))
-    inp[0, 6:15] = R
-    inp[0, 15] = thrust
-    inp[0, 17] = wind_y
-    inp[0, 3] = speed
-    inp[0, 2] = height
-    for _ in range(n):
-        x += speed * dt
-        inp[0, 0] = x
-        inp[0, 19] = 1.0 if -PASS_M / 2 <= x <= PASS_M / 2 else 0.0
-        dep.step_packed(dt, inp)
-    dm = dep.dose_map(0)
-    xc, yc = dm.centres()
-    cols = np.abs(xc) <= WINDOW_M / 2
-    prof = dm.l_per_ha[:, cols].mean(axis=1)
-    info = {"sprayed_l": dm.sprayed_l, "drift_l": dm.drift_l,
-            "outside_l": dm.outside_grid_l, "grid_l": float(dm.litres.sum())}
-    return yc, prof, info
-
-
-def cv_vs_spacing(y: np.ndarray, prof: np.ndarray, spacings: np.ndarray) -> np.ndarray:
-    """CV of the overlaid deposit Σ_j p(y − jS) over one period, for each spacing S."""
-    dy = y[1] - y[0]
-    out = np.empty(len(spacings))
-    for i, s in enumerate(spacings):
-        k = max(1, int(round(s / dy)))
-        per = np.zeros(k)
-        for j in range(len(prof)):
-            per[j % k] += prof[j]
-        out[i] = per.std() / per.mean() if per.mean() > 0 else math.inf
-    return out
-
-
-def effective_swath(spacings: np.ndarray, cv: np.ndarray, limit: float = CV_LIMIT) -> float:
-    """The widest spacing with CV ≤ ``limit`` (0 if none)."""
-    ok = np.nonzero(cv <= limit)[0]
-    return float(spacings[ok[-1]]) if len(ok) else 0.0
-
-
-def swath_pattern(cfg: DepositionConfig, heights, speeds, winds, mass_kg: float = 6.47,
-                  drag_lin: float = 0.25, drag_quad: float = 0.18,
-                  spacings: np.ndarray | None = None, turb: float = 0.2
-                  ) -> tuple[list[dict], dict]:
-    """Every (height, speed, wind) case: a row of pattern figures and its profile."""
-    sp = np.arange(0.5, 20.01, 0.25) if spacings is None else spacings
-    rows, profiles = [], {}
-    for h in heights:
-        for v in speeds:
-            for w in winds:
-                y, p, info = single_pass(cfg, v, h, w, mass_kg, drag_lin, drag_quad, turb=turb)
-                cv = cv_vs_spacing(y, p, sp)
-                tot = p.sum()
-                cen = float((y * p).sum() / tot) if tot > 0 else math.nan
-                i_cfg = int(np.argmin(np.abs(sp - cfg.swath_m)))
-                rows.append({"height_m": h, "speed_mps": v, "wind_mps": w,
-                             "effective_swath_m": effective_swath(sp, cv),
-                             "cv_at_swath": float(cv[i_cfg]), "peak_l_per_ha": float(p.max()),
-                             "centroid_m": cen,
-                             "beyond_5m_fraction": float(p[y > 5.0].sum() / tot) if tot else 0.0,
-                             "drift_fraction": info["drift_l"] / info["sprayed_l"]})
-                profiles[(h, v, w)] = (y, p)
-    return rows, profiles
 
 
 #: OMAFRA Hort Matters 2013 (omafra.gov.on.ca .../2013/16hrt13a2f1.htm): how far a droplet drifts

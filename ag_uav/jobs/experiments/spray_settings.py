@@ -1,0 +1,299 @@
+"""``ag-uav experiment spray-settings``: which height, speed, lane spacing and droplet spectrum
+spray evenly in a given wind, at what work rate and with how much drift.
+
+**Search (the pattern test, no flights).** For every release height × ground speed × droplet
+spectrum one single pass of the deposition model's pattern test is flown
+(:func:`ag_uav.world.pattern.single_pass`: a kinematic pass across a collector line, the mean
+wind as a crosswind, 60 m long, collectors every 0.25 m to 20 m on each side), and its
+profile p(y) (per unit flow) is overlaid at every candidate lane spacing S. Per (h, v, spectrum,
+S), on a 100 m wide field whose downwind edge is at y = 0 with the outermost lane S/2 inside it
+(the other lanes at (k + ½)S, k < ⌈100/S⌉, as the headland and the legs lie):
+
+- ``cv``: the CV of the overlay Σ_j p(y − jS) over one period (the pattern test's CV);
+- ``underdosed``: the share of that period below 80 % of its mean (the flight's
+  ``underdosed_fraction``, taken over the field interior);
+- ``offtarget``: the deposit beyond the downwind edge over everything sprayed (collectors to
+  20 m, plus what the test counts airborne past them);
+- ``drift_past_buffer``: the same beyond the edge plus ``--buffer`` metres;
+- ``work_rate_ha_h``: the theoretical field capacity S · v · 0.36 (ha/h; no turns, no refills:
+  an upper bound; the flights of ``--confirm`` give the job time).
+
+The **Pareto front** keeps the settings no other beats on all three of work rate (higher),
+CV (lower) and drift past the buffer (lower); the table lists the front's points with
+CV ≤ ``--cv-max`` (the effective swath's 25 % by default). Under-dosed area and off-target
+deposit are reported beside them.
+
+**Confirmation (``--confirm N``, real flights).** The N fastest front points with CV ≤
+``--cv-max`` are flown on the configured mission (MuJoCo, the controller and the INS, the
+engine's dose map) in one batch, and their flown dose CV, under-dosed area and off-field deposit
+stand beside the pattern test's: the pattern test has no gusts, turns, leg ends or field edges.
+
+Writes (``--out``): ``settings.csv`` (every point), ``pareto.csv``, ``spray_settings.md`` and
+``pareto.png`` (work rate against CV, coloured by the drift past the buffer).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...world.pattern import cv_vs_spacing, single_pass
+
+NAME = "spray-settings"
+HELP = ("search height, speed, lane spacing and droplet spectrum against dose CV, under-dosed "
+        "area, off-target deposit and drift past a buffer in a given wind (the pattern test); "
+        "Pareto front of work rate vs CV vs drift, optionally confirmed by flights")
+
+FIELD_M = 100.0
+#: droplet spectra (Dv10, Dv50, Dv90 in µm): illustrative points of ASABE S572's fine, medium and
+#: coarse classes (medium = the product's default 120 / 250 / 420 µm, 19 % of the volume below
+#: 150 µm; GRDC's reading of S572: fine > 20 %, coarse < 10 % below 150 µm)
+SPECTRA = {"fine": (90.0, 180.0, 320.0), "medium": (120.0, 250.0, 420.0),
+           "coarse": (180.0, 350.0, 560.0)}
+
+
+def _floats(s: str) -> list[float]:
+    return [float(v) for v in s.split(",") if v.strip()]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--wind", type=float, default=None,
+                   help="crosswind (m/s; default: the config's wind.speed_mps)")
+    p.add_argument("--heights", default="2,3,4", help="release heights (m), comma-separated")
+    p.add_argument("--speeds", default="3,5,7", help="ground speeds (m/s)")
+    p.add_argument("--spacings", default="2:9:0.5", metavar="LO:HI:STEP",
+                   help="lane spacings (m)")
+    p.add_argument("--spectra", default="fine,medium,coarse",
+                   help=f"droplet spectra ({', '.join(SPECTRA)})")
+    p.add_argument("--buffer", type=float, default=5.0, help="buffer (m) past the downwind edge")
+    p.add_argument("--cv-max", type=float, default=0.25, help="CV limit of the table and "
+                   "of the flights that confirm it")
+    p.add_argument("--confirm", type=int, default=0, metavar="N",
+                   help="fly the N fastest front points with CV <= --cv-max on the mission")
+    p.add_argument("--config", default=None, help="base config (TOML)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config key of the base config")
+    p.add_argument("--out", default="runs/experiment-spray-settings", metavar="DIR",
+                   help="output folder")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+
+
+@dataclasses.dataclass(frozen=True)
+class Case:
+    height_m: float
+    speed_mps: float
+    spectrum: str
+
+
+def _spacings(s: str) -> np.ndarray:
+    try:
+        lo, hi, st = (float(v) for v in s.split(":"))
+    except ValueError:
+        raise ValueError(f"--spacings = {s!r}: expected LO:HI:STEP") from None
+    if not (0 < lo <= hi and st > 0):
+        raise ValueError(f"--spacings = {s!r}: need 0 < LO <= HI and STEP > 0")
+    return np.round(np.arange(lo, hi + 1e-9, st), 6)
+
+
+def edge_shares(y: np.ndarray, p: np.ndarray, airborne: float, spacing: float,
+                buffer_m: float) -> tuple[float, float]:
+    """(off-target, drift past the buffer): the shares of what a ``FIELD_M`` wide field sprays
+    that land beyond its downwind edge (y > 0), and beyond the edge + ``buffer_m``, with lanes at
+    y = −(k + ½)·S. ``p`` is one pass's deposit profile (per collector), ``airborne`` the share
+    of one pass's volume the test carried past its collectors (counted as drift past any
+    buffer)."""
+    dy = y[1] - y[0]
+    n = max(1, math.ceil(FIELD_M / spacing - 1e-9))
+    cum = np.concatenate([[0.0], np.cumsum(p[::-1])])[::-1]   # cum[i] = Σ p[i:]
+    total = p.sum() / max(1.0 - airborne, 1e-12)               # the pass's whole volume
+    off = drift = 0.0
+    for k in range(n):
+        shift = (k + 0.5) * spacing                           # the pass lies at −shift
+        # collectors wholly beyond the line (their lower side at or past it)
+        i_edge = int(np.searchsorted(y, shift + 0.5 * dy - 1e-9))
+        i_buf = int(np.searchsorted(y, buffer_m + shift + 0.5 * dy - 1e-9))
+        off += cum[min(i_edge, len(p))]
+        drift += cum[min(i_buf, len(p))]
+    return ((off + n * airborne * total) / (n * total),
+            (drift + n * airborne * total) / (n * total))
+
+
+def case_rows(case: Case, y: np.ndarray, p: np.ndarray, airborne: float, wind: float,
+              spacings: np.ndarray, buffer_m: float) -> list[dict[str, Any]]:
+    """The figures of every spacing of one single pass."""
+    cvs = cv_vs_spacing(y, p, spacings)
+    dy = y[1] - y[0]
+    rows = []
+    for s, cv in zip(spacings, cvs, strict=True):
+        k = max(1, int(round(s / dy)))
+        per = np.bincount(np.arange(len(p)) % k, weights=p, minlength=k)
+        under = float(np.mean(per < 0.8 * per.mean())) if per.mean() > 0 else 1.0
+        off, drift = edge_shares(y, p, airborne, float(s), buffer_m)
+        rows.append({"height_m": case.height_m, "speed_mps": case.speed_mps,
+                     "spectrum": case.spectrum, "spacing_m": float(s), "wind_mps": wind,
+                     "work_rate_ha_h": float(s) * case.speed_mps * 0.36, "cv": float(cv),
+                     "underdosed": under, "offtarget": off, "drift_past_buffer": drift})
+    return rows
+
+
+def pareto(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The rows no other row beats on all of work rate (max), CV (min) and drift (min)."""
+    a = np.array([[-r["work_rate_ha_h"], r["cv"], r["drift_past_buffer"]] for r in rows])
+    keep = []
+    for i in range(len(a)):
+        dom = np.all(a <= a[i], axis=1) & np.any(a < a[i], axis=1)
+        if not dom.any():
+            keep.append(rows[i])
+    return sorted(keep, key=lambda r: -r["work_rate_ha_h"])
+
+
+def search(cfg: Any, cases: list[Case], wind: float, spacings: np.ndarray, buffer_m: float,
+           progress: bool = True) -> list[dict[str, Any]]:
+    """Every case's single pass at the mission's mass and drag, overlaid at every spacing."""
+    from ..._progress import progress_bar
+    from ...world.deposition import DepositionConfig
+    from ...world.pattern import pattern_case
+
+    base = pattern_case(cfg)
+    rows: list[dict[str, Any]] = []
+    bar = progress_bar(total=len(cases), desc="pattern tests", unit="pass", disable=not progress)
+    for c in cases:
+        d10, d50, d90 = SPECTRA[c.spectrum]
+        dc: DepositionConfig = dataclasses.replace(base.dep, dv10_um=d10, dv50_um=d50,
+                                                   dv90_um=d90)
+        y, p, info = single_pass(dc, c.speed_mps, c.height_m, wind, base.mass_kg,
+                                 base.drag_linear, base.drag_quadratic)
+        airborne = info["drift_l"] / info["sprayed_l"] if info["sprayed_l"] > 0 else 0.0
+        rows += case_rows(c, y, p, airborne, wind, spacings, buffer_m)
+        bar.update(1)
+    bar.close()
+    return rows
+
+
+def confirm(cfg_args: tuple[str | None, list[str]], points: list[dict[str, Any]], wind: float
+            ) -> list[dict[str, Any]]:
+    """Fly the mission at each point's settings (one batch); the flown dose beside the test's."""
+    from ...config import load_config, parse_set_items
+    from ...engine.missions import simulate_many
+
+    path, sets = cfg_args
+    cfgs = []
+    for r in points:
+        d10, d50, d90 = SPECTRA[r["spectrum"]]
+        ov = {**parse_set_items(sets), "log.enabled": False, "log.render": False,
+              "wind.speed_mps": wind, "mission.altitude_m": r["height_m"],
+              "mission.speed_mps": r["speed_mps"], "mission.swath_m": r["spacing_m"],
+              "mission.headland_m": "auto", "spray.dv10_um": d10, "spray.dv50_um": d50,
+              "spray.dv90_um": d90}
+        cfgs.append(load_config(path, ov))
+    out = []
+    for r, res in zip(points, simulate_many(cfgs, progress=True, errors="return"), strict=True):
+        s = {} if isinstance(res, Exception) else res.summary
+        out.append({**{k: r[k] for k in ("height_m", "speed_mps", "spectrum", "spacing_m")},
+                    "cv_test": r["cv"], "cv_flown": s.get("dose_cv"),
+                    "underdosed_test": r["underdosed"],
+                    "underdosed_flown": s.get("underdosed_fraction"),
+                    "offtarget_flown": s.get("offtarget_deposit_fraction"),
+                    "job_time_s": s.get("job_time_s"),
+                    "error": str(res) if isinstance(res, Exception) else ""})
+    return out
+
+
+def plot(rows: list[dict[str, Any]], front: list[dict[str, Any]], path: Path, title: str
+         ) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 5.0))
+    drift = np.array([100 * r["drift_past_buffer"] for r in rows])
+    sc = ax.scatter([r["work_rate_ha_h"] for r in rows], [100 * r["cv"] for r in rows], s=10,
+                    c=drift, cmap="viridis", alpha=0.5)
+    ax.scatter([r["work_rate_ha_h"] for r in front], [100 * r["cv"] for r in front], s=40,
+               facecolors="none", edgecolors="red", label="Pareto front")
+    ax.axhline(25.0, color="grey", lw=0.8, ls="--", label="CV 25 % (effective swath)")
+    ax.set_xlabel("work rate, lane × speed (ha/h)")
+    ax.set_ylabel("dose CV of the overlaid pattern (%)")
+    ax.set_ylim(0, min(100.0, max(100 * r["cv"] for r in rows) * 1.05))
+    fig.colorbar(sc, ax=ax, label="drift past the buffer (% of sprayed)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _table(front: list[dict[str, Any]], cv_max: float) -> tuple[list[str], list[list[str]]]:
+    header = ["h (m)", "v (m/s)", "droplets", "lanes (m)", "work rate (ha/h)", "CV",
+              "under-dosed", "off-target", "drift past buffer"]
+    body = [[f"{r['height_m']:g}", f"{r['speed_mps']:g}", r["spectrum"], f"{r['spacing_m']:g}",
+             f"{r['work_rate_ha_h']:.1f}", f"{100 * r['cv']:.0f} %",
+             f"{100 * r['underdosed']:.0f} %", f"{100 * r['offtarget']:.2f} %",
+             f"{100 * r['drift_past_buffer']:.3f} %"]
+            for r in front if r["cv"] <= cv_max]
+    return header, body
+
+
+def main(args: argparse.Namespace) -> int:
+    from ...config import ConfigError, load_config, parse_set_items
+    from ..batch import markdown_table, print_table
+    from . import write_csv
+
+    cfg = load_config(args.config, parse_set_items(args.set))
+    wind = cfg.wind.speed_mps if args.wind is None else float(args.wind)
+    bad = [s for s in args.spectra.split(",") if s.strip() not in SPECTRA]
+    if bad:
+        raise ConfigError(f"--spectra = {args.spectra!r}: {bad[0]!r} unknown; allowed: "
+                          f"{', '.join(SPECTRA)}")
+    try:
+        spacings = _spacings(args.spacings)
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+    if not (0 <= wind <= 25 and args.buffer >= 0):
+        raise ConfigError(f"--wind = {wind:g}, --buffer = {args.buffer:g}: expected 0..25 m/s "
+                          "and a buffer >= 0 m")
+    cases = [Case(h, v, s.strip()) for h in _floats(args.heights) for v in _floats(args.speeds)
+             for s in args.spectra.split(",")]
+    t0 = time.perf_counter()
+    rows = search(cfg, cases, wind, spacings, args.buffer, progress=not args.quiet)
+    wall = time.perf_counter() - t0
+    front = pareto(rows)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(out / "settings.csv", rows)
+    write_csv(out / "pareto.csv", front)
+    title = (f"{len(cases)} pattern tests x {len(spacings)} lane spacings, {wind:g} m/s "
+             f"crosswind, buffer {args.buffer:g} m ({wall:.0f} s)")
+    header, body = _table(front, args.cv_max)
+    print_table(header, body, f"Pareto front (work rate, CV, drift), CV <= "
+                              f"{100 * args.cv_max:g} %: {title}")
+    md = f"{title}\n\n" + markdown_table(header, body)
+    if args.confirm > 0:
+        pts = [r for r in front if r["cv"] <= args.cv_max][:args.confirm]
+        flown = confirm((args.config, args.set), pts, wind)
+        write_csv(out / "confirm.csv", flown)
+        fh = ["h (m)", "v (m/s)", "droplets", "lanes (m)", "CV test", "CV flown",
+              "under-dosed test", "under-dosed flown", "off the field (flown)", "job time (s)"]
+
+        def pct(v: Any, nd: int = 0) -> str:
+            return "–" if v is None else f"{100 * v:.{nd}f} %"
+
+        fb = [[f"{r['height_m']:g}", f"{r['speed_mps']:g}", r["spectrum"],
+               f"{r['spacing_m']:g}", pct(r["cv_test"]), pct(r["cv_flown"]),
+               pct(r["underdosed_test"]), pct(r["underdosed_flown"]),
+               pct(r["offtarget_flown"], 2),
+               "–" if r["job_time_s"] is None else f"{r['job_time_s']:.0f}"] for r in flown]
+        print_table(fh, fb, "Confirmed by flights of the mission (pattern test vs flown)")
+        md += "\n" + markdown_table(fh, fb)
+    (out / "spray_settings.md").write_text(md)
+    plot(rows, front, out / "pareto.png", title)
+    print(f"wrote {out / 'settings.csv'}, {out / 'pareto.csv'}, {out / 'spray_settings.md'}, "
+          f"{out / 'pareto.png'}")
+    return 0

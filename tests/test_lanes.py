@@ -1,0 +1,103 @@
+"""Lanes from the pattern: ``mission.swath_m = "auto"`` gives the plan, the sortie planner, the
+nozzles and the exports the pattern test's effective swath (ag_uav.world.pattern)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from ag_uav.cli import main
+from ag_uav.config import ConfigError, load_config
+from ag_uav.world import pattern
+from ag_uav.world.deposition import DepositionConfig
+from ag_uav.world.mission import build_field, build_plan
+from ag_uav.world.spray_job import liquid_l_per_m
+
+
+@pytest.fixture(scope="module")
+def calm():
+    return load_config(None, {"wind.speed_mps": 0.0})
+
+
+def test_auto_spacing_is_the_effective_swath_of_a_calm_pattern(calm):
+    lanes = pattern.lane_choice(calm)
+    # the oracle: the pattern test run by hand at the mission's figures (3 m, 5 m/s, calm,
+    # take-off mass 6.47 kg + a full 2.7 L tank, the body-x drag)
+    dc = DepositionConfig.from_config(calm, swath_m=6.0)
+    y, p, _ = pattern.single_pass(dc, 5.0, 3.0, 0.0, 6.47 + 2.7, 0.25, 0.18)
+    sp = pattern.SPACINGS
+    cv = pattern.cv_vs_spacing(y, p, sp)
+    want = pattern.effective_swath(sp, cv, 0.25)
+    assert lanes.source == "auto" and lanes.swath_m == want
+    assert 2.0 < want < 12.0
+    i = int(np.argmin(np.abs(sp - want)))
+    assert cv[i] <= 0.25 < cv[i + 1:].min()      # widest with CV <= 25 %: every wider one fails
+    assert lanes.cv == pytest.approx(cv[i], abs=1e-12)
+    assert "calm" in lanes.text() and f"lanes {want:g} m" in lanes.text()
+
+
+def test_the_plan_sprayer_and_sortie_planner_use_the_lanes(calm):
+    lanes = pattern.lane_choice(calm)
+    plan = build_plan(calm, build_field(calm))
+    assert plan.swath == lanes.swath_m and plan.meta["lanes"] is lanes
+    # equal strips over the interior: the legs are at most one lane apart
+    assert lanes.swath_m * 0.8 < plan.spacing <= lanes.swath_m + 1e-9
+    assert plan.headland == lanes.swath_m and plan.n_headland == 1     # headland_m = "auto"
+    assert liquid_l_per_m(calm) == pytest.approx(calm.spray.rate_l_per_ha * lanes.swath_m / 1e4)
+
+
+def test_a_number_sets_the_lanes_by_hand_and_headland_follows():
+    cfg = load_config(None, {"mission.swath_m": 5.5})
+    lanes = pattern.lane_choice(cfg)
+    assert (lanes.swath_m, lanes.source, lanes.case) == (5.5, "config", None)
+    assert "set by hand" in lanes.text()
+    plan = build_plan(cfg, build_field(cfg))
+    assert plan.swath == 5.5 and plan.headland == 5.5
+    cfg = load_config(None, {"mission.swath_m": 5.5, "mission.headland_m": 0.0})
+    assert build_plan(cfg, build_field(cfg)).n_headland == 0
+
+
+def test_the_choice_is_cached_deterministic_and_depends_on_its_inputs(calm):
+    a = pattern.lane_choice(calm)
+    assert pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0})) is a   # cached
+    pattern._CACHE.clear()
+    b = pattern.lane_choice(calm)
+    assert b is not a and b == a and np.array_equal(b.profile, a.profile)       # recomputed
+    # what the pattern test depends on changes it; what it does not (the seed) does not
+    assert pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0, "seed": 9})) is b
+    strict = pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0,
+                                                    "mission.swath_cv_max": 0.1}))
+    assert strict.swath_m < a.swath_m and strict.cv <= 0.1
+    assert "CV <= 10 %" in strict.text()
+    low = pattern.pattern_case(load_config(None, {"mission.altitude_m": 2.0}))
+    assert low.height_m == 2.0 and low.wind_mps == 3.0       # the mean wind, as a crosswind
+
+
+@pytest.mark.parametrize("value, msg", [
+    ("wide", 'mission.swath_m = "wide": expected a number or "auto"'),
+    (0.0, "mission.swath_m = 0.0: must be >= 0.5"),
+    (-3, "mission.swath_m = -3.0: must be >= 0.5"),
+])
+def test_swath_is_auto_or_a_positive_number(value, msg):
+    with pytest.raises(ConfigError) as e:
+        load_config(None, {"mission.swath_m": value})
+    assert str(e.value) == msg
+
+
+def test_cli_bad_swath_is_one_line_exit_2(capsys):
+    assert main(["plan", "-o", "x.geojson", "--set", "mission.swath_m=wide"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ['ag-uav: config error: mission.swath_m = "wide": expected a number or "auto"']
+
+
+def test_plan_prints_the_lanes_and_exports_them(tmp_path, capsys):
+    out = tmp_path / "p.geojson"
+    assert main(["plan", "-o", str(out), "--origin", "52.0,5.0"]) == 0
+    text = capsys.readouterr().out
+    cfg = load_config(None)
+    lanes = pattern.lane_choice(cfg)
+    assert lanes.text() in text and "effective swath of the pattern test at 3 m, 5 m/s" in text
+    props = [f["properties"] for f in json.loads(out.read_text())["features"]
+             if f["properties"].get("role") == "field"][0]
+    assert props["swath_m"] == lanes.swath_m and props["lanes"] == lanes.text()
+    assert props["leg_spacing_m"] <= lanes.swath_m
