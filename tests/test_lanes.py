@@ -22,11 +22,14 @@ def calm():
 def test_auto_spacing_is_the_effective_swath_of_a_calm_pattern(calm):
     lanes = pattern.lane_choice(calm)
     # the oracle: the pattern test run by hand at the mission's figures (3 m, 5 m/s, calm,
-    # take-off mass 6.47 kg + a full 2.7 L tank, the body-x drag)
+    # the body-x drag) with a full 2.7 L tank and an empty one: the worse CV of the two
     dc = DepositionConfig.from_config(calm, swath_m=6.0)
-    y, p, _ = pattern.single_pass(dc, 5.0, 3.0, 0.0, 6.47 + 2.7, 0.25, 0.18)
     sp = pattern.SPACINGS
-    cv = pattern.cv_vs_spacing(y, p, sp)
+    cvs = []
+    for mass in (6.47 + 2.7, 6.47):
+        y, p, _ = pattern.single_pass(dc, 5.0, 3.0, 0.0, mass, 0.25, 0.18)
+        cvs.append(pattern.cv_vs_spacing(y, p, sp))
+    cv = np.maximum(*cvs)
     want = pattern.effective_swath(sp, cv, 0.25)
     assert lanes.source == "auto" and lanes.swath_m == want
     assert 2.0 < want < 12.0
@@ -62,7 +65,7 @@ def test_the_choice_is_cached_deterministic_and_depends_on_its_inputs(calm):
     assert pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0})) is a   # cached
     pattern._CACHE.clear()
     b = pattern.lane_choice(calm)
-    assert b is not a and b == a and np.array_equal(b.profile, a.profile)       # recomputed
+    assert b is not a and b == a and np.array_equal(b.profiles, a.profiles)     # recomputed
     # what the pattern test depends on changes it; what it does not (the seed) does not
     assert pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0, "seed": 9})) is b
     strict = pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0,

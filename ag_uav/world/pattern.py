@@ -14,11 +14,11 @@ against S (:func:`cv_vs_spacing`); the effective swath is the widest S (0.25 m s
 with CV ≤ 25 % (:func:`effective_swath`).
 
 **Lanes of a mission** (:func:`lane_choice`). With ``mission.swath_m = "auto"`` (the default) the
-pattern test is run at the mission's height, ground speed, take-off mass (dry + payload + a full
-tank), drag, nozzles, droplet spectrum and the mean wind speed taken as a crosswind (the worst
-case over sweep directions: the lanes are chosen before the plan's direction is), and the lane
+pattern test is run at the mission's height, ground speed, drag, nozzles, droplet spectrum, the
+mean wind speed taken as a crosswind (the worst case over sweep directions: the lanes are chosen
+before the plan's direction is) and two masses, with a full tank and an empty one, and the lane
 spacing is the widest spacing whose overlaid CV is at most ``mission.swath_cv_max`` (0.25: the
-effective swath). The plan's legs are then at most that far apart (the planner splits the
+effective swath) at both. The plan's legs are then at most that far apart (the planner splits the
 interior into equal strips, :func:`ag_uav.world.plan.plan_coverage`), the nozzles meter the rate
 over it, and the sortie planner and the exports use it. A number sets the spacing by hand. The
 test is deterministic and cached per the inputs it depends on, so a batch and its runs flown
@@ -147,7 +147,7 @@ class PatternCase:
     speed_mps: float
     height_m: float
     wind_mps: float
-    mass_kg: float
+    masses_kg: tuple[float, ...]     # a full tank, an empty one
     drag_linear: float
     drag_quadratic: float
 
@@ -156,7 +156,8 @@ class PatternCase:
 class LaneChoice:
     """The lane spacing of a mission and where it came from. ``source``: ``"auto"`` (the pattern
     test) or ``"config"`` (a number in ``mission.swath_m``). With ``"auto"``, ``cv`` is the
-    overlaid CV at ``swath_m`` and ``y``/``profile`` the single-pass deposit (L/ha)."""
+    overlaid CV at ``swath_m`` (the worse of the masses tested) and ``y``/``profiles`` the
+    single-pass deposits (per unit flow), one per mass of :attr:`PatternCase.masses_kg`."""
 
     swath_m: float
     source: str
@@ -164,13 +165,15 @@ class LaneChoice:
     cv: float | None = None
     case: PatternCase | None = None
     y: np.ndarray | None = dataclasses.field(default=None, repr=False, compare=False)
-    profile: np.ndarray | None = dataclasses.field(default=None, repr=False, compare=False)
+    profiles: tuple = dataclasses.field(default=(), repr=False, compare=False)
 
     def cv_at(self, spacing: float) -> float | None:
-        """The pattern test's overlaid CV at ``spacing`` (None without a test)."""
-        if self.profile is None or self.y is None:
+        """The pattern test's overlaid CV at ``spacing``, the worse of the masses tested (None
+        without a test)."""
+        if not self.profiles or self.y is None:
             return None
-        return float(cv_vs_spacing(self.y, self.profile, np.array([spacing]))[0])
+        return max(float(cv_vs_spacing(self.y, p, np.array([spacing]))[0])
+                   for p in self.profiles)
 
     def text(self) -> str:
         """One line: the spacing and where it came from."""
@@ -178,6 +181,8 @@ class LaneChoice:
             return f"lanes {self.swath_m:g} m: mission.swath_m (set by hand)"
         c = self.case
         wind = "calm" if c.wind_mps == 0 else f"{c.wind_mps:g} m/s crosswind"
+        if len(c.masses_kg) > 1:
+            wind += ", full and empty tank"
         rule = ("effective swath" if self.cv_max == CV_LIMIT
                 else f"widest spacing with CV <= {100 * self.cv_max:g} %")
         if self.swath_m <= 0:
@@ -194,7 +199,7 @@ class LaneChoice:
             c = self.case
             out.update({"cv": self.cv, "cv_max": self.cv_max, "height_m": c.height_m,
                         "speed_mps": c.speed_mps, "crosswind_mps": c.wind_mps,
-                        "mass_kg": c.mass_kg})
+                        "masses_kg": list(c.masses_kg)})
         if leg_spacing is not None:
             out["leg_spacing_m"] = leg_spacing
             cv = self.cv_at(leg_spacing)
@@ -207,25 +212,33 @@ _CACHE: dict[str, LaneChoice] = {}
 
 
 def pattern_case(cfg: Any) -> PatternCase:
-    """The pattern test of ``cfg``'s mission: height, ground speed, take-off mass (dry + payload
-    + unknown payload + a full tank when the sprayer is modelled), drag along the body x axis,
-    the deposition config (nozzles, spectrum, rotors, air) and the mean wind as a crosswind."""
+    """The pattern test of ``cfg``'s mission: height, ground speed, the masses it sprays at (dry
+    + payload + unknown payload, with a full tank and with an empty one when the sprayer is
+    modelled: the rotor wake, hence the pattern, follows the thrust), drag along the body x
+    axis, the deposition config (nozzles, spectrum, rotors, air) and the mean wind as a
+    crosswind."""
     v, sp = cfg.vehicle, cfg.spray
-    tank = sp.tank_l * sp.density_kg_per_l if sp.enabled else 0.0
+    dry = v.mass_kg + v.payload_kg + v.unknown_payload_kg
+    masses = (dry + sp.tank_l * sp.density_kg_per_l, dry) if sp.enabled else (dry,)
     dep = DepositionConfig.from_config(cfg, swath_m=1.0)  # the profile is per unit swath flow
     return PatternCase(dep, float(cfg.mission.speed_mps), float(cfg.mission.altitude_m),
-                       float(cfg.wind.speed_mps), v.mass_kg + v.payload_kg + v.unknown_payload_kg
-                       + tank, float(v.drag_linear[0]), float(v.drag_quadratic[0]))
+                       float(cfg.wind.speed_mps), masses, float(v.drag_linear[0]),
+                       float(v.drag_quadratic[0]))
 
 
 def run_pattern(case: PatternCase, cv_max: float = CV_LIMIT) -> LaneChoice:
-    """The pattern test of ``case`` and the widest spacing with CV ≤ ``cv_max``."""
-    y, p, _ = single_pass(case.dep, case.speed_mps, case.height_m, case.wind_mps, case.mass_kg,
-                          case.drag_linear, case.drag_quadratic)
-    cv = cv_vs_spacing(y, p, SPACINGS)
+    """The pattern test of ``case`` at each of its masses and the widest spacing whose CV is ≤
+    ``cv_max`` at all of them (the lanes must hold from a full tank to an empty one)."""
+    profiles, cvs = [], []
+    for m in case.masses_kg:
+        y, p, _ = single_pass(case.dep, case.speed_mps, case.height_m, case.wind_mps, m,
+                              case.drag_linear, case.drag_quadratic)
+        profiles.append(p)
+        cvs.append(cv_vs_spacing(y, p, SPACINGS))
+    cv = np.max(cvs, axis=0)
     s = effective_swath(SPACINGS, cv, cv_max)
     cv_s = float(cv[int(np.argmin(np.abs(SPACINGS - s)))]) if s > 0 else None
-    return LaneChoice(s, "auto", cv_max, cv_s, case, y, p)
+    return LaneChoice(s, "auto", cv_max, cv_s, case, y, tuple(profiles))
 
 
 def lane_choice(cfg: Any) -> LaneChoice:

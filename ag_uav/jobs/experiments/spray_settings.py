@@ -2,7 +2,8 @@
 spray evenly in a given wind, at what work rate and with how much drift.
 
 **Search (the pattern test, no flights).** For every release height × ground speed × droplet
-spectrum one single pass of the deposition model's pattern test is flown
+spectrum single passes of the deposition model's pattern test are flown, with a full tank and an
+empty one (each figure below is the worse of the two, as the mission's automatic lanes take it)
 (:func:`ag_uav.world.pattern.single_pass`: a kinematic pass across a collector line, the mean
 wind as a crosswind, 60 m long, collectors every 0.25 m to 20 m on each side), and its
 profile p(y) (per unit flow) is overlaid at every candidate lane spacing S. Per (h, v, spectrum,
@@ -155,7 +156,9 @@ def pareto(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def search(cfg: Any, cases: list[Case], wind: float, spacings: np.ndarray, buffer_m: float,
            progress: bool = True) -> list[dict[str, Any]]:
-    """Every case's single pass at the mission's mass and drag, overlaid at every spacing."""
+    """Every case's single passes at the mission's masses (a full tank and an empty one, as
+    :func:`ag_uav.world.pattern.lane_choice` tests) and drag, overlaid at every spacing; each
+    figure is the worse of the two masses."""
     from ..._progress import progress_bar
     from ...world.deposition import DepositionConfig
     from ...world.pattern import pattern_case
@@ -167,10 +170,15 @@ def search(cfg: Any, cases: list[Case], wind: float, spacings: np.ndarray, buffe
         d10, d50, d90 = SPECTRA[c.spectrum]
         dc: DepositionConfig = dataclasses.replace(base.dep, dv10_um=d10, dv50_um=d50,
                                                    dv90_um=d90)
-        y, p, info = single_pass(dc, c.speed_mps, c.height_m, wind, base.mass_kg,
-                                 base.drag_linear, base.drag_quadratic)
-        airborne = info["drift_l"] / info["sprayed_l"] if info["sprayed_l"] > 0 else 0.0
-        rows += case_rows(c, y, p, airborne, wind, spacings, buffer_m)
+        per_mass = []
+        for m in base.masses_kg:
+            y, p, info = single_pass(dc, c.speed_mps, c.height_m, wind, m, base.drag_linear,
+                                     base.drag_quadratic)
+            airborne = info["drift_l"] / info["sprayed_l"] if info["sprayed_l"] > 0 else 0.0
+            per_mass.append(case_rows(c, y, p, airborne, wind, spacings, buffer_m))
+        for worst in zip(*per_mass, strict=True):
+            rows.append({**worst[0], **{k: max(r[k] for r in worst) for k in
+                                        ("cv", "underdosed", "offtarget", "drift_past_buffer")}})
         bar.update(1)
     bar.close()
     return rows
