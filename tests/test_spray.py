@@ -202,6 +202,21 @@ def test_default_mission_one_sortie_litres_energy_mass(default_spray_run):
     assert s["sprayed_area_m2"] > s["field_area_m2"] * 0.99
 
 
+def test_default_mission_flies_the_lanes_of_the_pattern_test(default_spray_run):
+    """The default mission's lanes are the back-and-forth pattern test's effective swath (2.5 m
+    on 2026-11-26, legs 2.45 m apart) and its dose is bounded where it was measured: dose CV
+    26.9 %, under-dosed 27.7 % (at the 6 m lanes it flew before: 36.3 % and 39.5 %)."""
+    from ag_uav.world.pattern import lane_choice
+
+    cfg, res, _ = default_spray_run
+    s = res.summary
+    lanes = lane_choice(cfg)
+    assert s["lanes"]["source"] == "auto" and s["lanes"]["swath_m"] == lanes.swath_m
+    assert res.plan.swath == lanes.swath_m and res.plan.spacing <= lanes.swath_m
+    assert s["lanes"]["text"].startswith(f"lanes {lanes.swath_m:g} m: effective swath")
+    assert s["dose_cv"] <= 0.30 and s["underdosed_fraction"] <= 0.31
+
+
 def test_mass_change_is_in_the_log(default_spray_run):
     from ag_uav.analysis.viewing import plot, read_run
 

@@ -49,10 +49,11 @@ SPACINGS = np.arange(0.5, 20.01, 0.25)
 
 
 def pass_states(speed: float, height: float, wind_y: float, mass_kg: float,
-                drag_lin: float, drag_quad: float) -> tuple[np.ndarray, float]:
+                drag_lin: float, drag_quad: float, wind_x: float = 0.0
+                ) -> tuple[np.ndarray, float]:
     """Body→world R (row-major, 9) and total thrust of a steady level pass along +x: thrust
     vector T = m g ẑ + (c₁ + c₂|v_a|) v_a balances weight and drag at airspeed v_a = v − W."""
-    va = np.array([speed, -wind_y, 0.0])
+    va = np.array([speed - wind_x, -wind_y, 0.0])
     tv = np.array([0.0, 0.0, mass_kg * 9.81]) + (drag_lin + drag_quad * np.linalg.norm(va)) * va
     z = tv / np.linalg.norm(tv)
     x = np.array([1.0, 0.0, 0.0]) - z[0] * z
@@ -63,12 +64,15 @@ def pass_states(speed: float, height: float, wind_y: float, mass_kg: float,
 
 def single_pass(cfg: DepositionConfig, speed: float, height: float, wind_y: float,
                 mass_kg: float = 6.47, drag_lin: float = 0.25, drag_quad: float = 0.18,
-                dt: float = 0.01, turb: float = 0.2) -> tuple[np.ndarray, np.ndarray, dict]:
-    """One pass; returns (y of the collectors, deposit L/ha, bookkeeping dict). The steady pass
-    has no gust samples, so ambient turbulence enters as σ_a = ``turb`` × wind (0.2: the Dryden
-    "mean" preset's σ_u at 3 m, :mod:`ag_uav.world.wind`) unless the config sets its own."""
-    R, thrust = pass_states(speed, height, wind_y, mass_kg, drag_lin, drag_quad)
-    sig = cfg.ambient_sigma_mps or turb * abs(wind_y)
+                dt: float = 0.01, turb: float = 0.2, wind_x: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray, dict]:
+    """One pass along +x; returns (y of the collectors, deposit L/ha, bookkeeping dict). The
+    wind has ``wind_y`` across the track (towards +y, the left of the pass) and ``wind_x`` along
+    it. The steady pass has no gust samples, so ambient turbulence enters as σ_a = ``turb`` ×
+    wind speed (0.2: the Dryden "mean" preset's σ_u at 3 m, :mod:`ag_uav.world.wind`) unless the
+    config sets its own."""
+    R, thrust = pass_states(speed, height, wind_y, mass_kg, drag_lin, drag_quad, wind_x)
+    sig = cfg.ambient_sigma_mps or turb * math.hypot(wind_x, wind_y)
     cfg = dataclasses.replace(cfg, cell_m=COLLECTOR_M, buffer_m=max(cfg.buffer_m, 20.0),
                               ambient_sigma_mps=sig)
     dep = DepositionBatch(cfg, None, 1, bounds=(-PASS_M / 2, -1.0, PASS_M / 2, 1.0))
@@ -77,6 +81,7 @@ def single_pass(cfg: DepositionConfig, speed: float, height: float, wind_y: floa
     inp = np.zeros((1, 20))
     inp[0, 6:15] = R
     inp[0, 15] = thrust
+    inp[0, 16] = wind_x
     inp[0, 17] = wind_y
     inp[0, 3] = speed
     inp[0, 2] = height
@@ -103,6 +108,23 @@ def cv_vs_spacing(y: np.ndarray, prof: np.ndarray, spacings: np.ndarray) -> np.n
         per = np.zeros(k)
         for j in range(len(prof)):
             per[j % k] += prof[j]
+        out[i] = per.std() / per.mean() if per.mean() > 0 else math.inf
+    return out
+
+
+def cv_back_and_forth(y: np.ndarray, fwd: np.ndarray, back: np.ndarray,
+                      spacings: np.ndarray) -> np.ndarray:
+    """CV of a back-and-forth overlay, for each spacing S: passes out (profile ``fwd``) at
+    y = 2jS and back (``back``, in the same y) at (2j + 1)S, over one period 2S. With a wind along
+    the track the two directions fly at different airspeeds and lay different profiles."""
+    dy = y[1] - y[0]
+    out = np.empty(len(spacings))
+    for i, s in enumerate(spacings):
+        k = max(1, int(round(s / dy)))
+        pair = fwd.astype(float).copy()
+        if k < len(back):
+            pair[k:] += back[:len(back) - k]
+        per = np.bincount(np.arange(len(pair)) % (2 * k), weights=pair, minlength=2 * k)
         out[i] = per.std() / per.mean() if per.mean() > 0 else math.inf
     return out
 
@@ -141,12 +163,16 @@ def swath_pattern(cfg: DepositionConfig, heights, speeds, winds, mass_kg: float 
 # ------------------------------------------------------------------------------ a mission's lanes
 @dataclass(frozen=True)
 class PatternCase:
-    """What a mission's pattern test depends on (the cache key)."""
+    """What a mission's pattern test depends on (the cache key): the wind in the frame of the
+    legs flown out (``wind_cross_mps`` to their left, ``wind_along_mps`` along them) and the legs'
+    heading ``legs_deg`` (degrees counter-clockwise from east)."""
 
     dep: DepositionConfig
     speed_mps: float
     height_m: float
-    wind_mps: float
+    wind_cross_mps: float
+    wind_along_mps: float
+    legs_deg: float | None
     masses_kg: tuple[float, ...]     # a full tank, an empty one
     drag_linear: float
     drag_quadratic: float
@@ -156,8 +182,9 @@ class PatternCase:
 class LaneChoice:
     """The lane spacing of a mission and where it came from. ``source``: ``"auto"`` (the pattern
     test) or ``"config"`` (a number in ``mission.swath_m``). With ``"auto"``, ``cv`` is the
-    overlaid CV at ``swath_m`` (the worse of the masses tested) and ``y``/``profiles`` the
-    single-pass deposits (per unit flow), one per mass of :attr:`PatternCase.masses_kg`."""
+    back-and-forth overlay's CV at ``swath_m`` (the worse of the masses tested) and ``y`` /
+    ``profiles`` the single-pass deposits (per unit flow): (out, back) per mass of
+    :attr:`PatternCase.masses_kg`, the back pass in the frame of the pass out."""
 
     swath_m: float
     source: str
@@ -172,24 +199,32 @@ class LaneChoice:
         without a test)."""
         if not self.profiles or self.y is None:
             return None
-        return max(float(cv_vs_spacing(self.y, p, np.array([spacing]))[0])
-                   for p in self.profiles)
+        return max(float(cv_back_and_forth(self.y, f, b, np.array([spacing]))[0])
+                   for f, b in self.profiles)
+
+    def _wind(self) -> str:
+        c = self.case
+        assert c is not None
+        if c.wind_cross_mps == 0 and c.wind_along_mps == 0:
+            return "calm"
+        legs = "" if c.legs_deg is None else f" ({c.legs_deg:.1f}°)"
+        return (f"wind {abs(c.wind_cross_mps):.1f} m/s across and {abs(c.wind_along_mps):.1f} "
+                f"m/s along the legs{legs}")
 
     def text(self) -> str:
         """One line: the spacing and where it came from."""
         if self.case is None:
             return f"lanes {self.swath_m:g} m: mission.swath_m (set by hand)"
         c = self.case
-        wind = "calm" if c.wind_mps == 0 else f"{c.wind_mps:g} m/s crosswind"
-        if len(c.masses_kg) > 1:
-            wind += ", full and empty tank"
         rule = ("effective swath" if self.cv_max == CV_LIMIT
                 else f"widest spacing with CV <= {100 * self.cv_max:g} %")
+        tank = ", full and empty tank" if len(c.masses_kg) > 1 else ""
+        where = f"{c.height_m:g} m, {c.speed_mps:g} m/s, {self._wind()}{tank}"
         if self.swath_m <= 0:
-            return (f"lanes: no spacing of the pattern test at {c.height_m:g} m, "
-                    f"{c.speed_mps:g} m/s, {wind} has CV <= {100 * self.cv_max:g} %")
-        return (f"lanes {self.swath_m:g} m: {rule} of the pattern test at {c.height_m:g} m, "
-                f"{c.speed_mps:g} m/s, {wind} (CV {100 * (self.cv or 0.0):.0f} %)")
+            return (f"lanes: no spacing of the back-and-forth pattern test at {where} has CV <= "
+                    f"{100 * self.cv_max:g} %")
+        return (f"lanes {self.swath_m:g} m: {rule} of the back-and-forth pattern test at "
+                f"{where} (CV {100 * (self.cv or 0.0):.0f} %)")
 
     def summary(self, leg_spacing: float | None = None) -> dict[str, Any]:
         """The ``lanes`` table of a run's summary."""
@@ -198,7 +233,8 @@ class LaneChoice:
         if self.case is not None:
             c = self.case
             out.update({"cv": self.cv, "cv_max": self.cv_max, "height_m": c.height_m,
-                        "speed_mps": c.speed_mps, "crosswind_mps": c.wind_mps,
+                        "speed_mps": c.speed_mps, "wind_cross_mps": c.wind_cross_mps,
+                        "wind_along_mps": c.wind_along_mps, "legs_deg": c.legs_deg,
                         "masses_kg": list(c.masses_kg)})
         if leg_spacing is not None:
             out["leg_spacing_m"] = leg_spacing
@@ -208,33 +244,84 @@ class LaneChoice:
         return out
 
 
-_CACHE: dict[str, LaneChoice] = {}
+_CACHE: dict[str, Any] = {}
+
+
+def _cached(key: str, make: Any) -> Any:
+    hit = _CACHE.get(key)
+    if hit is None:
+        if len(_CACHE) > 64:
+            _CACHE.clear()
+        hit = _CACHE[key] = make()
+    return hit
+
+
+def _legs_heading(cfg: Any, base: PatternCase) -> float | None:
+    """The heading (deg) of the legs the planner flies: ``mission.direction_deg``, or for
+    ``"auto"`` the direction of a plan whose lanes are the pure-crosswind effective swath at the
+    full tank (the direction with the fewest legs hardly moves with the lanes). None where that
+    plan fails (the lanes then take the whole wind as a crosswind)."""
+    m = cfg.mission
+    if not isinstance(m.direction_deg, str):
+        return float(m.direction_deg) % 180.0
+    from .field import load_field
+    from .plan import plan_coverage
+
+    w = math.hypot(base.wind_cross_mps, base.wind_along_mps)
+    y, p, _ = single_pass(base.dep, base.speed_mps, base.height_m, w, base.masses_kg[0],
+                          base.drag_linear, base.drag_quadratic)
+    s0 = effective_swath(SPACINGS, cv_vs_spacing(y, p, SPACINGS), m.swath_cv_max) or 4.0
+    try:
+        fld = load_field(m.field)
+        head = s0 if isinstance(m.headland_m, str) else float(m.headland_m)
+        return plan_coverage(fld, swath=s0, headland=head).direction_deg
+    except ValueError:
+        return None
 
 
 def pattern_case(cfg: Any) -> PatternCase:
     """The pattern test of ``cfg``'s mission: height, ground speed, the masses it sprays at (dry
     + payload + unknown payload, with a full tank and with an empty one when the sprayer is
     modelled: the rotor wake, hence the pattern, follows the thrust), drag along the body x
-    axis, the deposition config (nozzles, spectrum, rotors, air) and the mean wind as a
-    crosswind."""
-    v, sp = cfg.vehicle, cfg.spray
+    axis, the deposition config (nozzles, spectrum, rotors, air) and the mean wind split across
+    and along the legs (:func:`_legs_heading`)."""
+    v, sp, m, wd = cfg.vehicle, cfg.spray, cfg.mission, cfg.wind
     dry = v.mass_kg + v.payload_kg + v.unknown_payload_kg
     masses = (dry + sp.tank_l * sp.density_kg_per_l, dry) if sp.enabled else (dry,)
     dep = DepositionConfig.from_config(cfg, swath_m=1.0)  # the profile is per unit swath flow
-    return PatternCase(dep, float(cfg.mission.speed_mps), float(cfg.mission.altitude_m),
-                       float(cfg.wind.speed_mps), masses, float(v.drag_linear[0]),
-                       float(v.drag_quadratic[0]))
+    base = PatternCase(dep, float(m.speed_mps), float(m.altitude_m), float(wd.speed_mps), 0.0,
+                       None, masses, float(v.drag_linear[0]), float(v.drag_quadratic[0]))
+    if wd.speed_mps == 0:
+        return base
+    key = repr(("legs", base, m.field, m.direction_deg, m.headland_m, m.swath_cv_max))
+    legs = _cached(key, lambda: _legs_heading(cfg, base))
+    if legs is None:
+        return base
+    d = math.radians(wd.direction_deg)
+    wx, wy = -wd.speed_mps * math.sin(d), -wd.speed_mps * math.cos(d)   # ENU, blowing to
+    t = math.radians(legs)
+    along = wx * math.cos(t) + wy * math.sin(t)
+    cross = -wx * math.sin(t) + wy * math.cos(t)
+    return dataclasses.replace(base, wind_cross_mps=round(cross, 9),
+                               wind_along_mps=round(along, 9), legs_deg=legs)
 
 
 def run_pattern(case: PatternCase, cv_max: float = CV_LIMIT) -> LaneChoice:
-    """The pattern test of ``case`` at each of its masses and the widest spacing whose CV is ≤
-    ``cv_max`` at all of them (the lanes must hold from a full tank to an empty one)."""
+    """The back-and-forth pattern test of ``case`` at each of its masses: a pass out along the
+    legs and one back (the same pass with the wind reversed, mirrored across the track), and
+    the widest spacing whose overlay CV is ≤ ``cv_max`` at every mass (the lanes must hold from
+    a full tank to an empty one)."""
     profiles, cvs = [], []
-    for m in case.masses_kg:
-        y, p, _ = single_pass(case.dep, case.speed_mps, case.height_m, case.wind_mps, m,
-                              case.drag_linear, case.drag_quadratic)
-        profiles.append(p)
-        cvs.append(cv_vs_spacing(y, p, SPACINGS))
+    for mass in case.masses_kg:
+        args = (case.speed_mps, case.height_m)
+        drag = (case.drag_linear, case.drag_quadratic)
+        y, fwd, _ = single_pass(case.dep, *args, case.wind_cross_mps, mass, *drag,
+                                wind_x=case.wind_along_mps)
+        yb, back, _ = single_pass(case.dep, *args, -case.wind_cross_mps, mass, *drag,
+                                  wind_x=-case.wind_along_mps)
+        assert np.allclose(yb[::-1], -y)   # the collectors are symmetric about the track
+        profiles.append((fwd, back[::-1].copy()))
+        cvs.append(cv_back_and_forth(y, fwd, back[::-1], SPACINGS))
     cv = np.max(cvs, axis=0)
     s = effective_swath(SPACINGS, cv, cv_max)
     cv_s = float(cv[int(np.argmin(np.abs(SPACINGS - s)))]) if s > 0 else None
@@ -248,13 +335,8 @@ def lane_choice(cfg: Any) -> LaneChoice:
     if not isinstance(m.swath_m, str):
         return LaneChoice(float(m.swath_m), "config")
     case = pattern_case(cfg)
-    key = repr((case, m.swath_cv_max))
-    hit = _CACHE.get(key)
-    if hit is None:
-        if len(_CACHE) > 64:
-            _CACHE.clear()
-        hit = _CACHE[key] = run_pattern(case, m.swath_cv_max)
-    return hit
+    return _cached(repr(("lanes", case, m.swath_cv_max)),
+                   lambda: run_pattern(case, m.swath_cv_max))
 
 
 def mission_swath(cfg: Any) -> float:

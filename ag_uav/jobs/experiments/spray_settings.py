@@ -3,7 +3,10 @@ spray evenly in a given wind, at what work rate and with how much drift.
 
 **Search (the pattern test, no flights).** For every release height × ground speed × droplet
 spectrum single passes of the deposition model's pattern test are flown, with a full tank and an
-empty one (each figure below is the worse of the two, as the mission's automatic lanes take it)
+empty one (each figure below is the worse of the two, as the mission's automatic lanes take it);
+the passes out and back are overlaid alternately (:func:`ag_uav.world.pattern.cv_back_and_forth`:
+with ``--along``, a wind along the legs, the pass back is flown too; without, it is the pass out
+mirrored across the track, exact for the default nozzle layout, symmetric across it)
 (:func:`ag_uav.world.pattern.single_pass`: a kinematic pass across a collector line, the mean
 wind as a crosswind, 60 m long, collectors every 0.25 m to 20 m on each side), and its
 profile p(y) (per unit flow) is overlaid at every candidate lane spacing S. Per (h, v, spectrum,
@@ -44,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from ...world.pattern import cv_vs_spacing, single_pass
+from ...world.pattern import cv_back_and_forth, single_pass
 
 NAME = "spray-settings"
 HELP = ("search height, speed, lane spacing and droplet spectrum against dose CV, under-dosed "
@@ -65,7 +68,9 @@ def _floats(s: str) -> list[float]:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--wind", type=float, default=None,
-                   help="crosswind (m/s; default: the config's wind.speed_mps)")
+                   help="wind across the legs (m/s; default: the config's wind.speed_mps)")
+    p.add_argument("--along", type=float, default=0.0,
+                   help="wind along the legs (m/s): the passes out and back then differ")
     p.add_argument("--heights", default="2,3,4", help="release heights (m), comma-separated")
     p.add_argument("--speeds", default="3,5,7", help="ground speeds (m/s)")
     p.add_argument("--spacings", default="2:9:0.5", metavar="LO:HI:STEP",
@@ -126,16 +131,21 @@ def edge_shares(y: np.ndarray, p: np.ndarray, airborne: float, spacing: float,
 
 
 def case_rows(case: Case, y: np.ndarray, p: np.ndarray, airborne: float, wind: float,
-              spacings: np.ndarray, buffer_m: float) -> list[dict[str, Any]]:
-    """The figures of every spacing of one single pass."""
-    cvs = cv_vs_spacing(y, p, spacings)
+              spacings: np.ndarray, buffer_m: float, back: np.ndarray | None = None
+              ) -> list[dict[str, Any]]:
+    """The figures of every spacing of one pass out (``p``) and back (``back``, in the frame of
+    the pass out; None: ``p`` mirrored across the track)."""
+    back = p[::-1] if back is None else back
+    cvs = cv_back_and_forth(y, p, back, spacings)
     dy = y[1] - y[0]
     rows = []
     for s, cv in zip(spacings, cvs, strict=True):
         k = max(1, int(round(s / dy)))
-        per = np.bincount(np.arange(len(p)) % k, weights=p, minlength=k)
+        pair = p.astype(float).copy()
+        pair[k:] += back[:len(back) - k]
+        per = np.bincount(np.arange(len(pair)) % (2 * k), weights=pair, minlength=2 * k)
         under = float(np.mean(per < 0.8 * per.mean())) if per.mean() > 0 else 1.0
-        off, drift = edge_shares(y, p, airborne, float(s), buffer_m)
+        off, drift = edge_shares(y, 0.5 * (p + back), airborne, float(s), buffer_m)
         rows.append({"height_m": case.height_m, "speed_mps": case.speed_mps,
                      "spectrum": case.spectrum, "spacing_m": float(s), "wind_mps": wind,
                      "work_rate_ha_h": float(s) * case.speed_mps * 0.36, "cv": float(cv),
@@ -155,7 +165,7 @@ def pareto(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def search(cfg: Any, cases: list[Case], wind: float, spacings: np.ndarray, buffer_m: float,
-           progress: bool = True) -> list[dict[str, Any]]:
+           progress: bool = True, along: float = 0.0) -> list[dict[str, Any]]:
     """Every case's single passes at the mission's masses (a full tank and an empty one, as
     :func:`ag_uav.world.pattern.lane_choice` tests) and drag, overlaid at every spacing; each
     figure is the worse of the two masses."""
@@ -163,7 +173,8 @@ def search(cfg: Any, cases: list[Case], wind: float, spacings: np.ndarray, buffe
     from ...world.deposition import DepositionConfig
     from ...world.pattern import pattern_case
 
-    base = pattern_case(cfg)
+    base = pattern_case(dataclasses.replace(
+        cfg, wind=dataclasses.replace(cfg.wind, speed_mps=0.0)))   # its masses, drag, nozzles
     rows: list[dict[str, Any]] = []
     bar = progress_bar(total=len(cases), desc="pattern tests", unit="pass", disable=not progress)
     for c in cases:
@@ -172,10 +183,15 @@ def search(cfg: Any, cases: list[Case], wind: float, spacings: np.ndarray, buffe
                                                    dv90_um=d90)
         per_mass = []
         for m in base.masses_kg:
-            y, p, info = single_pass(dc, c.speed_mps, c.height_m, wind, m, base.drag_linear,
-                                     base.drag_quadratic)
+            drag = (base.drag_linear, base.drag_quadratic)
+            y, p, info = single_pass(dc, c.speed_mps, c.height_m, wind, m, *drag, wind_x=along)
+            back = None
+            if along != 0.0:
+                _, b, _ = single_pass(dc, c.speed_mps, c.height_m, -wind, m, *drag,
+                                      wind_x=-along)
+                back = b[::-1].copy()
             airborne = info["drift_l"] / info["sprayed_l"] if info["sprayed_l"] > 0 else 0.0
-            per_mass.append(case_rows(c, y, p, airborne, wind, spacings, buffer_m))
+            per_mass.append(case_rows(c, y, p, airborne, wind, spacings, buffer_m, back))
         for worst in zip(*per_mass, strict=True):
             rows.append({**worst[0], **{k: max(r[k] for r in worst) for k in
                                         ("cv", "underdosed", "offtarget", "drift_past_buffer")}})
@@ -270,7 +286,8 @@ def main(args: argparse.Namespace) -> int:
     cases = [Case(h, v, s.strip()) for h in _floats(args.heights) for v in _floats(args.speeds)
              for s in args.spectra.split(",")]
     t0 = time.perf_counter()
-    rows = search(cfg, cases, wind, spacings, args.buffer, progress=not args.quiet)
+    rows = search(cfg, cases, wind, spacings, args.buffer, progress=not args.quiet,
+                  along=args.along)
     wall = time.perf_counter() - t0
     front = pareto(rows)
     out = Path(args.out)
