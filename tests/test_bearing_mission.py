@@ -13,7 +13,9 @@ from estimators.bearing import angle_residual
 
 
 def _cfg(max_time: float = 40.0, seed: int = 0):
-    cfg = ag_uav.load_config(None, {"sim.max_time_s": max_time, "seed": seed})
+    # the bearing studies fly the default field at 6 m lanes (their bounds are in lane widths)
+    cfg = ag_uav.load_config(None, {"sim.max_time_s": max_time, "seed": seed,
+                                    "mission.swath_m": 6.0, "mission.headland_m": 6.0})
     cfg.log.enabled = False
     return cfg
 

@@ -4,6 +4,7 @@ the deposition only observes (the trajectory is the same without it)."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -105,7 +106,9 @@ def test_fly_prints_saves_logs_and_plots_the_dose(rect, tmp_path, capsys):
     st = d.series["/drone/state"]
     valve, flow = st["ctrl.nozzle.valve"], st["ctrl.nozzle.flow_lps"]
     assert valve.max() == 1.0 and valve.min() == 0.0 and flow.max() > 0.0
-    assert 0.5 * 3e-3 < flow.max() < 1.1 * 3e-3  # R·w·v/10⁴ = 3 mL/s at the 5 m/s cruise
+    w = json.loads((run / "summary.json").read_text())["lanes"]["swath_m"]
+    q = 1.0 * w * 5.0 / 1e4                      # R·w·v/10⁴ at the 5 m/s cruise, 1 L/ha
+    assert 0.5 * q < flow.max() < 1.1 * q
     assert any(p.name == "dose.png" for p in plot(d, tmp_path / "plots"))
     (run / "dose.npz").unlink()   # from the log alone
     assert any(p.name == "dose.png" for p in plot(run, tmp_path / "plots2"))

@@ -46,7 +46,8 @@ def test_10km_field_flies_its_max_time_in_bounded_memory(tmp_path):
     field = square_field(tmp_path / "sq10km.geojson", 10_000.0)
     r = subprocess.run([sys.executable, "-c", _MEASURE, "fly", "--no-render", "--no-log", "-q",
                         "--out", str(tmp_path), "--run-id", "big", "--set",
-                        f'mission.field="{field}"', "--set", "sim.max_time_s=30"],
+                        f'mission.field="{field}"', "--set", "sim.max_time_s=30",
+                        "--set", "mission.swath_m=6", "--set", "mission.headland_m=6"],
                        capture_output=True, text=True, timeout=600)
     rc, maxrss_kib = (int(v) for v in r.stdout.split()[-2:])
     assert rc == 0, r.stderr
@@ -63,11 +64,13 @@ def test_10km_field_flies_its_max_time_in_bounded_memory(tmp_path):
 
 @pytest.mark.parametrize("budget, what", [(1, "the plan"), (64, "the reference")])
 def test_memory_budget_refuses_before_flying_one_line_exit_2(tmp_path, capsys, budget, what):
-    """The default mission needs ~48,500 control ticks (~71 MB of tables at 1.5 KB a tick): 1 MB
-    is refused on the plan's lower bound (394 s at cruise speed, before the reference is built),
-    64 MB on the reference's duration (485 s)."""
+    """The default mission at 6 m lanes needs ~48,500 control ticks (~71 MB of tables at 1.5 KB a
+    tick): 1 MB is refused on the plan's lower bound (394 s at cruise speed, before the
+    reference is built), 64 MB on the reference's duration (485 s)."""
+    six = {"mission.swath_m": 6.0, "mission.headland_m": 6.0}
     rc = main(["fly", "--no-render", "--no-log", "-q", "--out", str(tmp_path), "--set",
-               f"sim.memory_budget_mb={budget}"])
+               f"sim.memory_budget_mb={budget}", "--set", "mission.swath_m=6", "--set",
+               "mission.headland_m=6"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2
     assert len(err) == 1, err
@@ -76,7 +79,7 @@ def test_memory_budget_refuses_before_flying_one_line_exit_2(tmp_path, capsys, b
     assert "raise sim.memory_budget_mb or lower sim.max_time_s" in err[0]
     assert not [f for f in tmp_path.rglob("*") if f.is_file()]  # nothing flown, nothing written
     # a short enough flight fits the same budget
-    cfg = load_config(None, {"sim.memory_budget_mb": 64.0, "sim.max_time_s": 300.0})
+    cfg = load_config(None, {"sim.memory_budget_mb": 64.0, "sim.max_time_s": 300.0, **six})
     assert mission_setup(cfg)[2].duration > 300.0
 
 
