@@ -287,7 +287,7 @@ class ControllerConfig:
     tilt_max_deg: float = _f(30.0, "tilt limit of the thrust vector (deg)", gt=0, lt=80)
     accel_feedforward: bool = _f(True, "add the reference acceleration to the command")
     # defaults: IT2-FPID with the BMM reducer, the winner of `ag-uav experiment controllers`
-    # (issue 20, docs/controllers.md): the median of 5 BB-BC tunings of examples/tune_it2_bmm.toml
+    # (docs/controllers.md): the median of 5 BB-BC tunings of examples/tune_it2_bmm.toml
     # on the realistic loop = examples/controller_it2_bmm.toml
     xy: AxisGains = field(default_factory=AxisGains, metadata={"help": "horizontal axes"})
     z: AxisGains = field(default_factory=lambda: AxisGains(ke=3.649, kd=2.067, k0=9.117,
@@ -701,7 +701,7 @@ def _check_gps_overrides(g: GpsConfig) -> None:
 
 def _check_gps_rate(cfg: Config) -> None:
     """A GNSS rate above the control rate is refused: the loop asks the receiver once per
-    control tick, so fixes in between would be dropped silently (issue 19)."""
+    control tick, so fixes in between would be dropped silently."""
     from .vehicle import gps
 
     g = cfg.gps

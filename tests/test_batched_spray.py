@@ -1,6 +1,6 @@
 """BatchSprayer (ag_uav.engine.spray_batched): N Sprayers per control tick in one numba kernel equal
 the plain-Python reference tick (tests/oracles/sprayer_ref.py) of each vehicle, bit for bit
-(issue 9, the lockstep engine; issue 17: the kernel is the product's only per-tick law)."""
+(the lockstep engine; the kernel is the product's only per-tick law)."""
 
 from __future__ import annotations
 

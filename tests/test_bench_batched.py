@@ -35,14 +35,14 @@ def test_stage_costs_add_up_to_the_loop_and_restore_the_engine() -> None:
     assert (stages.Guard.start, stages.Depositing.step, loop._Engine.physics) == before
 
 
-def test_the_as_filed_batches_are_also_paired_without_the_dose_model() -> None:
-    """``ratio_vs_physics_without_deposition``: the workload issue 17's targets were set on,
+def test_the_target_batches_are_also_paired_without_the_dose_model() -> None:
+    """``ratio_vs_physics_without_deposition``: the workload the speed targets are stated for,
     paired with its own replay like the default one."""
-    from ag_uav.jobs.bench import AS_FILED, _as_filed
+    from ag_uav.jobs.bench import ALSO_WITHOUT_DOSE, _without_dose
 
-    assert AS_FILED == ("batched", "batched_ideal_attitude")
+    assert ALSO_WITHOUT_DOSE == ("batched", "batched_ideal_attitude")
     cfg = with_overrides(load_config(None), TRUE_STATE_OVERRIDES)
-    out = _as_filed(cfg, 4, 1.0, 2, 2)
+    out = _without_dose(cfg, 4, 1.0, 2, 2)
     spread = out["ratio_vs_physics_without_deposition_spread"]
     assert 0.0 < spread["min"] <= out["ratio_vs_physics_without_deposition"] <= spread["max"]
     assert out["sim_s_per_wall_s_without_deposition"] > 0

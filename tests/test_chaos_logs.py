@@ -1,4 +1,4 @@
-"""Chaos: broken logs and full disks (issue 22).  Every case ends in one line, no traceback.
+"""Chaos: broken logs and full disks.  Every case ends in one line, no traceback.
 
 Logs: a synthetic run through the real writer (RunLog, several chunks) for the damage cases,
 and real short flights for the full-disk cases.  The per-chunk message counts the assertions

@@ -147,7 +147,7 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
     from ag_uav.vehicle.gps import gps_preset
 
     rate = g("gps.rate_hz") or gps_preset(g("gps.preset"))["rate_hz"]
-    if rate > g("sim.control_hz") + 1e-9:    # a GNSS rate above the control rate (issue 19)
+    if rate > g("sim.control_hz") + 1e-9:    # a GNSS rate above the control rate
         return ["gps.rate_hz", "sim.control_hz", "gps.preset"]
     lo, hi, alt = g("spray.min_height_m"), g("spray.max_height_m"), g("mission.altitude_m")
     if lo >= hi:

@@ -1,4 +1,4 @@
-"""Issue 20: model error the controller does not know, held-out validation of a tuning, the
+"""Model error the controller does not know, held-out validation of a tuning, the
 tuning campaign (resume, median pick) and the shape-vs-gain controls of
 ``ag-uav experiment controllers``."""
 

@@ -1,4 +1,4 @@
-"""Batches equal solo runs, over any mix (issue 17): every vehicle steps on data made for its
+"""Batches equal solo runs, over any mix: every vehicle steps on data made for its
 own model, and a run's whole mission depends on its config and seed only."""
 
 from __future__ import annotations

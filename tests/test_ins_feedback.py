@@ -1,4 +1,4 @@
-"""The drone navigates on the INS (issue 19 phase 2): ag_uav.navigation.ins_feedback."""
+"""The drone navigates on the INS: ag_uav.navigation.ins_feedback."""
 
 from __future__ import annotations
 

@@ -102,6 +102,6 @@ def test_step_1m_in_x_settles_fast_without_much_overshoot():
     m = step_metrics(t, y, 1.0, band=0.05)
     assert out.crash_reason is None
     assert m["settling_time_s"] < 4.0
-    # the issue-20 default (IT2-BMM, tuned on the mission, not on steps) overshoots 17.6 %
+    # the default (IT2-BMM, tuned on the mission, not on steps) overshoots 17.6 %
     assert m["overshoot"] < 0.22
     assert m["final_error_m"] < 0.01

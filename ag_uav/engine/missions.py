@@ -423,7 +423,7 @@ def model_layout(cfg: Config) -> str:
     return _LAYOUTS[key]
 
 
-#: the summary keys of the dose on the ground (names fixed by issue 18)
+#: the summary keys of the dose on the ground (names fixed: summaries and tests read them)
 DOSE_KEYS = ("dose_mean_l_per_ha", "dose_cv", "underdosed_fraction", "overdosed_fraction",
              "offtarget_deposit_fraction", "drift_fraction")
 

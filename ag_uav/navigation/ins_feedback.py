@@ -1,4 +1,4 @@
-"""The drone navigates on the INS (issue 19, ``estimator.nav = "ins"``, the default).
+"""The drone navigates on the INS (``estimator.nav = "ins"``, the default).
 
 :class:`InsFeedback` is one run's navigation: the receiver (:class:`~ag_uav.vehicle.gps.GpsSensor`
 with its fix types, the :class:`~ag_uav.vehicle.gps.ReceiverReport` of an honest receiver, the

@@ -1413,7 +1413,7 @@ class GpsSensor:
 
 
 # ---------------------------------------------------------------------------------------------
-# what the receiver reports with each fix (issue 19: an honest receiver)
+# what the receiver reports with each fix (an honest receiver)
 # ---------------------------------------------------------------------------------------------
 class ReceiverReport:
     """What a receiver with fix types reports beside each fix, and its false fixes.

@@ -40,7 +40,7 @@ states; :func:`process_noise_psd` derives their noise from the ``[imu]`` figures
 the control period (finite difference of the true world-frame velocity) plus white noise
 ``σ_vib``, the true attitude and no gyro errors.
 
-**Where the law lives** (issue 17: each law written once). The error sequences are drawn in
+**Where the law lives** (each law written once). The error sequences are drawn in
 blocks from the vehicle's own Generator: :func:`imu_error_block` (bias walk + white noise, six
 axes) and :func:`gauss_markov_block` (``δθ``). The per-tick law is a compiled row function,
 :func:`imu_row` (``f̃ = f + e_k``) and :func:`attitude_row` (``R̂ = Exp(δθ_k) R``, Rodrigues),

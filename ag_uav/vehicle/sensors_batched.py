@@ -11,7 +11,7 @@ rate.  This module runs, for the whole batch, the per-tick sensor/disturbance mo
 * :class:`BatchAttitudeError` -- ``N`` :class:`ag_uav.vehicle.imu.AttitudeError`
   (``R_hat = Exp(dtheta) R``, world-frame Gauss-Markov ``dtheta``).
 
-Where the laws live (issue 17: each law written once).  Nothing is modelled here: each law is
+Where the laws live (each law written once).  Nothing is modelled here: each law is
 one compiled row function, which the per-vehicle object calls on its own one-row arrays and a
 loop over rows, beside it, calls row by row --
 

@@ -1055,7 +1055,7 @@ class DoseMap:
         return shapely.contains_xy(poly, xx, yy)
 
     def metrics(self, fld: Any, target_l_per_ha: float, margin_m: float = 0.0) -> dict:
-        """The summary metrics (names fixed by issue 18); see :func:`dose_metrics`."""
+        """The summary metrics; see :func:`dose_metrics`."""
         return dose_metrics(self, fld, target_l_per_ha, margin_m)
 
     def arrays(self) -> dict[str, Any]:
@@ -1194,7 +1194,7 @@ class DepositionBatch:
 
     def metrics(self, i: int = 0, target_l_per_ha: float | None = None,
                 margin_m: float = 0.0) -> dict:
-        """The issue-18 summary metrics of row ``i`` over the field."""
+        """The summary metrics of row ``i`` over the field."""
         if self.field is None:
             raise ValueError("metrics need a field")
         t = self.cfg.rate_l_per_ha if target_l_per_ha is None else target_l_per_ha

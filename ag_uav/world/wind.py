@@ -46,8 +46,8 @@ of the mean wind and sigma_u ~ 20 % at 3 m, 14 % at 30 m), which is the physical
 for a low-flying drone and the recommended default when turbulence is wanted.  A float gives an
 explicit W20 in m/s; ``"none"`` (or 0) disables turbulence.
 
-Where the law lives (issue 17: each law written once)
------------------------------------------------------
+Where the law lives (each law written once)
+-------------------------------------------
 One vehicle's wind is one **row** of state: ``fs[i]`` (float columns ``WF_*``: the cached
 discretisation, the five filter states, the mean wind and its direction), ``ist[i]`` (int
 columns ``WI_*``: read position and length of the draw buffer, turbulence on, block size) and

@@ -124,7 +124,7 @@ def preset_toml(label: str, row: dict[str, Any], base: dict[str, Any]) -> str:
             f"{Path(row['spec']).name}\n# (optimiser seed {row['seed']}: tuning cost "
             f"{row['tune_cost']:.4g}, validation cost {row['validation_cost']:.4g}; "
             "gains rounded to 4 significant digits).\n# ag-uav experiment controllers --tunings "
-            "5 --workers 2 (issue 20)\n")
+            "5 --workers 2\n")
     return head + tomli_w.dumps(d)
 
 

@@ -1,4 +1,4 @@
-"""``ag-uav experiment ins-nav``: the measurements of issue 19 phase 2 (docs/ins.md).
+"""``ag-uav experiment ins-nav``: the measurements of the drone flying on the INS (docs/ins.md).
 
 ``--what``:
 
@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 NAME = "ins-nav"
-HELP = ("issue 19 measurements: MCKF recovery × σ, NEES consistency, a GNSS outage with the "
+HELP = ("the INS in the loop: MCKF recovery × σ, NEES consistency, a GNSS outage with the "
         "INS vs the ideal-attitude stand-in, the false-fix in-loop table, the MCKF kernel sweep")
 RULES = ("pca-mckf", "kf", "mckf", "pca-kf")
 

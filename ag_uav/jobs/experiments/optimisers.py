@@ -1,4 +1,4 @@
-"""``ag-uav experiment optimisers``: BB-BC, PSO and CMA-ES at an equal evaluation budget (issue 20).
+"""``ag-uav experiment optimisers``: BB-BC, PSO and CMA-ES at an equal evaluation budget.
 
 One tuning problem (default: ``examples/tune.toml``'s — its parameters, bounds, scenarios, cost,
 noise seed and default gains in the first population) is tuned by each optimiser

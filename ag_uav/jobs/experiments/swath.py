@@ -1,4 +1,4 @@
-"""``ag-uav experiment swath``: a spray pattern test of the deposition model (issue 18).
+"""``ag-uav experiment swath``: a spray pattern test of the deposition model.
 
 As a pattern test does (ASABE S386-style; the effective swath for multirotors as in Martin,
 Woldt & Latheef, *Drones* 3(4):83, 2019: the widest lane spacing with CV ≤ 25 %), single passes
