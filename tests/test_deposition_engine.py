@@ -1,4 +1,4 @@
-"""The dose on the ground in the engine (issue 18, phase 2): every mission with a field has the
+"""The dose on the ground in the engine: every mission with a field has the
 dose metrics; mass is conserved in the loop; a vehicle's dose is the same alone and in a batch;
 the deposition only observes (the trajectory is the same without it)."""
 

@@ -236,7 +236,7 @@ def test_two_part_field_flies_complete():
     res = ag_uav.simulate(cfg)
     s = res.summary
     assert s["completed"] and not s["crashed"]
-    assert s["legs_flown"] == s["legs"] == 5
+    assert s["legs_flown"] == s["legs"] == res.plan.legs >= 2 * len(res.field.parts)
     assert s["coverage_fraction"] >= 0.95
     # the drone sprayed on both parts and never between them
     fld = res.field

@@ -1,5 +1,5 @@
 """Spray jobs (ag_uav.world.spray_job): tank and flow, mass following the tank, battery energy,
-sorties with return to base, off-target area (issue 11, items 1-3); the engine's per-tick spray
+sorties with return to base, off-target area; the engine's per-tick spray
 law against the reference in tests/oracles/sprayer_ref.py."""
 
 from __future__ import annotations
@@ -419,7 +419,7 @@ def test_spray_disabled_is_the_plain_mission():
 @pytest.mark.slow
 @pytest.mark.parametrize("chain", ["true", "ins"])
 def test_38ha_job_multi_sortie_acceptance(chain):
-    """Issue 11 acceptance: the 0.69 x 0.56 km rectangle, >= 2 sorties, >= 98 %: the job's
+    """The 38 ha job: the 0.69 x 0.56 km rectangle, >= 2 sorties, >= 98 %: the job's
     mechanics on the true state, and on the default chain (the INS; it lands every sortie since
     the range aid: without it the sixth landing hit the ground at 1.2 m/s, docs/ins.md)."""
     over = {**NOLOG, "mission.field": FIELD_38HA, "sim.max_time_s": 21600}
