@@ -203,9 +203,9 @@ def test_default_mission_one_sortie_litres_energy_mass(default_spray_run):
 
 
 def test_default_mission_flies_the_lanes_of_the_pattern_test(default_spray_run):
-    """The default mission's lanes are the back-and-forth pattern test's effective swath (2.5 m
-    on 2026-11-26, legs 2.45 m apart) and its dose is bounded where it was measured: dose CV
-    26.9 %, under-dosed 27.7 % (at the 6 m lanes it flew before: 36.3 % and 39.5 %)."""
+    """The default mission's lanes are the back-and-forth pattern test's effective swath (2.25 m,
+    legs 2.21 m apart) and its dose is bounded where it was measured: dose CV 25.6 %,
+    under-dosed 27.8 % (at 6 m lanes: 58.1 % and 43.9 %)."""
     from ag_uav.world.pattern import lane_choice
 
     cfg, res, _ = default_spray_run
