@@ -104,3 +104,34 @@ def test_a_kernel_follows_a_law_changed_in_another_file(tmp_path: Path, where: s
     assert list(cached.rglob("*.nbi"))   # the kernel was cached there
     (pkg / "law.py").write_text(_LAW.format(2) + "# changed\n")
     assert run() == "30"
+
+
+def test_the_compile_is_said_before_the_wait(monkeypatch, capsys):
+    """A kernel compiled during tick 0 prints the notice when its compile starts (once per
+    process), and the tick's end says how long it took; a cached kernel says nothing."""
+    from numba import njit
+
+    from ag_uav.engine import loop
+
+    monkeypatch.setattr(loop, "_announced", "")
+    with loop._compile_notice():
+        @njit
+        def fresh(x):
+            return x + 1
+
+        assert fresh(1) == 2
+    err = capsys.readouterr().err
+    assert err == loop.COMPILE_NOTICE + "\n"
+    with loop._compile_notice():
+        assert fresh(2) == 3            # compiled: no event, nothing said
+        @njit
+        def another(x):
+            return x * 2
+
+        another(1)                       # a second compile: said once per process
+    assert capsys.readouterr().err == ""
+    t0 = loop.time.perf_counter() - 2 * loop.COMPILE_THRESHOLD_S
+    took, _ = loop._first_tick(t0)
+    assert took > loop.COMPILE_THRESHOLD_S
+    assert capsys.readouterr().err.startswith("compiled the kernels in ")
+    assert loop._announced == "done"

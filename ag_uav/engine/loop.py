@@ -39,6 +39,7 @@ numba, MuJoCo and the run's set-up (about 45 ms each otherwise, one every few se
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import gc
 import math
@@ -78,7 +79,42 @@ LANE_MIN = 8
 LANES_BY_DEFAULT = True
 #: first-tick time above which the numba kernels are taken to have been compiled (not loaded)
 COMPILE_THRESHOLD_S = 3.0
-_announced = False
+#: what this process has said of the compile: "" nothing, "started", "done"
+_announced = ""
+#: said before tick 0's wait when numba starts compiling (once per process)
+COMPILE_NOTICE = ("compiling kernels: first run only, about two minutes on a 2-core machine "
+                  "(cached for later runs) ...")
+
+
+def _say(msg: str) -> None:
+    """One line on stderr, above a progress bar if one is drawn."""
+    from tqdm import tqdm
+
+    tqdm.write(msg, file=sys.stderr)
+
+
+@contextlib.contextmanager
+def _compile_notice():
+    """While tick 0 runs: the first ``numba:compile`` event (a kernel not in the cache) prints
+    :data:`COMPILE_NOTICE` at once, so the wait is said before it, not after."""
+    try:
+        from numba.core import event
+    except ImportError:  # pragma: no cover - the kernels run as Python
+        yield
+        return
+
+    class _First(event.Listener):
+        def on_start(self, ev: Any) -> None:
+            global _announced
+            if _announced == "":
+                _announced = "started"
+                _say(COMPILE_NOTICE)
+
+        def on_end(self, ev: Any) -> None:
+            pass
+
+    with event.install_listener("numba:compile", _First()):
+        yield
 
 
 @dataclass
@@ -455,7 +491,8 @@ def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float, float]:
         gc.freeze()
     wall, cpu = time.perf_counter(), time.process_time()
     try:
-        flying = [e for e in lanes if e.tick(0)]
+        with _compile_notice():
+            flying = [e for e in lanes if e.tick(0)]
         compile_s, wall = _first_tick(wall)
         if compile_s:
             cpu = time.process_time()
@@ -519,16 +556,16 @@ def _fly_lanes(lanes: list[_Engine], bar: Any) -> None:
 
 def _first_tick(wall0: float) -> tuple[float, float]:
     """Tick 0 runs (and compiles, on a fresh checkout) every kernel: a long one is compile time,
-    said once per process and kept out of the loop's wall time."""
+    said once per process (:func:`_compile_notice` said it before; this says how long it took)
+    and kept out of the loop's wall time."""
     global _announced
     now = time.perf_counter()
     took = now - wall0
     if took < COMPILE_THRESHOLD_S:
         return 0.0, wall0
-    if not _announced:
-        _announced = True
-        print(f"compiling kernels: first run only, ~{took:.0f} s (cached for later runs)",
-              file=sys.stderr, flush=True)
+    if _announced != "done":
+        _announced = "done"
+        _say(f"compiled the kernels in {took:.0f} s (first run only; cached for later runs)")
     return took, now
 
 
