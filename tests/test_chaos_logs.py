@@ -26,7 +26,8 @@ from PIL import Image
 from ag_uav.analysis import viewing
 from ag_uav.cli import main
 from ag_uav.record.atomic import atomic_path, atomic_write_text
-from ag_uav.record.runlog import RunLog, synthetic_run
+from ag_uav.record.runlog import RunLog
+from ag_uav.record.synthetic import synthetic_run
 
 ROOT = Path(__file__).resolve().parents[1]
 

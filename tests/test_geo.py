@@ -15,7 +15,8 @@ from mcap_protobuf.decoder import DecoderFactory
 import ag_uav
 from ag_uav.config import ConfigError
 from ag_uav.record.geo import DOSE_BANDS, dose_bands, fix_color
-from ag_uav.record.runlog import RunLog, synthetic_run
+from ag_uav.record.runlog import RunLog
+from ag_uav.record.synthetic import synthetic_run
 from ag_uav.world.field import (
     DEFAULT_ORIGIN,
     enu_to_geodetic,

@@ -10,8 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from ag_uav.record import runlog as R
+from ag_uav.record import wire as R
 from ag_uav.record.encode import EST, POSE, REF, STATE, TF, encode_flat, encode_ticks
+from ag_uav.record.runlog import RunLog
 
 
 def _rows(rng, n, nm, extra):
@@ -30,7 +31,7 @@ def _state_ref(row, nm, ctrl_cols):
     w, x, y, z = row[R.TICK_Q:R.TICK_V]
     vx, vy, vz = row[R.TICK_V:R.TICK_PREF]
     rx, ry, rz = row[R.TICK_PREF:R.TICK_VREF]
-    roll, pitch, yaw = R._rpy_deg(w, x, y, z)
+    roll, pitch, yaw = R.rpy_deg(w, x, y, z)
     has = int(row[1]) & 8
     est = list(row[R.TICK_PEST:R.TICK_WIND]) if has else [math.nan] * 6
     ex, ey, ez = px - rx, py - ry, pz - rz
@@ -52,20 +53,20 @@ def test_block_messages_equal_the_one_at_a_time_encoders(seed):
     ctrl_cols = np.array([R.TICK_HEAD + nm + j for j in (3, 0, 6, 1)], dtype=np.intp)
     schema = R.FlatSchema("t.S", [(f, 0) for f in [f"v{j}" for j in range(37)]]
                           + [("motors", nm)] + [(f"c{j}", 0) for j in range(len(ctrl_cols))])
-    st = R._template(schema.prefixes)
-    mid = R._WORLD2 + R._str_field(3, "base_link")
+    st = R.template(schema.prefixes)
+    mid = R.WORLD2 + R.str_field(3, "base_link")
     out = np.zeros(200_000, np.uint8)
     starts, kinds, tns = (np.zeros(400, np.int64) for _ in range(3))
-    m = encode_ticks(rows, nm, ctrl_cols, st[0], st[1], R._POSE_TMPL, R._POSE_SLOTS, R._TF_TMPL,
+    m = encode_ticks(rows, nm, ctrl_cols, st[0], st[1], R.POSE_TMPL, R.POSE_SLOTS, R.TF_TMPL,
                      np.frombuffer(mid, np.uint8).copy(),
-                     np.frombuffer(R._POSE_MID, np.uint8).copy(), out, starts, kinds, tns)
+                     np.frombuffer(R.POSE_MID, np.uint8).copy(), out, starts, kinds, tns)
     want = []
     for row in rows:
         tn, mask = R.ns(float(row[0])), int(row[1])
-        ts = R._ts_pb(tn)
+        ts = R.ts_pb(tn)
         p, q = row[R.TICK_P:R.TICK_Q], row[R.TICK_Q:R.TICK_V]
         if mask & 1:
-            want.append((TF, tn, R.enc_transform(ts, R._str_field(3, "base_link"), p, q)))
+            want.append((TF, tn, R.enc_transform(ts, R.str_field(3, "base_link"), p, q)))
         if mask & 2:
             h = 0.5 * row[R.TICK_YAW]
             want.append((POSE, tn, R.enc_pose_in_frame(ts, p, q)))
@@ -98,7 +99,7 @@ def test_flat_rows_equal_flatschema_encode():
     rng = np.random.default_rng(5)
     schema = R.FlatSchema("t.E", [("t", 0), ("x", 16), ("p_diag", 16), ("pos.x", 0)])
     rows = rng.normal(size=(9, schema.n_values))
-    tmpl, slots = R._template(schema.prefixes)
+    tmpl, slots = R.template(schema.prefixes)
     out = np.zeros(len(tmpl) * 9, np.uint8)
     starts = np.zeros(10, np.int64)
     encode_flat(rows, tmpl, slots, out, starts)
@@ -111,7 +112,7 @@ def test_signal_mid_tick_drops_only_the_row_being_filled(tmp_path):
     row before it is."""
     from mcap.reader import make_reader
 
-    log = R.RunLog(tmp_path / "a.mcap", metadata={}, config_toml="", layout=False)
+    log = RunLog(tmp_path / "a.mcap", metadata={}, config_toml="", layout=False)
     log.bind_ticks(4, ["x.u"], [0], 1)
     for k in range(10):
         row = log.tick_slot(k * 0.05)
@@ -132,7 +133,7 @@ def test_grid_encoding_decodes_as_the_sdk_message():
     M = foxglove.messages
     vals = np.arange(12, dtype=np.float64).reshape(3, 4) * 1.5
     tn = R.ns(12.345)
-    ours = R.enc_grid(R._ts_pb(tn), -3.5, 7.25, 0.02, 0.8, vals)
+    ours = R.enc_grid(R.ts_pb(tn), -3.5, 7.25, 0.02, 0.8, vals)
     sdk = M.Grid(timestamp=M.Timestamp(sec=tn // 10**9, nsec=tn % 10**9), frame_id="world",
                  pose=M.Pose(position=M.Vector3(x=-3.5, y=7.25, z=0.02),
                              orientation=M.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
@@ -156,15 +157,15 @@ def test_gps_block_equals_the_one_message_encoder():
 
     rows = np.array([[0.0, 1.5, -2.25, 3.0], [0.05, 1e3, 2e-3, -7.0],
                      [128.0, -0.0, 5.0, 1.0], [20000.123456789, 4.0, 5.0, 6.0]])
-    mid = np.frombuffer(R._POSE_MID, np.uint8).copy()
+    mid = np.frombuffer(R.POSE_MID, np.uint8).copy()
     out = np.zeros(4096, np.uint8)
     starts, tns = np.zeros(5, np.int64), np.zeros(4, np.int64)
-    end = encode_poses(rows, R._POSE_TMPL, R._POSE_SLOTS, mid, out, starts, tns)
+    end = encode_poses(rows, R.POSE_TMPL, R.POSE_SLOTS, mid, out, starts, tns)
     assert starts[4] == end
     for j, (t, x, y, z) in enumerate(rows):
         tn = R.ns(t)
         assert tns[j] == tn
-        ref = R.enc_pose_in_frame(R._ts_pb(tn), (x, y, z), (1.0, 0.0, 0.0, 0.0))
+        ref = R.enc_pose_in_frame(R.ts_pb(tn), (x, y, z), (1.0, 0.0, 0.0, 0.0))
         assert out[starts[j]:starts[j + 1]].tobytes() == ref
 
 
@@ -179,7 +180,7 @@ def test_estimator_bank_writes_what_one_call_per_filter_writes(tmp_path):
              for k in range(1, 30)]
     msgs = {}
     for way in ("bank", "calls"):
-        with R.RunLog(tmp_path / f"{way}.mcap", channels=["estimator"], layout=False) as log:
+        with RunLog(tmp_path / f"{way}.mcap", channels=["estimator"], layout=False) as log:
             for t, x, pd, truth in fixes:
                 if way == "bank":
                     log.estimator_bank(t, names, x, pd, truth)

@@ -22,7 +22,8 @@ from mcap.reader import make_reader
 from PIL import Image
 
 from ag_uav.analysis.viewing import recover
-from ag_uav.record.runlog import RunLog, synthetic_run
+from ag_uav.record.runlog import RunLog
+from ag_uav.record.synthetic import synthetic_run
 
 NODE_DIR = Path(__file__).resolve().parent / "node"
 

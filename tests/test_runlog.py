@@ -18,16 +18,9 @@ import pytest
 from google.protobuf import descriptor_pb2, message_factory
 from mcap.reader import NonSeekingReader, make_reader
 
-from ag_uav.record.runlog import (
-    FlatSchema,
-    RunLog,
-    _rpy_deg,
-    _str_field,
-    _ts_pb,
-    enc_pose_in_frame,
-    enc_transform,
-    synthetic_run,
-)
+from ag_uav.record.runlog import FlatSchema, LogIO, RunLog, Tick
+from ag_uav.record.synthetic import synthetic_run
+from ag_uav.record.wire import enc_pose_in_frame, enc_transform, rpy_deg, str_field, ts_pb
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -70,7 +63,7 @@ def test_hand_encoded_foxglove_messages_decode_with_official_schema():
     from foxglove.messages import FrameTransforms, PoseInFrame
 
     tn = 12_345_678_901
-    ts = _ts_pb(tn)
+    ts = ts_pb(tn)
     p, q = (1.5, -2.25, 3.0), (0.9, 0.1, -0.2, 0.3)
     pif = _cls(PoseInFrame.get_schema().data, "foxglove.PoseInFrame").FromString(
         enc_pose_in_frame(ts, p, q))
@@ -79,8 +72,8 @@ def test_hand_encoded_foxglove_messages_decode_with_official_schema():
     assert (pif.pose.position.x, pif.pose.position.y, pif.pose.position.z) == p
     o = pif.pose.orientation
     assert (o.w, o.x, o.y, o.z) == q
-    raw = enc_transform(ts, _str_field(3, "base_link"), p, q) + enc_transform(
-        _ts_pb(0), _str_field(3, "cam_chase"), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0))
+    raw = enc_transform(ts, str_field(3, "base_link"), p, q) + enc_transform(
+        ts_pb(0), str_field(3, "cam_chase"), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0))
     ft = _cls(FrameTransforms.get_schema().data, "foxglove.FrameTransforms").FromString(raw)
     assert [t.child_frame_id for t in ft.transforms] == ["base_link", "cam_chase"]
     assert all(t.parent_frame_id == "world" for t in ft.transforms)
@@ -88,8 +81,8 @@ def test_hand_encoded_foxglove_messages_decode_with_official_schema():
     assert ft.transforms[1].translation.z == 1.0
 
 
-def _tick_kwargs(p, ctrl=None):
-    return dict(p_true=np.asarray(p, float), q_true_wxyz=(1.0, 0.0, 0.0, 0.0),
+def _tick_values(p, ctrl=None):
+    return Tick(p_true=np.asarray(p, float), q_true_wxyz=(1.0, 0.0, 0.0, 0.0),
                 v_true=(1.0, 0.0, 0.0), p_ref=(0.0, 0.0, 2.0), v_ref=(1.0, 0.0, 0.0),
                 yaw_ref=0.0, p_est=(p[0] + 0.3, p[1] - 0.4, p[2]), v_est=(1.0, 0.0, 0.0),
                 ctrl=ctrl if ctrl is not None else {"x.u": 0.1, "y.u": -0.2, "thrust": 0.5},
@@ -108,8 +101,8 @@ def test_state_values_rates_and_errors(tmp_path):
     path = tmp_path / "r" / "run.mcap"
     with RunLog(path, channels="full", metadata={"seed": 7}, config_toml="a = 1\n") as log:
         for k in range(100):  # 1 s at 100 Hz
-            log.tick(k * 0.01, **_tick_kwargs((k * 0.01, 1.0, 2.5)))
-        log.tick(1.0, **_tick_kwargs((1.0, 1.0, 2.5), ctrl={"x.u": 0.7}))  # key missing: NaN
+            log.tick(k * 0.01, _tick_values((k * 0.01, 1.0, 2.5)))
+        log.tick(1.0, _tick_values((1.0, 1.0, 2.5), ctrl={"x.u": 0.7}))  # key missing: NaN
     msgs = _decoded(path)
     st = [(t, d) for topic, t, d in msgs if topic == "/drone/state"]
     assert len(st) == 21  # 20 Hz over [0, 1] inclusive
@@ -143,7 +136,7 @@ def test_light_set_rates_and_custom_rates(tmp_path):
         with RunLog(p, metadata={}, config_toml="", layout=False, **kw) as log:
             for k in range(200):  # 2 s
                 t = k * 0.01
-                log.tick(t, **_tick_kwargs((t, 0.0, 2.0)))
+                log.tick(t, _tick_values((t, 0.0, 2.0)))
                 if k % 5 == 0:  # 20 Hz GPS
                     log.gps(t, (t, 0.1, 2.0))
                     log.estimator(t, "kf", np.arange(6.0), np.ones(6), np.zeros(3))
@@ -164,7 +157,7 @@ def test_none_is_a_cheap_no_op(tmp_path):
     path = tmp_path / "x" / "run.mcap"
     log = RunLog(path, channels="none", metadata={}, config_toml="")
     log.scene(0.0, [[0, 0], [1, 0], [1, 1]], [], [], swath=1.0, altitude=1.0)
-    log.tick(0.0, **_tick_kwargs((0.0, 0.0, 0.0)))
+    log.tick(0.0, _tick_values((0.0, 0.0, 0.0)))
     log.gps(0.0, (0, 0, 0))
     log.estimator(0.0, "kf", [0.0], [1.0])
     log.frame(0.0, "chase", b"", 1, 1, 60.0)
@@ -180,7 +173,7 @@ def test_none_is_a_cheap_no_op(tmp_path):
 def test_estimator_error_against_true_position(tmp_path):
     path = tmp_path / "run.mcap"
     with RunLog(path, metadata={}, config_toml="", layout=False) as log:
-        log.tick(0.0, **_tick_kwargs((3.0, 4.0, 2.0)))
+        log.tick(0.0, _tick_values((3.0, 4.0, 2.0)))
         log.estimator(0.0, "pca-kf", [0.0, 1.0, 0.0, 0.0], [1, 1, 1, 1], [0.5, 0.5],
                       {"nis": 2.0}, pos=(6.0, 8.0))
     est = [d for topic, _, d in _decoded(path) if topic == "/estimator/pca_kf"]
@@ -195,7 +188,7 @@ def test_estimator_error_against_the_truth_at_the_fix(tmp_path):
     (a pose 50 ms old is 0.25 m behind at 5 m/s; the default mission's estimate is ~1 cm)."""
     path = tmp_path / "run.mcap"
     with RunLog(path, metadata={}, config_toml="", layout=False) as log:
-        log.tick(0.0, **_tick_kwargs((3.0, 4.0, 2.0)))
+        log.tick(0.0, _tick_values((3.0, 4.0, 2.0)))
         log.set_truth((3.25, 4.0, 2.0))      # the vehicle moved on since the last state tick
         log.estimator(0.03, "kf", [3.26, 5.0, 4.0, 0.0], [1, 1, 1, 1], None, pos=(3.26, 4.0))
     e = [d for topic, _, d in _decoded(path) if topic == "/estimator/kf"][0]
@@ -205,7 +198,8 @@ def test_estimator_error_against_the_truth_at_the_fix(tmp_path):
 _CHILD = textwrap.dedent("""
     import mmap, struct, sys, time
     sys.path.insert(0, {root!r})
-    from ag_uav.record.runlog import RunLog, synthetic_run
+    from ag_uav.record.runlog import RunLog
+    from ag_uav.record.synthetic import synthetic_run
     f = open({shm!r}, "r+b"); mm = mmap.mmap(f.fileno(), 8)
     with RunLog({path!r}, channels="full", metadata={{"child": 1}}, config_toml="x = 1") as log:
         def on_tick(t, p, q):
@@ -308,7 +302,7 @@ def test_the_writer_process_and_the_inline_writer_write_the_same_messages(tmp_pa
     for writer in ("process", "inline"):
         p = tmp_path / f"{writer}.mcap"
         with RunLog(p, channels="full", metadata={}, config_toml="", layout=False,
-                    writer=writer, flush_sim_s=0.9) as log:
+                    writer=writer, io=LogIO(flush_sim_s=0.9)) as log:
             synthetic_run(log, 4.0, seed=3)
             logs[writer] = log.counts
         logs[writer + "_msgs"] = [(topic, t, m.SerializeToString()) for topic, t, m in _decoded(p)]
@@ -339,7 +333,7 @@ def test_estimator_vectors_as_arrays_or_lists_encode_the_same(tmp_path):
     x = np.array([1.0, -2.0, 3.5, 0.25, -0.125, 9.0])
     y = np.array([0.5, -0.75, 1.25])
     with RunLog(path, metadata={}, config_toml="", layout=False) as log:
-        log.tick(0.0, **_tick_kwargs((1.0, -1.0, 2.0)))
+        log.tick(0.0, _tick_values((1.0, -1.0, 2.0)))
         log.estimator(0.0, "arr", x, np.diag(P), y, pos=(x[0], x[2], x[4]))
         log.estimator(0.0, "lst", x.tolist(), np.diag(P).tolist(), y.tolist(),
                       pos=(1.0, 3.5, -0.125))
@@ -382,12 +376,12 @@ def test_buffered_messages_precede_a_frame_and_counts_match_the_file(tmp_path):
 
     path = tmp_path / "run.mcap"
     with RunLog(path, metadata={}, config_toml="", layout=False,
-                flush_sim_s=100.0, flush_wall_s=100.0) as log:
+                io=LogIO(flush_sim_s=100.0, flush_wall_s=100.0)) as log:
         for k in range(30):
-            log.tick(k * 0.01, **_tick_kwargs((k * 0.01, 0.0, 2.0)))
+            log.tick(k * 0.01, _tick_values((k * 0.01, 0.0, 2.0)))
             log.gps(k * 0.01, (k * 0.01, 0.0, 2.0))
         log.frame(0.3, "chase", b"\xff\xd8jpeg", 32, 24, 60.0)
-        log.tick(0.3, **_tick_kwargs((0.3, 0.0, 2.0)))
+        log.tick(0.3, _tick_values((0.3, 0.0, 2.0)))
         counts = log.counts
     with open(path, "rb") as f:
         order = [(c.topic, m.log_time) for _, c, m in
@@ -409,11 +403,11 @@ def test_state_attitude_and_numpy_inputs(tmp_path):
     q = np.array([0.9, 0.1, -0.2, 0.3])
     q /= np.linalg.norm(q)
     with RunLog(path, channels=["state"], metadata={}, config_toml="", layout=False) as log:
-        kw = _tick_kwargs((1.0, 2.0, 3.0))
-        log.tick(0.0, **(kw | {"q_true_wxyz": q, "p_true": np.array([1.0, 2.0, 3.0])}))
-        log.tick(0.05, **(kw | {"q_true_wxyz": tuple(q.tolist()), "p_true": (1.0, 2.0, 3.0)}))
+        kw = _tick_values((1.0, 2.0, 3.0))
+        log.tick(0.0, kw._replace(q_true_wxyz=q, p_true=np.array([1.0, 2.0, 3.0])))
+        log.tick(0.05, kw._replace(q_true_wxyz=tuple(q.tolist()), p_true=(1.0, 2.0, 3.0)))
     st = [d for topic, _, d in _decoded(path) if topic == "/drone/state"]
-    expect = _rpy_deg(*q.tolist())
+    expect = rpy_deg(*q.tolist())
     assert min(abs(a) for a in expect) > 3.0  # all three angles non-trivial
     for d in st:
         assert (d.rpy.roll, d.rpy.pitch, d.rpy.yaw) == pytest.approx(expect, abs=1e-12)
@@ -427,13 +421,13 @@ def test_a_writer_process_killed_on_its_own_is_not_silent(tmp_path):
     logs nothing more, and the flight goes on for its summary (which ``fly`` marks)."""
     path = tmp_path / "run.mcap"
     log = RunLog(path, channels="full", metadata={}, config_toml="", layout=False)
-    log.tick(0.0, **_tick_kwargs((0.0, 0.0, 1.0)))
+    log.tick(0.0, _tick_values((0.0, 0.0, 1.0)))
     log.flush()
     time.sleep(0.1)  # the writer polls its ring every millisecond
     os.kill(log._sink.pid, signal.SIGKILL)
     time.sleep(1.1)
     for k in range(1, 200):
-        log.tick(k * 0.01, **_tick_kwargs((k * 0.01, 0.0, 1.0)))
+        log.tick(k * 0.01, _tick_values((k * 0.01, 0.0, 1.0)))
     e = log.lost
     assert isinstance(e, OSError) and "writer process exited" in str(e)
     assert e.filename == str(path) and not isinstance(e, BrokenPipeError)
@@ -456,7 +450,7 @@ def test_a_log_past_the_spare_cores_writes_in_process_and_says_so(tmp_path, monk
         b = RunLog(tmp_path / "b.mcap", metadata={}, config_toml="", layout=False)
     assert a._sink.process and not b._sink.process
     for log in (a, b):
-        log.tick(0.0, **_tick_kwargs((1.0, 2.0, 3.0)))
+        log.tick(0.0, _tick_values((1.0, 2.0, 3.0)))
         log.close()
     c = RunLog(tmp_path / "c.mcap", metadata={}, config_toml="", layout=False)
     assert c._sink.process  # a's writer is gone: the core is spare again
@@ -468,7 +462,7 @@ def test_dose_maps_period_doubles_after_each_quota_of_bytes(tmp_path: Path, monk
     """A long flight over a big field logs its dose maps at a period that doubles after each
     DOSE_QUOTA_B of them (the log grows with the log of the duration, not with it); the final
     map is always logged."""
-    import ag_uav.record.runlog as rl
+    import ag_uav.record.log_scene as rl
 
     grid = np.ones((100, 100))          # 40 kB of float32 a map
     monkeypatch.setattr(rl, "DOSE_QUOTA_B", 400_000)   # ~10 maps a quota

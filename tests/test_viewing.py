@@ -12,7 +12,8 @@ from mcap.reader import make_reader
 from PIL import Image
 
 from ag_uav.analysis import viewing
-from ag_uav.record.runlog import RunLog, synthetic_run
+from ag_uav.record.runlog import RunLog
+from ag_uav.record.synthetic import synthetic_run
 
 
 def _fake_jpeg(k: int) -> bytes:
