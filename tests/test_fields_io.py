@@ -265,7 +265,8 @@ def test_example_farm_kml():
 
 def test_a_multi_part_field_is_drawn_whole(tmp_path):
     """The log's /field scene and the map outline every part (not just the first)."""
-    from ag_uav.analysis.viewing import _scene_lines, read_run
+    from ag_uav.analysis.plots import _scene_lines
+    from ag_uav.analysis.rundata import read_run
     from ag_uav.jobs.run import fly
 
     cfg = ag_uav.load_config(None, {"mission.field": "two-part", "sim.max_time_s": 3.0,

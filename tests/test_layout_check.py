@@ -1,6 +1,6 @@
 """The Foxglove layout (``layout.json``) read against the MCAP of a real logged run.
 
-Every panel of the layout ``ag_uav.analysis.viewing.write_foxglove_layout`` writes must name
+Every panel of the layout ``ag_uav.record.layout.write_foxglove_layout`` writes must name
 topics the run's log holds, with the schema that panel renders, and every plotted message path
 must resolve, field by field, to a number in a logged message. A layout whose panel names a
 topic the log lacks (or a wrong schema, or a field the message has not) fails the check: the

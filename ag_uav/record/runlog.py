@@ -71,7 +71,7 @@ flushes it to the OS at each hand-over.  With the writer process (:mod:`ag_uav.r
 default) a SIGKILL of the flight loses only the rows not handed over yet (< 0.3 s of flight and
 one log tick); the writer then finishes the file.  Killed together (a process group), they lose
 also the one hand-over the writer had not written yet;
-``ag_uav.analysis.viewing.recover`` turns a truncated file into a finished, indexed one.
+``ag_uav.analysis.recover.recover`` turns a truncated file into a finished, indexed one.
 
 Cost: between two hand-overs nothing is encoded.  A tick is one row of raw values
 (:meth:`RunLog.tick_slot`: the engine copies its arrays into it in one ``np.concatenate``;
@@ -551,7 +551,7 @@ class RunLog(TickLog, EstimateLog, SceneLog):
         if not self._layout:
             return
         try:
-            from ..analysis.viewing import write_foxglove_layout
+            from .layout import write_foxglove_layout
 
             cams = tuple(self._cam)
             if not cams and not final and self._period["camera"] < INF:
