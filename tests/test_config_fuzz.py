@@ -34,6 +34,7 @@ from hypothesis import strategies as st
 
 from ag_uav import cli
 from ag_uav import config as C
+from ag_uav.config import load as config_load
 from ag_uav.vehicle.gps import available_presets, gps_preset
 
 FUZZ = settings(max_examples=100, deadline=None, derandomize=True, database=None,
@@ -452,7 +453,7 @@ def test_whole_configs(data: st.DataObject, tmp_path: Path,
         bad = cross_ok({k: v for k, v in vals.items() if k in CROSS})
     doc: dict[str, Any] = {}
     for k, v in vals.items():
-        C._apply_override(doc, k, v)
+        config_load._apply_override(doc, k, v)
     path = tmp_path / "whole.toml"
     path.write_text(tomli_w.dumps(doc), encoding="utf-8")
     sets = [f"--set={k}={toml_inline(v)}" for k, v in vals.items()]
@@ -490,7 +491,7 @@ def test_unknown_key_at_every_level(data: st.DataObject, tmp_path: Path,
     name = data.draw(st.one_of(NAME, st.text(max_size=6), st.sampled_from(
         [f"{f}.x" for f in sorted(fields)] + ["", " ", "a b", "é"])).filter(
         lambda n: n not in fields), label="name")
-    key = f"{prefix}.{C._toml_key(name)}" if prefix else C._toml_key(name)
+    key = f"{prefix}.{config_load._toml_key(name)}" if prefix else config_load._toml_key(name)
     doc = _nest(prefix, {name: 1}) if prefix else {name: 1}
     with pytest.raises(C.ConfigError, match="unknown key") as e:
         C.config_from_dict(doc)
@@ -764,7 +765,7 @@ REAL = [  # (argv, key the message must name); run side by side, one process eac
 def test_real_command_exit_2_one_line(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
     bad.write_bytes(b"[mission]\nswath_m = 4\n\xff\xfe\n")
-    env = {**os.environ, "PYTHONPATH": str(Path(C.__file__).parents[1])}
+    env = {**os.environ, "PYTHONPATH": str(Path(C.__file__).parents[2])}
     procs = [subprocess.Popen([sys.executable, "-m", "ag_uav.cli",
                                *[str(bad) if a == "BADFILE" else a for a in argv]],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path,
