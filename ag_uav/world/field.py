@@ -54,8 +54,6 @@ geographic topics use (:mod:`ag_uav.record.geo`), so lon/lat → ENU → lon/lat
 from __future__ import annotations
 
 import json
-import math
-import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -80,96 +78,34 @@ __all__ = [
     "load_field",
     "lonlat_to_enu",
     "split_field_spec",
+    "WGS84_A",
+    "WGS84_B",
+    "WGS84_E2",
+    "WGS84_F",
 ]
 
-# WGS-84 ellipsoid
-WGS84_A = 6378137.0
-WGS84_F = 1.0 / 298.257223563
-WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
-WGS84_B = WGS84_A * (1.0 - WGS84_F)
-
-
-def geodetic_to_ecef(lat_deg, lon_deg, h=0.0) -> np.ndarray:
-    """WGS-84 geodetic (degrees, metres) → ECEF metres; broadcasts; returns (..., 3)."""
-    lat = np.radians(np.asarray(lat_deg, dtype=float))
-    lon = np.radians(np.asarray(lon_deg, dtype=float))
-    h = np.asarray(h, dtype=float)
-    s, c = np.sin(lat), np.cos(lat)
-    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * s * s)
-    x = (n + h) * c * np.cos(lon)
-    y = (n + h) * c * np.sin(lon)
-    z = (n * (1.0 - WGS84_E2) + h) * s
-    return np.stack(np.broadcast_arrays(x, y, z), axis=-1)
-
-
-def _enu_rotation(lat0_deg: float, lon0_deg: float) -> np.ndarray:
-    """Rows are the east, north, up unit vectors at (lat0, lon0) in ECEF."""
-    la, lo = math.radians(lat0_deg), math.radians(lon0_deg)
-    sla, cla, slo, clo = math.sin(la), math.cos(la), math.sin(lo), math.cos(lo)
-    return np.array(
-        [
-            [-slo, clo, 0.0],
-            [-sla * clo, -sla * slo, cla],
-            [cla * clo, cla * slo, sla],
-        ]
-    )
-
-
-def lonlat_to_enu(lon_deg, lat_deg, origin: Sequence[float], h=0.0) -> np.ndarray:
-    """Geodetic lon/lat (degrees) → local ENU (..., 3) metres about ``origin`` = (lat0, lon0[, h0]).
-
-    Exact WGS-84 geodetic → ECEF → ENU (see module docstring)."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    h0 = float(origin[2]) if len(origin) > 2 else 0.0
-    p = geodetic_to_ecef(lat_deg, lon_deg, h)
-    p0 = geodetic_to_ecef(lat0, lon0, h0)
-    return (p - p0) @ _enu_rotation(lat0, lon0).T
-
-
-def enu_to_geodetic(e, n, origin: Sequence[float], u=0.0
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Local ENU metres → (lon, lat, h): degrees and WGS-84 ellipsoidal height (m); the exact
-    inverse of :func:`lonlat_to_enu` (with its ``h``): ENU → ECEF by the transposed rotation,
-    then :func:`ecef_to_geodetic`."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    h0 = float(origin[2]) if len(origin) > 2 else 0.0
-    enu = np.stack(np.broadcast_arrays(np.asarray(e, float), np.asarray(n, float),
-                                       np.asarray(u, float)), axis=-1)
-    xyz = enu @ _enu_rotation(lat0, lon0) + geodetic_to_ecef(lat0, lon0, h0)
-    return ecef_to_geodetic(xyz)
-
-
-def enu_frame(origin: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    """(R, p0) of the ENU frame about ``origin`` = (lat, lon[, h]): ECEF = ENU @ R + p0 (what
-    :func:`enu_to_geodetic` computes per call, for a caller converting many batches)."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    h0 = float(origin[2]) if len(origin) > 2 else 0.0
-    return _enu_rotation(lat0, lon0), geodetic_to_ecef(lat0, lon0, h0)
-
-
-def ecef_to_geodetic(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ECEF metres (..., 3) → (lon °, lat °, h m) on WGS-84: Bowring's parametric-latitude
-    iteration (3 rounds; converged to ~1e-12 rad for terrestrial heights) and the height
-    ``h = p cosφ + z sinφ − a sqrt(1 − e² sin²φ)`` (valid at every latitude)."""
-    x, y, z = xyz[..., 0], xyz[..., 1], xyz[..., 2]
-    lon = np.arctan2(y, x)
-    p = np.hypot(x, y)
-    ep2 = (WGS84_A**2 - WGS84_B**2) / WGS84_B**2
-    beta = np.arctan2(z, (1.0 - WGS84_F) * p)
-    for _ in range(3):
-        lat = np.arctan2(z + ep2 * WGS84_B * np.sin(beta) ** 3,
-                         p - WGS84_E2 * WGS84_A * np.cos(beta) ** 3)
-        beta = np.arctan2((1.0 - WGS84_F) * np.sin(lat), np.cos(lat))
-    s = np.sin(lat)
-    h = p * np.cos(lat) + z * s - WGS84_A * np.sqrt(1.0 - WGS84_E2 * s * s)
-    return np.degrees(lon), np.degrees(lat), h
-
-
-def enu_to_lonlat(e, n, origin: Sequence[float], u=0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Local ENU metres → (lon, lat) degrees; inverse of :func:`lonlat_to_enu`
-    (:func:`enu_to_geodetic` without the height)."""
-    lon, lat, _ = enu_to_geodetic(e, n, origin, u)
-    return lon, lat
+from .field_files import (
+    FIELD_FILE_SUFFIXES,
+    from_features,
+    geojson_features,
+    json_loads,
+    kml_features,
+    kmz_doc,
+    read_bytes,
+    shp_features,
+)
+from .geodesy import (
+    WGS84_A,
+    WGS84_B,
+    WGS84_E2,
+    WGS84_F,
+    ecef_to_geodetic,
+    enu_frame,
+    enu_to_geodetic,
+    enu_to_lonlat,
+    geodetic_to_ecef,
+    lonlat_to_enu,
+)
 
 
 def _as_ring(pts: Iterable[Sequence[float]], what: str) -> np.ndarray:
@@ -344,14 +280,14 @@ class Field:
         else:
             s = str(src)
             if s.lstrip().startswith("{"):
-                gj = _json_loads(s)
+                gj = json_loads(s)
             else:
                 p = Path(s)
-                gj = _json_loads(_read_bytes(p, "GeoJSON"))
+                gj = json_loads(read_bytes(p, "GeoJSON"))
                 fallback = p.stem
         if not isinstance(gj, dict):
             raise ValueError("GeoJSON: the top level must be an object")
-        return _from_features(cls, _geojson_features(gj), select, "GeoJSON", origin, name,
+        return from_features(cls, geojson_features(gj), select, "GeoJSON", origin, name,
                               fallback)
 
     @classmethod
@@ -371,10 +307,10 @@ class Field:
         else:
             p = Path(src)
             fallback = p.stem
-            data = _read_bytes(p, "KML")
+            data = read_bytes(p, "KML")
             if p.suffix.lower() == ".kmz" or data[:2] == b"PK":
-                data = _kmz_doc(p)
-        return _from_features(cls, _kml_features(data), select, "KML", origin, name, fallback)
+                data = kmz_doc(p)
+        return from_features(cls, kml_features(data), select, "KML", origin, name, fallback)
 
     @classmethod
     def from_shapefile(
@@ -388,7 +324,7 @@ class Field:
         geographic lon/lat (read with pyshp); ``select`` as in :meth:`from_geojson`, matched
         against the record's attributes."""
         p = Path(path)
-        return _from_features(cls, _shp_features(p), select, "shapefile", origin, name, p.stem)
+        return from_features(cls, shp_features(p), select, "shapefile", origin, name, p.stem)
 
     @classmethod
     def from_file(
@@ -471,303 +407,6 @@ class Field:
         extra = f", parts={len(self.parts)}" if len(self.parts) > 1 else ""
         return f"Field(name={self.name!r}, area={self.area:.1f} m², holes={n_holes}{extra})"
 
-
-# --- reading files ----------------------------------------------------------------------------
-#: file name endings :func:`load_field` and :meth:`Field.from_file` accept
-FIELD_FILE_SUFFIXES = (".geojson", ".json", ".kml", ".kmz", ".shp")
-
-
-@dataclass
-class _Feature:
-    """One polygonal feature read from a file: its properties and its parts in lon/lat."""
-
-    props: dict[str, Any]
-    parts: list[list[np.ndarray]]
-
-
-def _read_bytes(p: Path, what: str) -> bytes:
-    try:
-        return p.read_bytes()
-    except FileNotFoundError:
-        raise ValueError(f"{what} file not found: {p}") from None
-    except OSError as e:
-        raise ValueError(f"cannot read {what} file {p}: {e.strerror or e}") from None
-
-
-def _json_loads(s: str | bytes) -> Any:
-    try:
-        return json.loads(s)
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ValueError(f"not valid JSON: {e}") from None
-
-
-def _parse_selector(select: str) -> tuple[str, str]:
-    key, sep, val = select.partition("=")
-    if not sep:
-        return "name", select.strip()
-    key = key.strip()
-    if not key:
-        raise ValueError(f"bad feature selector {select!r}; expected KEY=VALUE or a name")
-    return key, val.strip()
-
-
-def _prop_get(props: dict[str, Any], key: str) -> Any:
-    if key in props:
-        return props[key]
-    low = {str(k).lower(): v for k, v in props.items()}
-    return low.get(key.lower())
-
-
-def _fmt_val(v: Any) -> str:
-    if isinstance(v, float) and v.is_integer():
-        v = int(v)
-    return str(v).strip()
-
-
-def _from_features(cls, feats: list[_Feature], select: str | None, what: str,
-                   origin: Sequence[float] | None, name: str | None,
-                   fallback: str = "field") -> Field:
-    """Pick one feature (by ``select``) and build the Field; its name is ``name``, else the
-    feature's ``name`` property, else ``fallback`` (the file's stem)."""
-    if not feats:
-        raise ValueError(f"{what}: no polygon found (need a Polygon or MultiPolygon)")
-    if select is not None:
-        key, val = _parse_selector(select)
-        hits = [f for f in feats if _fmt_val(_prop_get(f.props, key)) == val
-                and _prop_get(f.props, key) is not None]
-        if len(hits) != 1:
-            have = [_fmt_val(v) for f in feats if (v := _prop_get(f.props, key)) is not None]
-            allowed = (", ".join(f'"{h}"' for h in have[:12]) + (" …" if len(have) > 12 else "")
-                       if have else f"none of the {len(feats)} polygon features has a {key!r}")
-            if len(hits) > 1:
-                raise ValueError(f"{what}: {len(hits)} polygon features have {key} = \"{val}\"; "
-                                 "pick by a property that is unique")
-            raise ValueError(f"{what}: no polygon feature with {key} = \"{val}\"; "
-                             f"{key} values: {allowed}")
-        feat = hits[0]
-    elif len(feats) > 1:
-        names = [_fmt_val(v) for f in feats if (v := _prop_get(f.props, "name")) is not None]
-        hint = (" (names: " + ", ".join(f'"{n}"' for n in names[:12]) + ")") if names else ""
-        raise ValueError(f"{what}: {len(feats)} polygon features{hint}; pick one with "
-                         "PATH#name=VALUE or PATH#KEY=VALUE")
-    else:
-        feat = feats[0]
-    props = {str(k): v for k, v in feat.props.items()}
-    nm = name or (_fmt_val(props["name"]) if props.get("name") not in (None, "") else fallback)
-    return cls.from_lonlat_parts(feat.parts, origin=origin, name=nm,
-                                 meta={k: v for k, v in props.items() if k != "name"})
-
-
-def _gj_polygon_parts(geom: Any) -> list[list[np.ndarray]] | None:
-    """Parts of a GeoJSON geometry (None if it is not polygonal)."""
-    if not isinstance(geom, dict):
-        return None
-    t = geom.get("type")
-
-    def poly(rings: Any, where: str) -> list[np.ndarray]:
-        if not isinstance(rings, list) or not rings:
-            raise ValueError(f"GeoJSON {where}: expected a list of rings [[[lon, lat], ...], ...]")
-        out = []
-        for i, r in enumerate(rings):
-            try:
-                a = np.asarray(r, dtype=float)
-            except (TypeError, ValueError):
-                a = np.empty((0,))
-            if a.ndim != 2 or a.shape[1] < 2:
-                raise ValueError(f"GeoJSON {where} ring {i}: expected [[lon, lat], ...]")
-            out.append(a)
-        return out
-
-    if t == "Polygon":
-        return [poly(geom.get("coordinates"), "Polygon")]
-    if t == "MultiPolygon":
-        cs = geom.get("coordinates")
-        if not isinstance(cs, list) or not cs:
-            raise ValueError("GeoJSON MultiPolygon has no parts")
-        return [poly(c, f"MultiPolygon part {k + 1}") for k, c in enumerate(cs)]
-    if t == "GeometryCollection":
-        parts: list[list[np.ndarray]] = []
-        for g in geom.get("geometries") or []:
-            parts += _gj_polygon_parts(g) or []
-        return parts or None
-    return None
-
-
-def _geojson_features(gj: dict) -> list[_Feature]:
-    t = gj.get("type")
-    if t == "FeatureCollection":
-        feats = gj.get("features")
-        if not isinstance(feats, list):
-            raise ValueError("GeoJSON FeatureCollection has no \"features\" list")
-        out = []
-        for f in feats:
-            if isinstance(f, dict):
-                out += _geojson_features(f) if f.get("type") == "Feature" else []
-        return out
-    if t == "Feature":
-        parts = _gj_polygon_parts(gj.get("geometry"))
-        return [_Feature(dict(gj.get("properties") or {}), parts)] if parts else []
-    if t in ("Polygon", "MultiPolygon", "GeometryCollection"):
-        parts = _gj_polygon_parts(gj)
-        return [_Feature({}, parts)] if parts else []
-    raise ValueError(f"GeoJSON: expected a Polygon, MultiPolygon, Feature or FeatureCollection, "
-                     f"got {t!r}")
-
-
-# KML ------------------------------------------------------------------------------------------
-def _local(tag: Any) -> str:
-    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
-
-
-def _kml_coords(text: str | None) -> np.ndarray:
-    """KML ``<coordinates>``: whitespace-separated ``lon,lat[,alt]`` tuples → (N, 2)."""
-    s = re.sub(r"\s*,\s*", ",", (text or "").strip())
-    pts = []
-    for tup in s.split():
-        vals = tup.split(",")
-        try:
-            pts.append((float(vals[0]), float(vals[1])))
-        except (ValueError, IndexError):
-            raise ValueError(f"KML: bad coordinate tuple {tup!r}; expected lon,lat[,alt]") from None
-    return np.asarray(pts, dtype=float).reshape(-1, 2)
-
-
-def _kml_ring(boundary: Any) -> list[np.ndarray]:
-    out = []
-    for el in boundary.iter():
-        if _local(el.tag) == "LinearRing":
-            for c in el:
-                if _local(c.tag) == "coordinates":
-                    out.append(_kml_coords(c.text))
-    return out
-
-
-def _kml_features(data: bytes) -> list[_Feature]:
-    import xml.etree.ElementTree as ET
-
-    try:
-        root = ET.fromstring(data)
-    except ET.ParseError as e:
-        raise ValueError(f"KML is not well-formed XML: {e}") from None
-    if _local(root.tag) != "kml":
-        raise ValueError(f"not a KML document (root element <{_local(root.tag)}>, expected <kml>)")
-    feats = []
-    for pm in root.iter():
-        if _local(pm.tag) != "Placemark":
-            continue
-        props: dict[str, Any] = {}
-        parts: list[list[np.ndarray]] = []
-        for ch in pm:
-            tag = _local(ch.tag)
-            if tag in ("name", "description") and ch.text:
-                props[tag] = ch.text.strip()
-            elif tag == "ExtendedData":
-                for d in ch.iter():
-                    dt = _local(d.tag)
-                    if dt == "Data" and d.get("name"):
-                        v = next((x.text for x in d if _local(x.tag) == "value"), None)
-                        props.setdefault(d.get("name"), (v or "").strip())
-                    elif dt == "SimpleData" and d.get("name"):
-                        props.setdefault(d.get("name"), (d.text or "").strip())
-        for g in pm.iter():
-            if _local(g.tag) != "Polygon":
-                continue
-            outer: list[np.ndarray] = []
-            inner: list[np.ndarray] = []
-            for b in g:
-                bt = _local(b.tag)
-                if bt == "outerBoundaryIs":
-                    outer += _kml_ring(b)
-                elif bt == "innerBoundaryIs":
-                    inner += _kml_ring(b)
-            if len(outer) != 1:
-                nm = f" {props['name']!r}" if "name" in props else ""
-                raise ValueError(f"KML Polygon{nm}: needs exactly one outerBoundaryIs "
-                                 f"LinearRing, has {len(outer)}")
-            parts.append([outer[0], *inner])
-        if parts:
-            feats.append(_Feature(props, parts))
-    return feats
-
-
-def _kmz_doc(p: Path) -> bytes:
-    """The KML document inside a KMZ (``doc.kml``, else the first ``.kml`` entry)."""
-    import zipfile
-
-    try:
-        with zipfile.ZipFile(p) as z:
-            names = [n for n in z.namelist() if n.lower().endswith(".kml")]
-            if not names:
-                raise ValueError(f"KMZ {p} holds no .kml document")
-            name = "doc.kml" if "doc.kml" in names else names[0]
-            return z.read(name)
-    except zipfile.BadZipFile as e:
-        raise ValueError(f"KMZ {p} is not a valid zip archive: {e}") from None
-
-
-# shapefile ------------------------------------------------------------------------------------
-def _group_rings(rings: list[np.ndarray]) -> list[list[np.ndarray]]:
-    """Sort rings into parts by containment (even nesting depth = boundary, odd = hole of the
-    smallest boundary around it); winding is ignored."""
-    polys = [Polygon(r[:, :2]) for r in rings]  # callers pass rings of >= 3 points
-    # a point strictly inside each ring (an invalid ring is reported later, by _make_polygon)
-    probe = [p.representative_point() if p.is_valid else p.centroid for p in polys]
-    areas = [p.area for p in polys]
-    n = len(rings)
-    containers = [[j for j in range(n) if j != i and areas[j] > areas[i]
-                   and polys[j].is_valid and polys[j].contains(probe[i])] for i in range(n)]
-    depth = [len(c) for c in containers]
-    parts: dict[int, list[np.ndarray]] = {}
-    order = [i for i in range(n) if depth[i] % 2 == 0]
-    for i in order:
-        parts[i] = [rings[i]]
-    for i in range(n):
-        if depth[i] % 2 == 1:
-            outs = [j for j in containers[i] if depth[j] == depth[i] - 1]
-            if outs:
-                parts[min(outs, key=lambda j: areas[j])].append(rings[i])
-    return [parts[i] for i in order]
-
-
-def _shp_features(p: Path) -> list[_Feature]:
-    import shapefile  # pyshp
-
-    if not p.exists():
-        raise ValueError(f"shapefile not found: {p}")
-    prj = p.with_suffix(".prj")
-    if not prj.exists():
-        prj = p.with_suffix(".PRJ")
-    if prj.exists():
-        wkt = prj.read_text(errors="replace").strip()
-        if wkt.upper().startswith("PROJCS") or wkt.upper().startswith("PROJCRS"):
-            crs = wkt.split('"')[1] if wkt.count('"') >= 2 else "projected"
-            raise ValueError(f"shapefile is in a projected CRS ({crs}); reproject it to WGS-84 "
-                             "lon/lat (EPSG:4326)")
-    poly_types = {shapefile.POLYGON, shapefile.POLYGONZ, shapefile.POLYGONM}
-    feats = []
-    bad_type = None
-    try:
-        with shapefile.Reader(str(p)) as r:
-            if r.shapeType not in poly_types and r.shapeType != shapefile.NULL:
-                bad_type = r.shapeTypeName
-            has_dbf = r.dbf is not None
-            for i in range(0 if bad_type else len(r)):
-                shp = r.shape(i)
-                if shp.shapeType not in poly_types or not shp.points:
-                    continue
-                pts = np.asarray(shp.points, dtype=float)[:, :2]
-                idx = [*list(shp.parts), len(pts)]
-                rings = [pts[a:b] for a, b in zip(idx[:-1], idx[1:], strict=True) if b - a >= 3]
-                props = dict(r.record(i).as_dict()) if has_dbf else {}
-                parts = _group_rings(rings)
-                if parts:
-                    feats.append(_Feature(props, parts))
-    except Exception as e:  # pyshp raises ShapefileException, struct.error, ... on a bad file
-        msg = (str(e).splitlines() or [""])[0]
-        raise ValueError(f"cannot read shapefile {p}: {type(e).__name__}: {msg}") from None
-    if bad_type:
-        raise ValueError(f"shapefile holds {bad_type} shapes, not polygons")
-    return feats
 
 
 # --- built-in fields ------------------------------------------------------------------------
