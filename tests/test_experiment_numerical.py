@@ -90,7 +90,7 @@ def test_mckf_batch_equals_library_mckf_including_rejections_and_recovery():
     Z = Z + rng.standard_normal((B, T, 2)) * [math.sqrt(10), 10]
     Z[:, rng.random(T) < 0.1] *= 8.0  # impulsive outliers (shared times)
     Z[1, 60:80] += [0.0, 150.0]  # a jump: 20 rejected fixes in a row -> KF recovery
-    fast = num.mckf_batch(m.F, m.H, m.Q, m.R, x0, P0, Z, sigma=2.0)
+    fast = num.mckf_batch(m, x0, P0, Z, sigma=2.0)
     n_rec = n_rej = 0
     iters = set()
     for b in range(B):
@@ -109,7 +109,7 @@ def test_mckf_batch_equals_library_mckf_including_rejections_and_recovery():
 def test_mckf_batch_large_sigma_is_the_kf():
     pos, x0, P0, Z = _data("impulsive", runs=(0, 1))
     m = num.model()
-    a = num.mckf_batch(m.F, m.H, m.Q, m.R, x0, P0, Z, sigma=1e6)
+    a = num.mckf_batch(m, x0, P0, Z, sigma=1e6)
     b = num.kf_fixed_gain(m.F, m.H, num.gain_sequence("kf", TINY, len(pos), x0, P0), x0, Z)
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-6)
 
