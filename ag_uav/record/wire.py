@@ -427,7 +427,7 @@ class EstBank(FlatRows):
 
     def take(self) -> np.ndarray | None:
         """The fixes since the last flush (compact rows: the writer makes the k messages of
-        each, :func:`ag_uav.record.sink._bank_rows`), or None."""
+        each, :func:`ag_uav.record.backend.bank_rows`), or None."""
         return self.raw.take() if self.raw.n else None
 
 
