@@ -28,9 +28,9 @@ def _fly(cfg: Config, path: Path | None, geo: bool = True, writer: str = "proces
     """(loop wall, loop CPU, loop + writer CPU), (log bytes, messages) of one flight."""
     from ..engine.missions import simulate
     from ..record.runlog import RunLog
-    from .bench import _LoopCpu
+    from .bench import LoopCpu
 
-    hook = _LoopCpu()
+    hook = LoopCpu()
     if path is None:
         wall = simulate(cfg, tick_hook=hook).summary["loop_wall_time_s"]
         return (wall, hook.seconds, hook.seconds), (0, 0)
