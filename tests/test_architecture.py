@@ -386,8 +386,6 @@ REACH_INS_LEFT: dict[str, int] = {
     "ag_uav/jobs/bench.py: loop._Engine": 1,
     "ag_uav/jobs/bench_physics.py: sp._set_mass": 2,
     "ag_uav/jobs/experiments/controllers.py: from ag_uav.jobs.batch import _num": 1,
-    "ag_uav/jobs/experiments/drift.py: from ag_uav.jobs.experiments.swath import _floats": 1,
-    "ag_uav/jobs/experiments/drift.py: from ag_uav.jobs.experiments.swath import _overrides": 1,
     "ag_uav/jobs/experiments/ins_nav.py: M._finish": 1,
     "ag_uav/jobs/experiments/ins_nav.py: M._prepare": 1,
     "ag_uav/jobs/experiments/numerical/fast.py: bf._from": 1,

@@ -9,6 +9,25 @@ MODULES = ("numerical", "table2", "bearing_tracking", "route_prediction", "lange
            "drift")
 
 
+def float_list(s: str) -> list[float]:
+    """A comma-separated list of numbers (``"2,3,4"``) as floats; empty items are skipped."""
+    return [float(v) for v in s.split(",") if v.strip()]
+
+
+def toml_overrides(items: list[str]) -> dict:
+    """``KEY=VALUE`` items (VALUE one TOML value) as a dict; lists become tuples (of tuples)."""
+    import tomllib
+
+    out: dict = {}
+    for it in items:
+        k, _, v = it.partition("=")
+        out[k.strip()] = tomllib.loads(f"v = {v}")["v"]
+        if isinstance(out[k.strip()], list):
+            out[k.strip()] = tuple(tuple(x) if isinstance(x, list) else x
+                                   for x in out[k.strip()])
+    return out
+
+
 def write_csv(path, rows) -> None:
     """Rows (dicts) to a CSV whose columns are every key, in first-seen order."""
     import csv

@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from ...world.deposition import DepositionConfig, footprints, pack_input
-from .swath import _floats, _overrides, pass_states
+from . import float_list, toml_overrides
+from .swath import pass_states
 
 NAME = "drift"
 HELP = ("simulated drift trial (ISO 22866 style): a treated strip upwind of collector lines at "
@@ -244,14 +245,14 @@ def main(args: argparse.Namespace) -> int:
     from . import write_csv
 
     try:
-        base = DepositionConfig(**_overrides(args.set))
+        base = DepositionConfig(**toml_overrides(args.set))
         spectra = [s.strip() for s in args.spectra.split(",") if s.strip()]
         bad = [s for s in spectra if s not in SPECTRA]
         if bad:
             raise ValueError(f"--spectra {bad[0]}: expected one of {', '.join(SPECTRA)}")
         cases = [Case(*v) for v in itertools.product(
-            _floats(args.winds), _floats(args.heights), _floats(args.speeds), spectra,
-            _floats(args.temps), _floats(args.rhs))]
+            float_list(args.winds), float_list(args.heights), float_list(args.speeds), spectra,
+            float_list(args.temps), float_list(args.rhs))]
         for c in cases:
             DepositionConfig(temperature_c=c.temp_c, rh_percent=c.rh)   # validates
     except (ValueError, TypeError) as e:
@@ -264,11 +265,11 @@ def main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "drift.csv", rows)
     write_csv(out / "cases.csv", summ)
-    mid_t = _floats(args.temps)[0]
-    rh_mid = sorted(_floats(args.rhs))[len(_floats(args.rhs)) // 2]
+    mid_t = float_list(args.temps)[0]
+    rh_mid = sorted(float_list(args.rhs))[len(float_list(args.rhs)) // 2]
     spec = "medium" if "medium" in spectra else spectra[0]
-    base_cases = [Case(w, h, _floats(args.speeds)[0], spec, mid_t, rh_mid)
-                  for h in _floats(args.heights) for w in _floats(args.winds)]
+    base_cases = [Case(w, h, float_list(args.speeds)[0], spec, mid_t, rh_mid)
+                  for h in float_list(args.heights) for w in float_list(args.winds)]
     _plot(out / "drift.png", curves, base_cases)
     bh = ["wind (m/s)", "h (m)", "v (m/s)", "spectrum", "T (°C)", "RH (%)", "< 1 % beyond (m)",
           "< 0.1 % beyond (m)", "escaped", "evaporated", "airborne"]

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from ...world.pattern import cv_back_and_forth, single_pass
+from . import float_list
 
 NAME = "spray-settings"
 HELP = ("search height, speed, lane spacing and droplet spectrum against dose CV, under-dosed "
@@ -60,10 +61,6 @@ FIELD_M = 100.0
 #: 150 µm; GRDC's reading of S572: fine > 20 %, coarse < 10 % below 150 µm)
 SPECTRA = {"fine": (90.0, 180.0, 320.0), "medium": (120.0, 250.0, 420.0),
            "coarse": (180.0, 350.0, 560.0)}
-
-
-def _floats(s: str) -> list[float]:
-    return [float(v) for v in s.split(",") if v.strip()]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -283,8 +280,8 @@ def main(args: argparse.Namespace) -> int:
     if not (0 <= wind <= 25 and args.buffer >= 0):
         raise ConfigError(f"--wind = {wind:g}, --buffer = {args.buffer:g}: expected 0..25 m/s "
                           "and a buffer >= 0 m")
-    cases = [Case(h, v, s.strip()) for h in _floats(args.heights) for v in _floats(args.speeds)
-             for s in args.spectra.split(",")]
+    cases = [Case(h, v, s.strip()) for h in float_list(args.heights)
+             for v in float_list(args.speeds) for s in args.spectra.split(",")]
     t0 = time.perf_counter()
     rows = search(cfg, cases, wind, spacings, args.buffer, progress=not args.quiet,
                   along=args.along)

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
-from typing import Any
 
 from ...world.deposition import DepositionConfig
 from ...world.pattern import (  # noqa: F401 - the pattern test lives in the world stage
@@ -36,15 +35,12 @@ from ...world.pattern import (  # noqa: F401 - the pattern test lives in the wor
     single_pass,
     swath_pattern,
 )
+from . import float_list, toml_overrides
 
 NAME = "swath"
 HELP = ("spray pattern test of the deposition model: single passes across a collector line at "
         "several heights, speeds and crosswinds; deposit profile, CV vs lane spacing, effective "
         "swath")
-
-
-def _floats(s: str) -> list[float]:
-    return [float(v) for v in s.split(",") if v.strip()]
 
 
 #: OMAFRA Hort Matters 2013 (omafra.gov.on.ca .../2013/16hrt13a2f1.htm): how far a droplet drifts
@@ -75,27 +71,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="runs/experiment-swath", metavar="DIR", help="output folder")
 
 
-def _overrides(items: list[str]) -> dict[str, Any]:
-    import tomllib
-
-    out: dict[str, Any] = {}
-    for it in items:
-        k, _, v = it.partition("=")
-        out[k.strip()] = tomllib.loads(f"v = {v}")["v"]
-        if isinstance(out[k.strip()], list):
-            out[k.strip()] = tuple(tuple(x) if isinstance(x, list) else x
-                                   for x in out[k.strip()])
-    return out
-
-
 def main(args: argparse.Namespace) -> int:
     from ..batch import markdown_table, print_table
     from . import write_csv
 
-    cfg = DepositionConfig(**_overrides(args.set))
+    cfg = DepositionConfig(**toml_overrides(args.set))
     t0 = time.perf_counter()
-    rows, profiles = swath_pattern(cfg, _floats(args.heights), _floats(args.speeds),
-                                   _floats(args.winds), mass_kg=args.mass, turb=args.turbulence)
+    rows, profiles = swath_pattern(cfg, float_list(args.heights), float_list(args.speeds),
+                                   float_list(args.winds), mass_kg=args.mass, turb=args.turbulence)
     wall = time.perf_counter() - t0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
