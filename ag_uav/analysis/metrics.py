@@ -83,6 +83,34 @@ def off_target(field, tracks, swath: float, buffer_m: float = 0.0) -> dict[str, 
     return {"outside": float(outside), "holes": float(holes), "sprayed": float(union.area)}
 
 
+def _legs_flown(res, plan, legs: list[int]) -> int:
+    """The legs whose both ends the flight passed within a swath of."""
+    flown = 0
+    for i in legs:
+        idx = np.flatnonzero(res.seg == i)
+        if not idx.size:
+            continue
+        pts = plan.segments[i].points
+        xy = res.p_true[idx, :2]
+        d0 = np.min(np.hypot(*(xy - pts[0]).T))
+        d1 = np.min(np.hypot(*(xy - pts[-1]).T))
+        if d0 < plan.swath and d1 < plan.swath:
+            flown += 1
+    return flown
+
+
+def _mission_time(res, legs: list[int], end: np.ndarray) -> float | None:
+    """The sim time the fed-back position first came within 0.5 m of the plan's end after the
+    last leg began (None: never)."""
+    last_leg_ticks = np.flatnonzero(res.seg == legs[-1])
+    if not last_leg_ticks.size:
+        return None
+    after = np.arange(last_leg_ticks[0], len(res.t))
+    dist = np.hypot(*(res.p_fb[after, :2] - end).T)
+    hit = np.flatnonzero(dist < 0.5)
+    return float(res.t[after[hit[0]]]) if hit.size else None
+
+
 def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float | None,
               reference=None) -> dict[str, Any]:
     plan = res.plan
@@ -116,29 +144,11 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     ref_done = reference is not None and n and res.t[-1] >= reference.duration - 1.5 * dt
     final_err = float(np.hypot(*(res.p_true[-1, :2] - end))) if n else float("inf")
     legs = [i for i, s in enumerate(plan.segments) if s.kind == "leg"]
-    legs_flown = 0
+    legs_flown = _legs_flown(res, plan, legs)
     swath = plan.swath
-    for i in legs:
-        idx = np.flatnonzero(res.seg == i)
-        if not idx.size:
-            continue
-        pts = plan.segments[i].points
-        xy = res.p_true[idx, :2]
-        d0 = np.min(np.hypot(*(xy - pts[0]).T))
-        d1 = np.min(np.hypot(*(xy - pts[-1]).T))
-        if d0 < swath and d1 < swath:
-            legs_flown += 1
     completed = bool(not crashed and ref_done and final_err < 0.5 * swath
                      and legs_flown == len(legs))
-    mission_time = None
-    if n and legs:
-        last_leg_ticks = np.flatnonzero(res.seg == legs[-1])
-        if last_leg_ticks.size:
-            after = np.arange(last_leg_ticks[0], n)
-            dist = np.hypot(*(res.p_fb[after, :2] - end).T)
-            hit = np.flatnonzero(dist < 0.5)
-            if hit.size:
-                mission_time = float(res.t[after[hit[0]]])
+    mission_time = _mission_time(res, legs, end) if n and legs else None
 
     def r(x: float | None, nd: int = 4) -> float | None:
         return None if x is None else round(float(x), nd)

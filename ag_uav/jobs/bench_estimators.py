@@ -128,83 +128,93 @@ def bench_estimators(repeats: int = 5, n: int = 2000, seed: int = 0) -> dict[str
     gc_was = gc.isenabled()
     gc.disable()
     try:
-        # ---------------------------------------------------------------- paper model
-        mdl = paper_numerical_model()
-        _, Z = _simulate(mdl.F, mdl.Q, mdl.H, mdl.R, n, rng)
-        x0, P0 = np.zeros(mdl.n), 100.0 * np.eye(mdl.n)
-        makers = _paper_filters(mdl, x0, P0)
-        fp = _filterpy_factory(mdl.F, mdl.H, mdl.Q, mdl.R, x0, P0)
-        if fp is not None:
-            makers["filterpy_kf"] = fp
-        Zlist = [z.copy() for z in Z]
-        Zcol = [z.reshape(-1, 1).copy() for z in Z]
-        samples: dict[str, list[float]] = {k: [] for k in makers}
-        for name, make in makers.items():  # warm-up (imports, caches)
-            _time_pu(make, (Zcol if name == "filterpy_kf" else Zlist)[:50])
-        for _ in range(repeats):
-            for name, make in makers.items():
-                samples[name].append(_time_pu(make, Zcol if name == "filterpy_kf" else Zlist))
-        paper = {name: _summary(s, n) for name, s in samples.items()}
-        if fp is not None:
-            ref = paper["filterpy_kf"]
-            for name, d in paper.items():
-                if name != "filterpy_kf":
-                    d["ratio_to_filterpy"] = round(d["us"] / ref["us"], 3)
-            import filterpy
-
-            out["filterpy"] = f"filterpy {filterpy.__version__}"
-        else:
-            out["filterpy"] = "filterpy not installed"
-        paper["model"] = "paper eqs 8-11: 4 states, 2 measurements; white + 5% outliers"
+        paper, out["filterpy"] = _paper_model(rng, n, repeats)
         out["paper_model"] = paper
-
-        # ------------------------------------------------------------- in-loop model
-        dt = 1.0 / LOOP_PREDICT_HZ
-        # the bank's model: CV + IMU input-bias states (cvb), RTK-class R, radar height
-        lm = motion_model("cvb", 3, dt, q=1e-4, q_bias=2e-4, r=[1e-4, 1e-4, 0.0025])
-        _, Zl = _simulate(lm.F, lm.Q, lm.H, lm.R, n, rng)
-        Zl_list = [z.copy() for z in Zl]
-        x0l, P0l = np.zeros(lm.n), np.diag([1e-4, 4.0, 0.005] * 2 + [0.0025, 4.0, 0.005])
-        loop_makers = {
-            name: (lambda name=name: estimators.make(
-                name, F=lm.F, H=lm.H, Q=lm.Q, R=lm.R, x0=x0l, P0=P0l))
-            for name in ("kf", "mckf", "pca-kf", "pca-mckf")
-        }
-        lfp = _filterpy_factory(lm.F, lm.H, lm.Q, lm.R, x0l, P0l)
-        Zl_col = [z.reshape(-1, 1).copy() for z in Zl]
-        if lfp is not None:
-            loop_makers["filterpy_kf"] = lfp
-        n_upd = math.ceil(n / LOOP_FIX_EVERY)
-        ls: dict[str, dict[str, list[float]]] = {k: {"p": [], "pu": []} for k in loop_makers}
-        for _ in range(repeats):
-            for name, make in loop_makers.items():
-                data = Zl_col if name == "filterpy_kf" else Zl_list
-                ls[name]["p"].append(_time_loop(make, data, LOOP_FIX_EVERY, False))
-                ls[name]["pu"].append(_time_loop(make, data, LOOP_FIX_EVERY, True))
-        loop: dict[str, Any] = {}
-        for name, d in ls.items():
-            p_us = min(d["p"]) * 1e6 / n
-            u_us = max(min(d["pu"]) - min(d["p"]), 0.0) * 1e6 / n_upd
-            per_s = (min(d["pu"]) * 1e6 / n) * LOOP_PREDICT_HZ
-            loop[name.replace("-", "_")] = {
-                "predict_us": round(p_us, 2),
-                "update_us": round(u_us, 2),
-                "us_per_flight_s": round(per_s, 1),
-            }
-        if lfp is not None:
-            for name, d in loop.items():
-                if name != "filterpy_kf":
-                    ref = loop["filterpy_kf"]
-                    d["ratio_to_filterpy"] = round(d["us_per_flight_s"] / ref["us_per_flight_s"], 3)
-        loop["model"] = (f"3-D CVB (CV + input bias), 9 states, 3 measurements; predict "
-                         f"{LOOP_PREDICT_HZ:g} Hz, "
-                         f"fix every {LOOP_FIX_EVERY} ticks")
-        out["in_loop_model"] = loop
+        out["in_loop_model"] = _in_loop_model(rng, n, repeats)
         out["n"], out["repeats"] = n, repeats
     finally:
         if gc_was:
             gc.enable()
     return out
+
+
+def _paper_model(rng: np.random.Generator, n: int, repeats: int) -> tuple[dict[str, Any], str]:
+    """The paper model's filters (and filterpy's KF, if installed): their figures and what
+    filterpy was."""
+    mdl = paper_numerical_model()
+    _, Z = _simulate(mdl.F, mdl.Q, mdl.H, mdl.R, n, rng)
+    x0, P0 = np.zeros(mdl.n), 100.0 * np.eye(mdl.n)
+    makers = _paper_filters(mdl, x0, P0)
+    fp = _filterpy_factory(mdl.F, mdl.H, mdl.Q, mdl.R, x0, P0)
+    if fp is not None:
+        makers["filterpy_kf"] = fp
+    Zlist = [z.copy() for z in Z]
+    Zcol = [z.reshape(-1, 1).copy() for z in Z]
+    samples: dict[str, list[float]] = {k: [] for k in makers}
+    for name, make in makers.items():  # warm-up (imports, caches)
+        _time_pu(make, (Zcol if name == "filterpy_kf" else Zlist)[:50])
+    for _ in range(repeats):
+        for name, make in makers.items():
+            samples[name].append(_time_pu(make, Zcol if name == "filterpy_kf" else Zlist))
+    paper = {name: _summary(s, n) for name, s in samples.items()}
+    if fp is not None:
+        ref = paper["filterpy_kf"]
+        for name, d in paper.items():
+            if name != "filterpy_kf":
+                d["ratio_to_filterpy"] = round(d["us"] / ref["us"], 3)
+        import filterpy
+
+        note = f"filterpy {filterpy.__version__}"
+    else:
+        note = "filterpy not installed"
+    paper["model"] = "paper eqs 8-11: 4 states, 2 measurements; white + 5% outliers"
+    return paper, note
+
+
+def _in_loop_model(rng: np.random.Generator, n: int, repeats: int) -> dict[str, Any]:
+    """The in-loop model's four filters (and filterpy's KF): predict and update µs, µs per
+    flight second."""
+    dt = 1.0 / LOOP_PREDICT_HZ
+    # the bank's model: CV + IMU input-bias states (cvb), RTK-class R, radar height
+    lm = motion_model("cvb", 3, dt, q=1e-4, q_bias=2e-4, r=[1e-4, 1e-4, 0.0025])
+    _, Zl = _simulate(lm.F, lm.Q, lm.H, lm.R, n, rng)
+    Zl_list = [z.copy() for z in Zl]
+    x0l, P0l = np.zeros(lm.n), np.diag([1e-4, 4.0, 0.005] * 2 + [0.0025, 4.0, 0.005])
+    loop_makers = {
+        name: (lambda name=name: estimators.make(
+            name, F=lm.F, H=lm.H, Q=lm.Q, R=lm.R, x0=x0l, P0=P0l))
+        for name in ("kf", "mckf", "pca-kf", "pca-mckf")
+    }
+    lfp = _filterpy_factory(lm.F, lm.H, lm.Q, lm.R, x0l, P0l)
+    Zl_col = [z.reshape(-1, 1).copy() for z in Zl]
+    if lfp is not None:
+        loop_makers["filterpy_kf"] = lfp
+    n_upd = math.ceil(n / LOOP_FIX_EVERY)
+    ls: dict[str, dict[str, list[float]]] = {k: {"p": [], "pu": []} for k in loop_makers}
+    for _ in range(repeats):
+        for name, make in loop_makers.items():
+            data = Zl_col if name == "filterpy_kf" else Zl_list
+            ls[name]["p"].append(_time_loop(make, data, LOOP_FIX_EVERY, False))
+            ls[name]["pu"].append(_time_loop(make, data, LOOP_FIX_EVERY, True))
+    loop: dict[str, Any] = {}
+    for name, d in ls.items():
+        p_us = min(d["p"]) * 1e6 / n
+        u_us = max(min(d["pu"]) - min(d["p"]), 0.0) * 1e6 / n_upd
+        per_s = (min(d["pu"]) * 1e6 / n) * LOOP_PREDICT_HZ
+        loop[name.replace("-", "_")] = {
+            "predict_us": round(p_us, 2),
+            "update_us": round(u_us, 2),
+            "us_per_flight_s": round(per_s, 1),
+        }
+    if lfp is not None:
+        for name, d in loop.items():
+            if name != "filterpy_kf":
+                ref = loop["filterpy_kf"]
+                d["ratio_to_filterpy"] = round(d["us_per_flight_s"] / ref["us_per_flight_s"], 3)
+    loop["model"] = (f"3-D CVB (CV + input bias), 9 states, 3 measurements; predict "
+                     f"{LOOP_PREDICT_HZ:g} Hz, "
+                     f"fix every {LOOP_FIX_EVERY} ticks")
+    return loop
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -42,6 +42,7 @@ import dataclasses
 import heapq
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import shapely
@@ -506,6 +507,60 @@ def _plan_single(field: Field, swath: float, headland: float, direction_deg: flo
                  n_headland: int, turn: str) -> CoveragePlan:
     """:func:`plan_coverage` of a one-part field (arguments already checked)."""
     poly = field.polygon
+    centre, interior = _centre_and_interior(poly, swath, headland)
+    ang, sp, strips = _direction(poly, interior, centre, swath, direction_deg)
+    cells = _cells(strips)
+    n_legs = sum(len(c) for c in cells)
+    b = _Builder(poly, centre, swath, ang, turn)
+    # first cell entry (lowest strip, left end) → start corner
+    first_cell = min(range(len(cells)), key=lambda i: (cells[i][0][0], cells[i][0][1]))
+    y0, a0, _ = cells[first_cell][0]
+    target = b.world(a0, y0)
+
+    # --- headland laps: outer rings first, hole rings as greedy tasks ---
+    hole_rings: list[np.ndarray] = []
+    outer_rings: list[np.ndarray] = []
+    for k in range(n_headland):
+        g = _offset(poly, (k + 0.5) * swath)
+        for p in _polys(g):
+            p = p.simplify(0.01)
+            outer_rings.append(np.asarray(p.exterior.coords))
+            hole_rings.extend(np.asarray(r.coords) for r in p.interiors)
+    pos = target
+    for ring in outer_rings:
+        pos = b.lap(ring, pos)
+
+    # --- greedy over hole laps and cells ---
+    cell_done = [False] * len(cells)
+    hole_done = [False] * len(hole_rings)
+    if not b.segments:
+        pos = target
+    while not (all(cell_done) and all(hole_done)):
+        what, i, opt = _nearest_task(b, hole_rings, hole_done, cells, cell_done, pos)
+        if what == "hole":
+            hole_done[i] = True
+            pos = b.lap(hole_rings[i], pos)
+            continue
+        cell_done[i] = True
+        pos = b.cell(cells[i], *opt)
+
+    return CoveragePlan(
+        field=field,
+        segments=b.segments,
+        swath=float(swath),
+        spacing=float(sp),
+        headland=float(headland),
+        n_headland=n_headland,
+        direction_deg=float(ang),
+        legs=n_legs,
+        cells=len(cells),
+        interior=interior,
+    )
+
+
+def _centre_and_interior(poly: Polygon, swath: float, headland: float) -> tuple[Any, Any]:
+    """The field shrunk by half a swath (where pass centres may go) and by the headland
+    margin (where the legs go); ValueError when either is empty."""
     centre = _offset(poly, 0.5 * swath)
     if centre.is_empty or centre.area < 1e-6:
         c = polylabel(poly, tolerance=0.05)
@@ -520,146 +575,120 @@ def _plan_single(field: Field, swath: float, headland: float, direction_deg: flo
             f"no sweep leg fits: the field shrunk by the {headland:g} m headland margin is empty; "
             "reduce the headland or the swath"
         )
+    return centre, interior
 
-    # --- direction ---
-    if direction_deg is None:
-        best = None
-        for ang, prio in _candidate_angles(poly):
-            n_legs, sp, strips = _evaluate_direction(interior, centre, swath, ang)
-            if n_legs == 0:
-                continue
-            n_cells = len(_cells(strips))
-            key = (n_legs, n_cells, prio, ang)
-            if best is None or key < best[0]:
-                best = (key, ang, sp, strips)
-        if best is None:
-            raise ValueError("no sweep leg fits in the interior at any direction; "
-                             "reduce the headland or the swath")
-        _, ang, sp, strips = best
-    else:
+
+def _direction(poly: Polygon, interior: Any, centre: Any, swath: float,
+               direction_deg: float | None) -> tuple[float, float, Any]:
+    """The sweep direction (the given one, else the candidate with the fewest legs, then
+    cells), its pass spacing and strips."""
+    if direction_deg is not None:
         ang = float(direction_deg) % 180.0
         n_legs, sp, strips = _evaluate_direction(interior, centre, swath, ang)
         if n_legs == 0:
             raise ValueError(f"no sweep leg fits in the interior at direction {ang:g}°; "
                              "reduce the headland or the swath")
-    cells = _cells(strips)
-    n_legs = sum(len(c) for c in cells)
+        return ang, sp, strips
+    best = None
+    for ang, prio in _candidate_angles(poly):
+        n_legs, sp, strips = _evaluate_direction(interior, centre, swath, ang)
+        if n_legs == 0:
+            continue
+        n_cells = len(_cells(strips))
+        key = (n_legs, n_cells, prio, ang)
+        if best is None or key < best[0]:
+            best = (key, ang, sp, strips)
+    if best is None:
+        raise ValueError("no sweep leg fits in the interior at any direction; "
+                         "reduce the headland or the swath")
+    _, ang, sp, strips = best
+    return ang, sp, strips
 
-    # --- geometry helpers in the world frame ---
-    th = math.radians(ang)
-    ex = np.array([math.cos(th), math.sin(th)])
 
-    def world(x, y):
-        return _rot(np.array([[x, y]]), ang)[0]
+def _nearest_task(b: _Builder, hole_rings: list[np.ndarray], hole_done: list[bool],
+                  cells: list, cell_done: list[bool], pos: np.ndarray) -> tuple[str, int, Any]:
+    """The next task, greedily: the hole lap or cell entry (either end, either side) nearest
+    to ``pos``: ``("hole", i, None)`` or ``("cell", i, (reversed, from_left))``."""
+    best = None
+    for i, ring in enumerate(hole_rings):
+        if not hole_done[i]:
+            c = ring[:-1]
+            d = float(np.min(np.hypot(*(c - pos).T)))
+            if best is None or d < best[0]:
+                best = (d, "hole", i, None)
+    for i, cell in enumerate(cells):
+        if cell_done[i]:
+            continue
+        for rev in (False, True):
+            first = cell[-1] if rev else cell[0]
+            for left in (True, False):
+                e = b.world(first[1] if left else first[2], first[0])
+                d = float(np.hypot(*(e - pos)))
+                if best is None or d < best[0]:
+                    best = (d, "cell", i, (rev, left))
+    return best[1], best[2], best[3]
 
-    free = _Free(centre if isinstance(centre, Polygon) else poly.buffer(-0.05))
-    allowed = poly.buffer(-0.25 * swath)
-    shapely.prepare(allowed)
 
-    segments: list[Segment] = []
+class _Builder:
+    """The plan's segments as they are laid down, in the world frame, with the transits
+    between them (around holes) and the turns between legs."""
 
-    def add(kind, pts, spray):
+    def __init__(self, poly: Polygon, centre: Any, swath: float, ang: float, turn: str):
+        self.ang, self.turn = ang, turn
+        th = math.radians(ang)
+        self.ex = np.array([math.cos(th), math.sin(th)])
+        self.free = _Free(centre if isinstance(centre, Polygon) else poly.buffer(-0.05))
+        self.allowed = poly.buffer(-0.25 * swath)
+        shapely.prepare(self.allowed)
+        self.overrun = 0.5 * swath
+        self.segments: list[Segment] = []
+
+    def world(self, x: float, y: float) -> np.ndarray:
+        return _rot(np.array([[x, y]]), self.ang)[0]
+
+    def add(self, kind: str, pts: Any, spray: bool) -> None:
         pts = np.asarray(pts, float)
         if len(pts) >= 2 and float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) > 1e-6:
             keep = np.ones(len(pts), bool)
             keep[1:] = np.hypot(*np.diff(pts, axis=0).T) > 1e-9
-            segments.append(Segment(kind, pts[keep], spray))
+            self.segments.append(Segment(kind, pts[keep], spray))
 
-    def goto(p):
-        if segments:
-            a = segments[-1].points[-1]
+    def goto(self, p: np.ndarray) -> None:
+        if self.segments:
+            a = self.segments[-1].points[-1]
             if np.hypot(*(a - p)) > 1e-6:
-                add("transit", free.path(a, p), False)
+                self.add("transit", self.free.path(a, p), False)
 
-    # first cell entry (lowest strip, left end) → start corner
-    first_cell = min(range(len(cells)), key=lambda i: (cells[i][0][0], cells[i][0][1]))
-    y0, a0, _ = cells[first_cell][0]
-    target = world(a0, y0)
+    def lap(self, ring: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """A headland lap of ``ring`` from the point nearest ``pos``; where it ends."""
+        lap = _ring_from(ring, pos, self.overrun)
+        self.goto(lap[0])
+        self.add("headland", lap, True)
+        return lap[-1]
 
-    # --- headland laps: outer rings first, hole rings as greedy tasks ---
-    hole_rings: list[np.ndarray] = []
-    outer_rings: list[np.ndarray] = []
-    for k in range(n_headland):
-        g = _offset(poly, (k + 0.5) * swath)
-        for p in _polys(g):
-            p = p.simplify(0.01)
-            outer_rings.append(np.asarray(p.exterior.coords))
-            hole_rings.extend(np.asarray(r.coords) for r in p.interiors)
-    overrun = 0.5 * swath
-    pos = target
-    for ring in outer_rings:
-        lap = _ring_from(ring, pos, overrun)
-        goto(lap[0])
-        add("headland", lap, True)
-        pos = lap[-1]
-
-    # --- greedy over hole laps and cells ---
-    cell_done = [False] * len(cells)
-    hole_done = [False] * len(hole_rings)
-    if not segments:
-        pos = target
-    while not (all(cell_done) and all(hole_done)):
-        best = None
-        for i, ring in enumerate(hole_rings):
-            if not hole_done[i]:
-                c = ring[:-1]
-                d = float(np.min(np.hypot(*(c - pos).T)))
-                if best is None or d < best[0]:
-                    best = (d, "hole", i, None)
-        for i, cell in enumerate(cells):
-            if cell_done[i]:
-                continue
-            for rev in (False, True):
-                first = cell[-1] if rev else cell[0]
-                for left in (True, False):
-                    e = world(first[1] if left else first[2], first[0])
-                    d = float(np.hypot(*(e - pos)))
-                    if best is None or d < best[0]:
-                        best = (d, "cell", i, (rev, left))
-        _, what, i, opt = best
-        if what == "hole":
-            hole_done[i] = True
-            lap = _ring_from(hole_rings[i], pos, overrun)
-            if segments:
-                goto(lap[0])
-            add("headland", lap, True)
-            pos = lap[-1]
-            continue
-        cell_done[i] = True
-        rev, left = opt
-        legs = cells[i][::-1] if rev else cells[i]
+    def cell(self, cell: list, rev: bool, left: bool) -> np.ndarray:
+        """The legs of a cell (from its last strip when ``rev``, starting at the left end when
+        ``left``), joined by turns; where they end."""
+        ex = self.ex
+        legs = cell[::-1] if rev else cell
         fwd = left
         prev_end = None
         for yc, a, b in legs:
-            p0 = world(a, yc) if fwd else world(b, yc)
-            p1 = world(b, yc) if fwd else world(a, yc)
+            p0 = self.world(a, yc) if fwd else self.world(b, yc)
+            p1 = self.world(b, yc) if fwd else self.world(a, yc)
             if prev_end is None:
-                if segments:
-                    goto(p0)
+                self.goto(p0)
             else:
                 h = -ex if fwd else ex  # heading of the previous leg
                 tpts = None
-                if turn == "arc":
+                if self.turn == "arc":
                     tpts = _semicircle_turn(prev_end, p0, h)
-                    if not allowed.covers(LineString(tpts)):
+                    if not self.allowed.covers(LineString(tpts)):
                         tpts = None
                 if tpts is None:
-                    tpts = free.path(prev_end, p0)
-                add("turn", tpts, False)
-            add("leg", [p0, p1], True)
+                    tpts = self.free.path(prev_end, p0)
+                self.add("turn", tpts, False)
+            self.add("leg", [p0, p1], True)
             prev_end = p1
             fwd = not fwd
-        pos = prev_end
-
-    return CoveragePlan(
-        field=field,
-        segments=segments,
-        swath=float(swath),
-        spacing=float(sp),
-        headland=float(headland),
-        n_headland=n_headland,
-        direction_deg=float(ang),
-        legs=n_legs,
-        cells=len(cells),
-        interior=interior,
-    )
+        return prev_end

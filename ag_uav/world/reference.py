@@ -189,6 +189,20 @@ class Reference:
 
     # ------------------------------------------------------------------ geometry
     def _build_geometry(self, takeoff, z0, climb_speed, stop_angle, max_dev):
+        """The path: its vertices, the lines and rounded corners between them (stops where
+        the turn is sharper than ``stop_angle`` or the path climbs), the dense arc-length grid
+        and the heading along it."""
+        P, eseg, ecap = self._vertices(takeoff, z0, climb_speed)
+        prims = self._primitives(P, eseg, ecap, stop_angle, max_dev)
+        # dense arc-length samples; every primitive contributes both end points (duplicates at
+        # junctions carry the tangent/curvature of each side). Sized first, then written.
+        self._dense(prims)
+        self.length = float(self._s[-1])
+        self._heading()
+
+    def _vertices(self, takeoff, z0, climb_speed) -> tuple[np.ndarray, list[int], list[float]]:
+        """The path's vertices (take-off, the plan's points at altitude, the landing), each
+        edge's plan segment (−1: climb or descent) and speed cap."""
         plan = self.plan
         pts: list[np.ndarray] = []
         eseg: list[int] = []
@@ -218,7 +232,11 @@ class Reference:
             pts.append(np.array([pts[-1][0], pts[-1][1], self._z_land]))
             eseg.append(-1)
             ecap.append(self._land_speed)
-        P = np.array(pts)
+        return np.array(pts), eseg, ecap
+
+    def _primitives(self, P: np.ndarray, eseg: list[int], ecap: list[float], stop_angle: float,
+                    max_dev: float) -> list[tuple]:
+        """Lines and corner arcs through the vertices ``P`` (sets :attr:`n_stops`)."""
         n = len(P)
         if n < 2:
             raise ValueError("plan path is degenerate")
@@ -252,13 +270,10 @@ class Reference:
             cur = P[i] + t * u_out
         prims.append(("line", cur, P[-1], eseg[-1], ecap[-1], True))
         self.n_stops = n_stops
+        return prims
 
-        # dense arc-length samples; every primitive contributes both end points (duplicates at
-        # junctions carry the tangent/curvature of each side). Sized first, then written.
-        self._dense(prims)
-        self.length = float(self._s[-1])
-
-        # heading along s (unwrapped), jump-free part and the jumps at stops
+    def _heading(self) -> None:
+        """The heading along s (unwrapped): its jump-free part and the jumps at stops."""
         txy = self._T[:, :2]
         nrm = np.hypot(txy[:, 0], txy[:, 1])
         psi = np.full(len(nrm), np.nan)

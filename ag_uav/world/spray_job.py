@@ -326,21 +326,32 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
     cut by ``sim.max_time_s``), so its end is not the job's end: a sortie reaching it must still
     keep its way home at every tick, or it is cut as anywhere else.
     """
+    base = base_point(cfg, field, plan.start)
+    dt = 1.0 / cfg.sim.control_hz
+    walk = _walk(ref, base, liquid_l_per_m(cfg), dt)
+    cuts = _cuts(cfg, _energy_model(cfg, dry_mass_kg, z_land), walk, dt, truncated)
+    sp = cfg.spray
+    job = SprayJob(base_xy=base, sorties=[], fill_l=sp.tank_l, dry_mass_kg=dry_mass_kg,
+                   service_s=sp.service_s)
+    if len(cuts) == 1:
+        job.sorties.append(Sortie(0, 0.0, ref.duration, None, cuts[0][1], cuts[0][2] / 3600.0,
+                                  False))
+        ref.spray_job = job
+        return ref, job
+    pieces = _sortie_references(cfg, plan, ref, field, walk[0], cuts, job, z_land)
+    return ChainedReference(pieces, sp.service_s, job), job
+
+
+def _energy_model(cfg: Config, dry_mass_kg: float, z_land: float) -> tuple[Any, Any]:
+    """``(t_way, power)``: the predicted time (s) of a way between the base and a point d metres
+    away (transit plus a descent or climb and dwells), and the electrical power (W, planning
+    margin included) with ``litres_left`` in the tank."""
     sp, b, m = cfg.spray, cfg.battery, cfg.mission
     k_p = rotor_power_coeff(b.figure_of_merit, b.rotor_diameter_m, b.air_density_kgm3)
     rho = sp.density_kg_per_l
-    fill = sp.tank_l
-    lpm = liquid_l_per_m(cfg)
-    base = base_point(cfg, field, plan.start)
-    dt = 1.0 / cfg.sim.control_hz
-    e_cap = b.capacity_wh * 3600.0  # J
-    e_use = e_cap * (1.0 - b.reserve_frac)
     v_tr = sp.transit_speed_mps
     a_max = m.accel_max_mps2
     climb = 1.5  # Reference's default climb speed (m/s)
-
-    seg, litres_cum, d_home = _walk(ref, base, lpm, dt)
-    n = len(seg)
 
     def t_way(d: np.ndarray | float) -> np.ndarray | float:
         """Predicted time (s) of a transit of d metres plus a descent or climb and dwells."""
@@ -351,13 +362,27 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
         mass = dry_mass_kg + np.asarray(litres_left) * rho
         return (4.0 * k_p * (mass * G / 4.0) ** 1.5 + b.avionics_w) * (1.0 + b.plan_margin)
 
+    return t_way, power
+
+
+def _cuts(cfg: Config, energy: tuple[Any, Any], walk: tuple[np.ndarray, np.ndarray, np.ndarray],
+          dt: float, truncated: bool) -> list[tuple[int, float, float]]:
+    """Where the sorties end: (tick of the cut, litres, energy J) each, the last at the end of
+    the job; ``walk`` from :func:`_walk`, ``energy`` from :func:`_energy_model`."""
+    sp, b = cfg.spray, cfg.battery
+    t_way, power = energy
+    seg, litres_cum, d_home = walk
+    fill = sp.tank_l
+    e_use = b.capacity_wh * 3600.0 * (1.0 - b.reserve_frac)  # J
+    n = len(seg)
     i0 = 0
     cuts: list[tuple[int, float, float]] = []  # (tick of the cut, litres, energy J)
     e_pre = 0.0
     while True:
         if len(cuts) >= sp.max_sorties:
             raise ConfigError(f"spray.max_sorties = {sp.max_sorties}: the job needs more sorties "
-                              f"(one {fill:g} L tank sprays {fill / lpm:.0f} m of track)")
+                              f"(one {fill:g} L tank sprays {fill / liquid_l_per_m(cfg):.0f} m "
+                              "of track)")
         left = fill - (litres_cum[i0:] - litres_cum[i0])
         p = power(np.maximum(left, 0.0))
         e_run = e_pre + np.concatenate([[0.0], np.cumsum(p[:-1] * dt)])
@@ -366,7 +391,7 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
         # the job's end: no way home needed (the pilot collects the drone where it hovers)
         if (ok.all() if truncated else left[-1] >= 0.0 and e_run[-1] <= e_use):
             cuts.append((n - 1, float(left[0] - left[-1]), float(e_run[-1])))
-            break
+            return cuts
         bad = int(np.argmin(ok))  # first tick that fails
         k = i0 + bad - 1
         while k > i0 and seg[k] < 0:
@@ -382,16 +407,17 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
         i0 = k
         # next sortie: climb at the base and transit out to the cut point, at the full tank
         e_pre = float(power(fill) * t_way(d_home[k]))
-    job = SprayJob(base_xy=base, sorties=[], fill_l=fill, dry_mass_kg=dry_mass_kg,
-                   service_s=sp.service_s)
-    if len(cuts) == 1:
-        job.sorties.append(Sortie(0, 0.0, ref.duration, None, cuts[0][1], cuts[0][2] / 3600.0,
-                                  False))
-        ref.spray_job = job
-        return ref, job
 
-    # build one Reference per sortie on a sub-plan (transit in, the plan from the resume point to
-    # the cut point, transit out, a short nudge that turns it towards the next resume point)
+
+def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray,
+                       cuts: list[tuple[int, float, float]], job: SprayJob,
+                       z_land: float) -> list[tuple[Reference, np.ndarray]]:
+    """One Reference per sortie on a sub-plan (transit in, the plan from the resume point to
+    the cut point, transit out, a short nudge that turns it towards the next resume point), and
+    each sub-plan segment's segment of ``plan``; appends the sorties to ``job``."""
+    sp, m = cfg.spray, cfg.mission
+    dt = 1.0 / cfg.sim.control_hz
+    base = job.base_xy
     segs = plan.segments
     pieces: list[tuple[Reference, np.ndarray]] = []
     resume: tuple[int, np.ndarray] | None = None  # (segment, point)
@@ -408,46 +434,20 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
             first_pts = None
         else:
             j_from, q = resume
-            start_xy = land_xy
-            sub.append(_seg("transit", transit_path(start_xy, q[:2], field, clear), False))
+            sub.append(_seg("transit", transit_path(land_xy, q[:2], field, clear), False))
             gmap.append(SEG_TRANSIT)
-            speeds.append(v_tr)
+            speeds.append(sp.transit_speed_mps)
             _, first_pts = _split_at(segs[j_from].points, q)
-        if last:
-            j_to, last_pts = len(segs) - 1, None
-            cut_q = None
-        else:
-            j_to = int(seg[k])
-            cut_q = ref.sample_all(np.array([k * dt]))["pos"][0, :2].copy()
-        for j in range(j_from, j_to + 1):
-            pts = segs[j].points
-            if j == j_from and first_pts is not None:
-                pts = first_pts
-            if j == j_to and not last:
-                if j == j_from and first_pts is not None:
-                    pts, _ = _split_at(first_pts, cut_q)
-                else:
-                    pts, _ = _split_at(pts, cut_q)
-                last_pts = pts
-            if len(pts) >= 2 and float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) > 1e-6:
-                sub.append(dataclasses.replace(segs[j], points=np.asarray(pts, float)))
-                gmap.append(j)
-                speeds.append(None)
+        j_to = len(segs) - 1 if last else int(seg[k])
+        cut_q = None if last else ref.sample_all(np.array([k * dt]))["pos"][0, :2].copy()
+        last_pts = _plan_part(segs, j_from, j_to, first_pts, cut_q, sub, gmap, speeds)
         if not last:
             end_xy = np.asarray(last_pts[-1], float)
-            # transit home, then a 0.5 m nudge towards the next resume point so that the drone
-            # lands (and takes off again) facing the way it will fly
-            u = end_xy - base
-            nu = float(np.hypot(*u))
-            u = u / nu if nu > 1e-9 else np.array([1.0, 0.0])
-            land_xy = base + 0.5 * u
-            sub.append(_seg("transit", transit_path(end_xy, base, field, clear), False))
-            sub.append(_seg("transit", [base, land_xy], False))
-            gmap += [SEG_TRANSIT, SEG_TRANSIT]
-            speeds += [v_tr, 0.5]
+            land_xy = _home_legs(end_xy, base, field, clear, sp.transit_speed_mps, sub, gmap,
+                                 speeds)
             resume = (j_to, end_xy)
         subplan = dataclasses.replace(plan, segments=sub)
-        r = Reference(subplan, speed=m.speed_mps, altitude=m.altitude_m, a_max=a_max,
+        r = Reference(subplan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
                       takeoff=cfg.sim.takeoff or si > 0,
                       hover_time=cfg.sim.hover_after_s if last else 0.0,
                       rate=cfg.sim.control_hz, landing=not last, z_land=z_land,
@@ -457,4 +457,42 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
                                   None if last else [float(v) for v in cut_q], litres,
                                   e_j / 3600.0, not last))
         t_acc += r.duration + sp.service_s
-    return ChainedReference(pieces, sp.service_s, job), job
+    return pieces
+
+
+def _plan_part(segs: list, j_from: int, j_to: int, first_pts: Any, cut_q: Any, sub: list,
+               gmap: list[int], speeds: list[float | None]) -> Any:
+    """Append the plan's segments ``j_from``..``j_to`` to a sortie's sub-plan, the first from
+    ``first_pts`` (the resume point on), the last up to ``cut_q`` (None: whole); the points of
+    the cut segment (None when not cut)."""
+    last_pts = None
+    for j in range(j_from, j_to + 1):
+        pts = segs[j].points
+        if j == j_from and first_pts is not None:
+            pts = first_pts
+        if j == j_to and cut_q is not None:
+            if j == j_from and first_pts is not None:
+                pts, _ = _split_at(first_pts, cut_q)
+            else:
+                pts, _ = _split_at(pts, cut_q)
+            last_pts = pts
+        if len(pts) >= 2 and float(np.sum(np.hypot(*np.diff(pts, axis=0).T))) > 1e-6:
+            sub.append(dataclasses.replace(segs[j], points=np.asarray(pts, float)))
+            gmap.append(j)
+            speeds.append(None)
+    return last_pts
+
+
+def _home_legs(end_xy: np.ndarray, base: np.ndarray, field, clear: float, v_tr: float,
+               sub: list, gmap: list[int], speeds: list[float | None]) -> np.ndarray:
+    """Append the transit home and a 0.5 m nudge towards the next resume point (so that the
+    drone lands, and takes off again, facing the way it will fly); the landing point."""
+    u = end_xy - base
+    nu = float(np.hypot(*u))
+    u = u / nu if nu > 1e-9 else np.array([1.0, 0.0])
+    land_xy = base + 0.5 * u
+    sub.append(_seg("transit", transit_path(end_xy, base, field, clear), False))
+    sub.append(_seg("transit", [base, land_xy], False))
+    gmap += [SEG_TRANSIT, SEG_TRANSIT]
+    speeds += [v_tr, 0.5]
+    return land_xy
