@@ -336,7 +336,6 @@ PARAMETERS_LEFT: dict[str, int] = {
     "ag_uav/navigation/bearing.py::BearingFeedback.__init__": 14,
     "ag_uav/navigation/ins_feedback.py::_outputs": 26,
     "ag_uav/navigation/ins_feedback.py::_tick_in": 19,
-    "ag_uav/record/encode.py::encode_ticks": 14,
     "ag_uav/world/deposition.py::DepositionBatch.step_rows": 11,
     "ag_uav/world/deposition.py::_engine_step": 17,
     "ag_uav/world/deposition.py::_row_step_args": 12,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from ag_uav.record import wire as R
-from ag_uav.record.encode import EST, POSE, REF, STATE, TF, encode_flat, encode_ticks
+from ag_uav.record.encode import EST, POSE, REF, STATE, TF, TickFormat, encode_flat, encode_ticks
 from ag_uav.record.runlog import RunLog
 
 
@@ -57,9 +57,10 @@ def test_block_messages_equal_the_one_at_a_time_encoders(seed):
     mid = R.WORLD2 + R.str_field(3, "base_link")
     out = np.zeros(200_000, np.uint8)
     starts, kinds, tns = (np.zeros(400, np.int64) for _ in range(3))
-    m = encode_ticks(rows, nm, ctrl_cols, st[0], st[1], R.POSE_TMPL, R.POSE_SLOTS, R.TF_TMPL,
+    fmt = TickFormat(nm, ctrl_cols, st[0], st[1], R.POSE_TMPL, R.POSE_SLOTS, R.TF_TMPL,
                      np.frombuffer(mid, np.uint8).copy(),
-                     np.frombuffer(R.POSE_MID, np.uint8).copy(), out, starts, kinds, tns)
+                     np.frombuffer(R.POSE_MID, np.uint8).copy())
+    m = encode_ticks(rows, fmt, out, starts, kinds, tns)
     want = []
     for row in rows:
         tn, mask = R.ns(float(row[0])), int(row[1])

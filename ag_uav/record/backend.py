@@ -103,7 +103,7 @@ class Backend:
         self._channels: list[Any] = []
         self._logs: list[Any] = []
         self._flats: dict[int, tuple[Any, ...]] = {}
-        self._tick: tuple[Any, ...] = ()
+        self._tick: Any = None  # the tick rows' TickFormat
         self._pend: list[tuple[int, bytes, int]] = []
         self._out = np.zeros(0, dtype=np.uint8)
         self._idx = np.zeros((3, 1), dtype=np.int64)
@@ -137,9 +137,11 @@ class Backend:
     def _tickfmt(self, n_motors: int, ctrl_cols: np.ndarray, st_tmpl: np.ndarray,
                  st_slots: np.ndarray, pose_tmpl: np.ndarray, tf_tmpl: np.ndarray,
                  kind_lids: list[int]) -> None:
+        from .encode import TickFormat
+
         _, slots, head, tf_head = self._pose
-        self._tick = (n_motors, ctrl_cols, st_tmpl, st_slots, pose_tmpl, slots, tf_tmpl,
-                      tf_head, head)
+        self._tick = TickFormat(n_motors, ctrl_cols, st_tmpl, st_slots, pose_tmpl, slots,
+                                tf_tmpl, tf_head, head)
         self._kind_lids = kind_lids
         self._row_bytes = _ROW_POSE_BYTES + len(st_tmpl)
 
@@ -263,9 +265,7 @@ class Backend:
             self._out = np.empty(2 * n * self._row_bytes, dtype=np.uint8)
             self._idx = np.empty((3, 8 * n + 1), dtype=np.int64)
         out, (starts, kinds, tns) = self._out, self._idx
-        nm, cc, st, sl, pose, psl, tf, tf_mid, pose_mid = self._tick
-        m = encode_ticks(r, nm, cc, st, sl, pose, psl, tf, tf_mid, pose_mid, out, starts,
-                         kinds, tns)
+        m = encode_ticks(r, self._tick, out, starts, kinds, tns)
         s = starts[:m + 1].tolist()
         buf = out[:s[-1]].tobytes()
         ids = self._kind_lids

@@ -18,6 +18,8 @@ errors, speed) are computed here per row, in the order of the state schema.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .._jit import njit
@@ -105,20 +107,37 @@ def _state_values(row: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
         v[37 + n_motors + j] = row[ctrl_cols[j]]
 
 
-@njit(cache=True)
-def encode_ticks(rows: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
-                 st_tmpl: np.ndarray, st_slots: np.ndarray, pose_tmpl: np.ndarray,
-                 pose_slots: np.ndarray, tf_tmpl: np.ndarray, tf_head: np.ndarray,
-                 pose_head: np.ndarray, out: np.ndarray, starts: np.ndarray,
-                 kinds: np.ndarray, tns: np.ndarray) -> int:
-    """Encode ``rows`` into ``out``: message ``m`` is ``out[starts[m]:starts[m + 1]]`` of kind
-    ``kinds[m]`` (:data:`TF` ...) at log time ``tns[m]`` ns.  Returns the message count.
+class TickFormat(NamedTuple):
+    """How tick rows are encoded (:func:`encode_ticks`): ``n_motors`` rotor columns after the
+    head, the raw columns of the ctrl keys (``ctrl_cols``), the state message's byte template
+    and value slots (:func:`ag_uav.record.wire.template`), the pose's, the FrameTransform's
+    translation and rotation fields (``tf_tmpl``), and the constant bytes between the timestamp
+    and the pose (frame ids and the pose's field header) of a transform (``tf_head``) and of a
+    pose (``pose_head``).  An empty template: that kind is off."""
 
-    ``tf_head`` / ``pose_head``: the constant bytes between the timestamp and the pose (frame
-    ids and the pose's field header); ``tf_tmpl`` is the FrameTransform's translation and
-    rotation fields.  A row's group mask (column 1): 1 ``/tf``, 2 the poses, 4 the state,
-    8 the estimate columns hold one (``pose_est`` then too); a kind whose template is empty
-    (its group off) is skipped."""
+    n_motors: int
+    ctrl_cols: np.ndarray
+    st_tmpl: np.ndarray
+    st_slots: np.ndarray
+    pose_tmpl: np.ndarray
+    pose_slots: np.ndarray
+    tf_tmpl: np.ndarray
+    tf_head: np.ndarray
+    pose_head: np.ndarray
+
+
+@njit(cache=True)
+def encode_ticks(rows: np.ndarray, fmt: TickFormat, out: np.ndarray, starts: np.ndarray,
+                 kinds: np.ndarray, tns: np.ndarray) -> int:
+    """Encode ``rows`` into ``out`` as ``fmt`` says: message ``m`` is
+    ``out[starts[m]:starts[m + 1]]`` of kind ``kinds[m]`` (:data:`TF` ...) at log time
+    ``tns[m]`` ns.  Returns the message count.
+
+    A row's group mask (column 1): 1 ``/tf``, 2 the poses, 4 the state, 8 the estimate columns
+    hold one (``pose_est`` then too); a kind whose template is empty (its group off) is
+    skipped."""
+    (n_motors, ctrl_cols, st_tmpl, st_slots, pose_tmpl, pose_slots, tf_tmpl, tf_head,
+     pose_head) = fmt
     f8 = np.empty(1)
     b8 = f8.view(np.uint8)
     vals = np.empty(len(st_slots))

@@ -441,16 +441,17 @@ def warm_encoders() -> None:
     global _WARMED
     if _WARMED:
         return
-    from .encode import encode_flat, encode_poses, encode_ticks
+    from .encode import TickFormat, encode_flat, encode_poses, encode_ticks
 
     t0 = time.perf_counter()
     rows = np.zeros((2, TICK_HEAD + 4))
     rows[:, 1] = 15.0
     out, idx = np.empty(4096, dtype=np.uint8), np.empty((3, 17), dtype=np.int64)
     st = template([b"\x09"] * 37 + [b"\x12\x20"] + [b"\x09"] * 3)
-    encode_ticks(rows, 4, np.zeros(0, dtype=np.intp), st[0], st[1], POSE_TMPL, POSE_SLOTS,
-                 TF_TMPL, np.frombuffer(WORLD2, dtype=np.uint8).copy(),
-                 np.frombuffer(POSE_MID, dtype=np.uint8).copy(), out, idx[0], idx[1], idx[2])
+    fmt = TickFormat(4, np.zeros(0, dtype=np.intp), st[0], st[1], POSE_TMPL, POSE_SLOTS,
+                     TF_TMPL, np.frombuffer(WORLD2, dtype=np.uint8).copy(),
+                     np.frombuffer(POSE_MID, dtype=np.uint8).copy())
+    encode_ticks(rows, fmt, out, idx[0], idx[1], idx[2])
     flat = template([b"\x09"] * 3)
     encode_flat(np.zeros((2, 3)), flat[0], flat[1], out, idx[0])
     encode_poses(np.zeros((2, 4)), POSE_TMPL, POSE_SLOTS,
