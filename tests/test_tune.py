@@ -51,6 +51,8 @@ def tiny(**kw) -> dict:
     ({"params": {"controller.type": {"lo": 0.0, "hi": 1.0}}}, "numeric"),
     ({"scenarios": [{"kind": "spin"}]}, "kind"),
     ({"scenarios": [{"kind": "step", "axis": "w"}]}, "axis"),
+    ({"scenarios": [{"kind": "step", "axis": {"a": 1}}]}, "scenarios[0].axis = { a = 1 }"),
+    ({"scenarios": [{"kind": ["step"]}]}, "scenarios[0].kind = [\"step\"]"),
     ({"scenarios": [{"kind": "step"}, {"kind": "step"}]}, "duplicate"),
     ({"optimizer_options": {"c1": 2.0}}, "optimizer_options.c1"),
     ({"pop": 1}, "pop"),

@@ -19,6 +19,7 @@ from .load import (
     default_config,
     load_config,
     parse_set_items,
+    toml_repr,
 )
 from .schema import (
     CONTROLLER_TYPES,
@@ -51,4 +52,5 @@ __all__ = [
     "ControllerConfig", "EstimatorConfig", "GpsConfig", "ImuConfig", "LogConfig", "MissionConfig",
     "SimConfig", "SprayConfig", "VehicleConfig", "WindConfig", "config_from_dict",
     "parse_set_items", "load_config", "default_config", "config_toml_with_comments",
+    "toml_repr",
 ]

@@ -27,7 +27,7 @@ from .schema import (
 )
 
 __all__ = ["config_from_dict", "parse_set_items", "load_config", "default_config",
-           "config_toml_with_comments"]
+           "config_toml_with_comments", "toml_repr"]
 
 
 # ------------------------------------------------------------------------------------ parsing
@@ -45,8 +45,9 @@ def _type_name(tp: Any, choices: tuple | None = None) -> str:
             bool: "true or false"}.get(tp, str(tp))
 
 
-def _fmt(v: Any) -> str:
-    """``v`` as TOML would write it (strings quoted and escaped, tables inline), for messages."""
+def toml_repr(v: Any) -> str:
+    """``v`` as TOML would write it (strings quoted and escaped, tables inline, cut at 120
+    characters), for the one-line messages of a bad value."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int | float):
@@ -57,6 +58,9 @@ def _fmt(v: Any) -> str:
         except Exception:  # not TOML-shaped (a Python API caller's object): its repr
             s = repr(v)
     return s if len(s) <= 120 else s[:117] + "..."
+
+
+_fmt = toml_repr  # the messages' short name
 
 
 def _is_kind(tp: Any, v: Any) -> bool:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ...config import Config, ConfigError, config_from_dict
+from ...config import toml_repr as _fmt
 from ..batch import (
     file_digest,
     get_dotted,
@@ -107,14 +108,6 @@ class TuneSpec:
         return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
-def _fmt(v: Any) -> str:
-    if isinstance(v, str):
-        return f'"{v}"'
-    if isinstance(v, dict):
-        return "{" + ", ".join(f"{k} = {_fmt(x)}" for k, x in v.items()) + "}"
-    return repr(v)
-
-
 def _num(v: Any, where: str, *, gt: float | None = None, ge: float | None = None) -> float:
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
         raise ConfigError(f"{where} = {_fmt(v)}: expected a finite number")
@@ -152,7 +145,7 @@ def _parse_scenario(i: int, s: Any) -> Scenario:
     allowed = {"step": {"kind", "name", "axis", "size", "duration", "t_step", "wind_speed",
                         "weight", "overshoot_max", "overshoot_penalty"},
                "mission": {"kind", "name", "max_time_s", "weight"}}
-    if kind not in allowed:
+    if not isinstance(kind, str) or kind not in allowed:
         raise ConfigError(f"{where}.kind = {_fmt(kind)}: allowed: step, mission")
     for k in s:
         if k not in allowed[kind]:
@@ -161,7 +154,7 @@ def _parse_scenario(i: int, s: Any) -> Scenario:
     weight = _num(s.get("weight", 1.0), f"{where}.weight", ge=0.0)
     if kind == "step":
         ax = s.get("axis", "x")
-        if ax not in AXES:
+        if not isinstance(ax, str) or ax not in AXES:
             raise ConfigError(f"{where}.axis = {_fmt(ax)}: allowed: x, y, z")
         size = _num(s.get("size", 1.0), f"{where}.size")
         if size == 0.0:
