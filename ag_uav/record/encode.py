@@ -7,9 +7,9 @@ message is protobuf wire format:
 
 * ``foxglove.FrameTransform`` / ``PoseInFrame``: the timestamp (field 1, a varint pair, the only
   part whose length varies), the frame ids, then the 67-byte pose (translation or position, then
-  the rotation quaternion x, y, z, w), as :func:`ag_uav.record.runlog.enc_pose_in_frame` writes
+  the rotation quaternion x, y, z, w), as :func:`ag_uav.record.wire.enc_pose_in_frame` writes
   one at a time;
-* ``ag_uav.DroneState``: a :class:`~ag_uav.record.runlog.FlatSchema` (every field a double at a
+* ``ag_uav.DroneState``: a :class:`~ag_uav.record.wire.FlatSchema` (every field a double at a
   fixed offset): the template's bytes with the row's values written into their slots.
 
 The derived values (roll, pitch and yaw in degrees by the ZYX convention, tracking and estimate
@@ -187,7 +187,7 @@ def encode_ticks(rows: np.ndarray, fmt: TickFormat, out: np.ndarray, starts: np.
 @njit(cache=True)
 def encode_flat(rows: np.ndarray, tmpl: np.ndarray, slots: np.ndarray, out: np.ndarray,
                 starts: np.ndarray) -> None:
-    """Each row of ``rows`` (its values in a :class:`~ag_uav.record.runlog.FlatSchema`'s
+    """Each row of ``rows`` (its values in a :class:`~ag_uav.record.wire.FlatSchema`'s
     order) as one message: ``out[starts[r]:starts[r + 1]]`` (all the same size)."""
     f8 = np.empty(1)
     b8 = f8.view(np.uint8)

@@ -47,7 +47,7 @@ from typing import Any
 
 import numpy as np
 
-from ..world.field import ecef_to_geodetic, enu_frame
+from ..world.geodesy import ecef_to_geodetic, enu_frame
 
 __all__ = [
     "DOSE_BANDS",
@@ -106,7 +106,7 @@ def fix_color(fix_type: str | None) -> tuple[float, float, float, float]:
 class GeoFrame:
     """The run's local ENU frame on the WGS-84 ellipsoid: ``origin`` = (lat °, lon °, h m).
     Converts with :mod:`ag_uav.world.field`'s law (:func:`~ag_uav.world.field.enu_frame`,
-    :func:`~ag_uav.world.field.ecef_to_geodetic`), the frame's constants computed once."""
+    :func:`~ag_uav.world.geodesy.ecef_to_geodetic`), the frame's constants computed once."""
 
     def __init__(self, origin: Sequence[float]):
         lat, lon = float(origin[0]), float(origin[1])

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 from shapely.geometry import LineString
 
-from .field import enu_to_lonlat
+from .geodesy import enu_to_lonlat
 from .plan import CoveragePlan
 
 __all__ = [
