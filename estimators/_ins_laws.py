@@ -45,7 +45,7 @@ __all__ = ["kf_fuse", "kf_fuse_b", "kf_work_size", "mckf_fuse", "mckf_fuse_b", "
 SOURCE = "row functions of estimators.kf / mckf / pca"
 
 
-@njit
+@njit(inline="always")
 def kf_fuse_b(dx, P, R, H, nu, buf):
     a0, a1, a2, a3, a4, a5, a6, a7, a8 = kf_work_in(buf, dx.shape[0], nu.shape[0])
     return _kf_row(dx, P, R, H, nu, a0, a1, a2, a3, a4, a5, a6, a7, a8)
@@ -56,7 +56,7 @@ def kf_fuse(dx, P, R, H, nu):
     return kf_fuse_b(dx, P, R, H, nu, np.empty(kf_work_size(dx.shape[0], nu.shape[0])))
 
 
-@njit
+@njit(inline="always")
 def mckf_fuse_b(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast, buf, kxa, kya):
     w = mckf_work_in(buf, dx.shape[0], nu.shape[0])
     if apar[0] > 0.0:

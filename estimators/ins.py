@@ -508,34 +508,46 @@ def h_radar(x, prm, z, nu, H):
 
 # ------------------------------------------------------------------------ one measurement
 @njit
-def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg, fb):
-    """δx = 0, the KF or MCKF update of (H, R, ν), then inject and reset; returns the NIS
-    (not finite: not fused).  The MCKF kernels are fixed (mpar's kx, ky) or adaptive (apar[0]
-    = 1: from the base widths σ and the row's ŝ, dg[_D_S2]); diag C_y goes to dg[_D_WY:]."""
+def _fuse_kf(x, P, H, nu, Rm, fb):
+    """δx = 0, the KF update of (H, R, ν), then inject and reset; returns the NIS (not finite:
+    not fused)."""
     dx = fb[_W_DX:_W_DX + 15]
     dx[:] = 0.0
-    wk = fb[_W_KF:]  # the KF or MCKF work (estimators.mckf.mckf_work_in)
-    if use_mckf:
-        v = mckf_fuse_b(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F],
-                        mpar[_M_F:_M_A], ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG],
-                        mpar[_M_SIG:_NMPAR], dg[_D_S2:_D_S2 + 1],
-                        wk, fb[_W_KX:_W_KX + 15],
-                        fb[_W_KY:_W_KY + nu.shape[0]])
-    else:
-        v = kf_fuse_b(dx, P, Rm, H, nu, wk)
+    v = kf_fuse_b(dx, P, Rm, H, nu, fb[_W_KF:])
+    if np.isfinite(v):
+        _inject_reset(x, P, dx, fb[_W_V:_W_V + 8])
+    return v
+
+
+@njit(inline="always")
+def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg, fb):
+    """The KF (:func:`_fuse_kf`) or the MCKF update of (H, R, ν) from δx = 0, then inject and
+    reset; returns the NIS (not finite: not fused).  The MCKF kernels are fixed (mpar's kx,
+    ky) or adaptive (apar[0] = 1: from the base widths σ and the row's ŝ, dg[_D_S2]); diag C_y
+    goes to dg[_D_WY:]."""
+    if not use_mckf:
+        return _fuse_kf(x, P, H, nu, Rm, fb)
+    dx = fb[_W_DX:_W_DX + 15]
+    dx[:] = 0.0
+    wk = fb[_W_KF:]  # the MCKF work (estimators.mckf.mckf_work_in)
+    v = mckf_fuse_b(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F],
+                    mpar[_M_F:_M_A], ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG],
+                    mpar[_M_SIG:_NMPAR], dg[_D_S2:_D_S2 + 1],
+                    wk, fb[_W_KX:_W_KX + 15],
+                    fb[_W_KY:_W_KY + nu.shape[0]])
     if np.isfinite(v):
         _inject_reset(x, P, dx, fb[_W_V:_W_V + 8])
     return v
 
 
 @njit
-def _diag_R(var, o, Rm):
-    """Rm = diag(var[o], …) (m × m, off-diagonal zero)."""
+def _diag_R(var, Rm):
+    """Rm = diag(var[0], …) (m × m, off-diagonal zero)."""
     m = Rm.shape[0]
     for a in range(m):
         for b in range(m):
             Rm[a, b] = 0.0
-        Rm[a, a] = var[o + a]
+        Rm[a, a] = var[a]
     return Rm
 
 
@@ -583,7 +595,7 @@ def _reset_pos(x, P, z, Rm, prm, S3):
         P[i, i] = Rm[i, i]
 
 
-@njit
+@njit(inline="always")
 def _fuse_pos(x, P, rec, rule, prm, mpar, ipar, ints, dg, fb):
     """The fix's position through the gate (:func:`gate_ratio`; every rule's fix, the PCA'd
     one for rules 2-3), then the rule's law.  Once neither a position nor a velocity has been
@@ -596,7 +608,7 @@ def _fuse_pos(x, P, rec, rule, prm, mpar, ipar, ints, dg, fb):
     if not np.isfinite(z[0] + z[1] + z[2]):
         return
     _h_gnss_pos(x, prm, z, nu3, H3, S3)
-    Rm = _diag_R(rec, _Q_V, R3)
+    Rm = _diag_R(rec[_Q_V:_Q_V + 3], R3)
     core = ints[_I_CORE]
     if gate_ratio(P, H3, Rm, nu3, prm[_P_GATE]) > 1.0:
         ints[_I_GREJP] += 1
@@ -616,7 +628,7 @@ def _fuse_pos(x, P, rec, rule, prm, mpar, ipar, ints, dg, fb):
     ints[_I_NGNSS] += 1
 
 
-@njit
+@njit(inline="always")
 def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg, fb):
     """A GNSS record: position (:func:`_fuse_pos`), then velocity and heading (KF, through the
     same gate), each present when finite; ``fb``: the scratch (``_W_*``).  The record's NIS
@@ -632,31 +644,28 @@ def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg, fb):
     zv = rec[_Q_Z + 3:_Q_Z + 6]
     if np.isfinite(zv[0] + zv[1] + zv[2]):
         _h_gnss_vel(x, w, prm, zv, nu3, H3, S3, wv)
-        Rv = _diag_R(rec, _Q_V + 3, R3)
+        Rv = _diag_R(rec[_Q_V + 3:_Q_V + 6], R3)
         if gate_ratio(P, H3, Rv, nu3, gate) > 1.0:
             ints[_I_GREJV] += 1
         else:
-            dg[_D_NISV] = _fuse_one(x, P, H3, nu3, Rv, False, mpar, ipar,
-                                    ints[_I_MST:_I_MST + 4], dg, fb)
+            dg[_D_NISV] = _fuse_kf(x, P, H3, nu3, Rv, fb)
             ints[_I_GLASTV] = ints[_I_CORE]
     zy = rec[_Q_Z + 6:_Q_Z + 7]
     if np.isfinite(zy[0]):
         if _h_heading(x, prm, zy, nu1, H1, S3):
-            Ry = _diag_R(rec, _Q_V + 6, R1)
+            Ry = _diag_R(rec[_Q_V + 6:_Q_V + 7], R1)
             if gate_ratio(P, H1, Ry, nu1, gate) > 1.0:
                 ints[_I_GREJY] += 1
             else:
-                dg[_D_NISY] = _fuse_one(x, P, H1, nu1, Ry, False, mpar, ipar,
-                                        ints[_I_MST:_I_MST + 4], dg, fb)
+                dg[_D_NISY] = _fuse_kf(x, P, H1, nu1, Ry, fb)
 
 
-@njit
+@njit(inline="always")
 def _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg, fb):
     H1, nu1, R1 = _w2(fb, _W_H1, 1, 15), fb[_W_NU1:_W_NU1 + 1], _w2(fb, _W_R1, 1, 1)
     S3 = _w3(fb, _W_S3)
     if np.isfinite(rec[_Q_Z]) and _h_radar(x, prm, rec[_Q_Z:_Q_Z + 1], nu1, H1, S3):
-        v = _fuse_one(x, P, H1, nu1, _diag_R(rec, _Q_V, R1), False, mpar, ipar,
-                      ints[_I_MST:_I_MST + 4], dg, fb)
+        v = _fuse_kf(x, P, H1, nu1, _diag_R(rec[_Q_V:_Q_V + 1], R1), fb)
         dg[_D_NISR] = v
         if np.isfinite(v):
             dg[_D_RSUM] += v
@@ -676,7 +685,7 @@ def _any_due(ints, mq):
     return False
 
 
-@njit
+@njit(inline="always")
 def _fuse_due(x, P, ib, ints, mq, dg, mpar, ipar, rule, prm, fb):
     """Fuse every queued record whose tick ≤ the core tick (in arrival order); compact."""
     core = ints[_I_CORE]
@@ -702,8 +711,9 @@ def _fuse_due(x, P, ib, ints, mq, dg, mpar, ipar, rule, prm, fb):
 
 
 @njit
-def _enqueue(ints, mq, prm, kind, age_ticks, z, o, nz, zp, var, ov):
-    """Append a record (tick = now − age in delayed mode, now at receipt)."""
+def _enqueue(ints, mq, prm, kind, age_ticks, z, zp, var):
+    """Append a record (tick = now − age in delayed mode, now at receipt): the values ``z``,
+    their variances ``var`` (as long), the PCA'd position ``zp``."""
     n = ints[_I_QN]
     if n >= mq.shape[0]:
         ints[_I_QDROP] += 1
@@ -713,9 +723,9 @@ def _enqueue(ints, mq, prm, kind, age_ticks, z, o, nz, zp, var, ov):
         rec[k] = np.nan
     rec[_Q_T] = ints[_I_NOW] - (age_ticks if prm[_P_DELAYED] > 0.0 else 0)
     rec[_Q_K] = kind
-    for k in range(nz):
-        rec[_Q_Z + k] = z[o + k]
-        rec[_Q_V + k] = var[ov + k]
+    for k in range(z.shape[0]):
+        rec[_Q_Z + k] = z[k]
+        rec[_Q_V + k] = var[k]
     for k in range(3):
         rec[_Q_ZP + k] = zp[k]
     ints[_I_QN] = n + 1
@@ -776,17 +786,18 @@ def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm,
         if has_g and any_pca and np.isfinite(g[1] + g[2] + g[3]):
             pca_row(pbuf[v], pcs[v], g[1:4], Nw, L, r, mode, zp)
         else:
-            zp[:] = nan3
+            for k in range(3):  # a loop: numba's slice assignment compiles slowly
+                zp[k] = nan3[k]
         has_r = np.isfinite(rin[v, 0])
         for i in range(v * nr, (v + 1) * nr):
             if predict:
                 _advance(xc[i], P[i], ib[i], ints[i], imu[v], prm, M, S3, w)
             if has_g:
                 age = int(round(g[0] / dt))
-                _enqueue(ints[i], mq[i], prm, 0.0, age, g, 1, 7, zp, g, 8)
+                _enqueue(ints[i], mq[i], prm, 0.0, age, g[1:8], zp, g[8:15])
             if has_r:
-                _enqueue(ints[i], mq[i], prm, 1.0, int(round(rin[v, 2] / dt)), rin[v], 0, 1,
-                         nan3, rin[v], 1)
+                _enqueue(ints[i], mq[i], prm, 1.0, int(round(rin[v, 2] / dt)), rin[v, 0:1],
+                         nan3, rin[v, 1:2])
             if _any_due(ints[i], mq[i]):
                 _fuse_due(xc[i], P[i], ib[i], ints[i], mq[i], dg[i], mpar[i], ipar[i],
                           rules[i], prm, fb)

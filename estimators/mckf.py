@@ -304,7 +304,7 @@ def _recover(x, P, R, H, nu, PHT, Si, K, xo, fpar, ipar, ist, Pa, PaHT, Sa, Sai)
     return 0
 
 
-@njit(inline="always")
+@njit
 def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
     """The MCKF update of one filter in place (x, P); returns the KF NIS of the innovation (not
     finite: no fix, x and P untouched).
@@ -376,7 +376,7 @@ def adapt_kernel_row(nis, m, sigma, lam, clip, st, kx, ky):
     return f
 
 
-@njit
+@njit(inline="always")
 def mckf_adaptive_update_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, fpar, ipar, ist, wy,
                              w):
     """:func:`mckf_update_row` with the adaptive bandwidth: the KF NIS of the innovation feeds

@@ -796,7 +796,7 @@ def _nees15(x, P, tr, q_t, dth, e, L, y):  # pragma: no cover
         e[6 + a] = dth[a]
         e[9 + a] = tr[23 + a] - x[10 + a]
         e[12 + a] = tr[26 + a] - x[13 + a]
-    return quad_inv(P, e, 15, L, y)
+    return quad_inv(P, e, e.shape[0], L, y)
 
 
 @njit(cache=True)
@@ -903,7 +903,9 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
             if at_fix:
                 tr = ring[i, (k0[i] + core[row]) % B]
                 rc = nees[i, rec, :, j]
-                Pc[:, :] = P[row]
+                for a in range(15):  # loops: numba's slice assignment compiles slowly
+                    for b in range(15):
+                        Pc[a, b] = P[row, a, b]
                 for a in range(3):
                     Pc[a, a] += cvar[i, a]
                 rc[_N_NEES15] = _nees15(xc[row], Pc, tr, q_t, dth, e, L, y)
@@ -913,5 +915,5 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
                 rc[_N_GATE] = nis[row, 8]
                 if np.isfinite(e[0]):   # each 3-state block alone (3 dof)
                     for b in range(5):
-                        rc[_N_POS + b] = quad_inv_at(Pc, e, 3 * b, 3, L, y, Pb, eb)
+                        rc[_N_POS + b] = quad_inv_at(Pc, e, 3 * b, eb.shape[0], L, y, Pb, eb)
                     rc[_N_NOTPD] = 0.0 if np.isfinite(rc[_N_NEES15]) else 1.0

@@ -142,7 +142,7 @@ def encode_ticks(rows: np.ndarray, fmt: TickFormat, out: np.ndarray, starts: np.
     b8 = f8.view(np.uint8)
     vals = np.empty(len(st_slots))
     pv = np.empty(7)
-    o = 0
+    o = np.int64(0)  # not the literal 0: the callees compile once, for int64
     m = 0
     for r in range(rows.shape[0]):
         row = rows[r]
@@ -191,7 +191,7 @@ def encode_flat(rows: np.ndarray, tmpl: np.ndarray, slots: np.ndarray, out: np.n
     order) as one message: ``out[starts[r]:starts[r + 1]]`` (all the same size)."""
     f8 = np.empty(1)
     b8 = f8.view(np.uint8)
-    o = 0
+    o = np.int64(0)  # not the literal 0: the callees compile once, for int64
     for r in range(rows.shape[0]):
         starts[r] = o
         o = _fill(out, o, tmpl, slots, rows[r], f8, b8)
@@ -208,7 +208,7 @@ def encode_poses(rows: np.ndarray, pose_tmpl: np.ndarray, pose_slots: np.ndarray
     f8 = np.empty(1)
     b8 = f8.view(np.uint8)
     pv = np.array((0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
-    o = 0
+    o = np.int64(0)  # not the literal 0: the callees compile once, for int64
     for r in range(rows.shape[0]):
         tn = int(np.rint(rows[r, 0] * 1e9))
         tn = tn if tn > 0 else 0

@@ -490,12 +490,14 @@ def _splat_part(par, st, buf, scratch, vol, mx, my, vx, vy, drift) -> None:
 
 
 @njit(cache=True)
-def _flush(par, st, buf, scratch, force: bool) -> None:
+def _flush(par, st, buf, scratch, force: float) -> None:
     """The window's landing law, once: every class's footprint (:func:`_class_footprint`) at
     the window's litre-weighted mean input row, convolved with each nozzle's release moments
     (the along-track smear exactly); the wake and the escaped part of each (nozzle, class)
     splatted (nozzles merged where the class's kernel is wider than ``merge_ratio`` × the
-    nozzle radius); airborne and evaporated volume booked."""
+    nozzle radius); airborne and evaporated volume booked.  ``force`` > 0: the wide parts
+    too (:func:`_flush_wide`; a float, not a bool constant, so that every caller shares one
+    compiled kernel)."""
     m_n, k_n = int(par[P_M]), int(par[P_K])
     o_fr = int(par[P_O_FRAC])
     merge_r = par[P_MERGE] * par[P_NOZC]
@@ -560,10 +562,10 @@ def _flush(par, st, buf, scratch, force: bool) -> None:
 
 
 @njit(cache=True)
-def _flush_wide(par, st, buf, scratch, force: bool) -> None:
+def _flush_wide(par, st, buf, scratch, force: float) -> None:
     """The wide parts (nozzles merged) gather over several windows: each is splatted once the
     spread of its release points reaches a quarter of its kernel's variance (so the smear
-    changes its shape by little; mean and variance are matched exactly), or when ``force``
+    changes its shape by little; mean and variance are matched exactly), or when ``force`` > 0
     (the end, the vehicle crossing the grid's edge)."""
     m_n, k_n = int(par[P_M]), int(par[P_K])
     drift = st[S_INSIDE] > 0.5
@@ -577,7 +579,7 @@ def _flush_wide(par, st, buf, scratch, force: bool) -> None:
         px = max(st[q + 3] / w - mx * mx, 0.0)
         py = max(st[q + 4] / w - my * my, 0.0)
         kx, ky = st[q + 5] / w, st[q + 6] / w
-        if force or px + py >= WIDE_SPREAD * (kx + ky):
+        if force > 0.0 or px + py >= WIDE_SPREAD * (kx + ky):
             _splat_part(par, st, buf, scratch, w, mx, my, px + kx, py + ky, drift)
             for j in range(NSLOW):
                 st[q + j] = 0.0
@@ -814,7 +816,7 @@ def _row_step(par, inp, st, buf, dt: float, scratch) -> float:
               and inp[1] >= y0 and inp[1] <= y0 + par[P_NY] * cell)
     flag = 1.0 if inside else 0.0
     if flag != st[S_INSIDE] and st[S_INSIDE] >= 0.0:
-        _flush(par, st, buf, scratch, True)       # what was released inside stays inside
+        _flush(par, st, buf, scratch, 1.0)       # what was released inside stays inside
     st[S_INSIDE] = flag
     if litres > 0.0:
         st[S_SPRAYED] += litres
@@ -825,9 +827,9 @@ def _row_step(par, inp, st, buf, dt: float, scratch) -> float:
         st[S_TICKS] += 1.0
         st[S_LX], st[S_LY] = inp[0], inp[1]
         if st[S_TRAVEL] >= par[P_FLUSHD] or st[S_TICKS] >= par[P_FLUSHT]:
-            _flush(par, st, buf, scratch, False)
+            _flush(par, st, buf, scratch, 0.0)
     elif st[S_PENDING] > 0.0:
-        _flush(par, st, buf, scratch, False)
+        _flush(par, st, buf, scratch, 0.0)
     return litres
 
 
@@ -895,7 +897,7 @@ def _levels_sum(buf, offs, nx, ny, nlev, f, out) -> None:
 @njit(cache=True)
 def _batch_flush(par, st, buf, scratch) -> None:
     for n in range(st.shape[0]):
-        _flush(par, st[n], buf[n], scratch, True)
+        _flush(par, st[n], buf[n], scratch, 1.0)
 
 
 # ------------------------------------------------------------------------------ grid and params
