@@ -29,14 +29,15 @@ A non-finite NIS means "not fused" (``dx``, ``P`` untouched).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ._jit import njit
 from .kf import kf_update_row as _kf_row
 from .kf import kf_work_in, kf_work_size
-from .mckf import mckf_adaptive_update_row as _mckf_adaptive_row
+from .mckf import adapt_kernels_row, mckf_work_in, mckf_work_size
 from .mckf import mckf_update_row as _mckf_row
-from .mckf import mckf_work_in, mckf_work_size
 from .pca import pca_row
 
 __all__ = ["kf_fuse", "kf_fuse_b", "kf_work_size", "mckf_fuse", "mckf_fuse_b", "mckf_work_size",
@@ -59,9 +60,11 @@ def kf_fuse(dx, P, R, H, nu):
 @njit(inline="always")
 def mckf_fuse_b(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast, buf, kxa, kya):
     w = mckf_work_in(buf, dx.shape[0], nu.shape[0])
-    if apar[0] > 0.0:
-        return _mckf_adaptive_row(dx, P, R, H, nu, sig, apar[1], apar[2], ast, kxa, kya, fpar,
-                                  ipar, ist, wy, w)
+    if apar[0] > 0.0:  # mckf_adaptive_update_row's law, with one call of the MCKF row
+        v = adapt_kernels_row(dx, P, R, H, nu, sig, apar[1], apar[2], ast, kxa, kya, w)
+        if not math.isfinite(v):
+            return v
+        kx, ky = kxa, kya
     return _mckf_row(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, w)
 
 

@@ -157,19 +157,19 @@ _W_KX, _W_KY, _W_M, _W_S3P, _W_W, _W_ZP, _W_NAN, _W_KF = 124, 139, 142, 277, 322
 _NW = _W_KF + 621 + 777  # mckf_work_size(15, 3): kf_work_size(15, 3) = 621, then the MCKF part
 
 
-@njit(inline="always")
+@njit
 def _w2(fb, o, r, c):
     """The (r, c) view of the scratch at offset o."""
     return fb[o:o + r * c].reshape((r, c))
 
 
-@njit(inline="always")
+@njit
 def _w3(fb, o):
     """The (3, 3, 3) view of the scratch at offset o."""
     return fb[o:o + 27].reshape((3, 3, 3))
 
 
-@njit(inline="always")
+@njit
 def _w3p(fb, o):
     """The (5, 3, 3) view of the scratch at offset o."""
     return fb[o:o + 45].reshape((5, 3, 3))

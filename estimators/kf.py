@@ -293,7 +293,7 @@ def kf_work(n, m):
     return kf_work_in(np.empty(kf_work_size(n, m)), n, m)
 
 
-@njit
+@njit(inline="always")
 def kf_update_row(x, P, R, H, z, nu, PHT, S, Si, K, xo, A, AP, KR):
     """The KF update of one filter in place (x, P); returns its NIS.  A non-finite NIS (NaN/inf
     in z, or an overflow) is "no fix": x and P are then untouched.  After a fix the work

@@ -102,9 +102,9 @@ from .kf import (
     kf_work_size,
 )
 
-__all__ = ["MCKF", "REL_PIVOT", "RECOVERY", "adapt_kernel_row", "kernel_coeffs",
-           "mckf_adaptive_update_row", "mckf_fixed_point_row", "mckf_update_row", "mckf_work",
-           "mckf_work_in", "mckf_work_size", "safe_cholesky"]
+__all__ = ["MCKF", "REL_PIVOT", "RECOVERY", "adapt_kernel_row", "adapt_kernels_row",
+           "kernel_coeffs", "mckf_adaptive_update_row", "mckf_fixed_point_row", "mckf_update_row",
+           "mckf_work", "mckf_work_in", "mckf_work_size", "safe_cholesky"]
 
 #: Cholesky pivots below REL_PIVOT · P̄_jj send P̄ to :func:`safe_cholesky` (jitter), so the
 #: positive-definite decision never hinges on the summation order
@@ -377,15 +377,26 @@ def adapt_kernel_row(nis, m, sigma, lam, clip, st, kx, ky):
 
 
 @njit(inline="always")
+def adapt_kernels_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, w):
+    """The first half of :func:`mckf_adaptive_update_row`: the KF NIS of the innovation
+    (into the work ``w``) feeds :func:`adapt_kernel_row` (state ``ast``, base widths
+    ``sigma``; kx, ky are written).  Returns the NIS (not finite: no fix, nothing changes)."""
+    v = kf_innovation_row(x, P, R, H, z, w[0], w[1], w[2], w[3])
+    if math.isfinite(v):
+        adapt_kernel_row(v, z.shape[0], sigma, lam, clip, ast, kx, ky)
+    return v
+
+
+@njit
 def mckf_adaptive_update_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, fpar, ipar, ist, wy,
                              w):
     """:func:`mckf_update_row` with the adaptive bandwidth: the KF NIS of the innovation feeds
     :func:`adapt_kernel_row` (state ``ast``, base widths ``sigma``; kx, ky are written), then the
-    MCKF update with those kernels.  Returns the NIS (not finite: no fix, nothing changes)."""
-    v = kf_innovation_row(x, P, R, H, z, w[0], w[1], w[2], w[3])
+    MCKF update with those kernels (:func:`adapt_kernels_row`, then :func:`mckf_update_row`).
+    Returns the NIS (not finite: no fix, nothing changes)."""
+    v = adapt_kernels_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, w)
     if not math.isfinite(v):
         return v
-    adapt_kernel_row(v, z.shape[0], sigma, lam, clip, ast, kx, ky)
     return mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w)
 
 

@@ -78,7 +78,8 @@ def _fill(out: np.ndarray, o: int, tmpl: np.ndarray, slots: np.ndarray, vals: np
 @njit(cache=True)
 def _state_values(row: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
                   v: np.ndarray) -> None:
-    """``ag_uav.DroneState``'s values of one tick row, in the schema's field order."""
+    """``ag_uav.DroneState``'s values of one tick row, in the schema's field order (element by
+    element: numba's slice assignment compiles its error message's string formatting)."""
     px, py, pz = row[2], row[3], row[4]
     qw, qx, qy, qz = row[5], row[6], row[7], row[8]
     vx, vy, vz = row[9], row[10], row[11]
@@ -86,20 +87,24 @@ def _state_values(row: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
     deg = 57.29577951308232
     sp = 2.0 * (qw * qy - qz * qx)
     sp = 1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp)
-    v[0:10] = (row[0], px, py, pz, vx, vy, vz,
-               np.arctan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy)) * deg,
-               np.arcsin(sp) * deg,
-               np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)) * deg)
-    v[10:17] = row[12:19]  # reference x, y, z, vx, vy, vz, yaw
+    head = (row[0], px, py, pz, vx, vy, vz,
+            np.arctan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy)) * deg,
+            np.arcsin(sp) * deg,
+            np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)) * deg)
+    for j in range(10):
+        v[j] = head[j]
+    for j in range(7):  # reference x, y, z, vx, vy, vz, yaw
+        v[10 + j] = row[12 + j]
     est = (int(row[1]) & 8) != 0
     for j in range(6):
         v[17 + j] = row[19 + j] if est else np.nan
     ex, ey, ez = px - rx, py - ry, pz - rz
     eh = np.sqrt(ex * ex + ey * ey)
     dx, dy, dz = v[17] - px, v[18] - py, v[19] - pz
-    v[23:35] = (ex, ey, ez, eh, np.sqrt(eh * eh + ez * ez), dx, dy, dz,
-                np.sqrt(dx * dx + dy * dy), np.sqrt(vx * vx + vy * vy + vz * vz), row[28],
-                row[25])
+    errs = (ex, ey, ez, eh, np.sqrt(eh * eh + ez * ez), dx, dy, dz,
+            np.sqrt(dx * dx + dy * dy), np.sqrt(vx * vx + vy * vy + vz * vz), row[28], row[25])
+    for j in range(12):
+        v[23 + j] = errs[j]
     v[35], v[36] = row[26], row[27]
     for j in range(n_motors):
         v[37 + j] = row[29 + j]
