@@ -61,7 +61,7 @@ def kf_fuse(dx, P, R, H, nu):
 def mckf_fuse_b(dx, P, R, H, nu, kx, ky, fpar, ipar, ist, wy, apar, sig, ast, buf, kxa, kya):
     w = mckf_work_in(buf, dx.shape[0], nu.shape[0])
     if apar[0] > 0.0:  # mckf_adaptive_update_row's law, with one call of the MCKF row
-        v = adapt_kernels_row(dx, P, R, H, nu, sig, apar[1], apar[2], ast, kxa, kya, w)
+        v = adapt_kernels_row(dx, P, R, H, nu, w, (sig, apar[1], apar[2], ast, kxa, kya))
         if not math.isfinite(v):
             return v
         kx, ky = kxa, kya

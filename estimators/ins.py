@@ -164,15 +164,9 @@ def _w2(fb, o, r, c):
 
 
 @njit
-def _w3(fb, o):
-    """The (3, 3, 3) view of the scratch at offset o."""
-    return fb[o:o + 27].reshape((3, 3, 3))
-
-
-@njit
-def _w3p(fb, o):
-    """The (5, 3, 3) view of the scratch at offset o."""
-    return fb[o:o + 45].reshape((5, 3, 3))
+def _w3(fb, o, n):
+    """The (n, 3, 3) view of the scratch at offset o."""
+    return fb[o:o + 9 * n].reshape((n, 3, 3))
 
 
 # ------------------------------------------------------------------------ quaternion algebra
@@ -509,8 +503,7 @@ def h_radar(x, prm, z, nu, H):
 # ------------------------------------------------------------------------ one measurement
 @njit
 def _fuse_kf(x, P, H, nu, Rm, fb):
-    """δx = 0, the KF update of (H, R, ν), then inject and reset; returns the NIS (not finite:
-    not fused)."""
+    """δx = 0, the KF update of (H, R, ν), inject and reset; the NIS (not finite: not fused)."""
     dx = fb[_W_DX:_W_DX + 15]
     dx[:] = 0.0
     v = kf_fuse_b(dx, P, Rm, H, nu, fb[_W_KF:])
@@ -521,20 +514,17 @@ def _fuse_kf(x, P, H, nu, Rm, fb):
 
 @njit(inline="always")
 def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg, fb):
-    """The KF (:func:`_fuse_kf`) or the MCKF update of (H, R, ν) from δx = 0, then inject and
-    reset; returns the NIS (not finite: not fused).  The MCKF kernels are fixed (mpar's kx,
-    ky) or adaptive (apar[0] = 1: from the base widths σ and the row's ŝ, dg[_D_S2]); diag C_y
-    goes to dg[_D_WY:]."""
+    """:func:`_fuse_kf` or the MCKF update of (H, R, ν) from δx = 0, inject and reset.  The MCKF
+    kernels are fixed (mpar's kx, ky) or adaptive (apar[0] = 1: from the base widths σ and the
+    row's ŝ, dg[_D_S2]); diag C_y goes to dg[_D_WY:]."""
     if not use_mckf:
         return _fuse_kf(x, P, H, nu, Rm, fb)
     dx = fb[_W_DX:_W_DX + 15]
     dx[:] = 0.0
-    wk = fb[_W_KF:]  # the MCKF work (estimators.mckf.mckf_work_in)
-    v = mckf_fuse_b(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F],
-                    mpar[_M_F:_M_A], ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG],
-                    mpar[_M_SIG:_NMPAR], dg[_D_S2:_D_S2 + 1],
-                    wk, fb[_W_KX:_W_KX + 15],
-                    fb[_W_KY:_W_KY + nu.shape[0]])
+    v = mckf_fuse_b(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F], mpar[_M_F:_M_A],
+                    ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG], mpar[_M_SIG:_NMPAR],
+                    dg[_D_S2:_D_S2 + 1], fb[_W_KF:], fb[_W_KX:_W_KX + 15],
+                    fb[_W_KY:_W_KY + nu.shape[0]])  # fb[_W_KF:]: mckf_work_in's work
     if np.isfinite(v):
         _inject_reset(x, P, dx, fb[_W_V:_W_V + 8])
     return v
@@ -603,7 +593,7 @@ def _fuse_pos(x, P, rec, rule, prm, mpar, ipar, ints, dg, fb):
     fix resets the position (:func:`_reset_pos`); while velocities are fused the position's
     variance grows and the gate itself re-admits the fixes that fit it."""
     H3, nu3, R3 = _w2(fb, _W_H3, 3, 15), fb[_W_NU3:_W_NU3 + 3], _w2(fb, _W_R3, 3, 3)
-    S3 = _w3(fb, _W_S3)
+    S3 = _w3(fb, _W_S3, 3)
     z = rec[_Q_ZP:_Q_ZP + 3] if rule >= 2 else rec[_Q_Z:_Q_Z + 3]
     if not np.isfinite(z[0] + z[1] + z[2]):
         return
@@ -635,7 +625,7 @@ def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg, fb):
     (``dg``) are NaN for a part absent or rejected."""
     H3, nu3, R3 = _w2(fb, _W_H3, 3, 15), fb[_W_NU3:_W_NU3 + 3], _w2(fb, _W_R3, 3, 3)
     H1, nu1, R1 = _w2(fb, _W_H1, 1, 15), fb[_W_NU1:_W_NU1 + 1], _w2(fb, _W_R1, 1, 1)
-    S3, wv = _w3(fb, _W_S3), fb[_W_V:_W_V + 8]
+    S3, wv = _w3(fb, _W_S3, 3), fb[_W_V:_W_V + 8]
     for k in range(3):
         dg[_D_NISP + k] = np.nan
     dg[_D_GATE] = np.nan
@@ -663,7 +653,7 @@ def _fuse_gnss(x, P, rec, w, rule, prm, mpar, ipar, ints, dg, fb):
 @njit(inline="always")
 def _fuse_radar(x, P, rec, prm, mpar, ipar, ints, dg, fb):
     H1, nu1, R1 = _w2(fb, _W_H1, 1, 15), fb[_W_NU1:_W_NU1 + 1], _w2(fb, _W_R1, 1, 1)
-    S3 = _w3(fb, _W_S3)
+    S3 = _w3(fb, _W_S3, 3)
     if np.isfinite(rec[_Q_Z]) and _h_radar(x, prm, rec[_Q_Z:_Q_Z + 1], nu1, H1, S3):
         v = _fuse_kf(x, P, H1, nu1, _diag_R(rec[_Q_V:_Q_V + 1], R1), fb)
         dg[_D_NISR] = v
@@ -712,8 +702,7 @@ def _fuse_due(x, P, ib, ints, mq, dg, mpar, ipar, rule, prm, fb):
 
 @njit
 def _enqueue(ints, mq, prm, kind, age_ticks, z, zp, var):
-    """Append a record (tick = now − age in delayed mode, now at receipt): the values ``z``,
-    their variances ``var`` (as long), the PCA'd position ``zp``."""
+    """Append a record (tick = now − age in delayed mode, now at receipt)."""
     n = ints[_I_QN]
     if n >= mq.shape[0]:
         ints[_I_QDROP] += 1
@@ -776,7 +765,7 @@ def _step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm,
     N = xc.shape[0]
     NV = imu.shape[0]
     nr = N // NV
-    M, S3, w = _w2(fb, _W_M, 9, 15), _w3p(fb, _W_S3P), fb[_W_W:_W_W + 16]
+    M, S3, w = _w2(fb, _W_M, 9, 15), _w3(fb, _W_S3P, 5), fb[_W_W:_W_W + 16]
     zp, nan3 = fb[_W_ZP:_W_ZP + 3], fb[_W_NAN:_W_NAN + 3]
     dt = prm[_P_DT]
     Nw, L, r, mode, any_pca = popt[0], popt[1], popt[2], popt[3], popt[4]

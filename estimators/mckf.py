@@ -377,10 +377,12 @@ def adapt_kernel_row(nis, m, sigma, lam, clip, st, kx, ky):
 
 
 @njit(inline="always")
-def adapt_kernels_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, w):
+def adapt_kernels_row(x, P, R, H, z, w, ad):
     """The first half of :func:`mckf_adaptive_update_row`: the KF NIS of the innovation
-    (into the work ``w``) feeds :func:`adapt_kernel_row` (state ``ast``, base widths
-    ``sigma``; kx, ky are written).  Returns the NIS (not finite: no fix, nothing changes)."""
+    (into the work ``w``) feeds :func:`adapt_kernel_row` with ``ad`` = (base widths σ, λ,
+    clip, state ŝ, kx, ky; kx, ky are written).  Returns the NIS (not finite: no fix, nothing
+    changes)."""
+    sigma, lam, clip, ast, kx, ky = ad
     v = kf_innovation_row(x, P, R, H, z, w[0], w[1], w[2], w[3])
     if math.isfinite(v):
         adapt_kernel_row(v, z.shape[0], sigma, lam, clip, ast, kx, ky)
@@ -394,7 +396,7 @@ def mckf_adaptive_update_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, fpar,
     :func:`adapt_kernel_row` (state ``ast``, base widths ``sigma``; kx, ky are written), then the
     MCKF update with those kernels (:func:`adapt_kernels_row`, then :func:`mckf_update_row`).
     Returns the NIS (not finite: no fix, nothing changes)."""
-    v = adapt_kernels_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, w)
+    v = adapt_kernels_row(x, P, R, H, z, w, (sigma, lam, clip, ast, kx, ky))
     if not math.isfinite(v):
         return v
     return mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w)

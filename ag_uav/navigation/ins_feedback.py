@@ -871,10 +871,8 @@ def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, 
     dth = np.empty(3)
     e = np.empty(15)
     o = np.empty(4)
-    L = np.empty((15, 15))
-    y = np.empty(15)
-    Pb = np.empty((3, 3))
-    eb = np.empty(3)
+    L, y = np.empty((15, 15)), np.empty(15)
+    Pb, eb = np.empty((3, 3)), np.empty(3)
     Pc = np.empty((15, 15))
     for i in range(act.shape[0]):
         if not act[i]:

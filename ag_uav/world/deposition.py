@@ -495,9 +495,7 @@ def _flush(par, st, buf, scratch, force: float) -> None:
     the window's litre-weighted mean input row, convolved with each nozzle's release moments
     (the along-track smear exactly); the wake and the escaped part of each (nozzle, class)
     splatted (nozzles merged where the class's kernel is wider than ``merge_ratio`` × the
-    nozzle radius); airborne and evaporated volume booked.  ``force`` > 0: the wide parts
-    too (:func:`_flush_wide`; a float, not a bool constant, so that every caller shares one
-    compiled kernel)."""
+    nozzle radius); airborne and evaporated volume booked."""
     m_n, k_n = int(par[P_M]), int(par[P_K])
     o_fr = int(par[P_O_FRAC])
     merge_r = par[P_MERGE] * par[P_NOZC]
