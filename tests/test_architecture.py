@@ -354,7 +354,6 @@ PARAMETERS_LEFT: dict[str, int] = {
     "estimators/batched.py::_pca_batch2": 12,
     "estimators/batched.py::_predict_batch": 15,
     "estimators/batched.py::_predict_batch_b3": 11,
-    "estimators/ins.py::_enqueue": 11,
     "estimators/ins.py::_fuse_due": 11,
     "estimators/ins.py::_fuse_gnss": 11,
     "estimators/ins.py::_fuse_one": 11,
