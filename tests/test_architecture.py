@@ -312,7 +312,6 @@ FILE_LINES_LEFT: dict[str, int] = {
     "ag_uav/jobs/batch.py": 1254,
     "ag_uav/navigation/estimation.py": 708,
     "ag_uav/navigation/ins_feedback.py": 917,
-    "ag_uav/vehicle/gps.py": 1486,
     "ag_uav/world/deposition.py": 1241,
     "estimators/batched.py": 709,
     "estimators/ins.py": 1156,
