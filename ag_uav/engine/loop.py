@@ -82,8 +82,8 @@ COMPILE_THRESHOLD_S = 3.0
 #: what this process has said of the compile: "" nothing, "started", "done"
 _announced = ""
 #: said before tick 0's wait when numba starts compiling (once per process)
-COMPILE_NOTICE = ("compiling kernels: first run only, about two minutes on a 2-core machine "
-                  "(cached for later runs) ...")
+COMPILE_NOTICE = ("compiling kernels: first run only, about a minute and a half on a 2-core "
+                  "machine (cached for later runs) ...")
 
 
 def _say(msg: str) -> None:
