@@ -312,7 +312,6 @@ FILE_LINES_LEFT: dict[str, int] = {
     "ag_uav/jobs/batch.py": 1254,
     "ag_uav/navigation/estimation.py": 708,
     "ag_uav/navigation/ins_feedback.py": 917,
-    "ag_uav/world/deposition.py": 1241,
     "estimators/batched.py": 709,
     "estimators/ins.py": 1156,
 }
@@ -336,8 +335,8 @@ PARAMETERS_LEFT: dict[str, int] = {
     "ag_uav/navigation/ins_feedback.py::_outputs": 26,
     "ag_uav/navigation/ins_feedback.py::_tick_in": 19,
     "ag_uav/world/deposition.py::DepositionBatch.step_rows": 11,
-    "ag_uav/world/deposition.py::_engine_step": 17,
-    "ag_uav/world/deposition.py::_row_step_args": 12,
+    "ag_uav/world/deposition_kernels.py::engine_step": 17,
+    "ag_uav/world/deposition_kernels.py::row_step_args": 12,
     "ag_uav/world/reference.py::Reference.__init__": 20,
     "ag_uav/world/wind.py::wind_drag_rows": 11,
     "controllers/batched.py::BatchCascade.update": 11,

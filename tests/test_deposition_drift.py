@@ -22,12 +22,12 @@ from ag_uav.world.deposition import (
     Deposition,
     DepositionBatch,
     DepositionConfig,
-    _ig_cdf,
     evaporation,
     footprints,
     pack_input,
     wet_bulb_c,
 )
+from ag_uav.world.deposition_kernels import _ig_cdf
 from ag_uav.world.field import Field
 
 SQUARE = Field.from_coords([(0, 0), (40, 0), (40, 30), (0, 30)])

@@ -1,0 +1,93 @@
+"""The spray deposition's parameters (:class:`DepositionConfig`; sources in
+:mod:`ag_uav.world.deposition`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+_M350_NOZZLES = ((0.3164, -0.3164, -0.15), (0.3164, 0.3164, -0.15),
+                 (-0.3164, 0.3164, -0.15), (-0.3164, -0.3164, -0.15))
+
+
+#: (key, low, high) of the air and tank-mix keys (Stull's wet-bulb fit holds for −20–50 °C and
+#: 5–99 % RH)
+_LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
+           ("nonvolatile_fraction", 1e-4, 1.0), ("roughness_m", 1e-4, 2.0),
+           ("wake_escape", 0.0, 1.0), ("shear_eddy_m", 1e-3, 10.0),
+           ("airborne_after_s", 1.0, 1e5), ("n_classes", 1, 40))
+
+
+@dataclass(frozen=True)
+class DepositionConfig:
+    """Deposition parameters (defaults: the M350-class quad of ``models/quad.xml``, one nozzle
+    under each rotor). Sources in the module docstring."""
+
+    rate_l_per_ha: float = 1.0
+    swath_m: float = 6.0
+    nozzle_xyz_m: tuple = _M350_NOZZLES           # body frame (m), about the body origin
+    nozzle_share: tuple = (0.25, 0.25, 0.25, 0.25)
+    dv10_um: float = 120.0
+    dv50_um: float = 250.0
+    dv90_um: float = 420.0
+    n_classes: int = 10                           # tail-weighted classes (droplet_classes)
+    nozzle_on_delay_s: float = 0.1                # AC_SPRAYER_DEFAULT_TURN_ON_DELAY
+    nozzle_off_delay_s: float = 1.0               # AC_SPRAYER_DEFAULT_SHUT_OFF_DELAY
+    cmd_off_immediate: bool = True                # AC_Sprayer::run(false) stops at once
+    speed_min_mps: float = 1.0                    # AC_SPRAYER_DEFAULT_SPEED_MIN
+    flow_min_l_per_s: float = 0.0                 # AC_SPRAYER_DEFAULT_PUMP_MIN = 0 %
+    pressure_tau_s: float = 0.15
+    rotor_diameter_m: float = 0.533
+    n_rotors: int = 4
+    rotor_z_m: float = 0.08                       # rotor plane above the body origin
+    air_density: float = 1.225
+    air_viscosity: float = 1.81e-5
+    liquid_density: float = 1000.0
+    jet_decay_b: float = 6.0
+    wake_turbulence: float = 0.25
+    outwash_layer_m: float = 0.17
+    release_sigma_m: float = 0.1
+    ambient_sigma_mps: float = 0.0
+    temperature_c: float = 20.0                   # air temperature (°C)
+    rh_percent: float = 60.0                      # relative humidity (%)
+    nonvolatile_fraction: float = 0.05            # volume share of the mix that never evaporates
+    roughness_m: float = 0.05                     # z0 of the log-law wind profile (m)
+    wake_escape: float = 0.3                      # ε₀: share of the sheet at the wake's edge
+    shear_eddy_m: float = 0.05                    # eddy length of the wake's shear layer (m)
+    airborne_after_s: float = 600.0               # still aloft after this: counted airborne
+    cell_m: float = 0.5
+    buffer_m: float = 10.0
+    max_cells: int = 4_000_000
+    flush_cells: float = 2.0
+    flush_ticks: int = 50
+    levels: int = 6
+    merge_ratio: float = 2.0
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for key, lo, hi in _LIMITS:
+            v = getattr(self, key)
+            if not lo <= v <= hi:
+                raise ValueError(f"{key} = {v}: must be within [{lo:g}, {hi:g}]")
+
+    @classmethod
+    def from_config(cls, cfg: Any, **over: Any) -> DepositionConfig:
+        """From the product's :class:`ag_uav.config.Config`: rate, swath, rotor diameter, air and
+        liquid density; any ``[spray]`` key that names a field here overrides it."""
+        kw: dict[str, Any] = {
+            "rate_l_per_ha": cfg.spray.rate_l_per_ha, "swath_m": cfg.mission.swath_m,
+            "rotor_diameter_m": cfg.battery.rotor_diameter_m,
+            "air_density": cfg.battery.air_density_kgm3,
+            "liquid_density": 1000.0 * cfg.spray.density_kg_per_l}
+        names = set(cls.__dataclass_fields__)
+        for k, v in vars(cfg.spray).items():
+            if k in names and k not in kw:
+                kw[k] = tuple(v) if isinstance(v, list) else v
+        xyz = kw.get("nozzle_xyz_m")
+        if xyz is not None and xyz and not isinstance(xyz[0], tuple | list):  # flat x, y, z, ..
+            kw["nozzle_xyz_m"] = tuple(tuple(xyz[i:i + 3]) for i in range(0, len(xyz), 3))
+        if kw.get("nozzle_share") == ():  # [] in the config: equal shares
+            m = len(kw.get("nozzle_xyz_m", _M350_NOZZLES))
+            kw["nozzle_share"] = tuple([1.0 / m] * m)
+        kw.update(over)
+        return cls(**kw)
