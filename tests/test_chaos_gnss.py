@@ -1,9 +1,10 @@
 """Chaos: GNSS denied from take-off.  An autopilot does not arm without a fix: on either
 navigation chain the vehicle stays on the ground, the summary says why, and nothing flies on
-the true state."""
+the true state.  GNSS lost in flight: the position failsafe lands the vehicle where it is."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import ag_uav
@@ -48,3 +49,53 @@ def test_fly_prints_the_reason(tmp_path, capsys):
     assert [ln for ln in err.splitlines() if ln.strip()] == [
         "ag-uav: pre-flight check: no GNSS fix at take-off (gps.overrides.outage."
         "start_in_outage = true): not armed, the vehicle stays on the ground"]
+
+
+LOST = {"gps.overrides": {"outage": {"mean_up_s": 20.0, "mean_down_s": 3600.0}}}
+FLY = {"sim.max_time_s": 90.0, "log.enabled": False, "mission.swath_m": 6.0, **LOST}
+
+
+def test_gnss_lost_in_flight_engages_the_failsafe():
+    """The fix is lost for good (about 25 s in, seed 0): once the flown estimate's horizontal
+    1-sigma passes the bound the vehicle stops spraying, brakes and lands where it is, softly;
+    the summary says why and when. With the failsafe off it flies on, dead reckoning."""
+    r = simulate(ag_uav.load_config(None, FLY))
+    s = r.summary
+    assert s["failsafe"].startswith("GNSS failsafe (land) at t="), s.get("failsafe")
+    assert "gps.failsafe_sigma_m = 1 m" in s["failsafe"]
+    assert not s["crashed"] and not s["completed"]
+    t0, t1 = s["failsafe_time_s"], s["failsafe_landed_s"]
+    assert t0 + 3.0 < t1 < t0 + 15.0
+    assert s["incomplete_reason"] == f"{s['failsafe']}; landed at t={t1}s"
+    assert s["sim_time_s"] == pytest.approx(t1, abs=0.02)
+    after = r.t >= t0 + 0.1
+    assert not r.spray[after].any()
+    assert abs(r.v_true[-1, 2]) < 0.4  # it settled at the crawl, not fell
+    off = simulate(ag_uav.load_config(None, {**FLY, "gps.failsafe": "off"})).summary
+    assert "failsafe" not in off and off["sim_time_s"] > t1 + 20.0
+
+
+def test_hold_hovers_before_it_lands():
+    """``hold`` keeps the height for ``gps.failsafe_hold_s`` and then descends (on dead
+    reckoning the hover drifts: 10 s of it end in a touchdown at 1.3 m/s sideways here, so
+    only the timing is pinned)."""
+    r = simulate(ag_uav.load_config(None, {**FLY, "gps.failsafe": "hold",
+                                           "gps.failsafe_hold_s": 10.0}))
+    s = r.summary
+    assert s["failsafe"].startswith("GNSS failsafe (hold)")
+    t0 = s["failsafe_time_s"]
+    hold = (r.t >= t0) & (r.t < t0 + 10.0)
+    assert np.max(np.abs(r.p_true[hold, 2] - 3.0)) < 0.15
+    assert r.p_true[-1, 2] < 1.0 and r.t[-1] > t0 + 11.0
+
+
+def test_the_radar_height_outlives_the_fix_on_the_ideal_chain():
+    """The ideal-attitude chain's height comes from the radar with or without a fix: through
+    the outage and the failsafe's descent the flown height stays on the true one (its
+    horizontal dead reckoning drifts, so its touchdown may be fast sideways)."""
+    r = simulate(ag_uav.load_config(None, {**FLY, "estimator.nav": "ideal-attitude"}))
+    s = r.summary
+    assert s["failsafe"].startswith("GNSS failsafe (land)")
+    out = r.t >= s["failsafe_time_s"] - 3.0
+    assert np.max(np.abs(r.p_true[out, 2] - r.p_fb[out, 2])) < 0.15
+    assert np.max(np.abs(r.v_true[out, 2])) < 1.0

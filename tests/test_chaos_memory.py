@@ -1,10 +1,14 @@
 """Chaos: memory guards.  The per-run budget counts the dose map; a tune's population and a
-batch's worker count are bounded, one line each; more workers than cores is said."""
+batch's worker count are bounded, one line each; more workers than cores is said; a batch's
+whole process tree stays within the bound its chunks were planned for."""
 
 from __future__ import annotations
 
 import os
+import threading
+import time
 
+import psutil
 import pytest
 import tomli_w
 
@@ -80,3 +84,55 @@ def test_workers_are_bounded_and_oversubscription_is_said(tmp_path, capsys):
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert line.startswith(f"ag-uav: warning: --workers = {cores + 1} on {cores} cores: "
                            "oversubscribed")
+
+
+def _tree_peak(stop: threading.Event, out: dict[int, float]) -> None:
+    """The peak RSS (MB) of this process and all its children, sampled every 20 ms."""
+    me = psutil.Process()
+    while not stop.is_set():
+        rss = 0
+        for p in [me, *me.children(recursive=True)]:
+            try:
+                r = p.memory_info().rss
+            except psutil.Error:
+                continue
+            rss += r
+            out[p.pid] = max(out.get(p.pid, 0), r / 2**20)
+        out[0] = max(out[0], rss / 2**20)
+        time.sleep(0.02)
+
+
+def test_the_batch_tree_stays_within_its_bound(tmp_path):
+    """Sixteen short runs on two worker processes: the whole process tree's peak stays under
+    the bound the batch planned its chunks for, and that bound under --memory-mb."""
+    from ag_uav.jobs.batch import load_spec, run_batch
+    from ag_uav.jobs.executor import LocalPoolExecutor
+
+    spec = tmp_path / "b.toml"
+    spec.write_text(tomli_w.dumps({"name": "m", "base": {"sim.max_time_s": 4.0},
+                                   "axes": {"seed": list(range(16))}}))
+    peak, stop = {0: 0.0}, threading.Event()
+    th = threading.Thread(target=_tree_peak, args=(stop, peak))
+    th.start()
+    try:
+        with LocalPoolExecutor(2) as ex:
+            res = run_batch(load_spec(str(spec)), tmp_path / "o", ex, progress=False,
+                            report=False, memory_mb=3000.0)
+    finally:
+        stop.set()
+        th.join()
+    assert len(res.rows) == 16 and all(r["status"] == "ok" for r in res.rows)
+    assert peak[0] <= res.memory_bound_mb <= 3000.0, (peak, res.memory_bound_mb)
+    assert res.memory_bound_mb < 1.5 * peak[0]  # a bound, not a guess far above it
+
+
+def test_a_worker_count_that_cannot_fit_is_refused(tmp_path, capsys):
+    spec = tmp_path / "b.toml"
+    spec.write_text(tomli_w.dumps({"name": "b", "base": {"sim.max_time_s": 1.0},
+                                   "axes": {"seed": [0, 1]}}))
+    rc = main(["batch", str(spec), "--out", str(tmp_path / "o"), "-j", "2",
+               "--memory-mb", "900", "-q"])
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and line.startswith("ag-uav: config error: --memory-mb = 900: 2 workers "
+                                       "need about"), line
+    assert not (tmp_path / "o" / "results.csv").exists()

@@ -1,6 +1,7 @@
 """Chaos: outcomes say what happened.  A vehicle that never leaves the ground is not a finished
 mission; a validated GNSS latency override is flown on the INS chain; a Dask address that is not
-a scheduler ends in one line, quickly; a job of several sorties exports one mission per sortie.
+a scheduler ends in one line, quickly; a job of several sorties exports one mission per sortie;
+the tank and the coverage follow what the nozzles let out, not the command.
 Short missions (seconds of sim time) and the default field."""
 
 from __future__ import annotations
@@ -43,6 +44,20 @@ def test_the_latency_override_is_flown_on_the_ins_chain():
     assert b["estimate_rmse_m"] != a["estimate_rmse_m"]
     with pytest.raises(ag_uav.config.ConfigError, match="latency_s"):
         _run(**base, **{"gps.overrides": {"latency_s": 1.5}})
+
+
+def test_the_tank_and_the_coverage_follow_the_nozzles():
+    """30 s valve delays: the valve never opens in a minute of flight, so nothing leaves the
+    nozzles, the tank is not drawn and nothing is covered; with the default delays the tank
+    draws exactly what the nozzle model let out."""
+    base = {"sim.max_time_s": 60.0, "mission.swath_m": 6.0}  # the pattern test needs a valve
+    shut = _run(**base, **{"spray.nozzle_on_delay_s": 30.0, "spray.nozzle_off_delay_s": 30.0})
+    assert shut["nozzle_sprayed_l"] == 0.0 and shut["litres_sprayed_l"] == 0.0
+    assert shut["coverage_fraction"] == 0.0 and shut["dose_mean_l_per_ha"] in (0.0, None)
+    assert shut["tank_end_l"] == 2.7
+    ok = _run(**base)
+    assert ok["litres_sprayed_l"] > 0.1 and ok["coverage_fraction"] > 0.05
+    assert abs(ok["nozzle_minus_tank_l"]) <= 1e-9 * ok["litres_sprayed_l"]
 
 
 class _Quiet(http.server.BaseHTTPRequestHandler):

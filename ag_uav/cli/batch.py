@@ -89,6 +89,13 @@ def _add_exec_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
 
 
+def _add_memory_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--memory-mb", type=float, default=None, metavar="MB",
+                   help="bound on the process tree's memory (this process and the workers); "
+                        "the runs are chunked to fit it and a --workers that cannot fit is "
+                        "refused (default: 80%% of the memory available now)")
+
+
 #: more worker processes per core than this is refused (each is a process with its own engine)
 MAX_WORKERS_PER_CORE = 4
 
@@ -149,10 +156,13 @@ def cmd_batch(args: argparse.Namespace) -> int:
         print(f"batch {spec.name}: {len(tasks)} runs; axes: "
               + "; ".join(f"{a.name} × {len(a.values)}" for a in spec.axes) + f"; out: {out}")
         return 0
+    if args.memory_mb is not None and not args.memory_mb > 0:
+        raise ConfigError(f"--memory-mb = {args.memory_mb:g}: must be > 0")
     with _executor(args) as ex:
         code, res = _guarded(f"batch {spec.name}", out, lambda: run_batch(
             spec, out, ex, resume=args.resume, fresh=args.fresh, logs=args.logs,
-            progress=not args.quiet, report=not args.no_report, tasks=tasks),
+            progress=not args.quiet, report=not args.no_report, tasks=tasks,
+            memory_mb=args.memory_mb),
             kept=f"finished runs kept, {out / 'results.csv'} written")
     if code is not None:
         return code
@@ -163,6 +173,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
                 f"on {res.executor}")
     print(f"results: {out / 'results.csv'}" + ("" if args.no_report else
                                                 f"; report: {out / 'report.md'}"))
+    if res.n_run:
+        print(f"memory: the process tree was planned within {res.memory_bound_mb:.0f} MB "
+              f"(--memory-mb {res.memory_mb:.0f})")
     if res.n_fallback:
         print(f"ag-uav: warning: batch {spec.name}: {res.n_fallback} runs flown one at a time "
               "after their engine batch failed (column engine_fallback)", file=sys.stderr)
@@ -215,6 +228,7 @@ def register(sub) -> None:
                    help="refuse a spec of more than N runs (default: the spec's max_runs, else "
                         "10000)")
     _add_exec_args(b)
+    _add_memory_arg(b)
     b.set_defaults(func=cmd_batch)
 
     t = sub.add_parser(

@@ -322,6 +322,17 @@ class GpsConfig:
                                   "engineering judgement)", gt=0, le=30)
     radar_hz: float = _f(20.0, "estimator.nav = ins: radar altimeter rate (Hz; slant range over "
                          "flat ground, dropouts beyond 30 deg tilt)", gt=0, le=1000)
+    failsafe: str = _f("land", "what the autopilot does in flight once the flown estimate's "
+                       "horizontal position 1-sigma passes failsafe_sigma_m (GNSS lost): land "
+                       "= descend where it is at 0.7 m/s (PX4 MPC_LAND_SPEED; ArduPilot "
+                       "FS_EKF_ACTION 1); hold = hover where it is for failsafe_hold_s, then "
+                       "land; off = fly on, dead reckoning. The mission is cut either way "
+                       "(the reference is timed)", choices=("land", "hold", "off"))
+    failsafe_sigma_m: float = _f(1.0, "the failsafe's bound on the horizontal position "
+                                 "1-sigma (m; PX4 COM_POS_FS_EPH is 5 m for general flight, a "
+                                 "spray lane is about 2 m)", gt=0, le=100)
+    failsafe_hold_s: float = _f(30.0, "failsafe = hold: seconds of hover before landing",
+                                ge=0, le=3600)
     receiver: str = _f("honest", "what the receiver reports with each fix (presets with fix "
                        "types only, e.g. rtk-m350): honest = the reported fix type lags the "
                        "true one, the reported accuracy carries a per-episode calibration "

@@ -15,8 +15,9 @@ observers (:mod:`ag_uav.engine.observers`), then runs every tick as the flow rea
 * **control**: the batched cascade (IT2/T1-FPID or PID per axis, thrust vectoring, geometric
   attitude loop, X mixer); **spray**: the spray job; **disturb**: wind (mean + Dryden) as a
   drag force, held over the control period; **deposit**: the nozzles, droplets and the dose map
-  (:class:`~ag_uav.engine.stages.Depositing`; it only observes, the trajectory is the same
-  without it);
+  (:class:`~ag_uav.engine.stages.Depositing`), then the tank draws what the nozzles let out
+  (:meth:`~ag_uav.engine.stages.Spraying.settle`: the liquid mass follows the nozzle model's
+  valve and pressure lag, so ``spray.deposition = false`` changes the flight slightly);
 * **record**: the tick's row (arrays); **observe**: logs, camera frames and tick hooks, all
   through one view of the batch;
 * **physics**: one control period of every active vehicle (``mj_step`` for one vehicle,
@@ -63,6 +64,7 @@ from .stages import (
     Control,
     Depositing,
     Disturbance,
+    Failsafe,
     Feedback,
     Guard,
     Recorder,
@@ -156,6 +158,7 @@ class LoopOutput:
     controls: np.ndarray | None = None    # with capture: (n, 7) rotor commands (4), force (3)
     dose: Any = None                      # the dose map (ag_uav.world.deposition.DoseMap) or None
     lanes: int = 1                        # the lanes its batch flew in (threads of the engine)
+    failsafe: dict | None = None          # the position failsafe's reason and times, if engaged
 
 
 # ------------------------------------------------------------------------------------ setup
@@ -307,7 +310,8 @@ def _spraying(b: Batch, flights: Sequence[Flight], vehs: Sequence[Vehicle],
     from .sprayer import Sprayer
 
     objs = [Sprayer(fl.cfg, veh, None, MassSink(i, control.set_mass),
-                    job_tabs[b.ref_ids[i]], job, int(b.n_ticks[i]), b.dt, fl.log)
+                    job_tabs[b.ref_ids[i]], job, int(b.n_ticks[i]), b.dt, fl.log,
+                    nozzle_model=fl.field is not None and fl.cfg.spray.deposition)
             for i, (fl, veh, job) in enumerate(zip(flights, vehs, jobs, strict=True))]
     spr = BatchSprayer.from_sprayers(objs, control.set_mass, push_initial=False)
     ia = mujoco.mj_stateSize(m0, mujoco.mjtState.mjSTATE_TIME) + m0.nq + m0.nv
@@ -379,6 +383,7 @@ class _Engine:
         self.observers, self.view, self.stepper = observers, view, stepper
         self.sprayers, self.vehicles = sprayers, vehicles
         self.depositing = depositing
+        self.failsafe: Failsafe | None = None
         self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
         self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
         self._pre_next = -math.inf  # the earliest time a pre-physics observer is due
@@ -394,12 +399,16 @@ class _Engine:
             return False
         self.sensing.step(k)
         self.feedback.step(k, t)
+        if self.failsafe is not None:
+            self.failsafe.step(k, t)
         self.control.step()
         if self.spraying is not None:
             self.spraying.step(k, t)
         self.disturbance.step()
         if self.depositing is not None:
             self.depositing.step()
+        if self.spraying is not None:
+            self.spraying.settle(k, t, self.depositing)
         self.recorder.step(k)
         if self.pre_obs and t >= self._pre_next:
             self._observe(self.pre_obs, "tick", k, t)
@@ -471,9 +480,12 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
     body = vehs[0].body_id
     stepper = make_stepper([v.model for v in vehs], body, round(dt / m0.opt.timestep), b.S,
                            nthread)
-    return _Engine(b, Guard(b, vehs, iq, iq + m0.nq), sensing, feedback, control, spraying,
-                   disturbance, observers, TickView(b, [v.model for v in vehs], body), stepper,
-                   sprayers, vehs, depositing, capture)
+    e = _Engine(b, Guard(b, vehs, iq, iq + m0.nq), sensing, feedback, control, spraying,
+                disturbance, observers, TickView(b, [v.model for v in vehs], body), stepper,
+                sprayers, vehs, depositing, capture)
+    if hasattr(feedback.bank, "pos_sigma"):
+        e.failsafe = Failsafe(b, feedback.bank, [fl.cfg for fl in flights])
+    return e
 
 
 def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float, float]:
@@ -581,7 +593,8 @@ def _outputs(e: _Engine, wall: float, compile_s: float, cpu: float) -> list[Loop
                          wall_loop_s=wall, cpu_loop_s=cpu, vehicle=e.vehicles[i],
                          frames=int(frames[i]),
                          notes=b.notes[i], sprayer=e.sprayers[i], compile_s=compile_s,
-                         dose=e.depositing.dose_map(i) if e.depositing is not None else None)
+                         dose=e.depositing.dose_map(i) if e.depositing is not None else None,
+                         failsafe=None if e.failsafe is None else e.failsafe.info[i])
         if imu is not None:
             out.imu = np.ascontiguousarray(e.sensing.rec[:n, i])
             out.imu_bias0 = imu.bias0[i].copy()

@@ -433,11 +433,11 @@ def dose_summary(cfg: Config, fld: Field, dose: Any, tank_l: float | None = None
     """The summary keys of a flight's dose map (:func:`ag_uav.world.deposition.dose_metrics`
     over the field, ``spray.dose_margin_m`` inside it, against ``spray.rate_l_per_ha``):
     :data:`DOSE_KEYS`, the litres that left the nozzles by the nozzle model
-    (``nozzle_sprayed_l``: valve delays, pressure lag, minimum speed) and, with the tank law's
-    litres ``tank_l`` (``litres_sprayed_l``: flow ∝ ground speed while the nozzles are
-    commanded on), the difference ``nozzle_minus_tank_l``. The tank is drawn down by the tank
-    law; what lands is the nozzle model's. Undefined values (nothing sprayed on the field) are
-    None."""
+    (``nozzle_sprayed_l``: valve delays, pressure lag, minimum speed) and, with the litres the
+    tank gave ``tank_l`` (``litres_sprayed_l`` unrounded), the difference
+    ``nozzle_minus_tank_l``: the tank draws what the nozzle model lets out (at most what is in
+    it), so it is 0 unless the tank ran dry while the line pressure was still falling.
+    Undefined values (nothing sprayed on the field) are None."""
     m = dose.metrics(fld, cfg.spray.rate_l_per_ha, cfg.spray.dose_margin_m)
     out: dict[str, Any] = {k: (None if math.isnan(m[k]) else m[k]) for k in DOSE_KEYS}
     out["nozzle_sprayed_l"] = m["sprayed_l"]
@@ -469,6 +469,11 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
     why = metrics.incomplete_reason(summ, res, cfg)
     if why is not None and (cut is None or why.startswith("never took off")):
         cut = f"{why}; {cut}" if cut else why
+    if out.failsafe is not None:  # the position failsafe cut the mission
+        summ.update(out.failsafe)
+        if not summ.get("crashed"):
+            landed = out.failsafe["failsafe_landed_s"]
+            cut = out.failsafe["failsafe"] + ("" if landed is None else f"; landed at t={landed}s")
     if cut:
         summ["incomplete_reason"] = cut
     if not summ["legs_flown"]:  # the end of a mission never flown is no mission time
@@ -484,7 +489,8 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
 
         add_sortie_areas(summ, res, plan.swath)
     if out.dose is not None:
-        summ.update(dose_summary(cfg, fld, out.dose, summ.get("litres_sprayed_l")))
+        tank_l = None if out.sprayer is None else out.sprayer.litres_total
+        summ.update(dose_summary(cfg, fld, out.dose, tank_l))
         res.extra["dose"] = out.dose
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)

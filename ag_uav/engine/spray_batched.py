@@ -49,13 +49,15 @@ SetMass = Callable[[int, float, tuple[float, float, float]], None]
 
 # ---- columns of the per-vehicle constants (float64, (N, _NP))
 P_LPM, P_RHO, P_HMIN, P_HMAX, P_KP, P_PAV, P_CAP, P_DT, P_FILL, P_DRY = range(10)
-_NP = 10
+P_NOZZLES = 10  # 1: the nozzle model (valve, pressure lag) gives the litres: :meth:`draw`
+_NP = 11
 # ---- columns of the float state (float64, (N, _NS)); NaN stands for None in ran-dry/landing
 S_TANK, S_E, S_ETOT, S_LTOT, S_MSET, S_GATED, S_DRY = range(7)
 S_LIT, S_EJ, S_MINSOC, S_RANDRY, S_TLAND = range(7, 12)  # the current sortie's totals
 C_LIT, C_EJ, C_MINSOC, C_RANDRY, C_TLAND = range(12, 17)  # the sortie closed on this tick
 S_MREFILL, S_MSPRAY = 17, 18  # liquid masses to set this tick (refill, then spray)
-_NS = 19
+S_FLOW = 19  # the flow of this tick (L/s)
+_NS = 20
 # ---- columns of the integer state (int64, (N, _NI))
 # current sortie, offset into the flat tables, ticks available, this tick's event flags
 I_CUR, I_OFF, I_LIM, I_FLAGS = range(4)
@@ -65,15 +67,15 @@ F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
 
 
 @njit(cache=True)
-def _spray_log_row(row, st, rec, tab, rec_on, ist, i, j, vx, vy, lpm):
+def _spray_log_row(row, st, rec, tab, rec_on, ist, i, j):
     """Vehicle ``i``'s spray state at its record ``j`` -> ``row[1:10]`` in
-    :attr:`ag_uav.record.runlog.RunLog.SPRAY_FIELDS` order: tank, mass, flow (the nominal rate
-    at the speed when the nozzles are on), nozzles, power, energy (Wh), battery fraction,
-    sortie (from 1), on the ground."""
+    :attr:`ag_uav.record.runlog.RunLog.SPRAY_FIELDS` order: tank, mass, flow (the tick's
+    litres per second), nozzles, power, energy (Wh), battery fraction, sortie (from 1), on the
+    ground."""
     on = rec_on[j]
     row[1] = st[i, S_TANK]
     row[2] = rec[1, j]
-    row[3] = lpm * math.sqrt(vx * vx + vy * vy) if on else 0.0
+    row[3] = st[i, S_FLOW]
     row[4] = 1.0 if on else 0.0
     row[5] = rec[2, j]
     row[6] = st[i, S_ETOT] / 3600.0
@@ -112,8 +114,10 @@ def _sortie_row(i, s, par, st, ist):  # pragma: no cover
 
 @njit(cache=True)
 def _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st):  # pragma: no cover
-    """The nozzles: the plan sprays, the tank is not empty, the height is within the band; the
-    flow per ground distance. Returns (on, event flags)."""
+    """The nozzle command: the plan sprays, the tank is not empty, the height is within the
+    band. Without the nozzle model the flow follows the command at once (per ground distance,
+    :func:`_draw_row`); with it, :func:`_draw_kernel` draws what the nozzles let out. Returns
+    (command, event flags)."""
     dt = par[i, P_DT]
     on = False
     if spray_ref[i]:
@@ -125,22 +129,53 @@ def _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st):  # pragma: no cover
             on = True
         else:
             st[i, S_GATED] += dt
-    if not on:
-        return False, 0
+    if par[i, P_NOZZLES] > 0.5:
+        return on, 0
+    dv = par[i, P_LPM] * math.sqrt(vx[i] * vx[i] + vy[i] * vy[i]) * dt if on else 0.0
+    return on, _draw_row(i, dv, par, st)
+
+
+@njit(cache=True)
+def _draw_row(i, dv, par, st):  # pragma: no cover
+    """``dv`` litres out of the tank (at most what is in it): the totals, the tick's flow, and
+    the liquid mass re-set when it fell by 1 g or the tank is empty. Returns the event flags."""
+    st[i, S_FLOW] = 0.0
+    if dv <= 0.0:
+        return 0
     tank = st[i, S_TANK]
-    dv = par[i, P_LPM] * math.sqrt(vx[i] * vx[i] + vy[i] * vy[i]) * dt
     if dv > tank:
         dv = tank
     tank -= dv
     st[i, S_TANK] = tank
     st[i, S_LTOT] += dv
     st[i, S_LIT] += dv
+    st[i, S_FLOW] = dv / par[i, P_DT]
     m_liq = tank * par[i, P_RHO]
     if st[i, S_MSET] - m_liq >= 1e-3 or tank <= 0.0:
         st[i, S_MSET] = m_liq
         st[i, S_MSPRAY] = m_liq
-        return True, F_MASS
-    return True, 0
+        return F_MASS
+    return 0
+
+
+@njit(cache=True)
+def _draw_kernel(k, rows, litres, valve, par, st, ist, rec, rec_on):  # pragma: no cover
+    """After the nozzle model's tick: vehicle ``rows[j]`` let ``litres[j]`` out with its valve
+    ``valve[j]``; the tank, the liquid mass and the records follow them (:func:`_draw_row`).
+    Returns the number of rows with an event flag."""
+    nev = 0
+    for j in range(rows.shape[0]):
+        i = rows[j]
+        fl = _draw_row(i, litres[j], par, st)
+        r = ist[i, I_OFF] + k
+        tank = st[i, S_TANK]
+        rec[0, r] = tank
+        rec[1, r] = par[i, P_DRY] + tank * par[i, P_RHO]
+        rec_on[r] = 1 if valve[j] else 0
+        ist[i, I_FLAGS] = fl
+        if fl:
+            nev += 1
+    return nev
 
 
 @njit(cache=True)
@@ -294,6 +329,7 @@ class BatchSprayer:
         n = len(self.sprayers)
         self.n = n
         self._finished = False
+        self._k = 0  # the tick being stepped (the log reads its records)
         self._cascades: list[Any] = []
         n_rec = [len(sp.rec_tank) for sp in self.sprayers]
         off = np.zeros(n + 1, np.int64)
@@ -311,7 +347,7 @@ class BatchSprayer:
             a, b = int(off[i]), int(off[i + 1])
             nr = b - a
             self._par[i] = (sp.lpm, sp.rho, sp.h_min, sp.h_max, sp.k_p, sp.p_av, sp.cap_j,
-                            sp.dt, sp.job.fill_l, sp.dry)
+                            sp.dt, sp.job.fill_l, sp.dry, float(sp.nozzle_model))
             self._ist[i] = (sp.cur, a, min(nr, len(sp.sortie), len(sp.ground)), 0)
             st = self._st[i]
             st[S_TANK], st[S_E], st[S_ETOT] = sp.tank, sp.energy_j, sp.energy_total_j
@@ -342,6 +378,8 @@ class BatchSprayer:
         self._logged = [(i, sp) for i, sp in enumerate(self.sprayers)
                         if sp.log is not None and hasattr(sp.log, "spray_row")]
         self._log_next = -math.inf  # the earliest time a logged vehicle's spray state is due
+        # with the nozzle model, the tick's litres (and the log) come after it: :meth:`draw`
+        self.nozzle_model = bool(self._par[:, P_NOZZLES].any()) if n else False
         if push_initial:
             for sp in self.sprayers:
                 if sp.mass_set >= 0.0:
@@ -390,6 +428,7 @@ class BatchSprayer:
                 or spray_ref.shape != (n,) or active.shape != (n,) or f.ndim != 2
                 or f.shape[0] != n or act.ndim != 2 or act.shape[0] != n):
             raise ValueError(f"BatchSprayer.step: arrays must have a leading axis of {n}")
+        self._k = k
         nev = _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, self._par, self._st,
                             self._ist, self._tab, self._rec, self._rec_on, self._out)
         if nev:
@@ -398,9 +437,26 @@ class BatchSprayer:
                 raise IndexError(f"tick {k} is outside vehicle {i}'s tables "
                                  f"({int(self._ist[i, I_LIM])} ticks)")
             self._events(t)
-        if self._logged and t >= self._log_next:
-            self._log(k, t, vx, vy, active)
+        if self._logged and not self.nozzle_model and t >= self._log_next:
+            self._log(t, active)
         return self._on, self._reset
+
+    def draw(self, k: int, t: float, rows: np.ndarray, litres: np.ndarray, valve: np.ndarray,
+             active: np.ndarray) -> None:
+        """After the nozzle model's tick (``P_NOZZLES`` rows): vehicle ``rows[j]`` let
+        ``litres[j]`` out with its valve ``valve[j]`` open or shut. The tank, the liquid mass,
+        the totals and the nozzle records follow them (:func:`_draw_kernel`), so that the tank,
+        the coverage and the dose count one flow. Then the spray log (every 0.1 s)."""
+        self._ist[:, I_FLAGS] = 0  # step's events are done
+        if rows.shape[0]:
+            keep = active[rows]
+            if not keep.all():
+                rows, litres, valve = rows[keep], litres[keep], valve[keep]
+            if _draw_kernel(k, rows, litres, valve, self._par, self._st, self._ist, self._rec,
+                            self._rec_on):
+                self._events(t)
+        if self._logged and t >= self._log_next:
+            self._log(t, active)
 
     def _events(self, t: float) -> None:
         """Sortie changes and liquid-mass updates of the rows the kernel flagged (Python)."""
@@ -426,8 +482,7 @@ class BatchSprayer:
             if fl & F_MASS:
                 _set_mass(sp, t, float(st[i, S_MSPRAY]))
 
-    def _log(self, k: int, t: float, vx: np.ndarray, vy: np.ndarray,
-             active: np.ndarray) -> None:
+    def _log(self, t: float, active: np.ndarray) -> None:
         """The spray state row of the vehicles that have a log, every 0.1 s (at most; the log's
         own rate may be lower): filled in place by :func:`_spray_log_row`."""
         for i, sp in self._logged:
@@ -437,7 +492,7 @@ class BatchSprayer:
             row = sp.log.spray_slot(t)
             if row is not None:
                 _spray_log_row(row, self._st, self._rec, self._tab, self._rec_on, self._ist, i,
-                               int(self._off[i]) + k, float(vx[i]), float(vy[i]), sp.lpm)
+                               int(self._off[i]) + self._k)
                 sp.log.spray_commit()
         self._log_next = min((sp._next_log for i, sp in self._logged if active[i]),
                              default=math.inf)

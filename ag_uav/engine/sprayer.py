@@ -30,8 +30,13 @@ class Sprayer:
     states from it. :class:`~ag_uav.engine.spray_batched.BatchSprayer` advances it per tick."""
 
     def __init__(self, cfg: Config, veh, data, cascade, tab: dict[str, np.ndarray],
-                 job: SprayJob, n_ticks: int, dt: float, log: Any = None):
+                 job: SprayJob, n_ticks: int, dt: float, log: Any = None,
+                 nozzle_model: bool = False):
         sp, b = cfg.spray, cfg.battery
+        #: the litres come from the nozzle model (valve, pressure lag; the dose map's), not
+        #: from the command at once (see :meth:`BatchSprayer.draw
+        #: <ag_uav.engine.spray_batched.BatchSprayer.draw>`)
+        self.nozzle_model = bool(nozzle_model)
         self.cfg = cfg
         self.model = veh.model
         self.data = data

@@ -216,6 +216,100 @@ class Feedback:
             self.bank.finish(self.b.flown)
 
 
+class Failsafe:
+    """The autopilot's position failsafe (``gps.failsafe``): in flight, once the flown
+    estimate's horizontal position 1σ (the feedback bank's ``pos_sigma``) passes
+    ``gps.failsafe_sigma_m``, the vehicle stops spraying, brakes at :attr:`BRAKE_MPS2`, holds
+    where it stopped (``hold``: for ``gps.failsafe_hold_s``), then descends there at
+    :attr:`DESCENT_MPS`, the last metre at :attr:`CRAWL_MPS`; on the ground (within 0.1 m of
+    its resting height, settled) its flight ends. The check runs at 10 Hz; the reason, the time
+    and the landing time go into the run's notes and summary (``failsafe``,
+    ``failsafe_time_s``, ``failsafe_landed_s``). All of it flies on the estimate: without a fix
+    the hover drifts with the dead reckoning."""
+
+    DESCENT_MPS = 0.7  # PX4 MPC_LAND_SPEED default
+    CRAWL_MPS = 0.3  # the last metre (PX4 MPC_LAND_CRWL default)
+    BRAKE_MPS2 = 2.0  # horizontal deceleration to the hold (PX4 MPC_ACC_HOR is 3 m/s²)
+    CHECK_HZ = 10.0
+
+    def __init__(self, b: Batch, bank: Any, cfgs: Sequence[Any]) -> None:
+        self.b, self.bank = b, bank
+        n = b.n
+        self.mode = [c.gps.failsafe for c in cfgs]
+        self.on = np.array([m != "off" for m in self.mode])
+        self.bound = np.array([c.gps.failsafe_sigma_m for c in cfgs])
+        self.hold_s = np.array([c.gps.failsafe_hold_s if m == "hold" else 0.0
+                                for c, m in zip(cfgs, self.mode, strict=True)])
+        self.every = max(1, round(1.0 / (self.CHECK_HZ * b.dt)))
+        self.sig = np.full(n, np.nan)
+        self.engaged = np.zeros(n, dtype=bool)
+        self.t_land = np.full(n, np.inf)
+        self.at = np.zeros((n, 3))
+        self.zr = np.zeros(n)  # the descending height reference
+        self.v0 = np.zeros((n, 3))  # the horizontal velocity it brakes from
+        self.t0 = np.zeros(n)
+        self.info: list[dict[str, Any] | None] = [None] * n
+
+    def step(self, k: int, t: float) -> None:
+        b = self.b
+        if k % self.every == 0:
+            self.bank.pos_sigma(self.sig)
+            with np.errstate(invalid="ignore"):
+                trig = self.on & ~self.engaged & b.act & b.airborne & (self.sig > self.bound)
+            for i in np.flatnonzero(trig):
+                self._engage(int(i), t)
+        if self.engaged.any():
+            for i in np.flatnonzero(self.engaged & b.act):
+                self._fly(int(i), t)
+
+    def _engage(self, i: int, t: float) -> None:
+        b = self.b
+        self.engaged[i] = True
+        v0 = b.v_fb[i].copy()
+        v0[2] = 0.0
+        tb = math.sqrt(v0[0] * v0[0] + v0[1] * v0[1]) / self.BRAKE_MPS2
+        self.at[i] = b.p_fb[i]
+        self.v0[i] = v0
+        self.t0[i] = t
+        self.zr[i] = b.p_fb[i, 2]
+        self.t_land[i] = t + max(self.hold_s[i], tb)
+        why = (f"GNSS failsafe ({self.mode[i]}) at t={t:.1f}s: horizontal position 1-sigma "
+               f"{self.sig[i]:.2f} m > gps.failsafe_sigma_m = {self.bound[i]:g} m")
+        self.info[i] = {"failsafe": why, "failsafe_time_s": round(t, 2),
+                        "failsafe_landed_s": None}
+        b.notes[i].append(why)
+
+    def _brake(self, i: int, t: float) -> None:
+        """The reference of a stop at :attr:`BRAKE_MPS2` from the velocity at the engagement,
+        then a hold where it stopped."""
+        b, v0 = self.b, self.v0[i]
+        sp = math.sqrt(v0[0] * v0[0] + v0[1] * v0[1])
+        s = min(t - self.t0[i], sp / self.BRAKE_MPS2)
+        a = self.BRAKE_MPS2 / sp if sp > 0.0 else 0.0  # per unit of v0
+        f = s - 0.5 * a * s * s
+        b.rp[i] = self.at[i] + f * v0
+        b.rv[i] = (1.0 - a * s) * v0
+        b.ra[i] = -a * v0 if s < sp / self.BRAKE_MPS2 else 0.0
+        b.rp[i, 2] = self.zr[i]
+
+    def _fly(self, i: int, t: float) -> None:
+        """Brake, hold, then descend; the flight ends on the ground."""
+        b = self.b
+        self._brake(i, t)
+        b.spray[i] = False
+        if t < self.t_land[i]:
+            return
+        ground = b.hover_z[i]
+        speed = self.DESCENT_MPS if self.zr[i] > ground + 1.0 else self.CRAWL_MPS
+        self.zr[i] = max(self.zr[i] - speed * b.dt, ground - 0.5)
+        b.rp[i, 2] = self.zr[i]
+        b.rv[i, 2] = -speed if self.zr[i] > ground - 0.5 else 0.0
+        if b.p[i, 2] < ground + 0.1 and abs(b.v[i, 2]) < 0.2:
+            self.info[i]["failsafe_landed_s"] = round(t, 2)
+            b.notes[i].append(f"GNSS failsafe: landed at t={t:.1f}s")
+            b.act[i] = False
+
+
 class Control:
     """The batched flight-controller cascade (:class:`controllers.batched.BatchCascade`)."""
 
@@ -233,6 +327,11 @@ class Control:
         self.bc.J[i] = J
 
 
+_NO_ROWS = np.zeros(0, np.int64)
+_NO_LITRES = np.zeros(0)
+_NO_VALVE = np.zeros(0, bool)
+
+
 class Spraying:
     """The spray job (:class:`ag_uav.engine.spray_batched.BatchSprayer`): nozzles, tank, battery
     and sorties; a vehicle landed at the base gets zero thrust and a reset controller."""
@@ -247,6 +346,19 @@ class Spraying:
         b.spray[:] = on
         if reset.any():
             self.control.bc.reset_rows(np.flatnonzero(reset))
+
+    def settle(self, k: int, t: float, depositing: Depositing | None) -> None:
+        """After the nozzle model: the tank draws what each vehicle's nozzles let out and the
+        nozzles are on while the valve is open (what the record, the coverage and the log
+        see), so the tank, the coverage and the dose follow one flow."""
+        b = self.b
+        if depositing is not None:
+            for rows, dep in depositing.groups:
+                valve = dep.valve_on
+                self.spr.draw(k, t, rows, dep.out, valve, b.act)
+                b.spray[rows] = valve & b.act[rows]
+        else:
+            self.spr.draw(k, t, _NO_ROWS, _NO_LITRES, _NO_VALVE, b.act)
 
 
 class Disturbance:
@@ -265,7 +377,7 @@ class Depositing:
     delays, pressure lag, minimum speed) on the spray job's nozzle command ``b.spray`` (the plan,
     gated by the tank and the height window), the droplets carried by the downwash of the actual
     rotor thrust (the actuator states) and the wind with its gust ``b.w``, splatted onto the
-    vehicle's dose map. It only observes: nothing it computes reaches the physics.
+    vehicle's dose map. Its litres are the ones the tank draws (:meth:`Spraying.settle`).
 
     ``groups``: (rows, :class:`~ag_uav.world.deposition.DepositionBatch`) for the vehicles that
     share a deposition config and a ground grid; each row is stepped by the one row function, so

@@ -582,27 +582,45 @@ ENGINE_BYTES_PER_TICK = 420
 ENGINE_BYTES_PER_FILTER_TICK = 120
 #: memory one chunk's records may take (a worker holds one chunk at a time)
 CHUNK_BYTES = 384 * 2**20
+#: a process's own memory with a short run flown in it: the interpreter, numpy, MuJoCo and the
+#: loaded kernels (a worker of a batch of short runs peaks at about 306 MB on the 2-core
+#: development machine; tests/test_chaos_memory.py measures the whole tree)
+WORKER_BASE_MB = 340
+
+
+def default_memory_mb() -> float:
+    """The process tree's memory bound when none is given: 80 % of what the machine has
+    available now."""
+    import psutil
+
+    return 0.8 * psutil.virtual_memory().available / 2**20
+
+
+def _run_bytes(t: RunTask) -> tuple[Any, int]:
+    """(engine-batch key, bytes) of one run: its per-tick records and filters over the
+    mission's length, and its dose map (:func:`ag_uav.engine.missions.dose_map_mb`)."""
+    from ..engine.missions import batch_key, dose_map_mb, mission_setup
+
+    cfg = config_from_dict(t.config)
+    fld, _, ref = mission_setup(cfg)
+    e = cfg.estimator
+    n_filters = len({*([e.name] if e.name != "true" else []), *e.shadow})
+    n = (int(min(ref.duration, cfg.sim.max_time_s) * cfg.sim.control_hz) + 1) * (
+        ENGINE_BYTES_PER_TICK + ENGINE_BYTES_PER_FILTER_TICK * n_filters)
+    return batch_key(cfg), n + int(dose_map_mb(cfg, fld) * 2**20)
 
 
 def plan_chunks(tasks: list[RunTask], workers: int, max_runs: int = 64,
                 budget_bytes: int = CHUNK_BYTES) -> list[list[int]]:
     """Indices of ``tasks`` in lockstep chunks: runs that can share an engine batch
     (:func:`ag_uav.engine.missions.batch_key`), at most ``max_runs`` and about ``budget_bytes`` of
-    records per chunk (from each mission's length), and at least as many chunks as ``workers`` when
-    there are enough runs."""
-    from ..engine.missions import batch_key, mission_setup
-
+    records and dose maps per chunk (from each mission's length and field), and at least as
+    many chunks as ``workers`` when there are enough runs."""
     groups: dict[Any, list[int]] = {}
     nbytes: dict[Any, int] = {}  # per run: the longest mission's engine memory
     for j, t in enumerate(tasks):
         try:
-            cfg = config_from_dict(t.config)
-            key = batch_key(cfg)
-            ref = mission_setup(cfg)[2]
-            e = cfg.estimator
-            n_filters = len({*([e.name] if e.name != "true" else []), *e.shadow})
-            n = (int(min(ref.duration, cfg.sim.max_time_s) * cfg.sim.control_hz) + 1) * (
-                ENGINE_BYTES_PER_TICK + ENGINE_BYTES_PER_FILTER_TICK * n_filters)
+            key, n = _run_bytes(t)
         except Exception:  # noqa: BLE001 - a bad run flies alone (and becomes an error row)
             key, n = ("alone", j), 1
         groups.setdefault(key, []).append(j)
@@ -613,6 +631,38 @@ def plan_chunks(tasks: list[RunTask], workers: int, max_runs: int = 64,
                           -(-len(idx) // max(workers, 1))))
         chunks += [idx[i:i + size] for i in range(0, len(idx), size)]
     return chunks
+
+
+def memory_plan(tasks: list[RunTask], workers: int, memory_mb: float
+                ) -> tuple[list[list[int]], float]:
+    """(chunks, the process tree's bound in MB) for ``workers`` processes within ``memory_mb``:
+    this process and each worker take :data:`WORKER_BASE_MB`, and each worker one chunk at a
+    time, so a chunk may take (memory_mb − (workers + 1) × base) / workers (at most
+    :data:`CHUNK_BYTES`). Raises :class:`ConfigError` (one line) when even one run per worker
+    does not fit."""
+    per = (memory_mb - (workers + 1) * WORKER_BASE_MB) / max(workers, 1)
+    largest = max(_sizes(tasks), default=0)
+    need = (workers + 1) * WORKER_BASE_MB + workers * largest / 2**20
+    if per * 2**20 < largest:
+        raise ConfigError(f"--memory-mb = {memory_mb:.0f}: {workers} workers need about "
+                          f"{need:.0f} MB ({WORKER_BASE_MB} MB per process and "
+                          f"{largest / 2**20:.0f} MB for the largest run); lower --workers or "
+                          "raise --memory-mb")
+    budget = int(min(CHUNK_BYTES, per * 2**20))
+    chunks = plan_chunks(tasks, workers, budget_bytes=budget)
+    sizes = {j: n for j, n in enumerate(_sizes(tasks))}
+    biggest = max((sum(sizes[j] for j in ch) for ch in chunks), default=0)
+    return chunks, (workers + 1) * WORKER_BASE_MB + workers * biggest / 2**20
+
+
+def _sizes(tasks: list[RunTask]) -> list[int]:
+    out = []
+    for t in tasks:
+        try:
+            out.append(_run_bytes(t)[1])
+        except Exception:  # noqa: BLE001 - its error row is made when it runs
+            out.append(0)
+    return out
 
 
 # ------------------------------------------------------------------------------------ journal
@@ -992,6 +1042,8 @@ class BatchResult:
     n_lost: int = 0                  # runs of this call lost to the machinery (re-run on resume)
     n_fallback: int = 0              # rows flown one at a time after their engine batch failed
     journal_skipped: int = 0         # unreadable journal lines passed over (--resume)
+    memory_bound_mb: float = 0.0     # the process tree's bound the chunks were planned for
+    memory_mb: float = 0.0           # the budget it had to fit (--memory-mb)
 
     def failure_line(self) -> str | None:
         """None when every run produced a result (ok or crashed: a crash is a result); else one
@@ -1020,8 +1072,13 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
               progress: bool = True, report: bool = True,
               tasks: list[RunTask] | None = None,
               on_row: Callable[[dict[str, Any]], None] | None = None,
-              warn: Callable[[str], None] | None = None) -> BatchResult:
+              warn: Callable[[str], None] | None = None,
+              memory_mb: float | None = None) -> BatchResult:
     """Run every task of ``spec`` on ``executor`` (default: serial) into ``out_dir``.
+
+    ``memory_mb`` bounds the process tree (this process and the workers; default
+    :func:`default_memory_mb`): the runs are chunked to fit it (:func:`memory_plan`), and a
+    worker count that cannot fit is refused before anything runs.
 
     ``resume``: skip runs already in ``out_dir/journal.jsonl``; ``fresh``: discard an existing
     journal. With neither, an existing journal is an error (nothing is overwritten silently).
@@ -1037,14 +1094,17 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
     with hold(out_dir, "batch", "wait for it to finish, or choose another --out"):
         return _run_batch(spec, Path(out_dir), executor, resume=resume, fresh=fresh, logs=logs,
                           progress=progress, report=report, tasks=tasks, on_row=on_row,
-                          warn=warn)
+                          warn=warn, memory_mb=memory_mb)
 
 
 def _run_batch(spec: BatchSpec, out: Path, executor: Executor | None, *, resume: bool,
                fresh: bool, logs: bool, progress: bool, report: bool,
                tasks: list[RunTask] | None, on_row: Callable[[dict[str, Any]], None] | None,
-               warn: Callable[[str], None] | None) -> BatchResult:
+               warn: Callable[[str], None] | None, memory_mb: float | None) -> BatchResult:
     tasks = tasks if tasks is not None else expand(spec)
+    executor = executor or SerialExecutor()
+    workers = 0 if isinstance(executor, SerialExecutor) else executor.workers
+    mem = default_memory_mb() if memory_mb is None else float(memory_mb)
     journal = Journal(out / "journal.jsonl")
     if journal.path.exists() and not (resume or fresh):
         raise ConfigError(f'--out = "{out}": already holds a batch journal; use --resume to '
@@ -1061,7 +1121,9 @@ def _run_batch(spec: BatchSpec, out: Path, executor: Executor | None, *, resume:
         "name": spec.name, "source": spec.source, "n_runs": len(tasks),
         "axes": {a.name: a.values for a in spec.axes}, "base": spec.base,
         "presets": spec.presets}, indent=2, default=_json_default))
-    executor = executor or SerialExecutor()
+    chunks, bound = memory_plan(todo, max(workers, 1), mem) if todo else ([], 0.0)
+    if workers == 0:  # in this process: one process, not workers + 1
+        bound -= WORKER_BASE_MB
     run = _BatchRun(spec.name, len(tasks), len(tasks) - len(todo), progress, warn, on_row)
     if journal.skipped:
         run.warn(f"{journal.path}: skipped {journal.skipped} unreadable line(s); their runs "
@@ -1070,7 +1132,6 @@ def _run_batch(spec: BatchSpec, out: Path, executor: Executor | None, *, resume:
     journal.open(fresh=fresh and not resume)
     stopped = None
     try:
-        chunks = plan_chunks(todo, executor.workers) if todo else []
         for c, rs in executor.map_unordered(run_chunk, [[todo[i] for i in ch] for ch in chunks],
                                             return_exceptions=True):
             run.chunk([todo[i] for i in chunks[c]], rs, journal, rows_by_index)
@@ -1087,12 +1148,14 @@ def _run_batch(spec: BatchSpec, out: Path, executor: Executor | None, *, resume:
     res = BatchResult(rows=rows, out_dir=out, n_run=len(todo), n_skipped=len(tasks) - len(todo),
                       wall_s=wall, executor=executor.name, files=[out / "results.csv"],
                       n_lost=run.n_lost, journal_skipped=journal.skipped,
-                      n_fallback=sum(bool(r.get("engine_fallback")) for r in rows))
+                      n_fallback=sum(bool(r.get("engine_fallback")) for r in rows),
+                      memory_bound_mb=bound, memory_mb=mem)
     if report:
         res.files += write_report(rows, spec, out, info={
             "executor": executor.name, "wall time (this call)": f"{wall:.1f} s",
             "runs executed / resumed": f"{res.n_run} / {res.n_skipped}",
-            "runs lost to the machinery (this call)": res.n_lost})
+            "runs lost to the machinery (this call)": res.n_lost,
+            "memory bound of the process tree": f"{bound:.0f} MB of {mem:.0f} MB"})
     return res
 
 

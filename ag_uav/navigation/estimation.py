@@ -500,6 +500,8 @@ class BatchEstimatorFeedback:
         self.every_tick = np.array([fb.gps.latency_s > 0.0 for fb in feedbacks], dtype=bool)
         self.z = np.zeros((N, 3))
         self.mask = np.zeros(N, dtype=bool)
+        self.h = np.zeros(N)  # radar heights read without a GNSS fix (see _height)
+        self.h_mask = np.zeros(N, dtype=bool)
         self.u = np.zeros((N, 3))
         self.p_out = np.zeros((N, 3))
         self.v_out = np.zeros((N, 3))
@@ -527,6 +529,9 @@ class BatchEstimatorFeedback:
         z, R_new = fb.measure(t, pt)
         self.next_t[i] = fb.gps._next_k * fb.gps.dt
         if z is None:
+            if fb.radar and self.init[i]:  # no fix: the radar altimeter still reads
+                self.h[i] = pt[2] + fb.radar_sigma * fb.radar_rng.standard_normal()
+                self.h_mask[i] = True
             return
         if R_new is not None:
             for bf in self.bank.filters.values():
@@ -572,6 +577,7 @@ class BatchEstimatorFeedback:
             self._grow(k)
         due = act & ((t >= self.next_t - 1e-9) | self.every_tick)
         self.mask[:] = False
+        self.h_mask[:] = False
         if due.any():
             for i in np.flatnonzero(due):
                 self._fix(int(i), t, p[i])
@@ -607,6 +613,8 @@ class BatchEstimatorFeedback:
             self.n_cons[mask] += 1
             if any(fb.log is not None for fb in self.fbs):
                 self._log(t, mask)
+        if self.h_mask.any():
+            self._height()
         for name, bf in filters.items():
             _est_record(self.est[name], k, run, bf.x, self.pos_idx)
         if self.primary not in self.bank.filters:
@@ -614,6 +622,31 @@ class BatchEstimatorFeedback:
         bf = self.bank.filters[self.primary]
         _primary_out(bf.x, self.pos_idx, self.vel_idx, run, p, v, self.p_out, self.v_out)
         return self.p_out, self.v_out
+
+    def _height(self) -> None:
+        """The radar altimeter's height without a GNSS fix, as autopilots fly on a range finder
+        when the fix is lost: a scalar Kalman update of the height in every filter (K =
+        P h / (hᵀ P h + σ_r²), x += K (z − x_z), P −= K hᵀ P), so the height does not
+        drift with the horizontal position during an outage."""
+        iz = int(self.pos_idx[2])
+        for i in np.flatnonzero(self.h_mask):
+            r = self.fbs[i].radar_sigma ** 2
+            for bf in self.bank.filters.values():
+                x, P = bf.x[i], bf.P[i]
+                k = P[:, iz] / (P[iz, iz] + r)
+                x += k * (self.h[i] - x[iz])
+                P -= np.outer(k, P[iz, :])
+
+    def pos_sigma(self, out: np.ndarray) -> None:
+        """Each vehicle's horizontal position 1σ (m) from the primary filter's covariance;
+        NaN before its first fix or without a primary filter."""
+        bf = self.bank.filters.get(self.primary)
+        if bf is None:
+            out[:] = np.nan
+            return
+        ix, iy = int(self.pos_idx[0]), int(self.pos_idx[1])
+        out[:] = np.sqrt(bf.P[:, ix, ix] + bf.P[:, iy, iy])
+        out[~self.init] = np.nan
 
     def _ideal_accel(self, v: np.ndarray, run: np.ndarray) -> np.ndarray | None:
         """The ideal IMU (``imu.model = "ideal"``), per vehicle as :meth:`FilterBank._imu_accel`."""

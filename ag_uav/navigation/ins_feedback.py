@@ -553,6 +553,17 @@ class BatchInsFeedback:
             return p, v
         return self.p_out, self.v_out, self.R_out, self.w_out
 
+    def pos_sigma(self, out: np.ndarray) -> None:
+        """Each vehicle's horizontal position 1σ (m) from the flown rule's covariance,
+        sqrt(P_xx + P_yy); NaN before its first fix or without a flown filter."""
+        if self.bank is None or self.flown < 0:
+            out[:] = np.nan
+            return
+        P = self.bank.P
+        rows = np.arange(self.NV) * self.nr + self.flown
+        out[:] = np.sqrt(P[rows, 0, 0] + P[rows, 1, 1])
+        out[~self.init] = np.nan
+
     def _log(self, t: float, p: np.ndarray) -> None:
         """``/estimator/<rule>`` of the vehicles that fused a fix this tick: the output state
         (16) and the core's P diagonal (15), as the position-filter bank logs its filters."""

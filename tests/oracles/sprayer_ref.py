@@ -11,7 +11,8 @@ Per tick ``k`` at time ``t``, from the job's tables ``sortie[k]`` and ``ground[k
 * nozzles on iff the plan sprays, the tank is not empty and ``h_min < z < h_max`` (else the
   time is counted as ran-dry or height-gated);
 * flow ``dV = L/m · |v_xy| · dt`` (at most the tank), the liquid mass re-set when it fell by
-  1 g or the tank is empty;
+  1 g or the tank is empty (a Sprayer without the nozzle model; with it, the litres of the
+  nozzle model are drawn the same way after it);
 * power ``P = P_avionics + k_P Σ a^{3/2}`` over the positive actuator states (0 on the
   ground), energy ``E += P dt``, state of charge ``1 − E / capacity``;
 * the per-tick records and, every 0.1 s, ``log.spray_state``.
@@ -55,11 +56,13 @@ def step(sp: Sprayer, k: int, t: float, pz: float, vx: float, vy: float, spray_r
             on = True
         else:
             sp.gated_s += sp.dt
+    flow = 0.0
     if on:
         dv = sp.lpm * math.sqrt(vx * vx + vy * vy) * sp.dt
         if dv > sp.tank:
             dv = sp.tank
         sp.tank -= dv
+        flow = dv / sp.dt
         sp.litres_total += dv
         sp.per[-1]["litres"] += dv
         m_liq = sp.tank * sp.rho
@@ -89,7 +92,7 @@ def step(sp: Sprayer, k: int, t: float, pz: float, vx: float, vy: float, spray_r
     if log is not None and t >= sp._next_log and hasattr(log, "spray_state"):
         sp._next_log = t + 0.1 - 1e-9
         log.spray_state(t, tank_l=sp.tank, mass_kg=sp.dry + sp.tank * sp.rho,
-                        flow_lps=sp.lpm * math.sqrt(vx * vx + vy * vy) if on else 0.0,
+                        flow_lps=flow,
                         nozzles=on, power_w=p, energy_wh=sp.energy_total_j / 3600.0,
                         soc=soc, sortie=s + 1, ground=sp.ground[k])
     return f, on
