@@ -471,7 +471,9 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
         cut = f"{why}; {cut}" if cut else why
     if out.failsafe is not None:  # the position failsafe cut the mission
         summ.update(out.failsafe)
-        if not summ.get("crashed"):
+        if summ.get("crashed"):
+            summ["crash_reason"] = f"{summ['crash_reason']} (in the GNSS failsafe)"
+        else:
             landed = out.failsafe["failsafe_landed_s"]
             cut = out.failsafe["failsafe"] + ("" if landed is None else f"; landed at t={landed}s")
     if cut:

@@ -216,6 +216,21 @@ class Feedback:
             self.bank.finish(self.b.flown)
 
 
+def failsafe_bound(cfg: Any, gps: Any) -> float:
+    """``gps.failsafe_sigma_m`` (m); ``"auto"``: 1 m, or the receiver's horizontal 1σ of one
+    fix of its worst type (its nominal level without fix types) when larger; inf for a receiver
+    without a finite variance (alpha-stable), which never trips it. A filter fed fixes at the
+    fix rate stays below one fix's error (the default INS under DGPS fixes: under 0.3 m)."""
+    v = cfg.gps.failsafe_sigma_m
+    if v != "auto":
+        return float(v)
+    if gps is None:
+        return 1.0
+    var = [gps.variance, *(gps.mode_variance(m) for m in getattr(gps, "fix_types", ()))]
+    worst = max(math.sqrt(x + y) for x, y, _ in var)
+    return max(1.0, worst)
+
+
 class Failsafe:
     """The autopilot's position failsafe (``gps.failsafe``): in flight, once the flown
     estimate's horizontal position 1σ (the feedback bank's ``pos_sigma``) passes
@@ -237,7 +252,9 @@ class Failsafe:
         n = b.n
         self.mode = [c.gps.failsafe for c in cfgs]
         self.on = np.array([m != "off" for m in self.mode])
-        self.bound = np.array([c.gps.failsafe_sigma_m for c in cfgs])
+        self.bound = np.array([failsafe_bound(c, getattr(fb, "gps", None))
+                               for c, fb in zip(cfgs, getattr(bank, "fbs", [None] * n),
+                                                strict=True)])
         self.hold_s = np.array([c.gps.failsafe_hold_s if m == "hold" else 0.0
                                 for c, m in zip(cfgs, self.mode, strict=True)])
         self.every = max(1, round(1.0 / (self.CHECK_HZ * b.dt)))
@@ -274,7 +291,7 @@ class Failsafe:
         self.zr[i] = b.p_fb[i, 2]
         self.t_land[i] = t + max(self.hold_s[i], tb)
         why = (f"GNSS failsafe ({self.mode[i]}) at t={t:.1f}s: horizontal position 1-sigma "
-               f"{self.sig[i]:.2f} m > gps.failsafe_sigma_m = {self.bound[i]:g} m")
+               f"{self.sig[i]:.2f} m > gps.failsafe_sigma_m = {self.bound[i]:.3g} m")
         self.info[i] = {"failsafe": why, "failsafe_time_s": round(t, 2),
                         "failsafe_landed_s": None}
         b.notes[i].append(why)
