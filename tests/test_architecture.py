@@ -309,9 +309,8 @@ def private_reach_ins(root: Path = ROOT, code=PRODUCT_CODE) -> dict[str, int]:
 # its limit or gone (then delete its line).
 #: files over :data:`MAX_FILE_LINES` today -> their lines (may only shrink)
 FILE_LINES_LEFT: dict[str, int] = {
-    "ag_uav/jobs/batch.py": 1254,
-    "ag_uav/navigation/estimation.py": 708,
-    "ag_uav/navigation/ins_feedback.py": 917,
+    "ag_uav/jobs/batch.py": 1228,
+    "ag_uav/navigation/ins_feedback.py": 881,
     "estimators/batched.py": 709,
     "estimators/ins.py": 1156,
 }
@@ -328,7 +327,6 @@ PARAMETERS_LEFT: dict[str, int] = {
     "ag_uav/engine/loop.py::_Engine.__init__": 14,
     "ag_uav/engine/missions.py::fly_reference": 11,
     "ag_uav/engine/spray_batched.py::_spray_kernel": 16,
-    "ag_uav/engine/spray_batched.py::_spray_log_row": 11,
     "ag_uav/jobs/batch.py::_run_batch": 11,
     "ag_uav/jobs/batch.py::run_batch": 11,
     "ag_uav/navigation/bearing.py::BearingFeedback.__init__": 14,

@@ -116,8 +116,9 @@ def test_the_batch_tree_stays_within_its_bound(tmp_path):
     th.start()
     try:
         with LocalPoolExecutor(2) as ex:
+            ex.memory_mb = 3000.0
             res = run_batch(load_spec(str(spec)), tmp_path / "o", ex, progress=False,
-                            report=False, memory_mb=3000.0)
+                            report=False)
     finally:
         stop.set()
         th.join()

@@ -152,7 +152,7 @@ def _dense_F_Q(x, u, R, cfg):
 def test_colour_factor_is_the_variance_of_the_mean():
     """n f(n, ρ) = n Var(mean of n AR(1) samples) / σ², from the Toeplitz covariance ρ^|i−j|;
     1 at n = 1, (1+ρ)/(1−ρ) as n → ∞."""
-    from ag_uav.navigation.ins_feedback import colour_factor
+    from ag_uav.navigation.receiver import colour_factor
 
     for rho in (0.0, 0.5, math.exp(-0.1 / 30.0)):
         for n in (1, 7, 40):
@@ -167,8 +167,7 @@ def test_fix_variance_splits_the_receivers_variance():
     """White + Gauss–Markov parts at n = 1 add up to the receiver's own variance per fix type;
     the consider split puts the rtk-m350 fixed mode's 60 % coloured share in the GM part."""
     from ag_uav.config import load_config
-    from ag_uav.navigation.estimation import make_gps
-    from ag_uav.navigation.ins_feedback import fix_variance
+    from ag_uav.navigation.receiver import fix_variance, make_gps
 
     gps = make_gps(load_config(None, {}), np.random.SeedSequence(0))
     for m in gps.fix_types:

@@ -159,10 +159,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if args.memory_mb is not None and not args.memory_mb > 0:
         raise ConfigError(f"--memory-mb = {args.memory_mb:g}: must be > 0")
     with _executor(args) as ex:
+        ex.memory_mb = args.memory_mb
         code, res = _guarded(f"batch {spec.name}", out, lambda: run_batch(
             spec, out, ex, resume=args.resume, fresh=args.fresh, logs=args.logs,
-            progress=not args.quiet, report=not args.no_report, tasks=tasks,
-            memory_mb=args.memory_mb),
+            progress=not args.quiet, report=not args.no_report, tasks=tasks),
             kept=f"finished runs kept, {out / 'results.csv'} written")
     if code is not None:
         return code

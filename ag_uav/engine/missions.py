@@ -288,9 +288,9 @@ _SAID: set[str] = set()
 
 def _preflight(cfg: Config) -> RunResult | None:
     """The run of a vehicle the pre-flight check keeps on the ground
-    (:func:`ag_uav.navigation.estimation.preflight_gnss`): no flight, not completed, the reason
+    (:func:`ag_uav.navigation.receiver.preflight_gnss`): no flight, not completed, the reason
     in ``incomplete_reason`` and ``preflight``; None when the check passes."""
-    from ..navigation.estimation import preflight_gnss
+    from ..navigation.receiver import preflight_gnss
 
     why = preflight_gnss(cfg)
     if why is None:
@@ -388,7 +388,7 @@ def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = Fals
 def batch_key(cfg: Config) -> tuple:
     """Configs with equal keys can fly in one engine batch (same control and physics rates,
     same sensing and spray-job structure)."""
-    from ..navigation.estimation import gnss_latency_s
+    from ..navigation.receiver import gnss_latency_s
 
     e = cfg.estimator
     imu = ((e.source == "bearings" or e.name != "true" or bool(e.shadow))
@@ -449,6 +449,24 @@ def dose_summary(cfg: Config, fld: Field, dose: Any, tank_l: float | None = None
     return out
 
 
+def _cut_reason(cfg: Config, ref: Any, out: LoopOutput, summ: dict[str, Any],
+                why: str | None) -> str | None:
+    """Why the mission was cut, in one line (None: it was not): the position failsafe (its
+    reason and landing; a crash in it says so in ``crash_reason``), else the reason a flight
+    is incomplete and the cut by ``sim.max_time_s``."""
+    cut = _cut_by_max_time(cfg, ref, out, summ)
+    if why is not None and (cut is None or why.startswith("never took off")):
+        cut = f"{why}; {cut}" if cut else why
+    if out.failsafe is None:
+        return cut
+    summ.update(out.failsafe)
+    if summ.get("crashed"):
+        summ["crash_reason"] = f"{summ['crash_reason']} (in the GNSS failsafe)"
+        return cut
+    landed = out.failsafe["failsafe_landed_s"]
+    return out.failsafe["failsafe"] + ("" if landed is None else f"; landed at t={landed}s")
+
+
 def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
     """Metrics and the summary of one flown run."""
     from ..analysis import metrics
@@ -465,17 +483,7 @@ def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
     sim_time = float(len(out.t) / cfg.sim.control_hz)
     summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
                              reference=ref)
-    cut = _cut_by_max_time(cfg, ref, out, summ)
-    why = metrics.incomplete_reason(summ, res, cfg)
-    if why is not None and (cut is None or why.startswith("never took off")):
-        cut = f"{why}; {cut}" if cut else why
-    if out.failsafe is not None:  # the position failsafe cut the mission
-        summ.update(out.failsafe)
-        if summ.get("crashed"):
-            summ["crash_reason"] = f"{summ['crash_reason']} (in the GNSS failsafe)"
-        else:
-            landed = out.failsafe["failsafe_landed_s"]
-            cut = out.failsafe["failsafe"] + ("" if landed is None else f"; landed at t={landed}s")
+    cut = _cut_reason(cfg, ref, out, summ, metrics.incomplete_reason(summ, res, cfg))
     if cut:
         summ["incomplete_reason"] = cut
     if not summ["legs_flown"]:  # the end of a mission never flown is no mission time

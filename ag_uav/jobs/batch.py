@@ -66,6 +66,7 @@ from typing import Any
 
 from ..config import Config, ConfigError, config_from_dict
 from ..record.atomic import atomic_open, atomic_write_text, savefig
+from .batch_memory import WORKER_BASE_MB, default_memory_mb, memory_plan
 from .executor import Executor, ExecutorLost, LocalPoolExecutor, SerialExecutor
 
 SPEC_KEYS = ("name", "description", "base", "axes", "presets", "max_runs")
@@ -575,96 +576,6 @@ def _error_row(task: RunTask, e: BaseException, t0: float) -> dict[str, Any]:
             "engine_fallback": ""}
 
 
-#: bytes the engine keeps per vehicle and control tick: records, IMU and spray job, plus
-#: ``ENGINE_BYTES_PER_FILTER_TICK`` per filter of the bank (estimates, NEES/NIS records, the
-#: per-run objects); measured: ~22 MB per 48,500-tick mission with one filter, ~31 MB with four
-ENGINE_BYTES_PER_TICK = 420
-ENGINE_BYTES_PER_FILTER_TICK = 120
-#: memory one chunk's records may take (a worker holds one chunk at a time)
-CHUNK_BYTES = 384 * 2**20
-#: a process's own memory with a short run flown in it: the interpreter, numpy, MuJoCo and the
-#: loaded kernels (a worker of a batch of short runs peaks at about 306 MB on the 2-core
-#: development machine; tests/test_chaos_memory.py measures the whole tree)
-WORKER_BASE_MB = 340
-
-
-def default_memory_mb() -> float:
-    """The process tree's memory bound when none is given: 80 % of what the machine has
-    available now."""
-    import psutil
-
-    return 0.8 * psutil.virtual_memory().available / 2**20
-
-
-def _run_bytes(t: RunTask) -> tuple[Any, int]:
-    """(engine-batch key, bytes) of one run: its per-tick records and filters over the
-    mission's length, and its dose map (:func:`ag_uav.engine.missions.dose_map_mb`)."""
-    from ..engine.missions import batch_key, dose_map_mb, mission_setup
-
-    cfg = config_from_dict(t.config)
-    fld, _, ref = mission_setup(cfg)
-    e = cfg.estimator
-    n_filters = len({*([e.name] if e.name != "true" else []), *e.shadow})
-    n = (int(min(ref.duration, cfg.sim.max_time_s) * cfg.sim.control_hz) + 1) * (
-        ENGINE_BYTES_PER_TICK + ENGINE_BYTES_PER_FILTER_TICK * n_filters)
-    return batch_key(cfg), n + int(dose_map_mb(cfg, fld) * 2**20)
-
-
-def plan_chunks(tasks: list[RunTask], workers: int, max_runs: int = 64,
-                budget_bytes: int = CHUNK_BYTES) -> list[list[int]]:
-    """Indices of ``tasks`` in lockstep chunks: runs that can share an engine batch
-    (:func:`ag_uav.engine.missions.batch_key`), at most ``max_runs`` and about ``budget_bytes`` of
-    records and dose maps per chunk (from each mission's length and field), and at least as
-    many chunks as ``workers`` when there are enough runs."""
-    groups: dict[Any, list[int]] = {}
-    nbytes: dict[Any, int] = {}  # per run: the longest mission's engine memory
-    for j, t in enumerate(tasks):
-        try:
-            key, n = _run_bytes(t)
-        except Exception:  # noqa: BLE001 - a bad run flies alone (and becomes an error row)
-            key, n = ("alone", j), 1
-        groups.setdefault(key, []).append(j)
-        nbytes[key] = max(nbytes.get(key, 0), n)
-    chunks: list[list[int]] = []
-    for key, idx in groups.items():
-        size = max(1, min(max_runs, budget_bytes // max(nbytes[key], 1),
-                          -(-len(idx) // max(workers, 1))))
-        chunks += [idx[i:i + size] for i in range(0, len(idx), size)]
-    return chunks
-
-
-def memory_plan(tasks: list[RunTask], workers: int, memory_mb: float
-                ) -> tuple[list[list[int]], float]:
-    """(chunks, the process tree's bound in MB) for ``workers`` processes within ``memory_mb``:
-    this process and each worker take :data:`WORKER_BASE_MB`, and each worker one chunk at a
-    time, so a chunk may take (memory_mb − (workers + 1) × base) / workers (at most
-    :data:`CHUNK_BYTES`). Raises :class:`ConfigError` (one line) when even one run per worker
-    does not fit."""
-    per = (memory_mb - (workers + 1) * WORKER_BASE_MB) / max(workers, 1)
-    largest = max(_sizes(tasks), default=0)
-    need = (workers + 1) * WORKER_BASE_MB + workers * largest / 2**20
-    if per * 2**20 < largest:
-        raise ConfigError(f"--memory-mb = {memory_mb:.0f}: {workers} workers need about "
-                          f"{need:.0f} MB ({WORKER_BASE_MB} MB per process and "
-                          f"{largest / 2**20:.0f} MB for the largest run); lower --workers or "
-                          "raise --memory-mb")
-    budget = int(min(CHUNK_BYTES, per * 2**20))
-    chunks = plan_chunks(tasks, workers, budget_bytes=budget)
-    sizes = {j: n for j, n in enumerate(_sizes(tasks))}
-    biggest = max((sum(sizes[j] for j in ch) for ch in chunks), default=0)
-    return chunks, (workers + 1) * WORKER_BASE_MB + workers * biggest / 2**20
-
-
-def _sizes(tasks: list[RunTask]) -> list[int]:
-    out = []
-    for t in tasks:
-        try:
-            out.append(_run_bytes(t)[1])
-        except Exception:  # noqa: BLE001 - its error row is made when it runs
-            out.append(0)
-    return out
-
-
 # ------------------------------------------------------------------------------------ journal
 class Journal:
     """Append-only JSONL of finished runs, one line per run, flushed and fsynced per line.
@@ -1072,13 +983,13 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
               progress: bool = True, report: bool = True,
               tasks: list[RunTask] | None = None,
               on_row: Callable[[dict[str, Any]], None] | None = None,
-              warn: Callable[[str], None] | None = None,
-              memory_mb: float | None = None) -> BatchResult:
+              warn: Callable[[str], None] | None = None) -> BatchResult:
     """Run every task of ``spec`` on ``executor`` (default: serial) into ``out_dir``.
 
-    ``memory_mb`` bounds the process tree (this process and the workers; default
-    :func:`default_memory_mb`): the runs are chunked to fit it (:func:`memory_plan`), and a
-    worker count that cannot fit is refused before anything runs.
+    The executor's ``memory_mb`` bounds the process tree (this process and the workers;
+    ``None``: :func:`~ag_uav.jobs.batch_memory.default_memory_mb`): the runs are chunked to fit
+    it (:func:`~ag_uav.jobs.batch_memory.memory_plan`), and a worker count that cannot fit is
+    refused before anything runs.
 
     ``resume``: skip runs already in ``out_dir/journal.jsonl``; ``fresh``: discard an existing
     journal. With neither, an existing journal is an error (nothing is overwritten silently).
@@ -1094,17 +1005,17 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
     with hold(out_dir, "batch", "wait for it to finish, or choose another --out"):
         return _run_batch(spec, Path(out_dir), executor, resume=resume, fresh=fresh, logs=logs,
                           progress=progress, report=report, tasks=tasks, on_row=on_row,
-                          warn=warn, memory_mb=memory_mb)
+                          warn=warn)
 
 
 def _run_batch(spec: BatchSpec, out: Path, executor: Executor | None, *, resume: bool,
                fresh: bool, logs: bool, progress: bool, report: bool,
                tasks: list[RunTask] | None, on_row: Callable[[dict[str, Any]], None] | None,
-               warn: Callable[[str], None] | None, memory_mb: float | None) -> BatchResult:
+               warn: Callable[[str], None] | None) -> BatchResult:
     tasks = tasks if tasks is not None else expand(spec)
     executor = executor or SerialExecutor()
     workers = 0 if isinstance(executor, SerialExecutor) else executor.workers
-    mem = default_memory_mb() if memory_mb is None else float(memory_mb)
+    mem = executor.memory_mb or default_memory_mb()
     journal = Journal(out / "journal.jsonl")
     if journal.path.exists() and not (resume or fresh):
         raise ConfigError(f'--out = "{out}": already holds a batch journal; use --resume to '

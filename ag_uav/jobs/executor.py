@@ -106,6 +106,8 @@ class Executor:
     name = "executor"
     #: number of tasks that run at the same time
     workers = 1
+    #: the bound a batch keeps its process tree within (MB; None: 80 % of what is available)
+    memory_mb: float | None = None
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> Any:
         raise NotImplementedError

@@ -45,56 +45,12 @@ import estimators
 
 from .._jit import njit
 from ..config import Config, ConfigError
-from ..vehicle.gps import GpsSensor
 from ..vehicle.mjcf import G
+from .aiding import fuse_height, horizontal_sigma
 from .feedback import Feedback
+from .receiver import make_gps
 
 R_FLOOR = 1e-4
-
-
-def preflight_gnss(cfg: Config) -> str | None:
-    """The pre-flight check an autopilot makes before it arms: no take-off without a GNSS fix
-    (PX4's ``COM_ARM_WO_GPS`` default, ArduPilot's GPS arming check).  A run that flies on an
-    estimate (``estimator.name`` other than ``"true"``, or bearings) whose receiver starts in
-    an outage (``gps.overrides.outage.start_in_outage``) has no fix at take-off: the reason,
-    in one line (None when the check passes)."""
-    e = cfg.estimator
-    if e.source == "gps" and e.name == "true":
-        return None
-    out = cfg.gps.overrides.get("outage") or {}
-    if isinstance(out, dict) and out.get("start_in_outage") is True:
-        return ("pre-flight check: no GNSS fix at take-off (gps.overrides.outage."
-                "start_in_outage = true): not armed, the vehicle stays on the ground")
-    return None
-
-
-def gnss_latency_s(cfg: Config) -> float:
-    """The receiver latency the INS chain applies (s): ``gps.overrides.latency_s`` where it is
-    given (the sensor's own key, which the ideal-attitude chain's sensor reads), else
-    ``gps.latency_s``."""
-    v = cfg.gps.overrides.get("latency_s", cfg.gps.latency_s)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 <= v <= 1.0:
-        raise ConfigError(f"gps.overrides.latency_s = {v!r}: must be a number in [0, 1] s")
-    return float(v)
-
-
-def make_gps(cfg: Config, seed: np.random.SeedSequence) -> GpsSensor:
-    g = cfg.gps
-    ov: dict[str, Any] = dict(g.overrides)
-    if g.rate_hz > 0:
-        ov["rate_hz"] = g.rate_hz
-    if g.multipath_prob > 0:
-        comps = dict(ov.get("components", {})) if isinstance(ov.get("components"), dict) else {}
-        comps["multipath_extra"] = {"type": "spikes", "prob": g.multipath_prob,
-                                    "amplitude": g.multipath_amplitude_m}
-        if isinstance(ov.get("components"), list):
-            raise ConfigError("gps.multipath_prob: cannot be combined with a components list in "
-                              "gps.overrides; add the spikes to that list")
-        ov["components"] = comps
-    try:
-        return GpsSensor.from_preset(g.preset, seed, **ov)
-    except ValueError as e:
-        raise ConfigError(f"gps.overrides = {ov!r}: {e}") from None
 
 
 def process_noise(cfg: Config, model: str | None = None) -> tuple[float, float, float]:
@@ -624,29 +580,18 @@ class BatchEstimatorFeedback:
         return self.p_out, self.v_out
 
     def _height(self) -> None:
-        """The radar altimeter's height without a GNSS fix, as autopilots fly on a range finder
-        when the fix is lost: a scalar Kalman update of the height in every filter (K =
-        P h / (hᵀ P h + σ_r²), x += K (z − x_z), P −= K hᵀ P), so the height does not
-        drift with the horizontal position during an outage."""
+        """The radar heights read without a fix (:func:`~ag_uav.navigation.aiding.fuse_height`),
+        as autopilots fly on a range finder when the fix is lost."""
         iz = int(self.pos_idx[2])
         for i in np.flatnonzero(self.h_mask):
-            r = self.fbs[i].radar_sigma ** 2
-            for bf in self.bank.filters.values():
-                x, P = bf.x[i], bf.P[i]
-                k = P[:, iz] / (P[iz, iz] + r)
-                x += k * (self.h[i] - x[iz])
-                P -= np.outer(k, P[iz, :])
+            fuse_height(self.bank.filters.values(), i, self.h[i], self.fbs[i].radar_sigma ** 2, iz)
 
     def pos_sigma(self, out: np.ndarray) -> None:
-        """Each vehicle's horizontal position 1σ (m) from the primary filter's covariance;
-        NaN before its first fix or without a primary filter."""
+        """Each vehicle's horizontal position 1σ (m) of the primary filter (NaN before its
+        first fix): :func:`~ag_uav.navigation.aiding.horizontal_sigma`."""
         bf = self.bank.filters.get(self.primary)
-        if bf is None:
-            out[:] = np.nan
-            return
-        ix, iy = int(self.pos_idx[0]), int(self.pos_idx[1])
-        out[:] = np.sqrt(bf.P[:, ix, ix] + bf.P[:, iy, iy])
-        out[~self.init] = np.nan
+        horizontal_sigma(None if bf is None else bf.P, int(self.pos_idx[0]), int(self.pos_idx[1]),
+                         self.init, out)
 
     def _ideal_accel(self, v: np.ndarray, run: np.ndarray) -> np.ndarray | None:
         """The ideal IMU (``imu.model = "ideal"``), per vehicle as :meth:`FilterBank._imu_accel`."""

@@ -36,7 +36,7 @@ reference).
 **R.** Position: ``max(r_scale · variance, (1 cm)²)`` of the *reported* fix type
 (``gps.r_from_fix_type``; with ``gps.receiver = "honest"`` the reported type lags and its
 accuracy carries the per-episode calibration error), else the preset's nominal variance;
-the variance's Gauss–Markov part is inflated by :func:`colour_factor` for the window
+the variance's Gauss–Markov part is inflated by `receiver.colour_factor` for the window
 ``estimator.ins_gnss_window_s`` (0, the default: fused as white); velocity
 ``gps.velocity_sigma_mps²``, heading ``gps.heading_sigma_deg²``, radar ``gps.radar_sigma_m²``.
 
@@ -92,7 +92,9 @@ from estimators.ins import BatchINS, INSConfig, quat_log_err
 from .._jit import njit
 from ..config import Config, ConfigError
 from ..vehicle.gps import ReceiverReport, derive_seed
+from .aiding import horizontal_sigma
 from .feedback import Feedback
+from .receiver import fix_variance
 
 R_FLOOR = 1e-4
 #: the least variance (m², (5 mm)²) a "consider" fix is fused with: a receiver whose error is
@@ -112,7 +114,7 @@ INS_RULES = ("kf", "mckf", "pca-kf", "pca-mckf")
 def ins_config(cfg: Config) -> INSConfig:
     """The INS's settings from the run config (IMU figures at the control rate, latency,
     MCKF σ, kernel and recovery, PCA window)."""
-    from .estimation import gnss_latency_s
+    from .receiver import gnss_latency_s
 
     e, im = cfg.estimator, cfg.imu
     rec = None if e.ins_recovery == "none" else e.ins_recovery
@@ -149,7 +151,7 @@ class InsFeedback(Feedback):
 
     def __init__(self, cfg: Config, seeds: dict[str, np.random.SeedSequence]) -> None:
         from ..vehicle.imu import ImuSensor
-        from .estimation import gnss_latency_s, make_gps
+        from .receiver import gnss_latency_s, make_gps
 
         e, g = cfg.estimator, cfg.gps
         self.cfg = cfg
@@ -248,7 +250,7 @@ class InsFeedback(Feedback):
     def _r(self, mode: str | None) -> tuple[np.ndarray, np.ndarray]:
         """(R, considered variance) per axis of a fix of type ``mode`` (None: the preset's
         nominal): "white" R = the whole variance; "inflate" its Gauss–Markov part times
-        :func:`colour_factor` over the window; "consider" R = the floored whole less the
+        `receiver.colour_factor` over the window; "consider" R = the floored whole less the
         Gauss–Markov part, which is considered (added to the position covariance the INS
         reports, not estimated: Schmidt's consider covariance without its cross terms)."""
         r_scale = self.cfg.estimator.r_scale
@@ -376,50 +378,6 @@ class InsFeedback(Feedback):
             s["false_fix_episodes"] = self.report.n_false
             s["false_fix_fixes"] = self.report.false_fixes
         return s
-
-
-def colour_factor(rho: float, n: int) -> float:
-    """``n f(n, ρ) = 1 + 2 Σ_{j=1}^{n−1} (1 − j/n) ρ^j``: the variance of the mean of ``n``
-    successive samples of a Gauss–Markov sequence with correlation ``ρ`` per sample, over the
-    σ²/n the same samples would have if white. A filter that averages about ``n`` fixes sees
-    the coloured part of the fix error ``n f`` times larger than white fusion assumes (→
-    (1+ρ)/(1−ρ) for n → ∞; 1 for n = 1). Inflating that part of R by it keeps the averaged
-    position's variance honest (Bar-Shalom, Li & Kirubarajan 2001, *Estimation with
-    Applications to Tracking and Navigation*, §8.1: coloured measurement noise)."""
-    if n <= 1 or rho <= 0.0:
-        return 1.0
-    j = np.arange(1, n)
-    return float(1.0 + 2.0 * np.sum((1.0 - j / n) * rho**j))
-
-
-def fix_variance(gps: Any, mode: str | None, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-axis variance of a fix of the receiver's error chain (the base components, plus
-    fix type ``mode``'s own) as (its white part, its Gauss–Markov / AR(1) part times
-    :func:`colour_factor` at the fix interval and the filter's window of ``n`` fixes); NaN
-    (no variance) reads 1 m²."""
-    dt = 1.0 / gps.rate_hz
-    comps = list(gps.components)
-    if mode is not None:
-        comps += list(gps.mode_components[gps.fix_types.index(mode)])
-    v = np.zeros((2, 3))
-    for _name, procs, scale in comps:
-        for ax in range(3):
-            if not scale[ax]:
-                continue
-            p = procs[ax]
-            var = float(p.variance)
-            if not math.isfinite(var):
-                var = 1.0
-            if hasattr(p, "rho_at"):
-                rho = p.rho_at(dt)
-            elif getattr(p, "tau_s", None):
-                rho = math.exp(-dt / p.tau_s)
-            else:
-                v[0, ax] += scale[ax] ** 2 * var
-                continue
-            v[1, ax] += scale[ax] ** 2 * var * colour_factor(rho, n)
-    v *= np.asarray(gps.axis_scale, dtype=float) ** 2
-    return v[0], v[1]
 
 
 def _mean(a: np.ndarray) -> float | None:
@@ -554,15 +512,10 @@ class BatchInsFeedback:
         return self.p_out, self.v_out, self.R_out, self.w_out
 
     def pos_sigma(self, out: np.ndarray) -> None:
-        """Each vehicle's horizontal position 1σ (m) from the flown rule's covariance,
-        sqrt(P_xx + P_yy); NaN before its first fix or without a flown filter."""
-        if self.bank is None or self.flown < 0:
-            out[:] = np.nan
-            return
-        P = self.bank.P
-        rows = np.arange(self.NV) * self.nr + self.flown
-        out[:] = np.sqrt(P[rows, 0, 0] + P[rows, 1, 1])
-        out[~self.init] = np.nan
+        """Each vehicle's horizontal position 1σ (m) of the flown rule (NaN before its first fix):
+        :func:`~ag_uav.navigation.aiding.horizontal_sigma`."""
+        P = None if self.bank is None or self.flown < 0 else self.bank.P[self.flown::self.nr]
+        horizontal_sigma(P, 0, 1, self.init, out)
 
     def _log(self, t: float, p: np.ndarray) -> None:
         """``/estimator/<rule>`` of the vehicles that fused a fix this tick: the output state
