@@ -226,7 +226,7 @@ def test_an_engine_batch_failure_is_a_column_a_warning_and_a_count(tmp_path, mon
 
     said: list[str] = []  # the planner keeps them apart; put them in one chunk to see it fail
     monkeypatch.setattr(batch, "memory_plan",
-                        lambda todo, workers, mem: ([list(range(len(todo)))], 0.0))
+                        lambda todo, workers, mem, here: ([list(range(len(todo)))], 0.0))
     res = run_batch(spec, tmp_path / "o", progress=False, warn=said.append)
     assert res.n_fallback == 2 and res.failure_line() is None
     assert len(said) == 1 and "flown one at a time" in said[0] and "ValueError" in said[0]

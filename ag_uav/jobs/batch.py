@@ -66,7 +66,7 @@ from typing import Any
 
 from ..config import Config, ConfigError, config_from_dict
 from ..record.atomic import atomic_open, atomic_write_text, savefig
-from .batch_memory import WORKER_BASE_MB, default_memory_mb, memory_plan
+from .batch_memory import default_memory_mb, memory_plan, this_process_mb
 from .executor import Executor, ExecutorLost, LocalPoolExecutor, SerialExecutor
 
 SPEC_KEYS = ("name", "description", "base", "axes", "presets", "max_runs")
@@ -1032,9 +1032,7 @@ def _run_batch(spec: BatchSpec, out: Path, executor: Executor | None, *, resume:
         "name": spec.name, "source": spec.source, "n_runs": len(tasks),
         "axes": {a.name: a.values for a in spec.axes}, "base": spec.base,
         "presets": spec.presets}, indent=2, default=_json_default))
-    chunks, bound = memory_plan(todo, max(workers, 1), mem) if todo else ([], 0.0)
-    if workers == 0:  # in this process: one process, not workers + 1
-        bound -= WORKER_BASE_MB
+    chunks, bound = memory_plan(todo, workers, mem, this_process_mb()) if todo else ([], 0.0)
     run = _BatchRun(spec.name, len(tasks), len(tasks) - len(todo), progress, warn, on_row)
     if journal.skipped:
         run.warn(f"{journal.path}: skipped {journal.skipped} unreadable line(s); their runs "

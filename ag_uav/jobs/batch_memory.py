@@ -3,8 +3,8 @@
 A worker flies one lockstep chunk at a time (:func:`ag_uav.jobs.batch.run_chunk`); the engine's
 memory of a run grows with its control ticks and filters, and its dose map with the field.
 :func:`plan_chunks` groups the runs that can share an engine batch into chunks of about a
-given size, and :func:`memory_plan` sizes them so that the whole process tree (this process
-and the workers, each :data:`WORKER_BASE_MB` before its runs) fits ``--memory-mb``.
+given size, and :func:`memory_plan` sizes them so that the whole process tree (this process as
+it is, and the workers, each :data:`WORKER_BASE_MB` before its runs) fits ``--memory-mb``.
 """
 
 from __future__ import annotations
@@ -23,10 +23,11 @@ ENGINE_BYTES_PER_TICK = 420
 ENGINE_BYTES_PER_FILTER_TICK = 120
 #: memory one chunk's records may take (a worker holds one chunk at a time)
 CHUNK_BYTES = 384 * 2**20
-#: a process's own memory with a short run flown in it: the interpreter, numpy, MuJoCo and the
-#: loaded kernels (a worker of a batch of short runs peaks at about 306 MB on the 2-core
-#: development machine; tests/test_chaos_memory.py measures the whole tree)
-WORKER_BASE_MB = 340
+#: a worker process's own memory with a short run flown in it: the interpreter, numpy, MuJoCo
+#: and the kernels (on the 2-core development machine a worker peaks at about 306 MB with the
+#: kernels cached and about 410 MB when it compiles them; tests/test_chaos_memory.py measures
+#: the whole tree)
+WORKER_BASE_MB = 450
 
 
 def default_memory_mb() -> float:
@@ -74,26 +75,35 @@ def plan_chunks(tasks: list[RunTask], workers: int, max_runs: int = 64,
     return chunks
 
 
-def memory_plan(tasks: list[RunTask], workers: int, memory_mb: float
-                ) -> tuple[list[list[int]], float]:
-    """(chunks, the process tree's bound in MB) for ``workers`` processes within ``memory_mb``:
-    this process and each worker take :data:`WORKER_BASE_MB`, and each worker one chunk at a
-    time, so a chunk may take (memory_mb − (workers + 1) × base) / workers (at most
-    :data:`CHUNK_BYTES`). Raises :class:`ConfigError` (one line) when even one run per worker
-    does not fit."""
-    per = (memory_mb - (workers + 1) * WORKER_BASE_MB) / max(workers, 1)
-    largest = max(_sizes(tasks), default=0)
-    need = (workers + 1) * WORKER_BASE_MB + workers * largest / 2**20
+def this_process_mb() -> float:
+    """This process's resident memory now (MB)."""
+    import psutil
+
+    return psutil.Process().memory_info().rss / 2**20
+
+
+def memory_plan(tasks: list[RunTask], workers: int, memory_mb: float,
+                here_mb: float) -> tuple[list[list[int]], float]:
+    """(chunks, the process tree's bound in MB) within ``memory_mb``: this process as it is now
+    (``here_mb``, :func:`this_process_mb`) and ``workers`` worker processes of
+    :data:`WORKER_BASE_MB` each, every worker holding one chunk at a time (``workers = 0``:
+    the runs fly in this process, which holds the chunk). A chunk may take what is left over
+    the workers (at most :data:`CHUNK_BYTES`). Raises :class:`ConfigError` (one line) when even
+    one run per worker does not fit."""
+    holders = max(workers, 1)
+    base = here_mb + workers * WORKER_BASE_MB
+    sizes = _sizes(tasks)
+    largest = max(sizes, default=0)
+    per = (memory_mb - base) / holders
     if per * 2**20 < largest:
         raise ConfigError(f"--memory-mb = {memory_mb:.0f}: {workers} workers need about "
-                          f"{need:.0f} MB ({WORKER_BASE_MB} MB per process and "
+                          f"{base + holders * largest / 2**20:.0f} MB (this process "
+                          f"{here_mb:.0f} MB, {WORKER_BASE_MB} MB a worker and "
                           f"{largest / 2**20:.0f} MB for the largest run); lower --workers or "
                           "raise --memory-mb")
-    budget = int(min(CHUNK_BYTES, per * 2**20))
-    chunks = plan_chunks(tasks, workers, budget_bytes=budget)
-    sizes = {j: n for j, n in enumerate(_sizes(tasks))}
+    chunks = plan_chunks(tasks, holders, budget_bytes=int(min(CHUNK_BYTES, per * 2**20)))
     biggest = max((sum(sizes[j] for j in ch) for ch in chunks), default=0)
-    return chunks, (workers + 1) * WORKER_BASE_MB + workers * biggest / 2**20
+    return chunks, base + holders * biggest / 2**20
 
 
 def _sizes(tasks: list[RunTask]) -> list[int]:
