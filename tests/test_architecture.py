@@ -309,14 +309,13 @@ def private_reach_ins(root: Path = ROOT, code=PRODUCT_CODE) -> dict[str, int]:
 # its limit or gone (then delete its line).
 #: files over :data:`MAX_FILE_LINES` today -> their lines (may only shrink)
 FILE_LINES_LEFT: dict[str, int] = {
-    "ag_uav/jobs/batch.py": 1226,
+    "ag_uav/jobs/batch.py": 1194,
     "ag_uav/navigation/ins_feedback.py": 881,
     "estimators/batched.py": 709,
     "estimators/ins.py": 1156,
 }
 #: functions over :data:`MAX_FUNCTION_LINES` today -> their lines
 FUNCTION_LINES_LEFT: dict[str, int] = {
-    "ag_uav/jobs/batch.py::write_report": 111,
     "ag_uav/vehicle/mjcf.py::build_vehicle": 88,
     "estimators/mckf.py::mckf_fixed_point_row": 96,
 }

@@ -64,10 +64,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..config import Config, ConfigError, config_from_dict
+from ..config import ConfigError, config_from_dict
 from ..record.atomic import atomic_open, atomic_write_text, savefig
 from .batch_memory import default_memory_mb, memory_plan, this_process_mb
-from .executor import Executor, ExecutorLost, LocalPoolExecutor, SerialExecutor
+from .executor import Executor, ExecutorLost, SerialExecutor
 
 SPEC_KEYS = ("name", "description", "base", "axes", "presets", "max_runs")
 #: most runs a spec may expand to unless it (``max_runs = N``) or ``--max-runs`` says more:
@@ -822,89 +822,82 @@ def _num(v: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str | Path,
-                 info: dict[str, Any] | None = None) -> list[Path]:
-    """``report.md`` and PNG figures: RMSE distributions per estimator and noise case, tracking
-    vs estimate error, coverage. Returns the files written."""
-    import matplotlib
+def _saved(fig: Any, path: Path, plt: Any) -> Path:
+    """Lay out, write (110 dpi) and close a report figure; its path."""
+    fig.tight_layout()
+    savefig(fig, path, dpi=110)
+    plt.close(fig)
+    return path
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    out = Path(out_dir)
-    written: list[Path] = []
-    group_keys = [a.name for a in spec.axes if a.name != "seed" and len(a.values) > 1]
-    noise_key = "gps.preset" if "gps.preset" in group_keys else None
-    box_keys = [k for k in group_keys if k != noise_key]
-    ok = [r for r in rows if r.get("status") == "ok"]
-
-    def label(r: dict[str, Any]) -> str:
-        return " / ".join(str(r.get(k)) for k in box_keys) or "all"
-
-    # --- RMSE distributions per group, one column per noise case
+def _rmse_figure(ok: list[dict[str, Any]], noise_key: str | None, label: Callable[[dict], str],
+                 out: Path, plt: Any) -> Path | None:
+    """``rmse.png``: RMSE distributions per group, one column per noise case (None: no data)."""
     metrics = [m for m in ("tracking_rmse_m", "estimate_rmse_m")
                if any(_num(r.get(m)) is not None for r in ok)]
     cases = sorted({str(r.get(noise_key)) for r in ok}) if noise_key else ["all"]
-    if metrics and ok:
-        fig, axs = plt.subplots(len(metrics), len(cases), squeeze=False,
-                                figsize=(max(5.0, 4.2 * len(cases)), 3.4 * len(metrics)))
-        for j, case in enumerate(cases):
-            sel = [r for r in ok if not noise_key or str(r.get(noise_key)) == case]
-            labels = sorted({label(r) for r in sel})
-            for i, m in enumerate(metrics):
-                data = [[_num(r.get(m)) for r in sel if label(r) == lb
-                         and _num(r.get(m)) is not None] for lb in labels]
-                ax = axs[i][j]
-                if any(data):
-                    ax.boxplot([d or [math.nan] for d in data], showmeans=True)
-                    ax.set_xticks(range(1, len(labels) + 1), labels, rotation=20, fontsize=8)
-                ax.set_ylabel(m.replace("_m", " (m)").replace("_", " "))
-                ax.set_title(f"{noise_key} = {case}" if noise_key else "RMSE distribution",
-                             fontsize=9)
-                ax.grid(alpha=0.3)
-        fig.tight_layout()
-        p = out / "rmse.png"
-        savefig(fig, p, dpi=110)
-        plt.close(fig)
-        written.append(p)
-    # --- tracking vs estimate error
+    if not (metrics and ok):
+        return None
+    fig, axs = plt.subplots(len(metrics), len(cases), squeeze=False,
+                            figsize=(max(5.0, 4.2 * len(cases)), 3.4 * len(metrics)))
+    for j, case in enumerate(cases):
+        sel = [r for r in ok if not noise_key or str(r.get(noise_key)) == case]
+        labels = sorted({label(r) for r in sel})
+        for i, m in enumerate(metrics):
+            data = [[_num(r.get(m)) for r in sel if label(r) == lb
+                     and _num(r.get(m)) is not None] for lb in labels]
+            ax = axs[i][j]
+            if any(data):
+                ax.boxplot([d or [math.nan] for d in data], showmeans=True)
+                ax.set_xticks(range(1, len(labels) + 1), labels, rotation=20, fontsize=8)
+            ax.set_ylabel(m.replace("_m", " (m)").replace("_", " "))
+            ax.set_title(f"{noise_key} = {case}" if noise_key else "RMSE distribution",
+                         fontsize=9)
+            ax.grid(alpha=0.3)
+    return _saved(fig, out / "rmse.png", plt)
+
+
+def _tracking_figure(ok: list[dict[str, Any]], label: Callable[[dict], str], out: Path,
+                     plt: Any) -> Path | None:
+    """``tracking_vs_estimate.png``: tracking against estimate error per run (None: no data)."""
     pairs = [(r, _num(r.get("estimate_rmse_m")), _num(r.get("tracking_rmse_m"))) for r in ok]
     pairs = [(r, e, t) for r, e, t in pairs if e is not None and t is not None]
-    if pairs:
-        fig, ax = plt.subplots(figsize=(5.5, 4.2))
-        for lb in sorted({label(r) for r, _, _ in pairs}):
-            xs = [e for r, e, _ in pairs if label(r) == lb]
-            ys = [t for r, _, t in pairs if label(r) == lb]
-            ax.scatter(xs, ys, s=12, label=lb, alpha=0.7)
-        lim = max(max(e for _, e, _ in pairs), max(t for _, _, t in pairs)) * 1.05
-        ax.plot([0, lim], [0, lim], "k--", lw=0.8, label="y = x")
-        ax.set_xlabel("estimate RMSE (m)")
-        ax.set_ylabel("tracking RMSE (m)")
-        ax.legend(fontsize=7)
-        ax.grid(alpha=0.3)
-        fig.tight_layout()
-        p = out / "tracking_vs_estimate.png"
-        savefig(fig, p, dpi=110)
-        plt.close(fig)
-        written.append(p)
-    # --- coverage
+    if not pairs:
+        return None
+    fig, ax = plt.subplots(figsize=(5.5, 4.2))
+    for lb in sorted({label(r) for r, _, _ in pairs}):
+        xs = [e for r, e, _ in pairs if label(r) == lb]
+        ys = [t for r, _, t in pairs if label(r) == lb]
+        ax.scatter(xs, ys, s=12, label=lb, alpha=0.7)
+    lim = max(max(e for _, e, _ in pairs), max(t for _, _, t in pairs)) * 1.05
+    ax.plot([0, lim], [0, lim], "k--", lw=0.8, label="y = x")
+    ax.set_xlabel("estimate RMSE (m)")
+    ax.set_ylabel("tracking RMSE (m)")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    return _saved(fig, out / "tracking_vs_estimate.png", plt)
+
+
+def _coverage_figure(ok: list[dict[str, Any]], label: Callable[[dict], str], out: Path,
+                     plt: Any) -> Path | None:
+    """``coverage.png``: spray coverage per group (None: no data)."""
     cov = [(label(r), _num(r.get("coverage_fraction"))) for r in ok]
     cov = [(lb, c) for lb, c in cov if c is not None]
-    if cov:
-        labels = sorted({lb for lb, _ in cov})
-        fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(labels) + 2), 3.6))
-        ax.boxplot([[100 * c for lb2, c in cov if lb2 == lb] for lb in labels], showmeans=True)
-        ax.set_xticks(range(1, len(labels) + 1), labels, rotation=20, fontsize=8)
-        ax.set_ylabel("spray coverage (%)")
-        ax.grid(alpha=0.3)
-        fig.tight_layout()
-        p = out / "coverage.png"
-        savefig(fig, p, dpi=110)
-        plt.close(fig)
-        written.append(p)
-    # --- markdown
+    if not cov:
+        return None
+    labels = sorted({lb for lb, _ in cov})
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.1 * len(labels) + 2), 3.6))
+    ax.boxplot([[100 * c for lb2, c in cov if lb2 == lb] for lb in labels], showmeans=True)
+    ax.set_xticks(range(1, len(labels) + 1), labels, rotation=20, fontsize=8)
+    ax.set_ylabel("spray coverage (%)")
+    ax.grid(alpha=0.3)
+    return _saved(fig, out / "coverage.png", plt)
+
+
+def _report_markdown(rows: Sequence[dict[str, Any]], spec: BatchSpec, group_keys: list[str],
+                     info: dict[str, Any], figures: list[Path]) -> str:
+    """The text of ``report.md``: counts, axes, the summary table, failed runs, the figures."""
     header, table = summary_rows(rows, group_keys)
-    info = info or {}
     md = [f"# Batch `{spec.name}`", ""]
     if spec.description:
         md += [spec.description, ""]
@@ -927,10 +920,34 @@ def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str |
                                 str(r.get("crash_reason"))] for r in bad[:50]])]
         if len(bad) > 50:
             md.append(f"... and {len(bad) - 50} more (see results.csv)\n")
-    for p in written:
+    for p in figures:
         md += [f"![{p.stem}]({p.name})", ""]
+    return "\n".join(md)
+
+
+def write_report(rows: Sequence[dict[str, Any]], spec: BatchSpec, out_dir: str | Path,
+                 info: dict[str, Any] | None = None) -> list[Path]:
+    """``report.md`` and PNG figures: RMSE distributions per estimator and noise case, tracking
+    vs estimate error, coverage. Returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    group_keys = [a.name for a in spec.axes if a.name != "seed" and len(a.values) > 1]
+    noise_key = "gps.preset" if "gps.preset" in group_keys else None
+    box_keys = [k for k in group_keys if k != noise_key]
+    ok = [r for r in rows if r.get("status") == "ok"]
+
+    def label(r: dict[str, Any]) -> str:
+        return " / ".join(str(r.get(k)) for k in box_keys) or "all"
+
+    figures = [_rmse_figure(ok, noise_key, label, out, plt), _tracking_figure(ok, label, out, plt),
+               _coverage_figure(ok, label, out, plt)]
+    written = [p for p in figures if p is not None]
     rp = out / "report.md"
-    atomic_write_text(rp, "\n".join(md))
+    atomic_write_text(rp, _report_markdown(rows, spec, group_keys, info or {}, written))
     written.insert(0, rp)
     return written
 
@@ -1170,57 +1187,8 @@ def write_rect_field(path: str | Path, width_m: float, height_m: float,
     return p
 
 
-# ---------------------------------------------------------------------------------- benchmark
-def _bench_task(cfg_dict: dict[str, Any]) -> float:
-    from ..engine.missions import simulate
-
-    res = simulate(config_from_dict(cfg_dict))
-    return float(res.summary["sim_time_s"])
-
-
-def bench_workers(cfg: Config, repeats: int = 1, quick: bool = False, *,
-                  n_runs: int | None = None, workers: Sequence[int] = (1, 2),
-                  mission_s: float | None = None) -> dict[str, Any]:
-    """Throughput of a batch of short missions on the local process pool with 1 and 2 workers
-    (pools started and warmed up before timing; best of ``repeats``).
-
-    Returns ``{"workers": {"runs": n, "mission_sim_s": ..., "runs_per_s_w1": ...,
-    "runs_per_s_w2": ..., "speedup_w2": ...}}``. The missions are ``cfg`` with seeds 0..n-1,
-    no log and ``sim.max_time_s`` capped at ``mission_s`` (default 30 s, 15 s with ``quick``).
-    """
-    c = copy.deepcopy(cfg)
-    c.log.enabled = False
-    cap = mission_s if mission_s is not None else (15.0 if quick else 30.0)
-    c.sim.max_time_s = min(c.sim.max_time_s, cap)
-    n = n_runs if n_runs is not None else (8 if quick else 16)
-    items = []
-    for s in range(n):
-        d = c.to_dict()
-        d["seed"] = s
-        items.append(d)
-    out: dict[str, Any] = {"runs": n, "mission_sim_s": cap, "cores": os.cpu_count()}
-    rates: dict[int, float] = {}
-    for w in workers:
-        best = 0.0
-        with LocalPoolExecutor(w) as ex:
-            ex.warm_up()
-            for _ in range(max(1, repeats)):
-                t0 = time.perf_counter()
-                sims = ex.map(_bench_task, items)
-                dt = time.perf_counter() - t0
-                best = max(best, n / dt)
-        rates[w] = best
-        out[f"runs_per_s_w{w}"] = round(best, 3)
-        out[f"sim_s_per_wall_s_w{w}"] = round(best * (sum(sims) / n), 1)
-    w0 = min(workers)
-    for w in workers:
-        if w != w0:
-            out[f"speedup_w{w}"] = round(rates[w] / rates[w0], 3)
-    return {"workers": out}
-
-
 __all__ = ["Axis", "BatchSpec", "RunTask", "BatchResult", "load_spec", "spec_from_dict", "expand",
            "run_task", "run_batch", "Journal", "BatchStopped", "MAX_RUNS", "write_results_csv",
            "read_results_csv", "resolve_field", "resolve_paths", "referenced_files",
-           "write_report", "summary_rows", "mean_ci", "bench_workers", "write_rect_field",
+           "write_report", "summary_rows", "mean_ci", "write_rect_field",
            "is_timing_column", "config_hash", "deep_merge", "set_dotted", "get_dotted"]

@@ -260,7 +260,7 @@ def _log_figures(runs: dict[str, list[tuple[float, ...]]], msgs: dict[str, int],
 
 
 def _workers(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
-    from .batch import bench_workers
+    from .bench_workers import bench_workers
 
     return bench_workers(cfg, repeats=max(1, min(repeats, 2)), quick=quick)
 
