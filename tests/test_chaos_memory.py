@@ -104,7 +104,9 @@ def _tree_peak(stop: threading.Event, out: dict[int, float]) -> None:
 
 def test_the_batch_tree_stays_within_its_bound(tmp_path):
     """Sixteen short runs on two worker processes: the whole process tree's peak stays under
-    the bound the batch planned its chunks for, and that bound under --memory-mb."""
+    the bound the batch planned its chunks for, and that bound under --memory-mb. (With an
+    empty numba cache, ``NUMBA_CACHE_DIR`` pointed at a new folder, the workers compile the
+    kernels: a peak of 1,452 MB against a bound of about 1,590 MB.)"""
     from ag_uav.jobs.batch import load_spec, run_batch
     from ag_uav.jobs.executor import LocalPoolExecutor
 
@@ -124,7 +126,9 @@ def test_the_batch_tree_stays_within_its_bound(tmp_path):
         th.join()
     assert len(res.rows) == 16 and all(r["status"] == "ok" for r in res.rows)
     assert peak[0] <= res.memory_bound_mb <= 3000.0, (peak, res.memory_bound_mb)
-    assert res.memory_bound_mb < 1.5 * peak[0]  # a bound, not a guess far above it
+    # a bound, not a guess far above it: workers are counted as if they compiled the kernels
+    # (about 1.1x the peak then), so with the kernels cached it is about 1.8x the peak
+    assert res.memory_bound_mb < 2.0 * peak[0]
 
 
 def test_a_worker_count_that_cannot_fit_is_refused(tmp_path, capsys):

@@ -24,10 +24,10 @@ ENGINE_BYTES_PER_FILTER_TICK = 120
 #: memory one chunk's records may take (a worker holds one chunk at a time)
 CHUNK_BYTES = 384 * 2**20
 #: a worker process's own memory with a short run flown in it: the interpreter, numpy, MuJoCo
-#: and the kernels (on the 2-core development machine a worker peaks at about 306 MB with the
-#: kernels cached and about 410 MB when it compiles them; tests/test_chaos_memory.py measures
-#: the whole tree)
-WORKER_BASE_MB = 450
+#: and the kernels (on the 2-core development machine a worker of short runs peaks at about
+#: 306 MB with the kernels cached and at 555-576 MB when it compiles all of them from an empty
+#: cache; tests/test_chaos_memory.py measures the whole tree)
+WORKER_BASE_MB = 650
 
 
 def default_memory_mb() -> float:
@@ -52,19 +52,29 @@ def run_bytes(t: RunTask) -> tuple[Any, int]:
     return batch_key(cfg), n + int(dose_map_mb(cfg, fld) * 2**20)
 
 
+def measure(tasks: list[RunTask]) -> list[tuple[Any, int]]:
+    """:func:`run_bytes` of every task; a task whose config cannot be read flies alone
+    (``("alone", j)``, 1 byte: it becomes an error row when it runs)."""
+    out = []
+    for j, t in enumerate(tasks):
+        try:
+            out.append(run_bytes(t))
+        except Exception:  # noqa: BLE001 - a bad run flies alone (and becomes an error row)
+            out.append((("alone", j), 1))
+    return out
+
+
 def plan_chunks(tasks: list[RunTask], workers: int, max_runs: int = 64,
-                budget_bytes: int = CHUNK_BYTES) -> list[list[int]]:
+                budget_bytes: int = CHUNK_BYTES,
+                measured: list[tuple[Any, int]] | None = None) -> list[list[int]]:
     """Indices of ``tasks`` in lockstep chunks: runs that can share an engine batch
     (:func:`ag_uav.engine.missions.batch_key`), at most ``max_runs`` and about ``budget_bytes`` of
     records and dose maps per chunk (from each mission's length and field), and at least as
-    many chunks as ``workers`` when there are enough runs."""
+    many chunks as ``workers`` when there are enough runs. ``measured``: :func:`measure` of
+    ``tasks`` when the caller has it."""
     groups: dict[Any, list[int]] = {}
     nbytes: dict[Any, int] = {}  # per run: the longest mission's engine memory
-    for j, t in enumerate(tasks):
-        try:
-            key, n = run_bytes(t)
-        except Exception:  # noqa: BLE001 - a bad run flies alone (and becomes an error row)
-            key, n = ("alone", j), 1
+    for j, (key, n) in enumerate(measure(tasks) if measured is None else measured):
         groups.setdefault(key, []).append(j)
         nbytes[key] = max(nbytes.get(key, 0), n)
     chunks: list[list[int]] = []
@@ -92,7 +102,8 @@ def memory_plan(tasks: list[RunTask], workers: int, memory_mb: float,
     one run per worker does not fit."""
     holders = max(workers, 1)
     base = here_mb + workers * WORKER_BASE_MB
-    sizes = _sizes(tasks)
+    measured = measure(tasks)
+    sizes = [n for _, n in measured]
     largest = max(sizes, default=0)
     per = (memory_mb - base) / holders
     if per * 2**20 < largest:
@@ -101,16 +112,7 @@ def memory_plan(tasks: list[RunTask], workers: int, memory_mb: float,
                           f"{here_mb:.0f} MB, {WORKER_BASE_MB} MB a worker and "
                           f"{largest / 2**20:.0f} MB for the largest run); lower --workers or "
                           "raise --memory-mb")
-    chunks = plan_chunks(tasks, holders, budget_bytes=int(min(CHUNK_BYTES, per * 2**20)))
+    chunks = plan_chunks(tasks, holders, budget_bytes=int(min(CHUNK_BYTES, per * 2**20)),
+                         measured=measured)
     biggest = max((sum(sizes[j] for j in ch) for ch in chunks), default=0)
     return chunks, base + holders * biggest / 2**20
-
-
-def _sizes(tasks: list[RunTask]) -> list[int]:
-    out = []
-    for t in tasks:
-        try:
-            out.append(run_bytes(t)[1])
-        except Exception:  # noqa: BLE001 - its error row is made when it runs
-            out.append(0)
-    return out
