@@ -6,7 +6,7 @@ GIL at each of them handed it to another lane's Python and waited to get it back
 (docs/speed.md); no ``fastmath`` (a vehicle's results must not depend on the batch it flies
 in). At import a module's kernels are swept from the cache when its source or any
 source it imports (in ``ag_uav``, ``estimators`` or ``controllers``) changed
-(:func:`controllers._jit.sweep_stale_caches`: numba alone would keep a kernel that inlined an old
+(:func:`jitcache.sweep_stale_caches`: numba alone would keep a kernel that inlined an old
 law from another file)."""
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from controllers._jit import package_dir, sweep_stale_caches
+from jitcache import package_dir, sweep_stale_caches
 
 __all__ = ["HAVE_NUMBA", "njit", "register_jitable"]
 

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ._jit import njit
+from .rows import RowBlocks
 
 Mat3 = tuple[float, float, float, float, float, float, float, float, float]
 Vec3 = tuple[float, float, float]
@@ -228,7 +229,7 @@ def _vec3(arr: np.ndarray) -> Vec3:
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
-class GeometricAttitudeController:
+class GeometricAttitudeController(RowBlocks):
     """PD attitude control on SO(3) (Lee et al. 2010) with gyroscopic compensation.
 
     ``τ = J (−ω_n² e_R − 2ζω_n e_ω) + ω × Jω`` per body axis, with
@@ -289,7 +290,7 @@ class GeometricAttitudeController:
         return _attitude_call(self._p, self._s, x)
 
 
-class XMixer:
+class XMixer(RowBlocks):
     """Allocation of collective thrust and body torques to four rotors, with saturation.
 
     Rotor ``i`` sits at ``(x_i, y_i)`` in the body frame and pushes ``f_i`` along body z; its yaw

@@ -39,6 +39,7 @@ import numpy as np
 from ._jit import njit
 from .fuzzy import it2_phi_jit as _it2_phi
 from .fuzzy import t1_phi_jit as _t1_phi
+from .rows import RowBlocks
 
 __all__ = ["AX_NP", "AX_NS", "ControllerBase", "axis_step"]
 
@@ -131,8 +132,8 @@ def axis_step(prm: np.ndarray, st: np.ndarray, error: float, meas: float, has_me
     if kind == KIND_T1:
         U = _t1_phi(E, dE, y)
     else:
-        U = _it2_phi(E, dE, y, prm[A_HN1], prm[A_HZ1], prm[A_HP1], prm[A_HN2], prm[A_HZ2],
-                     prm[A_HP2], int(prm[A_RED]), prm[A_ZETA])
+        U = _it2_phi(E, dE, y, (prm[A_HN1], prm[A_HZ1], prm[A_HP1]),
+                     (prm[A_HN2], prm[A_HZ2], prm[A_HP2]), int(prm[A_RED]), prm[A_ZETA])
     st[S_E] = E
     st[S_DE] = dE
     st[S_U] = U
@@ -174,7 +175,7 @@ def state(col: int, doc: str) -> property:
     return property(get, doc=doc)
 
 
-class ControllerBase:
+class ControllerBase(RowBlocks):
     """Python shell of one axis controller: its parameter block ``_p`` (AX_NP,) and state block
     ``_s`` (AX_NS,), the validation, :meth:`update` and :meth:`reset`; the law is
     :func:`axis_step`. A :class:`~controllers.cascade.PositionCascade` adopts the blocks (they

@@ -115,8 +115,8 @@ def cascade_step(P: np.ndarray, S: np.ndarray, p: np.ndarray, v: np.ndarray, R: 
         raise ValueError("p, v, omega, p_ref, v_ref, a_ref need (N, 3), R (N, 9), out (N, 4)")
     for i in range(n):
         if active[i]:
-            vehicle_step(P[i], S[i], p[i], v[i], R[i], omega[i], p_ref[i], v_ref[i], a_ref[i],
-                         yaw_ref[i], dt, out[i])
+            vehicle_step(P[i], S[i], (p[i], v[i], R[i], omega[i]),
+                         (p_ref[i], v_ref[i], a_ref[i], yaw_ref[i]), dt, out[i])
         else:
             out[i, 0] = 0.0
             out[i, 1] = 0.0
@@ -214,8 +214,8 @@ class BatchCascade:
             if type(mix) is not XMixer:
                 raise ValueError(f"cascade {i}: mixer must be an XMixer, "
                                  f"got {type(mix).__name__}")
-            P[i] = c._P
-            S[i] = c._S
+            P[i] = c.params
+            S[i] = c.state
         return cls(P, S)
 
     @property

@@ -14,7 +14,8 @@ Per tick (:func:`vehicle_step`):
 * :func:`controllers.attitude.mix_step` (X mixer with its saturation priority).
 
 :class:`PositionCascade` is the scalar shell (a batch of one): it owns one row and adopts its
-axis controllers', attitude controller's and mixer's blocks (they become views of the row), so
+axis controllers', attitude controller's and mixer's blocks (:class:`controllers.rows.RowBlocks`:
+they become views of the row), so
 one compiled call advances the whole cascade. Axis controllers of other classes (any object
 with ``update(error, dt, measurement, error_rate) -> float``), or an attitude controller / mixer
 of a subclass, are called through their own ``update`` / ``mix`` and the rest of the row runs
@@ -140,14 +141,16 @@ def command_step(prm: np.ndarray, st: np.ndarray, ux: float, uy: float, uz: floa
 
 
 @njit
-def vehicle_step(prm: np.ndarray, st: np.ndarray, p: np.ndarray, v: np.ndarray, R: np.ndarray,
-                 omega: np.ndarray, p_ref: np.ndarray, v_ref: np.ndarray, a_ref: np.ndarray,
-                 yaw: float, dt: float, out: np.ndarray) -> None:
+def vehicle_step(prm: np.ndarray, st: np.ndarray, fb: tuple, ref: tuple, dt: float,
+                 out: np.ndarray) -> None:
     """One control tick of one vehicle's row (module docstring); rotor thrusts to ``out`` (4,).
 
-    ``prm`` (NP,), ``st`` (NS,) advanced in place; ``p, v, omega, p_ref, v_ref, a_ref`` (3,),
-    ``R`` (9,) row-major body → world. The caller checks dt > 0.
+    ``prm`` (NP,), ``st`` (NS,) advanced in place; ``fb`` = (p, v, R, omega) the fed-back
+    state, ``ref`` = (p_ref, v_ref, a_ref, yaw) the reference: ``p, v, omega, p_ref, v_ref,
+    a_ref`` (3,), ``R`` (9,) row-major body → world. The caller checks dt > 0.
     """
+    p, v, R, omega = fb
+    p_ref, v_ref, a_ref, yaw = ref
     u0 = axis_step(prm[0:AX_NP], st[0:AX_NS], p_ref[0] - p[0], p[0], True, v_ref[0] - v[0],
                    True, dt)
     u1 = axis_step(prm[AX_NP:2 * AX_NP], st[AX_NS:2 * AX_NS], p_ref[1] - p[1], p[1], True,
@@ -163,8 +166,8 @@ def vehicle_step(prm: np.ndarray, st: np.ndarray, p: np.ndarray, v: np.ndarray, 
 def _vehicle_call(prm: np.ndarray, st: np.ndarray, x: np.ndarray, dt: float,
                   out: np.ndarray) -> None:
     """:func:`vehicle_step` with the inputs packed in ``x`` (the scalar shell's call)."""
-    vehicle_step(prm, st, x[X_P:X_P + 3], x[X_V:X_V + 3], x[X_R:X_R + 9], x[X_W:X_W + 3],
-                 x[X_PR:X_PR + 3], x[X_VR:X_VR + 3], x[X_AR:X_AR + 3], x[X_YAW], dt, out)
+    vehicle_step(prm, st, (x[X_P:X_P + 3], x[X_V:X_V + 3], x[X_R:X_R + 9], x[X_W:X_W + 3]),
+                 (x[X_PR:X_PR + 3], x[X_VR:X_VR + 3], x[X_AR:X_AR + 3], x[X_YAW]), dt, out)
 
 
 @njit
@@ -248,6 +251,16 @@ class PositionCascade:
         self._adopt(copy=True)
         self._internal_keys: list | None = None
 
+    @property
+    def params(self) -> np.ndarray:
+        """The parameter row (NP,) (module docstring); a view: writes reach the law."""
+        return self._P
+
+    @property
+    def state(self) -> np.ndarray:
+        """The state row (NS,) (module docstring); a view (read it, do not write)."""
+        return self._S
+
     def _blocks(self) -> list[tuple[Any, type, slice, slice]]:
         return [(a, ControllerBase, slice(k * AX_NP, (k + 1) * AX_NP),
                  slice(k * AX_NS, (k + 1) * AX_NS)) for k, a in enumerate(self.axes)] + [
@@ -259,11 +272,7 @@ class PositionCascade:
         """Make the sub-objects' blocks views of this row (copying their values in first)."""
         for obj, cls, ps, ss in self._blocks():
             if isinstance(obj, cls):
-                if copy:
-                    self._P[ps] = obj._p
-                    self._S[ss] = obj._s
-                obj._p = self._P[ps]
-                obj._s = self._S[ss]
+                obj.adopt_blocks(self._P[ps], self._S[ss], copy)
         self._compiled = (all(type(a) in ROW_AXES for a in self.axes)
                           and type(self.attitude) is GeometricAttitudeController
                           and type(self.mixer) is XMixer)

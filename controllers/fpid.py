@@ -21,7 +21,7 @@ The law is computed by :func:`controllers.axis.axis_step` (one implementation sh
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from typing import Any
 
 from .axis import (
     A_CM,
@@ -115,7 +115,7 @@ class _FuzzyPID(ControllerBase):
         core = self.core
         self._p[A_CM] = core.cm
         if isinstance(core, IT2FuzzyPD):
-            self._p[A_RED] = float(core._code)
+            self._p[A_RED] = float(core.reducer_code)
             self._p[A_ZETA] = core.zeta
             self._p[A_HN1:A_HP2 + 1] = (*core.heights_e, *core.heights_de)
         self.Ke = Ke
@@ -157,7 +157,8 @@ class IT2FPID(_FuzzyPID):
     ----------
     Ke, Kd : input scaling of the error and of its derivative.
     K0, K1 : output gains of the PD part (K0·U) and of the PI part (K1·∫U).
-    alpha, cm, reducer, zeta, heights : IT2 core, see :class:`controllers.fuzzy.IT2FuzzyPD`.
+    **core : the IT2 core's alpha, cm, reducer, zeta, heights
+        (:class:`controllers.fuzzy.IT2FuzzyPD`).
     derivative : "error" (d e/dt) or "measurement" (−d y/dt; pass ``measurement=y``).
     i_limit : anti-windup clamp, |K1·I| <= i_limit (None: no clamp).
     u_limit : output clamp, a symmetric bound or (lower, upper); conditional integration.
@@ -173,17 +174,13 @@ class IT2FPID(_FuzzyPID):
         K0: float,
         K1: float,
         *,
-        alpha: float = 0.25,
-        cm: float = 0.7,
-        reducer: str = "km",
-        zeta: float = 0.5,
-        heights: Sequence[float] | Sequence[Sequence[float]] | None = None,
         derivative: str = "error",
         i_limit: float | None = None,
         u_limit: float | tuple[float, float] | None = None,
         d_tau: float = 0.0,
+        **core: Any,
     ) -> None:
-        self.core = IT2FuzzyPD(alpha=alpha, cm=cm, reducer=reducer, zeta=zeta, heights=heights)
+        self.core = IT2FuzzyPD(**core)  # alpha, cm, reducer, zeta, heights (TypeError: others)
         self._init_gains(Ke, Kd, K0, K1, derivative, i_limit, u_limit, d_tau)
 
     def __repr__(self) -> str:

@@ -161,11 +161,13 @@ def t1_phi(E: float, dE: float, y: tuple[float, ...]) -> float:
     return a0 * b0 * y[p] + (a0 * b1 + a1 * b0) * y[p + 1] + a1 * b1 * y[p + 2]
 
 
-def it2_phi(E: float, dE: float, y: tuple[float, ...], hn1: float, hz1: float, hp1: float,
-            hn2: float, hz2: float, hp2: float, code: int, zeta: float) -> float:
+def it2_phi(E: float, dE: float, y: tuple[float, ...], h_e: tuple[float, float, float],
+            h_de: tuple[float, float, float], code: int, zeta: float) -> float:
     """IT2 core Φ(E, dE) (:class:`IT2FuzzyPD`): consequents ``y = (-1, -c_m, 0, c_m, 1)``,
-    lower-MF heights (h_N, h_Z, h_P) of E then of dE, reducer ``code`` (0 km, 1 nt, 2 bmm,
-    3 zeta) and ζ (read by "zeta" only)."""
+    lower-MF heights ``h_e`` = (h_N, h_Z, h_P) of E and ``h_de`` of dE, reducer ``code`` (0 km,
+    1 nt, 2 bmm, 3 zeta) and ζ (read by "zeta" only)."""
+    hn1, hz1, hp1 = h_e
+    hn2, hz2, hp2 = h_de
     if E > 1.0:
         E = 1.0
     elif E < -1.0:
@@ -249,7 +251,8 @@ def _grid(E: np.ndarray, dE: np.ndarray, y: tuple[float, ...], h: np.ndarray, co
         if code < 0:
             out[k] = t1_phi_jit(E[k], dE[k], y)
         else:
-            out[k] = it2_phi_jit(E[k], dE[k], y, h[0], h[1], h[2], h[3], h[4], h[5], code, zeta)
+            out[k] = it2_phi_jit(E[k], dE[k], y, (h[0], h[1], h[2]), (h[3], h[4], h[5]), code,
+                                 zeta)
 
 
 class _FuzzyPDBase:
@@ -329,13 +332,7 @@ class IT2FuzzyPD(_FuzzyPDBase):
         "zeta",
         "heights_e",
         "heights_de",
-        "_code",
-        "_hn1",
-        "_hz1",
-        "_hp1",
-        "_hn2",
-        "_hz2",
-        "_hp2",
+        "reducer_code",
     )
 
     def __init__(
@@ -355,12 +352,11 @@ class IT2FuzzyPD(_FuzzyPDBase):
         self.alpha = float(alpha)
         self.reducer = reducer
         self.zeta = zeta
-        self._code = _RED_CODE[reducer]
+        #: the reducer's code in the compiled laws (0 km, 1 nt, 2 bmm, 3 zeta)
+        self.reducer_code = _RED_CODE[reducer]
         h1, h2 = _resolve_heights(alpha, heights)
         self.heights_e = h1
         self.heights_de = h2
-        self._hn1, self._hz1, self._hp1 = h1
-        self._hn2, self._hz2, self._hp2 = h2
 
     def __repr__(self) -> str:
         return (
@@ -378,8 +374,8 @@ class IT2FuzzyPD(_FuzzyPDBase):
         return small_signal_gain(self.reducer, self.cm, hz, hp, self.zeta)
 
     def __call__(self, E: float, dE: float) -> float:
-        return it2_phi(E, dE, self._y, self._hn1, self._hz1, self._hp1, self._hn2, self._hz2,
-                       self._hp2, self._code, self.zeta)
+        return it2_phi(E, dE, self._y, self.heights_e, self.heights_de, self.reducer_code,
+                       self.zeta)
 
     # ------------------------------------------------ rule-level view (figures and checks)
     def firing(self, E: np.ndarray, dE: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -402,4 +398,4 @@ class IT2FuzzyPD(_FuzzyPDBase):
         return np.array(ys), np.array(fl), np.array(fu)
 
     def _grid_args(self) -> tuple[np.ndarray, int, float]:
-        return np.array([*self.heights_e, *self.heights_de]), self._code, self.zeta
+        return np.array([*self.heights_e, *self.heights_de]), self.reducer_code, self.zeta

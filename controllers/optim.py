@@ -490,12 +490,10 @@ def bbbc_minimize(
     pop: int = 20,
     iters: int = 20,
     rng: np.random.Generator | int | None = None,
-    spread: float = 0.5,
-    centre: str = "mass",
-    elitism: bool = True,
     map_fn: MapFn = map,
     callback: Callable[[BBBC], Any] | None = None,
     state: dict[str, Any] | None = None,
+    **settings: Any,
 ) -> OptimResult:
     """Minimise ``fun`` over the box [lo, hi] with BB-BC (see :class:`BBBC`).
 
@@ -503,12 +501,13 @@ def bbbc_minimize(
     ``callback(opt)`` runs after every iteration (checkpoint with ``opt.state_dict()``);
     returning a truthy value stops early. ``state`` resumes from a checkpoint, in which case
     the other optimiser settings are taken from it and the run continues until ``iters``
-    iterations have been done in total.
+    iterations have been done in total. ``settings``: :class:`BBBC`'s own (``spread``,
+    ``centre``, ``elitism``; its defaults otherwise).
     """
     if state is not None:
         opt = BBBC.from_state(state)
     else:
-        opt = BBBC(lo, hi, pop=pop, rng=rng, spread=spread, centre=centre, elitism=elitism)
+        opt = BBBC(lo, hi, pop=pop, rng=rng, **settings)
     return _run(opt, fun, iters, map_fn, callback)
 
 
@@ -519,33 +518,22 @@ def pso_minimize(
     pop: int = 20,
     iters: int = 20,
     rng: np.random.Generator | int | None = None,
-    inertia: float | tuple[float, float] = 0.7298,
-    c1: float = 1.49618,
-    c2: float = 1.49618,
-    v_max: float = 0.2,
     map_fn: MapFn = map,
     callback: Callable[[PSO], Any] | None = None,
     state: dict[str, Any] | None = None,
+    **settings: Any,
 ) -> OptimResult:
     """Minimise ``fun`` over the box [lo, hi] with PSO (see :class:`PSO`).
 
-    Same calling conventions as :func:`bbbc_minimize`; a tuple ``inertia`` decreases linearly
-    over ``iters`` iterations.
+    Same calling conventions as :func:`bbbc_minimize`; ``settings``: :class:`PSO`'s own
+    (``inertia``, ``c1``, ``c2``, ``v_max``; its defaults otherwise). A tuple ``inertia``
+    decreases linearly over ``iters`` iterations.
     """
     if state is not None:
         opt = PSO.from_state(state)
     else:
-        opt = PSO(
-            lo,
-            hi,
-            pop=pop,
-            rng=rng,
-            inertia=inertia,
-            c1=c1,
-            c2=c2,
-            v_max=v_max,
-            max_iter=iters if isinstance(inertia, tuple | list) else None,
-        )
+        linear = isinstance(settings.get("inertia"), tuple | list)
+        opt = PSO(lo, hi, pop=pop, rng=rng, max_iter=iters if linear else None, **settings)
     return _run(opt, fun, iters, map_fn, callback)
 
 

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from controllers._jit import package_dir, sweep_stale_caches
+from jitcache import package_dir, sweep_stale_caches
 
 __all__ = ["HAVE_NUMBA", "njit"]
 

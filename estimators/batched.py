@@ -396,8 +396,7 @@ class _MCKFMixin:
                 raise ValueError("batched MCKF: kernel_floor must be > 0")
             if f.recovery not in RECOVERY:
                 raise ValueError(f"batched MCKF: unknown recovery {f.recovery!r}")
-            self._kx[i] = f._ncx
-            self._ky[i] = f._ncy_half
+            self._kx[i], self._ky[i] = f.kernels
             self._fpar[i], self._ipar[i] = f.params()
             self._ist[i] = (f.n_rejected, f.n_iter, int(f.rejected), int(f.recovered))
             self.weights[i] = f.weights
@@ -432,8 +431,9 @@ class _MCKFMixin:
 
 
 class _PCAMixin:
-    """PCA window state: ring buffers (N, m, 2·window), positions and counts (``_pcs``),
-    ``z_filtered`` (N, m) = the last fix after the PCA block."""
+    """PCA window state: ``ring`` (N, m, 2·window) the ring buffers, ``ring_state`` (N, 2) their
+    positions and counts (each row :class:`estimators.PCABlock`'s), ``z_filtered`` (N, m) = the
+    last fix after the PCA block."""
 
     N: int
     m: int
@@ -451,8 +451,8 @@ class _PCAMixin:
             raise ValueError(f"batched PCA filters: unknown mode {b0.mode!r}")
         self.window, self.pca_mode = b0.N, b0.mode
         self._L, self._r = b0.L, b0.n_components
-        self._buf = np.ascontiguousarray(np.stack([f.pca._buf for f in filters]))
-        self._pcs = np.array([(f.pca._pos, f.pca.count) for f in filters], dtype=np.int64)
+        self.ring = np.ascontiguousarray(np.stack([f.pca.ring for f in filters]))
+        self.ring_state = np.array([f.pca.ring_state for f in filters], dtype=np.int64)
         self.z_filtered = np.zeros((self.N, self.m))
         for i, f in enumerate(filters):
             if f.z_filtered is not None:
@@ -466,24 +466,23 @@ class _PCAMixin:
         return (self.window, self._L, self._r, self.pca_mode, self.m)
 
     def _pca(self, z: np.ndarray, mask: np.ndarray) -> None:
-        pca_batch(self._buf, self._pcs, self.z_filtered, z, mask, self.window, self._L,
+        pca_batch(self.ring, self.ring_state, self.z_filtered, z, mask, self.window, self._L,
                    self._r, PCA_MODE[self.pca_mode])
 
     def _pca2(self, other: _PCAMixin, z: np.ndarray, mask: np.ndarray) -> None:
         """Run the PCA block of self and ``other`` (same options), once per row where their
         windows are equal."""
-        _pca_batch2(self._buf, self._pcs, self.z_filtered, other._buf, other._pcs,
+        _pca_batch2(self.ring, self.ring_state, self.z_filtered, other.ring, other.ring_state,
                     other.z_filtered, z, mask, self.window, self._L, self._r,
                     PCA_MODE[self.pca_mode])
 
     def _reset_window(self, rows: np.ndarray) -> None:
-        self._pcs[rows] = 0
+        self.ring_state[rows] = 0
 
     def _to(self, i: int, f: Any) -> None:
         super()._to(i, f)  # type: ignore[misc]
-        f.pca._buf[:] = self._buf[i]
-        f.pca._pos = int(self._pcs[i, 0])
-        f.pca.count = int(self._pcs[i, 1])
+        f.pca.ring[:] = self.ring[i]
+        f.pca.ring_state[:] = self.ring_state[i]
         f.z_filtered = self.z_filtered[i].copy()
 
 

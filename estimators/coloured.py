@@ -40,7 +40,7 @@ import math
 
 import numpy as np
 
-from .kf import KF, LinearGaussianBase, _mat, inv_small
+from .kf import KF, LinearGaussianBase, as_matrix, inv_small
 
 __all__ = ["BiasAugmentedKF", "DifferencingKF"]
 
@@ -80,7 +80,7 @@ class BiasAugmentedKF:
         sigma_b: float | np.ndarray = 1.0,
         dt: float = 0.01,
     ) -> None:
-        F, H, Q = _mat(F, "F"), _mat(H, "H"), _mat(Q, "Q")
+        F, H, Q = as_matrix(F, "F"), as_matrix(H, "H"), as_matrix(Q, "Q")
         n, m = F.shape[0], H.shape[0]
         self.n, self.m, self.dt = n, m, float(dt)
         self.tau = _per_channel(tau, m, "tau")
@@ -98,7 +98,7 @@ class BiasAugmentedKF:
         if x0 is not None:
             xa[:n] = np.asarray(x0, dtype=float).reshape(n)
         Pa = np.zeros((n + m, n + m))
-        Pa[:n, :n] = np.eye(n) if P0 is None else _mat(P0, "P0", (n, n))
+        Pa[:n, :n] = np.eye(n) if P0 is None else as_matrix(P0, "P0", (n, n))
         Pa[n:, n:] = np.diag(self.sigma_b**2)
         self.kf = KF(Fa, Ha, Qa, R, xa, Pa)
 
@@ -215,11 +215,11 @@ class DifferencingKF(LinearGaussianBase):
             self._gamma = (
                 np.diag(_per_channel(g, self.m, "gamma"))
                 if g.ndim < 2
-                else _mat(g, "gamma", (self.m, self.m))
+                else as_matrix(g, "gamma", (self.m, self.m))
             )
             self._tau = None
         self.dt = None if dt is None else float(dt)
-        self._R_xi = None if R_xi is None else _mat(R_xi, "R_xi", (self.m, self.m))
+        self._R_xi = None if R_xi is None else as_matrix(R_xi, "R_xi", (self.m, self.m))
         self.reset_diff()
 
     def reset_diff(self) -> None:

@@ -48,7 +48,8 @@ from ._linalg import (
     quad_form,
 )
 
-__all__ = ["KF", "inv_small", "as_fix", "block3", "csr", "joseph", "joseph_row", "kf_gain_row",
+__all__ = ["KF", "inv_small", "as_fix", "as_matrix", "as_vector", "block3", "csr", "joseph",
+           "joseph_row", "kf_gain_row",
            "kf_innovation_row", "kf_input_row", "kf_predict_row", "kf_update_row", "kf_work",
            "kf_work_in", "kf_work_size",
            "predict_b3_row", "predict_csr_row"]
@@ -308,14 +309,16 @@ def kf_update_row(x, P, R, H, z, nu, PHT, S, Si, K, xo, A, AP, KR):
 
 
 # ------------------------------------------------------------------------------ classes
-def _mat(a, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
+def as_matrix(a, name: str, shape: tuple[int, ...] | None = None) -> np.ndarray:
+    """A fresh C-contiguous float64 copy of a matrix argument (at least 2-D); ValueError naming
+    ``name`` when ``shape`` is given and differs."""
     arr = np.array(a, dtype=float, ndmin=2, order="C")
     if shape is not None and arr.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
     return arr
 
 
-def _vec(a, n: int) -> np.ndarray:
+def as_vector(a, n: int) -> np.ndarray:
     """A fresh C-contiguous float64 copy of a state vector (n,)."""
     return np.array(a, dtype=float, order="C").reshape(n)
 
@@ -325,11 +328,11 @@ class LinearGaussianBase:
     form; ``predict`` is :func:`kf_predict_row` on the filter's own arrays."""
 
     def __init__(self, F, H, Q, R, x0=None, P0=None) -> None:
-        F = _mat(F, "F")
+        F = as_matrix(F, "F")
         n = F.shape[0]
         if F.shape != (n, n):
             raise ValueError(f"F must be square, got {F.shape}")
-        H = _mat(H, "H")
+        H = as_matrix(H, "H")
         if H.shape[1] != n:
             raise ValueError(f"H must have {n} columns, got {H.shape}")
         self.n, self.m = n, H.shape[0]
@@ -338,7 +341,7 @@ class LinearGaussianBase:
         self.Q = Q
         self.R = R
         self.x = np.zeros(n) if x0 is None else np.array(x0, dtype=float).reshape(n)
-        self.P = np.eye(n) if P0 is None else _mat(P0, "P0", (n, n)).copy()
+        self.P = np.eye(n) if P0 is None else as_matrix(P0, "P0", (n, n)).copy()
         self.y = np.zeros(self.m)
         self.S = self.R.copy()
         self.K = np.zeros((n, self.m))
@@ -354,7 +357,7 @@ class LinearGaussianBase:
 
     @F.setter
     def F(self, value) -> None:
-        F = _mat(value, "F", (self.n, self.n))
+        F = as_matrix(value, "F", (self.n, self.n))
         self._F, self._FT = F, F.T.copy()
         self._fcsr = csr(F)
         self._Fb = block3(F)
@@ -365,7 +368,7 @@ class LinearGaussianBase:
 
     @H.setter
     def H(self, value) -> None:
-        H = _mat(value, "H", (self.m, self.n) if hasattr(self, "m") else None)
+        H = as_matrix(value, "H", (self.m, self.n) if hasattr(self, "m") else None)
         self._H, self._HT = H, H.T.copy()
         self._on_model_change()
 
@@ -375,7 +378,7 @@ class LinearGaussianBase:
 
     @Q.setter
     def Q(self, value) -> None:
-        self._Q = _mat(value, "Q", (self.n, self.n))
+        self._Q = as_matrix(value, "Q", (self.n, self.n))
 
     @property
     def R(self) -> np.ndarray:
@@ -383,7 +386,7 @@ class LinearGaussianBase:
 
     @R.setter
     def R(self, value) -> None:
-        self._R = _mat(value, "R", (self.m, self.m))
+        self._R = as_matrix(value, "R", (self.m, self.m))
         self._on_model_change()
 
     def _on_model_change(self) -> None:
@@ -392,8 +395,8 @@ class LinearGaussianBase:
     # common steps ------------------------------------------------------------------------------
     def predict(self) -> None:
         """x̄ = F x̂, P̄ = F P Fᵀ + Q (:func:`kf_predict_row`)."""
-        x = _vec(self.x, self.n)
-        P = _mat(self.P, "P", (self.n, self.n))
+        x = as_vector(self.x, self.n)
+        P = as_matrix(self.P, "P", (self.n, self.n))
         ptr, idx, val = self._fcsr
         kf_predict_row(x, P, ptr, idx, val, self._Fb, self._Q, self._tx, self._FP)
         self.x, self.P = x, P
@@ -401,7 +404,7 @@ class LinearGaussianBase:
     def _joseph(self, P: np.ndarray, K: np.ndarray) -> np.ndarray:
         """(I − K H) P (I − K H)ᵀ + K R Kᵀ (:func:`joseph_row`)."""
         n = self.n
-        return joseph(_mat(P, "P", (n, n)), _mat(K, "K", (n, self.m)), self._H, self._R)
+        return joseph(as_matrix(P, "P", (n, n)), as_matrix(K, "K", (n, self.m)), self._H, self._R)
 
     def _fix(self, z) -> np.ndarray | None:
         """``z`` as a C-contiguous float64 (m,) vector, or None (no fix)."""
@@ -428,8 +431,8 @@ class KF(LinearGaussianBase):
         zz = self._fix(z)
         if zz is None:
             return False
-        x = _vec(self.x, self.n)
-        P = _mat(self.P, "P", (self.n, self.n))
+        x = as_vector(self.x, self.n)
+        P = as_matrix(self.P, "P", (self.n, self.n))
         w = self._kfw
         v = kf_update_row(x, P, self._R, self._H, zz, *w)
         if not math.isfinite(v):

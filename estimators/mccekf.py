@@ -42,23 +42,23 @@ class MCCEKF(NonlinearModelMixin, MCKF):
 
     Parameters
     ----------
-    f, F_jac, h, H_jac, Q, R, x0, P0, residual, B : as :class:`estimators.ekf.EKF`.
-    sigma : kernel bandwidth (dimensionless: the residuals are whitened); scalar or a vector of
-        length n+m (one kernel per row).
-    eps, max_iter : fixed-point stop rule and iteration cap.
-    **mckf_options : any further :class:`estimators.MCKF` option (``kernel_floor``,
-        ``adaptive_sigma``, ``recovery``, ``lockout_n``, ``reject_weight``, ...).
+    f, F_jac, h, H_jac, Q, R, x0, P0 : as :class:`estimators.ekf.EKF`.
+    **options : ``residual`` and ``B`` (keywords) as :class:`estimators.ekf.EKF`; then
+        ``options`` (an :class:`estimators.mckf.MCKFOptions`) and any of its fields by name, as
+        :class:`estimators.MCKF`: ``sigma`` the kernel bandwidth (dimensionless: the residuals
+        are whitened; scalar or a vector of length n+m, one kernel per row), ``eps``,
+        ``max_iter`` the fixed-point stop rule and iteration cap, ``kernel_floor``,
+        ``adaptive_sigma``, ``recovery``, ``lockout_n``, ``reject_weight``, ...
     """
 
-    def __init__(self, f, F_jac, h, H_jac, Q, R, x0=None, P0=None,
-                 residual: Residual | None = None, B=None, sigma: float | np.ndarray = 2.0,
-                 eps: float = 1e-6, max_iter: int = 10, **mckf_options) -> None:
+    def __init__(self, f, F_jac, h, H_jac, Q, R, x0=None, P0=None, **options) -> None:
+        residual: Residual | None = options.pop("residual", None)
+        B = options.pop("B", None)
         R = np.array(R, dtype=float, ndmin=2)
         Qa = np.array(Q, dtype=float, ndmin=2)
         n, m = Qa.shape[0], R.shape[0]
         F0 = self._set_models(f, F_jac, h, H_jac, residual, B, n)
-        super().__init__(F0, np.zeros((m, n)), Qa, R, x0, P0, sigma=sigma, eps=eps,
-                         max_iter=max_iter, **mckf_options)
+        super().__init__(F0, np.zeros((m, n)), Qa, R, x0, P0, **options)
 
     def update(self, z) -> bool:
         """Fuse measurement ``z`` (m,); ``False`` (nothing changes) if there is none.

@@ -74,6 +74,7 @@ Diagnostics after an update: ``n_iter`` (fixed-point iterations), ``weights`` (d
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -92,8 +93,8 @@ from ._linalg import (
 )
 from .kf import (
     LinearGaussianBase,
-    _mat,
-    _vec,
+    as_matrix,
+    as_vector,
     joseph_from,
     joseph_row,
     kf_gain_row,
@@ -102,7 +103,7 @@ from .kf import (
     kf_work_size,
 )
 
-__all__ = ["MCKF", "REL_PIVOT", "RECOVERY", "adapt_kernel_row", "adapt_kernels_row",
+__all__ = ["MCKF", "MCKFOptions", "REL_PIVOT", "RECOVERY", "adapt_kernel_row", "adapt_kernels_row",
            "kernel_coeffs", "mckf_adaptive_update_row", "mckf_fixed_point_row", "mckf_update_row",
            "mckf_work", "mckf_work_in", "mckf_work_size", "safe_cholesky"]
 
@@ -403,12 +404,10 @@ def mckf_adaptive_update_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, fpar,
 
 
 # ------------------------------------------------------------------------------ the class
-class MCKF(LinearGaussianBase):
-    """Maximum correntropy Kalman filter; see the module docstring for every option.
+@dataclass(frozen=True)
+class MCKFOptions:
+    """The options of :class:`MCKF` (module docstring, *Options*), declared once.
 
-    Parameters
-    ----------
-    F, H, Q, R, x0, P0 : as :class:`estimators.KF`.
     sigma : kernel bandwidth, scalar or vector of length n+m (multi-kernel).
     eps, max_iter : fixed-point stop rule and cap.
     kernel_floor : lower bound (> 0) of the state weights C_x.
@@ -416,46 +415,53 @@ class MCKF(LinearGaussianBase):
     recovery, lockout_n, reject_weight, inflate : lock-out recovery rule.
     """
 
-    def __init__(
-        self,
-        F,
-        H,
-        Q,
-        R,
-        x0=None,
-        P0=None,
-        sigma: float | np.ndarray = 2.0,
-        eps: float = 1e-6,
-        max_iter: int = 10,
-        kernel_floor: float = 1e-12,
-        adaptive_sigma: bool = False,
-        adapt_lambda: float = 0.98,
-        adapt_clip: float = 3.0,
-        recovery: str | None = "kf",
-        lockout_n: int = 10,
-        reject_weight: float = 0.05,
-        inflate: float = 4.0,
-    ) -> None:
+    sigma: float | np.ndarray = 2.0
+    eps: float = 1e-6
+    max_iter: int = 10
+    kernel_floor: float = 1e-12
+    adaptive_sigma: bool = False
+    adapt_lambda: float = 0.98
+    adapt_clip: float = 3.0
+    recovery: str | None = "kf"
+    lockout_n: int = 10
+    reject_weight: float = 0.05
+    inflate: float = 4.0
+
+
+class MCKF(LinearGaussianBase):
+    """Maximum correntropy Kalman filter; see the module docstring for every option.
+
+    Parameters
+    ----------
+    F, H, Q, R, x0, P0 : as :class:`estimators.KF`.
+    options : the options (:class:`MCKFOptions`; its defaults when omitted).
+    **changes : any :class:`MCKFOptions` field by name, over ``options``
+        (``MCKF(F, H, Q, R, sigma=3.0, recovery="inflate")``); an unknown name is a TypeError.
+    """
+
+    def __init__(self, F, H, Q, R, x0=None, P0=None, options: MCKFOptions | None = None,
+                 **changes) -> None:
+        opts = replace(options or MCKFOptions(), **changes)  # TypeError names a bad keyword
         self._ist = np.zeros(4, dtype=np.int64)
         super().__init__(F, H, Q, R, x0, P0)
-        if recovery not in RECOVERY:
-            raise ValueError(f"recovery must be None, 'kf' or 'inflate', got {recovery!r}")
-        if max_iter < 1:
+        if opts.recovery not in RECOVERY:
+            raise ValueError(f"recovery must be None, 'kf' or 'inflate', got {opts.recovery!r}")
+        if opts.max_iter < 1:
             raise ValueError("max_iter must be >= 1")
-        if not kernel_floor > 0.0:
+        if not opts.kernel_floor > 0.0:
             raise ValueError("kernel_floor must be > 0")
-        self.sigma = sigma
-        self.eps = float(eps)
-        self.max_iter = int(max_iter)
-        self.kernel_floor = float(kernel_floor)
-        self.adaptive_sigma = bool(adaptive_sigma)
-        self.adapt_lambda = float(adapt_lambda)
-        self.adapt_clip = float(adapt_clip)
-        self.recovery = recovery
-        self.lockout_n = int(lockout_n)
-        self.reject_weight = float(reject_weight)
-        self.inflate = float(inflate)
-        if recovery == "inflate" and not self.inflate > 1.0:
+        self.sigma = opts.sigma
+        self.eps = float(opts.eps)
+        self.max_iter = int(opts.max_iter)
+        self.kernel_floor = float(opts.kernel_floor)
+        self.adaptive_sigma = bool(opts.adaptive_sigma)
+        self.adapt_lambda = float(opts.adapt_lambda)
+        self.adapt_clip = float(opts.adapt_clip)
+        self.recovery = opts.recovery
+        self.lockout_n = int(opts.lockout_n)
+        self.reject_weight = float(opts.reject_weight)
+        self.inflate = float(opts.inflate)
+        if opts.recovery == "inflate" and not self.inflate > 1.0:
             raise ValueError("inflate must be > 1")
         from scipy.special import gammaincinv
 
@@ -494,6 +500,12 @@ class MCKF(LinearGaussianBase):
         self._sigma = s
         self._ncx, self._ncy_half = kernel_coeffs(s, self.n)
 
+    @property
+    def kernels(self) -> tuple[np.ndarray, np.ndarray]:
+        """The kernel coefficients of ``sigma`` (:func:`kernel_coeffs`): (kx (n,), ky (m,)),
+        the rows' ``kx``, ``ky`` of :func:`mckf_update_row` (read them, do not write)."""
+        return self._ncx, self._ncy_half
+
     def _on_model_change(self) -> None:
         R = getattr(self, "_R", None)
         if R is not None and R is not getattr(self, "_R_checked", None):
@@ -517,8 +529,8 @@ class MCKF(LinearGaussianBase):
         if zz is None:
             return False
         n = self.n
-        x = _vec(self.x, n)
-        P = _mat(self.P, "P", (n, n))
+        x = as_vector(self.x, n)
+        P = as_matrix(self.P, "P", (n, n))
         w = self._w
         fpar, ipar = self.params()
         wy = np.empty(self.m)

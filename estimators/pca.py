@@ -54,15 +54,18 @@ import numpy as np
 from ._jit import njit
 from ._linalg import mat_mul
 from .kf import KF
-from .mckf import MCKF
+from .mckf import MCKF, MCKFOptions
 
 __all__ = ["PCABlock", "PCAKF", "PCAMCKF", "DEFAULT_MODE", "DEFAULT_WINDOW", "PCA_MODE",
+           "PCA_OPTIONS",
            "pca_row"]
 
 DEFAULT_MODE = "hankel"
 DEFAULT_WINDOW = 20
 #: mode → code of :func:`pca_row`
 PCA_MODE = {"channels": 0, "hankel": 1}
+#: the keywords of :class:`PCABlock` a PCA filter takes (the rest go to its update's class)
+PCA_OPTIONS = ("window", "n_components", "mode", "embed")
 
 
 # ------------------------------------------------------------------------------ the law, rows
@@ -208,17 +211,20 @@ class PCABlock:
             self.n_components = 2 if n_components is None else int(n_components)
             if not 1 <= self.n_components <= min(self.L, self.N - self.L + 1):
                 raise ValueError("n_components must be in [1, min(L, N - L + 1)]")
-        # doubled ring buffer: the last N samples are always buf[:, pos : pos + N]
-        self._buf = np.zeros((self.c, 2 * self.N))
-        self._pcs = np.zeros(2, dtype=np.int64)  # (pos, count), as pca_row keeps them
+        #: the doubled ring buffer (c, 2N): the last N samples are always ring[:, pos : pos + N]
+        self.ring = np.zeros((self.c, 2 * self.N))
+        #: (pos, count) of the ring, as :func:`pca_row` keeps them (its ``buf``, ``pcs``)
+        self.ring_state = np.zeros(2, dtype=np.int64)
 
-    _pos = property(lambda self: int(self._pcs[0]),
-                    lambda self, v: self._pcs.__setitem__(0, int(v)))
-    count = property(lambda self: int(self._pcs[1]),
-                     lambda self, v: self._pcs.__setitem__(1, int(v)))
+    position = property(lambda self: int(self.ring_state[0]),
+                        lambda self, v: self.ring_state.__setitem__(0, int(v)),
+                        doc="Where the ring's window starts (its oldest sample).")
+    count = property(lambda self: int(self.ring_state[1]),
+                     lambda self, v: self.ring_state.__setitem__(1, int(v)),
+                     doc="How many samples the ring has taken.")
 
     def reset(self) -> None:
-        self._pcs[:] = 0
+        self.ring_state[:] = 0
 
     @property
     def ready(self) -> bool:
@@ -228,8 +234,8 @@ class PCABlock:
     def window_data(self) -> np.ndarray:
         """The current window, oldest sample first (c × min(count, N))."""
         k = min(self.count, self.N)
-        p = self._pos
-        return self._buf[:, p + self.N - k : p + self.N].copy()
+        p = self.position
+        return self.ring[:, p + self.N - k : p + self.N].copy()
 
     def __call__(self, z):
         """Push ``z`` and return the reconstructed latest sample (pass-through until ready, and
@@ -240,7 +246,7 @@ class PCABlock:
         if zz.shape != (self.c,):
             raise ValueError(f"z must have {self.c} elements, got {zz.size}")
         out = np.empty(self.c)
-        pca_row(self._buf, self._pcs, zz, self.N, self.L, self.n_components,
+        pca_row(self.ring, self.ring_state, zz, self.N, self.L, self.n_components,
                 PCA_MODE[self.mode], out)
         return out
 
@@ -279,25 +285,15 @@ class PCAKF(KF):
 class PCAMCKF(MCKF):
     """PCA block in front of an :class:`~estimators.MCKF` (same interface and H, R).
 
-    PCA options as :class:`PCABlock`; every other keyword goes to :class:`MCKF`.
+    PCA options (:data:`PCA_OPTIONS`: ``window``, ``n_components``, ``mode``, ``embed``) as
+    :class:`PCABlock`; ``options`` and every other keyword as :class:`MCKF`.
     """
 
-    def __init__(
-        self,
-        F,
-        H,
-        Q,
-        R,
-        x0=None,
-        P0=None,
-        window: int = DEFAULT_WINDOW,
-        n_components: int | None = None,
-        mode: str = DEFAULT_MODE,
-        embed: int | None = None,
-        **mckf_params,
-    ) -> None:
-        super().__init__(F, H, Q, R, x0, P0, **mckf_params)
-        self.pca = PCABlock(self.m, window, n_components, mode, embed)
+    def __init__(self, F, H, Q, R, x0=None, P0=None, options: MCKFOptions | None = None,
+                 **changes) -> None:
+        pca = {k: changes.pop(k) for k in PCA_OPTIONS if k in changes}
+        super().__init__(F, H, Q, R, x0, P0, options, **changes)
+        self.pca = PCABlock(self.m, **pca)
         self.z_filtered: np.ndarray | None = None
 
     def update(self, z) -> bool:

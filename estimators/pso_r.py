@@ -38,6 +38,7 @@ from controllers.optim import pso_minimize
 
 __all__ = [
     "FITNESSES",
+    "TuneROptions",
     "TunedR",
     "innovation_nll",
     "kf_fitness_batch",
@@ -156,16 +157,28 @@ class TunedR:
     n_evals: int = 0
 
 
-def tune_r(F, H, Q, Z, x0, P0, groups: Sequence[Sequence[int]], lo, hi, *,
-           fitness: str = "nll", pop: int = 12, iters: int = 15,
-           rng: np.random.Generator | int | None = None) -> TunedR:
+@dataclass(frozen=True)
+class TuneROptions:
+    """The search of :func:`tune_r`: ``fitness`` ``"nll"`` (innovation likelihood,
+    recommended) or ``"paper"`` (eq 35's posterior residual, kept to demonstrate that it is
+    minimised at the lower bound, R → 0); the PSO's ``pop`` and ``iters``; ``rng`` its seed or
+    Generator (deterministic for a given seed)."""
+
+    fitness: str = "nll"
+    pop: int = 12
+    iters: int = 15
+    rng: np.random.Generator | int | None = None
+
+
+def tune_r(F, H, Q, Z, x0, P0, groups: Sequence[Sequence[int]], lo, hi,
+           **options) -> TunedR:
     """PSO over log10 variances of R (one per group) on recorded fixes ``Z``.
 
-    ``fitness="nll"``: innovation likelihood (recommended); ``"paper"``: eq 35's posterior
-    residual, kept to demonstrate that it is minimised at the lower bound (R → 0).
-    ``lo``, ``hi``: bounds of θ (log10 m² / (m/s)² ...), one per group.  Deterministic for a
-    given ``rng`` seed.
+    ``lo``, ``hi``: bounds of θ (log10 m² / (m/s)² ...), one per group; ``options``: the fields
+    of :class:`TuneROptions` by name (``fitness``, ``pop``, ``iters``, ``rng``).
     """
+    o = TuneROptions(**options)
+    fitness = o.fitness
     if fitness not in FITNESSES:
         raise ValueError(f"fitness must be one of {FITNESSES}, got {fitness!r}")
     H = np.asarray(H, dtype=float)
@@ -181,7 +194,7 @@ def tune_r(F, H, Q, Z, x0, P0, groups: Sequence[Sequence[int]], lo, hi, *,
     def single(theta):  # only used if someone calls fun directly
         return batch_map(None, [theta])[0]
 
-    res = pso_minimize(single, lo, hi, pop=pop, iters=iters, rng=rng, map_fn=batch_map)
+    res = pso_minimize(single, lo, hi, pop=o.pop, iters=o.iters, rng=o.rng, map_fn=batch_map)
     span = hi - lo
     at_bound = bool(np.any((res.x - lo < 0.01 * span) | (hi - res.x < 0.01 * span)))
     return TunedR(R=r_from_params(res.x, groups, m), theta=res.x.copy(), fun=float(res.fun),

@@ -66,13 +66,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import linalg, stats
 
 from .kf import KF, joseph
 
-__all__ = ["Route", "RouteConstrainedKF", "chi2_gate", "paper_gate", "singer_model"]
+__all__ = ["Route", "RouteConstrainedKF", "RouteOptions", "chi2_gate", "paper_gate", "singer_model"]
 
 _dot = np.dot
 
@@ -244,16 +245,34 @@ def paper_gate(nu: np.ndarray, S: np.ndarray, chi: float) -> bool:
 
 
 # ------------------------------------------------------------------------------------ filter
+@dataclass(frozen=True)
+class RouteOptions:
+    """The options of :class:`RouteConstrainedKF`, declared once (meanings there)."""
+
+    r_virtual: float = 1e-4
+    virtual: str = "outage"
+    turn: str = "project"
+    gate: str | None = None
+    gate_prob: float = 0.9999
+    paper_chi: float | None = None
+    gate_virtual: bool = True
+    recover_after: int | None = 20
+    segment: int | None = None
+
+
 class RouteConstrainedKF(KF):
     """KF with route pseudo-measurements during outages and an innovation gate.
 
     Parameters
     ----------
-    F, H, Q, R, x0, P0 : as :class:`estimators.kf.KF` (H, R: the real sensor).
+    F, H, Q, R : as :class:`estimators.kf.KF` (H, R: the real sensor); ``x0``, ``P0`` (keywords)
+        too.
     route : :class:`Route` or waypoints (K, d).
     pos_idx : indices of the route's d coordinates in the state (e.g. [0, 3, 6] for a 3-D
         Singer/CA state, [0, 2] for x, y of a 3-D CV state with a 2-D route).
     vel_idx, acc_idx : indices of velocity / acceleration (needed for ``turn="rotate"``).
+    options : :class:`RouteOptions` (its defaults when omitted); each of its fields may be
+        given by name instead (keywords over ``options``):
     r_virtual : variance (m²) of the route pseudo-measurement.
     virtual : "outage" (paper: only when no fix arrives), "always" (also after every fix) or
         "never" (a gated KF).
@@ -267,11 +286,9 @@ class RouteConstrainedKF(KF):
 
     def __init__(self, F, H, Q, R, route, pos_idx: Sequence[int],
                  vel_idx: Sequence[int] | None = None, acc_idx: Sequence[int] | None = None, *,
-                 r_virtual: float = 1e-4, virtual: str = "outage", turn: str = "project",
-                 gate: str | None = None, gate_prob: float = 0.9999,
-                 paper_chi: float | None = None, gate_virtual: bool = True,
-                 recover_after: int | None = 20, segment: int | None = None,
-                 x0=None, P0=None) -> None:
+                 options: RouteOptions | None = None, **changes) -> None:
+        x0, P0 = changes.pop("x0", None), changes.pop("P0", None)
+        o = replace(options or RouteOptions(), **changes)  # TypeError names a bad keyword
         super().__init__(F, H, Q, R, x0=x0, P0=P0)
         self.route = route if isinstance(route, Route) else Route(route)
         d = self.route.dim
@@ -280,25 +297,25 @@ class RouteConstrainedKF(KF):
             raise ValueError(f"pos_idx needs {d} indices for a {d}-D route")
         self.vel_idx = None if vel_idx is None else np.asarray(vel_idx, dtype=int)
         self.acc_idx = None if acc_idx is None else np.asarray(acc_idx, dtype=int)
-        if virtual not in ("outage", "always", "never"):
-            raise ValueError(f"virtual must be 'outage', 'always' or 'never', got {virtual!r}")
-        if turn not in ("project", "rotate"):
-            raise ValueError(f"turn must be 'project' or 'rotate', got {turn!r}")
-        if turn == "rotate" and self.vel_idx is None:
+        if o.virtual not in ("outage", "always", "never"):
+            raise ValueError(f"virtual must be 'outage', 'always' or 'never', got {o.virtual!r}")
+        if o.turn not in ("project", "rotate"):
+            raise ValueError(f"turn must be 'project' or 'rotate', got {o.turn!r}")
+        if o.turn == "rotate" and self.vel_idx is None:
             raise ValueError("turn='rotate' needs vel_idx")
-        if gate not in (None, "chi2", "paper"):
-            raise ValueError(f"gate must be None, 'chi2' or 'paper', got {gate!r}")
-        if not r_virtual > 0:
+        if o.gate not in (None, "chi2", "paper"):
+            raise ValueError(f"gate must be None, 'chi2' or 'paper', got {o.gate!r}")
+        if not o.r_virtual > 0:
             raise ValueError("r_virtual must be > 0")
-        self.r_virtual = float(r_virtual)
-        self.virtual = virtual
-        self.turn = turn
-        self.gate = gate
-        self.gate_prob = float(gate_prob)
-        self.paper_chi = paper_chi
-        self.gate_virtual = bool(gate_virtual)
-        self.recover_after = recover_after
-        self.segment = segment
+        self.r_virtual = float(o.r_virtual)
+        self.virtual = o.virtual
+        self.turn = o.turn
+        self.gate = o.gate
+        self.gate_prob = float(o.gate_prob)
+        self.paper_chi = o.paper_chi
+        self.gate_virtual = bool(o.gate_virtual)
+        self.recover_after = o.recover_after
+        self.segment = o.segment
         self.n_rejected = 0  # consecutive rejected fixes
         self.rejected_fixes = 0
         self.rejected_virtual = 0

@@ -33,13 +33,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .kf import inv_small
 from .mckf import safe_cholesky
 
-__all__ = ["UKF", "merwe_weights"]
+__all__ = ["UKF", "UKFOptions", "merwe_weights"]
 
 _dot = np.dot
 Residual = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -58,6 +59,21 @@ def merwe_weights(n: int, alpha: float, beta: float, kappa: float):
     return lam, Wm, Wc
 
 
+@dataclass(frozen=True)
+class UKFOptions:
+    """The sigma-point options of :class:`UKF`.
+
+    alpha, beta, kappa : sigma-point scaling (defaults 1, 2, 0; :func:`merwe_weights`).
+    vectorized : ``f`` and ``h`` accept a (k, n) stack of states and return (k, ·) — one call
+        per step instead of 2n + 1.
+    """
+
+    alpha: float = 1.0
+    beta: float = 2.0
+    kappa: float = 0.0
+    vectorized: bool = False
+
+
 class UKF:
     """Unscented Kalman filter (see the module docstring).
 
@@ -68,15 +84,15 @@ class UKF:
     Q, R : process and measurement noise covariances.
     x0, P0 : initial state and covariance (default zeros and identity).
     residual : measurement residual ``r(a, b)`` (must broadcast over a (k, m) stack).
-    alpha, beta, kappa : sigma-point scaling (defaults 1, 2, 0).
     B : control matrix for ``predict(u)``.
-    vectorized : ``f`` and ``h`` accept a (k, n) stack of states and return (k, ·) — one call
-        per step instead of 2n + 1.
+    options : :class:`UKFOptions` (its defaults when omitted); ``alpha``, ``beta``, ``kappa``,
+        ``vectorized`` may be given by name instead (keywords over ``options``).
     """
 
-    def __init__(self, f, h, Q, R, x0=None, P0=None, residual: Residual | None = None,
-                 alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0, B=None,
-                 vectorized: bool = False) -> None:
+    def __init__(self, f, h, Q, R, x0=None, P0=None, residual: Residual | None = None, B=None,
+                 options: UKFOptions | None = None, **changes) -> None:
+        o = replace(options or UKFOptions(), **changes)  # TypeError names a bad keyword
+        alpha, beta, kappa, vectorized = o.alpha, o.beta, o.kappa, o.vectorized
         self.Q = np.array(Q, dtype=float, ndmin=2)
         self.R = np.array(R, dtype=float, ndmin=2)
         n, m = self.Q.shape[0], self.R.shape[0]

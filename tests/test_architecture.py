@@ -44,8 +44,10 @@ def test_no_import_cycles():
 
 
 def test_libraries_do_not_import_ag_uav_or_mujoco():
+    """Nor does the shared numba cache sweep import either library."""
     bad = []
-    for lib in ("controllers", "estimators"):
+    for lib, banned in (("controllers", ("ag_uav", "mujoco")), ("estimators", ("ag_uav", "mujoco")),
+                        ("jitcache", ("ag_uav", "mujoco", "controllers", "estimators"))):
         for p in sorted((ROOT / lib).rglob("*.py")):
             for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
                 if isinstance(node, ast.Import):
@@ -55,7 +57,7 @@ def test_libraries_do_not_import_ag_uav_or_mujoco():
                 else:
                     continue
                 bad += [f"{p.relative_to(ROOT)}:{node.lineno} imports {n}" for n in names
-                        if n.split(".")[0] in ("ag_uav", "mujoco")]
+                        if n.split(".")[0] in banned]
     assert not bad, "\n".join(bad)
 
 
@@ -148,8 +150,9 @@ def test_product_text_has_no_history():
 
 
 # -------------------------------------------------------------------------- the house limits
-#: the product code the limits hold (the application and the two libraries)
-PRODUCT_CODE = ("ag_uav", "controllers", "estimators")
+#: the product code the limits hold (the application, the two libraries and the numba cache
+#: sweep the three share)
+PRODUCT_CODE = ("ag_uav", "controllers", "estimators", "jitcache")
 MAX_FILE_LINES = 700
 MAX_FUNCTION_LINES = 80
 #: parameters of a function, ``self`` and ``cls`` not counted (``*args`` and ``**kw`` count one)
@@ -311,7 +314,7 @@ def private_reach_ins(root: Path = ROOT, code=PRODUCT_CODE) -> dict[str, int]:
 FILE_LINES_LEFT: dict[str, int] = {
     "ag_uav/jobs/batch.py": 1194,
     "ag_uav/navigation/ins_feedback.py": 881,
-    "estimators/batched.py": 709,
+    "estimators/batched.py": 708,
     "estimators/ins.py": 1156,
 }
 #: functions over :data:`MAX_FUNCTION_LINES` today -> their lines
@@ -338,11 +341,6 @@ PARAMETERS_LEFT: dict[str, int] = {
     "ag_uav/world/wind.py::wind_drag_rows": 11,
     "controllers/batched.py::BatchCascade.update": 11,
     "controllers/batched.py::cascade_step": 13,
-    "controllers/cascade.py::vehicle_step": 12,
-    "controllers/fpid.py::IT2FPID.__init__": 13,
-    "controllers/fuzzy.py::it2_phi": 11,
-    "controllers/optim.py::bbbc_minimize": 12,
-    "controllers/optim.py::pso_minimize": 13,
     "estimators/_ins_laws.py::mckf_fuse": 14,
     "estimators/_ins_laws.py::mckf_fuse_b": 17,
     "estimators/batched.py::_mckf_update_batch": 15,
@@ -354,20 +352,13 @@ PARAMETERS_LEFT: dict[str, int] = {
     "estimators/ins.py::_fuse_one": 11,
     "estimators/ins.py::_step_kernel": 19,
     "estimators/kf.py::kf_update_row": 14,
-    "estimators/mccekf.py::MCCEKF.__init__": 14,
-    "estimators/mckf.py::MCKF.__init__": 17,
     "estimators/mckf.py::_recover": 16,
     "estimators/mckf.py::mckf_adaptive_update_row": 16,
     "estimators/mckf.py::mckf_fixed_point_row": 27,
     "estimators/mckf.py::mckf_update_row": 12,
-    "estimators/pca.py::PCAMCKF.__init__": 11,
-    "estimators/pso_r.py::tune_r": 13,
-    "estimators/route.py::RouteConstrainedKF.__init__": 19,
-    "estimators/ukf.py::UKF.__init__": 12,
 }
 #: private reach-ins across modules today -> their occurrences
 REACH_INS_LEFT: dict[str, int] = {
-    "ag_uav/_jit.py: from controllers._jit import ...": 1,
     "ag_uav/engine/spray_batched.py: sp._close_sortie": 1,
     "ag_uav/engine/spray_batched.py: sp._next_log": 3,
     "ag_uav/engine/spray_batched.py: sp._set_mass": 2,
@@ -391,21 +382,6 @@ REACH_INS_LEFT: dict[str, int] = {
     "ag_uav/vehicle/sensors_batched.py: w._buf": 3,
     "ag_uav/vehicle/sensors_batched.py: w._fs": 1,
     "ag_uav/vehicle/sensors_batched.py: w._ist": 1,
-    "controllers/batched.py: c._P": 1,
-    "controllers/batched.py: c._S": 1,
-    "controllers/cascade.py: obj._p": 2,
-    "controllers/cascade.py: obj._s": 2,
-    "controllers/fpid.py: core._code": 1,
-    "estimators/_jit.py: from controllers._jit import ...": 1,
-    "estimators/batched.py: f._ncx": 1,
-    "estimators/batched.py: f._ncy_half": 1,
-    "estimators/batched.py: f.pca._buf": 2,
-    "estimators/batched.py: f.pca._pos": 2,
-    "estimators/batched.py: other._buf": 1,
-    "estimators/batched.py: other._pcs": 1,
-    "estimators/coloured.py: from estimators.kf import _mat": 1,
-    "estimators/mckf.py: from estimators.kf import _mat": 1,
-    "estimators/mckf.py: from estimators.kf import _vec": 1,
 }
 
 

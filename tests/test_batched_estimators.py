@@ -157,7 +157,7 @@ def test_equivalence_with_scalar(name, opts):
         np.testing.assert_array_equal(bf.n_iter, [f.n_iter for f in scal])
     if name.startswith("pca"):
         np.testing.assert_array_equal(bf.z_filtered, np.stack([f.z_filtered for f in scal]))
-        np.testing.assert_array_equal(bf._pcs[:, 1], [f.pca.count for f in scal])
+        np.testing.assert_array_equal(bf.ring_state[:, 1], [f.pca.count for f in scal])
 
 
 def test_scenario_exercises_mckf_branches():
@@ -225,7 +225,7 @@ def test_update_mask_nonfinite_and_roundtrip():
     for _ in range(15):
         bf.predict(rng.standard_normal((N, 3)))
         bf.update(rng.standard_normal((N, 3)))
-    x, P, nis, pcs = bf.x.copy(), bf.P.copy(), bf.nis.copy(), bf._pcs.copy()
+    x, P, nis, pcs = bf.x.copy(), bf.P.copy(), bf.nis.copy(), bf.ring_state.copy()
     z = rng.standard_normal((N, 3))
     z[1, 0] = np.nan
     ok = bf.update(z, np.array([False, True, False]))
@@ -233,7 +233,7 @@ def test_update_mask_nonfinite_and_roundtrip():
     np.testing.assert_array_equal(bf.x, x)
     np.testing.assert_array_equal(bf.P, P)
     np.testing.assert_array_equal(bf.nis, nis)
-    np.testing.assert_array_equal(bf._pcs, pcs)
+    np.testing.assert_array_equal(bf.ring_state, pcs)
     ok = bf.update(z, np.array([True, True, False]))
     assert ok.tolist() == [True, False, False]
     # to_filter: the scalar filter continues exactly where the batch row is
@@ -248,7 +248,7 @@ def test_update_mask_nonfinite_and_roundtrip():
         f.update(zz[2])
     np.testing.assert_allclose(bf.x[2], f.x, **TOL)
     np.testing.assert_allclose(bf.P[2], f.P, **TOL)
-    assert bf.n_rejected[2] == f.n_rejected and bf._pcs[2, 1] == f.pca.count
+    assert bf.n_rejected[2] == f.n_rejected and bf.ring_state[2, 1] == f.pca.count
 
 
 def test_bank_views_set_R_and_initialise():
@@ -341,5 +341,5 @@ def test_bank_shared_pca_bit_identical():
     for k in names:
         assert np.array_equal(bank[k].x, solo[k].x) and np.array_equal(bank[k].P, solo[k].P)
         assert np.array_equal(bank[k].nis, solo[k].nis, equal_nan=True)
-    assert not np.array_equal(bank["pca-kf"]._buf[0], bank["pca-mckf"]._buf[0])
-    assert np.array_equal(bank["pca-kf"]._buf[5], bank["pca-mckf"]._buf[5])
+    assert not np.array_equal(bank["pca-kf"].ring[0], bank["pca-mckf"].ring[0])
+    assert np.array_equal(bank["pca-kf"].ring[5], bank["pca-mckf"].ring[5])

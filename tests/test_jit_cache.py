@@ -1,5 +1,5 @@
 """numba's cache is keyed on a kernel's own file: the packages sweep a module's kernels when any
-source it imports changes (controllers._jit.sweep_stale_caches), so a kernel never keeps running
+source it imports changes (jitcache.sweep_stale_caches), so a kernel never keeps running
 an old law, and an edit that no kernel reaches recompiles nothing."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from controllers._jit import STAMP, module_closures, sweep_stale_caches
+from jitcache import STAMP, module_closures, sweep_stale_caches
 
 
 def _fake_cache(pkg: Path) -> list[Path]:
@@ -68,7 +68,8 @@ def test_closures_follow_relative_function_local_and_parent_imports(tmp_path: Pa
 _LAW = "from controllers._jit import njit\n\n\n@njit\ndef law(x):\n    return x + {}\n"
 _KERNEL = """
 from pathlib import Path
-from controllers._jit import njit, sweep_stale_caches
+from controllers._jit import njit
+from jitcache import sweep_stale_caches
 sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent])
 from .law import law
 
