@@ -15,6 +15,7 @@ import pytest
 
 from ag_uav.config import Config, ConfigError
 from ag_uav.jobs.batch import (
+    BatchOptions,
     Journal,
     RunTask,
     expand,
@@ -31,6 +32,9 @@ from ag_uav.jobs.batch import (
 from ag_uav.jobs.executor import DaskExecutor, LocalPoolExecutor, SerialExecutor
 
 ROOT = Path(__file__).resolve().parents[1]
+
+#: no progress bar, no report
+QUIET = BatchOptions(progress=False, report=False)
 
 
 @pytest.fixture(scope="module")
@@ -147,20 +151,20 @@ def test_journal_ignores_and_repairs_a_torn_line(tmp_path):
 
 def test_resume_reuses_finished_runs_by_config_hash(tmp_path, tiny_field):
     out = tmp_path / "o"
-    r1 = run_batch(spec_from_dict(tiny_spec(tiny_field, seeds=(0,))), out, progress=False,
-                   report=False)
+    r1 = run_batch(spec_from_dict(tiny_spec(tiny_field, seeds=(0,))), out, options=QUIET)
     assert r1.n_run == 2
     with pytest.raises(ConfigError, match="--resume"):
-        run_batch(spec_from_dict(tiny_spec(tiny_field, seeds=(0,))), out, progress=False)
-    r2 = run_batch(spec_from_dict(tiny_spec(tiny_field, seeds=(0, 1))), out, resume=True,
-                   progress=False, report=False)
+        run_batch(spec_from_dict(tiny_spec(tiny_field, seeds=(0,))), out,
+                  options=BatchOptions(progress=False))
+    r2 = run_batch(spec_from_dict(tiny_spec(tiny_field, seeds=(0, 1))), out,
+                   options=BatchOptions(resume=True, progress=False, report=False))
     assert (r2.n_run, r2.n_skipped) == (2, 2)
     assert [r["index"] for r in r2.rows] == [0, 1, 2, 3]
     assert deterministic([r2.rows[0], r2.rows[2]]) == deterministic(
         [{**r1.rows[0], "index": 0, "run_id": "0000"}, {**r1.rows[1], "index": 2,
                                                           "run_id": "0002"}])
-    r3 = run_batch(spec_from_dict(tiny_spec(tiny_field, seeds=(0,))), out, fresh=True,
-                   progress=False, report=False)
+    r3 = run_batch(spec_from_dict(tiny_spec(tiny_field, seeds=(0,))), out,
+                   options=BatchOptions(fresh=True, progress=False, report=False))
     assert r3.n_run == 2
 
 
@@ -171,7 +175,7 @@ def test_same_results_serial_pool_and_dask(tmp_path, tiny_field):
     ex_serial = SerialExecutor()
     with LocalPoolExecutor(2) as ex_pool, DaskExecutor("local", 2) as ex_dask:
         for name, ex in (("serial", ex_serial), ("pool", ex_pool), ("dask", ex_dask)):
-            res = run_batch(spec, tmp_path / name, ex, progress=False, report=False)
+            res = run_batch(spec, tmp_path / name, ex, QUIET)
             assert res.n_run == 4 and res.executor == ex.name
             outs[name] = read_results_csv(tmp_path / name / "results.csv")
     ref = deterministic(outs["serial"])
@@ -264,7 +268,7 @@ def test_sigkill_then_resume_equals_uninterrupted(tmp_path, tiny_field):
     assert subprocess.run(cmd + ["--resume"], env=env, capture_output=True).returncode == 0
     hashes = _journal_hashes(journal)
     assert len(hashes) == n == len(set(hashes))  # nothing finished was run twice
-    ref = run_batch(load_spec(spec_path), tmp_path / "ref", progress=False, report=False)
+    ref = run_batch(load_spec(spec_path), tmp_path / "ref", options=QUIET)
     assert deterministic(read_results_csv(out / "results.csv")) == deterministic(
         read_results_csv(tmp_path / "ref" / "results.csv"))
     assert len(ref.rows) == n

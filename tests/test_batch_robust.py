@@ -17,6 +17,7 @@ import tomli_w
 from ag_uav.config import ConfigError
 from ag_uav.jobs.batch import (
     MAX_RUNS,
+    BatchOptions,
     Journal,
     expand,
     is_timing_column,
@@ -37,6 +38,9 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 ORG = (46.7300, -117.0000, 0.0)
 TINY = {"sim.max_time_s": 2.0, "estimator.name": "true", "wind.turbulence": "none",
         "mission.headland_m": 0.0}
+
+#: no progress bar, no report
+QUIET = BatchOptions(progress=False, report=False)
 
 
 def ring(w: float, h: float, x0: float = 0.0, reverse: bool = False) -> list[list[float]]:
@@ -194,16 +198,17 @@ def test_cli_refuses_a_huge_dry_run_and_a_zero_step_in_one_line(tmp_path):
 # ------------------------------------------------------------------------------------ journal
 def test_a_damaged_journal_is_skipped_with_a_count_and_resume_completes(tmp_path):
     spec = spec_from_dict({"base": TINY, "axes": {"seed": [0, 1, 2]}})
-    ref = run_batch(spec, tmp_path / "ref", progress=False, report=False)
+    ref = run_batch(spec, tmp_path / "ref", options=QUIET)
     out = tmp_path / "o"
-    run_batch(spec, out, progress=False, report=False)
+    run_batch(spec, out, options=QUIET)
     lines = (out / "journal.jsonl").read_bytes().split(b"\n")
     lines[1] = lines[1][:20] + b"\xff\xfe\x80" + lines[1][23:]  # not UTF-8 any more
     (out / "journal.jsonl").write_bytes(b"\n".join(lines) + b'[1, 2]\n{"hash": 5}\n{"row')
     j = Journal(out / "journal.jsonl")
     assert len(j.read()) == 2 and j.skipped == 3  # the torn last line is not counted
     said: list[str] = []
-    res = run_batch(spec, out, resume=True, progress=False, report=False, warn=said.append)
+    res = run_batch(spec, out, options=BatchOptions(resume=True, progress=False, report=False,
+                                                    warn=said.append))
     assert (res.n_run, res.n_skipped, res.journal_skipped) == (1, 2, 3)
     assert len(said) == 1 and "skipped 3 unreadable line(s)" in said[0]
     assert deterministic(res.rows) == deterministic(ref.rows)
@@ -225,9 +230,9 @@ def test_an_engine_batch_failure_is_a_column_a_warning_and_a_count(tmp_path, mon
     from ag_uav.jobs import batch
 
     said: list[str] = []  # the planner keeps them apart; put them in one chunk to see it fail
-    monkeypatch.setattr(batch, "memory_plan",
+    monkeypatch.setattr(batch.run, "memory_plan",
                         lambda todo, workers, mem, here: ([list(range(len(todo)))], 0.0))
-    res = run_batch(spec, tmp_path / "o", progress=False, warn=said.append)
+    res = run_batch(spec, tmp_path / "o", options=BatchOptions(progress=False, warn=said.append))
     assert res.n_fallback == 2 and res.failure_line() is None
     assert len(said) == 1 and "flown one at a time" in said[0] and "ValueError" in said[0]
     csv_rows = read_results_csv(tmp_path / "o" / "results.csv")
@@ -241,13 +246,13 @@ def test_an_exception_in_the_product_makes_the_batch_fail(tmp_path):
                            "axes": {"seed": [0, 1]}})
     tasks = expand(spec)
     field.write_text("{}")  # damaged after validation: the run raises in the product
-    res = run_batch(spec, tmp_path / "o", progress=False, report=False, tasks=tasks)
+    res = run_batch(spec, tmp_path / "o", options=QUIET, tasks=tasks)
     line = res.failure_line()
     assert line is not None and line.startswith("2 of 2 runs failed: 2 raised in the product")
     assert "\n" not in line
     ok = run_batch(spec_from_dict({"base": {**TINY, "sim.takeoff": False, "sim.max_time_s": 5.0,
                                             "vehicle.payload_kg": 10.0}}),
-                   tmp_path / "crash", progress=False, report=False)
+                   tmp_path / "crash", options=QUIET)
     assert ok.rows[0]["status"] == "crashed" and ok.failure_line() is None  # a result
 
 

@@ -107,7 +107,7 @@ def test_the_batch_tree_stays_within_its_bound(tmp_path):
     the bound the batch planned its chunks for, and that bound under --memory-mb. (With an
     empty numba cache, ``NUMBA_CACHE_DIR`` pointed at a new folder, the workers compile the
     kernels: a peak of 1,452 MB against a bound of about 1,590 MB.)"""
-    from ag_uav.jobs.batch import load_spec, run_batch
+    from ag_uav.jobs.batch import BatchOptions, load_spec, run_batch
     from ag_uav.jobs.executor import LocalPoolExecutor
 
     spec = tmp_path / "b.toml"
@@ -119,8 +119,8 @@ def test_the_batch_tree_stays_within_its_bound(tmp_path):
     try:
         with LocalPoolExecutor(2) as ex:
             ex.memory_mb = 3000.0
-            res = run_batch(load_spec(str(spec)), tmp_path / "o", ex, progress=False,
-                            report=False)
+            res = run_batch(load_spec(str(spec)), tmp_path / "o", ex,
+                            BatchOptions(progress=False, report=False))
     finally:
         stop.set()
         th.join()

@@ -147,7 +147,7 @@ def _load_spec(load_spec, path: str, what: str):
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
-    from ..jobs.batch import expand, load_spec, print_table, run_batch, summary_rows
+    from ..jobs.batch import BatchOptions, expand, load_spec, print_table, run_batch, summary_rows
 
     spec = _load_spec(lambda p: load_spec(p, max_runs=args.max_runs), args.spec, "batch")
     tasks = expand(spec)
@@ -161,8 +161,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
     with _executor(args) as ex:
         ex.memory_mb = args.memory_mb
         code, res = _guarded(f"batch {spec.name}", out, lambda: run_batch(
-            spec, out, ex, resume=args.resume, fresh=args.fresh, logs=args.logs,
-            progress=not args.quiet, report=not args.no_report, tasks=tasks),
+            spec, out, ex, BatchOptions(resume=args.resume, fresh=args.fresh, logs=args.logs,
+                                        progress=not args.quiet, report=not args.no_report),
+            tasks=tasks),
             kept=f"finished runs kept, {out / 'results.csv'} written")
     if code is not None:
         return code

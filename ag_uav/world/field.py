@@ -78,6 +78,7 @@ __all__ = [
     "load_field",
     "lonlat_to_enu",
     "split_field_spec",
+    "write_rect_field",
     "WGS84_A",
     "WGS84_B",
     "WGS84_E2",
@@ -464,3 +465,19 @@ def load_field(name: str, origin: Sequence[float] | None = None) -> Field:
     raise ValueError(f"unknown field {name!r}; built-in fields are {', '.join(BUILTIN_FIELDS)}"
                      f", or give a path to a {'/'.join(FIELD_FILE_SUFFIXES)} file "
                      "(optionally PATH#name=VALUE to pick one feature)")
+
+
+def write_rect_field(path: str | Path, width_m: float, height_m: float,
+                     lat0: float = 46.7300, lon0: float = -117.0000, name: str = "rect") -> Path:
+    """Write a ``width_m × height_m`` rectangular field (east × north) as a GeoJSON polygon about
+    (lat0, lon0): short missions for tests, benchmarks and quick experiments."""
+    e = [0.0, width_m, width_m, 0.0, 0.0]
+    n = [0.0, 0.0, height_m, height_m, 0.0]
+    lon, lat = enu_to_lonlat(e, n, (lat0, lon0, 0.0))
+    ring = [[round(float(a), 10), round(float(b), 10)] for a, b in zip(lon, lat, strict=True)]
+    gj = {"type": "Feature", "properties": {"name": name},
+          "geometry": {"type": "Polygon", "coordinates": [ring]}}
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(json.dumps(gj))
+    return p

@@ -238,7 +238,7 @@ def fly_every_tuning(rows: list[dict[str, Any]], spec_dir: Path, out: Path, exec
     *flown* results of one controller's tunings are. One table row per controller: the
     tracking RMSE (mm, mean over the seeds) of each tuning, median [min, max], and the picked
     tuning's."""
-    from ..batch import mean_ci, run_batch, spec_from_dict
+    from ..batch import BatchOptions, mean_ci, run_batch, spec_from_dict
 
     d = out / "every-tuning"
     pdir = d / "presets"
@@ -254,7 +254,8 @@ def fly_every_tuning(rows: list[dict[str, Any]], spec_dir: Path, out: Path, exec
                             "presets": {"controller": presets},
                             "axes": {"controller": list(presets), "seed": seeds}},
                            base_dir=Path.cwd())
-    res = run_batch(bspec, d, executor, resume=resume, progress=False, report=False)
+    res = run_batch(bspec, d, executor, BatchOptions(resume=resume, progress=False,
+                                                      report=False))
     picks = median_pick(rows)
     header = ["controller", "tracking RMSE (mm) per tuning: median [min, max]",
               "spread (max − min, mm)", "picked tuning (mm)", "crashed flights"]

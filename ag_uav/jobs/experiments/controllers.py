@@ -231,9 +231,9 @@ def _ok(r: dict[str, Any]) -> bool:
 
 
 def _val(r: dict[str, Any], col: str) -> float | None:
-    from ..batch import _num
+    from ..batch import as_number
 
-    return _num(r.get(col))
+    return as_number(r.get(col))
 
 
 def paired(rows: list[dict[str, Any]], cond: str, a: str, b: str, col: str
@@ -427,7 +427,7 @@ def main(args: argparse.Namespace) -> int:
     import time
 
     from ...config import ConfigError
-    from ..batch import expand, print_table, run_batch
+    from ..batch import BatchOptions, expand, print_table, run_batch
     from ..executor import make_executor
 
     if args.resume and args.fresh:
@@ -452,8 +452,9 @@ def main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     with make_executor(args.workers, args.dask) as ex:
-        res = run_batch(spec, out, ex, resume=args.resume, fresh=args.fresh,
-                        progress=not args.quiet, report=False, tasks=tasks)
+        res = run_batch(spec, out, ex, BatchOptions(
+            resume=args.resume, fresh=args.fresh, progress=not args.quiet, report=False),
+            tasks=tasks)
     wall = time.perf_counter() - t0
     rows = res.rows
     header, lines, recs = summary(rows, ctrls, conds)

@@ -154,14 +154,14 @@ def plot(rows: list[dict[str, Any]], ests: list[str], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..batch import _num
+    from ..batch import as_number
 
     fig, axs = plt.subplots(1, 3, figsize=(13, 3.8))
     for ax, key, label in ((axs[0], "tracking_rmse_m", "tracking RMSE (m)"),
                            (axs[1], "estimate_rmse_m", "estimate RMSE (m)"),
                            (axs[2], "mission_time_s", "task time (s)")):
         data = [[x for r in rows if r.get("estimator.name") == e and r.get("status") == "ok"
-                 and (x := _num(r.get(key))) is not None] for e in ests]
+                 and (x := as_number(r.get(key))) is not None] for e in ests]
         ax.boxplot([d or [math.nan] for d in data], showmeans=True)
         ax.set_xticks(range(1, len(ests) + 1), ests)
         if key == "tracking_rmse_m" or key == "estimate_rmse_m":
@@ -182,7 +182,7 @@ def main(args: argparse.Namespace) -> int:
     import time
 
     from ...config import ConfigError
-    from ..batch import expand, markdown_table, print_table, run_batch
+    from ..batch import BatchOptions, expand, markdown_table, print_table, run_batch
     from ..executor import make_executor
 
     out = Path(args.out)
@@ -194,8 +194,9 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError("--resume and --fresh: choose one")
     t0 = time.perf_counter()
     with make_executor(args.workers, args.dask) as ex:
-        res = run_batch(spec, out, ex, resume=args.resume, fresh=args.fresh,
-                        progress=not args.quiet, report=False, tasks=tasks)
+        res = run_batch(spec, out, ex, BatchOptions(
+            resume=args.resume, fresh=args.fresh, progress=not args.quiet, report=False),
+            tasks=tasks)
     wall = time.perf_counter() - t0
     header, lines, recs = table(res.rows, ests)
     print_table(header, lines, f"Table II — {args.runs} runs per estimator, "
