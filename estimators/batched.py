@@ -35,13 +35,13 @@ No row touches another and there is no cross-row BLAS call, so vehicle i's resul
 bit-identical whatever N and whatever the other rows hold (determinism of the lockstep
 engine).  Without numba the same functions run as (slow) Python (:mod:`estimators._jit`).
 The first use compiles the kernels (cached by numba in ``__pycache__``); :func:`warm_up` does
-it before anything is timed.  Speed: ``python -m estimators.batched`` (:func:`benchmark`).
+it before anything is timed.  Speed against a numpy-vectorised KF:
+``python tests/oracles/batched_numpy.py``.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -70,7 +70,6 @@ __all__ = [
     "BatchPCAKF",
     "BatchPCAMCKF",
     "batch_class",
-    "benchmark",
     "pca_batch",
     "warm_up",
 ]
@@ -83,10 +82,11 @@ _MODELS = ("cv", "cvb")
 
 
 @njit
-def _predict_batch_b3(x, P, Fb, Q, u, pos, vel, hh, dt, active, use_u):
+def _predict_batch_b3(x, P, Fb, Q, u, pos, vel, dt, active, use_u):
     """:func:`estimators.kf.kf_predict_row` on the active rows for F = blkdiag(Fb, …) (its
     3×3-block form :func:`~estimators.kf.predict_b3_row`), then with ``use_u`` the IMU input
-    :func:`~estimators.kf.kf_input_row`."""
+    :func:`~estimators.kf.kf_input_row` (x[pos] += dt²/2·u, x[vel] += dt·u)."""
+    hh = 0.5 * dt * dt
     for i in range(x.shape[0]):
         if active[i]:
             predict_b3_row(x[i], P[i], Fb, Q)
@@ -95,9 +95,14 @@ def _predict_batch_b3(x, P, Fb, Q, u, pos, vel, hh, dt, active, use_u):
 
 
 @njit
-def _predict_batch(x, P, fptr, fidx, fval, Q, u, pos, vel, hh, dt, active, use_u, tx, FP):
-    """As :func:`_predict_batch_b3` for a general F in CSR form
-    (:func:`~estimators.kf.predict_csr_row`)."""
+def _predict_batch(x, P, fcsr, Q, u, axes, dt, active, use_u, scratch):
+    """As :func:`_predict_batch_b3` for a general F in CSR form ``fcsr`` = (ptr, idx, val)
+    (:func:`~estimators.kf.predict_csr_row`); ``axes`` = (pos, vel) the input's indices,
+    ``scratch`` = (tx (n,), FP (n, n))."""
+    fptr, fidx, fval = fcsr
+    pos, vel = axes
+    tx, FP = scratch
+    hh = 0.5 * dt * dt
     for i in range(x.shape[0]):
         if active[i]:
             predict_csr_row(x[i], P[i], fptr, fidx, fval, Q, tx, FP)
@@ -114,11 +119,14 @@ def pca_batch(buf, pcs, zf, z, mask, Nw, L, r, mode):
 
 
 @njit
-def _pca_batch2(buf, pcs, zf, buf2, pcs2, zf2, z, mask, Nw, L, r, mode):
+def _pca_batch2(one, two, z, mask, Nw, L, r, mode):
     """:func:`pca_batch` for two filters with the same PCA options (PCA-KF and PCA-MCKF of
-    one bank): where a row's two windows are equal (they see the same fixes) the block runs
-    once and its result (window, output) is copied; otherwise each runs on its own window.
-    The same deterministic function of the same inputs: bit-identical to running both."""
+    one bank), ``one`` and ``two`` each (ring buffers, ring states, outputs): where a row's two
+    windows are equal (they see the same fixes) the block runs once and its result (window,
+    output) is copied; otherwise each runs on its own window.  The same deterministic function
+    of the same inputs: bit-identical to running both."""
+    buf, pcs, zf = one
+    buf2, pcs2, zf2 = two
     c = z.shape[1]
     W = buf.shape[2]
     for i in range(z.shape[0]):
@@ -149,31 +157,35 @@ def _pca_batch2(buf, pcs, zf, buf2, pcs2, zf2, z, mask, Nw, L, r, mode):
 def _kf_update_batch(x, P, R, nis, y, H, z, mask, ok):
     """:func:`estimators.kf.kf_update_row` on the masked rows; ok[i] = a fix was fused."""
     N, n = x.shape
-    nu, PHT, S, Si, K, xo, A, AP, KR = kf_work(n, H.shape[0])
+    w = kf_work(n, H.shape[0])
     for i in range(N):
         ok[i] = False
         if not mask[i]:
             continue
-        v = kf_update_row(x[i], P[i], R[i], H, z[i], nu, PHT, S, Si, K, xo, A, AP, KR)
+        v = kf_update_row(x[i], P[i], R[i], H, z[i], w)
         if not math.isfinite(v):
             continue
-        copy_vec(nu, y[i])
+        copy_vec(w[0], y[i])
         nis[i] = v
         ok[i] = True
 
 
 @njit
-def _mckf_update_batch(x, P, R, nis, y, H, z, mask, ok, kx, ky, fpar, ipar, ist, wy):
-    """:func:`estimators.mckf.mckf_update_row` on the masked rows (per-row parameters kx, ky,
-    fpar, ipar and state ist, wy); ok[i] = a fix was fused."""
+def _mckf_update_batch(x, P, R, H, z, mask, mp, st, res):
+    """:func:`estimators.mckf.mckf_update_row` on the masked rows: per-row parameters ``mp`` =
+    (kx, ky, fpar, ipar) and state ``st`` = (ist, wy), results ``res`` = (nis, y, ok): ok[i] =
+    a fix was fused."""
+    kx, ky, fpar, ipar = mp
+    ist, wy = st
+    nis, y, ok = res
     N, n = x.shape
     w = mckf_work(n, H.shape[0])
     for i in range(N):
         ok[i] = False
         if not mask[i]:
             continue
-        v = mckf_update_row(x[i], P[i], R[i], H, z[i], kx[i], ky[i], fpar[i], ipar[i], ist[i],
-                            wy[i], w)
+        v = mckf_update_row(x[i], P[i], R[i], H, z[i], (kx[i], ky[i], fpar[i], ipar[i]),
+                            (ist[i], wy[i]), w)
         if not math.isfinite(v):
             continue
         copy_vec(w[0], y[i])
@@ -229,7 +241,6 @@ class BatchFilter:
         self.pos_idx = np.asarray(pos_idx, dtype=np.int64)
         self.vel_idx = np.asarray(vel_idx, dtype=np.int64)
         self.dt = float(dt)
-        self._hh = 0.5 * self.dt * self.dt
         self._fcsr = csr(self.F)
         self._Fb = block3(self.F)
         self.nis = np.full(self.N, np.nan)
@@ -237,8 +248,7 @@ class BatchFilter:
         self._ok = np.zeros(self.N, dtype=bool)
         self._all = np.ones(self.N, dtype=bool)
         self._u0 = np.zeros((self.N, len(self.pos_idx)))
-        self._tx = np.empty(self.n)
-        self._FP = np.empty((self.n, self.n))
+        self._scratch = (np.empty(self.n), np.empty((self.n, self.n)))  # predict_csr_row's
 
     # construction ------------------------------------------------------------------------------
     @classmethod
@@ -296,11 +306,10 @@ class BatchFilter:
             use_u = True
         if self._Fb.shape[0] == 3:  # the two forms of kf_predict_row, chosen once per batch
             _predict_batch_b3(self.x, self.P, self._Fb, self.Q, uu, self.pos_idx, self.vel_idx,
-                              self._hh, self.dt, act, use_u)
+                              self.dt, act, use_u)
             return
-        ptr, idx, val = self._fcsr
-        _predict_batch(self.x, self.P, ptr, idx, val, self.Q, uu, self.pos_idx, self.vel_idx,
-                       self._hh, self.dt, act, use_u, self._tx, self._FP)
+        _predict_batch(self.x, self.P, self._fcsr, self.Q, uu, (self.pos_idx, self.vel_idx),
+                       self.dt, act, use_u, self._scratch)
 
     def update(self, z: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         """Fuse fix z[i] into the rows with mask[i] (default all), each exactly as the scalar
@@ -418,8 +427,9 @@ class _MCKFMixin:
         return self._ist[:, 3].astype(bool)
 
     def _fuse(self, z: np.ndarray, mask: np.ndarray) -> None:
-        _mckf_update_batch(self.x, self.P, self.R, self.nis, self.y, self.H, z, mask, self._ok,
-                           self._kx, self._ky, self._fpar, self._ipar, self._ist, self.weights)
+        _mckf_update_batch(self.x, self.P, self.R, self.H, z, mask,
+                           (self._kx, self._ky, self._fpar, self._ipar), (self._ist, self.weights),
+                           (self.nis, self.y, self._ok))
 
     def _to(self, i: int, f: Any) -> None:
         super()._to(i, f)  # type: ignore[misc]
@@ -472,9 +482,9 @@ class _PCAMixin:
     def _pca2(self, other: _PCAMixin, z: np.ndarray, mask: np.ndarray) -> None:
         """Run the PCA block of self and ``other`` (same options), once per row where their
         windows are equal."""
-        _pca_batch2(self.ring, self.ring_state, self.z_filtered, other.ring, other.ring_state,
-                    other.z_filtered, z, mask, self.window, self._L, self._r,
-                    PCA_MODE[self.pca_mode])
+        _pca_batch2((self.ring, self.ring_state, self.z_filtered),
+                    (other.ring, other.ring_state, other.z_filtered), z, mask, self.window,
+                    self._L, self._r, PCA_MODE[self.pca_mode])
 
     def _reset_window(self, rows: np.ndarray) -> None:
         self.ring_state[rows] = 0
@@ -609,100 +619,3 @@ def warm_up(bank: BatchBank) -> None:
     for f in b.filters.values():
         f.update(z)
     b.update(z)
-
-
-# ----------------------------------------------------------------------------------------------
-# numpy-vectorised reference (benchmark only) and the benchmark
-# ----------------------------------------------------------------------------------------------
-
-
-def _numpy_predict(x, P, F, Q, u, pos, vel, hh, dt) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised batched predict (einsum/matmul; benchmark comparison only: the matmuls
-    over the batch are not guaranteed row-independent bit for bit)."""
-    x = np.einsum("ij,nj->ni", F, x)
-    P = np.matmul(np.matmul(F, P), F.T) + Q
-    if u is not None:
-        x[:, pos] += hh * u
-        x[:, vel] += dt * u
-    return x, P
-
-
-def _numpy_kf_update(x, P, R, H, z, mask) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Vectorised batched KF update of the masked rows (benchmark comparison only)."""
-    xs, Ps, Rs, zs = x[mask], P[mask], R[mask], z[mask]
-    PHT = np.matmul(Ps, H.T)
-    S = np.matmul(H, PHT) + Rs
-    Si = np.linalg.inv(S)
-    nu = zs - np.einsum("ij,nj->ni", H, xs)
-    nis = np.einsum("ni,nij,nj->n", nu, Si, nu)
-    K = np.matmul(PHT, Si)
-    xs = xs + np.einsum("nij,nj->ni", K, nu)
-    A = np.eye(x.shape[1]) - np.matmul(K, H)
-    Ps = np.matmul(np.matmul(A, Ps), A.transpose(0, 2, 1)) + np.matmul(
-        np.matmul(K, Rs), K.transpose(0, 2, 1))
-    x[mask], P[mask] = xs, Ps
-    return x, P, nis
-
-
-def _bench_one(N: int, ticks: int, fix_every: int, repeats: int) -> dict[str, float]:
-    import estimators
-
-    params = dict(model="cvb", dim=3, dt=0.01, q=0.05, r=[0.5, 0.5, 0.01], q_bias=1e-4)
-    extra: dict[str, dict[str, Any]] = {
-        "kf": {}, "mckf": dict(sigma=2.0, max_iter=10, recovery="kf"),
-        "pca-kf": dict(window=10, mode="hankel"),
-        "pca-mckf": dict(window=10, mode="hankel", sigma=2.0, max_iter=10, recovery="kf")}
-    rng = np.random.default_rng(N)
-    bank = BatchBank.from_filters([{k: estimators.make(k, **params, **v)
-                                    for k, v in extra.items()} for _ in range(N)])
-    u = rng.standard_normal((ticks, N, 3))
-    z = rng.standard_normal((ticks, N, 3))
-    kf = BatchKF.from_filters([estimators.make("kf", **params) for _ in range(N)])
-    st = {"x": kf.x.copy(), "P": kf.P.copy()}
-    mask = np.ones(N, dtype=bool)
-
-    def run_numpy(t: int) -> None:
-        st["x"], st["P"] = _numpy_predict(st["x"], st["P"], kf.F, kf.Q, u[t], kf.pos_idx,
-                                          kf.vel_idx, kf._hh, kf.dt)
-        if t % fix_every == 0:
-            st["x"], st["P"], _ = _numpy_kf_update(st["x"], st["P"], kf.R, kf.H, z[t], mask)
-
-    def run_kf(t: int) -> None:
-        kf.predict(u[t])
-        if t % fix_every == 0:
-            kf.update(z[t], mask)
-
-    def run_bank(t: int) -> None:
-        bank.predict(u[t])
-        if t % fix_every == 0:
-            bank.update(z[t], mask)
-
-    times = []
-    for step in (run_numpy, run_kf, run_bank):
-        for t in range(fix_every):  # warm-up (numba: compile or load from the cache)
-            step(t)
-        best = math.inf
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            for t in range(ticks):
-                step(t)
-            best = min(best, time.perf_counter() - t0)
-        times.append(best * 1e6 / (ticks * N))
-    return {"numpy_kf_us": times[0], "numba_kf_us": times[1], "numba_bank4_us": times[2]}
-
-
-def benchmark(sizes: Sequence[int] = (1, 64, 256), ticks: int = 400, fix_every: int = 10,
-              repeats: int = 3) -> dict[int, dict[str, float]]:
-    """µs per vehicle-tick (best of ``repeats``) of predict (+IMU input) every tick and an
-    update every ``fix_every``-th tick: numpy-vectorised KF (batched matmul/einsum) vs the
-    numba kernels (KF alone, and the four filters of a :class:`BatchBank`).  For
-    ``python -m estimators.batched``."""
-    return {N: _bench_one(N, ticks, fix_every, repeats) for N in sizes}
-
-
-if __name__ == "__main__":  # pragma: no cover
-    t0 = time.perf_counter()
-    _bench_one(1, 2, 1, 1)
-    print(f"first use of the kernels (compile or cache load): {time.perf_counter() - t0:.2f} s")
-    for N, r in benchmark().items():
-        print(N, {k: round(v, 3) for k, v in r.items()})

@@ -521,10 +521,10 @@ def _fuse_one(x, P, H, nu, Rm, use_mckf, mpar, ipar, mst, dg, fb):
         return _fuse_kf(x, P, H, nu, Rm, fb)
     dx = fb[_W_DX:_W_DX + 15]
     dx[:] = 0.0
-    v = mckf_fuse_b(dx, P, Rm, H, nu, mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F], mpar[_M_F:_M_A],
-                    ipar, mst, dg[_D_WY:_D_WY + 3], mpar[_M_A:_M_SIG], mpar[_M_SIG:_NMPAR],
-                    dg[_D_S2:_D_S2 + 1], fb[_W_KF:], fb[_W_KX:_W_KX + 15],
-                    fb[_W_KY:_W_KY + nu.shape[0]])  # fb[_W_KF:]: mckf_work_in's work
+    v = mckf_fuse_b(dx, P, Rm, H, nu, (mpar[_M_KX:_M_KY], mpar[_M_KY:_M_F], mpar[_M_F:_M_A], ipar),
+                    (mst, dg[_D_WY:_D_WY + 3]), (mpar[_M_A:_M_SIG], mpar[_M_SIG:_NMPAR],
+                    dg[_D_S2:_D_S2 + 1], fb[_W_KX:_W_KX + 15], fb[_W_KY:_W_KY + nu.shape[0]]),
+                    fb[_W_KF:])  # fb[_W_KF:]: mckf_work_in's work
     if np.isfinite(v):
         _inject_reset(x, P, dx, fb[_W_V:_W_V + 8])
     return v

@@ -295,10 +295,12 @@ def kf_work(n, m):
 
 
 @njit(inline="always")
-def kf_update_row(x, P, R, H, z, nu, PHT, S, Si, K, xo, A, AP, KR):
+def kf_update_row(x, P, R, H, z, w):
     """The KF update of one filter in place (x, P); returns its NIS.  A non-finite NIS (NaN/inf
-    in z, or an overflow) is "no fix": x and P are then untouched.  After a fix the work
-    arrays hold ν, S, K."""
+    in z, or an overflow) is "no fix": x and P are then untouched.  ``w``: the work arrays
+    (:func:`kf_work`, or :func:`kf_work_in` on the caller's buffer); after a fix they hold ν
+    (w[0]), S (w[2]), K (w[4])."""
+    nu, PHT, S, Si, K, xo, _, _, KR = w
     v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
     if not math.isfinite(v):
         return v
@@ -434,7 +436,7 @@ class KF(LinearGaussianBase):
         x = as_vector(self.x, self.n)
         P = as_matrix(self.P, "P", (self.n, self.n))
         w = self._kfw
-        v = kf_update_row(x, P, self._R, self._H, zz, *w)
+        v = kf_update_row(x, P, self._R, self._H, zz, w)
         if not math.isfinite(v):
             return False
         self.x, self.P = x, P

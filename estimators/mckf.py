@@ -133,24 +133,58 @@ def kernel_coeffs(sigma: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 # ------------------------------------------------------------------------------ the law, rows
 @njit
-def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, floor, eps2, max_iter,
-                         A, nw, T, M, Mi, s, sn, be, q, u, xn, o, e, c, K, Nm, V):
-    """MCKF step 4 in whitened coordinates given L = chol(P̄) and G = B_r⁻¹ H; writes x̂ into
-    xn, K̃ into K, C_x into c (when more than one iteration ran) and √C_y into s; returns the
-    number of iterations.  Iteration 1 starts at x̂⁽⁰⁾ = x̄ (C_x = I, e_y = ν_w); each solves
-    T = A C_x⁻¹ Aᵀ, M = I + S T S, β = S M⁻¹ S ν_w, u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u; the stop rule
-    is ‖x̂⁽ᵗ⁾ − x̂⁽ᵗ⁻¹⁾‖² ≤ ε² max(‖x̂⁽ᵗ⁻¹⁾‖², 1) or t = max_iter; the next weights are
-    e_y = ν_w − A u, c_j = max(exp(u_j² kx_j), floor), q = 1/c, s_i = exp(e_y,i² ky_i).
-    Finally K̃ = L C_x⁻¹ Aᵀ N, N = S M⁻¹ S B_r⁻¹.  One straight loop (helper calls inside the
-    iteration measured slower)."""
-    n = xb.shape[0]
-    m = nu.shape[0]
-    for i in range(m):
+def _whitened_A(G, L, A):
+    """A = G L (= B_r⁻¹ H B_p), L lower triangular: its zeros skipped."""
+    n = L.shape[0]
+    for i in range(G.shape[0]):
         for j in range(n):
             acc = 0.0
             for k in range(j, n):
                 acc += G[i, k] * L[k, j]
             A[i, j] = acc
+
+
+@njit
+def _fixed_point_gain(L, A, Brinv, Mi, s, q, Nm, V, K):
+    """K̃ = L C_x⁻¹ Aᵀ N, N = S M⁻¹ S B_r⁻¹ (the last iteration's M⁻¹, S = diag(s), C_x⁻¹ =
+    diag(q)), L lower triangular."""
+    n, m = L.shape[0], s.shape[0]
+    for i in range(m):
+        for col in range(m):
+            acc = 0.0
+            for h in range(m):
+                acc += Mi[i, h] * s[h] * Brinv[h, col]
+            Nm[i, col] = s[i] * acc
+    mat_mul(A.T, Nm, V)
+    for k in range(n):
+        for col in range(m):
+            V[k, col] = q[k] * V[k, col]
+    for j in range(n):
+        for col in range(m):
+            acc = 0.0
+            for k in range(j + 1):
+                acc += L[j, k] * V[k, col]
+            K[j, col] = acc
+
+
+@njit
+def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, fpar, ipar, w):
+    """MCKF step 4 in whitened coordinates given L = chol(P̄) and G = B_r⁻¹ H; ``kx``, ``ky``,
+    ``fpar``, ``ipar`` as :func:`mckf_update_row` (the floor, ε² and the iteration cap read
+    here), ``w`` its work (:func:`mckf_work_in`).  Writes x̂ into w's x̂, K̃ into w's K, C_x into
+    w's c (when more than one iteration ran) and √C_y into w's s; returns the number of
+    iterations.  Iteration 1 starts at x̂⁽⁰⁾ = x̄ (C_x = I, e_y = ν_w); each solves
+    T = A C_x⁻¹ Aᵀ, M = I + S T S, β = S M⁻¹ S ν_w, u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u; the stop rule
+    is ‖x̂⁽ᵗ⁾ − x̂⁽ᵗ⁻¹⁾‖² ≤ ε² max(‖x̂⁽ᵗ⁻¹⁾‖², 1) or t = max_iter; the next weights are
+    e_y = ν_w − A u, c_j = max(exp(u_j² kx_j), floor), q = 1/c, s_i = exp(e_y,i² ky_i).
+    Finally K̃ = L C_x⁻¹ Aᵀ N, N = S M⁻¹ S B_r⁻¹.  One straight loop (helper calls inside the
+    iteration measured slower)."""
+    (_, _, _, _, K, xn, _, _, _, _, _, _, _, A, nw, T, M, Mi, s, sn, be, q, u, o, e, c, Nm, V,
+     _, _, _, _) = w
+    floor, eps2, max_iter = fpar[0], fpar[1], ipar[0]
+    n = xb.shape[0]
+    m = nu.shape[0]
+    _whitened_A(G, L, A)
     mat_vec(Brinv, nu, nw)
     for i in range(m):
         s[i] = math.exp(nw[i] * nw[i] * ky[i])
@@ -211,23 +245,7 @@ def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, floor, eps2, max_iter,
             q[j] = 1.0 / cj
         for i in range(m):
             s[i] = math.exp(e[i] * e[i] * ky[i])
-    # K̃ = L C_x⁻¹ Aᵀ N,  N = S M⁻¹ S B_r⁻¹
-    for i in range(m):
-        for col in range(m):
-            acc = 0.0
-            for h in range(m):
-                acc += Mi[i, h] * s[h] * Brinv[h, col]
-            Nm[i, col] = s[i] * acc
-    mat_mul(A.T, Nm, V)
-    for k in range(n):
-        for col in range(m):
-            V[k, col] = q[k] * V[k, col]
-    for j in range(n):
-        for col in range(m):
-            acc = 0.0
-            for k in range(j + 1):
-                acc += L[j, k] * V[k, col]
-            K[j, col] = acc
+    _fixed_point_gain(L, A, Brinv, Mi, s, q, Nm, V, K)
     return it
 
 
@@ -279,11 +297,14 @@ def mckf_work(n, m):
 
 
 @njit
-def _recover(x, P, R, H, nu, PHT, Si, K, xo, fpar, ipar, ist, Pa, PaHT, Sa, Sai):
-    """The lock-out recovery rule after a rejected fix (count in ist[0] already raised):
+def _recover(x, P, R, H, nu, fpar, ipar, ist, w):
+    """The lock-out recovery rule after a rejected fix (count in ist[0] already raised; ``w``
+    the update's work, :func:`mckf_work_in`, holding P̄ Hᵀ and S⁻¹ of the innovation):
     ``"kf"`` (ipar[2] = 1) K = P̄ Hᵀ S⁻¹, x̂ = x̄ + K ν; ``"inflate"`` (2) the same on α P̄,
     α = inflate^j, if νᵀ (H α P̄ Hᵀ + R)⁻¹ ν ≤ gate.  Returns 0 (no recovery), 1 (recovered on
-    P̄) or 2 (recovered on α P̄, now in Pa: the prior of the Joseph update)."""
+    P̄) or 2 (recovered on α P̄, now in w's Pa: the prior of the Joseph update)."""
+    (_, PHT, _, Si, K, xo, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _,
+     Pa, PaHT, Sa, Sai) = w
     if ist[0] < ipar[1]:
         return 0
     if ipar[2] == 1:
@@ -306,17 +327,20 @@ def _recover(x, P, R, H, nu, PHT, Si, K, xo, fpar, ipar, ist, Pa, PaHT, Sa, Sai)
 
 
 @njit
-def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
+def mckf_update_row(x, P, R, H, z, mp, st, w):
     """The MCKF update of one filter in place (x, P); returns the KF NIS of the innovation (not
     finite: no fix, x and P untouched).
 
-    fpar = (kernel_floor, ε², reject_weight, inflate, inflate_gate), ipar = (max_iter,
-    lockout_n, recovery 0/1/2 = None/"kf"/"inflate", inflate_jmax), ist = (n_rejected, n_iter,
-    rejected, recovered) (updated), wy ← diag C_y, w = :func:`mckf_work` (or
-    :func:`mckf_work_in` on the caller's buffer); after a fix w holds ν (w[0]), S (w[2]), K̃
-    (w[4]) and C_x (w[25], valid when n_iter > 1)."""
-    (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn, be, q, u,
-     o, e, c, Nm, V, Pa, PaHT, Sa, Sai) = w
+    ``mp`` = (kx, ky, fpar, ipar) the row's parameters: kx, ky the kernel coefficients
+    (:func:`kernel_coeffs`), fpar = (kernel_floor, ε², reject_weight, inflate, inflate_gate),
+    ipar = (max_iter, lockout_n, recovery 0/1/2 = None/"kf"/"inflate", inflate_jmax);
+    ``st`` = (ist, wy) its state: ist = (n_rejected, n_iter, rejected, recovered) (updated),
+    wy ← diag C_y; w = :func:`mckf_work` (or :func:`mckf_work_in` on the caller's buffer); after
+    a fix w holds ν (w[0]), S (w[2]), K̃ (w[4]) and C_x (w[25], valid when n_iter > 1)."""
+    kx, ky, fpar, ipar = mp
+    ist, wy = st
+    (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, _, _, _, _, _, s, _, _, _, _, _, _,
+     _, _, _, Pa, _, _, _) = w
     v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
     if not math.isfinite(v):
         return v
@@ -324,8 +348,7 @@ def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
     mat_mul(Brinv, H, G)
     if not chol(P, Lp, REL_PIVOT):
         safe_cholesky_into(P, Lp)
-    it = mckf_fixed_point_row(x, Lp, nu, Brinv, G, kx, ky, fpar[0], fpar[1], ipar[0], Aw, nw,
-                              T, M, Mi, s, sn, be, q, u, xo, o, e, c, K, Nm, V)
+    it = mckf_fixed_point_row(x, Lp, nu, Brinv, G, kx, ky, fpar, ipar, w)
     wmin = np.inf
     for a in range(nu.shape[0]):
         wy[a] = s[a] * s[a]
@@ -335,7 +358,7 @@ def mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w):
     rec = 0
     if rejected:
         ist[0] += 1
-        rec = _recover(x, P, R, H, nu, PHT, Si, K, xo, fpar, ipar, ist, Pa, PaHT, Sa, Sai)
+        rec = _recover(x, P, R, H, nu, fpar, ipar, ist, w)
     else:
         ist[0] = 0
     copy_vec(xo, x)
@@ -391,16 +414,16 @@ def adapt_kernels_row(x, P, R, H, z, w, ad):
 
 
 @njit
-def mckf_adaptive_update_row(x, P, R, H, z, sigma, lam, clip, ast, kx, ky, fpar, ipar, ist, wy,
-                             w):
+def mckf_adaptive_update_row(x, P, R, H, z, ad, mp, st, w):
     """:func:`mckf_update_row` with the adaptive bandwidth: the KF NIS of the innovation feeds
-    :func:`adapt_kernel_row` (state ``ast``, base widths ``sigma``; kx, ky are written), then the
-    MCKF update with those kernels (:func:`adapt_kernels_row`, then :func:`mckf_update_row`).
-    Returns the NIS (not finite: no fix, nothing changes)."""
-    v = adapt_kernels_row(x, P, R, H, z, w, (sigma, lam, clip, ast, kx, ky))
+    :func:`adapt_kernel_row` (``ad`` = (base widths σ, λ, clip, state ŝ); ``mp``'s kx, ky are
+    written), then the MCKF update with those kernels (:func:`adapt_kernels_row`, then
+    :func:`mckf_update_row`).  Returns the NIS (not finite: no fix, nothing changes)."""
+    sigma, lam, clip, ast = ad
+    v = adapt_kernels_row(x, P, R, H, z, w, (sigma, lam, clip, ast, mp[0], mp[1]))
     if not math.isfinite(v):
         return v
-    return mckf_update_row(x, P, R, H, z, kx, ky, fpar, ipar, ist, wy, w)
+    return mckf_update_row(x, P, R, H, z, mp, st, w)
 
 
 # ------------------------------------------------------------------------------ the class
@@ -536,15 +559,16 @@ class MCKF(LinearGaussianBase):
         wy = np.empty(self.m)
         if self.adaptive_sigma:
             kx, ky = np.empty(n), np.empty(self.m)
-            v = mckf_adaptive_update_row(x, P, self._R, self._H, zz, self._sigma,
-                                         self.adapt_lambda, self.adapt_clip, self._ast, kx, ky,
-                                         fpar, ipar, self._ist, wy, w)
+            v = mckf_adaptive_update_row(
+                x, P, self._R, self._H, zz,
+                (self._sigma, self.adapt_lambda, self.adapt_clip, self._ast),
+                (kx, ky, fpar, ipar), (self._ist, wy), w)
             if not math.isfinite(v):
                 return False
             self.sigma_k = self._sigma * max(1.0, math.sqrt(self.scale2))
         else:
-            v = mckf_update_row(x, P, self._R, self._H, zz, self._ncx, self._ncy_half, fpar,
-                                ipar, self._ist, wy, w)
+            v = mckf_update_row(x, P, self._R, self._H, zz,
+                                (self._ncx, self._ncy_half, fpar, ipar), (self._ist, wy), w)
             if not math.isfinite(v):
                 return False
         self.x, self.P = x, P

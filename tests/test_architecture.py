@@ -313,13 +313,11 @@ def private_reach_ins(root: Path = ROOT, code=PRODUCT_CODE) -> dict[str, int]:
 #: files over :data:`MAX_FILE_LINES` today -> their lines (may only shrink)
 FILE_LINES_LEFT: dict[str, int] = {
     "ag_uav/navigation/ins_feedback.py": 881,
-    "estimators/batched.py": 708,
     "estimators/ins.py": 1156,
 }
 #: functions over :data:`MAX_FUNCTION_LINES` today -> their lines
 FUNCTION_LINES_LEFT: dict[str, int] = {
     "ag_uav/vehicle/mjcf.py::build_vehicle": 88,
-    "estimators/mckf.py::mckf_fixed_point_row": 96,
 }
 #: functions over :data:`MAX_PARAMETERS` today -> their parameters
 PARAMETERS_LEFT: dict[str, int] = {
@@ -338,21 +336,10 @@ PARAMETERS_LEFT: dict[str, int] = {
     "ag_uav/world/wind.py::wind_drag_rows": 11,
     "controllers/batched.py::BatchCascade.update": 11,
     "controllers/batched.py::cascade_step": 13,
-    "estimators/_ins_laws.py::mckf_fuse": 14,
-    "estimators/_ins_laws.py::mckf_fuse_b": 17,
-    "estimators/batched.py::_mckf_update_batch": 15,
-    "estimators/batched.py::_pca_batch2": 12,
-    "estimators/batched.py::_predict_batch": 15,
-    "estimators/batched.py::_predict_batch_b3": 11,
     "estimators/ins.py::_fuse_due": 11,
     "estimators/ins.py::_fuse_gnss": 11,
     "estimators/ins.py::_fuse_one": 11,
     "estimators/ins.py::_step_kernel": 19,
-    "estimators/kf.py::kf_update_row": 14,
-    "estimators/mckf.py::_recover": 16,
-    "estimators/mckf.py::mckf_adaptive_update_row": 16,
-    "estimators/mckf.py::mckf_fixed_point_row": 27,
-    "estimators/mckf.py::mckf_update_row": 12,
 }
 #: private reach-ins across modules today -> their occurrences
 REACH_INS_LEFT: dict[str, int] = {
