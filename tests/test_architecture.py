@@ -323,7 +323,6 @@ FUNCTION_LINES_LEFT: dict[str, int] = {
 PARAMETERS_LEFT: dict[str, int] = {
     "ag_uav/engine/kernels.py::tick_in": 24,
     "ag_uav/engine/kernels.py::tick_out": 13,
-    "ag_uav/engine/loop.py::_Engine.__init__": 14,
     "ag_uav/engine/missions.py::fly_reference": 11,
     "ag_uav/engine/spray_batched.py::_spray_kernel": 16,
     "ag_uav/navigation/bearing.py::BearingFeedback.__init__": 14,
@@ -346,24 +345,9 @@ REACH_INS_LEFT: dict[str, int] = {
     "ag_uav/engine/spray_batched.py: sp._close_sortie": 1,
     "ag_uav/engine/spray_batched.py: sp._next_log": 3,
     "ag_uav/engine/spray_batched.py: sp._set_mass": 2,
-    "ag_uav/jobs/bench.py: loop._Engine": 1,
     "ag_uav/jobs/bench_physics.py: sp._set_mass": 2,
-    "ag_uav/jobs/experiments/ins_nav.py: M._finish": 1,
-    "ag_uav/jobs/experiments/ins_nav.py: M._prepare": 1,
     "ag_uav/jobs/experiments/numerical/fast.py: bf._from": 1,
-    "ag_uav/navigation/estimation.py: fb.gps._next_k": 2,
-    "ag_uav/navigation/ins_feedback.py: fb.gps._next_k": 1,
     "ag_uav/navigation/ins_feedback.py: self.bank._dg": 1,
-    "ag_uav/vehicle/sensors_batched.py: e._dth": 3,
-    "ag_uav/vehicle/sensors_batched.py: e._ist": 1,
-    "ag_uav/vehicle/sensors_batched.py: e._last": 1,
-    "ag_uav/vehicle/sensors_batched.py: e._x": 1,
-    "ag_uav/vehicle/sensors_batched.py: s._bias": 1,
-    "ag_uav/vehicle/sensors_batched.py: s._err": 3,
-    "ag_uav/vehicle/sensors_batched.py: s._ist": 1,
-    "ag_uav/vehicle/sensors_batched.py: w._buf": 3,
-    "ag_uav/vehicle/sensors_batched.py: w._fs": 1,
-    "ag_uav/vehicle/sensors_batched.py: w._ist": 1,
 }
 
 

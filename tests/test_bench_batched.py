@@ -24,7 +24,7 @@ def test_stage_costs_add_up_to_the_loop_and_restore_the_engine() -> None:
     from ag_uav.engine import loop, stages
     from ag_uav.jobs.bench import _stages
 
-    before = (stages.Guard.start, stages.Depositing.step, loop._Engine.physics)
+    before = (stages.Guard.start, stages.Depositing.step, loop.Engine.physics)
     cfg = with_overrides(load_config(None), TRUE_STATE_OVERRIDES)
     out = _stages(cfg, 1, True)["stages_us_per_vehicle_tick"]
     for key in ("true_state", "ins_bank"):
@@ -33,7 +33,7 @@ def test_stage_costs_add_up_to_the_loop_and_restore_the_engine() -> None:
         assert 0 < row["stages_over_physics"] < 10
         assert abs(row["loop_rest"]) < row["physics"]
     assert out["ins_bank"]["feedback"] > 5 * out["true_state"]["feedback"]   # the INS bank
-    assert (stages.Guard.start, stages.Depositing.step, loop._Engine.physics) == before
+    assert (stages.Guard.start, stages.Depositing.step, loop.Engine.physics) == before
 
 
 def test_the_target_batches_are_also_paired_without_the_dose_model() -> None:

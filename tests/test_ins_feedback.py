@@ -90,7 +90,7 @@ def test_gnss_rate_above_control_rate_refused():
 def test_ins_refuses_rules_it_has_not():
     cfg = _cfg(estimator__shadow=["kf-bias"])
     with pytest.raises(ConfigError, match="not an INS GNSS update rule"):
-        M._prepare(cfg, None, None, None)
+        M.prepare_run(cfg, None, None, None)
 
 
 def test_receiver_report_false_fixes_lag_and_calibration():

@@ -369,20 +369,39 @@ def _renderer(b: Batch, i: int, fl: Flight, veh: Vehicle) -> Any:
 
 
 # ------------------------------------------------------------------------------------ engine
-class _Engine:
-    """The built stages of one lane of a :func:`fly` call and its tick, in the flow's order."""
+@dataclass
+class Stages:
+    """The built stages of one lane (:class:`Engine`), by name, in the flow's order."""
 
-    def __init__(self, b: Batch, guard: Guard, sensing: Sensing, feedback: Feedback,
-                 control: Control, spraying: Spraying | None, disturbance: Disturbance,
-                 observers: list[Observer], view: TickView, stepper: Any,
-                 sprayers: list[Any], vehicles: list[Vehicle],
-                 depositing: Depositing | None = None, capture: bool = False) -> None:
-        self.b, self.guard, self.sensing, self.feedback = b, guard, sensing, feedback
-        self.control, self.spraying, self.disturbance = control, spraying, disturbance
+    b: Batch
+    guard: Guard
+    sensing: Sensing
+    feedback: Feedback
+    control: Control
+    spraying: Spraying | None
+    disturbance: Disturbance
+    depositing: Depositing | None
+    observers: list[Observer]
+    #: the lane's sprayers (None for a plain flight) and vehicles, one per row
+    sprayers: list[Any]
+    vehicles: list[Vehicle]
+
+
+class Engine:
+    """The built stages of one lane of a :func:`fly` call and its tick, in the flow's order:
+    ``stages`` (:class:`Stages`), the observers' ``view`` and the physics ``stepper``;
+    ``capture`` keeps the recorder's per-tick capture (the bench's replays)."""
+
+    def __init__(self, stages: Stages, view: TickView, stepper: Any,
+                 capture: bool = False) -> None:
+        st = stages
+        b, observers = st.b, st.observers
+        self.b, self.guard, self.sensing, self.feedback = b, st.guard, st.sensing, st.feedback
+        self.control, self.spraying, self.disturbance = st.control, st.spraying, st.disturbance
         self.recorder = Recorder(b, capture)
         self.observers, self.view, self.stepper = observers, view, stepper
-        self.sprayers, self.vehicles = sprayers, vehicles
-        self.depositing = depositing
+        self.sprayers, self.vehicles = st.sprayers, st.vehicles
+        self.depositing = st.depositing
         self.failsafe: Failsafe | None = None
         self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
         self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
@@ -453,7 +472,7 @@ class _Engine:
         self.feedback.finish()
 
 
-def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False) -> _Engine:
+def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False) -> Engine:
     from controllers.batched import BatchCascade
 
     from ..navigation.feedback import TrueFeedback
@@ -480,15 +499,15 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
     body = vehs[0].body_id
     stepper = make_stepper([v.model for v in vehs], body, round(dt / m0.opt.timestep), b.S,
                            nthread)
-    e = _Engine(b, Guard(b, vehs, iq, iq + m0.nq), sensing, feedback, control, spraying,
-                disturbance, observers, TickView(b, [v.model for v in vehs], body), stepper,
-                sprayers, vehs, depositing, capture)
+    st = Stages(b, Guard(b, vehs, iq, iq + m0.nq), sensing, feedback, control, spraying,
+                disturbance, depositing, observers, sprayers, vehs)
+    e = Engine(st, TickView(b, [v.model for v in vehs], body), stepper, capture)
     if hasattr(feedback.bank, "pos_sigma"):
         e.failsafe = Failsafe(b, feedback.bank, [fl.cfg for fl in flights])
     return e
 
 
-def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float, float]:
+def _run(lanes: list[Engine], bar: Any) -> tuple[float, float, float]:
     """Every tick until no vehicle is left; (loop wall seconds, compile seconds of tick 0, the
     process's CPU seconds over the same span: every thread's, so CPU ÷ wall is the cores kept busy).
 
@@ -518,7 +537,7 @@ def _run(lanes: list[_Engine], bar: Any) -> tuple[float, float, float]:
     return time.perf_counter() - wall, compile_s, time.process_time() - cpu
 
 
-def _fly_on(e: _Engine, bar: Any = None) -> None:
+def _fly_on(e: Engine, bar: Any = None) -> None:
     """Lane ``e``'s ticks from its next one until none of its vehicles is left (or it is told
     to halt: another lane failed, or the caller was interrupted). Between ticks it takes up
     the threads it is offered (``e.threads``: cores that lanes done before it left idle)."""
@@ -536,7 +555,7 @@ def _fly_on(e: _Engine, bar: Any = None) -> None:
             bar_next += 1.0
 
 
-def _fly_lanes(lanes: list[_Engine], bar: Any) -> None:
+def _fly_lanes(lanes: list[Engine], bar: Any) -> None:
     """Each lane to its end in a thread of its own; this thread keeps the progress bar and,
     as lanes finish, offers their cores to the lanes still flying (their rollouts widen). A
     lane that raises halts the others, and so does an interrupt here (Ctrl-C)."""
@@ -581,7 +600,7 @@ def _first_tick(wall0: float) -> tuple[float, float]:
     return took, now
 
 
-def _outputs(e: _Engine, wall: float, compile_s: float, cpu: float) -> list[LoopOutput]:
+def _outputs(e: Engine, wall: float, compile_s: float, cpu: float) -> list[LoopOutput]:
     b = e.b
     frames = frames_of(e.observers, b.n)
     imu = e.sensing.imu
@@ -620,7 +639,7 @@ def lane_count(flights: Sequence[Flight], nthread: int | None = None,
 
 
 def _lanes(flights: list[Flight], nthread: int | None, lanes: int | None,
-           capture: bool = False) -> list[_Engine]:
+           capture: bool = False) -> list[Engine]:
     """The batch as :func:`lane_count` engines, vehicle i in lane i mod L (so a batch ordered
     by field or length spreads its long missions over the lanes), each flying in a thread of
     its own with a one-thread rollout; or one engine whose rollout uses ``nthread`` threads.

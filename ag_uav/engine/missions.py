@@ -196,7 +196,10 @@ def _cut_by_max_time(cfg: Config, ref: Reference, out: LoopOutput,
 
 
 @dataclass
-class _Prepared:
+class Prepared:
+    """One run ready to fly (:func:`prepare_run`): its config, flight, field, plan, reference,
+    feedback, log, the wall clock at its start and the pre-flight notice."""
+
     cfg: Config
     flight: Flight
     fld: Field
@@ -237,9 +240,11 @@ def mission_setup(cfg: Config) -> tuple[Field, Any, Any]:
     return hit
 
 
-def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., None] | None,
-             log: Any) -> _Prepared:
-    """Everything one run needs before it flies: plan, reference, feedback, the flight."""
+def prepare_run(cfg: Config, feedback: Feedback | None = None,
+                tick_hook: Callable[..., None] | None = None, log: Any = None) -> Prepared:
+    """Everything one run needs before it flies: plan, reference, feedback, the flight
+    (:func:`simulate` is ``prepare_run``, :func:`~ag_uav.engine.loop.fly` of its flight, then
+    :func:`finish_run`; a caller that adjusts the feedback in between runs the three)."""
     wall0 = time.perf_counter()
     streams = rng_streams(cfg.seed)
     fld, plan, ref = mission_setup(cfg)
@@ -279,7 +284,7 @@ def _prepare(cfg: Config, feedback: Feedback | None, tick_hook: Callable[..., No
     flight = Flight(cfg, ref, ref.duration, outline=outline, bounds=bounds, feedback=fb,
                     log=log, render=cfg.log.render, tick_hook=tick_hook, streams=streams,
                     field=fld)
-    return _Prepared(cfg, flight, fld, plan, ref, fb, log, wall0,
+    return Prepared(cfg, flight, fld, plan, ref, fb, log, wall0,
                      notice=preflight_notice(cfg, ref))
 
 
@@ -319,12 +324,12 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
         if log is not None:
             log.summary(grounded.summary)
         return grounded
-    prep = _prepare(cfg, feedback, tick_hook, log)
+    prep = prepare_run(cfg, feedback, tick_hook, log)
     if prep.notice and prep.notice not in _SAID:  # once per process: loops of runs repeat it
         _SAID.add(prep.notice)
         print(f"ag-uav: {prep.notice}", file=sys.stderr, flush=True)
     out = fly([prep.flight], progress=progress)[0]
-    return _finish(prep, out, batch=1)
+    return finish_run(prep, out, batch=1)
 
 
 def simulate_many(cfgs: list[Config], *, progress: bool = False, errors: str = "raise",
@@ -340,24 +345,24 @@ def simulate_many(cfgs: list[Config], *, progress: bool = False, errors: str = "
     preps: list[Any] = []
     for c in cfgs:
         try:
-            preps.append(_preflight(c) or _prepare(c, None, None, None))
+            preps.append(_preflight(c) or prepare_run(c, None, None, None))
         except Exception as e:  # noqa: BLE001 - reported per run
             if errors == "raise":
                 raise
             preps.append(e)
-    ok = [p for p in preps if isinstance(p, _Prepared)]
+    ok = [p for p in preps if isinstance(p, Prepared)]
     outs = iter(fly([p.flight for p in ok], progress=progress)) if ok else iter(())
     res: list[Any] = []
     for i, p in enumerate(preps):
         if isinstance(p, RunResult):  # grounded by the pre-flight check
             res.append(reduce(i, p) if reduce is not None else p)
             continue
-        if not isinstance(p, _Prepared):
+        if not isinstance(p, Prepared):
             res.append(p)
             continue
         out = next(outs)
         try:
-            r = _finish(p, out, batch=len(ok))
+            r = finish_run(p, out, batch=len(ok))
             res.append(reduce(i, r) if reduce is not None else r)
         except Exception as e:  # noqa: BLE001
             if errors == "raise":
@@ -376,13 +381,13 @@ def fly_many(cfgs: list[Config], *, progress: bool = False, capture: bool = Fals
     preps: list[Any] = []
     for c in cfgs:
         try:
-            preps.append(_preflight(c) or _prepare(c, None, None, None))
+            preps.append(_preflight(c) or prepare_run(c, None, None, None))
         except Exception as e:  # noqa: BLE001 - reported per run
             preps.append(e)
-    ok = [p for p in preps if isinstance(p, _Prepared)]
+    ok = [p for p in preps if isinstance(p, Prepared)]
     flown = fly([p.flight for p in ok], progress=progress, capture=capture, lanes=lanes)
     outs = iter(flown)
-    return [next(outs) if isinstance(p, _Prepared) else p for p in preps]
+    return [next(outs) if isinstance(p, Prepared) else p for p in preps]
 
 
 def batch_key(cfg: Config) -> tuple:
@@ -467,8 +472,9 @@ def _cut_reason(cfg: Config, ref: Any, out: LoopOutput, summ: dict[str, Any],
     return out.failsafe["failsafe"] + ("" if landed is None else f"; landed at t={landed}s")
 
 
-def _finish(prep: _Prepared, out: LoopOutput, batch: int) -> RunResult:
-    """Metrics and the summary of one flown run."""
+def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
+    """Metrics and the summary of one flown run (``batch``: the size of the engine batch it
+    flew in)."""
     from ..analysis import metrics
 
     cfg, fld, plan, ref, fb, log = prep.cfg, prep.fld, prep.plan, prep.ref, prep.fb, prep.log

@@ -377,7 +377,7 @@ def _timed_stages(acc: Counter) -> Iterator[None]:
     the duration of the block; the classes are restored after it."""
     from ..engine import loop, stages
 
-    saved = [(getattr(stages, c), m, k) for c, m, k in _STAGES] + [(loop._Engine, "physics",
+    saved = [(getattr(stages, c), m, k) for c, m, k in _STAGES] + [(loop.Engine, "physics",
                                                                      "physics")]
     originals = [(cls, m, getattr(cls, m)) for cls, m, _ in saved]
 

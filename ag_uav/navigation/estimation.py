@@ -452,7 +452,7 @@ class BatchEstimatorFeedback:
         self.dt = f0.dt
         self.ideal_imu = f0.imu and not f0.wants_imu
         self.init = np.array([fb.initialised for fb in feedbacks], dtype=bool)
-        self.next_t = np.array([fb.gps._next_k * fb.gps.dt for fb in feedbacks])
+        self.next_t = np.array([fb.gps.next_fix_t for fb in feedbacks])
         self.every_tick = np.array([fb.gps.latency_s > 0.0 for fb in feedbacks], dtype=bool)
         self.z = np.zeros((N, 3))
         self.mask = np.zeros(N, dtype=bool)
@@ -483,7 +483,7 @@ class BatchEstimatorFeedback:
         fb = self.fbs[i]
         pt = (float(p[0]), float(p[1]), float(p[2]))
         z, R_new = fb.measure(t, pt)
-        self.next_t[i] = fb.gps._next_k * fb.gps.dt
+        self.next_t[i] = fb.gps.next_fix_t
         if z is None:
             if fb.radar and self.init[i]:  # no fix: the radar altimeter still reads
                 self.h[i] = pt[2] + fb.radar_sigma * fb.radar_rng.standard_normal()

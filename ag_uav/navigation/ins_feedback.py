@@ -535,7 +535,7 @@ class BatchInsFeedback:
         if not math.isfinite(r[0]):   # before D ticks of history: the oldest there is
             r = self.ring[i, 0]
         row = fb.fix(t, r[0:3], r[3:6], float(r[6]))
-        self.next_t[i] = fb.gps._next_k * fb.gps.dt
+        self.next_t[i] = fb.gps.next_fix_t
         if row is None or not (math.isfinite(row[1]) and math.isfinite(row[2])
                                and math.isfinite(row[3])):
             return

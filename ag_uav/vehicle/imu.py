@@ -53,6 +53,7 @@ one) and the loops over rows :func:`imu_rows` / :func:`attitude_rows` (run by
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -63,8 +64,8 @@ G = 9.81
 UG = 1e-6 * G                # one micro-g in m/s²
 DEG = math.pi / 180.0
 
-__all__ = ["AttitudeError", "ImuSensor", "accel_sigma", "attitude_row", "attitude_rows",
-           "block_used_up",
+__all__ = ["AttitudeError", "AttitudeRow", "ImuRow", "ImuSensor", "accel_sigma", "attitude_row",
+           "attitude_rows", "block_used_up",
            "gauss_markov_block", "gyro_sigma", "imu_error_block", "imu_row", "imu_rows",
            "process_noise_psd", "rows_need"]
 
@@ -233,6 +234,27 @@ def attitude_rows(R: np.ndarray, active: np.ndarray, dth: np.ndarray, ist: np.nd
     return 0
 
 
+class ImuRow(NamedTuple):
+    """An :class:`ImuSensor`'s row state, one row each: the bias after the buffered block
+    ``bias`` (6,), the buffered errors ``err`` (1, block, 6) and ``ist`` (1, 2: the next sample,
+    the samples buffered). :class:`~ag_uav.vehicle.sensors_batched.BatchImu` stacks them."""
+
+    bias: np.ndarray
+    err: np.ndarray
+    ist: np.ndarray
+
+
+class AttitudeRow(NamedTuple):
+    """An :class:`AttitudeError`'s row state: the Gauss–Markov state after the buffered block
+    ``x`` (3,), the buffered ``δθ`` ``dth`` (1, block, 3), ``ist`` (1, 2) and the last ``δθ``
+    ``last`` (1, 3). :class:`~ag_uav.vehicle.sensors_batched.BatchAttitudeError` stacks them."""
+
+    x: np.ndarray
+    dth: np.ndarray
+    ist: np.ndarray
+    last: np.ndarray
+
+
 class ImuSensor:
     """MEMS accelerometer + gyro errors on MuJoCo's exact readings (module docstring).
 
@@ -269,6 +291,11 @@ class ImuSensor:
         self._last_bias_block = bias
         self._err[0, :n] = err
         self._ist[0] = 0, n
+
+    @property
+    def row_state(self) -> ImuRow:
+        """This sensor's row state (the arrays themselves: a batch taking it over copies them)."""
+        return ImuRow(self._bias, self._err, self._ist)
 
     def walk_block(self) -> np.ndarray:
         """Draw this sensor's next block and return its walked bias ``b_k`` (block, 6): the
@@ -322,6 +349,11 @@ class AttitudeError:
     def last(self) -> np.ndarray:
         """The last ``δθ`` (rad, world x, y, z; the stationary start before the first apply)."""
         return self._last[0].copy()
+
+    @property
+    def row_state(self) -> AttitudeRow:
+        """This error's row state (the arrays themselves: a batch taking it over copies them)."""
+        return AttitudeRow(self._x, self._dth, self._ist, self._last)
 
     def _refill(self) -> None:
         x = gauss_markov_block(self.rng, self._x, self.block, self.phi, self.sigma)

@@ -151,11 +151,12 @@ class BatchWind:
         step them after)."""
         _nonempty(winds, "BatchWind.from_winds")
         n = len(winds)
-        fs = np.concatenate([w._fs for w in winds])
-        ist = np.concatenate([w._ist for w in winds])
-        buf = np.zeros((n, max(max(w._buf.shape[1] for w in winds), 5)))
-        for i, w in enumerate(winds):
-            buf[i, :w._buf.shape[1]] = w._buf[0]
+        rows = [w.row_state for w in winds]
+        fs = np.concatenate([r.fs for r in rows])
+        ist = np.concatenate([r.ist for r in rows])
+        buf = np.zeros((n, max(max(r.buf.shape[1] for r in rows), 5)))
+        for i, r in enumerate(rows):
+            buf[i, :r.buf.shape[1]] = r.buf[0]
         rngs = [w.turbulence.rng if w.turbulence is not None else None for w in winds]
         return cls(fs, ist, buf, rngs)
 
@@ -222,13 +223,14 @@ class BatchImu:
         self._block = np.array([s.block for s in imus], dtype=np.int64)
         self._sigma_rw = np.stack([s.sigma_rw for s in imus])
         self._sigma_white = np.stack([s.sigma_white for s in imus])
-        self._bias = np.stack([s._bias for s in imus])        # bias after the buffered block
+        rows = [s.row_state for s in imus]
+        self._bias = np.stack([r.bias for r in rows])         # bias after the buffered block
         self.bias0: F64 = np.stack([s.bias0 for s in imus])
-        width = max(int(self._block.max()), max(s._err.shape[1] for s in imus), 1)
+        width = max(int(self._block.max()), max(r.err.shape[1] for r in rows), 1)
         self._err = np.zeros((n, width, 6))
-        self._ist = np.concatenate([s._ist for s in imus])     # next sample, samples buffered
-        for i, s in enumerate(imus):
-            self._err[i, :s._err.shape[1]] = s._err[0]
+        self._ist = np.concatenate([r.ist for r in rows])      # next sample, samples buffered
+        for i, r in enumerate(rows):
+            self._err[i, :r.err.shape[1]] = r.err[0]
         self._ones = np.ones(n, dtype=np.bool_)
         self.f_meas: F64 = np.zeros((n, 3))
         self.w_meas: F64 = np.zeros((n, 3))
@@ -274,13 +276,14 @@ class BatchAttitudeError:
         self._block = np.array([e.block for e in errs], dtype=np.int64)
         self._phi = np.array([e.phi for e in errs])
         self._sigma = np.stack([e.sigma for e in errs])
-        self._x = np.stack([e._x for e in errs])
-        width = max(int(self._block.max()), max(e._dth.shape[1] for e in errs), 1)
+        rows = [e.row_state for e in errs]
+        self._x = np.stack([r.x for r in rows])
+        width = max(int(self._block.max()), max(r.dth.shape[1] for r in rows), 1)
         self._dth = np.zeros((n, width, 3))
-        self._ist = np.concatenate([e._ist for e in errs])
-        for i, e in enumerate(errs):
-            self._dth[i, :e._dth.shape[1]] = e._dth[0]
-        self.last: F64 = np.concatenate([e._last for e in errs])
+        self._ist = np.concatenate([r.ist for r in rows])
+        for i, r in enumerate(rows):
+            self._dth[i, :r.dth.shape[1]] = r.dth[0]
+        self.last: F64 = np.concatenate([r.last for r in rows])
         self._ones = np.ones(n, dtype=np.bool_)
         self.R_hat: F64 = np.zeros((n, 9))
 

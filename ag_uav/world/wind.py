@@ -69,6 +69,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -80,6 +81,7 @@ __all__ = [
     "TURBULENCE_PRESETS_W20",
     "DrydenTurbulence",
     "Wind",
+    "WindRow",
     "drag_axis",
     "drag_force",
     "dryden_parameters",
@@ -434,6 +436,16 @@ class DrydenTurbulence:
                         float(airspeed_mps))
 
 
+class WindRow(NamedTuple):
+    """A wind's row state (module docstring), one row each: the floats ``fs`` (1, NF; columns
+    ``WF_*``), the integers ``ist`` (1, NI; columns ``WI_*``) and the draw buffer ``buf``.
+    :class:`~ag_uav.vehicle.sensors_batched.BatchWind` stacks the rows of its winds."""
+
+    fs: np.ndarray
+    ist: np.ndarray
+    buf: np.ndarray
+
+
 class Wind:
     """Mean wind plus optional Dryden turbulence, in world ENU.
 
@@ -488,6 +500,11 @@ class Wind:
             self._fs, self._ist, self._buf = _new_row(w20, float(rel_tol), 0)
         self._fs[0, WF_EX], self._fs[0, WF_EY] = ex, ey
         self._fs[0, WF_MX], self._fs[0, WF_MY] = self.mean[0], self.mean[1]
+
+    @property
+    def row_state(self) -> WindRow:
+        """This wind's row state (the arrays themselves: a batch taking it over copies them)."""
+        return WindRow(self._fs, self._ist, self._buf)
 
     def sigmas(self, altitude_m: float) -> tuple[float, float, float]:
         """Gust stds (sigma_u, sigma_v, sigma_w) at ``altitude_m`` (zeros without turbulence)."""

@@ -268,10 +268,10 @@ def outage(args: argparse.Namespace) -> list[dict[str, Any]]:
             if nav == "ins":
                 from ...engine import missions as M
 
-                prep = M._prepare(c, None, None, None)
+                prep = M.prepare_run(c)
                 prep.fb.outages = [window]
                 out = M.fly([prep.flight])[0]
-                res = M._finish(prep, out, 1)
+                res = M.finish_run(prep, out)
                 herr = prep.fb.rec["herr"][:, 0]
             else:
                 fb = RouteConstrainedFeedback.for_config(c, primary=None, outages=[window])

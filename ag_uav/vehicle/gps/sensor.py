@@ -123,6 +123,13 @@ class GpsSensor:
         self.fix_type_counts: dict[str, int] = dict.fromkeys(self.fix_types, 0)
 
     @property
+    def next_fix_t(self) -> float:
+        """The time (s) from which the next fix is due: :meth:`measure` returns None before it
+        (less 1 ns of rounding slack). The engine's batches read it to call the receivers of
+        the vehicles with a fix due only."""
+        return self._next_k * self.dt
+
+    @property
     def fix_types(self) -> tuple[str, ...]:
         """Names of the fix types (the modes of ``fix_quality``; empty without it)."""
         return self.fix_quality.names if self.fix_quality is not None else ()
