@@ -313,7 +313,6 @@ def private_reach_ins(root: Path = ROOT, code=PRODUCT_CODE) -> dict[str, int]:
 #: files over :data:`MAX_FILE_LINES` today -> their lines (may only shrink)
 FILE_LINES_LEFT: dict[str, int] = {
     "ag_uav/navigation/ins_feedback.py": 881,
-    "estimators/ins.py": 1156,
 }
 #: functions over :data:`MAX_FUNCTION_LINES` today -> their lines
 FUNCTION_LINES_LEFT: dict[str, int] = {
@@ -335,10 +334,7 @@ PARAMETERS_LEFT: dict[str, int] = {
     "ag_uav/world/wind.py::wind_drag_rows": 11,
     "controllers/batched.py::BatchCascade.update": 11,
     "controllers/batched.py::cascade_step": 13,
-    "estimators/ins.py::_fuse_due": 11,
-    "estimators/ins.py::_fuse_gnss": 11,
-    "estimators/ins.py::_fuse_one": 11,
-    "estimators/ins.py::_step_kernel": 19,
+    "estimators/ins/fusion.py::step_kernel": 19,
 }
 #: private reach-ins across modules today -> their occurrences
 REACH_INS_LEFT: dict[str, int] = {

@@ -402,7 +402,7 @@ if __name__ == "__main__":  # pragma: no cover
 def test_the_bank_scratch_holds_the_mckf_work():
     """The INS bank's flat scratch reserves exactly the MCKF update's work (15 states, 3 rows)
     after the KF offset: the KF and the MCKF updates share that region."""
-    from estimators import ins
+    from estimators.ins import layout
     from estimators.mckf import mckf_work_size
 
-    assert ins._NW - ins._W_KF == mckf_work_size(15, 3)
+    assert layout.SCRATCH.size - layout.W_KF == mckf_work_size(15, 3)
