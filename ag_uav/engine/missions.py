@@ -170,19 +170,15 @@ class RunResult:
 
 
 # -------------------------------------------------------------------------------------- the loop
-def fly_reference(cfg: Config, reference: Any, duration: float, *,
-                  outline: list[np.ndarray] | None = None,
-                  bounds: tuple[float, float, float, float] | None = None,
-                  feedback: Feedback | None = None, progress: bool = False,
-                  tick_hook: Callable[..., None] | None = None, log: Any = None,
-                  render: bool = False, streams: dict | None = None) -> LoopOutput:
+def fly_reference(cfg: Config, reference: Any, duration: float, *, progress: bool = False,
+                  **flight: Any) -> LoopOutput:
     """Fly the vehicle along ``reference`` (``sample_all(times)`` → dict of pos, vel, acc, yaw,
     seg, spray arrays, as :meth:`ag_uav.world.reference.Reference.sample_all`) for
     ``duration`` seconds of sim time: the engine (:func:`ag_uav.engine.loop.fly`) with one
-    vehicle."""
-    return fly([Flight(cfg, reference, duration, outline=outline, bounds=bounds,
-                       feedback=feedback, log=log, render=render, tick_hook=tick_hook,
-                       streams=streams)], progress=progress)[0]
+    vehicle. ``flight``: any other :class:`~ag_uav.engine.loop.Flight` field by name
+    (``outline``, ``bounds``, ``feedback``, ``log``, ``render``, ``tick_hook``, ``streams``;
+    an unknown name is a TypeError)."""
+    return fly([Flight(cfg, reference, duration, **flight)], progress=progress)[0]
 
 
 def _cut_by_max_time(cfg: Config, ref: Reference, out: LoopOutput,

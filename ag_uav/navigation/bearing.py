@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -76,7 +77,7 @@ from ..world.mission import build_field
 from .estimation import EstimatorFeedback, FilterBank, process_noise
 from .feedback import Feedback
 
-__all__ = ["FILTERS", "BearingFeedback", "default_landmarks"]
+__all__ = ["FILTERS", "BearingFeedback", "BearingOptions", "default_landmarks"]
 
 #: filters the bearing feedback can run
 FILTERS = ("mcc-ekf", "ekf", "ukf")
@@ -92,16 +93,10 @@ def default_landmarks(cfg: Config, margin_m: float = 10.0) -> np.ndarray:
     return np.array([[x0 - m, y0 - m], [x1 + m, y0 - m], [x1 + m, y1 + m], [x0 - m, y1 + m]])
 
 
-class BearingFeedback(FilterBank, Feedback):
-    """Bearings to known landmarks + radar altimeter + IMU-aided prediction, no GPS.
+@dataclass(frozen=True)
+class BearingOptions:
+    """The options of :class:`BearingFeedback`, declared once.
 
-    Parameters
-    ----------
-    cfg : run config (``estimator.q``, ``model``, ``imu``, ``[imu]``, ``sigma``, ``max_iter``;
-        ``gps.radar_sigma_m``; ``sim.control_hz``; the field for the default landmarks).
-    seed : bearing-noise stream (``for_config`` passes the run's ``"gps"`` stream: the bearing
-        sensor replaces the GPS).
-    alt_seed, imu_seed : radar-altimeter and accelerometer noise streams.
     landmarks : (N, 2) beacon positions (m, ENU); default :func:`default_landmarks`.
     rate_hz : bearing (and altimeter) rate.
     filter : the filter the controller flies on, one of :data:`FILTERS`.
@@ -114,15 +109,38 @@ class BearingFeedback(FilterBank, Feedback):
     init_offset_m : (dx, dy, dz) added to the true start position for the initial estimate.
     """
 
+    landmarks: Sequence[Sequence[float]] | np.ndarray | None = None
+    rate_hz: float = 10.0
+    filter: str = "mcc-ekf"
+    noise: str = "mixture"
+    noise_scale: float = 0.1
+    r_var: float | None = None
+    shadow: Sequence[str] = ()
+    sigma: float | None = None
+    init_sigma_m: float = 3.0
+    init_offset_m: Sequence[float] = (0.0, 0.0, 0.0)
+
+
+class BearingFeedback(FilterBank, Feedback):
+    """Bearings to known landmarks + radar altimeter + IMU-aided prediction, no GPS.
+
+    Parameters
+    ----------
+    cfg : run config (``estimator.q``, ``model``, ``imu``, ``[imu]``, ``sigma``, ``max_iter``;
+        ``gps.radar_sigma_m``; ``sim.control_hz``; the field for the default landmarks).
+    seed : bearing-noise stream (``for_config`` passes the run's ``"gps"`` stream: the bearing
+        sensor replaces the GPS).
+    alt_seed, imu_seed : radar-altimeter and accelerometer noise streams.
+    options : the options (:class:`BearingOptions`; its defaults when omitted).
+    **changes : any :class:`BearingOptions` field by name, over ``options``.
+    """
+
     def __init__(self, cfg: Config, seed: np.random.SeedSequence | None,
                  alt_seed: np.random.SeedSequence | None = None,
-                 imu_seed: np.random.SeedSequence | None = None, *,
-                 landmarks: Sequence[Sequence[float]] | np.ndarray | None = None,
-                 rate_hz: float = 10.0, filter: str = "mcc-ekf", noise: str = "mixture",
-                 noise_scale: float = 0.1, r_var: float | None = None,
-                 shadow: Sequence[str] = (), sigma: float | None = None,
-                 init_sigma_m: float = 3.0,
-                 init_offset_m: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
+                 imu_seed: np.random.SeedSequence | None = None,
+                 options: BearingOptions | None = None, **changes: Any) -> None:
+        o = replace(options or BearingOptions(), **changes)  # TypeError names a bad keyword
+        filter, shadow, noise, rate_hz = o.filter, o.shadow, o.noise, o.rate_hz
         if filter not in FILTERS:
             raise ValueError(f"filter {filter!r}: not one of {FILTERS}")
         for s in shadow:
@@ -130,28 +148,28 @@ class BearingFeedback(FilterBank, Feedback):
                 raise ValueError(f"shadow {s!r}: not one of {FILTERS}")
         if noise not in ("mixture", "gaussian"):
             raise ValueError(f"noise {noise!r}: 'mixture' or 'gaussian'")
-        if not rate_hz > 0 or not noise_scale > 0 or not init_sigma_m > 0:
+        if not rate_hz > 0 or not o.noise_scale > 0 or not o.init_sigma_m > 0:
             raise ValueError("rate_hz, noise_scale and init_sigma_m must be > 0")
         self.cfg = cfg
-        lm = default_landmarks(cfg) if landmarks is None else landmarks
+        lm = default_landmarks(cfg) if o.landmarks is None else o.landmarks
         self.landmarks = np.asarray(lm, dtype=float).reshape(-1, 2)
         self.L = self.landmarks.shape[0]
         if self.L < 2:
             raise ValueError("need at least 2 landmarks to fix a horizontal position")
         self.rate_hz = float(rate_hz)
         self.noise = noise
-        self.noise_scale = float(noise_scale)
+        self.noise_scale = float(o.noise_scale)
         s2 = self.noise_scale**2
         self.var1, self.var2 = s2 * GAMMA1, s2 * GAMMA2
         total = (1 - THETA) * self.var1 + THETA * self.var2 if noise == "mixture" else self.var1
-        self.r_var = float(total if r_var is None else r_var)
+        self.r_var = float(total if o.r_var is None else o.r_var)
         self.rng = np.random.default_rng(seed)
         self.radar_sigma = float(cfg.gps.radar_sigma_m)
         self.radar_rng = np.random.default_rng(alt_seed)
         e = cfg.estimator
-        self.sigma = float(e.sigma if sigma is None else sigma)
-        self.init_sigma_m = float(init_sigma_m)
-        self.init_offset = np.asarray(init_offset_m, dtype=float).reshape(3)
+        self.sigma = float(e.sigma if o.sigma is None else o.sigma)
+        self.init_sigma_m = float(o.init_sigma_m)
+        self.init_offset = np.asarray(o.init_offset_m, dtype=float).reshape(3)
 
         self.dt = 1.0 / cfg.sim.control_hz
         # CV, or CV + the IMU input-bias states ("cvb", the default) as the GPS bank

@@ -59,28 +59,12 @@ class Vehicle:
         }
 
 
-def build_vehicle(cfg: Config) -> Vehicle:
-    """Compile the MJCF with the config applied.
-
-    Model error the controller does not know: ``vehicle.unknown_payload_kg`` is added to the tank
-    geom's mass and, at ``vehicle.unknown_payload_pos_m``, shifts the centre of mass (the tank
-    box moves to the payload's mass-weighted position, so the composite centre of mass is where
-    the known tank payload and the unknown mass put it); the ``ctrl_*`` facts of the returned
-    vehicle are those of the same config without it (what :func:`ag_uav.vehicle.cascade.
-    make_cascade` and the spray job's mass updates give the controller).
-    ``vehicle.rotor_thrust_loss`` scales each rotor's actuator (thrust and yaw torque per unit of
-    command) by ``1 − loss``: the command range, and so the controller's idea of the thrust
-    limit, stays ``f_max``.
-
-    The physics model depends on the vehicle and simulation keys only, never on the field: the
-    field outline and other scenery are drawn into the cameras' scene by
-    :class:`ag_uav.record.render.Renderer` (``scenery=``), so every vehicle of an engine batch,
-    whatever field it flies, has a model of the same sizes (one ``MjData`` layout per batch).
-    """
+def _compile(cfg: Config, f_max: float) -> mujoco.MjModel:
+    """The MJCF with the vehicle keys applied (masses, tank and unknown payload, the liquid's
+    body, the actuators), compiled, with the cameras' clipping planes pinned in metres."""
     spec = mujoco.MjSpec.from_file(str(MODEL_XML))
     v = cfg.vehicle
     spec.option.timestep = cfg.sim.timestep_s
-    f_max = v.thrust_to_weight * v.mass_kg * G / 4.0
     # scale the dry mass of the airframe geoms so the total equals mass_kg, payload in the tank
     body = spec.body("drone")
     geoms = [g for g in body.geoms]
@@ -116,6 +100,30 @@ def build_vehicle(cfg: Config) -> Vehicle:
     ext = float(model.stat.extent)
     model.vis.map.znear = 0.05 / ext
     model.vis.map.zfar = 800.0 / ext
+    return model
+
+
+def build_vehicle(cfg: Config) -> Vehicle:
+    """Compile the MJCF with the config applied.
+
+    Model error the controller does not know: ``vehicle.unknown_payload_kg`` is added to the tank
+    geom's mass and, at ``vehicle.unknown_payload_pos_m``, shifts the centre of mass (the tank
+    box moves to the payload's mass-weighted position, so the composite centre of mass is where
+    the known tank payload and the unknown mass put it); the ``ctrl_*`` facts of the returned
+    vehicle are those of the same config without it (what :func:`ag_uav.vehicle.cascade.
+    make_cascade` and the spray job's mass updates give the controller).
+    ``vehicle.rotor_thrust_loss`` scales each rotor's actuator (thrust and yaw torque per unit of
+    command) by ``1 − loss``: the command range, and so the controller's idea of the thrust
+    limit, stays ``f_max``.
+
+    The physics model depends on the vehicle and simulation keys only, never on the field: the
+    field outline and other scenery are drawn into the cameras' scene by
+    :class:`ag_uav.record.render.Renderer` (``scenery=``), so every vehicle of an engine batch,
+    whatever field it flies, has a model of the same sizes (one ``MjData`` layout per batch).
+    """
+    v = cfg.vehicle
+    f_max = v.thrust_to_weight * v.mass_kg * G / 4.0
+    model = _compile(cfg, f_max)
     body_id = model.body("drone").id
     # inertia tensor in body axes from the principal moments and their frame
     I_p = np.diag(model.body_inertia[body_id])

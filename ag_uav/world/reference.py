@@ -37,13 +37,14 @@ climb and end hover off); ``seg`` is the plan segment index, −1 during the cli
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from dataclasses import dataclass, replace
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from .plan import CoveragePlan
 
-__all__ = ["RefSample", "Reference"]
+__all__ = ["RefSample", "Reference", "ReferenceOptions"]
 
 #: ticks per piece when the output grid is built (bounds the working memory: the fine grid of a
 #: piece is ``_sub`` × this many points)
@@ -97,85 +98,87 @@ def _forward_backward(vlim: np.ndarray, two_a_ds: np.ndarray) -> np.ndarray:
     return v
 
 
+@dataclass(frozen=True)
+class ReferenceOptions:
+    """The options of :class:`Reference`, declared once (module docstring): cruise ``speed``
+    (m/s); spray ``altitude`` (m above the ground plane z = 0); ``a_max``, the bound on
+    |acceleration| (m/s², horizontal and vertical alike); ``takeoff``: start on the ground at
+    ``z0`` (m) below the plan start and climb first at ``climb_speed`` (m/s) at most;
+    ``hover_time`` at the end (s); ``rate``, the output grid rate (Hz; ``sample`` interpolates
+    linearly between grid points); ``jerk_window``, the moving-average width W of the time law
+    (s; jerk ≤ ~2·a_max/W); corners turning by ``stop_angle_deg`` or more are flown
+    rest-to-rest; ``max_deviation``, the largest distance a corner fillet may cut from the plan
+    (m); ``lat_frac``, the share of ``a_max`` given to centripetal acceleration in curves;
+    ``yaw_rate_max``, the yaw rate that sizes the yaw ramps at stops (rad/s); ``ds``, the
+    arc-length grid step (m); ``landing``: end with a vertical descent to ``z_land`` (m; a
+    little below the body height resting on the skids, so the vehicle settles at a low
+    vertical speed) at ``climb_speed``, and at ``land_speed`` (m/s) in the last
+    ``flare_height`` metres, with a stop in between (the descent, like the climb, has ``seg``
+    −1 and no spray); ``seg_speeds``: optional per-plan-segment speed caps (m/s; None =
+    ``speed``), e.g. a faster transit to and from the base.
+    """
+
+    speed: float = 5.0
+    altitude: float = 3.0
+    a_max: float = 1.5
+    takeoff: bool = True
+    climb_speed: float = 1.5
+    hover_time: float = 5.0
+    z0: float = 0.0
+    rate: float = 100.0
+    jerk_window: float = 0.3
+    stop_angle_deg: float = 60.0
+    max_deviation: float = 0.25
+    lat_frac: float = 0.7
+    yaw_rate_max: float = math.radians(90.0)
+    ds: float = 0.05
+    landing: bool = False
+    z_land: float = 0.0
+    land_speed: float = 0.3
+    flare_height: float = 0.6
+    seg_speeds: list[float | None] | None = None
+
+
 class Reference:
     """Smooth, flyable reference along a coverage plan (see module docstring).
 
     Args:
         plan: the coverage plan.
-        speed: cruise speed (m/s).
-        altitude: spray altitude (m above the ground plane z = 0).
-        a_max: bound on |acceleration| (m/s²), horizontal and vertical alike.
-        takeoff: start on the ground at ``z0`` below the plan start and climb first.
-        climb_speed: vertical speed cap for the climb (m/s).
-        hover_time: hover at the end (s).
-        z0: ground height of the start (m).
-        rate: output grid rate (Hz); ``sample`` interpolates linearly between grid points.
-        jerk_window: moving-average width W of the time law (s); jerk ≤ ~2·a_max/W.
-        stop_angle_deg: corners turning by at least this much are flown rest-to-rest.
-        max_deviation: largest distance a corner fillet may cut from the plan (m).
-        lat_frac: share of ``a_max`` given to centripetal acceleration in curves.
-        yaw_rate_max: yaw rate used to size the yaw ramps at stops (rad/s).
-        ds: arc-length grid step (m).
-        landing: end with a vertical descent to ``z_land`` at ``climb_speed`` (a sortie that
-            returns to its base); the descent, like the climb, has ``seg`` −1 and no spray.
-        z_land: height the landing descends to (m); a little below the body height resting on
-            the skids, so the vehicle settles at a low vertical speed.
-        land_speed: vertical speed cap of the last ``flare_height`` metres of the landing (m/s);
-            above that the descent runs at ``climb_speed``, with a stop in between.
-        seg_speeds: optional per-plan-segment speed caps (m/s; None = ``speed``), e.g. a faster
-            transit to and from the base.
+        options: the options (:class:`ReferenceOptions`; its defaults when omitted).
+        **changes: any :class:`ReferenceOptions` field by name, over ``options`` (an unknown
+            name is a TypeError).
     """
 
-    def __init__(
-        self,
-        plan: CoveragePlan,
-        speed: float = 5.0,
-        altitude: float = 3.0,
-        a_max: float = 1.5,
-        takeoff: bool = True,
-        climb_speed: float = 1.5,
-        hover_time: float = 5.0,
-        z0: float = 0.0,
-        rate: float = 100.0,
-        jerk_window: float = 0.3,
-        stop_angle_deg: float = 60.0,
-        max_deviation: float = 0.25,
-        lat_frac: float = 0.7,
-        yaw_rate_max: float = math.radians(90.0),
-        ds: float = 0.05,
-        landing: bool = False,
-        z_land: float = 0.0,
-        land_speed: float = 0.3,
-        flare_height: float = 0.6,
-        seg_speeds: list[float | None] | None = None,
-    ):
-        for nm, val in (("speed", speed), ("a_max", a_max), ("rate", rate),
-                        ("climb_speed", climb_speed), ("ds", ds)):
+    def __init__(self, plan: CoveragePlan, options: ReferenceOptions | None = None,
+                 **changes: Any) -> None:
+        o = replace(options or ReferenceOptions(), **changes)
+        for nm, val in (("speed", o.speed), ("a_max", o.a_max), ("rate", o.rate),
+                        ("climb_speed", o.climb_speed), ("ds", o.ds)):
             if not (math.isfinite(val) and val > 0):
                 raise ValueError(f"{nm} must be > 0, got {val}")
-        if jerk_window < 0 or hover_time < 0:
+        if o.jerk_window < 0 or o.hover_time < 0:
             raise ValueError("jerk_window and hover_time must be ≥ 0")
         self.plan = plan
-        self.speed = float(speed)
-        self.altitude = float(altitude)
-        self.a_max = float(a_max)
-        self.rate = float(rate)
+        self.speed = float(o.speed)
+        self.altitude = float(o.altitude)
+        self.a_max = float(o.a_max)
+        self.rate = float(o.rate)
         self.dt = 1.0 / self.rate
         self._sub = 5
         step = 2.0 * self.dt / self._sub
-        self.window = round(float(jerk_window) / step) * step
+        self.window = round(float(o.jerk_window) / step) * step
         self.dwell = max(1.2 * self.window, 0.2)
-        self.hover_time = float(hover_time)
-        self.lat_frac = float(lat_frac)
-        self.yaw_rate_max = float(yaw_rate_max)
-        self._ds = float(ds)
-        self._landing = bool(landing)
-        self._z_land = float(z_land)
-        self._land_speed = float(land_speed)
-        self._flare = float(flare_height)
-        self._seg_speeds = seg_speeds
-        self._build_geometry(takeoff, float(z0), float(climb_speed),
-                             math.radians(stop_angle_deg), float(max_deviation))
+        self.hover_time = float(o.hover_time)
+        self.lat_frac = float(o.lat_frac)
+        self.yaw_rate_max = float(o.yaw_rate_max)
+        self._ds = float(o.ds)
+        self._landing = bool(o.landing)
+        self._z_land = float(o.z_land)
+        self._land_speed = float(o.land_speed)
+        self._flare = float(o.flare_height)
+        self._seg_speeds = o.seg_speeds
+        self._build_geometry(o.takeoff, float(o.z0), float(o.climb_speed),
+                             math.radians(o.stop_angle_deg), float(o.max_deviation))
         a_int = self.a_max
         for _ in range(6):
             self._build_time_law(a_int)
