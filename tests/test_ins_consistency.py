@@ -20,7 +20,7 @@ import pytest
 from scipy.stats import chi2, norm
 
 from ag_uav.config import ImuConfig
-from ag_uav.navigation.ins_feedback import quad_inv, quad_inv_at
+from ag_uav.navigation.ins_kernels import quad_inv, quad_inv_at
 from ag_uav.vehicle.imu import ImuSensor
 from estimators.ins import RULES, INSConfig, cov_step
 from tests.test_ins import figure8, run

@@ -196,7 +196,7 @@ def test_the_log_shows_when_the_radar_is_the_height_source(tmp_path):
 def test_quad_inv_matches_numpy_and_refuses_an_indefinite_matrix():
     """The NEES's eᵀ P⁻¹ e (allocation-free Cholesky) against numpy's solve, on the whole matrix
     and on its leading block; NaN where the block is not positive definite."""
-    from ag_uav.navigation.ins_feedback import quad_inv
+    from ag_uav.navigation.ins_kernels import quad_inv
 
     rng = np.random.default_rng(3)
     L, y = np.empty((15, 15)), np.empty(15)

@@ -87,13 +87,32 @@ from typing import Any
 
 import numpy as np
 
-from estimators.ins import BatchINS, INSConfig, quat_log_err
+from estimators.ins import BatchINS, INSConfig
 
-from .._jit import njit
 from ..config import Config, ConfigError
 from ..vehicle.gps import ReceiverReport, derive_seed
 from .aiding import horizontal_sigma
 from .feedback import Feedback
+from .ins_kernels import (
+    BLOCKS,
+    FIX_DUE,
+    N_GATE,
+    N_NEES15,
+    N_NISP,
+    N_NISV,
+    N_NISY,
+    N_NOTPD,
+    N_POS,
+    NOT_INITIALISED,
+    NREC,
+    RING_WIDTH,
+    Outputs,
+    Scores,
+    SensorRows,
+    outputs,
+    quat_to_rot,
+    tick_in,
+)
 from .receiver import fix_variance
 
 R_FLOOR = 1e-4
@@ -412,7 +431,7 @@ class BatchInsFeedback:
         self.icfg = ins_config(f0.cfg)
         self.bank = BatchINS(NV, self.icfg, self.names) if nr else None
         self.D, self.dt = f0.D, f0.dt
-        self.ring = np.full((NV, self.D + 1, _RW), np.nan)
+        self.ring = np.full((NV, self.D + 1, RING_WIDTH), np.nan)
         self.R_true: np.ndarray | None = None
         self.w_true: np.ndarray | None = None
         self.init = np.zeros(NV, dtype=np.bool_)
@@ -450,14 +469,20 @@ class BatchInsFeedback:
         self.err = np.full((n_max, NV, 4, nrec), np.nan)
         n_fix = int(n_max * max(fb.gps.rate_hz for fb in fbs) * self.dt) + 4
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
-        # the per-fix score record (columns _N_*)
-        self.nees = np.full((NV, n_fix, _NREC, nrec), np.nan)
+        # the per-fix score record (columns N_*)
+        self.nees = np.full((NV, n_fix, NREC, nrec), np.nan)
         self.n_fix = np.zeros(NV, dtype=np.int64)
         self.noise = np.stack([fb.radar_rng.standard_normal(4096) for fb in fbs])
         self.noise_i = np.zeros(NV, dtype=np.int64)
         self.upd_ns = 0
         self.n_upd = 0
         self.n_calls = 0
+        #: the kernels' arguments (ins_kernels: declared by name, passed as plain tuples)
+        self.rows = tuple(SensorRows(self.ring, self.prm, self.btru, self.imu, self.gnss,
+                                     self.radar, self.next_t, self.init, self.due))
+        self.scores = tuple(Scores(self.ring, self.init, self.gnss, self.imu, self.cvar,
+                                   self.err, self.fix_k, self.nees, self.n_fix, self.k0))
+        self.outs = tuple(Outputs(self.p_out, self.v_out, self.R_out, self.w_out))
         self.logging = any(fb.log is not None for fb in fbs)
         self._logged: list[tuple[int, Any]] | None = None
         self._pdiag = np.zeros((0, 0))
@@ -483,10 +508,10 @@ class BatchInsFeedback:
             for i, fb in enumerate(self.fbs):
                 self.btru[i] = fb.imu_twin.walk_block()
             self.b_next += self.blk
-        flags = _tick_in(self.ring, k, t, p, v, self.R_true, self.w_true, act, self.prm,
-                         imu[0], imu[2], self.imu, self.gnss, self.radar, self.next_t,
-                         self.init, self.due, self.btru, k % self.blk)
-        if flags & 1:
+        # Truth's fields, as a plain tuple (ins_kernels: a named one types slower)
+        truth = (p, v, self.R_true, self.w_true, act, imu[0], imu[2])
+        flags = tick_in(truth, self.rows, k, t, k % self.blk)
+        if flags & FIX_DUE:
             for i in np.flatnonzero(self.due):
                 self._fix(int(i), k, t)
         if self.radar_on and k % self.radar_every == 0:
@@ -498,14 +523,14 @@ class BatchInsFeedback:
                 self.upd_ns += time.perf_counter_ns() - t0
                 self.n_upd += 1
             self.n_calls += 1
-            _outputs(self.bank.x_out, self.bank.x_core, self.bank.P, self.bank._dg,
-                     self.bank.core_tick, self.k0, k, self.nr, self.flown, act, self.init,
-                     self.gnss, p, v, self.R_true, self.ring, self.err, self.fix_k,
-                     self.nees, self.n_fix, self.p_out, self.v_out, self.R_out, self.imu,
-                     self.w_out, self.cvar)
-        if flags & 2:
+            # BankView's and Pose's fields, as plain tuples
+            bank = (self.bank.x_out, self.bank.x_core, self.bank.P, self.bank._dg,
+                    self.bank.core_tick)
+            outputs(bank, (p, v, self.R_true, act), self.scores, self.outs, k, self.nr,
+                    self.flown)
+        if flags & NOT_INITIALISED:
             self._pre_init(act)
-        if self.logging and flags & 1:
+        if self.logging and flags & FIX_DUE:
             self._log(t, p)
         if self.flown < 0:   # estimator.name = "true": the controller flies on the truth
             return p, v
@@ -607,13 +632,13 @@ class BatchInsFeedback:
             n, nf = int(flown[i]), int(self.n_fix[i])
             e = np.ascontiguousarray(self.err[:n, i])
             fb.rec = {"herr": e[:, 0], "verr": e[:, 1], "tilt": e[:, 2], "yaw": e[:, 3],
-                      "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, _N_NEES15],
-                      "nis": self.nees[i, :nf, _N_NISP], "nis_vel": self.nees[i, :nf, _N_NISV],
-                      "nis_yaw": self.nees[i, :nf, _N_NISY],
-                      **{f"nees_{b}": self.nees[i, :nf, _N_POS + m]
+                      "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, N_NEES15],
+                      "nis": self.nees[i, :nf, N_NISP], "nis_vel": self.nees[i, :nf, N_NISV],
+                      "nis_yaw": self.nees[i, :nf, N_NISY],
+                      **{f"nees_{b}": self.nees[i, :nf, N_POS + m]
                          for m, b in enumerate(BLOCKS)},
-                      "not_pd": self.nees[i, :nf, _N_NOTPD],
-                      "gate": self.nees[i, :nf, _N_GATE],
+                      "not_pd": self.nees[i, :nf, N_NOTPD],
+                      "gate": self.nees[i, :nf, N_GATE],
                       "nis_radar": (self.bank.radar_nis[i * self.nr:(i + 1) * self.nr].tolist()
                                     if self.bank is not None else []),
                       "update_us": us,
@@ -628,254 +653,3 @@ def _euler_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
     cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
     return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
                      cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
-
-
-# ------------------------------------------------------------------------------- kernels
-#: the per-fix score record's columns (``BatchInsFeedback.nees[i, fix, :, row]``): NEES15,
-#: the NEES of the position, velocity, attitude, accel-bias and gyro-bias blocks (3 dof each),
-#: 1 where the core P was not positive definite (no NEES), the NIS of the fix's position,
-#: velocity and heading updates, the gate's verdict on the position (0 fused, 1 rejected,
-#: 2 rejected and reset to the receiver)
-(_N_NEES15, _N_POS, _N_VEL, _N_ATT, _N_BA, _N_BG, _N_NOTPD, _N_NISP, _N_NISV, _N_NISY,
- _N_GATE) = range(11)
-_NREC = 11
-#: the NEES blocks' names (summary keys nees_<name>_mean), in record order from _N_POS
-BLOCKS = ("pos", "vel", "att", "ba", "bg")
-
-#: ring layout per tick: antenna position, antenna velocity, heading, R, slant range, p, v,
-#: the walked IMU biases (accel, gyro)
-_RW = 29
-
-
-@njit(cache=True)
-def _ring_write(ring, k, p, v, R, w, act, prm, bt, j):  # pragma: no cover
-    """Tick k's sensor truth per vehicle (row ``k % B``): the antenna position p + R r_ant
-    (0:3), the antenna velocity v + R(ω × r_ant) (3:6), the dual-antenna heading
-    ψ = atan2(b_y, b_x) − atan2(r_b,y, r_b,x) with b = R r_b (6), R (7:16), the radar's slant
-    range ρ = s_z / R₂₂ with s = p + R r_rad over the ground z = 0 (16; NaN beyond the radar's
-    cone or range), p (17:20), v (20:23), the IMU's walked biases ``bt[i, j]`` (23:29)."""
-    B = ring.shape[1]
-    ra = prm[0:3]
-    rr = prm[3:6]
-    rb = prm[6:9]
-    for i in range(p.shape[0]):
-        if not act[i]:
-            continue
-        r = ring[i, k % B]
-        wx = w[i, 1] * ra[2] - w[i, 2] * ra[1]
-        wy = w[i, 2] * ra[0] - w[i, 0] * ra[2]
-        wz = w[i, 0] * ra[1] - w[i, 1] * ra[0]
-        for a in range(3):
-            R0, R1, R2 = R[i, 3 * a], R[i, 3 * a + 1], R[i, 3 * a + 2]
-            r[a] = p[i, a] + R0 * ra[0] + R1 * ra[1] + R2 * ra[2]
-            r[3 + a] = v[i, a] + R0 * wx + R1 * wy + R2 * wz
-            r[17 + a] = p[i, a]
-            r[20 + a] = v[i, a]
-        bx = R[i, 0] * rb[0] + R[i, 1] * rb[1] + R[i, 2] * rb[2]
-        by = R[i, 3] * rb[0] + R[i, 4] * rb[1] + R[i, 5] * rb[2]
-        psi = math.atan2(by, bx) - math.atan2(rb[1], rb[0])
-        r[6] = math.atan2(math.sin(psi), math.cos(psi))
-        for m in range(9):
-            r[7 + m] = R[i, m]
-        for m in range(6):
-            r[23 + m] = bt[i, j, m]
-        c = R[i, 8]
-        sz = p[i, 2] + R[i, 6] * rr[0] + R[i, 7] * rr[1] + R[i, 8] * rr[2]
-        rho = sz / c if c > 0 else np.nan
-        r[16] = rho if (c >= prm[9] and rho <= prm[10]) else np.nan
-
-
-@njit(cache=True)
-def _tick_in(ring, k, t, p, v, R, w, act, prm, f_m, om, imu, gnss, radar, next_t, init,
-             due, bt, j):  # pragma: no cover
-    """The tick's truth ring row (:func:`_ring_write`), the IMU rows (f̃, ω̃), no fix and no
-    radar yet, the vehicles with a fix due; returns 1 if any fix is due | 2 if an active
-    vehicle is not initialised."""
-    _ring_write(ring, k, p, v, R, w, act, prm, bt, j)
-    flags = 0
-    for i in range(act.shape[0]):
-        for a in range(3):
-            imu[i, a] = f_m[i, a]
-            imu[i, 3 + a] = om[i, a]
-        gnss[i, 0] = np.nan
-        radar[i, 0] = np.nan
-        due[i] = act[i] and t >= next_t[i] - 1e-9
-        if due[i]:
-            flags |= 1
-        if act[i] and not init[i]:
-            flags |= 2
-    return flags
-
-
-@njit(cache=True)
-def quat_to_rot(q, R):  # pragma: no cover
-    """Unit quaternion (w, x, y, z) → row-major rotation (9,), body → world."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    R[0] = 1.0 - 2.0 * (y * y + z * z)
-    R[1] = 2.0 * (x * y - w * z)
-    R[2] = 2.0 * (x * z + w * y)
-    R[3] = 2.0 * (x * y + w * z)
-    R[4] = 1.0 - 2.0 * (x * x + z * z)
-    R[5] = 2.0 * (y * z - w * x)
-    R[6] = 2.0 * (x * z - w * y)
-    R[7] = 2.0 * (y * z + w * x)
-    R[8] = 1.0 - 2.0 * (x * x + y * y)
-
-
-@njit(cache=True)
-def _rot_to_quat(R, q):  # pragma: no cover
-    """Row-major rotation → unit quaternion (w, x, y, z) (Shepperd's method)."""
-    tr = R[0] + R[4] + R[8]
-    if tr > 0.0:
-        s = math.sqrt(tr + 1.0) * 2.0
-        q[0], q[1] = 0.25 * s, (R[7] - R[5]) / s
-        q[2], q[3] = (R[2] - R[6]) / s, (R[3] - R[1]) / s
-    elif R[0] > R[4] and R[0] > R[8]:
-        s = math.sqrt(1.0 + R[0] - R[4] - R[8]) * 2.0
-        q[0], q[1] = (R[7] - R[5]) / s, 0.25 * s
-        q[2], q[3] = (R[1] + R[3]) / s, (R[2] + R[6]) / s
-    elif R[4] > R[8]:
-        s = math.sqrt(1.0 + R[4] - R[0] - R[8]) * 2.0
-        q[0], q[1] = (R[2] - R[6]) / s, (R[1] + R[3]) / s
-        q[2], q[3] = 0.25 * s, (R[5] + R[7]) / s
-    else:
-        s = math.sqrt(1.0 + R[8] - R[0] - R[4]) * 2.0
-        q[0], q[1] = (R[3] - R[1]) / s, (R[2] + R[6]) / s
-        q[2], q[3] = (R[5] + R[7]) / s, 0.25 * s
-
-
-@njit(cache=True)
-def _nees15(x, P, tr, q_t, dth, e, L, y):  # pragma: no cover
-    """eᵀ P⁻¹ e of one row's core state against the truth ``tr`` (a ring row): e = [p, v,
-    Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the IMU's walked biases of that
-    tick (ring 23:29)."""
-    if not np.isfinite(tr[17]):
-        e[0] = np.nan
-        return np.nan
-    _rot_to_quat(tr[7:16], q_t)
-    quat_log_err(x[6:10], q_t, dth)
-    for a in range(3):
-        e[a] = tr[17 + a] - x[a]
-        e[3 + a] = tr[20 + a] - x[3 + a]
-        e[6 + a] = dth[a]
-        e[9 + a] = tr[23 + a] - x[10 + a]
-        e[12 + a] = tr[26 + a] - x[13 + a]
-    return quad_inv(P, e, e.shape[0], L, y)
-
-
-@njit(cache=True)
-def quad_inv_at(P, e, o, n, L, y, Pb, eb):  # pragma: no cover
-    """:func:`quad_inv` of the diagonal block ``P[o:o+n, o:o+n]`` with ``e[o:o+n]`` (the
-    block's own NEES: its marginal covariance); ``Pb`` (≥ n, ≥ n), ``eb`` (≥ n): scratch."""
-    for a in range(n):
-        eb[a] = e[o + a]
-        for b in range(n):
-            Pb[a, b] = P[o + a, o + b]
-    return quad_inv(Pb, eb, n, L, y)
-
-
-@njit(cache=True)
-def quad_inv(P, e, n, L, y):  # pragma: no cover
-    """eᵀ P⁻¹ e over the leading ``n`` × ``n`` block of a symmetric positive definite ``P``:
-    Cholesky P = L Lᵀ into the scratch ``L``, forward substitution L y = e (scratch ``y``),
-    then yᵀ y. Allocates nothing; NaN when the block is not positive definite."""
-    for j in range(n):
-        d = P[j, j]
-        for m in range(j):
-            d -= L[j, m] * L[j, m]
-        if not d > 0.0:
-            return np.nan
-        L[j, j] = math.sqrt(d)
-        for i in range(j + 1, n):
-            s = P[i, j]
-            for m in range(j):
-                s -= L[i, m] * L[j, m]
-            L[i, j] = s / L[j, j]
-    q = 0.0
-    for i in range(n):
-        s = e[i]
-        for m in range(i):
-            s -= L[i, m] * y[m]
-        y[i] = s / L[i, i]
-        q += y[i] * y[i]
-    return q
-
-
-@njit(cache=True)
-def _row_errors(x, p, v, Rt, Re, out):  # pragma: no cover
-    """Horizontal position, 3-D velocity, tilt (angle between the body z axes) and yaw errors
-    of one row's output against the truth of the tick."""
-    quat_to_rot(x[6:10], Re)
-    dx, dy = x[0] - p[0], x[1] - p[1]
-    out[0] = math.sqrt(dx * dx + dy * dy)
-    s = 0.0
-    for a in range(3):
-        s += (x[3 + a] - v[a]) ** 2
-    out[1] = math.sqrt(s)
-    cz = Re[2] * Rt[2] + Re[5] * Rt[5] + Re[8] * Rt[8]
-    out[2] = math.acos(min(1.0, max(-1.0, cz)))
-    ye = math.atan2(Re[3], Re[0]) - math.atan2(Rt[3], Rt[0])
-    out[3] = abs(math.atan2(math.sin(ye), math.cos(ye)))
-
-
-@njit(cache=True)
-def _outputs(xo, xc, P, nis, core, k0, k, nr, flown, act, init, gnss, p, v, Rt, ring,
-             err, fix_k, nees, n_fix, p_out, v_out, R_out, imu, w_out,
-             cvar):  # pragma: no cover
-    """The flown row's (p, v, R) per vehicle and the bias-corrected rates ω̃ − b̂_g (the raw
-    gyro before the filter is initialised); per row the tick's errors (:func:`_row_errors`)
-    and, at a fix, the record ``nees[i, fix, :, row]`` (columns ``_N_*``): the NEES of the
-    core's 15-state error against the truth of the core's tick (:func:`_nees15`), of each
-    3-state block on its marginal covariance, and the fix's NIS (position, velocity, heading;
-    NaN for a part not in the fix). The covariance scored is the one the INS reports: its P
-    plus the considered GNSS variance ``cvar`` on the position (zero unless "consider")."""
-    B = ring.shape[1]
-    Re = np.empty(9)
-    q_t = np.empty(4)
-    dth = np.empty(3)
-    e = np.empty(15)
-    o = np.empty(4)
-    L, y = np.empty((15, 15)), np.empty(15)
-    Pb, eb = np.empty((3, 3)), np.empty(3)
-    Pc = np.empty((15, 15))
-    for i in range(act.shape[0]):
-        if not act[i]:
-            continue
-        for a in range(3):
-            w_out[i, a] = imu[i, 3 + a]
-        if not init[i]:
-            continue
-        if flown >= 0:
-            x = xo[i * nr + flown]
-            for a in range(3):
-                p_out[i, a] = x[a]
-                v_out[i, a] = x[3 + a]
-                w_out[i, a] = imu[i, 3 + a] - x[13 + a]
-            quat_to_rot(x[6:10], R_out[i])
-        rec = n_fix[i]
-        at_fix = np.isfinite(gnss[i, 0]) and rec < fix_k.shape[1]
-        if at_fix:
-            fix_k[i, rec] = k
-            n_fix[i] = rec + 1
-        for j in range(nr):
-            row = i * nr + j
-            _row_errors(xo[row], p[i], v[i], Rt[i], Re, o)
-            for c in range(4):
-                err[k, i, c, j] = o[c]
-            if at_fix:
-                tr = ring[i, (k0[i] + core[row]) % B]
-                rc = nees[i, rec, :, j]
-                for a in range(15):  # loops: numba's slice assignment compiles slowly
-                    for b in range(15):
-                        Pc[a, b] = P[row, a, b]
-                for a in range(3):
-                    Pc[a, a] += cvar[i, a]
-                rc[_N_NEES15] = _nees15(xc[row], Pc, tr, q_t, dth, e, L, y)
-                rc[_N_NISP] = nis[row, 0]
-                rc[_N_NISV] = nis[row, 1]
-                rc[_N_NISY] = nis[row, 2]
-                rc[_N_GATE] = nis[row, 8]
-                if np.isfinite(e[0]):   # each 3-state block alone (3 dof)
-                    for b in range(5):
-                        rc[_N_POS + b] = quad_inv_at(Pc, e, 3 * b, eb.shape[0], L, y, Pb, eb)
-                    rc[_N_NOTPD] = 0.0 if np.isfinite(rc[_N_NEES15]) else 1.0
