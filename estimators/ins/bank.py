@@ -8,35 +8,19 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..pca import PCA_MODE
+from . import layout
 from .config import DEG, RULE_CODE, RULES, INSConfig
 from .fusion import step_kernel
-from .layout import (
-    DG,
-    DG_GATE,
-    DG_RN,
-    DG_RSUM,
-    DG_S2,
-    GIN,
-    INTS,
-    INTS_CORE,
-    INTS_GREJP,
-    INTS_GREJV,
-    INTS_GREJY,
-    INTS_GRESET,
-    INTS_LATE,
-    INTS_MST,
-    INTS_NGNSS,
-    INTS_NOW,
-    INTS_NRAD,
-    INTS_QDROP,
-    INTS_RDROP,
-    PRM_B,
-    REC,
-    SCRATCH,
-    W_NAN,
-)
 
-__all__ = ["BatchINS", "INS"]
+__all__ = ["COUNTERS", "BatchINS", "INS"]
+
+#: the keys of :attr:`BatchINS.counters`: the field of :data:`layout.INTS` each reads, and the
+#: slot in it
+COUNTERS = {"gnss_fused": ("ngnss", 0), "radar_fused": ("nrad", 0), "radar_dropped": ("rdrop", 0),
+            "late": ("late", 0), "queue_full": ("qdrop", 0), "mckf_n_iter": ("mst", 1),
+            "mckf_rejected": ("mst", 2), "mckf_recovered": ("mst", 3),
+            "gate_rejected_pos": ("grejp", 0), "gate_rejected_vel": ("grejv", 0),
+            "gate_rejected_yaw": ("grejy", 0), "gate_resets": ("greset", 0)}
 
 
 # ------------------------------------------------------------------------ classes
@@ -61,17 +45,17 @@ class BatchINS:
         self.NV, self.rules = int(n_vehicles), tuple(rules)
         N = self.N = self.NV * len(rules)
         self.prm = cfg.prm()
-        B = int(self.prm[PRM_B])
+        B = int(self.prm[layout.PRM_B])
         self.x_core = np.zeros((N, 16))
         self.x_core[:, 6] = 1.0
         self.P = np.tile(np.eye(15), (N, 1, 1))
         self.x_out = self.x_core.copy()
         self._ib = np.zeros((N, B, 6))
-        self._ints = np.zeros((N, INTS.size), dtype=np.int64)
-        self._mq = np.zeros((N, cfg.queue, REC.size))
-        self._dg = np.full((N, DG.size), np.nan)
-        self._dg[:, DG_S2] = 1.0
-        self._dg[:, DG_RSUM:DG_RN + 1] = 0.0
+        self._ints = np.zeros((N, layout.INTS.size), dtype=np.int64)
+        self._mq = np.zeros((N, cfg.queue, layout.REC.size))
+        self._dg = np.full((N, layout.DG.size), np.nan)
+        self._dg[:, layout.DG_S2] = 1.0
+        self._dg[:, layout.DG_RSUM:layout.DG_RN + 1] = 0.0
         mpar, ipar = cfg.mckf_params()
         self._mpar = np.tile(mpar, (N, 1))
         self._ipar = np.tile(ipar, (N, 1))
@@ -84,11 +68,11 @@ class BatchINS:
         self._popt = np.array([Nw, L, r, PCA_MODE[mode], int(any_pca)], dtype=np.int64)
         self._pbuf = np.zeros((self.NV, 3, 2 * Nw))
         self._pcs = np.zeros((self.NV, 2), dtype=np.int64)
-        self._no_g = np.full((self.NV, GIN.size), np.nan)
+        self._no_g = np.full((self.NV, layout.GIN.size), np.nan)
         self._no_r = np.full((self.NV, 3), np.nan)
         self._no_imu = np.zeros((self.NV, 6))
-        self._fb = np.empty(SCRATCH.size)
-        self._fb[W_NAN:W_NAN + 3] = np.nan
+        self._fb = np.empty(layout.SCRATCH.size)
+        self._fb[layout.W_NAN:layout.W_NAN + 3] = np.nan
 
     # -- state ------------------------------------------------------------------------------
     def reset(self, p, v, q, ba=None, bg=None, P0=None) -> None:
@@ -107,8 +91,8 @@ class BatchINS:
         self._ib[:] = 0.0
         self._ints[:] = 0
         self._dg[:] = np.nan
-        self._dg[:, DG_S2] = 1.0
-        self._dg[:, DG_RSUM:DG_RN + 1] = 0.0
+        self._dg[:, layout.DG_S2] = 1.0
+        self._dg[:, layout.DG_RSUM:layout.DG_RN + 1] = 0.0
         self._pcs[:] = 0
 
     def reset_vehicle(self, iv: int, p, v, q, ba=None, bg=None, P0=None) -> None:
@@ -128,8 +112,8 @@ class BatchINS:
         self._ib[rows] = 0.0
         self._ints[rows] = 0
         self._dg[rows] = np.nan
-        self._dg[rows, DG_S2] = 1.0
-        self._dg[rows, DG_RSUM:DG_RN + 1] = 0.0
+        self._dg[rows, layout.DG_S2] = 1.0
+        self._dg[rows, layout.DG_RSUM:layout.DG_RN + 1] = 0.0
         self._pcs[iv] = 0
 
     # -- ticks ------------------------------------------------------------------------------
@@ -164,7 +148,7 @@ class BatchINS:
     def gnss_row(pos=None, vel=None, yaw=None, var_pos=(1e-4,) * 3, var_vel=(1e-4,) * 3,
                  var_yaw=(0.5 * DEG) ** 2, age_s: float = 0.0) -> np.ndarray:
         """One ``gnss`` input row (absent parts NaN)."""
-        g = np.full(GIN.size, np.nan)
+        g = np.full(layout.GIN.size, np.nan)
         g[0] = age_s
         if pos is not None:
             g[1:4] = pos
@@ -178,11 +162,11 @@ class BatchINS:
     # -- views ------------------------------------------------------------------------------
     @property
     def now_tick(self) -> np.ndarray:
-        return self._ints[:, INTS_NOW]
+        return self._ints[:, layout.INTS_NOW]
 
     @property
     def core_tick(self) -> np.ndarray:
-        return self._ints[:, INTS_CORE]
+        return self._ints[:, layout.INTS_CORE]
 
     @property
     def nis(self) -> np.ndarray:
@@ -190,24 +174,20 @@ class BatchINS:
 
     @property
     def counters(self) -> dict[str, np.ndarray]:
-        i = self._ints
-        return {"gnss_fused": i[:, INTS_NGNSS], "radar_fused": i[:, INTS_NRAD],
-                "radar_dropped": i[:, INTS_RDROP], "late": i[:, INTS_LATE],
-                "queue_full": i[:, INTS_QDROP], "mckf_n_iter": i[:, INTS_MST + 1],
-                "mckf_rejected": i[:, INTS_MST + 2], "mckf_recovered": i[:, INTS_MST + 3],
-                "gate_rejected_pos": i[:, INTS_GREJP], "gate_rejected_vel": i[:, INTS_GREJV],
-                "gate_rejected_yaw": i[:, INTS_GREJY], "gate_resets": i[:, INTS_GRESET]}
+        """(N,) views of the rows' counters (:data:`COUNTERS`)."""
+        ints, off = self._ints, layout.INTS.offset
+        return {k: ints[:, off[f] + j] for k, (f, j) in COUNTERS.items()}
 
     @property
     def gate_state(self) -> np.ndarray:
         """(N,) the last fix's position per row: 0 fused, 1 rejected by the gate, 2 rejected
         and reset to the receiver (NaN: no position in the last fix)."""
-        return self._dg[:, DG_GATE]
+        return self._dg[:, layout.DG_GATE]
 
     @property
     def radar_nis(self) -> np.ndarray:
         """(N, 2) the radar NIS summed over the fused ranges, and their number."""
-        return self._dg[:, DG_RSUM:DG_RN + 1]
+        return self._dg[:, layout.DG_RSUM:layout.DG_RN + 1]
 
 
 class INS:
@@ -218,7 +198,7 @@ class INS:
     def __init__(self, cfg: INSConfig | None = None, rule: str = "kf") -> None:
         self.batch = BatchINS(1, cfg, (rule,))
         self.cfg, self.rule = self.batch.cfg, rule
-        self._g = np.full((1, GIN.size), np.nan)
+        self._g = np.full((1, layout.GIN.size), np.nan)
         self._r = np.full((1, 3), np.nan)
         self._u = np.zeros((1, 6))
 

@@ -8,27 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .layout import (
-    PRM,
-    PRM_B,
-    PRM_COSMAX,
-    PRM_D,
-    PRM_DELAYED,
-    PRM_DT,
-    PRM_G,
-    PRM_GATE,
-    PRM_GRESET,
-    PRM_QBA,
-    PRM_QBG,
-    PRM_QC,
-    PRM_QT,
-    PRM_QV,
-    PRM_RANT,
-    PRM_RB,
-    PRM_RMAX,
-    PRM_RRAD,
-    PRM_ZG,
-)
+from . import layout
 
 __all__ = ["DEG", "G_STD", "INS_RECOVERY", "KERNELS", "RULES", "RULE_CODE", "INSConfig"]
 
@@ -123,27 +103,28 @@ class INSConfig:
         return int(round(self.delay_s / self.dt)) if self.delayed else 0
 
     def prm(self) -> np.ndarray:
-        p = np.zeros(PRM.size)
+        p = np.zeros(layout.PRM.size)
         dt = self.dt
-        p[PRM_DT], p[PRM_G] = dt, self.gravity
-        p[PRM_QV] = (self.accel_sigma * dt) ** 2
-        p[PRM_QT] = (self.gyro_sigma * dt) ** 2
-        p[PRM_QBA] = self.accel_bias_rw**2 * dt
-        p[PRM_QBG] = self.gyro_bias_rw**2 * dt
-        p[PRM_RANT:PRM_RANT + 3] = self.lever_arm
+        p[layout.PRM_DT], p[layout.PRM_G] = dt, self.gravity
+        p[layout.PRM_QV] = (self.accel_sigma * dt) ** 2
+        p[layout.PRM_QT] = (self.gyro_sigma * dt) ** 2
+        p[layout.PRM_QBA] = self.accel_bias_rw**2 * dt
+        p[layout.PRM_QBG] = self.gyro_bias_rw**2 * dt
+        p[layout.PRM_RANT:layout.PRM_RANT + 3] = self.lever_arm
         b = np.asarray(self.heading_baseline, dtype=float)
-        p[PRM_RB:PRM_RB + 3] = b / np.linalg.norm(b)
-        p[PRM_RRAD:PRM_RRAD + 3] = self.radar_offset
-        p[PRM_ZG] = self.ground_z
-        p[PRM_COSMAX] = math.cos(self.radar_max_tilt_deg * DEG)
-        p[PRM_RMAX] = self.radar_max_range
+        p[layout.PRM_RB:layout.PRM_RB + 3] = b / np.linalg.norm(b)
+        p[layout.PRM_RRAD:layout.PRM_RRAD + 3] = self.radar_offset
+        p[layout.PRM_ZG] = self.ground_z
+        p[layout.PRM_COSMAX] = math.cos(self.radar_max_tilt_deg * DEG)
+        p[layout.PRM_RMAX] = self.radar_max_range
         D = self.delay_ticks()
-        p[PRM_D], p[PRM_DELAYED], p[PRM_B], p[PRM_QC] = D, float(self.delayed), D + 1, self.queue
+        p[layout.PRM_D], p[layout.PRM_DELAYED] = D, float(self.delayed)
+        p[layout.PRM_B], p[layout.PRM_QC] = D + 1, self.queue
         if not (self.gate_sigma > 0 and self.gate_reset_s > 0):
             raise ValueError(f"gate_sigma and gate_reset_s must be > 0 (inf = off), got "
                              f"{self.gate_sigma!r}, {self.gate_reset_s!r}")
-        p[PRM_GATE] = self.gate_sigma
-        p[PRM_GRESET] = self.gate_reset_s / dt
+        p[layout.PRM_GATE] = self.gate_sigma
+        p[layout.PRM_GRESET] = self.gate_reset_s / dt
         return p
 
     def kernel_widths(self) -> np.ndarray:
