@@ -2,9 +2,16 @@
 
 Each kernel loops over the vehicles of a batch and touches row ``i`` only, so a vehicle's
 results do not depend on its neighbours (bit-identical alone or in any batch).
+
+The long argument lists are declared once, by name, as named tuples (:class:`GuardRows`,
+:class:`PoseRows`, :class:`RefRows`, :class:`RecordRow`); a caller passes each as a plain
+tuple in field order and the kernel names it again (numba types a plain tuple of arrays on
+its fast path: :mod:`ag_uav.navigation.ins_kernels`).
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -23,16 +30,83 @@ def zeros_touched(shape: tuple[int, ...]) -> np.ndarray:
 #: crash codes of :func:`tick_in`
 OK, NONFINITE, TILT, BOX = 0, 1, 2, 3
 _NONFINITE, _TILT, _BOX = NONFINITE, TILT, BOX
+#: :func:`tick_in`'s return bits: some crash code set, some vehicle near the ground, some
+#: vehicle active
+CRASHED, NEAR_GROUND, ACTIVE = 1, 2, 4
+
+
+class GuardRows(NamedTuple):
+    """The guard's rows (N vehicles): ``act`` the active ones, ``n_ticks`` the ticks each
+    flies, ``box`` (N, 5) the bounding box x0, y0, x1, y1, z_max, the crash ``code``, the
+    lift-off latch ``airborne``, ``hover_z`` the body height on the skids, ``low`` near the
+    ground this tick."""
+
+    act: np.ndarray
+    n_ticks: np.ndarray
+    box: np.ndarray
+    code: np.ndarray
+    airborne: np.ndarray
+    hover_z: np.ndarray
+    low: np.ndarray
+
+
+class PoseRows(NamedTuple):
+    """The pose read from the state rows: ``p``, ``v`` (N, 3), the quaternion ``quat``
+    (N, 4; w, x, y, z), ``R`` (N, 9; row-major body → world) and the body rates ``omega``."""
+
+    p: np.ndarray
+    v: np.ndarray
+    quat: np.ndarray
+    R: np.ndarray
+    omega: np.ndarray
+
+
+class RefRows(NamedTuple):
+    """The reference: the table ``ref_tab`` (refs, ticks, 12), each vehicle's row of it
+    ``ref_ids``, and the tick's ``rp``, ``rv``, ``ra`` (N, 3), ``yaw`` and ``spray`` (N,)."""
+
+    ref_tab: np.ndarray
+    ref_ids: np.ndarray
+    rp: np.ndarray
+    rv: np.ndarray
+    ra: np.ndarray
+    yaw: np.ndarray
+    spray: np.ndarray
+
+
+class RecordRow(NamedTuple):
+    """What a tick's record row holds (:data:`~ag_uav.engine.loop.REC_COLUMNS`): ``p``, ``v``,
+    the reference ``rp``, the fed-back ``p_fb``, the wind ``w`` (N, 3), the rotor commands
+    ``f`` (N, 4), ``spray`` (N,), and the reference ``ref_tab`` with each vehicle's
+    ``ref_ids``."""
+
+    p: np.ndarray
+    v: np.ndarray
+    rp: np.ndarray
+    p_fb: np.ndarray
+    w: np.ndarray
+    f: np.ndarray
+    spray: np.ndarray
+    ref_tab: np.ndarray
+    ref_ids: np.ndarray
+
 
 @njit(cache=True)
-def tick_in(k, S, act, n_ticks, iq, iv, p, v, quat, R, omega, box, cos_tilt, code, airborne,
-             hover_z, low, ref_tab, ref_ids, rp, rv, ra, yaw, spray):  # pragma: no cover
-    """Start of tick ``k`` for every active vehicle: retire finished ones; state rows → p, v,
-    quaternion, R (row-major body → world), body rates; crash codes; the lift-off latch; the
-    near-ground flag (contacts are checked there); the reference row.
+def tick_in(k, S, iq, iv, cos_tilt, guard, pose, ref):  # pragma: no cover
+    """Start of tick ``k`` for every active vehicle: retire finished ones; state rows (``S``,
+    position at column ``iq``, velocity at ``iv``) → p, v, quaternion, R (row-major body →
+    world), body rates; crash codes (tilt: ``R₂₂ < cos_tilt``); the lift-off latch; the
+    near-ground flag (contacts are checked there); the reference row. ``guard``:
+    :class:`GuardRows`, ``pose``: :class:`PoseRows`, ``ref``: :class:`RefRows` (plain tuples).
 
-    Returns flags: 1 some crash code set, 2 some vehicle near the ground, 4 some vehicle active.
+    Returns :data:`CRASHED` | :data:`NEAR_GROUND` | :data:`ACTIVE` as they hold.
     """
+    g, po, rf = GuardRows(*guard), PoseRows(*pose), RefRows(*ref)
+    act, n_ticks, box, code, airborne, hover_z, low = (g.act, g.n_ticks, g.box, g.code,
+                                                        g.airborne, g.hover_z, g.low)
+    p, v, quat, R, omega = po.p, po.v, po.quat, po.R, po.omega
+    ref_tab, ref_ids, rp, rv, ra, yaw, spray = (rf.ref_tab, rf.ref_ids, rf.rp, rf.rv, rf.ra,
+                                                rf.yaw, rf.spray)
     flags = 0
     for i in range(S.shape[0]):
         if act[i] and n_ticks[i] <= k:
@@ -40,7 +114,7 @@ def tick_in(k, S, act, n_ticks, iq, iv, p, v, quat, R, omega, box, cos_tilt, cod
         low[i] = False
         if not act[i]:
             continue
-        flags |= 4
+        flags |= ACTIVE
         px, py, pz = S[i, iq], S[i, iq + 1], S[i, iq + 2]
         w, x, y, z = S[i, iq + 3], S[i, iq + 4], S[i, iq + 5], S[i, iq + 6]
         p[i, 0], p[i, 1], p[i, 2] = px, py, pz
@@ -68,13 +142,13 @@ def tick_in(k, S, act, n_ticks, iq, iv, p, v, quat, R, omega, box, cos_tilt, cod
               or pz > box[i, 4]):
             code[i] = _BOX
         if code[i] != 0:
-            flags |= 1
+            flags |= CRASHED
             continue
         if not airborne[i] and pz > hover_z[i] + 0.3:
             airborne[i] = True
         if airborne[i] and pz < hover_z[i] + 1.5:
             low[i] = True
-            flags |= 2
+            flags |= NEAR_GROUND
         row = ref_tab[ref_ids[i], k]
         for j in range(3):
             rp[i, j] = row[j]
@@ -102,9 +176,13 @@ def hold_on_ground(act, airborne, pf, vf, rp, rv, p_out, v_out):  # pragma: no c
 
 
 @njit(cache=True)
-def tick_out(rec, k, act, p, v, rp, pfb, ref_tab, ref_ids, spray, f, w,
-              flown):  # pragma: no cover
-    """Row ``k`` of every active vehicle's record (see :data:`REC_COLUMNS`)."""
+def tick_out(rec, k, act, flown, row):  # pragma: no cover
+    """Row ``k`` of every active vehicle's record ``rec`` (see
+    :data:`~ag_uav.engine.loop.REC_COLUMNS`) from ``row`` (:class:`RecordRow`, a plain tuple);
+    ``flown`` counts each vehicle's ticks."""
+    rr = RecordRow(*row)
+    p, v, rp, pfb, w, f, spray = rr.p, rr.v, rr.rp, rr.p_fb, rr.w, rr.f, rr.spray
+    ref_tab, ref_ids = rr.ref_tab, rr.ref_ids
     for i in range(p.shape[0]):
         if not act[i]:
             continue

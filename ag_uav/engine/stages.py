@@ -21,7 +21,21 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from .kernels import BOX, NONFINITE, hold_on_ground, imu_record, tick_in, tick_out, zeros_touched
+from .kernels import (
+    ACTIVE,
+    BOX,
+    CRASHED,
+    NEAR_GROUND,
+    NONFINITE,
+    GuardRows,
+    PoseRows,
+    RefRows,
+    hold_on_ground,
+    imu_record,
+    tick_in,
+    tick_out,
+    zeros_touched,
+)
 from .physics import ground_contact
 
 #: the loop record's columns (one row per control tick)
@@ -97,24 +111,29 @@ class Guard:
         self.contact_data = [mujoco.MjData(m) for m in self.models]
         self.skids = [set(v.skid_geoms) for v in vehicles]
         self.ground = [v.ground_geom for v in vehicles]
+        #: tick_in's arguments (engine.kernels: declared by name, passed as plain tuples)
+        self.rows = (tuple(GuardRows(b.act, b.n_ticks, b.box, b.code, b.airborne, b.hover_z,
+                                     b.low)),
+                     tuple(PoseRows(b.p, b.v, b.quat, b.R, b.omega)),
+                     tuple(RefRows(b.ref_tab, b.ref_ids, b.rp, b.rv, b.ra, b.yaw, b.spray)))
 
     def start(self, k: int, t: float) -> bool:
         """False when no vehicle is left to fly."""
         b = self.b
-        flags = tick_in(k, b.S, b.act, b.n_ticks, self.iq, self.iv, b.p, b.v, b.quat, b.R,
-                        b.omega, b.box, self.COS_TILT, b.code, b.airborne, b.hover_z, b.low,
-                        b.ref_tab, b.ref_ids, b.rp, b.rv, b.ra, b.yaw, b.spray)
-        if flags & 1:
+        guard, pose, ref = self.rows
+        flags = tick_in(k, b.S, self.iq, self.iv, self.COS_TILT, guard, pose, ref)
+        if flags & CRASHED:
             for i in np.flatnonzero(b.code):
                 self._end(i, _crash_text(int(b.code[i]), t), t)
             b.code[:] = 0
-        if flags & 2:
+        if flags & NEAR_GROUND:
             for i in np.flatnonzero(b.low):
                 why = ground_contact(self.models[i], self.contact_data[i], b.S[i],
                                      self.ground[i], self.skids[i], b.v[i], t)
                 if why:
                     self._end(i, why, t)
-        return bool(flags & 4) and not ((flags & 3) and not b.act.any())
+        return bool(flags & ACTIVE) and not ((flags & (CRASHED | NEAR_GROUND))
+                                             and not b.act.any())
 
     def _end(self, i: int, why: str, t: float) -> None:
         b = self.b
@@ -434,8 +453,9 @@ class Recorder:
 
     def step(self, k: int) -> None:
         b = self.b
-        tick_out(self.rec, k, b.act, b.p, b.v, b.rp, b.p_fb, b.ref_tab, b.ref_ids, b.spray,
-                 b.f, b.w, b.flown)
+        # RecordRow's fields, as a plain tuple (b.f is the controller's new array each tick)
+        tick_out(self.rec, k, b.act, b.flown,
+                 (b.p, b.v, b.rp, b.p_fb, b.w, b.f, b.spray, b.ref_tab, b.ref_ids))
         if self.controls is not None:
             self.controls[k, :, :4] = b.f
             self.controls[k, :, 4:] = b.xf

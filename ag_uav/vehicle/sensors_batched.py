@@ -72,6 +72,7 @@ from ..world.wind import (
     WF_MY,
     WI_TURB,
     Wind,
+    WindRow,
     drag_rows,
     refill_row,
     wind_drag_rows,
@@ -134,6 +135,7 @@ class BatchWind:
         self._fs = fs
         self._ist = ist
         self._buf = buf
+        self._rows = tuple(WindRow(fs, ist, buf))  # wind_drag_rows' argument
         self._rngs = rngs
         n = fs.shape[0]
         self.n = n
@@ -203,8 +205,7 @@ class BatchWind:
         """
         act = _active(active, self._ones)
         dt = float(dt)
-        while wind_drag_rows(dt, z, v, c_lin, c_quad, act, self._fs, self._ist, self._buf,
-                                self.wind, self.force):
+        while wind_drag_rows(dt, z, v, c_lin, c_quad, act, self._rows, self.wind, self.force):
             self._refill(act)
         return self.wind, self.force
 

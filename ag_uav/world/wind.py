@@ -323,11 +323,14 @@ def wind_rows(dt: float, altitude: np.ndarray, airspeed: np.ndarray, active: np.
 
 @njit(cache=True)
 def wind_drag_rows(dt: float, z: np.ndarray, v: np.ndarray, c_lin: np.ndarray,
-                   c_quad: np.ndarray, active: np.ndarray, fs: np.ndarray, ist: np.ndarray,
-                   buf: np.ndarray, out: np.ndarray, force: np.ndarray) -> int:
+                   c_quad: np.ndarray, active: np.ndarray, rows: tuple, out: np.ndarray,
+                   force: np.ndarray) -> int:
     """:func:`wind_rows` at altitude ``max(z, 0)`` and airspeed ``|v_xy - mean_xy|`` (the
     engine's per-tick inputs), and the drag ``force`` (N, 3) of ``r = v - wind``
-    (:func:`drag_axis`)."""
+    (:func:`drag_axis`). ``rows``: the stacked wind rows, :class:`WindRow`'s fields as a plain
+    tuple (numba types a plain tuple of arrays on its fast path)."""
+    st = WindRow(*rows)
+    fs, ist, buf = st.fs, st.ist, st.buf
     need = wind_rows_need(active, ist)
     if need:
         return need
