@@ -168,19 +168,20 @@ def _fixed_point_gain(L, A, Brinv, Mi, s, q, Nm, V, K):
 
 
 @njit
-def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, fpar, ipar, w):
+def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, fpar, ipar, fw):
     """MCKF step 4 in whitened coordinates given L = chol(P̄) and G = B_r⁻¹ H; ``kx``, ``ky``,
     ``fpar``, ``ipar`` as :func:`mckf_update_row` (the floor, ε² and the iteration cap read
-    here), ``w`` its work (:func:`mckf_work_in`).  Writes x̂ into w's x̂, K̃ into w's K, C_x into
-    w's c (when more than one iteration ran) and √C_y into w's s; returns the number of
-    iterations.  Iteration 1 starts at x̂⁽⁰⁾ = x̄ (C_x = I, e_y = ν_w); each solves
-    T = A C_x⁻¹ Aᵀ, M = I + S T S, β = S M⁻¹ S ν_w, u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u; the stop rule
-    is ‖x̂⁽ᵗ⁾ − x̂⁽ᵗ⁻¹⁾‖² ≤ ε² max(‖x̂⁽ᵗ⁻¹⁾‖², 1) or t = max_iter; the next weights are
+    here); ``fw`` = (A, ν_w, T, M, M⁻¹, s, S ν_w, β, q, u, x̂, x̂ before, e, c, K̃, N, V), the
+    fixed point's part of the update's work (:func:`mckf_work_in`: only what it uses, as a
+    call passes each array's fields).  Writes x̂, K̃, C_x into c (when more than one iteration
+    ran) and √C_y into s; returns the number of iterations.  Iteration 1 starts at
+    x̂⁽⁰⁾ = x̄ (C_x = I, e_y = ν_w); each solves T = A C_x⁻¹ Aᵀ, M = I + S T S,
+    β = S M⁻¹ S ν_w, u = C_x⁻¹ Aᵀ β, x̂ = x̄ + L u; the stop rule is
+    ‖x̂⁽ᵗ⁾ − x̂⁽ᵗ⁻¹⁾‖² ≤ ε² max(‖x̂⁽ᵗ⁻¹⁾‖², 1) or t = max_iter; the next weights are
     e_y = ν_w − A u, c_j = max(exp(u_j² kx_j), floor), q = 1/c, s_i = exp(e_y,i² ky_i).
     Finally K̃ = L C_x⁻¹ Aᵀ N, N = S M⁻¹ S B_r⁻¹.  One straight loop (helper calls inside the
     iteration measured slower)."""
-    (_, _, _, _, K, xn, _, _, _, _, _, _, _, A, nw, T, M, Mi, s, sn, be, q, u, o, e, c, Nm, V,
-     _, _, _, _) = w
+    A, nw, T, M, Mi, s, sn, be, q, u, xn, o, e, c, K, Nm, V = fw
     floor, eps2, max_iter = fpar[0], fpar[1], ipar[0]
     n = xb.shape[0]
     m = nu.shape[0]
@@ -297,14 +298,13 @@ def mckf_work(n, m):
 
 
 @njit
-def _recover(x, P, R, H, nu, fpar, ipar, ist, w):
-    """The lock-out recovery rule after a rejected fix (count in ist[0] already raised; ``w``
-    the update's work, :func:`mckf_work_in`, holding P̄ Hᵀ and S⁻¹ of the innovation):
+def _recover(x, P, R, H, nu, fpar, ipar, ist, rw):
+    """The lock-out recovery rule after a rejected fix (count in ist[0] already raised; ``rw``
+    = (P̄ Hᵀ, S⁻¹ of the innovation, K, x̂, Pa, Pa Hᵀ, Sa, Sa⁻¹) of the update's work):
     ``"kf"`` (ipar[2] = 1) K = P̄ Hᵀ S⁻¹, x̂ = x̄ + K ν; ``"inflate"`` (2) the same on α P̄,
     α = inflate^j, if νᵀ (H α P̄ Hᵀ + R)⁻¹ ν ≤ gate.  Returns 0 (no recovery), 1 (recovered on
     P̄) or 2 (recovered on α P̄, now in w's Pa: the prior of the Joseph update)."""
-    (_, PHT, _, Si, K, xo, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _, _,
-     Pa, PaHT, Sa, Sai) = w
+    PHT, Si, K, xo, Pa, PaHT, Sa, Sai = rw
     if ist[0] < ipar[1]:
         return 0
     if ipar[2] == 1:
@@ -339,8 +339,8 @@ def mckf_update_row(x, P, R, H, z, mp, st, w):
     a fix w holds ν (w[0]), S (w[2]), K̃ (w[4]) and C_x (w[25], valid when n_iter > 1)."""
     kx, ky, fpar, ipar = mp
     ist, wy = st
-    (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, _, _, _, _, _, s, _, _, _, _, _, _,
-     _, _, _, Pa, _, _, _) = w
+    (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn, be, q, u,
+     o, e, c, Nm, V, Pa, PaHT, Sa, Sai) = w
     v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
     if not math.isfinite(v):
         return v
@@ -348,7 +348,8 @@ def mckf_update_row(x, P, R, H, z, mp, st, w):
     mat_mul(Brinv, H, G)
     if not chol(P, Lp, REL_PIVOT):
         safe_cholesky_into(P, Lp)
-    it = mckf_fixed_point_row(x, Lp, nu, Brinv, G, kx, ky, fpar, ipar, w)
+    it = mckf_fixed_point_row(x, Lp, nu, Brinv, G, kx, ky, fpar, ipar,
+                              (Aw, nw, T, M, Mi, s, sn, be, q, u, xo, o, e, c, K, Nm, V))
     wmin = np.inf
     for a in range(nu.shape[0]):
         wy[a] = s[a] * s[a]
@@ -358,7 +359,7 @@ def mckf_update_row(x, P, R, H, z, mp, st, w):
     rec = 0
     if rejected:
         ist[0] += 1
-        rec = _recover(x, P, R, H, nu, fpar, ipar, ist, w)
+        rec = _recover(x, P, R, H, nu, fpar, ipar, ist, (PHT, Si, K, xo, Pa, PaHT, Sa, Sai))
     else:
         ist[0] = 0
     copy_vec(xo, x)
