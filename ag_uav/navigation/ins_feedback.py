@@ -524,8 +524,8 @@ class BatchInsFeedback:
                 self.n_upd += 1
             self.n_calls += 1
             # BankView's and Pose's fields, as plain tuples
-            bank = (self.bank.x_out, self.bank.x_core, self.bank.P, self.bank._dg,
-                    self.bank.core_tick)
+            bk = self.bank
+            bank = (bk.x_out, bk.x_core, bk.P, bk.nis, bk.gate_state, bk.core_tick)
             outputs(bank, (p, v, self.R_true, act), self.scores, self.outs, k, self.nr,
                     self.flown)
         if flags & NOT_INITIALISED:

@@ -18,7 +18,6 @@ from typing import NamedTuple
 import numpy as np
 
 from estimators.ins import quat_log_err
-from estimators.ins.layout import DG_GATE, DG_NISP, DG_NISV, DG_NISY
 
 from .._jit import njit
 
@@ -84,13 +83,15 @@ class SensorRows(NamedTuple):
 class BankView(NamedTuple):
     """What :func:`outputs` reads of the bank (:class:`estimators.ins.BatchINS`, rows =
     vehicles × rules): the output nominal ``x_out`` (rows, 16), the core ``x_core`` and ``P`` at
-    the fusion horizon, the diagnostics ``diag`` (rows, ``estimators.ins.layout.DG``) and each
-    row's core tick ``core_tick``."""
+    the fusion horizon, the last fix's NIS ``nis`` (rows, 4: position, velocity, heading,
+    radar), the gate's verdict on its position ``gate`` (rows,) and each row's core tick
+    ``core_tick``."""
 
     x_out: np.ndarray
     x_core: np.ndarray
     P: np.ndarray
-    diag: np.ndarray
+    nis: np.ndarray
+    gate: np.ndarray
     core_tick: np.ndarray
 
 
@@ -325,7 +326,7 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
     ``out``: :class:`Outputs` (plain tuples); ``nr`` rules a vehicle, ``flown`` the flown
     rule's index (< 0: none)."""
     bk, po, sc, o = BankView(*bank), Pose(*pose), Scores(*scores), Outputs(*out)
-    xo, xc, P, nis, core = bk.x_out, bk.x_core, bk.P, bk.diag, bk.core_tick
+    xo, xc, P, nis, gate, core = bk.x_out, bk.x_core, bk.P, bk.nis, bk.gate, bk.core_tick
     act, p, v, Rt = po.act, po.p, po.v, po.R
     ring, init, gnss, imu, cvar = sc.ring, sc.init, sc.gnss, sc.imu, sc.cvar
     err, fix_k, nees, n_fix, k0 = sc.err, sc.fix_k, sc.nees, sc.n_fix, sc.k0
@@ -372,10 +373,10 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
                 for a in range(3):
                     Pc[a, a] += cvar[i, a]
                 rc[N_NEES15] = nees15(xc[row], Pc, tr, q_t, dth, e, L, y)
-                rc[N_NISP] = nis[row, DG_NISP]
-                rc[N_NISV] = nis[row, DG_NISV]
-                rc[N_NISY] = nis[row, DG_NISY]
-                rc[N_GATE] = nis[row, DG_GATE]
+                rc[N_NISP] = nis[row, 0]
+                rc[N_NISV] = nis[row, 1]
+                rc[N_NISY] = nis[row, 2]
+                rc[N_GATE] = gate[row]
                 if np.isfinite(e[0]):   # each 3-state block alone (3 dof)
                     for b in range(5):
                         rc[N_POS + b] = quad_inv_at(Pc, e, 3 * b, eb.shape[0], L, y, Pb, eb)
