@@ -286,11 +286,13 @@ class BatchFilter:
                   mdl.pos_idx, mdl.vel_idx, mdl.dt)
         out.nis[:] = [f.nis for f in filters]
         out.y[:] = np.stack([f.y for f in filters])
-        out._from(filters)
+        out.adopt(filters)
         return out
 
-    def _from(self, filters: Sequence[Any]) -> None:
-        """Class-specific parameters and state (hook; each mixin extends it via super())."""
+    def adopt(self, filters: Sequence[Any]) -> None:
+        """Take the class-specific parameters and state of ``filters`` (one per row; each mixin
+        extends it via super()): :meth:`from_filters` calls it, and a caller that builds the
+        batch itself (without a motion model) calls it to copy the filters' options in."""
 
     # verbs -------------------------------------------------------------------------------------
     def predict(self, u: np.ndarray | None = None, active: np.ndarray | None = None) -> None:
@@ -389,8 +391,8 @@ class _MCKFMixin:
     n: int
     m: int
 
-    def _from(self, filters: Sequence[Any]) -> None:
-        super()._from(filters)  # type: ignore[misc]
+    def adopt(self, filters: Sequence[Any]) -> None:
+        super().adopt(filters)  # type: ignore[misc]
         N, n = self.N, self.n
         self._kx = np.empty((N, n))
         self._ky = np.empty((N, self.m))
@@ -448,8 +450,8 @@ class _PCAMixin:
     N: int
     m: int
 
-    def _from(self, filters: Sequence[Any]) -> None:
-        super()._from(filters)  # type: ignore[misc]
+    def adopt(self, filters: Sequence[Any]) -> None:
+        super().adopt(filters)  # type: ignore[misc]
         b0 = filters[0].pca
         for f in filters:
             b = f.pca

@@ -332,7 +332,6 @@ REACH_INS_LEFT: dict[str, int] = {
     "ag_uav/engine/spray_batched.py: sp._next_log": 3,
     "ag_uav/engine/spray_batched.py: sp._set_mass": 2,
     "ag_uav/jobs/bench_physics.py: sp._set_mass": 2,
-    "ag_uav/jobs/experiments/numerical/fast.py: bf._from": 1,
 }
 
 

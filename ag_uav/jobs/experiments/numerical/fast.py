@@ -113,7 +113,7 @@ def mckf_batch(m: Any, x0: np.ndarray, P0: np.ndarray, Z: np.ndarray,
     f = MCKF(F, H, Q, R, x0, P0, **options)
     bf = BatchMCKF(F, H, Q, np.broadcast_to(f.R, (B, nz, nz)), np.broadcast_to(f.x, (B, n)),
                    np.broadcast_to(f.P, (B, n, n)), [], [], 1.0)
-    bf._from([f] * B)
+    bf.adopt([f] * B)
     Zt = np.ascontiguousarray(np.asarray(Z, dtype=float).transpose(1, 0, 2))  # T × B × m
     out = np.empty((B, T, n))
     for k in range(T):
