@@ -328,10 +328,6 @@ PARAMETERS_LEFT: dict[str, int] = {
 }
 #: private reach-ins across modules today -> their occurrences
 REACH_INS_LEFT: dict[str, int] = {
-    "ag_uav/engine/spray_batched.py: sp._close_sortie": 1,
-    "ag_uav/engine/spray_batched.py: sp._next_log": 3,
-    "ag_uav/engine/spray_batched.py: sp._set_mass": 2,
-    "ag_uav/jobs/bench_physics.py: sp._set_mass": 2,
 }
 
 

@@ -25,7 +25,8 @@ BODY = ("body_mass", "body_inertia", "body_ipos", "body_subtreemass")
 
 
 class RecordingCascade:
-    """The two attributes Sprayer._set_mass writes, and reset(); records (mass, J) and resets."""
+    """The two attributes Sprayer.set_liquid_mass writes, and reset(); records (mass, J) and
+    resets."""
 
     def __init__(self):
         self.calls: list[tuple[float, tuple[float, float, float]]] = []
@@ -223,7 +224,7 @@ def _same_row(case: Case, scal_or_row: dict, batch: dict, i: int) -> None:
     for key in a1:
         np.testing.assert_array_equal(a1[key], a2[key], err_msg=key)
     for attr in ("tank", "energy_j", "energy_total_j", "litres_total", "cur", "mass_set",
-                 "gated_s", "dry_s", "_next_log"):
+                 "gated_s", "dry_s", "next_log"):
         assert getattr(s1, attr) == getattr(s2, attr), attr
     assert ref["calls"] == batch["calls"][i]
     for name in BODY:

@@ -39,7 +39,7 @@ def test_unknown_payload_leaves_the_controllers_model_unchanged():
 
 
 def test_the_spray_jobs_mass_updates_leave_the_unknown_payload_out():
-    """On a mission the tank's mass changes reach the controller (Sprayer._set_mass): it gets
+    """On a mission the tank's mass changes reach the controller (Sprayer.set_liquid_mass): it gets
     the liquid, never the unknown payload, while the physics carries both."""
     import mujoco
 
@@ -55,7 +55,7 @@ def test_the_spray_jobs_mass_updates_leave_the_unknown_payload_out():
     casc = make_cascade(cfg, veh)
     job = SprayJob(base_xy=np.zeros(2), sorties=[], fill_l=1.7, dry_mass_kg=6.47, service_s=0.0)
     sp = Sprayer(cfg, veh, data, casc, {}, job, 1, 0.01)
-    sp._set_mass(1.5)
+    sp.set_liquid_mass(1.5)
     assert casc.mass == pytest.approx(6.471 + 1.5, abs=1e-5)  # 1 g: the empty tank geom
     assert veh.model.body_subtreemass[veh.body_id] == pytest.approx(6.471 + 1.0 + 1.5, abs=1e-5)
 

@@ -95,7 +95,7 @@ def test_liquid_mass_set_at_run_time_equals_a_compiled_model():
     casc = make_cascade(cfg, veh)
     job = SprayJob(base_xy=np.zeros(2), sorties=[], fill_l=2.7, dry_mass_kg=6.47, service_s=0.0)
     sp = Sprayer(cfg, veh, data, casc, {}, job, 1, 0.01)
-    sp._set_mass(2.0)
+    sp.set_liquid_mass(2.0)
     assert casc.mass == pytest.approx(6.471 + 2.0, abs=1e-5)  # 1 g: the empty tank geom
     mujoco.mj_forward(veh.model, data)
 

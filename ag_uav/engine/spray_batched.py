@@ -6,17 +6,18 @@ The per-tick law (sortie table, tank and flow, nozzle gating by height, power fr
 states, energy, state of charge, per-tick records) is written once, in the compiled kernel
 :func:`_spray_kernel` (numba, no fastmath) that :class:`BatchSprayer` runs over all rows; one
 vehicle is a batch of one. The Sprayer keeps the setup, the liquid body
-(:meth:`Sprayer._set_mass <ag_uav.engine.sprayer.Sprayer._set_mass>`) and the reports. The
-independent plain-Python reference of the tick is ``tests/oracles/sprayer_ref.py``
+(:meth:`Sprayer.set_liquid_mass <ag_uav.engine.sprayer.Sprayer.set_liquid_mass>`) and the
+reports. The independent plain-Python reference of the tick is ``tests/oracles/sprayer_ref.py``
 (``tests/test_batched_spray.py`` compares them bit for bit). Python does only what happens on a
 few ticks, found from the kernel's per-row flags:
 
 * a sortie change: the finished sortie's dict gets its totals and ``t_end_s``, a new dict is
   appended (keys ``sortie, t_takeoff_s, litres, energy_j, min_soc, ran_dry_s, t_land_s``);
 * a liquid mass change (a refill, or the tank down by the threshold of 1 g, or empty): the
-  Sprayer's :meth:`~ag_uav.engine.sprayer.Sprayer._set_mass` runs for that vehicle (the MjModel
-  body updates); its cascade is replaced by a :class:`MassSink`, which forwards the composite
-  mass and the attitude inertia to the engine's ``set_mass(i, total_mass_kg, J_xyz)`` callback;
+  Sprayer's :meth:`~ag_uav.engine.sprayer.Sprayer.set_liquid_mass` runs for that vehicle (the
+  MjModel body updates); its cascade is replaced by a :class:`MassSink`, which forwards the
+  composite mass and the attitude inertia to the engine's ``set_mass(i, total_mass_kg, J_xyz)``
+  callback;
 * the optional log (``log.spray_row`` every 0.1 s).
 
 The per-sortie totals (litres, energy, minimum state of charge, ran-dry and landing times) are
@@ -249,7 +250,7 @@ def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab
 def _set_mass(sp: Sprayer, t: float, m_liq: float) -> None:
     """The liquid mass of ``sp``'s vehicle from tick time ``t`` on (recorded when the engine
     captures the flight for a physics replay)."""
-    sp._set_mass(m_liq)
+    sp.set_liquid_mass(m_liq)
     if sp.mass_events is not None:
         sp.mass_events.append((t, m_liq))
 
@@ -282,8 +283,9 @@ class _JSink:
 
 
 class MassSink:
-    """Stands in for a Sprayer's cascade: :meth:`Sprayer._set_mass` writes ``cascade.mass`` and
-    then ``cascade.attitude.J``; the second write calls ``set_mass(index, mass, J)``.
+    """Stands in for a Sprayer's cascade: :meth:`Sprayer.set_liquid_mass` writes
+    ``cascade.mass`` and then ``cascade.attitude.J``; the second write calls
+    ``set_mass(index, mass, J)``.
 
     The engine may pass ``MassSink(i, set_mass)`` as the ``cascade`` argument when it builds
     Sprayer i (its ``__init__`` then pushes the initial mass straight to the callback; use
@@ -383,7 +385,7 @@ class BatchSprayer:
         if push_initial:
             for sp in self.sprayers:
                 if sp.mass_set >= 0.0:
-                    sp._set_mass(sp.mass_set)
+                    sp.set_liquid_mass(sp.mass_set)
 
     @classmethod
     def from_sprayers(cls, sprayers: Sequence[Sprayer], set_mass: SetMass, *,
@@ -392,8 +394,9 @@ class BatchSprayer:
 
         ``set_mass(i, total_mass_kg, (Jx, Jy, Jz))`` receives vehicle i's composite mass and
         inertia (about the composite centre of mass) whenever its liquid mass changes; it is
-        what :meth:`Sprayer._set_mass` writes to ``cascade.mass`` and ``cascade.attitude.J``. Each
-        Sprayer's cascade is replaced by a :class:`MassSink` until :meth:`finish`.
+        what :meth:`Sprayer.set_liquid_mass` writes to ``cascade.mass`` and
+        ``cascade.attitude.J``. Each Sprayer's cascade is replaced by a :class:`MassSink` until
+        :meth:`finish`.
         ``push_initial``: call ``set_mass`` once per vehicle now with its current mass (what
         ``Sprayer.__init__`` gave its cascade); pass ``False`` when the Sprayers were built
         with ``MassSink(i, set_mass)`` as their cascade (they already pushed it).
@@ -472,7 +475,7 @@ class BatchSprayer:
                     per["min_soc"] = float(st[i, C_MINSOC])
                     per["ran_dry_s"] = _nan_none(st[i, C_RANDRY])
                     per["t_land_s"] = _nan_none(st[i, C_TLAND])
-                    sp._close_sortie(t)
+                    sp.close_sortie(t)
                 if fl & F_REFILL:
                     _set_mass(sp, t, float(st[i, S_MREFILL]))
                 s = int(self._ist[i, I_CUR])
@@ -486,15 +489,15 @@ class BatchSprayer:
         """The spray state row of the vehicles that have a log, every 0.1 s (at most; the log's
         own rate may be lower): filled in place by :func:`_spray_log_row`."""
         for i, sp in self._logged:
-            if not active[i] or not t >= sp._next_log:
+            if not active[i] or not t >= sp.next_log:
                 continue
-            sp._next_log = t + 0.1 - 1e-9
+            sp.next_log = t + 0.1 - 1e-9
             row = sp.log.spray_slot(t)
             if row is not None:
                 _spray_log_row(row, self._st, self._rec, self._tab, self._rec_on, self._ist, i,
                                int(self._off[i]) + self._k)
                 sp.log.spray_commit()
-        self._log_next = min((sp._next_log for i, sp in self._logged if active[i]),
+        self._log_next = min((sp.next_log for i, sp in self._logged if active[i]),
                              default=math.inf)
 
     # ------------------------------------------------------------------------------ the end

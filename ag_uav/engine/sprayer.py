@@ -3,7 +3,7 @@ itself (application, energy model, sorties) is planned before the flight by
 :mod:`ag_uav.world.spray_job`, whose docstring has the physics.
 
 :class:`Sprayer` holds one flight's setup and state, sets the liquid body's mass and inertia
-(:meth:`Sprayer._set_mass`) and reports (:meth:`Sprayer.summary`, :meth:`Sprayer.series`). The
+(:meth:`Sprayer.set_liquid_mass`) and reports (:meth:`Sprayer.summary`, :meth:`Sprayer.series`). The
 per-tick law (sortie table, nozzle gating by height, flow, tank, power, energy, state of charge,
 records) is written once, in :func:`ag_uav.engine.spray_batched._spray_kernel`, which
 :class:`~ag_uav.engine.spray_batched.BatchSprayer` runs over N Sprayers (one vehicle is a batch
@@ -82,12 +82,13 @@ class Sprayer:
         self.per: list[dict[str, Any]] = []
         self.gated_s = 0.0
         self.dry_s = 0.0
-        self._next_log = -math.inf
+        #: the time the next spray log row is due (the batch sprayer moves it on)
+        self.next_log = -math.inf
         #: (t, liquid kg) of every mass change in flight, when the engine captures the flight
         self.mass_events: list[tuple[float, float]] | None = None
-        self._set_mass(self.tank * self.rho)
+        self.set_liquid_mass(self.tank * self.rho)
 
-    def _set_mass(self, m_liq: float) -> None:
+    def set_liquid_mass(self, m_liq: float) -> None:
         """Liquid body mass and inertia (a box of liquid filling the tank's footprint from the
         bottom; parallel-axis terms about the composite centre of mass go to the controller)."""
         body_mass, inertia, ipos, subtree = self._mass_views
@@ -114,7 +115,8 @@ class Sprayer:
         self.cascade.attitude.J = (Ix + li[0] + dz2, Iy + li[1] + dz2, Iz + li[2])
         self.mass_set = m_liq
 
-    def _close_sortie(self, t: float) -> None:
+    def close_sortie(self, t: float) -> None:
+        """The current sortie ends at time ``t`` (its dict gets ``t_end_s``)."""
         per = self.per[-1]
         per["t_end_s"] = t
 

@@ -105,7 +105,7 @@ def replay_physics(models: list, body: int, nsub: int, s0: list, controls: list,
         rep, ev = reps[j], events[j]
         for k in ks:
             for sp, m in ev.get(k, ()):
-                sp._set_mass(m)
+                sp.set_liquid_mass(m)
             act = k < n_i
             pack(rep.U, C[k, rep.sl, :4], C[k, rep.sl, 4:], xcol, act[rep.sl])
             rep.step(S, act)
@@ -140,7 +140,7 @@ def _mass_events(masses: list | None, dt: float, parts: list[np.ndarray]
         for i in part:
             sp = masses[i] if masses else None
             if sp is not None and sp.mass_events is not None:
-                sp._set_mass(sp.job.fill_l * sp.rho)
+                sp.set_liquid_mass(sp.job.fill_l * sp.rho)
                 for t, m in sp.mass_events:
                     events[j].setdefault(int(round(t / dt)), []).append((sp, m))
     return events

@@ -32,12 +32,12 @@ def step(sp: Sprayer, k: int, t: float, pz: float, vx: float, vy: float, spray_r
     s = sp.sortie[k]
     if s != sp.cur:
         if sp.cur >= 0:
-            sp._close_sortie(t)
+            sp.close_sortie(t)
         sp.cur = s
         if s > 0:  # refilled and a fresh battery at the base
             sp.tank = sp.job.fill_l
             sp.energy_j = 0.0
-            sp._set_mass(sp.tank * sp.rho)
+            sp.set_liquid_mass(sp.tank * sp.rho)
         sp.per.append({"sortie": s + 1, "t_takeoff_s": t, "litres": 0.0, "energy_j": 0.0,
                        "min_soc": 1.0, "ran_dry_s": None, "t_land_s": None})
     if sp.ground[k]:
@@ -67,7 +67,7 @@ def step(sp: Sprayer, k: int, t: float, pz: float, vx: float, vy: float, spray_r
         sp.per[-1]["litres"] += dv
         m_liq = sp.tank * sp.rho
         if sp.mass_set - m_liq >= 1e-3 or sp.tank <= 0.0:
-            sp._set_mass(m_liq)
+            sp.set_liquid_mass(m_liq)
     # electrical power of the actual rotor thrusts (actuator states after the motor lag)
     p = sp.p_av
     kp = sp.k_p
@@ -89,8 +89,8 @@ def step(sp: Sprayer, k: int, t: float, pz: float, vx: float, vy: float, spray_r
     sp.rec_soc[k] = soc
     sp.rec_on[k] = on
     log = sp.log
-    if log is not None and t >= sp._next_log and hasattr(log, "spray_state"):
-        sp._next_log = t + 0.1 - 1e-9
+    if log is not None and t >= sp.next_log and hasattr(log, "spray_state"):
+        sp.next_log = t + 0.1 - 1e-9
         log.spray_state(t, tank_l=sp.tank, mass_kg=sp.dry + sp.tank * sp.rho,
                         flow_lps=flow,
                         nozzles=on, power_w=p, energy_wh=sp.energy_total_j / 3600.0,
