@@ -65,15 +65,21 @@ class MissionConfig:
                               "has CV <= swath_cv_max in the deposition model's pattern test at "
                               "this mission's height, speed, mass, nozzles, droplets and mean "
                               "wind (ag_uav.world.pattern)", ge=0.5, choices=("auto",))
-    swath_cv_max: float = _f(0.25, "swath_m = \"auto\": CV limit of the overlaid pattern (0.25: "
-                             "the effective swath, ASABE S386 / Martin et al. 2019)", gt=0,
-                             lt=1)
+    swath_cv_max: float = _f(0.15, "swath_m = \"auto\": CV limit of the overlaid pattern. 0.15: "
+                             "a dose spread normally with this CV leaves about 10 % of the "
+                             "field below 80 % of its mean (0.2 / z(0.90) = 0.156); 0.25 is "
+                             "the effective swath (ASABE S386 / Martin et al. 2019), a width "
+                             "for comparing aircraft, which leaves about 20 % below it",
+                             gt=0, lt=1)
     headland_m: float | str = _f("auto", "headland margin swept by laps along the boundary (m; "
                                  "0 = none), or \"auto\": one lap of the lane spacing",
                                  ge=0, choices=("auto",))
-    direction_deg: float | str = _f("auto", "sweep direction in degrees from east "
-                                    "(counter-clockwise), or \"auto\" (fewest turns)",
-                                    choices=("auto",))
+    direction_deg: float | str = _f("crosswind", "sweep direction in degrees from east "
+                                    "(counter-clockwise); \"crosswind\": legs across the mean "
+                                    "wind, as aerial application flies them, so that legs out "
+                                    "and back meet the same airspeed and lay the same pattern "
+                                    "(\"auto\" in calm air); \"auto\": fewest turns",
+                                    choices=("auto", "crosswind"))
     speed_mps: float = _f(5.0, "cruise ground speed on legs (m/s)", ge=0.5, le=15)
     altitude_m: float = _f(3.0, "spray altitude above ground (m)", gt=0.5, le=50)
     accel_max_mps2: float = _f(1.5, "acceleration bound of the reference (m/s^2)", ge=0.05,
@@ -285,8 +291,11 @@ class ControllerConfig:
 class WindConfig:
     speed_mps: float = _f(3.0, "mean wind speed (m/s)", ge=0, le=25)
     direction_deg: float = _f(240.0, "direction the wind blows FROM (deg, 0 = north, clockwise)")
-    turbulence: str = _f("light", "Dryden turbulence: MIL-F-8785C W20 of 15/30/45 kt for "
-                         "light/moderate/severe, or \"mean\" (W20 = the mean wind speed)",
+    turbulence: str = _f("mean", "Dryden turbulence: MIL-F-8785C W20 of 15/30/45 kt for "
+                         "light/moderate/severe (a manned aircraft's design gusts: W20 of 15 kt "
+                         "is a wind past the spraying limit of most labels), or \"mean\": W20 = "
+                         "the mean wind speed, the intensity consistent with the configured "
+                         "wind (sigma_u about 20 % of it at 3 m)",
                          choices=("none", "light", "moderate", "severe", "mean"))
 
 

@@ -80,8 +80,11 @@ passage of a settling droplet through a diffusing layer is the inverse Gaussian 
 (Chhikara & Folks 1989), μ_T the still-air fall time from the table (evaporating), λ_T = h²/(2K).
 The landing distance is ū·T along the wind; across it the spread is σ_v T (σ_v = 1.9 u*,
 Panofsky & Dutton 1984; Taylor's short-time limit), plus the wake's edge ring. What has not
-landed after ``airborne_after_s`` (P(T > T_max)) is **airborne**; the volume lost on the way
-is **evaporated** (at the mean fall time). In the dose grid the escaped part is splatted as the
+landed after ``airborne_after_s`` (P(T > T_max)) is **airborne**; the water lost on the way
+is **evaporated** (at the mean fall time). The map and the bookkeeping count the **tank mix** (its
+tracer, or active ingredient, as a deposition trial's collectors and a label's rate do):
+evaporation shrinks a droplet, and so its fall and its drift, but not the mix it carries; the
+water it loses is booked apart. In the dose grid the escaped part is splatted as the
 Gaussian of the same mean and variance; the drift trial (:mod:`ag_uav.jobs.experiments.drift`)
 evaluates the inverse-Gaussian law itself, so the far field has no cut-off.
 
@@ -98,7 +101,7 @@ vehicle crosses the grid's edge). Cell weights are exact cell integrals (erf dif
 truncated at ±4σ and rescaled so that the grid receives exactly the analytic in-grid
 probability; wide kernels go to coarser levels (cells 2^l larger, at most ~17×17
 cells touched), summed into the fine map on read. Mass bookkeeping is exact by
-construction: sprayed = in grid + deposited outside the grid + drift + airborne + evaporated,
+construction: sprayed = in grid + deposited outside the grid + drift + airborne (tank mix),
 where the part landing outside the grid counts as **drift** (carried past the buffer) if it was
 released over the grid and as **deposited outside** otherwise.
 
@@ -327,7 +330,7 @@ class DoseMap:
     outside_grid_l: float
     drift_l: float
     airborne_l: float = 0.0       # still aloft after ``airborne_after_s``
-    evaporated_l: float = 0.0     # water evaporated on the way down
+    evaporated_l: float = 0.0     # water evaporated on the way down (not in the balance)
 
     @classmethod
     def from_buffer(cls, g: GridSpec, buf: np.ndarray, st: np.ndarray) -> DoseMap:
@@ -398,16 +401,16 @@ def dose_metrics(dm: DoseMap, fld: Any, target: float, margin_m: float = 0.0) ->
     ``offtarget_deposit_fraction``: litres on grid cells outside the field or over holes plus
     litres deposited outside the grid, over the sprayed litres; ``drift_fraction``: litres carried
     airborne past the buffer (landing beyond it, or still aloft after ``airborne_after_s``) over
-    the sprayed litres; ``evaporated_fraction``: water evaporated on the way down over sprayed;
-    ``mass_balance_error``: sprayed − all destinations, over sprayed."""
+    the sprayed litres; ``evaporated_fraction``: water evaporated on the way down over sprayed
+    (the map and the other volumes count the tank mix, which evaporation does not remove);
+    ``mass_balance_error``: sprayed − all destinations of the mix, over sprayed."""
     inside = dm.field_mask(fld, 0.0)
     interior = inside if margin_m <= 0 else dm.field_mask(fld, margin_m)
     rate = dm.l_per_ha[interior]
     mean = float(rate.mean()) if rate.size else 0.0
     sprayed = max(dm.sprayed_l, 1e-300)
     off = float(dm.litres[~inside].sum()) + dm.outside_grid_l
-    total = (float(dm.litres.sum()) + dm.outside_grid_l + dm.drift_l + dm.airborne_l
-             + dm.evaporated_l)
+    total = float(dm.litres.sum()) + dm.outside_grid_l + dm.drift_l + dm.airborne_l
     return {
         "dose_mean_l_per_ha": mean,
         "dose_cv": float(rate.std() / mean) if mean > 0 else math.nan,

@@ -127,7 +127,10 @@ def _flush(par, st, buf, scratch, force: float) -> None:
     the window's litre-weighted mean input row, convolved with each nozzle's release moments
     (the along-track smear exactly); the wake and the escaped part of each (nozzle, class)
     splatted (nozzles merged where the class's kernel is wider than ``merge_ratio`` × the
-    nozzle radius); airborne and evaporated volume booked."""
+    nozzle radius); airborne volume and evaporated water booked. Volumes are of the tank mix
+    (its tracer, as a deposition trial's collectors measure it): evaporation shrinks a droplet
+    but not the mix it carries, so the splatted and airborne shares are the whole class's, and
+    the water it loses on the way is booked apart."""
     m_n, k_n = int(par[P_M]), int(par[P_K])
     o_fr = int(par[P_O_FRAC])
     merge_r = par[P_MERGE] * par[P_NOZC]
@@ -151,12 +154,13 @@ def _flush(par, st, buf, scratch, force: float) -> None:
             f = _class_footprint(par, k, env)
             vk = par[o_fr + k]
             vw, ve = vk * f[F_WAKE], vk * f[F_ESC]
-            land_e = ve * (1.0 - f[F_PAIR]) * f[F_RLAND]
-            air = ve * f[F_PAIR] * f[F_RAIR]
+            land_e = ve * (1.0 - f[F_PAIR])
+            air = ve * f[F_PAIR]
             st[S_AIR] += vtot * air
-            st[S_EVAP] += vtot * (vw * (1.0 - f[F_WLAND]) + (ve - land_e - air))
+            st[S_EVAP] += vtot * (vw * (1.0 - f[F_WLAND]) + land_e * (1.0 - f[F_RLAND])
+                                  + air * (1.0 - f[F_RAIR]))
             for part in range(2):
-                share = vw * f[F_WLAND] if part == 0 else land_e
+                share = vw if part == 0 else land_e
                 if share <= 0.0:
                     continue
                 ox = f[F_WX] if part == 0 else f[F_EX]

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..config import Config, ConfigError
 from .field import DEFAULT_ORIGIN, Field, load_field
-from .pattern import lane_choice, mission_headland
+from .pattern import lane_choice, mission_direction, mission_headland
 from .plan import CoveragePlan, plan_coverage
 
 #: how far (m) a field may reach from the origin a config names: the local tangent plane's
@@ -49,7 +49,7 @@ def build_plan(cfg: Config, fld: Field) -> CoveragePlan:
     """The coverage plan of ``cfg``'s mission over ``fld`` with the mission's lanes
     (``plan.swath``; ``plan.meta["lanes"]`` is the :class:`~ag_uav.world.pattern.LaneChoice`)."""
     m = cfg.mission
-    direction = None if m.direction_deg == "auto" else float(m.direction_deg)
+    direction = mission_direction(cfg)
     lanes = lane_choice(cfg)
     if lanes.swath_m <= 0:
         raise ConfigError(f'mission.swath_m = "auto": {lanes.text()}; set mission.swath_m to a '

@@ -37,8 +37,8 @@ import numpy as np
 from .deposition import DepositionBatch, DepositionConfig
 
 __all__ = ["pass_states", "single_pass", "cv_vs_spacing", "effective_swath", "swath_pattern",
-           "LaneChoice", "lane_choice", "mission_swath", "mission_headland", "CV_LIMIT",
-           "SPACINGS"]
+           "LaneChoice", "lane_choice", "mission_swath", "mission_headland", "mission_direction",
+           "crosswind_heading", "CV_LIMIT", "SPACINGS"]
 
 PASS_M = 60.0          # length of the sprayed pass
 WINDOW_M = 10.0        # collectors: mean over this stretch of track in the middle
@@ -256,14 +256,36 @@ def _cached(key: str, make: Any) -> Any:
     return hit
 
 
+def crosswind_heading(wind_from_deg: float) -> float:
+    """The heading (deg from east, counter-clockwise, in [0, 180)) of legs across a wind that
+    blows from compass bearing ``wind_from_deg``: the wind blows towards
+    atan2(−cos d, −sin d) in ENU; the legs run 90° to that."""
+    d = math.radians(wind_from_deg)
+    towards = math.degrees(math.atan2(-math.cos(d), -math.sin(d)))
+    return round((towards + 90.0) % 180.0, 9)
+
+
+def mission_direction(cfg: Any) -> float | None:
+    """The legs' heading given to the planner: ``mission.direction_deg`` when a number; for
+    ``"crosswind"`` the heading across the mean wind (:func:`crosswind_heading`), or None in calm
+    air; for ``"auto"`` None (the planner's fewest turns)."""
+    d = cfg.mission.direction_deg
+    if d == "crosswind":
+        w = cfg.wind
+        return crosswind_heading(w.direction_deg) if w.speed_mps > 0 else None
+    return None if d == "auto" else float(d)
+
+
 def _legs_heading(cfg: Any, base: PatternCase) -> float | None:
-    """The heading (deg) of the legs the planner flies: ``mission.direction_deg``, or for
-    ``"auto"`` the direction of a plan whose lanes are the pure-crosswind effective swath at the
-    full tank (the direction with the fewest legs hardly moves with the lanes). None where that
-    plan fails (the lanes then take the whole wind as a crosswind)."""
+    """The heading (deg) of the legs the planner flies: :func:`mission_direction`, or where the
+    planner picks it (``"auto"``, or ``"crosswind"`` in calm air) the direction of a plan whose
+    lanes are the pure-crosswind effective swath at the full tank (the direction with the fewest
+    legs hardly moves with the lanes). None where that plan fails (the lanes then take the
+    whole wind as a crosswind)."""
     m = cfg.mission
-    if not isinstance(m.direction_deg, str):
-        return float(m.direction_deg) % 180.0
+    given = mission_direction(cfg)
+    if given is not None:
+        return given % 180.0
     from .field import load_field
     from .plan import plan_coverage
 
@@ -293,7 +315,7 @@ def pattern_case(cfg: Any) -> PatternCase:
                        None, masses, float(v.drag_linear[0]), float(v.drag_quadratic[0]))
     if wd.speed_mps == 0:
         return base
-    key = repr(("legs", base, m.field, m.direction_deg, m.headland_m, m.swath_cv_max))
+    key = repr(("legs", base, m.field, mission_direction(cfg), m.headland_m, m.swath_cv_max))
     legs = _cached(key, lambda: _legs_heading(cfg, base))
     if legs is None:
         return base
