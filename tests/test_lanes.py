@@ -35,6 +35,11 @@ def test_auto_spacing_is_the_effective_swath_of_a_calm_pattern(calm):
         np.testing.assert_allclose(pattern.cv_back_and_forth(y, p, p[::-1], sp[near]),
                                    cvs[-1][near], atol=2e-3)
     cv = np.maximum(*cvs)
+    # the default rule (CV <= 15 %) and the effective swath proper (CV <= 25 %)
+    assert lanes.source == "auto" and lanes.swath_m == pattern.effective_swath(sp, cv, 0.15)
+    assert lanes.swath_m < pattern.effective_swath(sp, cv, 0.25)
+    lanes = pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0,
+                                                   "mission.swath_cv_max": 0.25}))
     want = pattern.effective_swath(sp, cv, 0.25)
     assert lanes.source == "auto" and lanes.swath_m == want
     assert 2.0 < want < 12.0
@@ -81,15 +86,32 @@ def test_the_choice_is_cached_deterministic_and_depends_on_its_inputs(calm):
     assert low.height_m == 2.0
 
 
-def test_the_wind_is_split_across_and_along_the_legs():
+def test_the_default_legs_run_across_the_wind():
     cfg = load_config(None)              # 3 m/s from 240°: blowing to 060°, 30° CCW from east
+    assert pattern.mission_direction(cfg) == 120.0
+    assert build_plan(cfg, build_field(cfg)).direction_deg == pytest.approx(120.0)
+    case = pattern.pattern_case(cfg)
+    assert case.legs_deg == 120.0 and case.wind_along_mps == pytest.approx(0.0, abs=1e-9)
+    for frm, legs in ((0.0, 0.0), (90.0, 90.0), (45.0, 135.0), (300.0, 60.0)):
+        assert pattern.crosswind_heading(frm) == pytest.approx(legs)
+    # in calm air there is no crosswind: the planner's fewest turns, as "auto"
+    calm = load_config(None, {"wind.speed_mps": 0.0})
+    assert pattern.mission_direction(calm) is None
+    auto = load_config(None, {"wind.speed_mps": 0.0, "mission.direction_deg": "auto"})
+    assert build_plan(calm, build_field(calm)).direction_deg == build_plan(
+        auto, build_field(auto)).direction_deg
+
+
+def test_the_wind_is_split_across_and_along_the_legs():
+    # legs with the fewest turns on the default field run nearly along the default wind
+    cfg = load_config(None, {"mission.direction_deg": "auto", "mission.swath_cv_max": 0.25})
     case = pattern.pattern_case(cfg)
     plan = build_plan(cfg, build_field(cfg))
     assert case.legs_deg == pytest.approx(plan.direction_deg)
     t = np.radians(30.0 - case.legs_deg)          # the wind's angle from the legs, CCW
     assert case.wind_along_mps == pytest.approx(3.0 * np.cos(t), abs=1e-6)
     assert case.wind_cross_mps == pytest.approx(3.0 * np.sin(t), abs=1e-6)
-    across = load_config(None, {"mission.direction_deg": 120.0})
+    across = load_config(None, {"mission.direction_deg": 120.0, "mission.swath_cv_max": 0.25})
     c2 = pattern.pattern_case(across)
     assert (c2.legs_deg, c2.wind_along_mps) == (120.0, pytest.approx(0.0, abs=1e-6))
     assert abs(c2.wind_cross_mps) == pytest.approx(3.0)
@@ -132,7 +154,7 @@ def test_plan_prints_the_lanes_and_exports_them(tmp_path, capsys):
     cfg = load_config(None)
     lanes = pattern.lane_choice(cfg)
     assert lanes.text() in text
-    assert "effective swath of the back-and-forth pattern test at 3 m, 5 m/s" in text
+    assert "widest spacing with CV <= 15 % of the back-and-forth pattern test at 3 m, 5 m/s" in text
     props = [f["properties"] for f in json.loads(out.read_text())["features"]
              if f["properties"].get("role") == "field"][0]
     assert props["swath_m"] == lanes.swath_m and props["lanes"] == lanes.text()
