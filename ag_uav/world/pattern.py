@@ -14,15 +14,18 @@ against S (:func:`cv_vs_spacing`); the effective swath is the widest S (0.25 m s
 with CV ≤ 25 % (:func:`effective_swath`).
 
 **Lanes of a mission** (:func:`lane_choice`). With ``mission.swath_m = "auto"`` (the default) the
-pattern test is run at the mission's height, ground speed, drag, nozzles, droplet spectrum, the
-mean wind speed taken as a crosswind (the worst case over sweep directions: the lanes are chosen
-before the plan's direction is) and two masses, with a full tank and an empty one, and the lane
-spacing is the widest spacing whose overlaid CV is at most ``mission.swath_cv_max`` (0.25: the
-effective swath) at both. The plan's legs are then at most that far apart (the planner splits the
-interior into equal strips, :func:`ag_uav.world.plan.plan_coverage`), the nozzles meter the rate
-over it, and the sortie planner and the exports use it. A number sets the spacing by hand. The
-test is deterministic and cached per the inputs it depends on, so a batch and its runs flown
-alone choose the same lanes.
+pattern test is run at the mission's height, ground speed, drag, nozzles, droplet spectrum and
+two masses, a full tank and an empty one, with the mean wind split across and along the legs the
+planner will fly (:func:`mission_direction`: by default ``"crosswind"``, legs across the mean
+wind, so that the passes out and back meet the same airspeed), a pass out and a pass back
+overlaid alternately; the lane spacing is the widest spacing whose overlaid CV is at most
+``mission.swath_cv_max`` at both masses (default 0.15, the spacing at which a normally spread
+dose leaves about 10 % of the field below 80 % of its mean; 0.25 is the effective swath proper).
+The plan's legs are then at most that far apart (the planner splits the interior into equal
+strips, :func:`ag_uav.world.plan.plan_coverage`), the nozzles meter the rate over it, and the
+sortie planner and the exports use it. A number sets the spacing by hand. The test is
+deterministic and cached per the inputs it depends on, so a batch and its runs flown alone
+choose the same lanes.
 """
 
 from __future__ import annotations
