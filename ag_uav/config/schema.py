@@ -406,7 +406,7 @@ class EstimatorConfig:
                             "(incl. vibration) is [imu]'s times this margin (an autopilot's "
                             "noise parameters exceed the data sheet's: vibration, coning, model "
                             "error); calibrated in docs/ins.md", gt=0, le=100)
-    ins_q_gyro: float = _f(2.0, "nav = ins: the filter's gyro white-noise variance is [imu]'s "
+    ins_q_gyro: float = _f(32.0, "nav = ins: the filter's gyro white-noise variance is [imu]'s "
                            "times this margin; calibrated in docs/ins.md", gt=0, le=100)
     ins_range_aid_m: float = _f(5.0, "nav = ins: range aid (PX4 EKF2_RNG_CTRL = 1, "
                                 "conditional; EKF2_RNG_A_HMAX = 5 m): while the radar reads "
