@@ -47,7 +47,8 @@ def test_10km_field_flies_its_max_time_in_bounded_memory(tmp_path):
     r = subprocess.run([sys.executable, "-c", _MEASURE, "fly", "--no-render", "--no-log", "-q",
                         "--out", str(tmp_path), "--run-id", "big", "--set",
                         f'mission.field="{field}"', "--set", "sim.max_time_s=30",
-                        "--set", "mission.swath_m=6", "--set", "mission.headland_m=6"],
+                        "--set", "mission.swath_m=6", "--set", "mission.headland_m=6",
+                        "--set", "mission.direction_deg=0"],
                        capture_output=True, text=True, timeout=600)
     rc, maxrss_kib = (int(v) for v in r.stdout.split()[-2:])
     assert rc == 0, r.stderr

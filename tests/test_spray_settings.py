@@ -57,7 +57,8 @@ def test_search_end_to_end(tmp_path, capsys):
     # the widest spacing with CV <= 25 % is the mission's automatic lanes in calm air
     from ag_uav.config import load_config
 
-    lanes = pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0}))
+    lanes = pattern.lane_choice(load_config(None, {"wind.speed_mps": 0.0,
+                                                   "mission.swath_cv_max": 0.25}))
     ok = [float(r["spacing_m"]) for r in rows if float(r["cv"]) <= 0.25]
     assert max(ok) == lanes.swath_m
     assert "Pareto front" in capsys.readouterr().out
