@@ -345,7 +345,7 @@ def file_digest(path: Path) -> str:
 def expand(spec: BatchSpec) -> list[RunTask]:
     """All runs of the spec, validated (one-line ConfigError naming the failing run)."""
     from ...engine.missions import build_field, build_plan
-    from ...world.pattern import mission_headland, mission_swath
+    from ...world.pattern import mission_direction, mission_headland, mission_swath
 
     tasks: list[RunTask] = []
     names = [a.name for a in spec.axes]
@@ -363,7 +363,7 @@ def expand(spec: BatchSpec) -> list[RunTask]:
         try:
             cfg = config_from_dict(d)
             m = cfg.mission
-            key = (m.field, mission_swath(cfg), mission_headland(cfg), m.direction_deg)
+            key = (m.field, mission_swath(cfg), mission_headland(cfg), mission_direction(cfg))
             if key not in plans_ok:  # the field loads and the coverage plan exists
                 build_plan(cfg, build_field(cfg))
                 plans_ok.add(key)
