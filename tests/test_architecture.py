@@ -318,10 +318,6 @@ FUNCTION_LINES_LEFT: dict[str, int] = {
 }
 #: functions over :data:`MAX_PARAMETERS` today -> their parameters
 PARAMETERS_LEFT: dict[str, int] = {
-    "ag_uav/engine/spray_batched.py::_spray_kernel": 16,
-    "ag_uav/world/deposition.py::DepositionBatch.step_rows": 11,
-    "ag_uav/world/deposition_kernels.py::engine_step": 17,
-    "ag_uav/world/deposition_kernels.py::row_step_args": 12,
     "controllers/batched.py::BatchCascade.update": 11,
     "controllers/batched.py::cascade_step": 13,
     "estimators/ins/fusion.py::step_kernel": 19,

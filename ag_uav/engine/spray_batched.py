@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 from array import array
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -65,6 +65,23 @@ I_CUR, I_OFF, I_LIM, I_FLAGS = range(4)
 _NI = 4
 # ---- the event flags (bits of ist[:, I_FLAGS])
 F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
+
+
+class SprayArrays(NamedTuple):
+    """A batch's own arrays that :func:`_spray_kernel` reads and writes, declared once: the
+    per-vehicle constants ``par`` (N, _NP), the float and integer state ``st`` (N, _NS) and
+    ``ist`` (N, _NI), the flat sortie and ground tables ``tab`` (2, total), the per-tick
+    records ``rec`` (4, total) and ``rec_on`` (total,), and ``out`` (2, N): nozzles on and
+    controller reset. Passed as a plain tuple in field order and named again in the kernel
+    (as :mod:`ag_uav.engine.kernels` does)."""
+
+    par: np.ndarray
+    st: np.ndarray
+    ist: np.ndarray
+    tab: np.ndarray
+    rec: np.ndarray
+    rec_on: np.ndarray
+    out: np.ndarray
 
 
 @njit(cache=True)
@@ -202,14 +219,15 @@ def _energy_row(i, g, act, par, st):  # pragma: no cover
 
 
 @njit(cache=True)
-def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, par, st, ist, tab, rec, rec_on,
-                  out):  # pragma: no cover
+def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, arrays):  # pragma: no cover
     """One control tick of the spray job for every active row: the per-tick law (module docstring;
     its plain-Python reference is ``tests/oracles/sprayer_ref.py``).
 
     Returns the number of rows with an event flag (0 on most ticks), or ``-(i + 1)`` without
-    touching anything when tick ``k`` is outside active row i's tables. ``tab``: (2, total)
-    sortie and ground tables; ``out``: (2, N) nozzles on and controller reset."""
+    touching anything when tick ``k`` is outside active row i's tables. ``arrays``: the batch's
+    :class:`SprayArrays` (a plain tuple in field order)."""
+    a = SprayArrays(*arrays)
+    par, st, ist, tab, rec, rec_on, out = a.par, a.st, a.ist, a.tab, a.rec, a.rec_on, a.out
     n = pz.shape[0]
     for i in range(n):
         if active[i] and (k < 0 or k >= ist[i, I_LIM]):
@@ -376,6 +394,8 @@ class BatchSprayer:
             sp.cascade = MassSink(i, set_mass)
         self._all = np.ones(n, bool)
         self._out = np.zeros((2, n), bool)
+        self._arrays = (self._par, self._st, self._ist, self._tab, self._rec, self._rec_on,
+                        self._out)  # SprayArrays, as a plain tuple
         self._on, self._reset = self._out[0], self._out[1]
         self._logged = [(i, sp) for i, sp in enumerate(self.sprayers)
                         if sp.log is not None and hasattr(sp.log, "spray_row")]
@@ -432,8 +452,7 @@ class BatchSprayer:
                 or f.shape[0] != n or act.ndim != 2 or act.shape[0] != n):
             raise ValueError(f"BatchSprayer.step: arrays must have a leading axis of {n}")
         self._k = k
-        nev = _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, self._par, self._st,
-                            self._ist, self._tab, self._rec, self._rec_on, self._out)
+        nev = _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, self._arrays)
         if nev:
             if nev < 0:
                 i = -nev - 1
@@ -541,4 +560,5 @@ class BatchSprayer:
         self._finished = True
         self._rec = self._rec[:, :0]
         self._rec_on = self._rec_on[:0]
+        self._arrays = ()  # let the records go
         return self.sprayers

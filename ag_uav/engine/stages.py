@@ -427,7 +427,8 @@ class Depositing:
     def step(self) -> None:
         b = self.b
         for rows, dep in self.groups:
-            dep.step_rows(b.dt, rows, b.p, b.v, b.R, b.S, self.ia, self.na, b.w, b.spray, b.act)
+            dep.step_rows(b.dt, rows, (b.p, b.v, b.R, b.S, b.w, b.spray, b.act), self.ia,
+                          self.na)
 
     def of(self, i: int) -> tuple[Any, int] | None:
         """(the DepositionBatch, its row) of vehicle ``i``, or None without a dose map."""

@@ -448,6 +448,7 @@ class DepositionBatch:
         self.out = np.zeros(n)
         self.inp = np.zeros((n, INPUT_WIDTH))
         self.scratch = np.zeros((3, max(self.grid.nx, self.grid.ny, INPUT_WIDTH) + 2))
+        self._arrays = (self.par, self.inp, self.st, self.buf, self.scratch)  # DepArrays
 
     @property
     def n(self) -> int:
@@ -479,12 +480,13 @@ class DepositionBatch:
         batch_step(self.par, inp, self.st, self.buf, float(dt), self.out, self.scratch)
         return self.out
 
-    def step_rows(self, dt: float, rows: np.ndarray, p, v, R, S, ia: int, na: int, w, cmd,
-                  act) -> np.ndarray:
-        """One tick from the engine's per-vehicle arrays: this batch's row j is the engine's
-        vehicle ``rows[j]`` (see :func:`engine_step`); litres per row (a view)."""
-        engine_step(self.par, self.st, self.buf, self.inp, self.out, self.scratch, float(dt),
-                     rows, p, v, R, S, ia, na, w, cmd, act)
+    def step_rows(self, dt: float, rows: np.ndarray, vehicles: tuple, ia: int,
+                  na: int) -> np.ndarray:
+        """One tick from the engine's per-vehicle arrays (``vehicles``: a
+        :class:`~ag_uav.world.deposition_kernels.VehicleRows`, or a plain tuple in its field
+        order): this batch's row j is the engine's vehicle ``rows[j]`` (see
+        :func:`engine_step`); litres per row (a view)."""
+        engine_step(self._arrays, self.out, float(dt), rows, tuple(vehicles), ia, na)
         return self.out
 
     def l_per_ha_now(self, i: int, factor: int = 0) -> np.ndarray:
@@ -527,13 +529,12 @@ class Deposition(DepositionBatch):
     def __init__(self, cfg: DepositionConfig, fld: Any = None,
                  bounds: tuple[float, float, float, float] | None = None):
         super().__init__(cfg, fld, 1, bounds)
-        self._inp0, self._st0, self._buf0 = self.inp[0], self.st[0], self.buf[0]
+        self._row0 = (self.par, self.inp[0], self.st[0], self.buf[0], self.scratch)  # DepArrays
 
     def step(self, dt: float, pos, vel, R, thrust: float, wind, cmd: bool) -> float:  # type: ignore[override]
         try:
-            return row_step_args(self.par, self._inp0, self._st0, self._buf0, float(dt),
-                                  self.scratch, pos, vel, R, float(thrust), wind, bool(cmd))
+            return row_step_args(self._row0, float(dt), pos, vel, R, float(thrust), wind,
+                                 bool(cmd))
         except NumbaTypingError:   # sequences of mixed int/float: convert (slow path)
-            return row_step_args(self.par, self._inp0, self._st0, self._buf0, float(dt),
-                                  self.scratch, _f64(pos), _f64(vel), _f64(R), float(thrust),
-                                  _f64(wind), bool(cmd))
+            return row_step_args(self._row0, float(dt), _f64(pos), _f64(vel), _f64(R),
+                                 float(thrust), _f64(wind), bool(cmd))

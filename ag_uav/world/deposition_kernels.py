@@ -5,9 +5,39 @@ by one vehicle and by the batch (sources in :mod:`ag_uav.world.deposition`)."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
+
+import numpy as np
 
 from .._jit import njit
 from .droplets import N_TAB
+
+
+class DepArrays(NamedTuple):
+    """A deposition batch's arrays, declared once: the packed parameters ``par``, the input
+    rows ``inp`` (N, INPUT_WIDTH), the state rows ``st``, the dose buffers ``buf`` and the
+    splat's ``scratch``; or one row's (``inp``, ``st``, ``buf`` 1-D). Passed to a kernel as a
+    plain tuple in field order and named again inside (as :mod:`ag_uav.engine.kernels` does)."""
+
+    par: np.ndarray
+    inp: np.ndarray
+    st: np.ndarray
+    buf: np.ndarray
+    scratch: np.ndarray
+
+
+class VehicleRows(NamedTuple):
+    """The engine's per-vehicle arrays that the deposition reads: position ``p`` and velocity
+    ``v`` (N, 3), ``R`` (N, 9; row-major body → world), the physics state ``S``, the wind ``w``
+    (N, 3), the nozzle command ``cmd`` and the active vehicles ``act`` (N,)."""
+
+    p: np.ndarray
+    v: np.ndarray
+    R: np.ndarray
+    S: np.ndarray
+    w: np.ndarray
+    cmd: np.ndarray
+    act: np.ndarray
 
 #: columns of one input row: pos 3, vel 3, R 9 (row-major), thrust, wind 3, cmd
 INPUT_WIDTH = 20
@@ -475,12 +505,15 @@ def batch_step(par, inp, st, buf, dt: float, out, scratch) -> None:
 
 
 @njit(cache=True)
-def engine_step(par, st, buf, inp, out, scratch, dt, rows, p, v, R, S, ia, na, w, cmd,
-                 act) -> None:
-    """The engine's rows: row j of this batch is vehicle ``rows[j]`` of the engine's arrays
-    (pos p, velocity v, R row-major, wind w, nozzle command cmd; the total thrust is the sum of
-    the ``na`` actuator states at column ``ia`` of the physics state S). Inactive vehicles are
-    not stepped (as alone, where the flight has ended)."""
+def engine_step(arrays, out, dt, rows, vehicles, ia, na) -> None:
+    """The engine's rows: row j of this batch (``arrays``: :class:`DepArrays`, ``out`` the
+    litres per row) is vehicle ``rows[j]`` of the engine's arrays (``vehicles``:
+    :class:`VehicleRows`; the total thrust is the sum of the ``na`` actuator states at column
+    ``ia`` of the physics state S). Inactive vehicles are not stepped (as alone, where the
+    flight has ended). Both tuples are plain tuples in field order, named again here."""
+    d, e = DepArrays(*arrays), VehicleRows(*vehicles)
+    par, inp, st, buf, scratch = d.par, d.inp, d.st, d.buf, d.scratch
+    p, v, R, S, w, cmd, act = e.p, e.v, e.R, e.S, e.w, e.cmd, e.act
     for j in range(rows.shape[0]):
         i = rows[j]
         out[j] = 0.0
@@ -536,8 +569,11 @@ def batch_flush(par, st, buf, scratch) -> None:
 
 
 @njit(cache=True)
-def row_step_args(par, inp, st, buf, dt, scratch, pos, vel, R, thrust, wind, cmd) -> float:
-    """:func:`_row_step` from unpacked arrays (fills the packed input row in compiled code)."""
+def row_step_args(arrays, dt, pos, vel, R, thrust, wind, cmd) -> float:
+    """:func:`_row_step` from unpacked arrays (fills the packed input row in compiled code);
+    ``arrays``: one row's :class:`DepArrays` (a plain tuple in field order)."""
+    d = DepArrays(*arrays)
+    par, inp, st, buf, scratch = d.par, d.inp, d.st, d.buf, d.scratch
     for j in range(3):
         inp[j] = pos[j]
         inp[3 + j] = vel[j]
