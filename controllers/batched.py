@@ -43,7 +43,7 @@ body → world and ``yaw_ref`` (N,). C-contiguous float64 arrays avoid extra com
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -82,7 +82,8 @@ from .cascade import (
 from .fpid import FPID, IT2FPID
 from .pid import PID
 
-__all__ = ["AX_NP", "AX_NS", "NP", "NS", "TYPE_CODES", "BatchCascade", "cascade_step"]
+__all__ = ["AX_NP", "AX_NS", "NP", "NS", "TYPE_CODES", "BatchCascade", "PoseRows", "RefRows",
+           "cascade_step"]
 
 #: Axis controller type codes.
 TYPE_CODES: dict[type, int] = {PID: 0, FPID: 1, IT2FPID: 2}
@@ -91,16 +92,39 @@ _AXIS_ATTRS = ("E", "dE", "U", "integral", "u")
 _STATE_COL = {"E": S_E, "dE": S_DE, "U": S_U, "integral": S_I, "u": S_UOUT}
 
 
+class PoseRows(NamedTuple):
+    """The measured state of N vehicles, declared once: ``p``, ``v``, ``omega`` (N, 3) and
+    ``R`` (N, 9) row-major body → world, float64."""
+
+    p: np.ndarray
+    v: np.ndarray
+    R: np.ndarray
+    omega: np.ndarray
+
+
+class RefRows(NamedTuple):
+    """The reference of N vehicles, declared once: ``p_ref``, ``v_ref``, ``a_ref`` (N, 3) and
+    ``yaw_ref`` (N,), float64."""
+
+    p_ref: np.ndarray
+    v_ref: np.ndarray
+    a_ref: np.ndarray
+    yaw_ref: np.ndarray
+
+
 @njit
-def cascade_step(P: np.ndarray, S: np.ndarray, p: np.ndarray, v: np.ndarray, R: np.ndarray,
-                 omega: np.ndarray, p_ref: np.ndarray, v_ref: np.ndarray, a_ref: np.ndarray,
-                 yaw_ref: np.ndarray, dt: float, active: np.ndarray, out: np.ndarray) -> None:
+def cascade_step(P: np.ndarray, S: np.ndarray, pose: tuple, ref: tuple, dt: float,
+                 active: np.ndarray, out: np.ndarray) -> None:
     """One control tick of every active row (the kernel behind :meth:`BatchCascade.update`):
     :func:`controllers.cascade.vehicle_step` per row.
 
     ``P`` (N, NP) parameters, ``S`` (N, NS) state (advanced in place for active rows),
+    ``pose``: :class:`PoseRows`, ``ref``: :class:`RefRows` (plain tuples in field order),
     ``out`` (N, 4) rotor thrusts (inactive rows set to 0). See the module docstring.
     """
+    po, rf = PoseRows(*pose), RefRows(*ref)
+    p, v, R, omega = po.p, po.v, po.R, po.omega
+    p_ref, v_ref, a_ref, yaw_ref = rf.p_ref, rf.v_ref, rf.a_ref, rf.yaw_ref
     n = P.shape[0]
     if not dt > 0.0:
         raise ValueError("dt must be > 0")
@@ -223,21 +247,22 @@ class BatchCascade:
         """Batch size N."""
         return self.params.shape[0]
 
-    def update(self, p: np.ndarray, v: np.ndarray, R: np.ndarray, omega: np.ndarray,
-               p_ref: np.ndarray, v_ref: np.ndarray, a_ref: np.ndarray, yaw_ref: np.ndarray,
-               dt: float, out: np.ndarray | None = None,
+    def update(self, pose: Sequence[np.ndarray], ref: Sequence[np.ndarray], dt: float,
+               out: np.ndarray | None = None,
                active: np.ndarray | None = None) -> np.ndarray:
         """Rotor thrusts (N, 4) in N for one control tick of every (active) vehicle.
 
-        Inputs as :meth:`PositionCascade.update`, batched: ``p, v, omega, p_ref, v_ref, a_ref``
-        (N, 3), ``R`` (N, 9) row-major body → world, ``yaw_ref`` (N,), float64.
+        Inputs as :meth:`PositionCascade.update`, batched: ``pose`` (:class:`PoseRows`, or a
+        plain tuple ``(p, v, R, omega)``) and ``ref`` (:class:`RefRows`, or ``(p_ref, v_ref,
+        a_ref, yaw_ref)``): ``p, v, omega, p_ref, v_ref, a_ref`` (N, 3), ``R`` (N, 9) row-major
+        body → world, ``yaw_ref`` (N,), float64.
         ``active`` (N,) bool: rows that are False keep their state and get zero thrusts.
         Without ``out`` the result is an internal buffer overwritten by the next call (copy
         it to keep it).
         """
         if out is None:
             out = self._out
-        cascade_step(self.params, self.state, p, v, R, omega, p_ref, v_ref, a_ref, yaw_ref, dt,
+        cascade_step(self.params, self.state, tuple(pose), tuple(ref), dt,
                      self._all if active is None else active, out)
         return out
 

@@ -94,7 +94,7 @@ def check(cascades, ticks=300, seed=1, scale=1.0, dt=0.01, bc=None):
     n = len(cascades)
     sat = 0
     for p, v, R, w, pr, vr, ar, yaw in inputs(n, ticks, seed, scale):
-        f = bc.update(p, v, R, w, pr, vr, ar, yaw, dt)
+        f = bc.update((p, v, R, w), (pr, vr, ar, yaw), dt)
         for i, c in enumerate(cascades):
             fs = c.update(p[i], v[i], tuple(R[i]), w[i], pr[i], vr[i], ar[i], yaw[i], dt)
             assert all(close(x, y) for x, y in zip(f[i], fs, strict=True)), (i, f[i], fs)
@@ -151,7 +151,7 @@ def _run_rows(bc: BatchCascade, rows, data, dt=0.01):
     out = []
     for p, v, R, w, pr, vr, ar, yaw in data:
         sel = [a[rows] for a in (p, v, R, w, pr, vr, ar, yaw)]
-        out.append(bc.update(*sel, dt).copy())
+        out.append(bc.update(sel[:4], sel[4:], dt).copy())
     return np.array(out)
 
 
@@ -179,16 +179,16 @@ def test_active_mask():
     for k, (p, v, R, w, pr, vr, ar, yaw) in enumerate(data):
         active = mask if 20 <= k < 40 else None
         before = bc.state.copy()
-        f = bc.update(p, v, R, w, pr, vr, ar, yaw, 0.01, active=active).copy()
+        f = bc.update((p, v, R, w), (pr, vr, ar, yaw), 0.01, active=active).copy()
         if active is not None:
             assert np.array_equal(bc.state[~mask], before[~mask])
             assert np.all(f[~mask] == 0.0)
             rows = np.flatnonzero(mask)
-            fr = ref.update(p, v, R, w, pr, vr, ar, yaw, 0.01)  # reference for active rows
+            fr = ref.update((p, v, R, w), (pr, vr, ar, yaw), 0.01)  # reference for active rows
             assert np.array_equal(f[rows], fr[rows])
             ref.state[~mask] = bc.state[~mask]
         else:
-            fr = ref.update(p, v, R, w, pr, vr, ar, yaw, 0.01)
+            fr = ref.update((p, v, R, w), (pr, vr, ar, yaw), 0.01)
             assert np.array_equal(f, fr)
 
 
@@ -202,7 +202,7 @@ def test_mass_change_and_views():
             m = 0.97 * cs[1].mass
             cs[1].mass = m
             bc.mass[1] = m
-        f = bc.update(p, v, R, w, pr, vr, ar, yaw, 0.01)
+        f = bc.update((p, v, R, w), (pr, vr, ar, yaw), 0.01)
         for i, c in enumerate(cs):
             fs = c.update(p[i], v[i], tuple(R[i]), w[i], pr[i], vr[i], ar[i], yaw[i], 0.01)
             assert all(close(x, y) for x, y in zip(f[i], fs, strict=True))
@@ -257,9 +257,9 @@ def test_refusals():
     bc = BatchCascade.from_cascades(cs)
     p, v, R, w, pr, vr, ar, yaw = next(inputs(1, 1, seed=0))
     with pytest.raises(ValueError, match="dt"):
-        bc.update(p, v, R, w, pr, vr, ar, yaw, 0.0)
+        bc.update((p, v, R, w), (pr, vr, ar, yaw), 0.0)
     with pytest.raises(ValueError, match="batch size"):
-        bc.update(p, v, R, w, pr, vr, ar, np.zeros(2), 0.01)
+        bc.update((p, v, R, w), (pr, vr, ar, np.zeros(2)), 0.01)
 
 
 def test_sub_objects_share_the_cascade_row():

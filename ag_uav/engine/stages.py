@@ -354,7 +354,7 @@ class Control:
 
     def step(self) -> None:
         b = self.b
-        b.f = self.bc.update(b.p_fb, b.v_fb, b.Rc, b.om, b.rp, b.rv, b.ra, b.yaw, b.dt,
+        b.f = self.bc.update((b.p_fb, b.v_fb, b.Rc, b.om), (b.rp, b.rv, b.ra, b.yaw), b.dt,
                              active=b.act)
 
     def set_mass(self, i: int, total: float, J: Sequence[float]) -> None:
