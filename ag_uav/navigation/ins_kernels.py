@@ -18,6 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from estimators.ins import quat_log_err
+from estimators.ins import quat_to_rot as quat_to_rot_3x3
 
 from .._jit import njit
 
@@ -204,17 +205,9 @@ def tick_in(truth, rows, k, t, j):  # pragma: no cover
 
 @njit(cache=True)
 def quat_to_rot(q, R):  # pragma: no cover
-    """Unit quaternion (w, x, y, z) → row-major rotation (9,), body → world."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    R[0] = 1.0 - 2.0 * (y * y + z * z)
-    R[1] = 2.0 * (x * y - w * z)
-    R[2] = 2.0 * (x * z + w * y)
-    R[3] = 2.0 * (x * y + w * z)
-    R[4] = 1.0 - 2.0 * (x * x + z * z)
-    R[5] = 2.0 * (y * z - w * x)
-    R[6] = 2.0 * (x * z - w * y)
-    R[7] = 2.0 * (y * z + w * x)
-    R[8] = 1.0 - 2.0 * (x * x + y * y)
+    """Unit quaternion (w, x, y, z) → row-major rotation (9,), body → world: the INS's own
+    law (:func:`estimators.ins.quat_to_rot`) written into R's 3 × 3 view."""
+    quat_to_rot_3x3(q, R.reshape(3, 3))
 
 
 @njit(cache=True)
