@@ -30,8 +30,10 @@ Mat3 = tuple[float, float, float, float, float, float, float, float, float]
 Vec3 = tuple[float, float, float]
 
 
+@njit
 def quat_to_rot(w: float, x: float, y: float, z: float) -> Mat3:
-    """Rotation matrix (body → world, row-major) of a unit quaternion (w, x, y, z)."""
+    """Rotation matrix (body → world, row-major) of a unit quaternion (w, x, y, z); compiled,
+    so the engine's per-tick kernel calls this one law (:mod:`ag_uav.engine.kernels`)."""
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z

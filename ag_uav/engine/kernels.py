@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from controllers.attitude import quat_to_rot
+
 from .._jit import njit
 
 
@@ -122,18 +124,9 @@ def tick_in(k, S, iq, iv, cos_tilt, guard, pose, ref):  # pragma: no cover
         for j in range(3):
             v[i, j] = S[i, iv + j]
             omega[i, j] = S[i, iv + 3 + j]
-        xx, yy, zz = x * x, y * y, z * z
-        xy, xz, yz = x * y, x * z, y * z
-        wx, wy, wz = w * x, w * y, w * z
-        R[i, 0] = 1.0 - 2.0 * (yy + zz)
-        R[i, 1] = 2.0 * (xy - wz)
-        R[i, 2] = 2.0 * (xz + wy)
-        R[i, 3] = 2.0 * (xy + wz)
-        R[i, 4] = 1.0 - 2.0 * (xx + zz)
-        R[i, 5] = 2.0 * (yz - wx)
-        R[i, 6] = 2.0 * (xz - wy)
-        R[i, 7] = 2.0 * (yz + wx)
-        R[i, 8] = 1.0 - 2.0 * (xx + yy)
+        Ri = quat_to_rot(w, x, y, z)
+        for j in range(9):
+            R[i, j] = Ri[j]
         if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(pz)):
             code[i] = _NONFINITE
         elif R[i, 8] < cos_tilt:
