@@ -123,9 +123,7 @@ class BatchINS:
         var_v(3), var_yaw]`` (NaN age: no fix; NaN components: absent); ``radar`` (NV, 3)
         rows ``[range, var, age_s]`` (NaN range: none / dropout)."""
         pred = imu is not None
-        step_kernel(self.x_core, self.P, self.x_out, self._ib, self._ints, self._mq,
-                     self._dg, self._mpar, self._ipar, self._pbuf, self._pcs, self._rules,
-                     self.prm, self._popt,
+        step_kernel(self._rows(), self.prm, self._popt,
                      self._no_imu if imu is None else np.ascontiguousarray(imu, dtype=float),
                      pred, self._no_g if gnss is None else np.ascontiguousarray(gnss, dtype=float),
                      self._no_r if radar is None else np.ascontiguousarray(radar, dtype=float),
@@ -134,9 +132,13 @@ class BatchINS:
     def step_raw(self, imu, gnss, radar) -> None:
         """:meth:`step` with all three inputs given as C-contiguous float64 arrays (the
         caller's own buffers: no conversion), always predicting."""
-        step_kernel(self.x_core, self.P, self.x_out, self._ib, self._ints, self._mq,
-                     self._dg, self._mpar, self._ipar, self._pbuf, self._pcs, self._rules,
-                     self.prm, self._popt, imu, True, gnss, radar, self._fb)
+        step_kernel(self._rows(), self.prm, self._popt, imu, True, gnss, radar, self._fb)
+
+    def _rows(self) -> tuple:
+        """The bank's rows as :class:`~estimators.ins.fusion.BankRows` wants them (a plain
+        tuple in field order)."""
+        return (self.x_core, self.P, self.x_out, self._ib, self._ints, self._mq, self._dg,
+                self._mpar, self._ipar, self._pbuf, self._pcs, self._rules)
 
     def predict(self, imu) -> None:
         self.step(imu)

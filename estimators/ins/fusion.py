@@ -5,6 +5,8 @@ fusion time horizon), and :func:`step_kernel`, one tick of every row of a bank; 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from .._ins_laws import kf_fuse_b, mckf_fuse_b, pca_row
@@ -94,6 +96,27 @@ from .model import (
     nominal_step_R,
     quat_to_rot,
 )
+
+
+class BankRows(NamedTuple):
+    """The rows of a :class:`~estimators.ins.bank.BatchINS`, declared once (layouts in
+    :mod:`.layout`): per filter row the core state ``xc`` and covariance ``P``, the output
+    state ``xo``, the IMU ring ``ib``, the integer state ``ints``, the measurement queue ``mq``,
+    the diagnostics ``dg``, the float and integer parameters ``mpar``, ``ipar`` and the rule
+    codes ``rules``; per vehicle the PCA ring ``pbuf`` and its counters ``pcs``."""
+
+    xc: np.ndarray
+    P: np.ndarray
+    xo: np.ndarray
+    ib: np.ndarray
+    ints: np.ndarray
+    mq: np.ndarray
+    dg: np.ndarray
+    mpar: np.ndarray
+    ipar: np.ndarray
+    pbuf: np.ndarray
+    pcs: np.ndarray
+    rules: np.ndarray
 
 __all__ = ["step_kernel"]
 
@@ -338,15 +361,16 @@ def _refresh_output(xc, xo, ib, ints, prm, predicted, S3, w):
 
 
 @njit
-def step_kernel(xc, P, xo, ib, ints, mq, dg, mpar, ipar, pbuf, pcs, rules, prm, popt,
-                 imu, predict, gin, rin, fb):
+def step_kernel(rows, prm, popt, imu, predict, gin, rin, fb):
     """One tick of every row (row i belongs to vehicle i // n_rules): predict with imu[v] (if
     ``predict``), queue the vehicle's GNSS fix gin[v] (a NaN age: none) and radar range rin[v]
     (NaN: none), fuse what is due, refresh the output; ``fb``: the scratch
-    (:data:`layout.SCRATCH`).  Rows: ``xc``, ``P`` the core filter, ``xo`` the output, ``ib``
-    the IMU ring, ``ints``, ``mq``, ``dg``, ``mpar``, ``ipar``, ``rules`` (:mod:`.layout`); per
-    vehicle the PCA ring ``pbuf``, ``pcs``; shared ``prm`` and ``popt`` = (window, embed,
-    components, mode, any PCA rule)."""
+    (:data:`layout.SCRATCH`).  ``rows``: the bank's :class:`BankRows` (a plain tuple in field
+    order, named again here); shared ``prm`` and ``popt`` = (window, embed, components, mode,
+    any PCA rule)."""
+    r = BankRows(*rows)
+    xc, P, xo, ib, ints, mq, dg = r.xc, r.P, r.xo, r.ib, r.ints, r.mq, r.dg
+    mpar, ipar, pbuf, pcs, rules = r.mpar, r.ipar, r.pbuf, r.pcs, r.rules
     N = xc.shape[0]
     NV = imu.shape[0]
     nr = N // NV
