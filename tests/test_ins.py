@@ -139,8 +139,9 @@ def run(truth, n_seeds: int = 1, rules=("kf",), cfg: INSConfig | None = None, la
             j = k - Lt
             Rj = truth["R"][j]
             pa = truth["p"][j] + Rj @ lever + rng.normal(0, 1, (NV, 3)) * SIG_P
-            if false_fix and false_fix[0] <= j * DT < false_fix[1]:
-                pa = pa + np.asarray(false_fix[2])
+            for f0, f1, fb in ([false_fix] if isinstance(false_fix, tuple) else false_fix or []):
+                if f0 <= j * DT < f1:
+                    pa = pa + np.asarray(fb)
             om = truth["u"][min(j + 1, K), 3:]
             va = truth["v"][j] + Rj @ np.cross(om, lever) + rng.normal(0, SIG_V, (NV, 3))
             b = Rj @ rb

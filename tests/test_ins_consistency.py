@@ -8,6 +8,9 @@ and the covariance step's sparse form.
   band of χ²(n·N)/N, the whole 15 and each 3-state block on its marginal covariance.
 * The gate (``INSConfig.gate_sigma``, common to the four rules): a planted 0.3 m RTK-fixed bias
   is rejected, clean fixes are accepted at the rate a consistent filter's innovations give.
+* The step latch behind it (``INSConfig.gate_latch_s``): a 0.15 m step the gate alone
+  re-admits is held for its whole 35 s, a lone outlier does not release it, its hold limit
+  resets the position to the receiver.
 * ``cov_step`` (F's 45 non-zeros written out) equals the dense F P Fᵀ + Q to rounding.
 """
 
@@ -89,18 +92,67 @@ def test_gate_rejects_a_planted_false_fix(truth):
 
 
 def test_gate_accepts_clean_fixes_at_the_nominal_rate(truth):
-    """Clean fixes: at γ = 5 no position fix of 4 × 600 is rejected (a consistent filter
-    rejects 3·2·Φ(−5) ≈ 1.7e-6 of them); at γ = 2 the rejected fraction is the nominal
+    """Clean fixes: at γ = 5 (the step latch on, the default) no position fix of 4 × 600 is
+    rejected (a consistent filter rejects 3·2·Φ(−5) ≈ 1.7e-6 of them); at γ = 2 the gate alone
+    (no latch: a 2 σ rejection of the coloured noise would open it) rejects the nominal
     1 − (1 − 2Φ(−2))³ ≈ 0.13 within sampling and the filter's slight conservatism."""
     r5 = run(truth, 4, ("kf",), INSConfig(gate_sigma=5.0), seed=71)
     n = r5["ins"].counters["gnss_fused"] + r5["ins"].counters["gate_rejected_pos"]
     assert np.all(r5["ins"].counters["gate_rejected_pos"] == 0) and np.all(n >= 590)
-    r2 = run(truth, 4, ("kf",), INSConfig(gate_sigma=2.0), seed=71)
+    r2 = run(truth, 4, ("kf",), INSConfig(gate_sigma=2.0, gate_latch_s=0.0), seed=71)
     c = r2["ins"].counters
     frac = c["gate_rejected_pos"].sum() / (c["gate_rejected_pos"] + c["gnss_fused"]).sum()
     nominal = 1 - (1 - 2 * norm.sf(2.0)) ** 3
     print(f"γ = 2: rejected {frac:.3f} of the fixes, nominal {nominal:.3f}")
     assert 0.6 * nominal < frac < 1.3 * nominal
+
+
+STEP = (0.15, 0.0, 0.0)   # a false fix 10 σ_S east, reported fixed (σ 8 mm), 15-50 s
+
+
+def _peak(r, a, b):
+    """Per row, the largest horizontal output error over ticks a:b."""
+    return np.linalg.norm(r["err_out"][a:b, :, :2], axis=2).max(axis=0)
+
+
+def test_step_latch_holds_a_false_fix_the_gate_alone_readmits(truth):
+    """35 s of a 0.15 m step: the gate alone re-admits it once the position variance, fed by
+    the velocities only, has grown to it, and the filter follows it (error ≈ the step); the
+    latch holds every fix of the episode (one more after it: the CUSUM's two fixes of
+    evidence), fuses them relative to the step so the error stays at the fixes' own level,
+    and releases once, after the step ends."""
+    ff = (15.0, 50.0, STEP)
+    on = run(truth, 4, ("kf",), INSConfig(), false_fix=ff, seed=81)
+    off = run(truth, 4, ("kf",), INSConfig(gate_latch_s=0.0), false_fix=ff, seed=81)
+    c, c0 = on["ins"].counters, off["ins"].counters
+    print(f"held {c['gate_rejected_pos']}, relative {c['gnss_fused_relative']}; gate alone "
+          f"rejected {c0['gate_rejected_pos']}; peak {_peak(on, 1500, 5000).round(3)} m, "
+          f"gate alone {_peak(off, 1500, 5000).round(3)} m")
+    assert np.all((c["gate_rejected_pos"] >= 350) & (c["gate_rejected_pos"] <= 353))
+    assert np.all(c["gnss_fused_relative"] >= 340) and np.all(c["gate_latch_releases"] == 1)
+    assert np.all(c0["gate_rejected_pos"] < 0.7 * 350)
+    assert np.all(_peak(on, 1500, 5000) < 0.04) and np.all(_peak(off, 1500, 5000) > 0.12)
+    assert np.all(_peak(on, 5200, 6000) < 0.03)   # released: on the true fixes again
+
+
+def test_step_latch_is_not_released_by_a_lone_outlier(truth):
+    """Two single fixes inside the step that land where the receiver would be without it: each
+    fix's evidence is clipped to γ²/2, so neither releases the latch (one release, at the
+    end); the error stays as without them."""
+    ffs = [(15.0, 50.0, STEP), (30.0, 30.1, (-0.15, 0.0, 0.0)), (35.0, 35.1, (-0.15, 0.0, 0.0))]
+    r = run(truth, 4, ("kf",), INSConfig(), false_fix=ffs, seed=81)
+    assert np.all(r["ins"].counters["gate_latch_releases"] == 1)
+    assert np.all(_peak(r, 1500, 5000) < 0.04)
+
+
+def test_step_latch_believes_the_receiver_after_its_hold_limit(truth):
+    """gate_latch_s = 10: held for 10 s, the position resets to the receiver, which the filter
+    then follows."""
+    r = run(truth, 4, ("kf",), INSConfig(gate_latch_s=10.0), false_fix=(15.0, 50.0, STEP),
+            seed=81)
+    assert np.all(r["ins"].counters["gate_resets"] >= 1)
+    assert np.all(_peak(r, 1500, 2450) < 0.04)
+    assert np.all(np.linalg.norm(r["err_out"][2700:5000, :, :2], axis=2).min(axis=0) > 0.1)
 
 
 def test_sparse_covariance_step_equals_the_dense_one():

@@ -145,7 +145,8 @@ def _ins_table(scores: dict[str, dict[str, Any]]) -> Table:
             is not None))
     if flown and flown.get("gate_rejected") is not None:
         caption += (f"; the innovation gate rejected {flown['gate_rejected']} of its fixes "
-                    f"({flown.get('gate_resets') or 0} resets)")
+                    f"({flown.get('gate_latched') or 0} of them held by the step latch and "
+                    f"fused relative to the step; {flown.get('gate_resets') or 0} resets)")
     caption += _why_not(scores)
     t = Table(title="estimators (INS; same fixes; * = flown)", caption=caption + ")",
               show_header=True, header_style="bold", box=box.SIMPLE_HEAD)

@@ -390,9 +390,18 @@ class EstimatorConfig:
                                "EKF2_GPS_GATE = 5): a fix fails when an axis's innovation^2 > "
                                "gate^2 x its variance; 0 = no gate", ge=0, le=100)
     ins_gate_reset_s: float = _f(5.0, "nav = ins: after this long (s) without a fused GNSS "
-                                 "position or velocity (no horizontal aiding), a fix the gate "
-                                 "rejects resets the position to the receiver (PX4 EKF2's reset "
-                                 "after its aiding timeout); 0 = never", ge=0, le=3600)
+                                 "position or velocity (no horizontal aiding), or twice this "
+                                 "long without a fused position, a fix the gate rejects resets "
+                                 "the position to the receiver (PX4 EKF2's two timeouts); 0 = "
+                                 "never", ge=0, le=3600)
+    ins_gate_latch_s: float = _f(60.0, "nav = ins: the step latch behind the gate: a fix the "
+                                 "gate rejects opens it with its innovation as a receiver step; "
+                                 "later fixes that fit the step better than no step are held "
+                                 "(their position not taken, fused relative to the step) until "
+                                 "one does not, or for at most this long (s), after which the "
+                                 "position resets to the receiver; 0 = no latch (the gate "
+                                 "alone, as PX4 EKF2). A false RTK fix is such a step; measured "
+                                 "with and without in docs/ins.md", ge=0, le=3600)
     ins_gnss_colour: str = _f("consider", "nav = ins: the GNSS error's Gauss-Markov part: "
                               "white = fused as white noise (R = the whole variance); inflate "
                               "= R's Gauss-Markov part times the variance of its mean over "

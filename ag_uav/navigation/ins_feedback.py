@@ -149,7 +149,8 @@ def ins_config(cfg: Config) -> INSConfig:
         max_iter=e.max_iter, recovery=rec,
         pca_window=e.window, pca_mode=e.pca_mode,
         gate_sigma=e.ins_gate_sigma if e.ins_gate_sigma > 0 else math.inf,
-        gate_reset_s=e.ins_gate_reset_s if e.ins_gate_reset_s > 0 else math.inf)
+        gate_reset_s=e.ins_gate_reset_s if e.ins_gate_reset_s > 0 else math.inf,
+        gate_latch_s=e.ins_gate_latch_s if e.ins_gate_latch_s >= 0 else math.inf)
 
 
 def ins_bank_key(cfg: Config) -> tuple:
@@ -359,6 +360,7 @@ class InsFeedback(Feedback):
                 "nis_radar_mean": round(rsum / rn, 3) if rn else None,
                 "gate_rejected": int(np.sum(gate >= 1)),
                 "gate_resets": int(np.sum(gate == 2)),
+                "gate_latched": int(np.sum(gate == 3)),
                 "false_fixes_rejected": (round(float(np.mean(ffg >= 1)), 4) if ffg.size
                                          else None),
                 "false_fix_peak_m": mx(he[self._false_window(lo, hi)]) if self.false_k else None,

@@ -72,7 +72,25 @@ row), ``"multi"`` σ on the fix's rows, ∞ on the prior's.  Velocity, heading a
 KF update.  **The gate** in front of every rule (PX4 EKF2's innovation test, ``EKF2_GPS_GATE``
 = 5 σ; :func:`gate_ratio`): a fix's position, velocity or heading whose innovation exceeds
 ``gate_sigma`` standard deviations on any axis is not fused; after ``gate_reset_s`` with
-neither position nor velocity fused, a rejected fix resets the position to it.  Each
+neither position nor velocity fused, or with no position fused for twice that, a rejected fix
+resets the position to it (PX4 EKF2's two timeouts). **The step latch**
+behind the gate (``gate_latch_s`` > 0; not in PX4 EKF2): a false RTK fix (wrong integer
+ambiguities) is a constant step in a receiver that still reports cm accuracy, and the
+single-epoch test re-admits it once the position variance, fed only by the velocities, has grown
+to the step (10–20 s).  So a position the gate rejects, while the filter knows the antenna's
+horizontal position at least as well as the fix does (S_ii ≤ 2 R_ii: a filter less sure than
+its fixes, out of a float or DGPS period, is more likely wrong itself), opens a candidate step
+b = its innovation, with its innovation variance as b's.  The next fix confirms it when the
+gate rejects it too and it lies nearer the step than the filter (a lone outlier does not).
+While the latch holds, every fix is held: its position is not taken, and it is fused relative
+to the step (ν − b, R + diag var b, through the gate again), as a relative position from a
+receiver whose integers are wrong but constant.  Page's CUSUM of the evidence for the
+unstepped receiver (the log-likelihood ratio ½ [Σ (ν_i − b_i)²/S_ii − Σ ν_i²/S_ii],
+:func:`step_llr`, each fix's clipped to ±γ²/2) releases it at γ², and so does a fix whose
+reported variance leaves a factor 2 of the latched one's (a new solution); held for
+``gate_latch_s`` (default 60 s), the receiver is believed: the position resets to it.  A filter
+anchored this way is tied to the step's estimate, whose error (the fix's and the filter's at
+the step, ~1–2 cm) the held fixes cannot see.  Each
 measurement is fused sequentially (R block-diagonal), then injected and reset
 (Solà §6.2-6.3, eqs 282-287)::
 

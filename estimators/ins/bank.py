@@ -20,7 +20,8 @@ COUNTERS = {"gnss_fused": ("ngnss", 0), "radar_fused": ("nrad", 0), "radar_dropp
             "late": ("late", 0), "queue_full": ("qdrop", 0), "mckf_n_iter": ("mst", 1),
             "mckf_rejected": ("mst", 2), "mckf_recovered": ("mst", 3),
             "gate_rejected_pos": ("grejp", 0), "gate_rejected_vel": ("grejv", 0),
-            "gate_rejected_yaw": ("grejy", 0), "gate_resets": ("greset", 0)}
+            "gate_rejected_yaw": ("grejy", 0), "gate_resets": ("greset", 0),
+            "gate_latch_releases": ("grel", 0), "gnss_fused_relative": ("gnrel", 0)}
 
 
 # ------------------------------------------------------------------------ classes

@@ -49,8 +49,10 @@ class INSConfig:
     gate, common to the four rules and applied to the GNSS position, velocity and heading
     before any update (:func:`gate_ratio`): ``gate_sigma`` γ (PX4 ``EKF2_GPS_GATE``, default
     5; ``inf`` = no gate) and ``gate_reset_s``: a rejected position fix that comes that long
-    after the last fused position and the last fused velocity resets the position to the
-    receiver (``inf`` = never).
+    after the last fused position and the last fused velocity, or twice that long after the
+    last fused position, resets the position to the receiver (``inf`` = never);
+    ``gate_latch_s``: the step latch's hold limit (s; 0 = no latch, ``inf`` = no limit; the
+    module docstring of :mod:`estimators.ins`).
     """
 
     dt: float = 0.01
@@ -84,6 +86,7 @@ class INSConfig:
     pca_components: int | None = None
     gate_sigma: float = 5.0
     gate_reset_s: float = 5.0
+    gate_latch_s: float = 60.0
     extra: dict = field(default_factory=dict)
 
     @classmethod
@@ -125,6 +128,10 @@ class INSConfig:
                              f"{self.gate_sigma!r}, {self.gate_reset_s!r}")
         p[layout.PRM_GATE] = self.gate_sigma
         p[layout.PRM_GRESET] = self.gate_reset_s / dt
+        if not self.gate_latch_s >= 0:
+            raise ValueError(f"gate_latch_s must be >= 0 (0 = no latch, inf = no limit), got "
+                             f"{self.gate_latch_s!r}")
+        p[layout.PRM_GLATCH] = self.gate_latch_s / dt
         return p
 
     def kernel_widths(self) -> np.ndarray:

@@ -13,6 +13,10 @@ from .._ins_laws import kf_fuse_b, mckf_fuse_b, pca_row
 from .._jit import njit
 from .layout import (
     DG_GATE,
+    DG_GB,
+    DG_GC,
+    DG_GR,
+    DG_GS,
     DG_NISP,
     DG_NISR,
     DG_NISV,
@@ -29,9 +33,13 @@ from .layout import (
     INTS_DIRTY,
     INTS_GLAST,
     INTS_GLASTV,
+    INTS_GLAT0,
+    INTS_GLATCH,
+    INTS_GNREL,
     INTS_GREJP,
     INTS_GREJV,
     INTS_GREJY,
+    INTS_GREL,
     INTS_GRESET,
     INTS_LATE,
     INTS_MST,
@@ -53,6 +61,7 @@ from .layout import (
     PRM_DT,
     PRM_G,
     PRM_GATE,
+    PRM_GLATCH,
     PRM_GRESET,
     PRM_RANT,
     REC_K,
@@ -92,9 +101,11 @@ from .model import (
     h_heading_w,
     h_radar_w,
     inject_reset_w,
+    innov_var,
     nominal_step,
     nominal_step_R,
     quat_to_rot,
+    step_llr,
 )
 
 
@@ -183,13 +194,111 @@ def _reset_pos(x, P, z, Rm, prm, S3):
         P[i, i] = Rm[i, i]
 
 
+#: the step latch's states (``INTS_GLATCH``): none, a candidate step (one fix rejected), a
+#: confirmed step (the next fix rejected too, and nearer the step than the filter)
+LATCH_NONE, LATCH_CANDIDATE, LATCH_ON = 0, 1, 2
+
+
+@njit
+def _latch_holds(P, H3, Rm, nu3, prm, ints, dg):
+    """Whether the confirmed latch still holds after this fix.  Page's CUSUM of the evidence
+    for the unstepped receiver, C ← max(0, C + clip(λ, ±γ²/2)), λ = :func:`step_llr` (one fix
+    weighs at most what a γ-σ event does, so a lone outlier cannot release it); C ≥ γ²
+    releases it, and so does a fix whose reported variance is not within a factor 2 of the
+    latched fix's (the receiver has a new solution, a new fix type: the step was the old
+    one's)."""
+    r0 = dg[DG_GR]
+    c = 0.0
+    if 0.5 * r0 <= Rm[0, 0] <= 2.0 * r0:
+        h = 0.5 * prm[PRM_GATE] * prm[PRM_GATE]
+        lam = min(max(step_llr(P, H3, Rm, nu3, dg[DG_GB:DG_GB + 3]), -h), h)
+        c = max(0.0, dg[DG_GC] + lam)
+        dg[DG_GC] = c
+        if c < 2.0 * h:
+            return True
+    ints[INTS_GLATCH] = LATCH_NONE
+    ints[INTS_GREL] += 1
+    return False
+
+
+@njit
+def _open_latch(P, H3, Rm, nu3, ints, dg):
+    """A fix the gate rejected opens a candidate step: b = its innovation, b's variance = its
+    innovation variance per axis."""
+    ints[INTS_GLATCH] = LATCH_CANDIDATE
+    ints[INTS_GLAT0] = ints[INTS_CORE]
+    dg[DG_GC] = 0.0
+    dg[DG_GR] = Rm[0, 0]
+    for i in range(3):
+        dg[DG_GB + i] = nu3[i]
+        dg[DG_GS + i] = innov_var(P, H3, Rm, i)
+
+
+@njit
+def _filter_as_sure(P, H3, Rm):
+    """Whether the filter knows the antenna's horizontal position at least as well as the fix
+    does (S_ii ≤ 2 R_ii, east and north): only then is a rejected fix evidence that the
+    receiver stepped.  A filter less sure than its fixes (out of a float or DGPS period, into
+    RTK fixed) disagreeing with them is more likely wrong itself, and is not latched."""
+    for i in range(2):
+        if innov_var(P, H3, Rm, i) > 2.0 * Rm[i, i]:
+            return False
+    return True
+
+
+@njit(inline="always")
+def _fuse_held(x, P, meas, par, ints, dg, fb):
+    """A fix the confirmed latch holds: its position is not taken; it is fused relative to
+    the step (ν ← ν − b, R ← R + diag(var b)) through the gate again."""
+    H3, nu3, Rm = meas
+    ints[INTS_GREJP] += 1
+    dg[DG_GATE] = 3.0
+    for i in range(3):
+        nu3[i] -= dg[DG_GB + i]
+        Rm[i, i] += dg[DG_GS + i]
+    if gate_ratio(P, H3, Rm, nu3, par[1][PRM_GATE]) <= 1.0:
+        rule = par[0]
+        dg[DG_NISP] = _fuse_one(x, P, meas, rule == 1 or rule == 3, par,
+                                ints[INTS_MST:INTS_MST + 4], dg, fb)
+        ints[INTS_GLAST] = ints[INTS_CORE]
+        ints[INTS_GNREL] += 1
+
+
+@njit(inline="always")
+def _reject_fix(x, P, z, meas, prm, ints, dg, S3, force_reset):
+    """A fix the gate rejects: counted; a reset to the receiver when forced (the latch's hold
+    limit), once neither a position nor a velocity has been fused for ``PRM_GRESET`` ticks
+    (no horizontal aiding: the filter has drifted), or once no position has been fused for
+    twice that (PX4 EKF2's ``shouldResetGpsFusion``: the aiding timeout, or the position's
+    alone for twice ``reset_timeout_max``); else the latch's confirmation when the
+    candidate's step fits this fix too, or a candidate step (:func:`_filter_as_sure`)."""
+    H3, nu3, Rm = meas
+    core = ints[INTS_CORE]
+    ints[INTS_GREJP] += 1
+    dg[DG_GATE] = 1.0
+    since = core - ints[INTS_GLAST]
+    if force_reset or since >= 2.0 * prm[PRM_GRESET] or (
+            since >= prm[PRM_GRESET] and core - ints[INTS_GLASTV] >= prm[PRM_GRESET]):
+        _reset_pos(x, P, z, Rm, prm, S3)
+        ints[INTS_GRESET] += 1
+        ints[INTS_GLAST] = core
+        ints[INTS_GLATCH] = LATCH_NONE
+        dg[DG_GATE] = 2.0
+    elif (ints[INTS_GLATCH] == LATCH_CANDIDATE
+          and step_llr(P, H3, Rm, nu3, dg[DG_GB:DG_GB + 3]) < 0.0):
+        ints[INTS_GLATCH] = LATCH_ON
+    elif prm[PRM_GLATCH] > 0.0 and _filter_as_sure(P, H3, Rm):
+        _open_latch(P, H3, Rm, nu3, ints, dg)
+
+
 @njit(inline="always")
 def _fuse_pos(x, P, rec, par, ints, dg, fb):
     """The fix's position through the gate (:func:`gate_ratio`; every rule's fix, the PCA'd
-    one for rules 2-3), then the rule's law.  Once neither a position nor a velocity has been
-    fused for ``PRM_GRESET`` ticks (no horizontal aiding: the filter has drifted), a rejected
-    fix resets the position (:func:`_reset_pos`); while velocities are fused the position's
-    variance grows and the gate itself re-admits the fixes that fit it."""
+    one for rules 2-3) and the step latch (module docstring of :mod:`estimators.ins`), then
+    the rule's law.  A rejected fix opens a candidate step; the next fix, rejected too and
+    nearer the step than the filter, confirms it; while the confirmed latch holds
+    (:func:`_latch_holds`) the fixes are held (:func:`_fuse_held`); held for ``PRM_GLATCH``
+    ticks, the position resets to the receiver (:func:`_reject_fix`)."""
     rule, prm, _, _ = par
     H3, nu3, R3 = view2(fb, W_H3, 3, 15), fb[W_NU3:W_NU3 + 3], view2(fb, W_R3, 3, 3)
     S3 = view3(fb, W_S3, 3)
@@ -199,18 +308,18 @@ def _fuse_pos(x, P, rec, par, ints, dg, fb):
     h_gnss_pos_w(x, prm, z, nu3, H3, S3)
     Rm = _diag_R(rec[REC_V:REC_V + 3], R3)
     core = ints[INTS_CORE]
-    if gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
-        ints[INTS_GREJP] += 1
-        dg[DG_GATE] = 1.0
-        if (core - ints[INTS_GLAST] >= prm[PRM_GRESET]
-                and core - ints[INTS_GLASTV] >= prm[PRM_GRESET]):
-            _reset_pos(x, P, z, Rm, prm, S3)
-            ints[INTS_GRESET] += 1
-            ints[INTS_GLAST] = core
-            dg[DG_GATE] = 2.0
+    if ints[INTS_GLATCH] == LATCH_ON and _latch_holds(P, H3, Rm, nu3, prm, ints, dg):
+        if core - ints[INTS_GLAT0] < prm[PRM_GLATCH]:
+            _fuse_held(x, P, (H3, nu3, Rm), par, ints, dg, fb)
+        else:
+            _reject_fix(x, P, z, (H3, nu3, Rm), prm, ints, dg, S3, True)
         return
-    use_mckf = rule == 1 or rule == 3
-    v = _fuse_one(x, P, (H3, nu3, Rm), use_mckf, par, ints[INTS_MST:INTS_MST + 4], dg, fb)
+    if gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
+        _reject_fix(x, P, z, (H3, nu3, Rm), prm, ints, dg, S3, False)
+        return
+    ints[INTS_GLATCH] = LATCH_NONE
+    v = _fuse_one(x, P, (H3, nu3, Rm), rule == 1 or rule == 3, par, ints[INTS_MST:INTS_MST + 4],
+                  dg, fb)
     dg[DG_NISP] = v
     dg[DG_GATE] = 0.0
     ints[INTS_GLAST] = core

@@ -53,29 +53,35 @@ class Layout:
 
 #: shared parameters: Δt, g, the Q impulses (δv, δθ, δb_a, δb_g), lever arm, heading baseline,
 #: radar offset, ground height, cos(max tilt), max range, delay D (ticks), delayed (0/1), ring
-#: length B = D + 1, queue length, the innovation gate (σ; inf = off), its reset time (ticks)
+#: length B = D + 1, queue length, the innovation gate (σ; inf = off), its reset time (ticks),
+#: the step latch's hold limit (ticks; 0 = no latch, inf = no limit)
 PRM = Layout("dt g qv qt qba qbg r_ant:3 r_b:3 r_rad:3 z_g cos_max r_max delay delayed ring "
-             "queue gate gate_reset")
+             "queue gate gate_reset gate_latch")
 (PRM_DT, PRM_G, PRM_QV, PRM_QT, PRM_QBA, PRM_QBG, PRM_RANT, PRM_RB, PRM_RRAD, PRM_ZG,
- PRM_COSMAX, PRM_RMAX, PRM_D, PRM_DELAYED, PRM_B, PRM_QC, PRM_GATE, PRM_GRESET) = PRM.offsets
+ PRM_COSMAX, PRM_RMAX, PRM_D, PRM_DELAYED, PRM_B, PRM_QC, PRM_GATE, PRM_GRESET,
+ PRM_GLATCH) = PRM.offsets
 
 #: per row: ticks now and of the core, queued records, output dirty (0/1), records fused late,
 #: records dropped (queue full), the MCKF state (n_rejected, n_iter, rejected, recovered),
 #: GNSS / radar fused, radar dropped; the gate: position / velocity / heading fixes rejected,
 #: position resets to the receiver, the core ticks of the last fused (or reset) position and
-#: of the last fused velocity
+#: of the last fused velocity; the step latch: open (0/1), the core tick it opened, its
+#: releases, the fixes fused relative to the latched step
 INTS = Layout("now core qn dirty late qdrop mst:4 ngnss nrad rdrop grejp grejv grejy greset "
-              "glast glastv")
+              "glast glastv glatch glat0 grel gnrel")
 (INTS_NOW, INTS_CORE, INTS_QN, INTS_DIRTY, INTS_LATE, INTS_QDROP, INTS_MST, INTS_NGNSS,
  INTS_NRAD, INTS_RDROP, INTS_GREJP, INTS_GREJV, INTS_GREJY, INTS_GRESET, INTS_GLAST,
- INTS_GLASTV) = INTS.offsets
+ INTS_GLASTV, INTS_GLATCH, INTS_GLAT0, INTS_GREL, INTS_GNREL) = INTS.offsets
 
 #: per row: the last NIS of position / velocity / heading / radar, diag C_y of the last MCKF
 #: update, ŝ of the adaptive bandwidth rule (1 after a reset), the last fix's position (0
-#: fused, 1 rejected by the gate, 2 reset; NaN: none), the radar NIS summed over the fused
-#: ranges and their number
-DG = Layout("nisp nisv nisy nisr wy:3 s2 gate rsum rn")
-DG_NISP, DG_NISV, DG_NISY, DG_NISR, DG_WY, DG_S2, DG_GATE, DG_RSUM, DG_RN = DG.offsets
+#: fused, 1 rejected by the gate, 2 reset, 3 held by the step latch; NaN: none), the radar
+#: NIS summed over the fused ranges and their number, the latched step b (the innovation of
+#: the fix that opened the latch), its variance (that fix's innovation variance per axis) and
+#: the latch's CUSUM of the evidence against the step, the latched fix's reported east variance
+DG = Layout("nisp nisv nisy nisr wy:3 s2 gate rsum rn gb:3 gs:3 gc gr")
+(DG_NISP, DG_NISV, DG_NISY, DG_NISR, DG_WY, DG_S2, DG_GATE, DG_RSUM, DG_RN, DG_GB,
+ DG_GS, DG_GC, DG_GR) = DG.offsets
 
 #: per row MCKF parameters: kernel coefficients kx (15 states), ky (3 position rows), fpar,
 #: apar = (adaptive, λ, clip), the 18 base widths σ

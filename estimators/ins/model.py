@@ -24,8 +24,8 @@ from .layout import (
 
 __all__ = ["cov_step", "gate_ratio", "h_gnss_pos", "h_gnss_pos_w", "h_gnss_vel", "h_gnss_vel_w",
            "h_heading", "h_heading_w", "h_radar", "h_radar_w", "inject_reset", "inject_reset_w",
-           "nominal_step", "nominal_step_R", "quat_exp", "quat_log_err", "quat_mul",
-           "quat_to_rot", "skew_mul"]
+           "innov_var", "nominal_step", "nominal_step_R", "quat_exp", "quat_log_err",
+           "quat_mul", "quat_to_rot", "skew_mul", "step_llr"]
 
 
 # ------------------------------------------------------------------------ quaternion algebra
@@ -359,27 +359,49 @@ def h_radar(x, prm, z, nu, H):
 
 # ------------------------------------------------------------------------ the innovation gate
 @njit
+def innov_var(P, H, Rm, i):
+    """S_ii = h_i P h_iᵀ + R_ii, over H's non-zero columns only (at most 7 of 15 for the GNSS
+    rows)."""
+    s = Rm[i, i]
+    for a in range(15):
+        ha = H[i, a]
+        if ha == 0.0:
+            continue
+        acc = 0.0
+        for b in range(15):
+            if H[i, b] != 0.0:
+                acc += P[a, b] * H[i, b]
+        s += ha * acc
+    return s
+
+
+@njit
 def gate_ratio(P, H, Rm, nu, gate):
     """The innovation test of PX4 EKF2 (docs.px4.io, *Using the ECL EKF*: "test ratio =
     innovation² / (gate² · innovation variance)", ``EKF2_GPS_GATE`` = 5 σ): the largest over
-    the measurement's rows of ν_i² / (γ² S_ii), S_ii = h_i P h_iᵀ + R_ii.  Only H's non-zero
-    columns enter (at most 7 of 15 for the GNSS rows).  A ratio above 1 fails the gate; a row
-    whose S_ii is not positive (a singular covariance) fails it too (ratio ∞)."""
+    the measurement's rows of ν_i² / (γ² S_ii), S_ii from :func:`innov_var`.  A ratio above 1
+    fails the gate; a row whose S_ii is not positive (a singular covariance) fails it too
+    (ratio ∞)."""
     worst = 0.0
     for i in range(H.shape[0]):
-        s = Rm[i, i]
-        for a in range(15):
-            ha = H[i, a]
-            if ha == 0.0:
-                continue
-            acc = 0.0
-            for b in range(15):
-                if H[i, b] != 0.0:
-                    acc += P[a, b] * H[i, b]
-            s += ha * acc
+        s = innov_var(P, H, Rm, i)
         if not s > 0.0:
             return np.inf
         r = nu[i] * nu[i] / (gate * gate * s)
         if r > worst:
             worst = r
     return worst
+
+
+@njit
+def step_llr(P, H, Rm, nu, b):
+    """The log-likelihood ratio of a receiver without a step against one stepped by ``b``, for
+    the innovation ν (S's diagonal): ½ [Σ_i (ν_i − b_i)² / S_ii − Σ_i ν_i² / S_ii]; positive
+    when the fix fits no step better."""
+    d0 = 0.0
+    d1 = 0.0
+    for i in range(H.shape[0]):
+        s = innov_var(P, H, Rm, i)
+        d0 += nu[i] * nu[i] / s
+        d1 += (nu[i] - b[i]) * (nu[i] - b[i]) / s
+    return 0.5 * (d1 - d0)

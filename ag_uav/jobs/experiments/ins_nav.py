@@ -107,11 +107,14 @@ def recovery(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 #: the consistency experiment's conditions: (name, config overrides); "clean" is the rtk
 #: preset (no fix types, so no false fixes), "false fixes" the rtk-m350 receiver with its
-#: honest reports and 30 false-fix episodes per hour of RTK fixed
+#: honest reports and 30 false-fix episodes per hour of RTK fixed; "no latch" the gate alone,
+#: as PX4 EKF2's (the step latch off)
 CONDITIONS = (
     ("clean, gate", {"gps.preset": "rtk"}),
     ("clean, no gate", {"gps.preset": "rtk", "estimator.ins_gate_sigma": 0.0}),
     ("false fixes, gate", {"gps.false_fix_per_hour": 30.0}),
+    ("false fixes, gate, no latch", {"gps.false_fix_per_hour": 30.0,
+                                     "estimator.ins_gate_latch_s": 0.0}),
     ("false fixes, no gate", {"gps.false_fix_per_hour": 30.0, "estimator.ins_gate_sigma": 0.0}),
 )
 #: (score key, its dimension) per NEES block and sensor NIS
@@ -167,6 +170,7 @@ def consistency(args: argparse.Namespace) -> list[dict[str, Any]]:
                              "cross_track_rmse_m": s.get("cross_track_rmse_m")})
         _print_condition(name, [x for x in rows if x["condition"] == name])
     _print_false_fix([x for x in rows if x["condition"].startswith("false")])
+    _print_verdict(rows)
     _plot_nees(series, Path(args.out) / "nees.png")
     return rows
 
@@ -189,28 +193,63 @@ def _print_condition(name: str, rows: list[dict[str, Any]]) -> None:
 
 
 def _print_false_fix(rows: list[dict[str, Any]]) -> None:
-    """The gate's share of the false-fix epochs, and the peak error through the episodes
-    paired with and without the gate (seeds that had episodes)."""
+    """Per gated condition: the gate's share of the false-fix epochs, and the peak error
+    through the episodes paired against the same seeds without the gate (seeds that had
+    episodes)."""
+
+    gated = sorted({x["condition"] for x in rows if not x["condition"].endswith("no gate")})
+    for cond in gated:
+        print(f"-- {cond} against no gate")
+        for rule in RULES:
+            on = {x["seed"]: x for x in rows if x["rule"] == rule and x["condition"] == cond}
+            off = {x["seed"]: x for x in rows if x["rule"] == rule
+                   and x["condition"].endswith("no gate")}
+            both = [k for k in on if k in off and on[k]["false_fix_peak_m"] is not None
+                    and off[k]["false_fix_peak_m"] is not None]
+            if both:
+                _print_pair(rule, [on[k] for k in both], [off[k] for k in both])
+
+
+def _print_pair(rule: str, on: list[dict[str, Any]], off: list[dict[str, Any]]) -> None:
+    """One rule's false-fix line: rejected share and the paired peak error."""
     import numpy as np
 
-    for rule in RULES:
-        on = {x["seed"]: x for x in rows if x["rule"] == rule and x["condition"].endswith(" gate")
-              and not x["condition"].endswith("no gate")}
-        off = {x["seed"]: x for x in rows if x["rule"] == rule
-               and x["condition"].endswith("no gate")}
-        both = [k for k in on if k in off and on[k]["false_fix_peak_m"] is not None
-                and off[k]["false_fix_peak_m"] is not None]
-        if not both:
-            continue
-        w = np.array([on[k]["false_fix_fixes"] for k in both], float)
-        rej = np.array([on[k]["false_fixes_rejected"] for k in both], float)
-        pk_on = [on[k]["false_fix_peak_m"] for k in both]
-        pk_off = [off[k]["false_fix_peak_m"] for k in both]
-        print(f"{rule}: the gate rejects {np.sum(rej * w) / np.sum(w):.1%} of "
-              f"{int(w.sum())} false-fix epochs ({len(both)} seeds with episodes); peak error "
-              f"through them {_ci(pk_on)} m with the gate, {_ci(pk_off)} m without; ratio of "
-              f"the means {np.mean(pk_off) / np.mean(pk_on):.2f}; paired "
-              f"{_ci([b - a for a, b in zip(pk_on, pk_off, strict=True)])} m", flush=True)
+    w = np.array([x["false_fix_fixes"] for x in on], float)
+    rej = np.array([x["false_fixes_rejected"] for x in on], float)
+    pk_on = [x["false_fix_peak_m"] for x in on]
+    pk_off = [x["false_fix_peak_m"] for x in off]
+    print(f"{rule}: the gate rejects {np.sum(rej * w) / np.sum(w):.1%} of "
+          f"{int(w.sum())} false-fix epochs ({len(on)} seeds with episodes); peak error "
+          f"through them {_ci(pk_on)} m with the gate, {_ci(pk_off)} m without; ratio of "
+          f"the means {np.mean(pk_off) / np.mean(pk_on):.2f}; paired "
+          f"{_ci([b - a for a, b in zip(pk_on, pk_off, strict=True)])} m", flush=True)
+
+
+#: the verdict's scores: (row key, label)
+VERDICT = (("estimate_rmse_m", "position RMSE"), ("estimate_max_m", "max error"),
+           ("false_fix_peak_m", "peak through the false fixes"))
+
+
+def _print_verdict(rows: list[dict[str, Any]]) -> None:
+    """Per condition and score, each rule paired against the KF of the same flight: the KF's
+    mean ± 95 % CI (m) and each other rule's difference (mm), with the seeds where it is
+    lower."""
+    for cond in dict.fromkeys(x["condition"] for x in rows):
+        kf = {x["seed"]: x for x in rows if x["condition"] == cond and x["rule"] == "kf"}
+        for key, label in VERDICT:
+            seeds = [k for k, x in kf.items() if x[key] is not None]
+            if not seeds:
+                continue
+            parts = [f"kf {_ci([kf[k][key] for k in seeds])} m ({len(seeds)})"]
+            for rule in ("mckf", "pca-kf", "pca-mckf"):
+                o = {x["seed"]: x[key] for x in rows
+                     if x["condition"] == cond and x["rule"] == rule}
+                d = [1e3 * (o[k] - kf[k][key]) for k in seeds if o.get(k) is not None]
+                if d:
+                    m, h = _ci(d).partition(" ± ")[::2]
+                    parts.append(f"{rule} − kf {float(m):+.1f} ± {float(h or 0):.1f} mm "
+                                 f"({sum(x < 0 for x in d)} of {len(d)} lower)")
+            print(f"{cond}: {label}: " + "; ".join(parts), flush=True)
 
 
 def _plot_nees(series: dict[str, list[Any]], path: Path) -> None:
