@@ -83,6 +83,7 @@ from .layout import (
     W_NAN,
     W_NU1,
     W_NU3,
+    W_NUR,
     W_R1,
     W_R3,
     W_S3,
@@ -270,8 +271,9 @@ def _reject_fix(x, P, z, meas, prm, ints, dg, S3, force_reset):
     limit), once neither a position nor a velocity has been fused for ``PRM_GRESET`` ticks
     (no horizontal aiding: the filter has drifted), or once no position has been fused for
     twice that (PX4 EKF2's ``shouldResetGpsFusion``: the aiding timeout, or the position's
-    alone for twice ``reset_timeout_max``); else the latch's confirmation when the
-    candidate's step fits this fix too, or a candidate step (:func:`_filter_as_sure`)."""
+    alone for twice ``reset_timeout_max``); else, when the raw fix (``meas``'s ν) fails the
+    gate too, the latch's confirmation when the candidate's step fits it, or a candidate
+    step (:func:`_filter_as_sure`)."""
     H3, nu3, Rm = meas
     core = ints[INTS_CORE]
     ints[INTS_GREJP] += 1
@@ -284,11 +286,12 @@ def _reject_fix(x, P, z, meas, prm, ints, dg, S3, force_reset):
         ints[INTS_GLAST] = core
         ints[INTS_GLATCH] = LATCH_NONE
         dg[DG_GATE] = 2.0
-    elif (ints[INTS_GLATCH] == LATCH_CANDIDATE
-          and step_llr(P, H3, Rm, nu3, dg[DG_GB:DG_GB + 3]) < 0.0):
-        ints[INTS_GLATCH] = LATCH_ON
-    elif prm[PRM_GLATCH] > 0.0 and _filter_as_sure(P, H3, Rm):
-        _open_latch(P, H3, Rm, nu3, ints, dg)
+    elif prm[PRM_GLATCH] > 0.0 and gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
+        if (ints[INTS_GLATCH] == LATCH_CANDIDATE
+                and step_llr(P, H3, Rm, nu3, dg[DG_GB:DG_GB + 3]) < 0.0):
+            ints[INTS_GLATCH] = LATCH_ON
+        elif _filter_as_sure(P, H3, Rm):
+            _open_latch(P, H3, Rm, nu3, ints, dg)
 
 
 @njit(inline="always")
@@ -298,24 +301,35 @@ def _fuse_pos(x, P, rec, par, ints, dg, fb):
     the rule's law.  A rejected fix opens a candidate step; the next fix, rejected too and
     nearer the step than the filter, confirms it; while the confirmed latch holds
     (:func:`_latch_holds`) the fixes are held (:func:`_fuse_held`); held for ``PRM_GLATCH``
-    ticks, the position resets to the receiver (:func:`_reject_fix`)."""
+    ticks, the position resets to the receiver (:func:`_reject_fix`).  The latch works on the
+    raw fix for every rule: a false fix is the receiver's step, which the PCA block's window
+    spreads over its fixes (a PCA'd fix the gate rejects opens nothing unless the raw fix
+    fails the gate too, and a held fix is fused raw, relative to the raw step)."""
     rule, prm, _, _ = par
     H3, nu3, R3 = view2(fb, W_H3, 3, 15), fb[W_NU3:W_NU3 + 3], view2(fb, W_R3, 3, 3)
-    S3 = view3(fb, W_S3, 3)
-    z = rec[REC_ZP:REC_ZP + 3] if rule >= 2 else rec[REC_Z:REC_Z + 3]
-    if not np.isfinite(z[0] + z[1] + z[2]):
+    S3, nur = view3(fb, W_S3, 3), fb[W_NUR:W_NUR + 3]
+    zr = rec[REC_Z:REC_Z + 3]
+    z = rec[REC_ZP:REC_ZP + 3] if rule >= 2 else zr
+    if not np.isfinite(z[0] + z[1] + z[2] + zr[0] + zr[1] + zr[2]):
         return
-    h_gnss_pos_w(x, prm, z, nu3, H3, S3)
+    h_gnss_pos_w(x, prm, zr, nur, H3, S3)   # the raw fix's ν: the latch's
+    if rule >= 2:
+        h_gnss_pos_w(x, prm, z, nu3, H3, S3)
+    else:
+        for i in range(3):
+            nu3[i] = nur[i]
     Rm = _diag_R(rec[REC_V:REC_V + 3], R3)
     core = ints[INTS_CORE]
-    if ints[INTS_GLATCH] == LATCH_ON and _latch_holds(P, H3, Rm, nu3, prm, ints, dg):
+    if ints[INTS_GLATCH] == LATCH_ON and _latch_holds(P, H3, Rm, nur, prm, ints, dg):
         if core - ints[INTS_GLAT0] < prm[PRM_GLATCH]:
+            for i in range(3):
+                nu3[i] = nur[i]
             _fuse_held(x, P, (H3, nu3, Rm), par, ints, dg, fb)
         else:
-            _reject_fix(x, P, z, (H3, nu3, Rm), prm, ints, dg, S3, True)
+            _reject_fix(x, P, z, (H3, nur, Rm), prm, ints, dg, S3, True)
         return
     if gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
-        _reject_fix(x, P, z, (H3, nu3, Rm), prm, ints, dg, S3, False)
+        _reject_fix(x, P, z, (H3, nur, Rm), prm, ints, dg, S3, False)
         return
     ints[INTS_GLATCH] = LATCH_NONE
     v = _fuse_one(x, P, (H3, nu3, Rm), rule == 1 or rule == 3, par, ints[INTS_MST:INTS_MST + 4],

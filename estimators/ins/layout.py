@@ -106,13 +106,14 @@ RIN_RANGE, RIN_VAR, RIN_AGE = RIN.offsets
 
 #: the tick's work: H, ν, R for m = 3 and m = 1, δx, the models' (3, 3, 3) and vector, the
 #: adaptive MCKF kernels kx, ky; F P (9, 15), the prediction's (5, 3, 3) and vector, the PCA'd
-#: fix, three NaNs; the KF / MCKF work of one update (``mckf_work_size(15, 3)`` floats, whose
-#: head is the KF work: the two updates never run at once)
+#: fix, three NaNs, the raw fix's innovation (the step latch's); the KF / MCKF work of one
+#: update (``mckf_work_size(15, 3)`` floats, whose head is the KF work: the two updates never
+#: run at once)
 SCRATCH = Layout("H3:3x15 nu3:3 R3:3x3 H1:1x15 nu1:1 R1:1x1 dx:15 S3:3x3x3 v:8 kx:15 ky:3 "
-                 f"M:9x15 S3P:5x3x3 w:16 zp:3 nan:3 "
+                 f"M:9x15 S3P:5x3x3 w:16 zp:3 nan:3 nur:3 "
                  f"kf:{getattr(mckf_work_size, 'py_func', mckf_work_size)(15, 3)}")
 (W_H3, W_NU3, W_R3, W_H1, W_NU1, W_R1, W_DX, W_S3, W_V, W_KX, W_KY, W_M, W_S3P, W_W, W_ZP,
- W_NAN, W_KF) = SCRATCH.offsets
+ W_NAN, W_NUR, W_KF) = SCRATCH.offsets
 
 
 @njit
