@@ -41,14 +41,17 @@ def test_default_mission_flies_the_estimator_bank(default_run):
     assert s["nav"] == "ins"
     for v in s["estimators"].values():
         # the INS: an RTK-class estimate, centimetres, with the honest receiver's false fix of
-        # seed 0 (one 31 s episode, decimetres) in it; attitude to tenths of a degree. The
-        # NEES15 (16.4-17.3 measured) lies above χ²(15) by the episode the gate lets back in
-        # after its variance grew (docs/ins.md)
-        assert 0.003 < v["estimate_rmse_m"] < 0.08
-        assert v["estimate_max_m"] < 0.4
+        # seed 0 (one 31 s episode, decimetres) held out by the gate's step latch (0.010-0.011
+        # m RMS, max 0.031-0.041 m measured; 0.029-0.031 / 0.26-0.27 m on the gate alone);
+        # attitude to tenths of a degree. The NEES15 (14.1-14.5 measured) lies in the band of
+        # the mean of its ~140 effective fixes (14.1-15.9; 16.4-17.3 on the gate alone)
+        assert 0.003 < v["estimate_rmse_m"] < 0.02
+        assert v["estimate_max_m"] < 0.1
         assert v["tilt_error_rms_deg"] < 0.5 and v["yaw_error_rms_deg"] < 0.3
-        assert 15.0 < v["nees15_mean"] < 30.0 and 1.5 < v["nis_mean"] < 4.0
-        assert v["nees_pos_mean"] < 12.0
+        lo, hi = v["nees15_band95"]
+        assert 12.0 < lo < 15.0 < hi < 18.0 and 100 < v["nees15_n_eff"] < 300
+        assert 13.0 < v["nees15_mean"] < 16.0 and 1.5 < v["nis_mean"] < 4.0
+        assert v["nees_pos_mean"] < 6.0 and v["gate_latched"] > 250
         assert all(v[f"nees_{b}_mean"] < 5.0 for b in ("vel", "att", "ba", "bg"))
         assert 2.0 < v["nis_vel_mean"] < 4.0 and 0.7 < v["nis_yaw_mean"] < 1.4
         assert v["false_fixes_rejected"] > 0.9 and v["gate_rejected"] > 250
@@ -144,9 +147,9 @@ def test_fly_cli_writes_summary(tmp_path):
 
 def test_default_mission_dose_figures_the_readme_states(default_run):
     """The README's dose figures of the default mission (seed 0; legs across the wind, lanes
-    3 m from the pattern test at CV <= 15 %: mean 0.997 L/ha of tank mix, CV 15.8 %, 7.9 %
-    under-dosed, 7.1 % over-dosed, 3.3 % off the field, 0.66 % drifting past the buffer, 2.4 %
-    of the water evaporated) and its cross-track RMSE on the INS (0.037 m), within bounds that
+    3 m from the pattern test at CV <= 15 %: mean 0.997 L/ha of tank mix, CV 16.2 %, 8.0 %
+    under-dosed, 7.3 % over-dosed, 3.2 % off the field, 0.66 % drifting past the buffer, 2.4 %
+    of the water evaporated) and its cross-track RMSE on the INS (0.022 m), within bounds that
     a broken deposition, plan or navigation would leave (legs along the wind at the effective
     swath and light turbulence gave CV 25.6 % and 27.8 % under-dosed; 6 m lanes 58 %)."""
     _, res = default_run
@@ -159,5 +162,5 @@ def test_default_mission_dose_figures_the_readme_states(default_run):
     assert 0.02 < s["offtarget_deposit_fraction"] < 0.05
     assert 3e-3 < s["drift_fraction"] < 1.2e-2
     assert 0.015 < s["evaporated_fraction"] < 0.035
-    assert s["cross_track_rmse_m"] < 0.05
+    assert s["cross_track_rmse_m"] < 0.035
     assert s["tilt_error_rms_deg"] < 0.3

@@ -44,8 +44,11 @@ the variance's Gauss–Markov part is inflated by `receiver.colour_factor` for t
 ``estimator.ins_gate_reset_s``; :func:`estimators.ins.gate_ratio`): every fix's position,
 velocity and heading is tested before its update; a rejected one is not fused, counted
 (summary ``gate_rejected`` per filter, ``ins_counters``) and its verdict kept per fix. After
-``ins_gate_reset_s`` with neither a position nor a velocity fused, a rejected fix resets the
-position to the receiver (``gate_resets``).
+``ins_gate_reset_s`` with neither a position nor a velocity fused, or twice that with no
+position, a rejected fix resets the position to the receiver (``gate_resets``). Behind the gate
+the step latch (``estimator.ins_gate_latch_s``; :mod:`estimators.ins`) holds the fixes of a
+step the gate caught and fuses them relative to it (``gate_latched``, counted in
+``gate_rejected`` too; ``ins_counters``: ``gnss_fused_relative``, ``gate_latch_releases``).
 
 **Rates.** The rate loop flies on the gyro less the flown filter's gyro-bias estimate (the
 fourth output of :meth:`BatchInsFeedback.update`), as an autopilot's does.
@@ -351,7 +354,8 @@ class InsFeedback(Feedback):
                 "tilt_error_rms_deg": rms(te / DEG), "tilt_error_max_deg": mx(te / DEG),
                 "yaw_error_rms_deg": rms(ye / DEG),
                 "nees15_mean": round(float(nees.mean()), 3) if nees.size else None,
-                "nees15_band95": _chi2_band(15, nees.size),
+                "nees15_band95": _chi2_band(15, effective_n(nees)),
+                "nees15_n_eff": round(effective_n(nees), 1) if nees.size else None,
                 "nees15_not_pd": not_pd,
                 **{f"nees_{b}_mean": _mean(r[f"nees_{b}"][sel, j]) for b in BLOCKS},
                 "nis_mean": _mean(r["nis"][sel, j]),
@@ -407,14 +411,38 @@ def _mean(a: np.ndarray) -> float | None:
     return round(float(a.mean()), 3) if a.size else None
 
 
-def _chi2_band(dof: int, n: int) -> list[float] | None:
-    """The 95 % two-sided band of the mean of ``n`` independent χ²(dof) values."""
+def _chi2_band(dof: int, n: float) -> list[float] | None:
+    """The 95 % two-sided band of the mean of ``n`` independent χ²(dof) values (``n`` may be
+    an effective number, :func:`effective_n`)."""
     if n <= 0:
         return None
     from scipy.stats import chi2
 
     return [round(float(chi2.ppf(0.025, dof * n) / n), 3),
             round(float(chi2.ppf(0.975, dof * n) / n), 3)]
+
+
+def effective_n(x: np.ndarray) -> float:
+    """The effective number of independent values in the series ``x`` for its mean: N / τ,
+    τ = 1 + 2 Σ ρ_k the integrated autocorrelation time, summed over Geyer's initial positive
+    sequence (pairs ρ_2m + ρ_2m+1 while positive; Geyer, Statistical Science 7, 1992).
+    Successive fixes' NEES are correlated (the filter's error is), so the band of their mean
+    is that of N / τ independent values, not N."""
+    x = np.asarray(x, dtype=float)
+    n = x.size
+    if n < 4 or not np.any(x != x[0]):
+        return float(n)
+    d = x - x.mean()
+    f = np.fft.rfft(d, 2 * n)
+    acf = np.fft.irfft(f * np.conj(f))[:n]
+    rho = acf / acf[0]
+    tau = -1.0                      # 2 Σ_{m} (ρ_2m + ρ_2m+1) − 1, from ρ_0 = 1
+    for m in range(n // 2):
+        g = rho[2 * m] + rho[2 * m + 1]
+        if g <= 0.0:
+            break
+        tau += 2.0 * g
+    return float(n / max(tau, 1.0))
 
 
 class BatchInsFeedback:

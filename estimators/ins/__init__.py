@@ -77,7 +77,8 @@ resets the position to it (PX4 EKF2's two timeouts). **The step latch**
 behind the gate (``gate_latch_s`` > 0; not in PX4 EKF2): a false RTK fix (wrong integer
 ambiguities) is a constant step in a receiver that still reports cm accuracy, and the
 single-epoch test re-admits it once the position variance, fed only by the velocities, has grown
-to the step (10–20 s).  So a position the gate rejects, while the filter knows the antenna's
+to the step (10–20 s).  So a position the gate rejects, once the filter has fused fixes for
+``gate_reset_s`` since it was set on one (its start, a reset) and while it knows the antenna's
 horizontal position at least as well as the fix does (S_ii ≤ 2 R_ii: a filter less sure than
 its fixes, out of a float or DGPS period, is more likely wrong itself), opens a candidate step
 b = its innovation, with its innovation variance as b's.  The next fix confirms it when the

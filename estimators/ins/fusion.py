@@ -41,6 +41,7 @@ from .layout import (
     INTS_GREJY,
     INTS_GREL,
     INTS_GRESET,
+    INTS_GRST,
     INTS_LATE,
     INTS_MST,
     INTS_NGNSS,
@@ -273,7 +274,8 @@ def _reject_fix(x, P, z, meas, prm, ints, dg, S3, force_reset):
     twice that (PX4 EKF2's ``shouldResetGpsFusion``: the aiding timeout, or the position's
     alone for twice ``reset_timeout_max``); else, when the raw fix (``meas``'s ν) fails the
     gate too, the latch's confirmation when the candidate's step fits it, or a candidate
-    step (:func:`_filter_as_sure`)."""
+    step: only once the filter has fused fixes for ``PRM_GRESET`` ticks since it was set on
+    one (its start, a reset), and is as sure as the fix (:func:`_filter_as_sure`)."""
     H3, nu3, Rm = meas
     core = ints[INTS_CORE]
     ints[INTS_GREJP] += 1
@@ -284,13 +286,14 @@ def _reject_fix(x, P, z, meas, prm, ints, dg, S3, force_reset):
         _reset_pos(x, P, z, Rm, prm, S3)
         ints[INTS_GRESET] += 1
         ints[INTS_GLAST] = core
+        ints[INTS_GRST] = core
         ints[INTS_GLATCH] = LATCH_NONE
         dg[DG_GATE] = 2.0
     elif prm[PRM_GLATCH] > 0.0 and gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
         if (ints[INTS_GLATCH] == LATCH_CANDIDATE
                 and step_llr(P, H3, Rm, nu3, dg[DG_GB:DG_GB + 3]) < 0.0):
             ints[INTS_GLATCH] = LATCH_ON
-        elif _filter_as_sure(P, H3, Rm):
+        elif core - ints[INTS_GRST] >= prm[PRM_GRESET] and _filter_as_sure(P, H3, Rm):
             _open_latch(P, H3, Rm, nu3, ints, dg)
 
 

@@ -65,13 +65,14 @@ PRM = Layout("dt g qv qt qba qbg r_ant:3 r_b:3 r_rad:3 z_g cos_max r_max delay d
 #: records dropped (queue full), the MCKF state (n_rejected, n_iter, rejected, recovered),
 #: GNSS / radar fused, radar dropped; the gate: position / velocity / heading fixes rejected,
 #: position resets to the receiver, the core ticks of the last fused (or reset) position and
-#: of the last fused velocity; the step latch: open (0/1), the core tick it opened, its
-#: releases, the fixes fused relative to the latched step
+#: of the last fused velocity, of the last position reset (0: the filter's start); the step
+#: latch: its state (none / candidate / on), the core tick it opened, its releases, the fixes
+#: fused relative to the latched step
 INTS = Layout("now core qn dirty late qdrop mst:4 ngnss nrad rdrop grejp grejv grejy greset "
-              "glast glastv glatch glat0 grel gnrel")
+              "glast glastv grst glatch glat0 grel gnrel")
 (INTS_NOW, INTS_CORE, INTS_QN, INTS_DIRTY, INTS_LATE, INTS_QDROP, INTS_MST, INTS_NGNSS,
  INTS_NRAD, INTS_RDROP, INTS_GREJP, INTS_GREJV, INTS_GREJY, INTS_GRESET, INTS_GLAST,
- INTS_GLASTV, INTS_GLATCH, INTS_GLAT0, INTS_GREL, INTS_GNREL) = INTS.offsets
+ INTS_GLASTV, INTS_GRST, INTS_GLATCH, INTS_GLAT0, INTS_GREL, INTS_GNREL) = INTS.offsets
 
 #: per row: the last NIS of position / velocity / heading / radar, diag C_y of the last MCKF
 #: update, ŝ of the adaptive bandwidth rule (1 after a reset), the last fix's position (0
