@@ -205,7 +205,7 @@ class InsFeedback(Feedback):
         self.aux_rng = np.random.default_rng(derive_seed(spare, "gnss_aux"))
         self._aux: list[float] = []
         self._aux_j = 0
-        self.gnss_buf = np.empty(15)   # the fix row fix() returns (overwritten by the next)
+        self.age_s = self.D * self.dt   # every fix's age (s): the latency in whole ticks
         self.radar = g.altitude_source == "radar"
         self.radar_rng = np.random.default_rng(seeds["altimeter"])
         # R and the considered variance per reported fix type (module docstring, "R")
@@ -214,11 +214,16 @@ class InsFeedback(Feedback):
         self.var_nominal = self._r(None)
         self.var_by_type = ({m: self._r(m) for m in self.gps.fix_types}
                             if g.r_from_fix_type else {})
+        # the same as Python floats for fix() (R per reported type)
+        self._var_nominal_list = self.var_nominal[0].tolist()
+        self._var_lists = {m: vp.tolist() for m, (vp, _) in self.var_by_type.items()}
         #: the Gauss-Markov variance of the last fused fix (consider: the position covariance
         #: the INS reports is its P plus this; zero otherwise)
         self.cvar = np.zeros(3)
         self.var_v = g.velocity_sigma_mps**2
         self.var_yaw = (g.heading_sigma_deg * DEG) ** 2
+        #: the velocity and heading noise's standard deviations (m/s, rad)
+        self.sig_v, self.sig_yaw = g.velocity_sigma_mps, g.heading_sigma_deg * DEG
         # scoring only: a twin of the engine's IMU (the same seed stream and block), whose
         # walk_block() gives the walked biases sample by sample: the bias states' truth
         self.imu_twin = ImuSensor(cfg.imu, cfg.sim.control_hz, seeds["imu"])
@@ -241,34 +246,37 @@ class InsFeedback(Feedback):
         self.rec: dict[str, Any] = {}
         self.att: dict[str, float] = {}
 
-    def fix(self, t: float, p_ant, v_ant, yaw) -> np.ndarray | None:
-        """The receiver's fix of this tick from the delayed antenna truth, as one
-        :meth:`BatchINS.gnss_row` (None: no fix due, or lost). Python floats where numpy's
-        per-call cost would dominate (the same IEEE operations, so the same bits)."""
-        z = self.gps.measure(t, p_ant)
+    def fix(self, t: float, p_ant, v_ant, yaw: float) -> list[float] | None:
+        """The receiver's fix of this tick from the delayed antenna truth (position, velocity,
+        heading), as one :meth:`BatchINS.gnss_row` (a list of 15; None: no fix due, or lost).
+        Python floats, since numpy's per-call cost would dominate at one vehicle (the same IEEE
+        operations, so the same bits)."""
+        z = self.gps.measure_xyz(t, p_ant)
         if z is None or (self.outages and any(a <= t < b for a, b in self.outages)):
             return None
         true_type = self.gps.last_fix_type
         rep, scale = true_type, 1.0
+        zx, zy, zz = z
         self.last_false = False
         if self.report is not None:
             bias, rep, scale = self.report.step(true_type)
-            z = z + bias
+            zx, zy, zz = zx + bias[0], zy + bias[1], zz + bias[2]
             self.last_false = bool(bias.any())   # a false fix carries its bias
-        vp, cv = self.var_by_type.get(rep, self.var_nominal)
-        self.cvar[:] = cv * (scale * scale)
+        vp = self._var_lists.get(rep, self._var_nominal_list)
+        if self.colour == "consider":   # else the considered variance stays zero
+            self.cvar[:] = self.var_by_type.get(rep, self.var_nominal)[1] * (scale * scale)
         n = self._aux4()
-        sv, g = self.cfg.gps.velocity_sigma_mps, self.gnss_buf
+        sv = self.sig_v
         self.fixes += 1
         if self.log is not None:  # the reported type and its variance (times the calibration)
             v, s2 = self.gps.reported_variance(rep), scale * scale
-            self.log.gps(t, z, (v[0] * s2, v[1] * s2, v[2] * s2), rep)
-        g[:] = (self.D * self.dt, z[0], z[1], z[2],
+            self.log.gps(t, np.array((zx, zy, zz)), (v[0] * s2, v[1] * s2, v[2] * s2), rep)
+        vv = self.var_v
+        return [self.age_s, zx, zy, zz,
                 v_ant[0] + sv * n[0], v_ant[1] + sv * n[1], v_ant[2] + sv * n[2],
-                yaw + self.cfg.gps.heading_sigma_deg * DEG * n[3],
+                yaw + self.sig_yaw * n[3],
                 vp[0] * scale * scale, vp[1] * scale * scale, vp[2] * scale * scale,
-                self.var_v, self.var_v, self.var_v, self.var_yaw)
-        return g
+                vv, vv, vv, self.var_yaw]
 
     def _r(self, mode: str | None) -> tuple[np.ndarray, np.ndarray]:
         """(R, considered variance) per axis of a fix of type ``mode`` (None: the preset's
@@ -542,8 +550,7 @@ class BatchInsFeedback:
         truth = (p, v, self.R_true, self.w_true, act, imu[0], imu[2])
         flags = tick_in(truth, self.rows, k, t, k % self.blk)
         if flags & FIX_DUE:
-            for i in np.flatnonzero(self.due):
-                self._fix(int(i), k, t)
+            self._fixes(k, t)
         if self.radar_on and k % self.radar_every == 0:
             self._radar(k, act)
         if self.bank is not None:
@@ -584,29 +591,42 @@ class BatchInsFeedback:
                 r = i * nr
                 log.estimator_bank(t, self.names, x[r:r + nr], pd[r:r + nr], p[i])
 
-    def _fix(self, i: int, k: int, t: float) -> None:
-        fb = self.fbs[i]
-        r = self.ring[i, max(k - self.D, 0) % (self.D + 1)]
-        if not math.isfinite(r[0]):   # before D ticks of history: the oldest there is
-            r = self.ring[i, 0]
-        row = fb.fix(t, r[0:3], r[3:6], float(r[6]))
-        self.next_t[i] = fb.gps.next_fix_t
-        if row is None or not (math.isfinite(row[1]) and math.isfinite(row[2])
-                               and math.isfinite(row[3])):
-            return
-        if not self.init[i]:
-            if abs(float(np.linalg.norm(self.imu[i, :3])) - 9.81) < 0.5:  # at rest: levels
-                self._initialise(i, k, row)
-            return
-        aid = self.range_last[i] < fb.aid_m and math.hypot(row[4], row[5]) < fb.aid_mps
-        if aid:
-            row[10] = NOT_FUSED_VAR  # range aid: the radar is the height source
-            fb.range_aid_fixes += 1
-        self.aid_on[i] = 1.0 if aid else 0.0
-        self.gnss[i] = row
-        self.cvar[i] = fb.cvar
-        if fb.last_false:
-            fb.false_k.append(k)
+    def _fixes(self, k: int, t: float) -> None:
+        """The receivers of the vehicles with a fix due (Python, one vehicle at a time at the
+        fix rate, on the truth ring's delayed row as a list); the fused fixes' rows go into
+        ``gnss`` in one assignment."""
+        ii = np.flatnonzero(self.due).tolist()
+        slot = max(k - self.D, 0) % (self.D + 1)
+        rings = self.ring[ii, slot, :7].tolist()
+        rl = self.range_last[ii].tolist()
+        fused: list[int] = []
+        rows: list[list[float]] = []
+        for i, r, rng in zip(ii, rings, rl, strict=True):
+            if not math.isfinite(r[0]):   # before D ticks of history: the oldest there is
+                r = self.ring[i, 0, :7].tolist()
+            fb = self.fbs[i]
+            row = fb.fix(t, r[0:3], r[3:6], r[6])
+            self.next_t[i] = fb.gps.next_fix_t
+            if row is None or not (math.isfinite(row[1]) and math.isfinite(row[2])
+                                   and math.isfinite(row[3])):
+                continue
+            if not self.init[i]:
+                if abs(float(np.linalg.norm(self.imu[i, :3])) - 9.81) < 0.5:  # at rest: levels
+                    self._initialise(i, k, np.array(row))
+                continue
+            aid = rng < fb.aid_m and math.hypot(row[4], row[5]) < fb.aid_mps
+            if aid:
+                row[10] = NOT_FUSED_VAR  # range aid: the radar is the height source
+                fb.range_aid_fixes += 1
+            self.aid_on[i] = 1.0 if aid else 0.0
+            fused.append(i)
+            rows.append(row)
+            if fb.colour == "consider":   # else both stay zero
+                self.cvar[i] = fb.cvar
+            if fb.last_false:
+                fb.false_k.append(k)
+        if fused:
+            self.gnss[fused] = rows
 
     def _initialise(self, i: int, k: int, row: np.ndarray) -> None:
         """On the ground at the first fix (module docstring)."""

@@ -290,26 +290,28 @@ def quad_inv(P, e, n, L, y):  # pragma: no cover
 
 
 @njit(cache=True)
-def row_errors(x, p, v, Rt, Re, out):  # pragma: no cover
+def row_errors(x, p, v, Rt, yaw_t, Re, out):  # pragma: no cover
     """Horizontal position, 3-D velocity, tilt (angle between the body z axes) and yaw errors
-    of one row's output against the truth of the tick."""
-    quat_to_rot(x[6:10], Re)
+    of one row's output against the truth of the tick (``Rt`` row-major, its yaw
+    ``yaw_t = atan2(Rt[3], Rt[0])``, the same for every row of a vehicle); ``Re`` (3, 3):
+    scratch."""
+    quat_to_rot_3x3(x[6:10], Re)
     dx, dy = x[0] - p[0], x[1] - p[1]
     out[0] = math.sqrt(dx * dx + dy * dy)
     s = 0.0
     for a in range(3):
         s += (x[3 + a] - v[a]) ** 2
     out[1] = math.sqrt(s)
-    cz = Re[2] * Rt[2] + Re[5] * Rt[5] + Re[8] * Rt[8]
+    cz = Re[0, 2] * Rt[2] + Re[1, 2] * Rt[5] + Re[2, 2] * Rt[8]
     out[2] = math.acos(min(1.0, max(-1.0, cz)))
-    ye = math.atan2(Re[3], Re[0]) - math.atan2(Rt[3], Rt[0])
+    ye = math.atan2(Re[1, 0], Re[0, 0]) - yaw_t
     out[3] = abs(math.atan2(math.sin(ye), math.cos(ye)))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
     """The flown row's (p, v, R) per vehicle and the bias-corrected rates ω̃ − b̂_g (the raw
-    gyro before the filter is initialised); per row the tick's errors (:func:`_row_errors`)
+    gyro before the filter is initialised); per row the tick's errors (:func:`row_errors`)
     and, at a fix, the record ``nees[i, fix, :, row]`` (columns ``N_*``): the NEES of the
     core's 15-state error against the truth of the core's tick (:func:`nees15`), of each
     3-state block on its marginal covariance, and the fix's NIS (position, velocity, heading;
@@ -325,7 +327,7 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
     err, fix_k, nees, n_fix, k0 = sc.err, sc.fix_k, sc.nees, sc.n_fix, sc.k0
     p_out, v_out, R_out, w_out = o.p, o.v, o.R, o.w
     B = ring.shape[1]
-    Re = np.empty(9)
+    Re = np.empty((3, 3))
     q_t = np.empty(4)
     dth = np.empty(3)
     e = np.empty(15)
@@ -352,9 +354,10 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
         if at_fix:
             fix_k[i, rec] = k
             n_fix[i] = rec + 1
+        yaw_t = math.atan2(Rt[i, 3], Rt[i, 0])
         for j in range(nr):
             row = i * nr + j
-            row_errors(xo[row], p[i], v[i], Rt[i], Re, oe)
+            row_errors(xo[row], p[i], v[i], Rt[i], yaw_t, Re, oe)
             for c in range(4):
                 err[k, i, c, j] = oe[c]
             if at_fix:

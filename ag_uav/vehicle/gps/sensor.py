@@ -209,6 +209,13 @@ class GpsSensor:
         epoch index only).  Calls must have non-decreasing t.  A delivered fix updates
         :attr:`last_fix_type` and :attr:`fix_type_counts`.
         """
+        z = self.measure_xyz(t, p_true_xyz)
+        return None if z is None else np.array(z)
+
+    def measure_xyz(self, t: float, p_true_xyz: Sequence[float]
+                    ) -> tuple[float, float, float] | None:
+        """:meth:`measure` with the fix as a tuple of three floats (the same law and values;
+        no array made: the INS batch calls it per vehicle at the fix rate)."""
         if self.latency_s > 0.0:
             self._hist.append((t, float(p_true_xyz[0]), float(p_true_xyz[1]),
                                float(p_true_xyz[2])))
@@ -238,7 +245,7 @@ class GpsSensor:
             x, y, z = self._truth_at(t - self.latency_s)
         else:
             x, y, z = p_true_xyz[0], p_true_xyz[1], p_true_xyz[2]
-        return np.array((x + ex, y + ey, z + ez))
+        return (x + ex, y + ey, z + ez)
 
     @property
     def variance(self) -> tuple[float, float, float]:
