@@ -109,6 +109,7 @@ from .ins_kernels import (
     NOT_INITIALISED,
     NREC,
     RING_WIDTH,
+    BankView,
     Outputs,
     Scores,
     SensorRows,
@@ -260,8 +261,11 @@ class InsFeedback(Feedback):
         self.last_false = False
         if self.report is not None:
             bias, rep, scale = self.report.step(true_type)
-            zx, zy, zz = zx + bias[0], zy + bias[1], zz + bias[2]
-            self.last_false = bool(bias.any())   # a false fix carries its bias
+            if self.report.in_false:   # a false fix carries its bias
+                zx, zy, zz = zx + bias[0], zy + bias[1], zz + bias[2]
+                self.last_false = bool(bias.any())
+            else:   # the bias is zero (added, as it always was: -0.0 becomes 0.0)
+                zx, zy, zz = zx + 0.0, zy + 0.0, zz + 0.0
         vp = self._var_lists.get(rep, self._var_nominal_list)
         if self.colour == "consider":   # else the considered variance stays zero
             self.cvar[:] = self.var_by_type.get(rep, self.var_nominal)[1] * (scale * scale)
@@ -499,6 +503,8 @@ class BatchInsFeedback:
         self.blk = f0.imu_twin.block
         self.btru = np.zeros((NV, self.blk, 6))
         self.b_next = 0
+        #: whether the walked biases come from the twins (no engine IMU tapped: imu_tap)
+        self.twins = True
         self.prm = np.array([*ANTENNA, *RADAR, *self.icfg.heading_baseline,
                              math.cos(self.icfg.radar_max_tilt_deg * DEG),
                              self.icfg.radar_max_range])
@@ -521,9 +527,24 @@ class BatchInsFeedback:
         self.scores = tuple(Scores(self.ring, self.init, self.gnss, self.imu, self.cvar,
                                    self.err, self.fix_k, self.nees, self.n_fix, self.k0))
         self.outs = tuple(Outputs(self.p_out, self.v_out, self.R_out, self.w_out))
+        bk = self.bank   # its arrays are made once and written in place: views taken once
+        self.bank_view = (tuple(BankView(bk.x_out, bk.x_core, bk.P, bk.nis, bk.gate_state,
+                                         bk.core_tick)) if bk is not None else ())
         self.logging = any(fb.log is not None for fb in fbs)
         self._logged: list[tuple[int, Any]] | None = None
         self._pdiag = np.zeros((0, 0))
+
+    def imu_tap(self, walked: np.ndarray) -> None:
+        """The engine's IMU's walked biases of its buffered blocks (N, block, 6:
+        :attr:`~ag_uav.vehicle.sensors_batched.BatchImu.walked`, refilled in place by the
+        sensing stage before this stage's tick): read as the bias states' truth instead of the
+        twins' (the same draws: :meth:`~ag_uav.vehicle.imu.ImuSensor.walk_block`), when its
+        block is the twins'."""
+        if walked.shape[1] != self.blk:
+            return
+        self.btru, self.twins = walked, False
+        self.rows = tuple(SensorRows(self.ring, self.prm, self.btru, self.imu, self.gnss,
+                                     self.radar, self.next_t, self.init, self.due))
 
     def truth_tap(self, R: np.ndarray, omega: np.ndarray) -> None:
         """The engine's true attitude (N, 9) and body rate (N, 3) arrays (written in place each
@@ -543,8 +564,9 @@ class BatchInsFeedback:
         if self.R_true is None:   # no engine tap: the sensors that need the attitude drop out
             self.truth_tap(np.full((self.NV, 9), np.nan), np.full((self.NV, 3), np.nan))
         if k >= self.b_next:   # the next block of the walked biases (scoring truth)
-            for i, fb in enumerate(self.fbs):
-                self.btru[i] = fb.imu_twin.walk_block()
+            if self.twins:
+                for i, fb in enumerate(self.fbs):
+                    self.btru[i] = fb.imu_twin.walk_block()
             self.b_next += self.blk
         # Truth's fields, as a plain tuple (ins_kernels: a named one types slower)
         truth = (p, v, self.R_true, self.w_true, act, imu[0], imu[2])
@@ -560,11 +582,8 @@ class BatchInsFeedback:
                 self.upd_ns += time.perf_counter_ns() - t0
                 self.n_upd += 1
             self.n_calls += 1
-            # BankView's and Pose's fields, as plain tuples
-            bk = self.bank
-            bank = (bk.x_out, bk.x_core, bk.P, bk.nis, bk.gate_state, bk.core_tick)
-            outputs(bank, (p, v, self.R_true, act), self.scores, self.outs, k, self.nr,
-                    self.flown)
+            outputs(self.bank_view, (p, v, self.R_true, act), self.scores, self.outs, k,
+                    self.nr, self.flown)
         if flags & NOT_INITIALISED:
             self._pre_init(act)
         if self.logging and flags & FIX_DUE:

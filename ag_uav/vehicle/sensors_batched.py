@@ -235,6 +235,10 @@ class BatchImu:
         self._ones = np.ones(n, dtype=np.bool_)
         self.f_meas: F64 = np.zeros((n, 3))
         self.w_meas: F64 = np.zeros((n, 3))
+        #: the walked bias ``b_k`` of each row's buffered block (accel m/s^2, gyro rad/s), sample
+        #: k of the block at ``walked[i, k]`` (zeros before the first block; scoring truth of
+        #: the INS bias states, ``ag_uav.navigation.ins_feedback``)
+        self.walked: F64 = np.zeros((n, width, 6))
 
     @classmethod
     def from_sensors(cls, imus: Sequence[ImuSensor]) -> BatchImu:
@@ -246,9 +250,10 @@ class BatchImu:
         ist = self._ist
         for i in np.flatnonzero(active & (ist[:, 0] >= ist[:, 1])):
             n = int(self._block[i])
-            err, self._bias[i], _ = imu_error_block(self._rngs[i], self._bias[i], n,
-                                                    self._sigma_rw[i], self._sigma_white[i])
+            err, self._bias[i], walked = imu_error_block(self._rngs[i], self._bias[i], n,
+                                                         self._sigma_rw[i], self._sigma_white[i])
             self._err[i, :n] = err
+            self.walked[i, :n] = walked
             ist[i] = 0, n
 
     def measure(self, f: F64, w: F64,

@@ -57,6 +57,7 @@ class ReceiverReport:
         self.scale = 1.0
         self.n_false = 0                     # false-fix episodes started
         self.false_fixes = 0                 # fixes delivered inside one
+        self.in_false = False                # whether the last fix was inside one
 
     def step(self, true_type: str | None) -> tuple[np.ndarray, str | None, float]:
         """One delivered fix: (bias to add, reported type, reported accuracy scale)."""
@@ -68,7 +69,7 @@ class ReceiverReport:
             self.bias = u * self._rng_shape.uniform(*self.bias_m)
             self._left = max(1, int(round(self._rng_shape.exponential(self.mean_s) / self.dt)))
             self.n_false += 1
-        in_false = self._left > 0
+        in_false = self.in_false = self._left > 0
         if in_false:
             self._left -= 1
             self.false_fixes += 1
