@@ -74,12 +74,15 @@ truth at the core's tick) and of each 3-state block on its marginal covariance
 updates (``nis_mean``, ``nis_vel_mean``, ``nis_yaw_mean``; a rejected part has none) and of the
 radar over the flight (``nis_radar_mean``). Every state's truth: position and velocity of the
 IMU (the body origin) from the engine's state; attitude from the engine's rotation (the error
-``Log(q̂* ⊗ q)``); the biases are the IMU's **walked** biases of that tick, from a twin of the
-engine's IMU (same seed stream and block: :meth:`ImuSensor.walk_block`). A fix whose core P is
-not positive definite (its Cholesky fails) has no NEES: it is left out of the mean and counted
-(``nees15_not_pd``; the report says so). With the honest receiver's false fixes: the share of
-false-fix epochs the gate rejected (``false_fixes_rejected``) and the peak horizontal error from
-each episode's first false fix to 10 s after its last (``false_fix_peak_m``).
+``Log(q̂* ⊗ q)``); the biases are the IMU's **walked** biases of that tick, read from the
+engine's IMU (:attr:`~ag_uav.vehicle.sensors_batched.BatchImu.walked`, through
+:meth:`BatchInsFeedback.imu_tap`), or, for a bank flown without it, from a twin of that IMU
+(the same seed stream and block, the same draws: :meth:`ImuSensor.walk_block`). A fix whose
+core P is not positive definite (its Cholesky fails) has no NEES: it is left out of the mean
+and counted (``nees15_not_pd``; the report says so). With the honest receiver's false fixes:
+the share of false-fix epochs the gate rejected (``false_fixes_rejected``) and the peak
+horizontal error from each episode's first false fix to 10 s after its last
+(``false_fix_peak_m``).
 """
 
 from __future__ import annotations
@@ -115,6 +118,7 @@ from .ins_kernels import (
     SensorRows,
     outputs,
     quat_to_rot,
+    radar_rows,
     tick_in,
 )
 from .receiver import fix_variance
@@ -499,7 +503,8 @@ class BatchInsFeedback:
         self.cvar = np.zeros((NV, 3))
         self.bias0 = np.stack([fb.bias0 for fb in fbs])
         #: the walked IMU biases of the current block of ticks (IMU sample k = tick k: every
-        #: vehicle's IMU is sampled from tick 0 while it flies), refilled from the twins
+        #: vehicle's IMU is sampled from tick 0 while it flies): the engine's IMU's own
+        #: (imu_tap), else refilled from the twins
         self.blk = f0.imu_twin.block
         self.btru = np.zeros((NV, self.blk, 6))
         self.b_next = 0
@@ -665,20 +670,14 @@ class BatchInsFeedback:
         self.k0[i] = k - 1   # the reset state is the tick before: this tick's step moves it on
 
     def _radar(self, k: int, act: np.ndarray) -> None:
-        """The radar's slant range of every active vehicle (its noise from the vehicle's own
-        stream, drawn in blocks of 4096)."""
+        """The radar's slant range of every active vehicle (:func:`radar_rows`; its noise from
+        the vehicle's own stream, drawn in blocks of 4096)."""
         sig = self.cfg.gps.radar_sigma_m
-        ii = np.flatnonzero(act)
-        for i in ii[self.noise_i[ii] >= self.noise.shape[1]].tolist():
-            self.noise[i] = self.fbs[i].radar_rng.standard_normal(self.noise.shape[1])
-            self.noise_i[i] = 0
-        j = self.noise_i[ii]
-        self.noise_i[ii] = j + 1
-        z = self.ring[ii, k % (self.D + 1), 16] + sig * self.noise[ii, j]
-        self.radar[ii, 0] = z
-        self.radar[ii, 1] = sig * sig
-        self.radar[ii, 2] = 0.0
-        self.range_last[ii] = z  # NaN: a dropout (no range aid then)
+        while radar_rows(self.ring, k % (self.D + 1), act, self.noise, self.noise_i, sig,
+                         self.radar, self.range_last):
+            for i in np.flatnonzero(act & (self.noise_i >= self.noise.shape[1])).tolist():
+                self.noise[i] = self.fbs[i].radar_rng.standard_normal(self.noise.shape[1])
+                self.noise_i[i] = 0
 
     def _pre_init(self, act: np.ndarray) -> None:
         """Vehicles without a fix yet: radar height, zero velocity, levelled attitude."""

@@ -24,7 +24,7 @@ from .._jit import njit
 
 __all__ = ["BLOCKS", "FIX_DUE", "NOT_INITIALISED", "NREC", "RING_WIDTH", "BankView", "Outputs",
            "Pose", "Scores", "SensorRows", "Truth", "outputs", "quad_inv", "quad_inv_at",
-           "quat_to_rot", "ring_write", "rot_to_quat", "tick_in"]
+           "quat_to_rot", "radar_rows", "ring_write", "rot_to_quat", "tick_in"]
 
 #: the per-fix score record's columns (``BatchInsFeedback.nees[i, fix, :, row]``): NEES15,
 #: the NEES of the position, velocity, attitude, accel-bias and gyro-bias blocks (3 dof each),
@@ -150,6 +150,7 @@ def ring_write(tr, s, k, j):  # pragma: no cover
     ra = prm[0:3]
     rr = prm[3:6]
     rb = prm[6:9]
+    psi_b = math.atan2(rb[1], rb[0])   # the baseline's body azimuth
     for i in range(p.shape[0]):
         if not act[i]:
             continue
@@ -165,7 +166,7 @@ def ring_write(tr, s, k, j):  # pragma: no cover
             r[20 + a] = v[i, a]
         bx = R[i, 0] * rb[0] + R[i, 1] * rb[1] + R[i, 2] * rb[2]
         by = R[i, 3] * rb[0] + R[i, 4] * rb[1] + R[i, 5] * rb[2]
-        psi = math.atan2(by, bx) - math.atan2(rb[1], rb[0])
+        psi = math.atan2(by, bx) - psi_b
         r[6] = math.atan2(math.sin(psi), math.cos(psi))
         for m in range(9):
             r[7 + m] = R[i, m]
@@ -201,6 +202,32 @@ def tick_in(truth, rows, k, t, j):  # pragma: no cover
         if act[i] and not s.init[i]:
             flags |= NOT_INITIALISED
     return flags
+
+
+@njit(cache=True)
+def radar_rows(ring, slot, act, noise, noise_i, sig, radar, range_last):  # pragma: no cover
+    """The radar's slant range of every active vehicle: the truth ring's range (column 16 of
+    row ``slot``) plus ``sig`` times the vehicle's next standard normal, ``noise[i,
+    noise_i[i]]`` (its own stream's block), into ``radar[i] = (range, sig², age 0)`` and
+    ``range_last[i]`` (NaN: a dropout). Returns 0, or (nothing done) the number of active
+    vehicles whose block is used up (the caller draws the next block and calls again)."""
+    need = 0
+    for i in range(act.shape[0]):
+        if act[i] and noise_i[i] >= noise.shape[1]:
+            need += 1
+    if need:
+        return need
+    for i in range(act.shape[0]):
+        if not act[i]:
+            continue
+        j = noise_i[i]
+        noise_i[i] = j + 1
+        z = ring[i, slot, 16] + sig * noise[i, j]
+        radar[i, 0] = z
+        radar[i, 1] = sig * sig
+        radar[i, 2] = 0.0
+        range_last[i] = z
+    return 0
 
 
 @njit(cache=True)
