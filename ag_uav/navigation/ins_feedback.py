@@ -222,9 +222,11 @@ class InsFeedback(Feedback):
         # the same as Python floats for fix() (R per reported type)
         self._var_nominal_list = self.var_nominal[0].tolist()
         self._var_lists = {m: vp.tolist() for m, (vp, _) in self.var_by_type.items()}
-        #: the Gauss-Markov variance of the last fused fix (consider: the position covariance
-        #: the INS reports is its P plus this; zero otherwise)
-        self.cvar = np.zeros(3)
+        self._cv_nominal_list = self.var_nominal[1].tolist()
+        self._cv_lists = {m: cv.tolist() for m, (_, cv) in self.var_by_type.items()}
+        #: the Gauss-Markov variance (3 floats) of the last fix (consider: the position
+        #: covariance the INS reports is its P plus this; zero otherwise)
+        self.cvar = [0.0, 0.0, 0.0]
         self.var_v = g.velocity_sigma_mps**2
         self.var_yaw = (g.heading_sigma_deg * DEG) ** 2
         #: the velocity and heading noise's standard deviations (m/s, rad)
@@ -272,7 +274,8 @@ class InsFeedback(Feedback):
                 zx, zy, zz = zx + 0.0, zy + 0.0, zz + 0.0
         vp = self._var_lists.get(rep, self._var_nominal_list)
         if self.colour == "consider":   # else the considered variance stays zero
-            self.cvar[:] = self.var_by_type.get(rep, self.var_nominal)[1] * (scale * scale)
+            cv, s2 = self._cv_lists.get(rep, self._cv_nominal_list), scale * scale
+            self.cvar = [cv[0] * s2, cv[1] * s2, cv[2] * s2]
         n = self._aux4()
         sv = self.sig_v
         self.fixes += 1
@@ -617,24 +620,25 @@ class BatchInsFeedback:
 
     def _fixes(self, k: int, t: float) -> None:
         """The receivers of the vehicles with a fix due (Python, one vehicle at a time at the
-        fix rate, on the truth ring's delayed row as a list); the fused fixes' rows go into
-        ``gnss`` in one assignment."""
+        fix rate, on the truth ring's delayed row as a list); what they give goes into the
+        batch's rows in one assignment each (``gnss``, ``cvar``, ``aid_on``, ``next_t``)."""
         ii = np.flatnonzero(self.due).tolist()
         slot = max(k - self.D, 0) % (self.D + 1)
         rings = self.ring[ii, slot, :7].tolist()
-        rl = self.range_last[ii].tolist()
+        rl, init = self.range_last[ii].tolist(), self.init[ii].tolist()
         fused: list[int] = []
         rows: list[list[float]] = []
-        for i, r, rng in zip(ii, rings, rl, strict=True):
+        cvar: list[list[float]] = []
+        aid_on: list[float] = []
+        for i, r, rng, ok in zip(ii, rings, rl, init, strict=True):
             if not math.isfinite(r[0]):   # before D ticks of history: the oldest there is
                 r = self.ring[i, 0, :7].tolist()
             fb = self.fbs[i]
             row = fb.fix(t, r[0:3], r[3:6], r[6])
-            self.next_t[i] = fb.gps.next_fix_t
             if row is None or not (math.isfinite(row[1]) and math.isfinite(row[2])
                                    and math.isfinite(row[3])):
                 continue
-            if not self.init[i]:
+            if not ok:
                 if abs(float(np.linalg.norm(self.imu[i, :3])) - 9.81) < 0.5:  # at rest: levels
                     self._initialise(i, k, np.array(row))
                 continue
@@ -642,15 +646,17 @@ class BatchInsFeedback:
             if aid:
                 row[10] = NOT_FUSED_VAR  # range aid: the radar is the height source
                 fb.range_aid_fixes += 1
-            self.aid_on[i] = 1.0 if aid else 0.0
+            aid_on.append(1.0 if aid else 0.0)
             fused.append(i)
             rows.append(row)
-            if fb.colour == "consider":   # else both stay zero
-                self.cvar[i] = fb.cvar
+            cvar.append(fb.cvar)
             if fb.last_false:
                 fb.false_k.append(k)
+        self.next_t[ii] = [self.fbs[i].gps.next_fix_t for i in ii]
         if fused:
             self.gnss[fused] = rows
+            self.cvar[fused] = cvar
+            self.aid_on[fused] = aid_on
 
     def _initialise(self, i: int, k: int, row: np.ndarray) -> None:
         """On the ground at the first fix (module docstring)."""
