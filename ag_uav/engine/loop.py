@@ -493,10 +493,7 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
             if sp is not None:
                 sp.mass_events = []
     disturbance = _disturbance(b, flights)
-    feedback = Feedback(b, fbs, all(isinstance(fb, TrueFeedback) for fb in fbs))
-    imu_tap = getattr(feedback.bank, "imu_tap", None)
-    if imu_tap is not None and sensing.imu is not None:  # the IMU's own walked biases (scores)
-        imu_tap(sensing.imu.walked)
+    feedback = Feedback(b, fbs, all(isinstance(fb, TrueFeedback) for fb in fbs), sensing.imu)
     depositing = _depositing(b, flights, iq + m0.nq + m0.nv, m0.na)
     observers = _observers(b, flights, vehs, fbs, control, sensing, depositing)
     body = vehs[0].body_id

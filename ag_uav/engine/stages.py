@@ -173,7 +173,8 @@ class Feedback:
     On the skids the horizontal part is the reference's (no horizontal position control before
     lift-off, as autopilots do: an estimate a metre off must not tip the vehicle over)."""
 
-    def __init__(self, b: Batch, feedbacks: Sequence[Any], all_true: bool) -> None:
+    def __init__(self, b: Batch, feedbacks: Sequence[Any], all_true: bool,
+                 imu: Any = None) -> None:
         self.b, self.fbs, self.all_true = b, list(feedbacks), all_true
         self.bank = None
         if not all_true:
@@ -181,6 +182,9 @@ class Feedback:
             tap = getattr(self.bank, "truth_tap", None)
             if tap is not None:  # the sensor models' and the scores' truth (never fed back)
                 tap(b.R, b.omega)
+            tap = getattr(self.bank, "imu_tap", None)
+            if tap is not None and imu is not None:  # the IMU's walked biases (scores only)
+                tap(imu.walked)
             notes = [getattr(fb, "batch_note", None) for fb in self.fbs]
             if self.bank is None and (len(self.fbs) > 1 or any(notes)):
                 self._say_per_vehicle()

@@ -505,14 +505,11 @@ class BatchInsFeedback:
         #: each vehicle's considered GNSS variance (the last fix's; InsFeedback.cvar)
         self.cvar = np.zeros((NV, 3))
         self.bias0 = np.stack([fb.bias0 for fb in fbs])
-        #: the walked IMU biases of the current block of ticks (IMU sample k = tick k: every
-        #: vehicle's IMU is sampled from tick 0 while it flies): the engine's IMU's own
-        #: (imu_tap), else refilled from the twins
+        #: the walked IMU biases of the block of ticks (IMU sample k = tick k from tick 0): the
+        #: engine's IMU's own (imu_tap), else refilled from the twins
         self.blk = f0.imu_twin.block
         self.btru = np.zeros((NV, self.blk, 6))
-        self.b_next = 0
-        #: whether the walked biases come from the twins (no engine IMU tapped: imu_tap)
-        self.twins = True
+        self.b_next, self.twins = 0, True   # twins: no engine IMU tapped (imu_tap)
         self.prm = np.array([*ANTENNA, *RADAR, *self.icfg.heading_baseline,
                              math.cos(self.icfg.radar_max_tilt_deg * DEG),
                              self.icfg.radar_max_range])
