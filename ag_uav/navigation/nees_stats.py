@@ -1,0 +1,49 @@
+"""The statistics of the INS feedback's consistency scores (:mod:`ag_uav.navigation.ins_feedback`):
+the mean of a score series, the 95 % χ² band of a mean NEES or NIS, and the effective number of
+independent values of a correlated series."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["chi2_band", "effective_n", "finite_mean"]
+
+
+def finite_mean(a: np.ndarray) -> float | None:
+    """The mean of the finite values (3 decimals), None if there are none."""
+    a = a[np.isfinite(a)]
+    return round(float(a.mean()), 3) if a.size else None
+
+
+def chi2_band(dof: int, n: float) -> list[float] | None:
+    """The 95 % two-sided band of the mean of ``n`` independent χ²(dof) values (``n`` may be
+    an effective number, :func:`effective_n`)."""
+    if n <= 0:
+        return None
+    from scipy.stats import chi2
+
+    return [round(float(chi2.ppf(0.025, dof * n) / n), 3),
+            round(float(chi2.ppf(0.975, dof * n) / n), 3)]
+
+
+def effective_n(x: np.ndarray) -> float:
+    """The effective number of independent values in the series ``x`` for its mean: N / τ,
+    τ = 1 + 2 Σ ρ_k the integrated autocorrelation time, summed over Geyer's initial positive
+    sequence (pairs ρ_2m + ρ_2m+1 while positive; Geyer, Statistical Science 7, 1992).
+    Successive fixes' NEES are correlated (the filter's error is), so the band of their mean
+    is that of N / τ independent values, not N."""
+    x = np.asarray(x, dtype=float)
+    n = x.size
+    if n < 4 or not np.any(x != x[0]):
+        return float(n)
+    d = x - x.mean()
+    f = np.fft.rfft(d, 2 * n)
+    acf = np.fft.irfft(f * np.conj(f))[:n]
+    rho = acf / acf[0]
+    tau = -1.0                      # 2 Σ_{m} (ρ_2m + ρ_2m+1) − 1, from ρ_0 = 1
+    for m in range(n // 2):
+        g = rho[2 * m] + rho[2 * m + 1]
+        if g <= 0.0:
+            break
+        tau += 2.0 * g
+    return float(n / max(tau, 1.0))
