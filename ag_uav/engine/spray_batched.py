@@ -177,19 +177,29 @@ def _draw_row(i, dv, par, st):  # pragma: no cover
 
 
 @njit(cache=True)
-def _draw_kernel(k, rows, litres, valve, par, st, ist, rec, rec_on):  # pragma: no cover
-    """After the nozzle model's tick: vehicle ``rows[j]`` let ``litres[j]`` out with its valve
-    ``valve[j]``; the tank, the liquid mass and the records follow them (:func:`_draw_row`).
+def _draw_kernel(k, rows, litres, nozzles, on_col, spray, active, arrays):  # pragma: no cover
+    """After the nozzle model's tick: vehicle ``rows[j]`` let ``litres[j]`` out, its valve open
+    when ``nozzles[j, on_col]`` > 0.5; ``spray[rows[j]]`` ← valve open and vehicle active; the
+    tank, the liquid mass and the records of the active rows follow them (:func:`_draw_row`).
+    The step's event flags are cleared first. ``arrays``: :class:`SprayArrays` (a plain tuple).
     Returns the number of rows with an event flag."""
+    a = SprayArrays(*arrays)
+    par, st, ist, rec, rec_on = a.par, a.st, a.ist, a.rec, a.rec_on
+    for i in range(ist.shape[0]):
+        ist[i, I_FLAGS] = 0
     nev = 0
     for j in range(rows.shape[0]):
         i = rows[j]
+        on = nozzles[j, on_col] > 0.5
+        spray[i] = on and active[i]
+        if not active[i]:
+            continue
         fl = _draw_row(i, litres[j], par, st)
         r = ist[i, I_OFF] + k
         tank = st[i, S_TANK]
         rec[0, r] = tank
         rec[1, r] = par[i, P_DRY] + tank * par[i, P_RHO]
-        rec_on[r] = 1 if valve[j] else 0
+        rec_on[r] = 1 if on else 0
         ist[i, I_FLAGS] = fl
         if fl:
             nev += 1
@@ -463,20 +473,18 @@ class BatchSprayer:
             self._log(t, active)
         return self._on, self._reset
 
-    def draw(self, k: int, t: float, rows: np.ndarray, litres: np.ndarray, valve: np.ndarray,
-             active: np.ndarray) -> None:
+    def draw(self, k: int, t: float, rows: np.ndarray, litres: np.ndarray,
+             nozzles: np.ndarray, on_col: int, spray: np.ndarray, active: np.ndarray) -> None:
         """After the nozzle model's tick (``P_NOZZLES`` rows): vehicle ``rows[j]`` let
-        ``litres[j]`` out with its valve ``valve[j]`` open or shut. The tank, the liquid mass,
-        the totals and the nozzle records follow them (:func:`_draw_kernel`), so that the tank,
-        the coverage and the dose count one flow. Then the spray log (every 0.1 s)."""
-        self._ist[:, I_FLAGS] = 0  # step's events are done
-        if rows.shape[0]:
-            keep = active[rows]
-            if not keep.all():
-                rows, litres, valve = rows[keep], litres[keep], valve[keep]
-            if _draw_kernel(k, rows, litres, valve, self._par, self._st, self._ist, self._rec,
-                            self._rec_on):
-                self._events(t)
+        ``litres[j]`` out with its valve open when ``nozzles[j, on_col]`` > 0.5 (the nozzle
+        model's state rows), and ``spray[rows[j]]`` (the nozzles on, for the record and the
+        coverage) follows the valve of the active rows. The tank, the liquid mass, the totals
+        and the nozzle records follow them (:func:`_draw_kernel`, one compiled call), so that
+        the tank, the coverage and the dose count one flow. Then the spray log (every 0.1 s)."""
+        if not rows.shape[0]:
+            self._ist[:, I_FLAGS] = 0  # step's events are done
+        elif _draw_kernel(k, rows, litres, nozzles, on_col, spray, active, self._arrays):
+            self._events(t)
         if self._logged and t >= self._log_next:
             self._log(t, active)
 

@@ -21,6 +21,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from ..world.deposition import S_ON
 from .kernels import (
     ACTIVE,
     BOX,
@@ -369,7 +370,7 @@ class Control:
 
 _NO_ROWS = np.zeros(0, np.int64)
 _NO_LITRES = np.zeros(0)
-_NO_VALVE = np.zeros(0, bool)
+_NO_NOZZLES = np.zeros((0, 1))
 
 
 class Spraying:
@@ -394,11 +395,9 @@ class Spraying:
         b = self.b
         if depositing is not None:
             for rows, dep in depositing.groups:
-                valve = dep.valve_on
-                self.spr.draw(k, t, rows, dep.out, valve, b.act)
-                b.spray[rows] = valve & b.act[rows]
+                self.spr.draw(k, t, rows, dep.out, dep.st, S_ON, b.spray, b.act)
         else:
-            self.spr.draw(k, t, _NO_ROWS, _NO_LITRES, _NO_VALVE, b.act)
+            self.spr.draw(k, t, _NO_ROWS, _NO_LITRES, _NO_NOZZLES, 0, b.spray, b.act)
 
 
 class Disturbance:
