@@ -248,25 +248,18 @@ def _filter_as_sure(P, H3, Rm):
     return True
 
 
-@njit(inline="always")
-def _fuse_held(x, P, meas, par, ints, dg, fb):
+@njit
+def _hold_fix(nu3, nur, Rm, ints, dg):
     """A fix the confirmed latch holds: its position is not taken; it is fused relative to
-    the step (ν ← ν − b, R ← R + diag(var b)) through the gate again."""
-    H3, nu3, Rm = meas
+    the step (ν ← ν_raw − b, R ← R + diag(var b)) through the gate again."""
     ints[INTS_GREJP] += 1
     dg[DG_GATE] = 3.0
     for i in range(3):
-        nu3[i] -= dg[DG_GB + i]
+        nu3[i] = nur[i] - dg[DG_GB + i]
         Rm[i, i] += dg[DG_GS + i]
-    if gate_ratio(P, H3, Rm, nu3, par[1][PRM_GATE]) <= 1.0:
-        rule = par[0]
-        dg[DG_NISP] = _fuse_one(x, P, meas, rule == 1 or rule == 3, par,
-                                ints[INTS_MST:INTS_MST + 4], dg, fb)
-        ints[INTS_GLAST] = ints[INTS_CORE]
-        ints[INTS_GNREL] += 1
 
 
-@njit(inline="always")
+@njit
 def _reject_fix(x, P, z, meas, prm, ints, dg, S3, force_reset):
     """A fix the gate rejects: counted; a reset to the receiver when forced (the latch's hold
     limit), once neither a position nor a velocity has been fused for ``PRM_GRESET`` ticks
@@ -303,7 +296,7 @@ def _fuse_pos(x, P, rec, par, ints, dg, fb):
     one for rules 2-3) and the step latch (module docstring of :mod:`estimators.ins`), then
     the rule's law.  A rejected fix opens a candidate step; the next fix, rejected too and
     nearer the step than the filter, confirms it; while the confirmed latch holds
-    (:func:`_latch_holds`) the fixes are held (:func:`_fuse_held`); held for ``PRM_GLATCH``
+    (:func:`_latch_holds`) the fixes are held (:func:`_hold_fix`); held for ``PRM_GLATCH``
     ticks, the position resets to the receiver (:func:`_reject_fix`).  The latch works on the
     raw fix for every rule: a false fix is the receiver's step, which the PCA block's window
     spreads over its fixes (a PCA'd fix the gate rejects opens nothing unless the raw fix
@@ -323,24 +316,31 @@ def _fuse_pos(x, P, rec, par, ints, dg, fb):
             nu3[i] = nur[i]
     Rm = _diag_R(rec[REC_V:REC_V + 3], R3)
     core = ints[INTS_CORE]
+    held = reject = force = False
     if ints[INTS_GLATCH] == LATCH_ON and _latch_holds(P, H3, Rm, nur, prm, ints, dg):
         if core - ints[INTS_GLAT0] < prm[PRM_GLATCH]:
-            for i in range(3):
-                nu3[i] = nur[i]
-            _fuse_held(x, P, (H3, nu3, Rm), par, ints, dg, fb)
+            held = True
+            _hold_fix(nu3, nur, Rm, ints, dg)
+            if gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
+                return
         else:
-            _reject_fix(x, P, z, (H3, nur, Rm), prm, ints, dg, S3, True)
+            reject = force = True
+    elif gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
+        reject = True
+    if reject:   # one call site each: an inlined callee is compiled once per site
+        _reject_fix(x, P, z, (H3, nur, Rm), prm, ints, dg, S3, force)
         return
-    if gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
-        _reject_fix(x, P, z, (H3, nur, Rm), prm, ints, dg, S3, False)
-        return
-    ints[INTS_GLATCH] = LATCH_NONE
+    if not held:
+        ints[INTS_GLATCH] = LATCH_NONE
     v = _fuse_one(x, P, (H3, nu3, Rm), rule == 1 or rule == 3, par, ints[INTS_MST:INTS_MST + 4],
                   dg, fb)
     dg[DG_NISP] = v
-    dg[DG_GATE] = 0.0
     ints[INTS_GLAST] = core
-    ints[INTS_NGNSS] += 1
+    if held:
+        ints[INTS_GNREL] += 1
+    else:
+        dg[DG_GATE] = 0.0
+        ints[INTS_NGNSS] += 1
 
 
 @njit(inline="always")
