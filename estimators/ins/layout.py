@@ -117,13 +117,13 @@ SCRATCH = Layout("H3:3x15 nu3:3 R3:3x3 H1:1x15 nu1:1 R1:1x1 dx:15 S3:3x3x3 v:8 k
  W_NAN, W_NUR, W_KF) = SCRATCH.offsets
 
 
-@njit
+@njit(inline="always")
 def view2(fb, o, r, c):
     """The (r, c) view of the scratch at offset o."""
     return fb[o:o + r * c].reshape((r, c))
 
 
-@njit
+@njit(inline="always")
 def view3(fb, o, n):
     """The (n, 3, 3) view of the scratch at offset o."""
     return fb[o:o + 9 * n].reshape((n, 3, 3))
