@@ -33,7 +33,8 @@ def _same_mission(a, b) -> None:
     assert np.array_equal(a.p_true, b.p_true)
     assert np.array_equal(a.p_fb, b.p_fb)
     assert np.array_equal(a.motors, b.motors)
-    skip = {"wall_time_s", "loop_wall_time_s", "real_time_factor", "batch_size", "notes"}
+    skip = {"wall_time_s", "loop_wall_time_s", "loop_cpu_time_s", "real_time_factor",
+            "batch_size", "notes"}
     sa = {k: v for k, v in a.summary.items() if k not in skip and "update_us" not in k}
     sb = {k: v for k, v in b.summary.items() if k not in skip and "update_us" not in k}
     sa.pop("estimators", None), sb.pop("estimators", None)

@@ -521,6 +521,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         "sim_time_s": round(sim_time, 3),
         "wall_time_s": round(wall, 3),
         "loop_wall_time_s": round(loop_wall, 3),
+        "loop_cpu_time_s": round(out.cpu_loop_s / batch, 3),
         "real_time_factor": round(sim_time / loop_wall, 1) if loop_wall > 0 else None,
         "batch_size": batch,
         "frames": out.frames,

@@ -21,7 +21,14 @@ import mujoco
 
 from ..config import Config
 from ..vehicle.mjcf import G, build_vehicle
-from .bench_physics import batched_capture, batched_rate, paired, physics_alone, spread
+from .bench_physics import (
+    batched_capture,
+    batched_rate,
+    batched_summaries,
+    paired,
+    physics_alone,
+    spread,
+)
 
 
 def _median_rate(fn: Callable[[], tuple[float, float]], repeats: int) -> float:
@@ -337,31 +344,59 @@ def _without_dose(conf: Config, n: int, sim_s: float, threads: int,
 
 def _deposition(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     """``deposition``: the dose on the ground's share of the loop, ``loop_share`` = (loop time
-    with ``spray.deposition`` − without) / with, for one mission and for a batch of N
+    with ``spray.deposition`` − without) / with, for one whole mission (a short one's loop,
+    well under a second, is at the mercy of the machine) and for a batch of N of 60 s
     (``loop_share_batched``). Each repeat flies with and right after it without, so a load
     change on a shared machine hits both; the medians of the per-repeat shares, with their
-    min and max."""
+    min and max. ``*_cpu``: the same from the loop's CPU seconds (every thread's) instead of
+    its wall seconds: the work the dose model adds, which another process on the machine does
+    not change the way it changes the wall time."""
     sim_s = 20.0 if quick else 60.0
     n = 16 if quick else 64
-    on = with_overrides(c, {"spray.deposition": True, "sim.max_time_s": sim_s})
-    off = with_overrides(on, {"spray.deposition": False})
+    whole = with_overrides(c, {"spray.deposition": True})
+    if quick:
+        whole.sim.max_time_s = min(whole.sim.max_time_s, 120.0)
+    on = with_overrides(whole, {"sim.max_time_s": sim_s})
     batched_rate(on, 2, 1.0)  # compiled kernels loaded outside the timed loops
 
-    def share(fly: Callable[[Config], float]) -> list[float]:
-        out = []
+    def shares(fly: Callable[[Config], tuple[float, float]], on: Config
+               ) -> tuple[list[float], list[float]]:
+        off = with_overrides(on, {"spray.deposition": False})
+        wall, cpu = [], []
         for _ in range(repeats):
             a, b = fly(on), fly(off)
-            out.append((a - b) / a)
-        return out
+            wall.append((a[0] - b[0]) / a[0])
+            cpu.append((a[1] - b[1]) / a[1])
+        return wall, cpu
 
-    single = share(lambda conf: closed_loop(conf)[1])
-    batched = share(lambda conf: batched_rate(conf, n, sim_s)[1])
+    flown: dict[str, float] = {}
+
+    def one(conf: Config) -> tuple[float, float]:
+        s = closed_loop(conf)[2]
+        flown["sim_s"] = s["sim_time_s"]
+        return _loop_times([s])
+
+    single, single_cpu = shares(one, whole)
+    batched, batched_cpu = shares(lambda conf: _loop_times(batched_summaries(conf, n, sim_s)),
+                                  on)
     return {"deposition": {
         "loop_share": round(statistics.median(single), 3),
         "loop_share_spread": spread(single),
+        "loop_share_cpu": round(statistics.median(single_cpu), 3),
+        "loop_share_cpu_spread": spread(single_cpu),
         "loop_share_batched": round(statistics.median(batched), 3),
         "loop_share_batched_spread": spread(batched),
-        "batched_vehicles": n, "mission_sim_s": sim_s, "target": 0.15}}
+        "loop_share_batched_cpu": round(statistics.median(batched_cpu), 3),
+        "loop_share_batched_cpu_spread": spread(batched_cpu),
+        "mission_sim_s": flown["sim_s"], "batched_vehicles": n,
+        "batched_mission_sim_s": sim_s, "target": 0.15}}
+
+
+def _loop_times(summaries: list[dict]) -> tuple[float, float]:
+    """(loop wall, loop CPU) seconds of one flight or of one batch (each run's summary holds
+    its share of the batch's loop)."""
+    return (sum(s["loop_wall_time_s"] for s in summaries),
+            sum(s["loop_cpu_time_s"] for s in summaries))
 
 
 #: the engine's stages as :func:`_stages` times them: (class in engine.stages, method, key)
@@ -437,8 +472,19 @@ def _first_run(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     return {"first_run": measure_first_run()}
 
 
+def _big_job(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    """``big_job``: the 38 ha job flown whole in a fresh process, with the full log
+    (:mod:`ag_uav.jobs.bench_big`); skipped with ``--quick``."""
+    if quick:
+        return {}
+    from .bench_big import measure_big_job
+
+    return {"big_job": measure_big_job()}
+
+
 _EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers, _batched,
-                                                               _deposition, _stages, _first_run]
+                                                               _deposition, _stages, _first_run,
+                                                               _big_job]
 
 
 def print_bench(out: dict[str, Any]) -> None:

@@ -34,14 +34,19 @@ def _batch_cfgs(cfg: Config, n: int, sim_s: float) -> list[Config]:
     return cfgs
 
 
-def batched_rate(cfg: Config, n: int, sim_s: float) -> tuple[float, float]:
-    """Vehicle-sim-seconds and loop wall seconds of ``n`` missions of ``cfg`` (seeds 0…n-1,
-    cut at ``sim_s``) flown as one lockstep batch (:func:`ag_uav.engine.missions.simulate_many`)."""
+def batched_summaries(cfg: Config, n: int, sim_s: float) -> list[dict]:
+    """The summaries of ``n`` missions of ``cfg`` (seeds 0…n-1, cut at ``sim_s``) flown as one
+    lockstep batch (:func:`ag_uav.engine.missions.simulate_many`)."""
     from ..engine.missions import simulate_many
 
-    res = simulate_many(_batch_cfgs(cfg, n, sim_s))
-    sim = sum(r.summary["sim_time_s"] for r in res)
-    return sim, res[0].summary["loop_wall_time_s"] * n
+    return [r.summary for r in simulate_many(_batch_cfgs(cfg, n, sim_s))]
+
+
+def batched_rate(cfg: Config, n: int, sim_s: float) -> tuple[float, float]:
+    """Vehicle-sim-seconds and loop wall seconds of ``n`` missions of ``cfg`` flown as one
+    lockstep batch (:func:`batched_summaries`)."""
+    res = batched_summaries(cfg, n, sim_s)
+    return sum(s["sim_time_s"] for s in res), res[0]["loop_wall_time_s"] * n
 
 
 def physics_alone(cfg: Config, n: int, sim_s: float, nthread: int,

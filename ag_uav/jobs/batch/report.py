@@ -28,7 +28,8 @@ def is_timing_column(name: str) -> bool:
     """Columns that measure the machine (or how the run was scheduled: ``batch_size``, the size
     of the lockstep chunk it flew in), not the run (excluded from determinism checks)."""
     n = name.lower()
-    return ("wall" in n or "real_time_factor" in n or n.endswith(("_per_s", "_us"))
+    return ("wall" in n or "cpu_time" in n or "real_time_factor" in n
+            or n.endswith(("_per_s", "_us"))
             or "timing" in n or n == "batch_size")
 
 

@@ -1,0 +1,22 @@
+"""``ag-uav bench``'s big job: its configuration is the documented 38 ha job, and it stays out of
+``--quick``. (The job itself flies for minutes; the bench runs it, not the suite.)"""
+
+from __future__ import annotations
+
+from ag_uav.config import load_config
+from ag_uav.jobs import bench
+from ag_uav.jobs.bench_big import BIG_JOB_OVERRIDES, FIELD_38HA
+from ag_uav.world.field import Field
+
+
+def test_big_job_config_is_the_38ha_job_with_the_full_log():
+    cfg = load_config(None, dict(BIG_JOB_OVERRIDES))
+    assert FIELD_38HA.is_file()
+    assert cfg.log.enabled and cfg.log.channels == "full" and not cfg.log.render
+    assert cfg.mission.swath_m == 6.0 and cfg.mission.direction_deg == "auto"
+    area = Field.from_geojson(str(FIELD_38HA)).area
+    assert 38e4 < area < 39e4
+
+
+def test_big_job_is_left_out_of_quick_bench():
+    assert bench._big_job(load_config(None, {}), 1, True) == {}
