@@ -112,18 +112,18 @@ def test_the_compile_is_said_before_the_wait(monkeypatch, capsys):
     process), and the tick's end says how long it took; a cached kernel says nothing."""
     from numba import njit
 
-    from ag_uav.engine import loop
+    from ag_uav.engine import compiling
 
-    monkeypatch.setattr(loop, "_announced", "")
-    with loop._compile_notice():
+    monkeypatch.setattr(compiling, "_announced", "")
+    with compiling.compile_notice():
         @njit
         def fresh(x):
             return x + 1
 
         assert fresh(1) == 2
     err = capsys.readouterr().err
-    assert err == loop.COMPILE_NOTICE + "\n"
-    with loop._compile_notice():
+    assert err == compiling.COMPILE_NOTICE + "\n"
+    with compiling.compile_notice():
         assert fresh(2) == 3            # compiled: no event, nothing said
         @njit
         def another(x):
@@ -131,8 +131,47 @@ def test_the_compile_is_said_before_the_wait(monkeypatch, capsys):
 
         another(1)                       # a second compile: said once per process
     assert capsys.readouterr().err == ""
-    t0 = loop.time.perf_counter() - 2 * loop.COMPILE_THRESHOLD_S
-    took, _ = loop._first_tick(t0)
-    assert took > loop.COMPILE_THRESHOLD_S
+    t0 = compiling.time.perf_counter() - 2 * compiling.COMPILE_THRESHOLD_S
+    took, _ = compiling.first_tick(t0)
+    assert took > compiling.COMPILE_THRESHOLD_S
     assert capsys.readouterr().err.startswith("compiled the kernels in ")
-    assert loop._announced == "done"
+    assert compiling._announced == "done"
+
+
+def test_the_progress_bar_counts_the_kernels_as_they_compile(monkeypatch, capsys):
+    """With a progress bar, each kernel's compile shows in its postfix (counted and named),
+    and the postfix is cleared when tick 0 is done."""
+    from numba import njit
+
+    from ag_uav.engine import compiling
+
+    class Bar:
+        mininterval = 0.0
+
+        def __init__(self) -> None:
+            self.shown: list[str] = []
+            self.refreshed = 0
+
+        def set_postfix_str(self, s: str, refresh: bool = True) -> None:
+            self.shown.append(s)
+
+        def refresh(self) -> None:
+            self.refreshed += 1
+
+    bar = Bar()
+    monkeypatch.setattr(compiling, "_announced", "done")
+    with compiling.compile_notice(bar):
+        @njit
+        def first_law(x):
+            return x + 1
+
+        @njit
+        def second_law(x):
+            return first_law(x) * 2
+
+        assert second_law(1) == 4
+    assert bar.shown[0].startswith("compiling kernel 1: ")
+    assert any(s.endswith("second_law") for s in bar.shown)
+    assert any(s.startswith("compiling kernel 2: ") for s in bar.shown)
+    assert bar.shown[-1] == "" and bar.refreshed == len(bar.shown) - 1
+    assert capsys.readouterr().err == ""     # the notice was said before (once per process)

@@ -40,11 +40,9 @@ numba, MuJoCo and the run's set-up (about 45 ms each otherwise, one every few se
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import gc
 import math
-import sys
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
@@ -56,6 +54,7 @@ import numpy as np
 
 from ..config import Config
 from ..vehicle.mjcf import Vehicle, build_vehicle
+from .compiling import compile_notice, first_tick
 from .observers import HookObserver, LogObserver, Observer, TickView, frames_of
 from .physics import STATE_SPEC, default_threads, make_stepper
 from .stages import (
@@ -79,46 +78,6 @@ LANE_MIN = 8
 #: split big batches into lanes unless asked otherwise (``ag-uav bench``: one engine on the
 #: rollout's thread pool against lanes, ``batched.one_engine_*``)
 LANES_BY_DEFAULT = True
-#: first-tick time above which the numba kernels are taken to have been compiled (not loaded)
-COMPILE_THRESHOLD_S = 3.0
-#: what this process has said of the compile: "" nothing, "started", "done"
-_announced = ""
-#: said before tick 0's wait when numba starts compiling (once per process)
-COMPILE_NOTICE = ("compiling kernels: first run only, about a minute and a half on a 2-core "
-                  "machine (cached for later runs) ...")
-
-
-def _say(msg: str) -> None:
-    """One line on stderr, above a progress bar if one is drawn."""
-    from tqdm import tqdm
-
-    tqdm.write(msg, file=sys.stderr)
-
-
-@contextlib.contextmanager
-def _compile_notice():
-    """While tick 0 runs: the first ``numba:compile`` event (a kernel not in the cache) prints
-    :data:`COMPILE_NOTICE` at once, so the wait is said before it, not after."""
-    try:
-        from numba.core import event
-    except ImportError:  # pragma: no cover - the kernels run as Python
-        yield
-        return
-
-    class _First(event.Listener):
-        def on_start(self, ev: Any) -> None:
-            global _announced
-            if _announced == "":
-                _announced = "started"
-                _say(COMPILE_NOTICE)
-
-        def on_end(self, ev: Any) -> None:
-            pass
-
-    with event.install_listener("numba:compile", _First()):
-        yield
-
-
 @dataclass
 class Flight:
     """One vehicle's job in a :func:`fly` batch: its config, the reference it flies
@@ -522,9 +481,9 @@ def _run(lanes: list[Engine], bar: Any) -> tuple[float, float, float]:
         gc.freeze()
     wall, cpu = time.perf_counter(), time.process_time()
     try:
-        with _compile_notice():
+        with compile_notice(bar):
             flying = [e for e in lanes if e.tick(0)]
-        compile_s, wall = _first_tick(wall)
+        compile_s, wall = first_tick(wall)
         if compile_s:
             cpu = time.process_time()
         if len(flying) == 1:
@@ -583,21 +542,6 @@ def _fly_lanes(lanes: list[Engine], bar: Any) -> None:
                 e.halt = True
         for fu in futs:
             fu.result()
-
-
-def _first_tick(wall0: float) -> tuple[float, float]:
-    """Tick 0 runs (and compiles, on a fresh checkout) every kernel: a long one is compile time,
-    said once per process (:func:`_compile_notice` said it before; this says how long it took)
-    and kept out of the loop's wall time."""
-    global _announced
-    now = time.perf_counter()
-    took = now - wall0
-    if took < COMPILE_THRESHOLD_S:
-        return 0.0, wall0
-    if _announced != "done":
-        _announced = "done"
-        _say(f"compiled the kernels in {took:.0f} s (first run only; cached for later runs)")
-    return took, now
 
 
 def _outputs(e: Engine, wall: float, compile_s: float, cpu: float) -> list[LoopOutput]:

@@ -52,16 +52,17 @@ def _child(out_dir: str) -> dict[str, Any]:
     from numba.core import event
 
     from ..config import load_config
+    from ..engine.compiling import kernel_name
     from .run import fly
 
     events: list[tuple[float, str, bool]] = []
 
     class _Rec(event.Listener):
         def on_start(self, ev: event.Event) -> None:
-            events.append((time.perf_counter(), _kernel_name(ev), True))
+            events.append((time.perf_counter(), kernel_name(ev), True))
 
         def on_end(self, ev: event.Event) -> None:
-            events.append((time.perf_counter(), _kernel_name(ev), False))
+            events.append((time.perf_counter(), kernel_name(ev), False))
 
     cfg = load_config(None, {"sim.max_time_s": FLY_S, "log.render": False})
     with event.install_listener("numba:compile", _Rec()):
@@ -74,12 +75,6 @@ def _child(out_dir: str) -> dict[str, Any]:
             "top_kernels_s": {k: round(v, 2) for k, v in top}}
 
 
-def _kernel_name(ev: Any) -> str:
-    disp = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
-    fn = getattr(disp, "py_func", None)
-    if fn is None:
-        return "?"
-    return f"{fn.__module__}.{fn.__qualname__}"
 
 
 def measure_first_run(timeout_s: float = 900.0) -> dict[str, Any]:
