@@ -70,7 +70,7 @@ NENV = 16
 NFOOT = 17
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _fall_time(vt: float, a: float, s0: float, s1: float, s2: float) -> float:
     """Time to fall from depth s1 to s2 at ds/dt = vt + u(s), u = a (s < s0), a·s0/s (s ≥ s0)."""
     t = 0.0
@@ -84,7 +84,7 @@ def _fall_time(vt: float, a: float, s0: float, s1: float, s2: float) -> float:
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cell_weights(lo, c, m, r, i0, i1, w) -> float:
     """Cells ``i0..i1`` (of size ``c`` from ``lo``) of a 1-D Gaussian of mean ``m`` and
     ``r = 1/(√2 σ)``: twice each cell's share into ``w`` (erf differences); their sum."""
@@ -138,7 +138,7 @@ def _splat(par, buf, vol, mx, my, vx, vy, scratch) -> float:
     return put
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _splat_part(par, st, buf, scratch, vol, mx, my, vx, vy, drift) -> None:
     """Splat one Gaussian and book what misses the grid (drift or deposited outside)."""
     if vol <= 0.0:
@@ -225,7 +225,7 @@ def _flush(par, st, buf, scratch, force: float) -> None:
     st[S_TICKS] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _flush_wide(par, st, buf, scratch, force: float) -> None:
     """The wide parts (nozzles merged) gather over several windows: each is splatted once the
     spread of its release points reaches a quarter of its kernel's variance (so the smear
@@ -249,7 +249,7 @@ def _flush_wide(par, st, buf, scratch, force: float) -> None:
                 st[q + j] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _valve(par, st, dt: float, cmd: bool, speed: float) -> None:
     """ArduPilot AC_Sprayer's state machine on want = cmd ∧ speed ≥ v_min (module docstring)."""
     on = st[S_ON] > 0.5
@@ -268,7 +268,7 @@ def _valve(par, st, dt: float, cmd: bool, speed: float) -> None:
         st[S_INC] = -1.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _flow(par, st, dt: float, speed: float) -> float:
     """Litres out this tick: the first-order pressure lag toward q* = max(R·w·v/10⁴, q_min),
     exactly."""
@@ -282,7 +282,7 @@ def _flow(par, st, dt: float, speed: float) -> float:
     return qs * dt + (q0 - qs) * tau * (1.0 - e)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _ig_cdf(t: float, mu: float, lam: float) -> float:
     """CDF of the inverse Gaussian IG(μ, λ) (first-passage time of a drifting Brownian motion;
     Chhikara & Folks 1989, eq. 2.3), its second term in log space (no overflow of e^{2λ/μ})."""
@@ -299,7 +299,7 @@ def _ig_cdf(t: float, mu: float, lam: float) -> float:
     return min(max(c1 + c2, 0.0), 1.0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _tab_time(par, k: int, h: float) -> float:
     """Still-air fall time (s) of class ``k`` through ``h`` metres, evaporating (the table of
     :func:`fall_tables`, linear between its points, the last speed beyond it)."""
@@ -321,7 +321,7 @@ def _tab_time(par, k: int, h: float) -> float:
     return par[o_t + lo] + f * (par[o_t + hi] - par[o_t + lo])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _tab_left(par, k: int, t: float) -> float:
     """Share of class ``k``'s volume left after ``t`` s of evaporation (table, linear)."""
     n, o_t = N_TAB, int(par[P_O_TT])
@@ -442,7 +442,7 @@ def class_footprints(par, inp, out) -> None:
             out[k, j] = f[j]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _release(par, st, inp, litres: float) -> None:
     """This tick's litres into the window: the litre-weighted input row and each nozzle's
     release moments (the landing law is applied once per window, in :func:`_flush`)."""
