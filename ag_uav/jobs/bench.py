@@ -343,14 +343,14 @@ def _without_dose(conf: Config, n: int, sim_s: float, threads: int,
 
 
 def _deposition(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
-    """``deposition``: the dose on the ground's share of the loop, ``loop_share`` = (loop time
-    with ``spray.deposition`` − without) / with, for one whole mission (a short one's loop,
-    well under a second, is at the mercy of the machine) and for a batch of N of 60 s
-    (``loop_share_batched``). Each repeat flies with and right after it without, so a load
-    change on a shared machine hits both; the medians of the per-repeat shares, with their
-    min and max. ``*_cpu``: the same from the loop's CPU seconds (every thread's) instead of
-    its wall seconds: the work the dose model adds, which another process on the machine does
-    not change the way it changes the wall time."""
+    """``deposition``: the dose on the ground's share of the loop. ``loop_share``: the
+    deposition stage's own wall time (``Depositing.step``, the only method timed) over the
+    loop's, for one whole mission (true state) and for a batch of N of 60 s
+    (``loop_share_batched``); medians of ``repeats`` flights, with their min and max.
+    ``loop_share_difference``: (loop time with ``spray.deposition`` − without) / with, each
+    repeat flying with and right after it without, also from the loop's CPU seconds
+    (``*_cpu``). Both shares of one flight come from the same loop; the differences come from
+    two, and on a busy machine they move with the load more than with the dose model."""
     sim_s = 20.0 if quick else 60.0
     n = 16 if quick else 64
     whole = with_overrides(c, {"spray.deposition": True})
@@ -358,38 +358,51 @@ def _deposition(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
         whole.sim.max_time_s = min(whole.sim.max_time_s, 120.0)
     on = with_overrides(whole, {"sim.max_time_s": sim_s})
     batched_rate(on, 2, 1.0)  # compiled kernels loaded outside the timed loops
-
-    def shares(fly: Callable[[Config], tuple[float, float]], on: Config
-               ) -> tuple[list[float], list[float]]:
-        off = with_overrides(on, {"spray.deposition": False})
-        wall, cpu = [], []
-        for _ in range(repeats):
-            a, b = fly(on), fly(off)
-            wall.append((a[0] - b[0]) / a[0])
-            cpu.append((a[1] - b[1]) / a[1])
-        return wall, cpu
-
     flown: dict[str, float] = {}
 
-    def one(conf: Config) -> tuple[float, float]:
+    def one(conf: Config) -> list[dict]:
         s = closed_loop(conf)[2]
         flown["sim_s"] = s["sim_time_s"]
-        return _loop_times([s])
+        return [s]
 
-    single, single_cpu = shares(one, whole)
-    batched, batched_cpu = shares(lambda conf: _loop_times(batched_summaries(conf, n, sim_s)),
-                                  on)
+    def many(conf: Config) -> list[dict]:
+        return batched_summaries(conf, n, sim_s)
+
+    out = {**_stage_share(one, whole, repeats, ""), **_stage_share(many, on, repeats, "_batched")}
+    for fly, conf, key in ((one, whole, ""), (many, on, "_batched")):
+        out.update(_difference_share(fly, conf, repeats, key))
     return {"deposition": {
-        "loop_share": round(statistics.median(single), 3),
-        "loop_share_spread": spread(single),
-        "loop_share_cpu": round(statistics.median(single_cpu), 3),
-        "loop_share_cpu_spread": spread(single_cpu),
-        "loop_share_batched": round(statistics.median(batched), 3),
-        "loop_share_batched_spread": spread(batched),
-        "loop_share_batched_cpu": round(statistics.median(batched_cpu), 3),
-        "loop_share_batched_cpu_spread": spread(batched_cpu),
-        "mission_sim_s": flown["sim_s"], "batched_vehicles": n,
+        **out, "mission_sim_s": flown["sim_s"], "batched_vehicles": n,
         "batched_mission_sim_s": sim_s, "target": 0.15}}
+
+
+def _stage_share(fly: Callable[[Config], list[dict]], on: Config, repeats: int,
+                 key: str) -> dict[str, Any]:
+    """``loop_share{key}``: the deposition stage's wall time over the loop's, the engine on one
+    thread (a batch as one lane), so that the stage's time and the loop's are of one thread
+    (see :func:`_deposition`)."""
+    shares = []
+    for _ in range(repeats):
+        acc: Counter = Counter()
+        with _timed_stages(acc, only=("dose_model",)), _one_thread():
+            wall = _loop_times(fly(on))[0]
+        shares.append(acc["dose_model"] / wall)
+    return {f"loop_share{key}": round(statistics.median(shares), 3),
+            f"loop_share{key}_spread": spread(shares)}
+
+
+def _difference_share(fly: Callable[[Config], list[dict]], on: Config, repeats: int,
+                      key: str) -> dict[str, Any]:
+    """``loop_share_difference{key}`` and its ``_cpu`` twin (see :func:`_deposition`)."""
+    off = with_overrides(on, {"spray.deposition": False})
+    wall, cpu = [], []
+    for _ in range(repeats):
+        a, b = _loop_times(fly(on)), _loop_times(fly(off))
+        wall.append((a[0] - b[0]) / a[0])
+        cpu.append((a[1] - b[1]) / a[1])
+    k = f"loop_share_difference{key}"
+    return {k: round(statistics.median(wall), 3), f"{k}_spread": spread(wall),
+            f"{k}_cpu": round(statistics.median(cpu), 3), f"{k}_cpu_spread": spread(cpu)}
 
 
 def _loop_times(summaries: list[dict]) -> tuple[float, float]:
@@ -407,13 +420,14 @@ _STAGES = (("Guard", "start", "guard"), ("Sensing", "step", "imu"),
 
 
 @contextmanager
-def _timed_stages(acc: Counter) -> Iterator[None]:
-    """Every stage's method (and the physics step) wrapped to add its wall time to ``acc`` for
-    the duration of the block; the classes are restored after it."""
+def _timed_stages(acc: Counter, only: tuple[str, ...] | None = None) -> Iterator[None]:
+    """Every stage's method (and the physics step; ``only``: those keys alone) wrapped to add
+    its wall time to ``acc`` for the duration of the block; the classes are restored after it."""
     from ..engine import loop, stages
 
     saved = [(getattr(stages, c), m, k) for c, m, k in _STAGES] + [(loop.Engine, "physics",
                                                                      "physics")]
+    saved = [x for x in saved if only is None or x[2] in only]
     originals = [(cls, m, getattr(cls, m)) for cls, m, _ in saved]
 
     def timed(f: Callable[..., Any], key: str) -> Callable[..., Any]:
@@ -441,9 +455,7 @@ def _stages(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     less the lanes' contention); a second batch, the first warms the memory and kernels."""
     n, sim_s = (8, 10.0) if quick else (32, 20.0)
     out: dict[str, Any] = {"vehicles": n, "mission_sim_s": sim_s}
-    prev = os.environ.get("AG_UAV_ENGINE_THREADS")
-    os.environ["AG_UAV_ENGINE_THREADS"] = "1"
-    try:
+    with _one_thread():
         for key, conf in (("true_state", c), ("ins_bank", with_overrides(
                 c, ESTIMATOR_LOG_OVERRIDES))):
             batched_capture(conf, n, sim_s, lanes=1)
@@ -456,12 +468,21 @@ def _stages(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
             row["loop_rest"] = round((wall - staged - acc["physics"]) / vt * 1e6, 2)
             row["stages_over_physics"] = round((wall - acc["physics"]) / acc["physics"], 3)
             out[key] = row
+    return {"stages_us_per_vehicle_tick": out}
+
+
+@contextmanager
+def _one_thread() -> Iterator[None]:
+    """Engines built in the block fly on one thread (one lane, a one-thread rollout)."""
+    prev = os.environ.get("AG_UAV_ENGINE_THREADS")
+    os.environ["AG_UAV_ENGINE_THREADS"] = "1"
+    try:
+        yield
     finally:
         if prev is None:
             os.environ.pop("AG_UAV_ENGINE_THREADS", None)
         else:
             os.environ["AG_UAV_ENGINE_THREADS"] = prev
-    return {"stages_us_per_vehicle_tick": out}
 
 
 def _first_run(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
