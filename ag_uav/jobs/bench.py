@@ -380,7 +380,8 @@ def _stage_share(fly: Callable[[Config], list[dict]], on: Config, repeats: int,
                  key: str) -> dict[str, Any]:
     """``loop_share{key}``: the deposition stage's wall time over the loop's, the engine on one
     thread (a batch as one lane), so that the stage's time and the loop's are of one thread
-    (see :func:`_deposition`)."""
+    (see :func:`_deposition`). The kernels must be loaded before: a compile in tick 0 is kept
+    out of the loop's time but not out of the stage's."""
     shares = []
     for _ in range(repeats):
         acc: Counter = Counter()
