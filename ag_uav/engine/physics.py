@@ -178,8 +178,8 @@ def ground_contact(model: mujoco.MjModel, data: mujoco.MjData, s: np.ndarray, gr
     if not data.ncon:
         return None
     speed = math.sqrt(float(vel[0]) ** 2 + float(vel[1]) ** 2 + float(vel[2]) ** 2)
-    for c in data.contact[:data.ncon]:
-        g1, g2 = int(c.geom1), int(c.geom2)
+    # the geom pairs as one array (a Python object per contact costs ~20 µs each)
+    for g1, g2 in data.contact.geom[:data.ncon].tolist():
         if ground not in (g1, g2):
             continue
         other = g2 if g1 == ground else g1

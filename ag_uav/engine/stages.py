@@ -123,18 +123,20 @@ class Guard:
         b = self.b
         guard, pose, ref = self.rows
         flags = tick_in(k, b.S, self.iq, self.iv, self.COS_TILT, guard, pose, ref)
+        ended = False
         if flags & CRASHED:
             for i in np.flatnonzero(b.code):
                 self._end(i, _crash_text(int(b.code[i]), t), t)
             b.code[:] = 0
+            ended = True
         if flags & NEAR_GROUND:
             for i in np.flatnonzero(b.low):
                 why = ground_contact(self.models[i], self.contact_data[i], b.S[i],
                                      self.ground[i], self.skids[i], b.v[i], t)
                 if why:
                     self._end(i, why, t)
-        return bool(flags & ACTIVE) and not ((flags & (CRASHED | NEAR_GROUND))
-                                             and not b.act.any())
+                    ended = True
+        return bool(flags & ACTIVE) and not (ended and not b.act.any())
 
     def _end(self, i: int, why: str, t: float) -> None:
         b = self.b
@@ -284,6 +286,7 @@ class Failsafe:
         self.every = max(1, round(1.0 / (self.CHECK_HZ * b.dt)))
         self.sig = np.full(n, np.nan)
         self.engaged = np.zeros(n, dtype=bool)
+        self.n_engaged = 0  # engaged.sum(), kept as a count (no array reduction per tick)
         self.t_land = np.full(n, np.inf)
         self.at = np.zeros((n, 3))
         self.zr = np.zeros(n)  # the descending height reference
@@ -299,13 +302,14 @@ class Failsafe:
                 trig = self.on & ~self.engaged & b.act & b.airborne & (self.sig > self.bound)
             for i in np.flatnonzero(trig):
                 self._engage(int(i), t)
-        if self.engaged.any():
+        if self.n_engaged:
             for i in np.flatnonzero(self.engaged & b.act):
                 self._fly(int(i), t)
 
     def _engage(self, i: int, t: float) -> None:
         b = self.b
         self.engaged[i] = True
+        self.n_engaged += 1
         v0 = b.v_fb[i].copy()
         v0[2] = 0.0
         tb = math.sqrt(v0[0] * v0[0] + v0[1] * v0[1]) / self.BRAKE_MPS2
