@@ -132,12 +132,15 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
     cov, ovl = spray_coverage(res.field, tracks, plan.swath) if tracks else (0.0, 0.0)
     off = off_target(res.field, tracks, plan.swath, cfg.spray.offtarget_buffer_m)
-    steps = np.diff(res.p_true, axis=0)
-    # motor effort: RMS rate of the rotor-thrust commands over the spraying part (N/s per rotor)
+    path_len = float(np.sum(np.linalg.norm(np.diff(res.p_true, axis=0), axis=1))) if n > 1 else 0.0
+    # motor effort: RMS rate of the rotor-thrust commands over the spraying part (N/s per rotor);
+    # scaled and squared in place (a whole job's rate is 4 values a tick: no more copies of it)
     f_mis = np.asarray(res.motors, dtype=float)[mission]
-    motor_rate = (_rms(np.diff(f_mis, axis=0).ravel() * cfg.sim.control_hz)
-                  if len(f_mis) > 1 else None)
-    path_len = float(np.sum(np.linalg.norm(steps, axis=1))) if n > 1 else 0.0
+    motor_rate = None
+    if len(f_mis) > 1:
+        rate = np.diff(f_mis, axis=0).ravel()
+        rate *= cfg.sim.control_hz
+        motor_rate = float(np.sqrt(np.mean(np.multiply(rate, rate, out=rate))))
 
     end = np.asarray(plan.end, dtype=float)
     dt = 1.0 / cfg.sim.control_hz
