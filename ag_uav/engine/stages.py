@@ -389,7 +389,7 @@ class Spraying:
         on, reset = self.spr.step(k, t, b.p[:, 2], b.v[:, 0], b.v[:, 1], b.spray, b.f,
                                   b.S[:, self.ia:self.ia + 4], b.act)
         b.spray[:] = on
-        if np.count_nonzero(reset):  # (a quarter of reset.any()'s cost, paid every tick)
+        if np.count_nonzero(reset):  # every tick: cheaper than reset.any()
             self.control.bc.reset_rows(np.flatnonzero(reset))
 
     def settle(self, k: int, t: float, depositing: Depositing | None) -> None:
