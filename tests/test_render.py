@@ -170,3 +170,64 @@ def test_scenery_is_drawn_for_the_cameras_and_is_not_in_the_physics_model():
     other.mission.field = "hole"
     m2 = build_vehicle(other).model
     assert (m2.ngeom, m2.nbody, m2.nq) == (veh.model.ngeom, veh.model.nbody, veh.model.nq)
+
+
+def _state(m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
+    s = np.empty(mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+    mujoco.mj_getState(m, d, s, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    return s
+
+
+#: a body whose centre of mass is off its frame, tracked by a camera (as the spray tank's
+#: liquid moves the drone's centre of mass and its chase camera with it)
+TRACKED = """
+<mujoco>
+  <worldbody>
+    <light pos="0 0 20" dir="0 0 -1" directional="true"/>
+    <geom type="plane" size="50 50 0.1" rgba=".3 .6 .3 1"/>
+    <body name="drone" pos="0 0 3">
+      <freejoint/>
+      <inertial pos="0.2 0 0" mass="2" diaginertia=".1 .1 .1"/>
+      <geom type="box" size=".5 .5 .15" rgba=".1 .1 .9 1" mass="0"/>
+      <camera name="chase" mode="trackcom" pos="-4 0 2" xyaxes="0 -1 0 .5 0 .9"/>
+    </body>
+  </worldbody>
+</mujoco>"""
+
+
+def test_render_thread_gives_the_calling_thread_s_frames_in_order(rig):
+    from ag_uav.record.render import RenderThread
+
+    m = mujoco.MjModel.from_xml_string(TRACKED)
+    r = Renderer(m, 160, 120, ("chase",))
+    rt = RenderThread(m, 160, 120, ("chase",), body=1, depth=2)
+    assert rt.cameras == ("chase",) and rt.fovy("chase") == pytest.approx(45.0)
+    want, got = [], []
+    d = mujoco.MjData(m)
+    poses = set()
+    for k in range(6):  # more moments than the queue holds: submit waits, nothing is lost
+        d.qpos[:3] = (0.4 * k, -0.2 * k, 3.0 + 0.1 * k)
+        mujoco.mj_forward(m, d)
+        want.append((0.5 * k, [(c, r.jpeg(d, c), r.camera_pose(d, c)) for c in r.cameras]))
+        poses.add(tuple(d.cam_xpos[0] - d.xpos[1]))
+        rt.submit(0.5 * k, _state(m, d), d.ctrl, np.zeros(3))
+        m.body_ipos[1, 0] += 0.5  # the centre of mass moves after the moment: not in its frame
+        got += rt.done()
+    got += rt.close()
+    r.close()
+    assert len(poses) == 6  # the camera followed the centre of mass: each moment differs
+    assert [t for t, _ in got] == [t for t, _ in want]
+    for (_, shots), (_, ref) in zip(got, want, strict=True):
+        for (c, jpg, (pos, quat)), (c0, jpg0, (pos0, quat0)) in zip(shots, ref, strict=True):
+            assert c == c0 and jpg == jpg0
+            np.testing.assert_array_equal(pos, pos0)
+            np.testing.assert_array_equal(quat, quat0)
+    assert rt.close() == []
+
+
+def test_render_thread_raises_what_the_renderer_raises(rig):
+    from ag_uav.record.render import RenderThread
+
+    m, _, _ = rig
+    with pytest.raises(ValueError, match="camera 'nope' not in model"):
+        RenderThread(m, 160, 120, ("nope",))

@@ -316,12 +316,12 @@ def _observers(b: Batch, flights: Sequence[Flight], vehs: Sequence[Vehicle],
 def _renderer(b: Batch, i: int, fl: Flight, veh: Vehicle) -> Any:
     if not fl.render:
         return None
-    from ..record.render import Renderer, RenderUnavailable
+    from ..record.render import RenderThread, RenderUnavailable
 
     c = fl.cfg.log
     try:
-        return Renderer(veh.model, c.width, c.height, tuple(c.cameras),
-                        scenery=fl.outline or ())
+        return RenderThread(veh.model, c.width, c.height, tuple(c.cameras),
+                            scenery=fl.outline or (), body=veh.body_id)
     except RenderUnavailable as e:
         b.notes[i].append(f"no camera frames: {e}")
         return None

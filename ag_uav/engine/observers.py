@@ -109,8 +109,9 @@ class LogObserver(Observer):
     """Vehicle ``i``'s run log (:class:`ag_uav.record.runlog.RunLog`): the state, reference,
     estimate, controller internals, motors, wind and spray at the log's rate (with the dose:
     the nozzle model's valve and actual flow as ``ctrl.nozzle.*``, and the dose map on
-    ``/dose`` every few seconds), and camera frames (:class:`ag_uav.record.render.Renderer`)
-    when a frame is due."""
+    ``/dose`` every few seconds), and camera frames when a frame is due. The frames render in
+    a thread of their own (:class:`ag_uav.record.render.RenderThread`) while the flight goes on,
+    and go into the log, each at its own time, as they are done (the rest at :meth:`close`)."""
 
     def __init__(self, i: int, log: Any, renderer: Any, feedback: Any, control: Control,
                  sensing: Sensing, depositing: Any = None) -> None:
@@ -122,16 +123,24 @@ class LogObserver(Observer):
         self._dose_f = _dose_factor(self.dose[0].grid) if self.dose is not None else 0
         self._extra: int | None = None  # the log's raw columns after the motors, once bound
         self._imu = False
+        #: the next frame's time: the log's camera clock moves only when a frame is logged,
+        #: which is later than it is handed to the render thread
+        self._frame_next = -math.inf
+        self._frame_every = log.period("camera") - 1e-9 if renderer is not None else math.inf
 
     def next_time(self) -> float:
-        return self.log.next_due(frames=self.renderer is not None)
+        return min(self.log.next_due(), self._frame_next if self.renderer is not None
+                   else math.inf)
 
     def tick(self, view: TickView) -> None:
         log, t = self.log, view.t
         if log.due(t):
             self._record(view)
-        if self.renderer is not None and log.want_frame(t):
-            self._frames(view)
+        if self.renderer is not None and t >= self._frame_next:
+            self._log_frames(self.renderer.done())
+            if log.want_frame(t):
+                self._frames(view)
+            self._frame_next = t + self._frame_every
 
     def _record(self, view: TickView) -> None:
         """One tick row of the log (:meth:`~ag_uav.record.runlog.RunLog.tick_slot`): the
@@ -188,15 +197,24 @@ class LogObserver(Observer):
                             [c for _, c in cols], base)
 
     def _frames(self, view: TickView) -> None:
-        d, r = view.data(self.i), self.renderer
-        for cam in r.cameras:
-            self.log.frame(view.t, cam, r.jpeg(d, cam), r.width, r.height, r.fovy(cam),
-                           pose=r.camera_pose(d, cam))
-            self.frames += 1
+        b, i = view.b, self.i
+        self.renderer.submit(view.t, b.S[i], b.f[i], b.xf[i])
+
+    def _log_frames(self, done: list[tuple[float, list]]) -> None:
+        r = self.renderer
+        for t, shots in done:
+            for cam, jpg, pose in shots:
+                self.log.frame(t, cam, jpg, r.width, r.height, r.fovy(cam), pose=pose)
+                self.frames += 1
 
     def close(self) -> None:
         if self.renderer is not None:
-            self.renderer.close()
+            r, self.renderer = self.renderer, None
+            done = r.close()
+            if not self.log.closed:
+                self.renderer = r
+                self._log_frames(done)
+                self.renderer = None
 
 
 def _dose_factor(g: Any, cell_m: float = 1.0, max_cells: int = 250_000) -> int:

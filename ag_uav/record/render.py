@@ -32,7 +32,7 @@ if os.environ["MUJOCO_GL"].lower() == "egl":
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["Renderer", "RenderUnavailable", "optical_quat"]
+__all__ = ["RenderThread", "Renderer", "RenderUnavailable", "optical_quat"]
 
 
 class RenderUnavailable(RuntimeError):
@@ -201,3 +201,117 @@ class Renderer:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+_FULLPHYSICS = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+#: the model fields a spray job writes in flight (the liquid's mass, inertia, centre of mass)
+_MASS_FIELDS = ("body_mass", "body_inertia", "body_ipos", "body_subtreemass")
+
+
+class RenderThread:
+    """A :class:`Renderer` in a thread of its own, so that the frames render while the
+    simulation goes on: MuJoCo's rendering and the JPEG encoder release the GIL.
+
+    :meth:`submit` hands it one moment (the physics state, what the physics was handed and the
+    bodies' mass properties, which a spray job changes in flight, as copies); the thread sets its
+    own copy of the model and its own ``MjData`` from them, runs ``mj_forward`` and renders every
+    camera. :meth:`done` returns the finished moments in the order they were submitted, each as
+    ``(t, [(camera, jpeg, pose), ...])``; :meth:`close` waits for the rest and returns them.
+    At most ``depth`` moments wait (then :meth:`submit` waits for the thread), so memory stays
+    bounded and the frames never fall far behind. The images are those the same state gives
+    :class:`Renderer` in the calling thread. The GL context is made in the thread, which is
+    where it is used; construction raises :class:`RenderUnavailable` as :class:`Renderer` does.
+    """
+
+    def __init__(self, model: mujoco.MjModel, width: int = 320, height: int = 240,
+                 cameras: tuple[str, ...] | list[str] = ("chase", "down"),
+                 scenery: Sequence[np.ndarray] = (), body: int = 1, depth: int = 8):
+        import copy
+        import queue
+        import threading
+
+        self.model, self.width, self.height, self.body = model, int(width), int(height), body
+        self._own = copy.copy(model)  # the thread's: the caller's may change as it renders
+        self._todo: queue.Queue = queue.Queue(maxsize=max(1, depth))
+        self._done: queue.Queue = queue.Queue()
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._fovy: dict[str, float] = {}
+        self.cameras: tuple[str, ...] = ()
+        self._thread = threading.Thread(target=self._run, args=(tuple(cameras), scenery),
+                                        name="ag-uav-render", daemon=True)
+        self._thread.start()
+        self._ready.wait()
+        if self._error is not None:
+            self._thread.join()
+            raise self._error
+        self._pending = 0
+
+    def _run(self, cameras: tuple[str, ...], scenery: Sequence[np.ndarray]) -> None:
+        try:
+            r = Renderer(self._own, self.width, self.height, cameras, scenery=scenery)
+        except BaseException as e:  # noqa: BLE001 - handed to the constructor's caller
+            self._error = e
+            self._ready.set()
+            return
+        self.cameras = r.cameras
+        self._fovy = {c: r.fovy(c) for c in r.cameras}
+        self._ready.set()
+        m = self._own
+        d = mujoco.MjData(m)
+        try:
+            while (item := self._todo.get()) is not None:
+                t, state, ctrl, xf, mass = item
+                try:
+                    for field, value in zip(_MASS_FIELDS, mass, strict=True):
+                        getattr(m, field)[:] = value
+                    mujoco.mj_setState(m, d, state, _FULLPHYSICS)
+                    d.ctrl[:] = ctrl
+                    d.xfrc_applied[self.body, :3] = xf
+                    mujoco.mj_forward(m, d)
+                    self._done.put((t, [(c, r.jpeg(d, c), r.camera_pose(d, c))
+                                        for c in r.cameras]))
+                except BaseException as e:  # noqa: BLE001 - reported by done()/close()
+                    self._done.put(e)
+        finally:
+            r.close()
+
+    def fovy(self, camera: str) -> float:
+        """Vertical field of view of ``camera`` in degrees."""
+        return self._fovy[camera]
+
+    def submit(self, t: float, state: np.ndarray, ctrl: np.ndarray, xf: np.ndarray) -> None:
+        """Render every camera at ``t`` from the full physics state ``state``
+        (``mjSTATE_FULLPHYSICS``), with ``ctrl``, the body force ``xf`` and the model's mass
+        properties now (all copied here)."""
+        mass = tuple(np.array(getattr(self.model, f)) for f in _MASS_FIELDS)
+        self._todo.put((t, np.array(state), np.array(ctrl), np.array(xf), mass))
+        self._pending += 1
+
+    def done(self) -> list[tuple[float, list]]:
+        """The moments rendered so far, oldest first (without waiting)."""
+        import queue
+
+        out = []
+        while self._pending:
+            try:
+                item = self._done.get_nowait()
+            except queue.Empty:
+                break
+            out.append(self._take(item))
+        return out
+
+    def _take(self, item):
+        self._pending -= 1
+        if isinstance(item, BaseException):
+            raise item
+        return item
+
+    def close(self) -> list[tuple[float, list]]:
+        """Wait for the moments still rendering, end the thread, return them (oldest first)."""
+        if not self._thread.is_alive():
+            return []
+        self._todo.put(None)
+        out = [self._take(self._done.get()) for _ in range(self._pending)]
+        self._thread.join()
+        return out

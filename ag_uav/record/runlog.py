@@ -513,6 +513,10 @@ class RunLog(TickLog, EstimateLog, SceneLog):
             nxt = min(nxt, self._next["camera"])
         return nxt
 
+    def period(self, group: str) -> float:
+        """Sim seconds between two messages of ``group`` (``inf``: the group is not logged)."""
+        return self._period[group]
+
     def want_frame(self, t: float) -> bool:
         """True when a camera frame at sim time ``t`` would be logged: render only then."""
         return self.want("camera", t)
