@@ -106,6 +106,17 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
 
 def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
               log_writer: str) -> tuple[RunResult, Path]:
+    from . import warm
+
+    helper = warm.start(cfg) if feedback is None else None  # an empty kernel cache: 2 cores
+    try:
+        return _fly_logged(cfg, run_dir, progress, feedback, log_writer)
+    finally:
+        warm.stop(helper)
+
+
+def _fly_logged(cfg: Config, run_dir: Path, progress: bool, feedback,
+                log_writer: str) -> tuple[RunResult, Path]:
     log = _open_log(cfg, run_dir, log_writer)
     try:
         res = simulate(cfg, feedback=feedback, progress=progress, log=log)

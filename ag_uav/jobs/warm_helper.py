@@ -1,0 +1,26 @@
+"""The helper process of :mod:`ag_uav.jobs.warm`: ``python -m ag_uav.jobs.warm_helper FOLDER``
+flies ``FOLDER/config.toml`` with :data:`ag_uav.jobs.warm.HELPER_OVERRIDES` into ``FOLDER``, at
+low priority, so that the kernels it runs land in numba's cache."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from pathlib import Path
+
+
+def main(folder: str) -> None:
+    """Fly the run's config on the true state, briefly, into ``folder``."""
+    with contextlib.suppress(OSError, AttributeError):
+        os.nice(10)  # the run comes first where cores are short
+    from ..config import load_config
+    from .run import fly
+    from .warm import HELPER_OVERRIDES
+
+    cfg = load_config(Path(folder) / "config.toml", dict(HELPER_OVERRIDES))
+    fly(cfg, out_root=folder, run_id="helper", progress=False, log_writer="inline")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])

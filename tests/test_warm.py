@@ -1,0 +1,64 @@
+"""The first run's second-core helper (ag_uav.jobs.warm): when it starts, that it flies the run's
+config on the true state in a process of its own, and that it leaves nothing behind."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from ag_uav.config import load_config
+from ag_uav.jobs import warm
+
+
+@pytest.fixture
+def can_help(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("AG_UAV_WARM", raising=False)
+    monkeypatch.setattr(warm, "_cores", lambda: 2)
+    monkeypatch.setattr(warm, "_ins_kernel_cached", lambda: False)
+
+
+def test_helper_is_wanted_only_where_it_can_help(can_help, monkeypatch) -> None:
+    cfg = load_config(None, {})
+    assert warm.wanted(cfg)
+    assert not warm.wanted(load_config(None, {"estimator.name": "true"}))
+    assert not warm.wanted(load_config(None, {"estimator.nav": "ideal-attitude"}))
+    monkeypatch.setenv("AG_UAV_WARM", "0")
+    assert not warm.wanted(cfg)
+    monkeypatch.delenv("AG_UAV_WARM")
+    monkeypatch.setattr(warm, "_cores", lambda: 1)
+    assert not warm.wanted(cfg)
+    monkeypatch.setattr(warm, "_cores", lambda: 2)
+    monkeypatch.setattr(warm, "_ins_kernel_cached", lambda: True)
+    assert not warm.wanted(cfg)
+
+
+def test_the_ins_kernel_cache_check_reads_numba_s_index() -> None:
+    # the suite has flown the INS before or compiles it here: either way the answer is a bool
+    # that matches the index file numba keeps for the kernel
+    import os
+
+    from estimators.ins.fusion import step_kernel
+
+    index = step_kernel._cache._cache_file._index_path
+    assert warm._ins_kernel_cached() is os.path.exists(index)
+
+
+def test_helper_flies_the_config_on_the_true_state_and_leaves_nothing(can_help) -> None:
+    cfg = load_config(None, {"seed": 3})
+    w = warm.start(cfg)
+    assert w is not None
+    assert w.proc.wait(timeout=600) == 0
+    summary = json.loads((w.folder / "helper" / "summary.json").read_text())
+    assert summary["feedback"] == "true" and summary["seed"] == 3
+    assert summary["sim_time_s"] <= warm.FLY_S + 0.01
+    warm.stop(w)
+    assert not w.folder.exists()
+
+
+def test_stop_ends_a_helper_still_running(can_help) -> None:
+    w = warm.start(load_config(None, {}))
+    assert w is not None
+    warm.stop(w)  # at once: the helper is still importing
+    assert w.proc.poll() is not None and not w.folder.exists()
+    warm.stop(None)
