@@ -80,7 +80,7 @@ def _open_log(cfg: Config, run_dir: Path, writer: str = "process"):
 
 def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None,
         progress: bool = False, feedback=None, log_writer: str = "process",
-        overwrite: bool = False) -> tuple[RunResult, Path]:
+        overwrite: bool = False, helper: bool = True) -> tuple[RunResult, Path]:
     """Fly ``cfg`` once into ``out_root/run_id``; returns the result and the run folder.
     ``log_writer``: the run log's writer (:class:`ag_uav.record.runlog.RunLog`'s ``writer``:
     ``"process"``, its own process on another core, or ``"inline"``).
@@ -94,25 +94,29 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     A log that cannot be written mid-flight (disk full) stops the flight with an
     :class:`OSError` naming it (the log stays readable up to its last complete chunk); a
     finished flight whose log end or ``summary.json`` cannot be written raises
-    :class:`RunOutputError`, which carries the result."""
+    :class:`RunOutputError`, which carries the result.
+
+    ``helper``: on an empty kernel cache, compile the kernels the INS does not need in a helper
+    process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
+    every core busy, says False)."""
     from .outdir import check_reuse, hold, unique_run_dir
 
     run_dir = (Path(out_root) / run_id if run_id else
                unique_run_dir(out_root, default_run_id(cfg)))
     with hold(run_dir, "run", "wait for it to finish, or choose another --run-id"):
         check_reuse(run_dir, overwrite)
-        return _fly_into(cfg, run_dir, progress, feedback, log_writer)
+        return _fly_into(cfg, run_dir, progress, feedback, log_writer, helper)
 
 
 def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
-              log_writer: str) -> tuple[RunResult, Path]:
+              log_writer: str, helper: bool = True) -> tuple[RunResult, Path]:
     from . import warm
 
-    helper = warm.start(cfg) if feedback is None else None  # an empty kernel cache: 2 cores
+    w = warm.start(cfg) if helper and feedback is None else None  # an empty kernel cache
     try:
         return _fly_logged(cfg, run_dir, progress, feedback, log_writer)
     finally:
-        warm.stop(helper)
+        warm.stop(w)
 
 
 def _fly_logged(cfg: Config, run_dir: Path, progress: bool, feedback,

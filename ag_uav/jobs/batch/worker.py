@@ -65,7 +65,7 @@ def run_task(task: RunTask) -> dict[str, Any]:
             # inline: a batch keeps every core busy already (and a Dask worker's threads
             # make a fork unsafe)
             res, _ = fly(cfg, out_root=task.logs_dir, run_id=task.run_id, log_writer="inline",
-                         overwrite=True)  # a re-run (--resume) replaces what it left
+                         overwrite=True, helper=False)  # a re-run (--resume) replaces it
         else:
             from ...engine.missions import simulate
 
