@@ -208,13 +208,12 @@ class LogObserver(Observer):
                 self.frames += 1
 
     def close(self) -> None:
+        """The frames still rendering go into the log (unless it is closed already)."""
         if self.renderer is not None:
-            r, self.renderer = self.renderer, None
-            done = r.close()
+            done = self.renderer.close()
             if not self.log.closed:
-                self.renderer = r
                 self._log_frames(done)
-                self.renderer = None
+            self.renderer = None
 
 
 def _dose_factor(g: Any, cell_m: float = 1.0, max_cells: int = 250_000) -> int:
