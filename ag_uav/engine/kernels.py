@@ -64,10 +64,12 @@ class PoseRows(NamedTuple):
 
 
 class RefRows(NamedTuple):
-    """The reference: the table ``ref_tab`` (refs, ticks, 12), each vehicle's row of it
-    ``ref_ids``, and the tick's ``rp``, ``rv``, ``ra`` (N, 3), ``yaw`` and ``spray`` (N,)."""
+    """The reference: the block of rows ``ref_tab`` (refs, ticks, 12) from tick ``ref_k0[0]``
+    (:class:`~ag_uav.engine.reftable.RefTable`), each vehicle's row of it ``ref_ids``, and the
+    tick's ``rp``, ``rv``, ``ra`` (N, 3), ``yaw`` and ``spray`` (N,)."""
 
     ref_tab: np.ndarray
+    ref_k0: np.ndarray
     ref_ids: np.ndarray
     rp: np.ndarray
     rv: np.ndarray
@@ -79,8 +81,8 @@ class RefRows(NamedTuple):
 class RecordRow(NamedTuple):
     """What a tick's record row holds (:data:`~ag_uav.engine.loop.REC_COLUMNS`): ``p``, ``v``,
     the reference ``rp``, the fed-back ``p_fb``, the wind ``w`` (N, 3), the rotor commands
-    ``f`` (N, 4), ``spray`` (N,), and the reference ``ref_tab`` with each vehicle's
-    ``ref_ids``."""
+    ``f`` (N, 4), ``spray`` (N,), and the reference's block ``ref_tab`` from tick
+    ``ref_k0[0]`` with each vehicle's ``ref_ids``."""
 
     p: np.ndarray
     v: np.ndarray
@@ -90,6 +92,7 @@ class RecordRow(NamedTuple):
     f: np.ndarray
     spray: np.ndarray
     ref_tab: np.ndarray
+    ref_k0: np.ndarray
     ref_ids: np.ndarray
 
 
@@ -109,6 +112,7 @@ def tick_in(k, S, iq, iv, cos_tilt, guard, pose, ref):  # pragma: no cover
     p, v, quat, R, omega = po.p, po.v, po.quat, po.R, po.omega
     ref_tab, ref_ids, rp, rv, ra, yaw, spray = (rf.ref_tab, rf.ref_ids, rf.rp, rf.rv, rf.ra,
                                                 rf.yaw, rf.spray)
+    kr = k - rf.ref_k0[0]
     flags = 0
     for i in range(S.shape[0]):
         if act[i] and n_ticks[i] <= k:
@@ -142,7 +146,7 @@ def tick_in(k, S, iq, iv, cos_tilt, guard, pose, ref):  # pragma: no cover
         if airborne[i] and pz < hover_z[i] + 1.5:
             low[i] = True
             flags |= NEAR_GROUND
-        row = ref_tab[ref_ids[i], k]
+        row = ref_tab[ref_ids[i], kr]
         for j in range(3):
             rp[i, j] = row[j]
             rv[i, j] = row[3 + j]
@@ -175,7 +179,7 @@ def tick_out(rec, k, act, flown, row):  # pragma: no cover
     ``flown`` counts each vehicle's ticks."""
     rr = RecordRow(*row)
     p, v, rp, pfb, w, f, spray = rr.p, rr.v, rr.rp, rr.p_fb, rr.w, rr.f, rr.spray
-    ref_tab, ref_ids = rr.ref_tab, rr.ref_ids
+    ref_tab, ref_ids, kr = rr.ref_tab, rr.ref_ids, k - rr.ref_k0[0]
     for i in range(p.shape[0]):
         if not act[i]:
             continue
@@ -186,7 +190,7 @@ def tick_out(rec, k, act, flown, row):  # pragma: no cover
             r[6 + j] = rp[i, j]
             r[9 + j] = pfb[i, j]
             r[18 + j] = w[i, j]
-        r[12] = ref_tab[ref_ids[i], k, 10]
+        r[12] = ref_tab[ref_ids[i], kr, 10]
         r[13] = 1.0 if spray[i] else 0.0
         for j in range(4):
             r[14 + j] = f[i, j]

@@ -57,6 +57,7 @@ from ..vehicle.mjcf import Vehicle, build_vehicle
 from .compiling import compile_notice, first_tick
 from .observers import HookObserver, LogObserver, Observer, TickView, frames_of
 from .physics import STATE_SPEC, default_threads, make_stepper
+from .reftable import RefTable
 from .stages import (
     REC_COLUMNS,
     Batch,
@@ -174,37 +175,6 @@ def _box(fl: Flight) -> tuple[float, ...]:
     return (b[0] - 100.0, b[1] - 100.0, b[2] + 100.0, b[3] + 100.0, 120.0)
 
 
-def _reference_tables(flights: Sequence[Flight], n_ticks: np.ndarray, dt: float
-                      ) -> tuple[np.ndarray, np.ndarray, list[dict[str, np.ndarray]]]:
-    """Per-tick reference rows (pos, vel, acc, yaw, seg, spray) of each distinct reference,
-    padded with their last row to the longest flight; which table each vehicle reads; the spray
-    job's per-tick tables of each reference."""
-    tables: list[np.ndarray] = []
-    job_tabs: list[dict[str, np.ndarray]] = []
-    ref_ids = np.empty(len(flights), dtype=np.int64)
-    index: dict[int, int] = {}
-    for i, fl in enumerate(flights):
-        rid = index.get(id(fl.reference))
-        if rid is None or len(tables[rid]) < n_ticks[i]:
-            tab = fl.reference.sample_all(np.arange(n_ticks[i]) * dt)
-            packed = np.column_stack([tab["pos"], tab["vel"], tab["acc"], tab["yaw"],
-                                      tab["seg"], tab["spray"]]).astype(float)
-            job = {k: tab[k] for k in ("ground", "sortie") if k in tab}
-            if rid is None:
-                rid = index[id(fl.reference)] = len(tables)
-                tables.append(packed)
-                job_tabs.append(job)
-            else:
-                tables[rid], job_tabs[rid] = packed, job
-        ref_ids[i] = rid
-    n_max = int(n_ticks.max())
-    ref_tab = np.empty((len(tables), n_max, 12))
-    for j, t_ in enumerate(tables):
-        ref_tab[j, :len(t_)] = t_
-        ref_tab[j, len(t_):] = t_[-1] if len(t_) else 0.0
-    return ref_tab, ref_ids, job_tabs
-
-
 def _batch(flights: Sequence[Flight], vehs: Sequence[Vehicle], dt: float
            ) -> tuple[Batch, list[dict[str, np.ndarray]]]:
     m0 = vehs[0].model
@@ -215,12 +185,12 @@ def _batch(flights: Sequence[Flight], vehs: Sequence[Vehicle], dt: float
         _initial_state(fl, veh, S[i], sens[i])
     n_ticks = np.array([int(math.ceil(min(fl.duration, fl.cfg.sim.max_time_s) / dt - 1e-9))
                         for fl in flights], dtype=np.int64)
-    ref_tab, ref_ids, job_tabs = _reference_tables(flights, n_ticks, dt)
+    ref, ref_ids, job_tabs = RefTable.of(flights, n_ticks, dt)
     b = Batch(dt=dt, S=S, sens=sens, n_ticks=n_ticks,
               airborne=np.array([not fl.cfg.sim.takeoff for fl in flights]),
               hover_z=np.array([v.hover_z for v in vehs]),
               box=np.array([_box(fl) for fl in flights], dtype=float),
-              ref_tab=ref_tab, ref_ids=ref_ids, notes=[[] for _ in range(N)])
+              ref=ref, ref_ids=ref_ids, n_max=int(n_ticks.max()), notes=[[] for _ in range(N)])
     return b, job_tabs
 
 

@@ -38,6 +38,7 @@ from .kernels import (
     zeros_touched,
 )
 from .physics import ground_contact
+from .reftable import RefTable
 
 #: the loop record's columns (one row per control tick)
 REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
@@ -58,8 +59,9 @@ class Batch:
     airborne: np.ndarray          # (N,) lift-off latch
     hover_z: np.ndarray           # (N,)
     box: np.ndarray               # (N, 5) bounding box x0, y0, x1, y1, z_max
-    ref_tab: np.ndarray           # (n_refs, n_max, 12) reference rows
-    ref_ids: np.ndarray           # (N,) row of ref_tab
+    ref: RefTable                 # the reference rows, a block of ticks at a time
+    ref_ids: np.ndarray           # (N,) each vehicle's row of ref.tab
+    n_max: int                    # ticks of the longest flight
     notes: list[list[str]]
     act: np.ndarray = field(init=False)
 
@@ -87,10 +89,6 @@ class Batch:
     def n(self) -> int:
         return len(self.S)
 
-    @property
-    def n_max(self) -> int:
-        return self.ref_tab.shape[1]
-
 
 def _crash_text(code: int, t: float) -> str:
     if code == NONFINITE:
@@ -116,12 +114,14 @@ class Guard:
         self.rows = (tuple(GuardRows(b.act, b.n_ticks, b.box, b.code, b.airborne, b.hover_z,
                                      b.low)),
                      tuple(PoseRows(b.p, b.v, b.quat, b.R, b.omega)),
-                     tuple(RefRows(b.ref_tab, b.ref_ids, b.rp, b.rv, b.ra, b.yaw, b.spray)))
+                     tuple(RefRows(b.ref.tab, b.ref.k0, b.ref_ids, b.rp, b.rv, b.ra, b.yaw,
+                                   b.spray)))
 
     def start(self, k: int, t: float) -> bool:
         """False when no vehicle is left to fly."""
         b = self.b
         guard, pose, ref = self.rows
+        b.ref.at(k)
         flags = tick_in(k, b.S, self.iq, self.iv, self.COS_TILT, guard, pose, ref)
         ended = False
         if flags & CRASHED:
@@ -463,7 +463,7 @@ class Recorder:
         b = self.b
         # RecordRow's fields, as a plain tuple (b.f is the controller's new array each tick)
         tick_out(self.rec, k, b.act, b.flown,
-                 (b.p, b.v, b.rp, b.p_fb, b.w, b.f, b.spray, b.ref_tab, b.ref_ids))
+                 (b.p, b.v, b.rp, b.p_fb, b.w, b.f, b.spray, b.ref.tab, b.ref.k0, b.ref_ids))
         if self.controls is not None:
             self.controls[k, :, :4] = b.f
             self.controls[k, :, 4:] = b.xf

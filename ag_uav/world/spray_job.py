@@ -184,13 +184,23 @@ class ChainedReference:
         out = np.where(seg >= 0, m[np.clip(seg, 0, len(m) - 1)], seg)
         return out.astype(int)
 
+    def sortie_ground(self, times) -> tuple[np.ndarray, np.ndarray]:
+        """The sortie (int) flown at each of ``times`` and whether the vehicle is then on the
+        ground at the base (bool: after its sortie's reference ends, before the next starts)."""
+        t = np.asarray(times, float)
+        piece = np.clip(np.searchsorted(self.t0, t, side="right") - 1, 0, len(self.pieces) - 1)
+        ends = np.array([ref.duration for ref, _m in self.pieces])
+        ground = (t - self.t0[piece] > ends[piece]) & (piece < len(self.pieces) - 1)
+        return piece, ground
+
     def sample_all(self, times) -> dict[str, np.ndarray]:
         t = np.asarray(times, float)
         n = len(t)
         out = {"pos": np.zeros((n, 3)), "vel": np.zeros((n, 3)), "acc": np.zeros((n, 3)),
                "yaw": np.zeros(n), "yaw_rate": np.zeros(n), "spray": np.zeros(n, bool),
-               "seg": np.zeros(n, int), "sortie": np.zeros(n, int), "ground": np.zeros(n, bool)}
-        piece = np.clip(np.searchsorted(self.t0, t, side="right") - 1, 0, len(self.pieces) - 1)
+               "seg": np.zeros(n, int)}
+        piece, ground = self.sortie_ground(t)
+        out["sortie"], out["ground"] = piece.astype(int), ground
         for i, (ref, m) in enumerate(self.pieces):
             sel = np.flatnonzero(piece == i)
             if not sel.size:
@@ -200,12 +210,8 @@ class ChainedReference:
             for key in ("pos", "vel", "acc", "yaw", "yaw_rate", "spray"):
                 out[key][sel] = tab[key]
             seg = self._map(tab["seg"], m)
-            last = i == len(self.pieces) - 1
-            on_ground = (tl > ref.duration) & (not last)
-            seg[on_ground] = SEG_GROUND
+            seg[ground[sel]] = SEG_GROUND
             out["seg"][sel] = seg
-            out["ground"][sel] = on_ground
-            out["sortie"][sel] = i
         # the ground hold: at rest where the sortie landed
         g = out["ground"]
         out["vel"][g] = 0.0
