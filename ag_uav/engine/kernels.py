@@ -11,7 +11,7 @@ its fast path: :mod:`ag_uav.navigation.ins_kernels`).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -20,11 +20,11 @@ from controllers.attitude import quat_to_rot
 from .._jit import njit
 
 
-def zeros_touched(shape: tuple[int, ...]) -> np.ndarray:
+def zeros_touched(shape: tuple[int, ...], dtype: Any = np.float64) -> np.ndarray:
     """Zeros whose pages are written now: a per-tick record written one tick-row at a time
     would otherwise take its page faults inside the loop, a few each tick (np.zeros maps
     the memory lazily); written in one pass here they cost a fraction of that."""
-    a = np.empty(shape)
+    a = np.empty(shape, dtype=dtype)
     a.fill(0.0)
     return a
 
@@ -198,13 +198,20 @@ def tick_out(rec, k, act, flown, row):  # pragma: no cover
 
 
 @njit(cache=True)
-def imu_record(imu_rec, k, act, f_m, om, err):  # pragma: no cover
+def imu_record(imu_rec, now, k, act, f_m, om, err):  # pragma: no cover
+    """The tick's IMU row (measured f, gyro, attitude error) into ``now`` (N, 9) and into the
+    record ``imu_rec[k]`` (its dtype: float32 in the engine); an ended vehicle's ``now`` row is
+    zero, as its record's rows are."""
     for i in range(act.shape[0]):
-        if act[i]:
-            for j in range(3):
-                imu_rec[k, i, j] = f_m[i, j]
-                imu_rec[k, i, 3 + j] = om[i, j]
-                imu_rec[k, i, 6 + j] = err[i, j]
+        if not act[i]:
+            now[i, :] = 0.0
+            continue
+        for j in range(3):
+            now[i, j] = f_m[i, j]
+            now[i, 3 + j] = om[i, j]
+            now[i, 6 + j] = err[i, j]
+        for j in range(9):
+            imu_rec[k, i, j] = now[i, j]
 
 
 @njit(cache=True)

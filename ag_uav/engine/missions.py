@@ -46,9 +46,9 @@ from .loop import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
 # ------------------------------------------------------------------------------------ building
 #: Bytes one vehicle's run holds per control tick, for the memory budget
 #: (``sim.memory_budget_mb``): the reference grid (~100 B: pos, vel, acc, yaw, yaw rate, segment,
-#: spray) and its build (the arc-length grid, ~300 B a tick at 5 m/s), the engine's copies of
-#: it and its records (~1 KB: the recorded columns, the IMU, the estimators' estimates, the
-#: sprayer's series). An estimate of the order of magnitude, not a measurement of every config.
+#: spray) and its build (the arc-length grid, ~300 B a tick at 5 m/s), and the engine's records
+#: (~0.6 KB: the recorded columns, the IMU, the estimators' errors and scores, the sprayer's
+#: series). An estimate of the order of magnitude, not a measurement of every config.
 TABLE_BYTES_PER_TICK = 1536
 
 

@@ -154,8 +154,6 @@ class LogObserver(Observer):
             if b.f is not self._f:  # the controller handed a new thrust buffer
                 self._f = b.f
                 parts[self._jf] = b.f[i]
-            if self._imu:
-                parts[-1 - (self.dose is not None)] = self.sensing.row(i, view.k)
             np.concatenate(parts, out=row)
         if self.dose is not None and log.want_dose(t):
             dep, j = self.dose
@@ -172,7 +170,7 @@ class LogObserver(Observer):
         if aid is not None:
             cols.append(("nav.range_aid", base))
             base += 1
-        self._imu = self.sensing.row(i, view.k) is not None
+        self._imu = self.sensing.row(i) is not None
         if self._imu:
             cols += [(k, base + j) for j, k in enumerate(IMU_KEYS)]
             base += len(IMU_KEYS)
@@ -188,7 +186,7 @@ class LogObserver(Observer):
         if aid is not None:
             parts.append(aid)
         if self._imu:
-            parts.append(self.sensing.row(i, view.k))
+            parts.append(self.sensing.row(i))
         if self.dose is not None:
             dep, j = self.dose
             parts.append(dep.st[j, S_ON:S_Q + 1])

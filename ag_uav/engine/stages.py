@@ -152,8 +152,10 @@ class Sensing:
         self.b, self.imu, self.att = b, imu, att
         self.ia, self.ig = accel_adr, gyro_adr
         # tick-major (n_max, N, 9): one tick's rows are contiguous (the per-tick writes stay in
-        # cache lines the physics step did not evict); a vehicle's record is copied out at the end
-        self.rec = zeros_touched((b.n_max, b.n, 9)) if imu is not None else None
+        # cache lines the physics step did not evict); a vehicle's record is copied out at the
+        # end. float32: a record for plots and checks (7 significant digits), half the memory
+        self.rec = zeros_touched((b.n_max, b.n, 9), np.float32) if imu is not None else None
+        self.now = np.zeros((b.n, 9))   # the tick's row in full precision (the log's)
 
     def step(self, k: int) -> None:
         b = self.b
@@ -163,11 +165,12 @@ class Sensing:
         f_m, b.om = self.imu.measure(sens[:, self.ia:self.ia + 3], sens[:, self.ig:self.ig + 3],
                                      b.act)
         b.Rc = self.att.apply(b.R, b.act)
-        imu_record(self.rec, k, b.act, f_m, b.om, self.att.last)
+        imu_record(self.rec, self.now, k, b.act, f_m, b.om, self.att.last)
         b.imu_in = (f_m, b.Rc, b.om)
 
-    def row(self, i: int, k: int) -> np.ndarray | None:
-        return None if self.rec is None else self.rec[k, i]
+    def row(self, i: int) -> np.ndarray | None:
+        """Vehicle ``i``'s IMU row of the current tick (a view, written in place), or None."""
+        return None if self.rec is None else self.now[i]
 
 
 class Feedback:

@@ -355,14 +355,14 @@ class InsFeedback(Feedback):
             sel = (fk >= lo) & (fk < hi)
             nees = r["nees"][sel, j]
             not_pd = int(np.nansum(r["not_pd"][sel, j]))
-            nees = nees[np.isfinite(nees)]
+            nees = nees[np.isfinite(nees)].astype(np.float64)
             gate = r["gate"][sel, j]
             ff = np.isin(fk, self.false_k) & sel
             ffg = r["gate"][ff, j]
             rsum, rn = r["nis_radar"][j]
 
             def rms(a: np.ndarray) -> float | None:
-                a = a[np.isfinite(a)]
+                a = a[np.isfinite(a)].astype(np.float64)
                 return round(float(np.sqrt(np.mean(a * a))), 4) if a.size else None
 
             def mx(a: np.ndarray) -> float | None:
@@ -476,12 +476,14 @@ class BatchInsFeedback:
                              math.cos(self.icfg.radar_max_tilt_deg * DEG),
                              self.icfg.radar_max_range])
         nrec = max(nr, 1)
-        # herr, verr, tilt, yaw; tick-major (one tick's rows contiguous: cache-friendly writes)
-        self.err = np.full((n_max, NV, 4, nrec), np.nan)
+        # herr, verr, tilt, yaw; tick-major (one tick's rows contiguous: cache-friendly writes).
+        # The scoring records are float32 (7 significant digits; the scores sum in float64):
+        # half the memory of a long job's records
+        self.err = np.full((n_max, NV, 4, nrec), np.nan, dtype=np.float32)
         n_fix = int(n_max * max(fb.gps.rate_hz for fb in fbs) * self.dt) + 4
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
         # the per-fix score record (columns N_*)
-        self.nees = np.full((NV, n_fix, NREC, nrec), np.nan)
+        self.nees = np.full((NV, n_fix, NREC, nrec), np.nan, dtype=np.float32)
         self.n_fix = np.zeros(NV, dtype=np.int64)
         self.noise = np.stack([fb.radar_rng.standard_normal(4096) for fb in fbs])
         self.noise_i = np.zeros(NV, dtype=np.int64)

@@ -10,9 +10,10 @@ __all__ = ["chi2_band", "effective_n", "finite_mean"]
 
 
 def finite_mean(a: np.ndarray) -> float | None:
-    """The mean of the finite values (3 decimals), None if there are none."""
+    """The mean of the finite values (3 decimals, summed in float64), None if there are
+    none."""
     a = a[np.isfinite(a)]
-    return round(float(a.mean()), 3) if a.size else None
+    return round(float(a.mean(dtype=np.float64)), 3) if a.size else None
 
 
 def chi2_band(dof: int, n: float) -> list[float] | None:
