@@ -11,8 +11,8 @@ law from another file).
 
 LLVM optimises the kernels at level :data:`OPT_LEVEL` (numba's ``NUMBA_OPT``; numba's own
 default is 3), set here for the process unless ``NUMBA_OPT`` is in the environment: the
-results are the same bit for bit, the first run compiles faster and the warm loop's speed does
-not move beyond noise (docs/speed.md, "The first run")."""
+results are the same bit for bit, the first run compiles faster and the warm loop keeps its
+speed (docs/speed.md, "LLVM's optimisation level")."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from jitcache import package_dir, sweep_stale_caches
 __all__ = ["HAVE_NUMBA", "OPT_LEVEL", "njit", "register_jitable"]
 
 #: LLVM's optimisation level for the kernels compiled in this process (see the module)
-OPT_LEVEL = 1
+OPT_LEVEL = 2
 
 
 def _set_opt_level() -> None:
