@@ -42,6 +42,19 @@ def _rms(x: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(x * x))) if x.size else None
 
 
+def _path_length(p: np.ndarray, block: int = 1 << 16) -> float:
+    """Σ |p[k+1] − p[k]| (m): the steps' lengths computed a block at a time into one array
+    (a whole job's differences would be three columns more), summed once."""
+    n = len(p)
+    if n < 2:
+        return 0.0
+    steps = np.empty(n - 1)
+    for a in range(0, n - 1, block):
+        b = min(n - 1, a + block)
+        steps[a:b] = np.linalg.norm(p[a + 1:b + 1] - p[a:b], axis=1)
+    return float(np.sum(steps))
+
+
 def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """[start, stop) index pairs of the True runs of a boolean array."""
     m = np.concatenate([[False], mask.astype(bool), [False]])
@@ -53,10 +66,15 @@ def cross_track(res, plan) -> np.ndarray:
     """Distance (m) of each spraying tick's true position to its planned segment (NaN elsewhere)."""
     out = np.full(len(res.t), np.nan)
     xy = res.p_true[:, :2]
-    for s in np.unique(res.seg[res.spray]):
+    ticks = np.flatnonzero(res.spray)
+    seg = res.seg[ticks]
+    order = np.argsort(seg, kind="stable")   # the spraying ticks grouped by segment, in order
+    ticks, seg = ticks[order], seg[order]
+    cuts = np.flatnonzero(np.diff(seg)) + 1
+    for idx in np.split(ticks, cuts) if ticks.size else []:
+        s = int(res.seg[idx[0]])
         if s < 0 or s >= len(plan.segments):
             continue
-        idx = np.flatnonzero((res.seg == s) & res.spray)
         line = shapely.LineString(plan.segments[s].points)
         out[idx] = shapely.distance(shapely.points(xy[idx]), line)
     return out
@@ -124,15 +142,17 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     on_plan = np.zeros(n, bool)
     on_plan[mission] = True
     on_plan &= res.seg >= 0  # sorties: not the base transits, climbs, descents, ground time
-    d_h = res.p_true[on_plan, :2] - res.p_ref[on_plan, :2]
-    tracking = _rms(np.hypot(d_h[:, 0], d_h[:, 1]))
+    # one column at a time: a whole job's (n, 2) copies are ~27 MB each
+    dx = res.p_true[on_plan, 0] - res.p_ref[on_plan, 0]
+    tracking = _rms(np.hypot(dx, res.p_true[on_plan, 1] - res.p_ref[on_plan, 1]))
+    del dx
     alt = _rms(res.p_true[on_plan, 2] - res.p_ref[on_plan, 2])
     ct = cross_track(res, plan)
     ct_spray = ct[np.isfinite(ct)]
     tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
     cov, ovl = spray_coverage(res.field, tracks, plan.swath) if tracks else (0.0, 0.0)
     off = off_target(res.field, tracks, plan.swath, cfg.spray.offtarget_buffer_m)
-    path_len = float(np.sum(np.linalg.norm(np.diff(res.p_true, axis=0), axis=1))) if n > 1 else 0.0
+    path_len = _path_length(res.p_true)
     # motor effort: RMS rate of the rotor-thrust commands over the spraying part (N/s per rotor);
     # scaled and squared in place (a whole job's rate is 4 values a tick: no more copies of it)
     f_mis = np.asarray(res.motors, dtype=float)[mission]

@@ -41,7 +41,7 @@ class RefTable:
         self._fill(0)
 
     @classmethod
-    def of(cls, flights: Sequence[Any], n_ticks: np.ndarray, dt: float
+    def of(cls, flights: Sequence[Any], n_ticks: np.ndarray, dt: float, block: int = BLOCK
            ) -> tuple[RefTable, np.ndarray, list[dict[str, np.ndarray]]]:
         """The table of ``flights``' distinct references (by identity), each vehicle's row of
         it, and each reference's whole-job spray tables (``sortie``, ``ground``; empty
@@ -58,7 +58,7 @@ class RefTable:
             longest[rid] = max(longest[rid], int(n_ticks[i]))
             ids[i] = rid
         job_tabs = [_job_tables(r, n, dt) for r, n in zip(refs, longest, strict=True)]
-        return cls(refs, longest, dt), ids, job_tabs
+        return cls(refs, longest, dt, block), ids, job_tabs
 
     def at(self, k: int) -> None:
         """Make tick ``k``'s rows current (a new block when ``k`` is past this one)."""
