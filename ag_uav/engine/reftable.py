@@ -61,12 +61,14 @@ class RefTable:
         return cls(refs, longest, dt, block), ids, job_tabs
 
     def at(self, k: int) -> None:
-        """Make tick ``k``'s rows current (a new block when ``k`` is past this one)."""
-        if k - int(self.k0[0]) >= self.block or k < self.k0[0]:
+        """Make tick ``k``'s rows current (a new block when ``k`` is outside this one; the
+        engine checks ``k >= end`` itself first, a tick's cheapest test)."""
+        if not self.start <= k < self.end:
             self._fill(k)
 
     def _fill(self, k0: int) -> None:
         self.k0[0] = k0
+        self.start, self.end = k0, k0 + self.block
         ks = np.arange(k0, k0 + self.block)
         for r, (ref, n) in enumerate(zip(self.refs, self.n.tolist(), strict=True)):
             if n == 0:

@@ -121,7 +121,8 @@ class Guard:
         """False when no vehicle is left to fly."""
         b = self.b
         guard, pose, ref = self.rows
-        b.ref.at(k)
+        if k >= b.ref.end:
+            b.ref.at(k)
         flags = tick_in(k, b.S, self.iq, self.iv, self.COS_TILT, guard, pose, ref)
         ended = False
         if flags & CRASHED:
