@@ -13,8 +13,9 @@ EGL here when it is first constructed; an explicit other choice (``osmesa``, ``g
 respected.  On this kind of machine EGL is Mesa llvmpipe (CPU): no install needed.  In parallel
 workers set ``LP_NUM_THREADS=1`` (llvmpipe uses every core otherwise).
 
-``fast=True`` (default) turns off shadows, reflections, skybox and multisampling: ~110 frames/s
-instead of ~15-19 at 320x240 on llvmpipe.  If the GL context cannot be created,
+``fast=True`` (default) turns off shadows, reflections, skybox and multisampling, the costly
+parts on llvmpipe (what a frame costs: docs/speed.md, "Camera frames").  If the GL context
+cannot be created,
 :class:`RenderUnavailable` carries a one-line reason; the simulation then runs without frames.
 """
 
