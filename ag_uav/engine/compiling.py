@@ -19,7 +19,7 @@ COMPILE_THRESHOLD_S = 3.0
 #: what this process has said of the compile: "" nothing, "started", "done"
 _announced = ""
 #: said before tick 0's wait when numba starts compiling (once per process)
-COMPILE_NOTICE = ("compiling kernels: first run only, about a minute and a half on a 2-core "
+COMPILE_NOTICE = ("compiling kernels: first run only, about a minute on a 2-core "
                   "machine (cached for later runs) ...")
 
 
