@@ -319,7 +319,7 @@ def _one_parser() -> typing.Iterator[None]:
     of this module's run time); what ``main`` does with the parsed arguments is unchanged."""
     mp = pytest.MonkeyPatch()
     parser = cli.build_parser()
-    mp.setattr(cli, "build_parser", lambda: parser)
+    mp.setattr(cli, "build_parser", lambda experiments=True: parser)
     yield
     mp.undo()
 

@@ -164,7 +164,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------- parser
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(experiments: bool = True) -> argparse.ArgumentParser:
+    """The ``ag-uav`` parser; ``experiments=False`` registers ``experiment`` without importing
+    the experiment modules (what ``main`` does unless the command is ``experiment``: some of
+    them import scipy.stats, half a second and ~60 MB for every other command)."""
     p = argparse.ArgumentParser(
         prog="ag-uav",
         description="Agricultural UAV simulator: fly coverage missions in MuJoCo under an "
@@ -222,12 +225,13 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true", help="shorter measurements")
     b.set_defaults(func=cmd_bench)
 
-    _register_optional(sub)
+    _register_optional(sub, experiments)
     return p
 
 
-def _register_optional(sub) -> None:
-    """Commands that live in other modules register themselves here (logging, batch, tuning)."""
+def _register_optional(sub, experiments: bool = True) -> None:
+    """Commands that live in other modules register themselves here (logging, batch, tuning);
+    ``experiments``: with each experiment's own arguments (see :func:`build_parser`)."""
     import importlib
 
     for mod in ("ag_uav.cli.view", "ag_uav.cli.experiments", "ag_uav.cli.batch"):
@@ -237,7 +241,10 @@ def _register_optional(sub) -> None:
             if e.name != mod:
                 raise
             continue
-        m.register(sub)
+        if mod == "ag_uav.cli.experiments":
+            m.register(sub, load=experiments)
+        else:
+            m.register(sub)
 
 
 def _sigterm_handler(signum: int, frame: object) -> None:
@@ -259,7 +266,8 @@ def _install_sigterm() -> object:
 
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MUJOCO_GL", "egl")
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(experiments="experiment" in argv)
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     prev = _install_sigterm()

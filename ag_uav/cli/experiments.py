@@ -8,10 +8,15 @@ import importlib
 from ..jobs.experiments import MODULES
 
 
-def register(sub) -> None:
+def register(sub, load: bool = True) -> None:
+    """``ag-uav experiment NAME``, each experiment with its own arguments; ``load=False``: the
+    command alone, its experiments not imported (the command line holds no ``experiment``)."""
     p = sub.add_parser("experiment", help="reproduce a paper's experiment (see its --help)",
                        description="Reproduce a paper's experiment and print its table next to "
                                    "the paper's numbers.")
+    if not load:
+        p.add_argument("name", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+        return
     esub = p.add_subparsers(dest="experiment", required=True, metavar="NAME")
     for name in MODULES:
         try:

@@ -21,10 +21,11 @@ def chi2_band(dof: int, n: float) -> list[float] | None:
     an effective number, :func:`effective_n`)."""
     if n <= 0:
         return None
-    from scipy.stats import chi2
+    from scipy.special import gammaincinv  # χ²(k) quantile q: 2·P⁻¹(k/2, q), as scipy.stats
 
-    return [round(float(chi2.ppf(0.025, dof * n) / n), 3),
-            round(float(chi2.ppf(0.975, dof * n) / n), 3)]
+    k = dof * n
+    return [round(float(2.0 * gammaincinv(0.5 * k, 0.025) / n), 3),
+            round(float(2.0 * gammaincinv(0.5 * k, 0.975) / n), 3)]
 
 
 def effective_n(x: np.ndarray) -> float:

@@ -59,6 +59,7 @@ import numpy as np
 
 from .._jit import njit, register_jitable
 from ..config import ImuConfig
+from .ar1 import ar1_filter
 
 G = 9.81
 UG = 1e-6 * G                # one micro-g in m/s²
@@ -134,11 +135,8 @@ def imu_error_block(rng: np.random.Generator, bias: np.ndarray, n: int, sigma_rw
 def gauss_markov_block(rng: np.random.Generator, x0: np.ndarray, n: int, phi: float,
                        sigma: np.ndarray) -> np.ndarray:
     """``n`` steps of ``x_k+1 = φ x_k + σ √(1−φ²) ξ`` (exact discretisation), rows k = 1..n."""
-    from scipy.signal import lfilter
-
     drive = rng.standard_normal((n, len(x0))) * (sigma * math.sqrt(max(1.0 - phi * phi, 0.0)))
-    out, _ = lfilter([1.0], [1.0, -phi], drive, axis=0, zi=(phi * x0)[None, :])
-    return out
+    return ar1_filter(drive, 1.0, phi, phi * np.asarray(x0, dtype=float))
 
 
 @register_jitable

@@ -8,8 +8,8 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
 
+from ..ar1 import ar1_filter
 from .checks import SeedLike, bad, check_axis_scale, check_pos, derive_seed, real, rngs
 
 
@@ -223,8 +223,7 @@ class GaussMarkov(NoiseComponent):
             return xi
         rho = math.exp(-dt / self.tau_s)
         g = self.sigma * math.sqrt(-math.expm1(-2.0 * dt / self.tau_s))
-        y, _ = lfilter([g], [1.0, -rho], xi, zi=[rho * prev])
-        return y
+        return ar1_filter(xi, g, rho, rho * prev)
 
     @property
     def variance(self) -> float:
@@ -281,12 +280,12 @@ class AR1(NoiseComponent):
             first = float(xi[0])
             xi = xi[1:]
             if xi.size:
-                y, _ = lfilter([g], [1.0, -rho], xi, zi=[rho * first])
+                y = ar1_filter(xi, g, rho, rho * first)
                 out = np.concatenate(([first], y))
             else:
                 out = np.array([first])
         else:
-            out, _ = lfilter([g], [1.0, -rho], xi, zi=[rho * self._state])
+            out = ar1_filter(xi, g, rho, rho * self._state)
         self._state = float(out[-1])
         return out
 
