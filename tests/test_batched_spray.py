@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from array import array
 
 import mujoco
 import numpy as np
@@ -200,7 +199,8 @@ def _fly_batch(cs: list[Case], inps: list[dict]) -> dict:
     assert batch.finish() is batch.sprayers
     for sp, c in zip(sps, orig, strict=True):
         assert sp.cascade is c  # the Sprayers' own cascades back
-        assert type(sp.rec_tank) is array and type(sp.rec_on) is bytearray
+        # the records stay views of the batch's (no copies)
+        assert type(sp.rec_tank) is memoryview and type(sp.rec_on) is memoryview
     return {"sps": sps, "vehs": [m[1] for m in made], "calls": calls, "active": active, **out}
 
 

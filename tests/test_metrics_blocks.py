@@ -6,7 +6,14 @@ from types import SimpleNamespace
 import numpy as np
 import shapely
 
-from ag_uav.analysis.metrics import _path_length, cross_track
+from ag_uav.analysis.metrics import (
+    _masked,
+    _path_length,
+    _rate_rms,
+    _rms,
+    _rms_in_place,
+    cross_track,
+)
 
 
 def test_path_length_in_blocks_equals_the_whole_array_formula():
@@ -37,3 +44,22 @@ def test_cross_track_grouped_by_segment_equals_one_segment_at_a_time():
     got = cross_track(res, plan)
     assert np.array_equal(got, want, equal_nan=True)
     assert np.isfinite(got).sum() > n // 2
+
+
+def test_masked_blocks_and_rates_equal_the_whole_array_formulas():
+    rng = np.random.default_rng(8)
+    n = 150_001
+    p, r = rng.normal(size=(n, 3)), rng.normal(size=(n, 3))
+    mask = rng.random(n) < 0.7
+    whole = _rms(np.hypot(p[mask, 0] - r[mask, 0], p[mask, 1] - r[mask, 1]))
+    for block in (1000, 1 << 16, 10 * n):
+        got = _masked(mask, lambda a, b, m: np.hypot(p[a:b, 0][m] - r[a:b, 0][m],
+                                                      p[a:b, 1][m] - r[a:b, 1][m]), block)
+        assert _rms_in_place(got) == whole
+    f = rng.normal(size=(n, 4)) * 5.0
+    rate = np.diff(f, axis=0).ravel() * 100.0
+    whole = _rms(rate)
+    for block in (777, 1 << 16):   # the squares summed by blocks: equal to rounding
+        assert abs(_rate_rms(f, 100.0, block=block) - whole) <= 1e-13 * whole
+    assert _rate_rms(f[:1], 100.0) is None
+    assert _rms_in_place(np.empty(0)) is None

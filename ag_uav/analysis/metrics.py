@@ -29,6 +29,7 @@ on the
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,45 @@ from .coverage import footprints, spray_coverage
 
 def _rms(x: np.ndarray) -> float | None:
     return float(np.sqrt(np.mean(x * x))) if x.size else None
+
+
+def _rms_in_place(x: np.ndarray) -> float | None:
+    """:func:`_rms` of ``x``, squaring ``x`` in place (the same values, no second array)."""
+    return float(np.sqrt(np.mean(np.multiply(x, x, out=x)))) if x.size else None
+
+
+#: ticks per block of the per-tick metrics (bounds their temporaries)
+BLOCK = 1 << 16
+
+
+def _masked(mask: np.ndarray, fn: Any, block: int = BLOCK) -> np.ndarray:
+    """``fn(a, b, m)`` (the values of the ticks ``m`` = ``mask[a:b]`` of block [a, b)) of every
+    block, in order, in one array: what ``fn`` over the whole mask gives, with a block's
+    temporaries only."""
+    out = np.empty(int(np.count_nonzero(mask)))
+    j = 0
+    for a in range(0, len(mask), block):
+        b = min(len(mask), a + block)
+        v = fn(a, b, mask[a:b])
+        out[j:j + len(v)] = v
+        j += len(v)
+    return out
+
+
+def _rate_rms(f: np.ndarray, hz: float, block: int = BLOCK) -> float | None:
+    """RMS over every column of ``f``'s first difference times ``hz``, its squares summed a
+    block of rows at a time (a whole job's rotor-command differences would be 54 MB): equal to
+    the whole-array formula to rounding (the sum's order differs), the same for any batch."""
+    m = len(f) - 1
+    if m < 1:
+        return None
+    total = 0.0
+    for a in range(0, m, block):
+        b = min(m, a + block)
+        d = np.diff(f[a:b + 1], axis=0)
+        d *= hz
+        total += float(np.sum(np.multiply(d, d, out=d)))
+    return math.sqrt(total / (m * f.shape[1]))
 
 
 def _path_length(p: np.ndarray, block: int = 1 << 16) -> float:
@@ -66,17 +106,16 @@ def cross_track(res, plan) -> np.ndarray:
     """Distance (m) of each spraying tick's true position to its planned segment (NaN elsewhere)."""
     out = np.full(len(res.t), np.nan)
     xy = res.p_true[:, :2]
-    ticks = np.flatnonzero(res.spray)
-    seg = res.seg[ticks]
-    order = np.argsort(seg, kind="stable")   # the spraying ticks grouped by segment, in order
-    ticks, seg = ticks[order], seg[order]
-    cuts = np.flatnonzero(np.diff(seg)) + 1
-    for idx in np.split(ticks, cuts) if ticks.size else []:
-        s = int(res.seg[idx[0]])
-        if s < 0 or s >= len(plan.segments):
-            continue
-        line = shapely.LineString(plan.segments[s].points)
-        out[idx] = shapely.distance(shapely.points(xy[idx]), line)
+    lines: dict[int, Any] = {}
+    for a, b in contiguous_runs(res.spray):   # each spraying run, cut where the segment changes
+        cuts = [a, *(a + 1 + np.flatnonzero(np.diff(res.seg[a:b]))).tolist(), b]
+        for c0, c1 in zip(cuts[:-1], cuts[1:], strict=True):
+            s = int(res.seg[c0])
+            if s < 0 or s >= len(plan.segments):
+                continue
+            if s not in lines:
+                lines[s] = shapely.LineString(plan.segments[s].points)
+            out[c0:c1] = shapely.distance(shapely.points(xy[c0:c1]), lines[s])
     return out
 
 
@@ -142,25 +181,21 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     on_plan = np.zeros(n, bool)
     on_plan[mission] = True
     on_plan &= res.seg >= 0  # sorties: not the base transits, climbs, descents, ground time
-    # one column at a time: a whole job's (n, 2) copies are ~27 MB each
-    dx = res.p_true[on_plan, 0] - res.p_ref[on_plan, 0]
-    tracking = _rms(np.hypot(dx, res.p_true[on_plan, 1] - res.p_ref[on_plan, 1]))
-    del dx
-    alt = _rms(res.p_true[on_plan, 2] - res.p_ref[on_plan, 2])
+    # a block at a time into one array each: a whole job's per-tick copies are 13.5 MB apiece
+    pt, pr = res.p_true, res.p_ref
+    tracking = _rms_in_place(_masked(on_plan, lambda a, b, m: np.hypot(
+        pt[a:b, 0][m] - pr[a:b, 0][m], pt[a:b, 1][m] - pr[a:b, 1][m])))
+    alt = _rms_in_place(_masked(on_plan, lambda a, b, m: pt[a:b, 2][m] - pr[a:b, 2][m]))
     ct = cross_track(res, plan)
     ct_spray = ct[np.isfinite(ct)]
+    del ct
+    ct_max = float(np.max(ct_spray)) if ct_spray.size else None
     tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
     cov, ovl = spray_coverage(res.field, tracks, plan.swath) if tracks else (0.0, 0.0)
     off = off_target(res.field, tracks, plan.swath, cfg.spray.offtarget_buffer_m)
     path_len = _path_length(res.p_true)
-    # motor effort: RMS rate of the rotor-thrust commands over the spraying part (N/s per rotor);
-    # scaled and squared in place (a whole job's rate is 4 values a tick: no more copies of it)
-    f_mis = np.asarray(res.motors, dtype=float)[mission]
-    motor_rate = None
-    if len(f_mis) > 1:
-        rate = np.diff(f_mis, axis=0).ravel()
-        rate *= cfg.sim.control_hz
-        motor_rate = float(np.sqrt(np.mean(np.multiply(rate, rate, out=rate))))
+    # motor effort: RMS rate of the rotor-thrust commands over the spraying part (N/s per rotor)
+    motor_rate = _rate_rms(np.asarray(res.motors, dtype=float)[mission], cfg.sim.control_hz)
 
     end = np.asarray(plan.end, dtype=float)
     dt = 1.0 / cfg.sim.control_hz
@@ -183,8 +218,8 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
         "crash_time_s": r(crash_time, 3),
         "mission_time_s": r(mission_time, 2),
         "tracking_rmse_m": r(tracking),
-        "cross_track_rmse_m": r(_rms(ct_spray)),
-        "cross_track_max_m": r(float(np.max(ct_spray)) if ct_spray.size else None),
+        "cross_track_rmse_m": r(_rms_in_place(ct_spray)),
+        "cross_track_max_m": r(ct_max),
         "altitude_rmse_m": r(alt),
         "motor_rate_rms_nps": r(motor_rate),
         "coverage_fraction": r(cov, 5),

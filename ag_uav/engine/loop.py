@@ -55,6 +55,7 @@ import numpy as np
 from ..config import Config
 from ..vehicle.mjcf import Vehicle, build_vehicle
 from .compiling import compile_notice, first_tick
+from .heap import trim_heap
 from .observers import HookObserver, LogObserver, Observer, TickView, frames_of
 from .physics import STATE_SPEC, default_threads, make_stepper
 from .reftable import RefTable
@@ -589,7 +590,9 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
     if not flights:
         return []
     _check_rates(flights)
+    trim_heap()   # what planning freed goes back to the system (heap.py) ...
     engines = _lanes(flights, nthread, lanes, capture)
+    trim_heap()   # ... and what building the engines freed, before the flight
     b0 = engines[0].b
     bar = None
     if progress:

@@ -362,8 +362,9 @@ class InsFeedback(Feedback):
             rsum, rn = r["nis_radar"][j]
 
             def rms(a: np.ndarray) -> float | None:
-                a = a[np.isfinite(a)].astype(np.float64)
-                return round(float(np.sqrt(np.mean(a * a))), 4) if a.size else None
+                a = a[np.isfinite(a)].astype(np.float64)   # squared in place: one copy
+                return round(float(np.sqrt(np.mean(np.multiply(a, a, out=a)))), 4) \
+                    if a.size else None
 
             def mx(a: np.ndarray) -> float | None:
                 a = a[np.isfinite(a)]

@@ -343,7 +343,10 @@ class DoseMap:
                 out += a
             elif a.any():
                 f = 1 << lev
-                out += np.repeat(np.repeat(a, f, axis=0), f, axis=1) / (f * f)
+                fine = np.repeat(np.repeat(a, f, axis=0), f, axis=1)
+                fine /= f * f   # in place: one fine grid less at a time
+                out += fine
+                del fine
         return cls(g, out, float(st[S_SPRAYED]), float(st[S_OUTSIDE]), float(st[S_DRIFT]),
                    float(st[S_AIR]), float(st[S_EVAP]))
 
@@ -362,9 +365,8 @@ class DoseMap:
         import shapely
 
         poly = fld.polygon if margin_m <= 0 else fld.polygon.buffer(-margin_m)
-        xc, yc = self.centres()
-        xx, yy = np.meshgrid(xc, yc)
-        return shapely.contains_xy(poly, xx, yy)
+        xc, yc = self.centres()   # broadcast (ny, 1) against (1, nx): no meshgrid copies
+        return shapely.contains_xy(poly, xc[None, :], yc[:, None])
 
     def metrics(self, fld: Any, target_l_per_ha: float, margin_m: float = 0.0) -> dict:
         """The summary metrics; see :func:`dose_metrics`."""
@@ -406,7 +408,7 @@ def dose_metrics(dm: DoseMap, fld: Any, target: float, margin_m: float = 0.0) ->
     ``mass_balance_error``: sprayed − all destinations of the mix, over sprayed."""
     inside = dm.field_mask(fld, 0.0)
     interior = inside if margin_m <= 0 else dm.field_mask(fld, margin_m)
-    rate = dm.l_per_ha[interior]
+    rate = dm.litres[interior] / (dm.grid.cell ** 2 * 1e-4)   # l_per_ha of those cells only
     mean = float(rate.mean()) if rate.size else 0.0
     sprayed = max(dm.sprayed_l, 1e-300)
     off = float(dm.litres[~inside].sum()) + dm.outside_grid_l
