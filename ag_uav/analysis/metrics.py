@@ -38,32 +38,25 @@ import shapely
 from ..config import Config
 from .coverage import footprints, spray_coverage
 
-
-def _rms(x: np.ndarray) -> float | None:
-    return float(np.sqrt(np.mean(x * x))) if x.size else None
-
-
-def _rms_in_place(x: np.ndarray) -> float | None:
-    """:func:`_rms` of ``x``, squaring ``x`` in place (the same values, no second array)."""
-    return float(np.sqrt(np.mean(np.multiply(x, x, out=x)))) if x.size else None
-
-
 #: ticks per block of the per-tick metrics (bounds their temporaries)
 BLOCK = 1 << 16
 
 
-def _masked(mask: np.ndarray, fn: Any, block: int = BLOCK) -> np.ndarray:
-    """``fn(a, b, m)`` (the values of the ticks ``m`` = ``mask[a:b]`` of block [a, b)) of every
-    block, in order, in one array: what ``fn`` over the whole mask gives, with a block's
-    temporaries only."""
-    out = np.empty(int(np.count_nonzero(mask)))
-    j = 0
+def _sumsq(mask: np.ndarray, fn: Any, block: int = BLOCK) -> tuple[float, int]:
+    """``(Σ v², count)`` over the values ``v = fn(a, b, m)`` of the ticks ``m = mask[a:b]`` of
+    every block [a, b): a block's temporaries only, the squares summed in float64 by blocks
+    (equal to a whole-array sum to rounding, and the same for any batch)."""
+    total, cnt = 0.0, 0
     for a in range(0, len(mask), block):
         b = min(len(mask), a + block)
-        v = fn(a, b, mask[a:b])
-        out[j:j + len(v)] = v
-        j += len(v)
-    return out
+        v = np.asarray(fn(a, b, mask[a:b]), dtype=np.float64)
+        total += float(np.sum(v * v))
+        cnt += v.size
+    return total, cnt
+
+
+def _root_mean(total: float, cnt: int) -> float | None:
+    return math.sqrt(total / cnt) if cnt else None
 
 
 def _rate_rms(f: np.ndarray, hz: float, block: int = BLOCK) -> float | None:
@@ -82,17 +75,15 @@ def _rate_rms(f: np.ndarray, hz: float, block: int = BLOCK) -> float | None:
     return math.sqrt(total / (m * f.shape[1]))
 
 
-def _path_length(p: np.ndarray, block: int = 1 << 16) -> float:
-    """Σ |p[k+1] − p[k]| (m): the steps' lengths computed a block at a time into one array
-    (a whole job's differences would be three columns more), summed once."""
+def _path_length(p: np.ndarray, block: int = BLOCK) -> float:
+    """Σ |p[k+1] − p[k]| (m), the steps' lengths summed a block at a time (equal to a
+    whole-array sum to rounding)."""
     n = len(p)
-    if n < 2:
-        return 0.0
-    steps = np.empty(n - 1)
+    total = 0.0
     for a in range(0, n - 1, block):
         b = min(n - 1, a + block)
-        steps[a:b] = np.linalg.norm(p[a + 1:b + 1] - p[a:b], axis=1)
-    return float(np.sum(steps))
+        total += float(np.sum(np.linalg.norm(p[a + 1:b + 1] - p[a:b], axis=1)))
+    return total
 
 
 def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -102,12 +93,12 @@ def contiguous_runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(d[::2].tolist(), d[1::2].tolist(), strict=True))
 
 
-def cross_track(res, plan) -> np.ndarray:
-    """Distance (m) of each spraying tick's true position to its planned segment (NaN elsewhere)."""
-    out = np.full(len(res.t), np.nan)
+def _cross_track_pieces(res, plan):
+    """``(c0, c1, distances)`` of each stretch of spraying ticks [c0, c1) on one planned
+    segment: each spraying run, cut where the segment changes."""
     xy = res.p_true[:, :2]
     lines: dict[int, Any] = {}
-    for a, b in contiguous_runs(res.spray):   # each spraying run, cut where the segment changes
+    for a, b in contiguous_runs(res.spray):
         cuts = [a, *(a + 1 + np.flatnonzero(np.diff(res.seg[a:b]))).tolist(), b]
         for c0, c1 in zip(cuts[:-1], cuts[1:], strict=True):
             s = int(res.seg[c0])
@@ -115,8 +106,28 @@ def cross_track(res, plan) -> np.ndarray:
                 continue
             if s not in lines:
                 lines[s] = shapely.LineString(plan.segments[s].points)
-            out[c0:c1] = shapely.distance(shapely.points(xy[c0:c1]), lines[s])
+            yield c0, c1, shapely.distance(shapely.points(xy[c0:c1]), lines[s])
+
+
+def cross_track(res, plan) -> np.ndarray:
+    """Distance (m) of each spraying tick's true position to its planned segment (NaN elsewhere)."""
+    out = np.full(len(res.t), np.nan)
+    for c0, c1, d in _cross_track_pieces(res, plan):
+        out[c0:c1] = d
     return out
+
+
+def _cross_track_stats(res, plan) -> tuple[float | None, float | None]:
+    """RMS and max of :func:`cross_track`'s finite values, stretch by stretch (no per-tick
+    array; the RMS equal to the whole array's to rounding)."""
+    total, cnt, mx = 0.0, 0, -math.inf
+    for _, _, d in _cross_track_pieces(res, plan):
+        d = d[np.isfinite(d)]
+        if d.size:
+            total += float(np.sum(d * d))
+            cnt += d.size
+            mx = max(mx, float(d.max()))
+    return _root_mean(total, cnt), (mx if cnt else None)
 
 
 def off_target(field, tracks, swath: float, buffer_m: float = 0.0) -> dict[str, float]:
@@ -181,15 +192,12 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     on_plan = np.zeros(n, bool)
     on_plan[mission] = True
     on_plan &= res.seg >= 0  # sorties: not the base transits, climbs, descents, ground time
-    # a block at a time into one array each: a whole job's per-tick copies are 13.5 MB apiece
+    # a block at a time: a whole job's per-tick copies are 13.5 MB apiece
     pt, pr = res.p_true, res.p_ref
-    tracking = _rms_in_place(_masked(on_plan, lambda a, b, m: np.hypot(
+    tracking = _root_mean(*_sumsq(on_plan, lambda a, b, m: np.hypot(
         pt[a:b, 0][m] - pr[a:b, 0][m], pt[a:b, 1][m] - pr[a:b, 1][m])))
-    alt = _rms_in_place(_masked(on_plan, lambda a, b, m: pt[a:b, 2][m] - pr[a:b, 2][m]))
-    ct = cross_track(res, plan)
-    ct_spray = ct[np.isfinite(ct)]
-    del ct
-    ct_max = float(np.max(ct_spray)) if ct_spray.size else None
+    alt = _root_mean(*_sumsq(on_plan, lambda a, b, m: pt[a:b, 2][m] - pr[a:b, 2][m]))
+    ct_rms, ct_max = _cross_track_stats(res, plan)
     tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
     cov, ovl = spray_coverage(res.field, tracks, plan.swath) if tracks else (0.0, 0.0)
     off = off_target(res.field, tracks, plan.swath, cfg.spray.offtarget_buffer_m)
@@ -218,7 +226,7 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
         "crash_time_s": r(crash_time, 3),
         "mission_time_s": r(mission_time, 2),
         "tracking_rmse_m": r(tracking),
-        "cross_track_rmse_m": r(_rms_in_place(ct_spray)),
+        "cross_track_rmse_m": r(ct_rms),
         "cross_track_max_m": r(ct_max),
         "altitude_rmse_m": r(alt),
         "motor_rate_rms_nps": r(motor_rate),

@@ -608,6 +608,7 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
             e.close()
         if bar is not None:
             bar.close()
+    trim_heap()   # the loop's freed pages, before the outputs are gathered
     outs: list[Any] = [None] * len(flights)
     for e in engines:
         e.finish()

@@ -41,6 +41,7 @@ from ..world.field import Field
 from ..world.mission import build_field, build_plan, field_outline
 from ..world.pattern import lane_choice, mission_swath
 from ..world.reference import Reference
+from .heap import trim_heap
 from .loop import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
 
 # ------------------------------------------------------------------------------------ building
@@ -485,6 +486,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     sim_time = float(len(out.t) / cfg.sim.control_hz)
     summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
                              reference=ref)
+    trim_heap()   # each phase's freed temporaries go back before the next (engine/heap.py)
     cut = _cut_reason(cfg, ref, out, summ, metrics.incomplete_reason(summ, res, cfg))
     if cut:
         summ["incomplete_reason"] = cut
@@ -504,6 +506,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         tank_l = None if out.sprayer is None else out.sprayer.litres_total
         summ.update(dose_summary(cfg, fld, out.dose, tank_l))
         res.extra["dose"] = out.dose
+    trim_heap()
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))

@@ -121,7 +121,7 @@ from .ins_kernels import (
     radar_rows,
     tick_in,
 )
-from .nees_stats import chi2_band, effective_n, finite_mean
+from .nees_stats import chi2_band, effective_n, finite_mean, finite_rms_max
 from .receiver import fix_variance
 
 _chi2_band, _mean = chi2_band, finite_mean   # the scores' statistics (nees_stats)
@@ -350,7 +350,6 @@ class InsFeedback(Feedback):
         for j, name in enumerate(self.names):
             he, ve = r["herr"][lo:hi, j], r["verr"][lo:hi, j]
             te, ye = r["tilt"][lo:hi, j], r["yaw"][lo:hi, j]
-            ok = np.isfinite(he)
             fk = r["fix_k"]
             sel = (fk >= lo) & (fk < hi)
             nees = r["nees"][sel, j]
@@ -360,21 +359,15 @@ class InsFeedback(Feedback):
             ff = np.isin(fk, self.false_k) & sel
             ffg = r["gate"][ff, j]
             rsum, rn = r["nis_radar"][j]
-
-            def rms(a: np.ndarray) -> float | None:
-                a = a[np.isfinite(a)].astype(np.float64)   # squared in place: one copy
-                return round(float(np.sqrt(np.mean(np.multiply(a, a, out=a)))), 4) \
-                    if a.size else None
-
-            def mx(a: np.ndarray) -> float | None:
-                a = a[np.isfinite(a)]
-                return round(float(a.max()), 4) if a.size else None
+            # RMS and max a block at a time (finite_rms_max): no whole-job float64 copies
+            h_rms, h_max, h_n = finite_rms_max(he)
+            t_rms, t_max, _ = finite_rms_max(te, DEG)
 
             out[name] = {
-                "estimate_rmse_m": rms(he), "estimate_max_m": mx(he),
-                "velocity_rmse_mps": rms(ve),
-                "tilt_error_rms_deg": rms(te / DEG), "tilt_error_max_deg": mx(te / DEG),
-                "yaw_error_rms_deg": rms(ye / DEG),
+                "estimate_rmse_m": h_rms, "estimate_max_m": h_max,
+                "velocity_rmse_mps": finite_rms_max(ve)[0],
+                "tilt_error_rms_deg": t_rms, "tilt_error_max_deg": t_max,
+                "yaw_error_rms_deg": finite_rms_max(ye, DEG)[0],
                 "nees15_mean": round(float(nees.mean()), 3) if nees.size else None,
                 "nees15_band95": _chi2_band(15, effective_n(nees)),
                 "nees15_n_eff": round(effective_n(nees), 1) if nees.size else None,
@@ -389,10 +382,11 @@ class InsFeedback(Feedback):
                 "gate_latched": int(np.sum(gate == 3)),
                 "false_fixes_rejected": (round(float(np.mean(ffg >= 1)), 4) if ffg.size
                                          else None),
-                "false_fix_peak_m": mx(he[self._false_window(lo, hi)]) if self.false_k else None,
+                "false_fix_peak_m": (finite_rms_max(he[self._false_window(lo, hi)])[1]
+                                     if self.false_k else None),
                 "update_us": r["update_us"],
                 "updates": int(sel.sum()),
-                "ticks": int(ok.sum()),
+                "ticks": h_n,
                 "flown": name == self.primary,
             }
             if name == self.primary:

@@ -456,7 +456,7 @@ class Reference:
         n = int(math.floor(self.duration * self.rate + 1e-9)) + 1
         self._n = n
         self._R = np.empty((n, 9))
-        self._seg = np.empty(n, dtype=np.int64)
+        self._seg = np.empty(n, dtype=np.int32)   # plan segment (−1: climb, end hover)
         self._yaw_u = np.empty(n)
         carry = np.zeros(3)
         for a in range(0, n, _CHUNK):
@@ -549,7 +549,6 @@ class Reference:
                 x = np.clip((np.arange(j0, j1) * self.dt - (tm - 0.5 * wk)) / wk, 0.0, 1.0)
                 yaw[j0:j1] += d * (0.5 - 0.5 * np.cos(math.pi * x))
                 yaw[j1:] += d
-        self._yaw_rate = np.gradient(yaw, self.dt) if n > 1 else np.zeros(1)
         self._R.setflags(write=False)
         self.max_acc = self._max_norm(slice(6, 9))
         self.max_speed = self._max_norm(slice(3, 6))
@@ -597,8 +596,20 @@ class Reference:
     @property
     def nbytes(self) -> int:
         """Bytes held by the output grid (what the reference keeps after it is built)."""
-        return int(self._R.nbytes + self._yaw_u.nbytes + self._yaw_rate.nbytes
-                   + self._seg.nbytes + self._spray.nbytes)
+        return int(self._R.nbytes + self._yaw_u.nbytes + self._seg.nbytes
+                   + self._spray.nbytes)
+
+    def _yaw_rate_at(self, j: np.ndarray | int) -> np.ndarray:
+        """The yaw rate at grid points ``j``: ``np.gradient`` of the unwrapped yaw (central
+        differences, one-sided at the ends), computed where it is asked for, not kept (a whole
+        job's would be 8 B a tick)."""
+        n, y = self._n, self._yaw_u
+        j = np.asarray(j)
+        if n < 2:
+            return np.zeros(j.shape)
+        hi, lo = np.minimum(j + 1, n - 1), np.maximum(j - 1, 0)
+        end = (j == 0) | (j == n - 1)
+        return (y[hi] - y[lo]) / np.where(end, self.dt, 2.0 * self.dt)
 
     def sample(self, t: float) -> RefSample:
         """Reference at time ``t`` (s); clamps to [0, duration]. Linear interpolation between
@@ -622,7 +633,7 @@ class Reference:
             yu = y0 + f * (y1 - y0)
             yaw = (yu + math.pi) % (2 * math.pi) - math.pi
         j = i + 1 if f >= 0.5 else i
-        return RefSample(row[0:3], row[3:6], row[6:9], yaw, float(self._yaw_rate[j]),
+        return RefSample(row[0:3], row[3:6], row[6:9], yaw, float(self._yaw_rate_at(j)),
                          bool(self._spray[j]), int(self._seg[j]))
 
     def sample_all(self, times) -> dict[str, np.ndarray]:
@@ -641,9 +652,9 @@ class Reference:
             "vel": row[:, 3:6],
             "acc": row[:, 6:9],
             "yaw": (yu + math.pi) % (2 * math.pi) - math.pi,
-            "yaw_rate": self._yaw_rate[j],
+            "yaw_rate": self._yaw_rate_at(j),
             "spray": self._spray[j],
-            "seg": self._seg[j],
+            "seg": self._seg[j].astype(np.int64),
         }
 
     def cross_track(self, points_xy, seg_idx) -> np.ndarray:
