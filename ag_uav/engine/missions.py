@@ -475,6 +475,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     from ..analysis import metrics
 
     cfg, fld, plan, ref, fb, log = prep.cfg, prep.fld, prep.plan, prep.ref, prep.fb, prep.log
+    trim_heap()   # the outputs' freed temporaries, before the summary's (engine/heap.py)
     arr = out.rec
     res = RunResult(
         summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],

@@ -343,10 +343,10 @@ class DoseMap:
                 out += a
             elif a.any():
                 f = 1 << lev
-                fine = np.repeat(np.repeat(a, f, axis=0), f, axis=1)
-                fine /= f * f   # in place: one fine grid less at a time
-                out += fine
-                del fine
+                # each fine cell of a coarse one gets its share, added through a view of the
+                # fine grid as (ny/f, f, nx/f, f) blocks: no fine-sized temporaries
+                blocks = out.reshape(g.ny >> lev, f, g.nx >> lev, f)
+                blocks += (a / (f * f))[:, None, :, None]
         return cls(g, out, float(st[S_SPRAYED]), float(st[S_OUTSIDE]), float(st[S_DRIFT]),
                    float(st[S_AIR]), float(st[S_EVAP]))
 
