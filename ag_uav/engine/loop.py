@@ -615,4 +615,5 @@ def fly(flights: Sequence[Flight], *, progress: bool = False, nthread: int | Non
         for i, o in zip(e.rows, _outputs(e, wall, compile_s, cpu), strict=True):
             o.lanes = len(engines)
             outs[i] = o
+    trim_heap()   # and the outputs' freed temporaries, before the caller's summary
     return outs

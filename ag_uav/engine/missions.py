@@ -475,7 +475,6 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     from ..analysis import metrics
 
     cfg, fld, plan, ref, fb, log = prep.cfg, prep.fld, prep.plan, prep.ref, prep.fb, prep.log
-    trim_heap()   # the outputs' freed temporaries, before the summary's (engine/heap.py)
     arr = out.rec
     res = RunResult(
         summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
@@ -507,7 +506,6 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         tank_l = None if out.sprayer is None else out.sprayer.litres_total
         summ.update(dose_summary(cfg, fld, out.dose, tank_l))
         res.extra["dose"] = out.dose
-    trim_heap()
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))

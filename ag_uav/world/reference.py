@@ -46,8 +46,7 @@ from .plan import CoveragePlan
 
 __all__ = ["RefSample", "Reference", "ReferenceOptions"]
 
-#: ticks per piece when the output grid is built (bounds the working memory: the fine grid of a
-#: piece is ``_sub`` × this many points)
+#: ticks per piece of the output grid's build (its fine grid: ``_sub`` × this many points)
 _CHUNK = 1 << 14
 
 
@@ -596,20 +595,14 @@ class Reference:
     @property
     def nbytes(self) -> int:
         """Bytes held by the output grid (what the reference keeps after it is built)."""
-        return int(self._R.nbytes + self._yaw_u.nbytes + self._seg.nbytes
-                   + self._spray.nbytes)
+        return int(self._R.nbytes + self._yaw_u.nbytes + self._seg.nbytes + self._spray.nbytes)
 
     def _yaw_rate_at(self, j: np.ndarray | int) -> np.ndarray:
-        """The yaw rate at grid points ``j``: ``np.gradient`` of the unwrapped yaw (central
-        differences, one-sided at the ends), computed where it is asked for, not kept (a whole
-        job's would be 8 B a tick)."""
-        n, y = self._n, self._yaw_u
-        j = np.asarray(j)
-        if n < 2:
-            return np.zeros(j.shape)
+        """``np.gradient(yaw, dt)`` at the grid points ``j``, worked out where asked (not kept)."""
+        j, n = np.asarray(j), self._n
         hi, lo = np.minimum(j + 1, n - 1), np.maximum(j - 1, 0)
         end = (j == 0) | (j == n - 1)
-        return (y[hi] - y[lo]) / np.where(end, self.dt, 2.0 * self.dt)
+        return (self._yaw_u[hi] - self._yaw_u[lo]) / np.where(end, self.dt, 2.0 * self.dt)
 
     def sample(self, t: float) -> RefSample:
         """Reference at time ``t`` (s); clamps to [0, duration]. Linear interpolation between
