@@ -347,7 +347,7 @@ class Reference:
             k += m + 1
         stop[0] = True
         stop[-1] = True
-        self._s, self._P, self._T, self._K = S, P, T, K
+        self._s, self._P, self._T, self._K, self._dP = S, P, T, K, P[1:] - P[:-1]
         self._cap, self._seg_s, self._stop = cap, seg, stop
 
     # ------------------------------------------------------------------ time law
@@ -388,8 +388,8 @@ class Reference:
         self._t_end_raw = float(tk[-1])
         self.duration = self._t_end_raw + 0.5 * self.window + self.hover_time
 
-    def _raw(self, t: np.ndarray):
-        """s, ṡ and ∫s dt of the un-smoothed time law (vectorised; clamps outside)."""
+    def _raw(self, t: np.ndarray, pos_only: bool = False):
+        """s, ṡ and ∫s dt of the un-smoothed time law (vectorised; clamps outside), or s."""
         tk, s = self._tk, self._s
         t = np.asarray(t, float)
         i = np.clip(np.searchsorted(tk, t, side="right") - 1, 0, len(tk) - 2)
@@ -399,19 +399,19 @@ class Reference:
         tau = np.minimum(tau, dur)
         si, vi, ai = s[i], self._v[i], self._acc_i[i]
         pos = si + vi * tau + 0.5 * ai * tau**2
-        vel = vi + ai * tau
+        after, before = t > tk[-1], t < 0   # beyond the ends: at rest at s_end (s_0)
+        if any_after := np.any(after):
+            pos = np.where(after, s[-1], pos)
+        if any_before := np.any(before):
+            pos = np.where(before, s[0], pos)
+        if pos_only:
+            return pos
+        vel = np.where(after | before, 0.0, vi + ai * tau)
         dw = np.minimum(tc - tk[i], self._tdep[i] - tk[i])
         integ = self._Sk[i] + si * dw + si * tau + vi * tau**2 / 2 + ai * tau**3 / 6
-        # beyond the end: at rest at s_end
-        after = t > tk[-1]
-        if np.any(after):
-            pos = np.where(after, s[-1], pos)
-            vel = np.where(after, 0.0, vel)
+        if any_after:
             integ = np.where(after, self._Sk[-1] + s[-1] * (t - tk[-1]), integ)
-        before = t < 0
-        if np.any(before):
-            pos = np.where(before, s[0], pos)
-            vel = np.where(before, 0.0, vel)
+        if any_before:
             integ = np.where(before, s[0] * t, integ)
         return pos, vel, integ
 
@@ -422,8 +422,7 @@ class Reference:
             i = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self._tk) - 2)
             moving = (t > self._tdep[i]) & (t <= self._tk[-1])
             return pos, vel, np.where(moving, self._acc_i[i], 0.0)
-        p1, v1, i1 = self._raw(t + 0.5 * w)
-        p0, v0, i0 = self._raw(t - 0.5 * w)
+        (p1, v1, i1), (p0, v0, i0) = self._raw(t + 0.5 * w), self._raw(t - 0.5 * w)
         return (i1 - i0) / w, (p1 - p0) / w, (v1 - v0) / w
 
     def _interp_s(self, sq: np.ndarray):
@@ -435,10 +434,12 @@ class Reference:
         return i, f
 
     # ------------------------------------------------------------------ outputs
-    def _path_at(self, sq: np.ndarray):
-        """Position P(s) and unit tangent T(s) by interpolation on the s-grid."""
+    def _path_at(self, sq: np.ndarray, tangent: bool = True):
+        """Position P(s) and unit tangent T(s) (or None) by interpolation on the s-grid."""
         i, f = self._interp_s(np.clip(sq, 0.0, self.length))
-        P = self._P[i] + f * (self._P[i + 1] - self._P[i])
+        P = self._P[i] + f * self._dP[i]
+        if not tangent:
+            return P, None
         T = self._T[i] + f * (self._T[i + 1] - self._T[i])
         T /= np.maximum(np.linalg.norm(T, axis=1, keepdims=True), 1e-12)
         return P, T
@@ -489,8 +490,8 @@ class Reference:
         Returns the box-averaged arc length (progress, for segment, spray and yaw) and C(bm)."""
         w = self.window
         h = 0.5 * w
-        sp, vp, _ = self._raw(t + h)
-        sm, vm, _ = self._raw(t - h)
+        sp, vp, ip = self._raw(t + h)
+        sm, vm, im = self._raw(t - h)
         Pp, Tp = self._path_at(sp)
         Pm, Tm = self._path_at(sm)
         self._R[a:b, 3:6] = (Pp - Pm) / w
@@ -500,12 +501,11 @@ class Reference:
         nh = int(round(h / dtf))
         hi = max((b - 1) * m + 2 * nh, b * m)  # fine points a·m … hi
         tf = np.arange(a * m - nh, hi - nh + 1) * dtf
-        sf, _, _ = self._raw(tf)
-        Pf, _ = self._path_at(sf)
+        Pf, _ = self._path_at(self._raw(tf, pos_only=True), tangent=False)
         cum = np.cumsum(np.vstack([carry[None], 0.5 * (Pf[1:] + Pf[:-1]) * dtf]), axis=0)
         k = np.arange(b - a) * m
         self._R[a:b, 0:3] = (cum[k + 2 * nh] - cum[k]) / (2 * nh * dtf)
-        sw, _, _ = self._smoothed(t)
+        sw = (ip - im) / w   # _smoothed(t)'s progress, from the same two raw samples
         return np.clip(sw, 0.0, self.length), cum[(b - a) * m].copy()
 
     def _progress(self, sw: np.ndarray, a: int, b: int) -> None:
@@ -553,7 +553,7 @@ class Reference:
         self.max_speed = self._max_norm(slice(3, 6))
         self.max_jerk = self._max_norm(slice(6, 9), diff=True) if n > 1 else 0.0
         # the arc-length grid and the time law are not needed once the grid is built
-        for name in ("_s", "_P", "_T", "_K", "_cap", "_stop", "_seg_s", "_psi_smooth", "_tk",
+        for name in ("_s", "_P", "_dP", "_T", "_K", "_cap", "_stop", "_seg_s", "_psi_smooth", "_tk",
                      "_tdep", "_v", "_acc_i", "_Sk"):
             setattr(self, name, None)
 
