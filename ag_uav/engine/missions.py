@@ -478,7 +478,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     arr = out.rec
     res = RunResult(
         summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
-        p_fb=arr[:, 9:12], seg=arr[:, 12].astype(int), spray=arr[:, 13].astype(bool),
+        p_fb=arr[:, 9:12], seg=arr[:, 12].astype(np.int32), spray=arr[:, 13].astype(bool),
         motors=arr[:, 14:18], field=fld, plan=plan,
         extra={"wind": arr[:, 18:21], "reference": ref, "vehicle": out.vehicle.info(),
                "imu": out.imu, "imu_bias0": out.imu_bias0},
@@ -506,6 +506,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         tank_l = None if out.sprayer is None else out.sprayer.litres_total
         summ.update(dose_summary(cfg, fld, out.dose, tank_l))
         res.extra["dose"] = out.dose
+        trim_heap()
     if hasattr(fb, "scores"):
         sp = np.flatnonzero(res.spray)
         mission = slice(int(sp[0]), int(sp[-1]) + 1) if sp.size else slice(0, len(res.t))
@@ -535,17 +536,27 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     })
     res.summary = summ
     if log is not None:
-        from ..analysis.metrics import contiguous_runs
-
-        tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
-        if tracks:
-            import shapely
-
-            foot = shapely.union_all([shapely.LineString(tr).simplify(0.1).buffer(
-                0.5 * plan.swath, cap_style="flat") for tr in tracks])
-            log.sprayed(sim_time, [foot])
-        if out.dose is not None:
-            g = out.dose.grid
-            log.dose(sim_time, g.x0, g.y0, g.cell, out.dose.l_per_ha, final=True)
-        log.summary(summ)
+        _log_outputs(log, res, out, plan.swath, sim_time)
     return res
+
+
+def _log_outputs(log: Any, res: RunResult, out: LoopOutput, swath: float, sim_time: float
+                 ) -> None:
+    """The run's end in its log: the sprayed footprint, the final dose map and the summary,
+    each after the heap's freed pages went back (:func:`trim_heap`)."""
+    from ..analysis.metrics import contiguous_runs
+
+    trim_heap()
+    tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
+    if tracks:
+        import shapely
+
+        foot = shapely.union_all([shapely.LineString(tr).simplify(0.1).buffer(
+            0.5 * swath, cap_style="flat") for tr in tracks])
+        log.sprayed(sim_time, [foot])
+    if out.dose is not None:
+        trim_heap()
+        g = out.dose.grid
+        log.dose(sim_time, g.x0, g.y0, g.cell, out.dose.l_per_ha, final=True)
+    trim_heap()
+    log.summary(res.summary)

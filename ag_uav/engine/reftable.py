@@ -85,4 +85,4 @@ def _job_tables(ref: Any, n: int, dt: float) -> dict[str, np.ndarray]:
     if not hasattr(ref, "sortie_ground"):
         return {}
     sortie, ground = ref.sortie_ground(np.arange(n) * dt)
-    return {"ground": ground, "sortie": sortie.astype(int)}
+    return {"ground": ground, "sortie": sortie.astype(np.int32)}

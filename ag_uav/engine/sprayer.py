@@ -64,8 +64,8 @@ class Sprayer:
         n = n_ticks
         self.ground = (np.asarray(tab["ground"], dtype=bool) if "ground" in tab
                        else np.zeros(n, dtype=bool))
-        self.sortie = (np.asarray(tab["sortie"], dtype=np.int64) if "sortie" in tab
-                       else np.zeros(n, dtype=np.int64))
+        self.sortie = (np.asarray(tab["sortie"], dtype=np.int32) if "sortie" in tab
+                       else np.zeros(n, dtype=np.int32))
         self.tank = job.fill_l
         self.energy_j = 0.0          # used from the current battery
         self.energy_total_j = 0.0
@@ -122,16 +122,16 @@ class Sprayer:
 
     def series(self, n: int) -> dict[str, np.ndarray]:
         """Per-tick records of the first ``n`` ticks (the ticks flown): read-only views of the
-        records (a 38 ha job's four are 54 MB), the nozzle flags a copy."""
-        def f(a: Any) -> np.ndarray:
-            v = np.frombuffer(a, dtype=np.float64, count=n)
+        records (a 38 ha job's four are 54 MB) and of the sortie table, the nozzle flags a copy."""
+        def f(a: Any, dtype: Any = np.float64) -> np.ndarray:
+            v = np.frombuffer(a, dtype=dtype, count=n)
             v.flags.writeable = False
             return v
 
         return {"tank_l": f(self.rec_tank), "mass_kg": f(self.rec_mass),
                 "power_w": f(self.rec_power), "soc": f(self.rec_soc),
                 "nozzles": np.frombuffer(self.rec_on, dtype=np.uint8, count=n).astype(bool),
-                "sortie": np.asarray(self.sortie[:n], int),
+                "sortie": f(self.sortie, np.int32),
                 "ground": np.asarray(self.ground[:n], bool)}
 
     def summary(self, t_end: float) -> dict[str, Any]:
