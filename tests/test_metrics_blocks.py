@@ -14,6 +14,7 @@ from ag_uav.analysis.metrics import (
     _root_mean,
     _sumsq,
     cross_track,
+    polyline_distance,
 )
 
 
@@ -87,3 +88,16 @@ def test_ins_scores_rms_and_max_by_blocks_equal_the_whole_array_formulas():
             rms, mx, n = finite_rms_max(a, scale, block)
             assert (rms, mx, n) == (want_rms, round(float(f.max()), 4), f.size)
     assert finite_rms_max(np.full(5, np.nan, np.float32)) == (None, None, 0)
+
+
+def test_polyline_distance_equals_shapely_to_the_bit():
+    """Polylines of 2–7 vertices, a repeated vertex among them, points on every side (before
+    an edge's start, beyond its end, alongside)."""
+    rng = np.random.default_rng(11)
+    for trial in range(60):
+        line = np.cumsum(rng.normal(0, 50, (rng.integers(2, 8), 2)), axis=0)
+        if trial % 5 == 0:
+            line[1] = line[0]
+        p = line[0] + rng.normal(0, 80, (400, 2))
+        want = shapely.distance(shapely.points(p), shapely.LineString(line))
+        assert np.array_equal(polyline_distance(p, line), want)

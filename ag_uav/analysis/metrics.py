@@ -97,16 +97,34 @@ def _cross_track_pieces(res, plan):
     """``(c0, c1, distances)`` of each stretch of spraying ticks [c0, c1) on one planned
     segment: each spraying run, cut where the segment changes."""
     xy = res.p_true[:, :2]
-    lines: dict[int, Any] = {}
     for a, b in contiguous_runs(res.spray):
         cuts = [a, *(a + 1 + np.flatnonzero(np.diff(res.seg[a:b]))).tolist(), b]
         for c0, c1 in zip(cuts[:-1], cuts[1:], strict=True):
             s = int(res.seg[c0])
-            if s < 0 or s >= len(plan.segments):
-                continue
-            if s not in lines:
-                lines[s] = shapely.LineString(plan.segments[s].points)
-            yield c0, c1, shapely.distance(shapely.points(xy[c0:c1]), lines[s])
+            if 0 <= s < len(plan.segments):
+                yield c0, c1, polyline_distance(xy[c0:c1], plan.segments[s].points)
+
+
+def polyline_distance(p: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """Distance of each point of ``p`` (n, 2) to the polyline ``line`` (m, 2): the least over
+    its edges of GEOS's point-to-segment distance (``Distance::pointToSegment``, the same
+    operations in the same order, so equal to ``shapely.distance`` to the bit)."""
+    px, py = p[:, 0], p[:, 1]
+    line = np.asarray(line, float)
+    out = None
+    for (ax, ay), (bx, by) in zip(line[:-1].tolist(), line[1:].tolist(), strict=True):
+        da = np.sqrt((px - ax) * (px - ax) + (py - ay) * (py - ay))
+        if ax == bx and ay == by:
+            d = da
+        else:
+            len2 = (bx - ax) * (bx - ax) + (by - ay) * (by - ay)
+            r = ((px - ax) * (bx - ax) + (py - ay) * (by - ay)) / len2
+            d = np.abs(((ay - py) * (bx - ax) - (ax - px) * (by - ay)) / len2) * math.sqrt(len2)
+            d = np.where(r <= 0.0, da, np.where(
+                r >= 1.0, np.sqrt((px - bx) * (px - bx) + (py - by) * (py - by)), d))
+        out = d if out is None else np.minimum(out, d)
+    return out if out is not None else np.sqrt(
+        (px - line[0, 0]) ** 2 + (py - line[0, 1]) ** 2)
 
 
 def cross_track(res, plan) -> np.ndarray:
