@@ -302,10 +302,10 @@ class Failsafe:
         b = self.b
         if k % self.every == 0:
             self.bank.pos_sigma(self.sig)
-            with np.errstate(invalid="ignore"):
-                trig = self.on & ~self.engaged & b.act & b.airborne & (self.sig > self.bound)
-            for i in np.flatnonzero(trig):
-                self._engage(int(i), t)
+            over = self.sig > self.bound   # NaN (no fix yet) compares False, silently
+            if over.any():
+                for i in np.flatnonzero(self.on & ~self.engaged & b.act & b.airborne & over):
+                    self._engage(int(i), t)
         if self.n_engaged:
             for i in np.flatnonzero(self.engaged & b.act):
                 self._fly(int(i), t)
