@@ -11,7 +11,8 @@ and the covariance step's sparse form.
   is rejected, clean fixes are accepted at the rate a consistent filter's innovations give.
 * The step latch behind it (``INSConfig.gate_latch_s``): a 0.15 m step the gate alone
   re-admits is held for its whole 35 s, a lone outlier does not release it, its hold limit
-  resets the position to the receiver.
+  resets the position to the receiver; a PCA rule does not fuse its window's held fixes
+  after the step ends.
 * ``cov_step`` (F's 45 non-zeros written out) equals the dense F P Fᵀ + Q to rounding.
 """
 
@@ -165,6 +166,21 @@ def test_step_latch_is_not_released_by_a_lone_outlier(truth):
     r = run(truth, 4, ("kf",), INSConfig(), false_fix=ffs, seed=81)
     assert np.all(r["ins"].counters["gate_latch_releases"] == 1)
     assert np.all(_peak(r, 1500, 5000) < 0.04)
+
+
+def test_pca_rules_do_not_fuse_the_held_fixes_after_the_latch_releases(truth):
+    """A 0.31 m step (seed 3's first episode, 15-50 s): after it ends the PCA block's window
+    (10 fixes) still holds the step's fixes, and its rank-2 reconstruction overshoots the
+    step's end by centimetres on the far side; a PCA rule whose latch has released fuses the
+    raw fix until its window no longer spans a held fix, so its error after the step stays
+    at the KF's level (fusing the PCA'd fixes: 0.034-0.048 m for PCA-KF, 0.009-0.022 the
+    KF's)."""
+    r = run(truth, 4, ("kf", "pca-kf", "pca-mckf"), INSConfig(),
+            false_fix=(15.0, 50.0, (-0.29, 0.11, 0.0)), seed=81)
+    pk = _peak(r, 5000, 5400).reshape(4, 3)
+    print(f"peak 50-54 s, kf / pca-kf / pca-mckf: {pk.round(3)}")
+    assert np.all(r["ins"].counters["gate_latch_releases"] == 1)
+    assert np.all(pk[:, 1:] < 0.03) and np.all(pk[:, 1:] < pk[:, :1] + 0.01)
 
 
 def test_step_latch_believes_the_receiver_after_its_hold_limit(truth):

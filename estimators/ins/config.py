@@ -132,6 +132,7 @@ class INSConfig:
             raise ValueError(f"gate_latch_s must be >= 0 (0 = no latch, inf = no limit), got "
                              f"{self.gate_latch_s!r}")
         p[layout.PRM_GLATCH] = self.gate_latch_s / dt
+        p[layout.PRM_PCAW] = self.pca_window
         return p
 
     def kernel_widths(self) -> np.ndarray:

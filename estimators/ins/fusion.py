@@ -36,6 +36,7 @@ from .layout import (
     INTS_GLAT0,
     INTS_GLATCH,
     INTS_GNREL,
+    INTS_GRAW,
     INTS_GREJP,
     INTS_GREJV,
     INTS_GREJY,
@@ -64,6 +65,7 @@ from .layout import (
     PRM_GATE,
     PRM_GLATCH,
     PRM_GRESET,
+    PRM_PCAW,
     PRM_RANT,
     REC_K,
     REC_N,
@@ -300,16 +302,22 @@ def _fuse_pos(x, P, rec, par, ints, dg, fb):
     ticks, the position resets to the receiver (:func:`_reject_fix`).  The latch works on the
     raw fix for every rule: a false fix is the receiver's step, which the PCA block's window
     spreads over its fixes (a PCA'd fix the gate rejects opens nothing unless the raw fix
-    fails the gate too, and a held fix is fused raw, relative to the raw step)."""
+    fails the gate too, and a held fix is fused raw, relative to the raw step).  A PCA rule
+    fuses the raw fix while its PCA window still spans a held fix (the ``PRM_PCAW`` − 1 fixes
+    after the last held one): the window's fixes of the step are not the receiver of now, and
+    its reconstruction of the step's end overshoots it (as the window's restart would)."""
     rule, prm, _, _ = par
     H3, nu3, R3 = view2(fb, W_H3, 3, 15), fb[W_NU3:W_NU3 + 3], view2(fb, W_R3, 3, 3)
     S3, nur = view3(fb, W_S3, 3), fb[W_NUR:W_NUR + 3]
     zr = rec[REC_Z:REC_Z + 3]
-    z = rec[REC_ZP:REC_ZP + 3] if rule >= 2 else zr
+    pca = rule >= 2 and ints[INTS_GRAW] <= 0
+    z = rec[REC_ZP:REC_ZP + 3] if pca else zr
     if not np.isfinite(z[0] + z[1] + z[2] + zr[0] + zr[1] + zr[2]):
         return
+    if ints[INTS_GRAW] > 0:
+        ints[INTS_GRAW] -= 1
     h_gnss_pos_w(x, prm, zr, nur, H3, S3)   # the raw fix's ν: the latch's
-    if rule >= 2:
+    if pca:
         h_gnss_pos_w(x, prm, z, nu3, H3, S3)
     else:
         for i in range(3):
@@ -320,6 +328,7 @@ def _fuse_pos(x, P, rec, par, ints, dg, fb):
     if ints[INTS_GLATCH] == LATCH_ON and _latch_holds(P, H3, Rm, nur, prm, ints, dg):
         if core - ints[INTS_GLAT0] < prm[PRM_GLATCH]:
             held = True
+            ints[INTS_GRAW] = int(prm[PRM_PCAW]) - 1
             _hold_fix(nu3, nur, Rm, ints, dg)
             if gate_ratio(P, H3, Rm, nu3, prm[PRM_GATE]) > 1.0:
                 return

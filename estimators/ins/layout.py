@@ -54,12 +54,13 @@ class Layout:
 #: shared parameters: Δt, g, the Q impulses (δv, δθ, δb_a, δb_g), lever arm, heading baseline,
 #: radar offset, ground height, cos(max tilt), max range, delay D (ticks), delayed (0/1), ring
 #: length B = D + 1, queue length, the innovation gate (σ; inf = off), its reset time (ticks),
-#: the step latch's hold limit (ticks; 0 = no latch, inf = no limit)
+#: the step latch's hold limit (ticks; 0 = no latch, inf = no limit), the PCA block's window
+#: (fixes)
 PRM = Layout("dt g qv qt qba qbg r_ant:3 r_b:3 r_rad:3 z_g cos_max r_max delay delayed ring "
-             "queue gate gate_reset gate_latch")
+             "queue gate gate_reset gate_latch pca_window")
 (PRM_DT, PRM_G, PRM_QV, PRM_QT, PRM_QBA, PRM_QBG, PRM_RANT, PRM_RB, PRM_RRAD, PRM_ZG,
  PRM_COSMAX, PRM_RMAX, PRM_D, PRM_DELAYED, PRM_B, PRM_QC, PRM_GATE, PRM_GRESET,
- PRM_GLATCH) = PRM.offsets
+ PRM_GLATCH, PRM_PCAW) = PRM.offsets
 
 #: per row: ticks now and of the core, queued records, output dirty (0/1), records fused late,
 #: records dropped (queue full), the MCKF state (n_rejected, n_iter, rejected, recovered),
@@ -67,12 +68,13 @@ PRM = Layout("dt g qv qt qba qbg r_ant:3 r_b:3 r_rad:3 z_g cos_max r_max delay d
 #: position resets to the receiver, the core ticks of the last fused (or reset) position and
 #: of the last fused velocity, of the last position reset (0: the filter's start); the step
 #: latch: its state (none / candidate / on), the core tick it opened, its releases, the fixes
-#: fused relative to the latched step
+#: fused relative to the latched step, the fixes still to come whose PCA window spans a held one
 INTS = Layout("now core qn dirty late qdrop mst:4 ngnss nrad rdrop grejp grejv grejy greset "
-              "glast glastv grst glatch glat0 grel gnrel")
+              "glast glastv grst glatch glat0 grel gnrel graw")
 (INTS_NOW, INTS_CORE, INTS_QN, INTS_DIRTY, INTS_LATE, INTS_QDROP, INTS_MST, INTS_NGNSS,
  INTS_NRAD, INTS_RDROP, INTS_GREJP, INTS_GREJV, INTS_GREJY, INTS_GRESET, INTS_GLAST,
- INTS_GLASTV, INTS_GRST, INTS_GLATCH, INTS_GLAT0, INTS_GREL, INTS_GNREL) = INTS.offsets
+ INTS_GLASTV, INTS_GRST, INTS_GLATCH, INTS_GLAT0, INTS_GREL, INTS_GNREL,
+ INTS_GRAW) = INTS.offsets
 
 #: per row: the last NIS of position / velocity / heading / radar, diag C_y of the last MCKF
 #: update, ŝ of the adaptive bandwidth rule (1 after a reset), the last fix's position (0
