@@ -12,7 +12,7 @@ and the covariance step's sparse form.
 * The step latch behind it (``INSConfig.gate_latch_s``): a 0.15 m step the gate alone
   re-admits is held for its whole 35 s, a lone outlier does not release it, its hold limit
   resets the position to the receiver; a PCA rule does not fuse its window's held fixes
-  after the step ends.
+  after the step ends, nor a rejected outlier through its window.
 * ``cov_step`` (F's 45 non-zeros written out) equals the dense F P Fᵀ + Q to rounding.
 """
 
@@ -181,6 +181,19 @@ def test_pca_rules_do_not_fuse_the_held_fixes_after_the_latch_releases(truth):
     print(f"peak 50-54 s, kf / pca-kf / pca-mckf: {pk.round(3)}")
     assert np.all(r["ins"].counters["gate_latch_releases"] == 1)
     assert np.all(pk[:, 1:] < 0.03) and np.all(pk[:, 1:] < pk[:, :1] + 0.01)
+
+
+def test_pca_rules_do_not_fuse_a_rejected_outlier_through_their_window(truth):
+    """One fix 0.3 m off at 30 s: the gate rejects it for every row, and a PCA rule fuses the
+    raw fix while its window holds it, so its error stays at the KF's level (fusing the PCA'd
+    fixes, whose reconstruction rings by centimetres for the window's 1 s after the outlier:
+    0.02-0.05 m, and up to 9 fixes rejected as the filter left the truth)."""
+    r = run(truth, 4, ("kf", "pca-kf", "pca-mckf"), INSConfig(),
+            false_fix=(30.0, 30.1, (0.3, 0.0, 0.0)), seed=81, t_end=40.0)
+    pk = _peak(r, 3000, 3300).reshape(4, 3)
+    print(f"peak 30-33 s, kf / pca-kf / pca-mckf: {pk.round(3)}")
+    assert np.all(r["ins"].counters["gate_rejected_pos"] == 1)
+    assert np.all(pk[:, 1:] < 0.02) and np.all(pk[:, 1:] < pk[:, :1] + 0.005)
 
 
 def test_step_latch_believes_the_receiver_after_its_hold_limit(truth):

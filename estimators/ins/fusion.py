@@ -303,26 +303,30 @@ def _fuse_pos(x, P, rec, par, ints, dg, fb):
     raw fix for every rule: a false fix is the receiver's step, which the PCA block's window
     spreads over its fixes (a PCA'd fix the gate rejects opens nothing unless the raw fix
     fails the gate too, and a held fix is fused raw, relative to the raw step).  A PCA rule
-    fuses the raw fix while its PCA window still spans a held fix (the ``PRM_PCAW`` − 1 fixes
-    after the last held one): the window's fixes of the step are not the receiver of now, and
-    its reconstruction of the step's end overshoots it (as the window's restart would)."""
+    fuses the raw fix while its PCA window spans a fix whose raw position the gate rejected
+    or the latch held (that fix and the ``PRM_PCAW`` − 1 after it): a fix the gate keeps out
+    does not come in through the window, whose reconstruction rings after an outlier or a
+    step's end by centimetres (as the window's restart after it would)."""
     rule, prm, _, _ = par
     H3, nu3, R3 = view2(fb, W_H3, 3, 15), fb[W_NU3:W_NU3 + 3], view2(fb, W_R3, 3, 3)
     S3, nur = view3(fb, W_S3, 3), fb[W_NUR:W_NUR + 3]
     zr = rec[REC_Z:REC_Z + 3]
-    pca = rule >= 2 and ints[INTS_GRAW] <= 0
-    z = rec[REC_ZP:REC_ZP + 3] if pca else zr
+    z = rec[REC_ZP:REC_ZP + 3] if rule >= 2 else zr
     if not np.isfinite(z[0] + z[1] + z[2] + zr[0] + zr[1] + zr[2]):
         return
+    h_gnss_pos_w(x, prm, zr, nur, H3, S3)   # the raw fix's ν: the latch's
+    Rm = _diag_R(rec[REC_V:REC_V + 3], R3)
+    if rule >= 2 and gate_ratio(P, H3, Rm, nur, prm[PRM_GATE]) > 1.0:
+        ints[INTS_GRAW] = int(prm[PRM_PCAW])
+    pca = rule >= 2 and ints[INTS_GRAW] <= 0
     if ints[INTS_GRAW] > 0:
         ints[INTS_GRAW] -= 1
-    h_gnss_pos_w(x, prm, zr, nur, H3, S3)   # the raw fix's ν: the latch's
     if pca:
         h_gnss_pos_w(x, prm, z, nu3, H3, S3)
     else:
+        z = zr
         for i in range(3):
             nu3[i] = nur[i]
-    Rm = _diag_R(rec[REC_V:REC_V + 3], R3)
     core = ints[INTS_CORE]
     held = reject = force = False
     if ints[INTS_GLATCH] == LATCH_ON and _latch_holds(P, H3, Rm, nur, prm, ints, dg):
