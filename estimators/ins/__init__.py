@@ -91,7 +91,9 @@ unstepped receiver (the log-likelihood ratio ½ [Σ (ν_i − b_i)²/S_ii − Σ
 reported variance leaves a factor 2 of the latched one's (a new solution); held for
 ``gate_latch_s`` (default 60 s), the receiver is believed: the position resets to it.  A filter
 anchored this way is tied to the step's estimate, whose error (the fix's and the filter's at
-the step, ~1–2 cm) the held fixes cannot see.  Each
+the step, ~1–2 cm) the held fixes cannot see.  The PCA rules gate and latch on the raw fix, and
+fuse the raw fix while their PCA window spans a fix whose raw position the gate rejected or the
+latch held: the window's reconstruction rings after such a fix by centimetres.  Each
 measurement is fused sequentially (R block-diagonal), then injected and reset
 (Solà §6.2-6.3, eqs 282-287)::
 
