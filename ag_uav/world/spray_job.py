@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -425,11 +426,10 @@ def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray
     dt = 1.0 / cfg.sim.control_hz
     base = job.base_xy
     segs = plan.segments
-    pieces: list[tuple[Reference, np.ndarray]] = []
+    made: list[tuple[Any, dict[str, Any], list[int], Any, float, float, bool]] = []
     resume: tuple[int, np.ndarray] | None = None  # (segment, point)
     land_xy = base
     clear = 0.5 * plan.swath  # transits keep half a swath from the holes (obstacles)
-    t_acc = 0.0
     for si, (k, litres, e_j) in enumerate(cuts):
         last = si == len(cuts) - 1
         sub: list = []
@@ -452,18 +452,35 @@ def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray
             land_xy = _home_legs(end_xy, base, field, clear, sp.transit_speed_mps, sub, gmap,
                                  speeds)
             resume = (j_to, end_xy)
-        subplan = dataclasses.replace(plan, segments=sub)
-        r = Reference(subplan, speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
-                      takeoff=cfg.sim.takeoff or si > 0,
-                      hover_time=cfg.sim.hover_after_s if last else 0.0,
-                      rate=cfg.sim.control_hz, landing=not last, z_land=z_land,
-                      seg_speeds=speeds)
+        opts = dict(speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
+                    takeoff=cfg.sim.takeoff or si > 0,
+                    hover_time=cfg.sim.hover_after_s if last else 0.0,
+                    rate=cfg.sim.control_hz, landing=not last, z_land=z_land, seg_speeds=speeds)
+        made.append((dataclasses.replace(plan, segments=sub), opts, gmap, cut_q, litres, e_j,
+                     last))
+    refs = _references([(a[0], a[1]) for a in made])
+    pieces: list[tuple[Reference, np.ndarray]] = []
+    t_acc = 0.0
+    for si, (r, (_, _, gmap, cut_q, litres, e_j, last)) in enumerate(zip(refs, made,
+                                                                          strict=True)):
         pieces.append((r, np.asarray(gmap, int)))
         job.sorties.append(Sortie(si, t_acc, t_acc + r.duration,
                                   None if last else [float(v) for v in cut_q], litres,
                                   e_j / 3600.0, not last))
         t_acc += r.duration + sp.service_s
     return pieces
+
+
+def _references(specs: list[tuple[Any, dict[str, Any]]]) -> list[Reference]:
+    """The sorties' references, ``Reference(subplan, **options)`` each, built two at a time in
+    threads (numpy's array work runs outside the GIL; each reference is its own object, so the
+    results are those of a serial build)."""
+    if len(specs) < 2 or (os.cpu_count() or 1) < 2:
+        return [Reference(p, **o) for p, o in specs]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=2) as ex:
+        return list(ex.map(lambda spec: Reference(spec[0], **spec[1]), specs))
 
 
 def _plan_part(segs: list, j_from: int, j_to: int, first_pts: Any, cut_q: Any, sub: list,
