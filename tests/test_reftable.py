@@ -74,3 +74,21 @@ def test_a_plain_reference_has_no_job_tables():
     assert job_tabs == [{}]
     rt.at(4999)
     assert np.array_equal(rt.tab[0, 4999 - rt.k0[0]], _whole(ref, 5000)[-1])
+
+
+def test_sorties_built_in_threads_equal_a_serial_build(job_ref, monkeypatch):
+    """``spray_job._references`` builds the sorties' references two at a time in threads; one
+    at a time (as on a one-core machine) gives the same grids, bit for bit."""
+    import ag_uav.world.spray_job as sj
+
+    cfg = load_config(None, {"log.enabled": False, "spray.tank_l": 0.5})
+    fld = build_field(cfg)
+    plan = build_plan(cfg, fld)
+    monkeypatch.setattr(sj.os, "cpu_count", lambda: 1)
+    serial, _ = plan_job(cfg, plan, build_reference(cfg, plan, spray=False), fld,
+                         dry_mass_kg=6.47, z_land=build_vehicle(cfg).hover_z - 0.08)
+    assert len(serial.pieces) == len(job_ref.pieces)
+    t = np.arange(int(job_ref.duration / DT)) * DT
+    a, b = job_ref.sample_all(t), serial.sample_all(t)
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+    assert job_ref.spray_job.sorties == serial.spray_job.sorties
