@@ -34,9 +34,11 @@ def _cli(*args) -> list[str]:
 
 def _lines(err: str) -> list[str]:
     """stderr's lines, less the pre-flight notice of a mission cut by sim.max_time_s and the
-    notice of the log's encoders compiling (a busy machine's first run)."""
+    first run's compile notices (the process may be the first to fly on an empty cache)."""
     return [ln for ln in err.strip().splitlines() if "the plan needs at least" not in ln
-            and not ln.startswith("compiling the log's encoders")]
+            and not ln.startswith(("compiling the log's encoders",
+                                   "compiling kernels: first run only",
+                                   "compiled the kernels in"))]
 
 
 def _one(err: str) -> str:
