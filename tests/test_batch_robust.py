@@ -330,3 +330,31 @@ def test_an_experiment_whose_batch_stops_exits_1_with_one_line(monkeypatch, caps
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 1
     assert err[-1].startswith("ag-uav: batch table2 stopped") and "Traceback" not in "".join(err)
+
+
+def test_signals_held_defers_a_sigterm_that_reaches_another_thread():
+    """A SIGTERM sent while a journal line and its row are being recorded runs its handler
+    after both, also when the kernel delivers it to a thread other than the main one."""
+    import signal
+    import threading
+
+    from ag_uav.jobs.batch import signals_held
+
+    done: list[str] = []
+
+    def handler(signum, frame):
+        raise RuntimeError("terminated")
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        with pytest.raises(RuntimeError, match="terminated"), signals_held():
+            t = threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGTERM))
+            t.start()
+            t.join()
+            time.sleep(0.05)  # the handler would run here, between two bytecodes
+            done.append("journal line")
+            done.append("row")
+        assert done == ["journal line", "row"]
+        assert signal.getsignal(signal.SIGTERM) is handler
+    finally:
+        signal.signal(signal.SIGTERM, old)

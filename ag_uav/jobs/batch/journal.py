@@ -7,6 +7,7 @@ import contextlib
 import json
 import os
 import signal
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -107,17 +108,29 @@ def repair_jsonl(path: Path) -> None:
 @contextlib.contextmanager
 def signals_held() -> Iterator[None]:
     """SIGTERM and SIGINT held back (delivered right after): a run's journal line and its row
-    in memory, from which an interrupted batch writes ``results.csv``, are recorded together."""
-    sigs = {signal.SIGTERM, signal.SIGINT}
-    try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    except (AttributeError, ValueError, OSError):  # pragma: no cover - not POSIX
+    in memory, from which an interrupted batch writes ``results.csv``, are recorded together.
+
+    Held at Python's level: a signal sent to the process may reach any of its threads (a pool's
+    manager thread, a progress bar's), and Python runs its handler in the main thread at the
+    next bytecode whichever thread the signal reached, so blocking it in the main thread alone
+    (``pthread_sigmask``) does not hold it. Here the handlers are swapped for one that notes
+    the signal, and the noted signals are raised again, to the handlers restored, at the end.
+    Outside the main thread (where no handler can be set, and none runs), or with a handler
+    set outside Python, it holds nothing."""
+    got: list[int] = []
+    sigs = (signal.SIGTERM, signal.SIGINT)
+    if (threading.current_thread() is not threading.main_thread()
+            or any(signal.getsignal(s) is None for s in sigs)):
         yield
         return
+    old = [signal.signal(s, lambda signum, _frame: got.append(signum)) for s in sigs]
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for s, h in zip(sigs, old, strict=True):
+            signal.signal(s, h)
+        for s in dict.fromkeys(got):
+            signal.raise_signal(s)
 
 
 def json_default(o: Any) -> Any:
