@@ -175,3 +175,26 @@ def test_the_progress_bar_counts_the_kernels_as_they_compile(monkeypatch, capsys
     assert any(s.startswith("compiling kernel 2: ") for s in bar.shown)
     assert bar.shown[-1] == "" and bar.refreshed == len(bar.shown) - 1
     assert capsys.readouterr().err == ""     # the notice was said before (once per process)
+
+
+def test_a_compile_before_tick_0_is_said_with_it(monkeypatch, capsys):
+    """Kernels compiled before tick 0 under the notice (the INS, while the helper compiles the
+    rest) count in what tick 0 says, also when tick 0 itself compiles nothing."""
+    from numba import njit
+
+    from ag_uav.engine import compiling
+
+    monkeypatch.setattr(compiling, "_announced", "")
+    monkeypatch.setattr(compiling, "_before_s", 0.0)
+    with compiling.compile_notice(ahead=True):
+        @njit
+        def early(x):
+            return x - 1
+
+        assert early(1) == 0
+    assert compiling._before_s > 0.0
+    assert capsys.readouterr().err == compiling.COMPILE_NOTICE + "\n"
+    took, _ = compiling.first_tick(compiling.time.perf_counter())  # tick 0 compiled nothing
+    assert took == 0.0
+    assert capsys.readouterr().err.startswith("compiled the kernels in ")
+    assert compiling._before_s == 0.0 and compiling._announced == "done"

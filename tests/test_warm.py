@@ -62,3 +62,16 @@ def test_stop_ends_a_helper_still_running(can_help) -> None:
     warm.stop(w)  # at once: the helper is still importing
     assert w.proc.poll() is not None and not w.folder.exists()
     warm.stop(None)
+
+
+def test_the_ins_compiled_first_is_the_kernel_a_run_calls(tmp_path) -> None:
+    """:func:`warm.compile_ins` calls the INS's tick kernel with the argument types a run's bank
+    passes: after a run, it adds no second specialisation (which the run would not use)."""
+    from ag_uav.jobs.run import fly
+    from estimators.ins.fusion import step_kernel
+
+    cfg = load_config(None, {"sim.max_time_s": 0.2, "log.enabled": False})
+    fly(cfg, out_root=tmp_path, run_id="r", progress=False, helper=False)
+    sigs = list(step_kernel.signatures)
+    warm.compile_ins()
+    assert list(step_kernel.signatures) == sigs and len(sigs) == 1

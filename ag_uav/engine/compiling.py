@@ -1,7 +1,9 @@
 """What the engine says of numba's compile on a fresh checkout: a notice when the first kernel
 starts compiling (before the wait, once per process), the kernels counted on the flight's progress
-bar as they compile, and how long tick 0 took when it compiled (kept out of the loop's wall
-time)."""
+bar as they compile, and how long the compile took, said at tick 0: tick 0's own time when it
+compiled (kept out of the loop's wall time) plus what compiled before it under
+:func:`compile_notice` (the INS, compiled first while a helper takes the rest:
+:mod:`ag_uav.jobs.warm`)."""
 
 from __future__ import annotations
 
@@ -18,6 +20,8 @@ __all__ = ["COMPILE_NOTICE", "COMPILE_THRESHOLD_S", "compile_notice", "first_tic
 COMPILE_THRESHOLD_S = 3.0
 #: what this process has said of the compile: "" nothing, "started", "done"
 _announced = ""
+#: seconds compiled before tick 0 (:func:`compile_notice` without a bar), said with tick 0's
+_before_s = 0.0
 #: said before tick 0's wait when numba starts compiling (once per process)
 COMPILE_NOTICE = ("compiling kernels: first run only, about a minute on a 2-core "
                   "machine (cached for later runs) ...")
@@ -31,11 +35,13 @@ def _say(msg: str) -> None:
 
 
 @contextlib.contextmanager
-def compile_notice(bar: Any = None):
+def compile_notice(bar: Any = None, ahead: bool = False):
     """While tick 0 runs: the first ``numba:compile`` event (a kernel not in the cache) prints
     :data:`COMPILE_NOTICE` at once, so the wait is said before it, not after. With a progress
     bar, its postfix counts the kernels as they compile and names the one compiling (the bar
-    itself stands at 0 until the first tick is done), at most every ``bar.mininterval``."""
+    itself stands at 0 until the first tick is done), at most every ``bar.mininterval``.
+    ``ahead``: kernels compiled before tick 0 (their time is said with tick 0's,
+    :func:`first_tick`)."""
     try:
         from numba.core import event
     except ImportError:  # pragma: no cover - the kernels run as Python
@@ -62,12 +68,16 @@ def compile_notice(bar: Any = None):
             pass
 
     first = _First()
+    t0 = time.perf_counter()
     try:
         with event.install_listener("numba:compile", first):
             yield
     finally:
         if bar is not None and first.n:
             bar.set_postfix_str("", refresh=False)
+        if ahead and first.n:
+            global _before_s
+            _before_s += time.perf_counter() - t0
 
 
 def kernel_name(ev: Any) -> str:
@@ -81,12 +91,13 @@ def first_tick(wall0: float) -> tuple[float, float]:
     """Tick 0 runs (and compiles, on a fresh checkout) every kernel: a long one is compile time,
     said once per process (:func:`compile_notice` said it before; this says how long it took)
     and kept out of the loop's wall time."""
-    global _announced
+    global _announced, _before_s
     now = time.perf_counter()
     took = now - wall0
-    if took < COMPILE_THRESHOLD_S:
-        return 0.0, wall0
-    if _announced != "done":
+    compiled = took >= COMPILE_THRESHOLD_S
+    if _announced != "done" and (compiled or _before_s > 0.0):
         _announced = "done"
-        _say(f"compiled the kernels in {took:.0f} s (first run only; cached for later runs)")
-    return took, now
+        _say(f"compiled the kernels in {_before_s + took * compiled:.0f} s (first run only; "
+             "cached for later runs)")
+    _before_s = 0.0
+    return (took, now) if compiled else (0.0, wall0)

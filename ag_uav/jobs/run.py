@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import json
 import re
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -96,8 +97,8 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     finished flight whose log end or ``summary.json`` cannot be written raises
     :class:`RunOutputError`, which carries the result.
 
-    ``helper``: on an empty kernel cache, compile the kernels the INS does not need in a helper
-    process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
+    ``helper``: on an empty kernel cache, compile the INS first, here, and the kernels the INS
+    does not need in a helper process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
     every core busy, says False)."""
     from .outdir import check_reuse, hold, unique_run_dir
 
@@ -114,9 +115,25 @@ def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
 
     w = warm.start(cfg) if helper and feedback is None else None  # an empty kernel cache
     try:
+        if w is not None:  # the INS here while the helper compiles what comes before it
+            _compile_ins_ahead(progress)
         return _fly_logged(cfg, run_dir, progress, feedback, log_writer)
     finally:
         warm.stop(w)
+
+
+def _compile_ins_ahead(progress: bool) -> None:
+    """:func:`warm.compile_ins` with the compile notice, and a line that counts and names the
+    kernels as they compile (``progress``)."""
+    from tqdm import tqdm
+
+    from ..engine.compiling import compile_notice
+    from . import warm
+
+    with tqdm(total=0, desc="compiling the INS", bar_format="{desc}{postfix}", leave=False,
+              disable=not progress, file=sys.stderr) as bar, \
+            compile_notice(bar if progress else None, ahead=True):
+        warm.compile_ins()
 
 
 def _fly_logged(cfg: Config, run_dir: Path, progress: bool, feedback,

@@ -1,20 +1,20 @@
-"""The first run's compile on two cores: a helper process compiles the kernels the INS does not
-need while the run compiles the INS.
+"""The first run's compile on two cores: the run compiles the INS first while a helper process
+compiles the other kernels.
 
 On a checkout whose numba cache is empty, the run's kernels compile one after another in the
-flying process before its first tick (docs/speed.md, "The first run"). The INS's tick kernel and
-its laws are most of that and compile when tick 0 reaches the navigation stage; the rest (the
-deposition pattern that chooses the lanes, the log's encoders, the controller, the sprayer, the
-wind, the dose map) does not depend on them. :func:`start` launches a helper process that flies
-the same config on the true state (``estimator.name = "true"`` with no shadow filters: no INS)
-for :data:`FLY_S` simulated seconds into a temporary folder, at low priority, without the log
-and on fixed lanes (the run compiles the log's encoders and the lane pattern test before its
-loop anyway): it compiles the loop's other kernels into the same numba cache while the run
-compiles the INS, and when the run reaches them numba loads them from the cache. The helper
-shares nothing with the run but the cache's files, which numba writes whole (a temporary file
-renamed into place), so the run computes exactly what it computes without it; a kernel the run
-reaches before the helper has written it is compiled by the run as
-before. :func:`stop` ends the helper if it is still running and removes its folder.
+flying process (docs/speed.md, "The first run"). The INS's tick kernel and its laws are most of
+that; the rest (the deposition pattern that chooses the lanes, the log's encoders, the
+controller, the sprayer, the wind, the dose map) does not depend on them. :func:`start`
+launches a helper process that flies the same config on the true state (``estimator.name =
+"true"`` with no shadow filters: no INS) for :data:`FLY_S` simulated seconds into a temporary
+folder, at low priority, with its log but no renders: it compiles those kernels into the same
+numba cache. The run meanwhile compiles the INS before anything else (:func:`compile_ins`, one
+tick of a one-vehicle bank, called by :func:`ag_uav.jobs.run.fly` once the helper is started),
+then plans and flies, and numba loads from the cache what the helper has written by then. The
+helper shares nothing with the run but the cache's files, which numba writes whole (a
+temporary file renamed into place), so the run computes exactly what it computes without it; a
+kernel the run reaches before the helper has written it is compiled by the run as before.
+:func:`stop` ends the helper if it is still running and removes its folder.
 
 It starts only when it can help: the run flies the INS, the INS's tick kernel is not in the
 cache, this process may use at least two cores, and ``AG_UAV_WARM`` is not ``0``.
@@ -31,14 +31,13 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FLY_S", "Warmer", "start", "stop", "wanted"]
+__all__ = ["FLY_S", "Warmer", "compile_ins", "start", "stop", "wanted"]
 
 #: simulated seconds the helper flies (every per-tick kernel and the log's encoders run in them)
 FLY_S = 2.0
-#: what the helper flies differently from the run: no INS, no log, fixed lanes, briefly
+#: what the helper flies differently from the run: no INS, no renders, briefly
 HELPER_OVERRIDES: dict[str, Any] = {"estimator.name": "true", "estimator.shadow": [],
-                                    "sim.max_time_s": FLY_S, "log.enabled": False,
-                                    "mission.swath_m": 6.0}
+                                    "sim.max_time_s": FLY_S, "log.render": False}
 
 
 class Warmer:
@@ -90,6 +89,18 @@ def start(cfg: Any) -> Warmer | None:
         shutil.rmtree(folder, ignore_errors=True)
         return None
     return Warmer(proc, folder)
+
+
+def compile_ins() -> None:
+    """Compile the INS's tick kernel and the laws it calls, in this process, now: one tick of a
+    one-vehicle bank on zeros. Its arguments have the types a run's bank passes (every bank's
+    arrays are C-contiguous float64 or int64, whatever its rules), so the run loads the kernel
+    from the cache at its first tick."""
+    import numpy as np
+
+    from estimators.ins import BatchINS
+
+    BatchINS(1).step(np.zeros((1, 6)))
 
 
 def stop(w: Warmer | None) -> None:
