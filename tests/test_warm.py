@@ -75,3 +75,21 @@ def test_the_ins_compiled_first_is_the_kernel_a_run_calls(tmp_path) -> None:
     sigs = list(step_kernel.signatures)
     warm.compile_ins()
     assert list(step_kernel.signatures) == sigs and len(sigs) == 1
+
+
+def test_a_bad_field_is_said_before_any_compile(can_help, monkeypatch, tmp_path) -> None:
+    """Where the run would compile the INS first, a field it cannot load is refused at once:
+    no helper started, nothing compiled."""
+    from ag_uav.config import ConfigError
+    from ag_uav.jobs import run
+
+    started: list[object] = []
+    monkeypatch.setattr(warm, "start", lambda cfg: started.append(cfg))
+    monkeypatch.setattr(warm, "compile_ins", lambda: started.append("ins"))
+    bow = tmp_path / "bow.geojson"
+    bow.write_text(json.dumps({"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [1, 0],
+                                                                    [0, 1], [0, 0]]]}))
+    cfg = load_config(None, {"mission.field": str(bow)})
+    with pytest.raises(ConfigError, match="mission.field"):
+        run.fly(cfg, out_root=tmp_path, run_id="r", progress=False)
+    assert started == []

@@ -97,8 +97,9 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     finished flight whose log end or ``summary.json`` cannot be written raises
     :class:`RunOutputError`, which carries the result.
 
-    ``helper``: on an empty kernel cache, compile the INS first, here, and the kernels the INS
-    does not need in a helper process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
+    ``helper``: on an empty kernel cache, compile the INS first, here (after the field is
+    loaded: a bad field is refused at once), and the kernels the INS does not need in a helper
+    process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
     every core busy, says False)."""
     from .outdir import check_reuse, hold, unique_run_dir
 
@@ -113,7 +114,12 @@ def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
               log_writer: str, helper: bool = True) -> tuple[RunResult, Path]:
     from . import warm
 
-    w = warm.start(cfg) if helper and feedback is None else None  # an empty kernel cache
+    w = None
+    if helper and feedback is None and warm.wanted(cfg):  # an empty kernel cache
+        from ..world.mission import build_field
+
+        build_field(cfg)  # a bad field is said at once, not after the compile
+        w = warm.start(cfg)
     try:
         if w is not None:  # the INS here while the helper compiles what comes before it
             _compile_ins_ahead(progress)

@@ -14,7 +14,9 @@ then plans and flies, and numba loads from the cache what the helper has written
 helper shares nothing with the run but the cache's files, which numba writes whole (a
 temporary file renamed into place), so the run computes exactly what it computes without it; a
 kernel the run reaches before the helper has written it is compiled by the run as before.
-:func:`stop` ends the helper if it is still running and removes its folder.
+:func:`stop` ends the helper if it is still running and removes its folder. The run loads its
+field before it starts the helper, so a field it cannot load is refused at once; a plan it cannot
+make (the lanes, the sorties) is refused after the INS's compile, on an empty cache only.
 
 It starts only when it can help: the run flies the INS, the INS's tick kernel is not in the
 cache, this process may use at least two cores, and ``AG_UAV_WARM`` is not ``0``.
