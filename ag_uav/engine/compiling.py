@@ -20,7 +20,7 @@ __all__ = ["COMPILE_NOTICE", "COMPILE_THRESHOLD_S", "compile_notice", "first_tic
 COMPILE_THRESHOLD_S = 3.0
 #: what this process has said of the compile: "" nothing, "started", "done"
 _announced = ""
-#: seconds compiled before tick 0 (:func:`compile_notice` without a bar), said with tick 0's
+#: seconds compiled before tick 0 (:func:`compile_notice` with ``ahead``), said with tick 0's
 _before_s = 0.0
 #: said before tick 0's wait when numba starts compiling (once per process)
 COMPILE_NOTICE = ("compiling kernels: first run only, about a minute on a 2-core "
