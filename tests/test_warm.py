@@ -52,6 +52,7 @@ def test_helper_flies_the_config_on_the_true_state_and_leaves_nothing(can_help) 
     summary = json.loads((w.folder / "helper" / "summary.json").read_text())
     assert summary["feedback"] == "true" and summary["seed"] == 3
     assert summary["sim_time_s"] <= warm.FLY_S + 0.01
+    assert (w.folder / warm.MCKF_DONE).exists()   # the MCKF update first, and said
     warm.stop(w)
     assert not w.folder.exists()
 
@@ -85,7 +86,7 @@ def test_a_bad_field_is_said_before_any_compile(can_help, monkeypatch, tmp_path)
 
     started: list[object] = []
     monkeypatch.setattr(warm, "start", lambda cfg: started.append(cfg))
-    monkeypatch.setattr(warm, "compile_ins", lambda: started.append("ins"))
+    monkeypatch.setattr(warm, "compile_ins", lambda w=None: started.append("ins"))
     bow = tmp_path / "bow.geojson"
     bow.write_text(json.dumps({"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [1, 0],
                                                                     [0, 1], [0, 0]]]}))
@@ -93,3 +94,82 @@ def test_a_bad_field_is_said_before_any_compile(can_help, monkeypatch, tmp_path)
     with pytest.raises(ConfigError, match="mission.field"):
         run.fly(cfg, out_root=tmp_path, run_id="r", progress=False)
     assert started == []
+
+
+class _TypingOnly:
+    """numba's nopython pipeline cut after type inference (a test oracle: what a kernel asks of
+    the kernels it calls, without lowering it); built on first use."""
+
+    @staticmethod
+    def compiler() -> type:
+        from numba.core.compiler import CompilerBase, DefaultPassBuilder
+        from numba.core.compiler_machinery import PassManager
+        from numba.core.typed_passes import NopythonTypeInference
+
+        class TypingOnly(CompilerBase):
+            def define_pipelines(self):  # type: ignore[no-untyped-def]
+                pm = PassManager("typing only")
+                for cls, desc in DefaultPassBuilder.define_nopython_pipeline(self.state).passes:
+                    pm.add_pass(cls, desc)
+                    if cls is NopythonTypeInference:
+                        break
+                pm.finalize()
+                return [pm]
+
+        return TypingOnly
+
+
+def test_the_helpers_mckf_update_is_the_one_the_ins_calls(monkeypatch) -> None:
+    """The INS's tick kernel, typed, asks for the MCKF update with exactly the argument types
+    that :func:`warm.compile_ins`'s helper half (:func:`warm.compile_mckf_row`) compiles: the
+    run loads the helper's from the cache instead of compiling its own."""
+    import numba
+
+    from estimators.ins.fusion import step_kernel
+    from estimators.mckf import mckf_update_row
+
+    warm.compile_ins()
+    asked: list[object] = []
+    law_compile = type(mckf_update_row).compile
+    monkeypatch.setattr(mckf_update_row, "compile",
+                        lambda sig: asked.append(sig) or law_compile(mckf_update_row, sig),
+                        raising=False)
+    typed = numba.njit(pipeline_class=_TypingOnly.compiler())(step_kernel.py_func)
+    with pytest.raises(AttributeError):  # no lowering: no compile result
+        typed.compile(step_kernel.signatures[0])
+    helper = tuple(mckf_update_row.typeof_pyval(a) for a in warm.mckf_row_args())
+    assert set(asked) == {helper}
+
+
+def test_the_run_waits_for_the_helpers_mckf_update_then_compiles(tmp_path) -> None:
+    """``compile`` of the law waits for the helper's file, or for the helper's end, then
+    compiles (a cache hit when the helper wrote it), once."""
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    class Law:
+        def __init__(self) -> None:
+            self.calls: list[tuple[object, float]] = []
+
+        def compile(self, sig):  # type: ignore[no-untyped-def]
+            self.calls.append((sig, time.monotonic()))
+
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        law, w = Law(), warm.Warmer(sleeper, tmp_path)
+        law.compile = warm._after_helper(w, law)  # type: ignore[method-assign]
+        t0 = time.monotonic()
+        threading.Timer(0.4, (tmp_path / warm.MCKF_DONE).touch).start()
+        law.compile("sig")
+        assert law.calls[0][0] == "sig" and law.calls[0][1] - t0 >= 0.4
+        assert "compile" not in law.__dict__      # waits once only
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    law = Law()   # the helper has ended without the file: no wait
+    law.compile = warm._after_helper(warm.Warmer(sleeper, tmp_path / "none"), law)  # type: ignore[method-assign]
+    t0 = time.monotonic()
+    law.compile("sig")
+    assert law.calls and law.calls[0][1] - t0 < 0.2

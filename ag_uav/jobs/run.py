@@ -122,13 +122,13 @@ def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
         w = warm.start(cfg)
     try:
         if w is not None:  # the INS here while the helper compiles what comes before it
-            _compile_ins_ahead(progress)
+            _compile_ins_ahead(progress, w)
         return _fly_logged(cfg, run_dir, progress, feedback, log_writer)
     finally:
         warm.stop(w)
 
 
-def _compile_ins_ahead(progress: bool) -> None:
+def _compile_ins_ahead(progress: bool, w: Any) -> None:
     """:func:`warm.compile_ins` with the compile notice, and a line that counts and names the
     kernels as they compile (``progress``)."""
     from tqdm import tqdm
@@ -139,7 +139,7 @@ def _compile_ins_ahead(progress: bool) -> None:
     with tqdm(total=0, desc="compiling the INS", bar_format="{desc}{postfix}", leave=False,
               disable=not progress, file=sys.stderr) as bar, \
             compile_notice(bar if progress else None, ahead=True):
-        warm.compile_ins()
+        warm.compile_ins(w)
 
 
 def _fly_logged(cfg: Config, run_dir: Path, progress: bool, feedback,

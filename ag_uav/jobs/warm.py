@@ -1,5 +1,5 @@
 """The first run's compile on two cores: the run compiles the INS first while a helper process
-compiles the other kernels.
+compiles the MCKF's update and then the other kernels.
 
 On a checkout whose numba cache is empty, the run's kernels compile one after another in the
 flying process (docs/speed.md, "The first run"). The INS's tick kernel and its laws are most of
@@ -14,9 +14,18 @@ then plans and flies, and numba loads from the cache what the helper has written
 helper shares nothing with the run but the cache's files, which numba writes whole (a
 temporary file renamed into place), so the run computes exactly what it computes without it; a
 kernel the run reaches before the helper has written it is compiled by the run as before.
+
 :func:`stop` ends the helper if it is still running and removes its folder. The run loads its
 field before it starts the helper, so a field it cannot load is refused at once; a plan it cannot
 make (the lanes, the sorties) is refused after the INS's compile, on an empty cache only.
+
+The INS's tick kernel calls its laws in one order, and the MCKF's update
+(:func:`estimators.mckf.mckf_update_row`, over a quarter of the INS's compile) comes after the PCA,
+the propagation and the KF innovation. The helper compiles that update first, with the types the
+tick kernel passes it (:func:`compile_mckf_row`), and says so with a file in its folder; the run
+compiles the laws before it meanwhile, and when its tick kernel reaches the update it waits for
+that file (or for the helper to end, at most :data:`MCKF_WAIT_S`) and loads the update from the
+cache. The INS's compile is then shared between the two cores instead of running on one.
 
 It starts only when it can help: the run flies the INS, the INS's tick kernel is not in the
 cache, this process may use at least two cores, and ``AG_UAV_WARM`` is not ``0``.
@@ -30,16 +39,22 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FLY_S", "Warmer", "compile_ins", "start", "stop", "wanted"]
+__all__ = ["FLY_S", "MCKF_DONE", "MCKF_WAIT_S", "Warmer", "compile_ins", "compile_mckf_row",
+           "mckf_row_args", "start", "stop", "wanted"]
 
 #: simulated seconds the helper flies (every per-tick kernel and the log's encoders run in them)
 FLY_S = 2.0
 #: what the helper flies differently from the run: no INS, no renders, briefly
 HELPER_OVERRIDES: dict[str, Any] = {"estimator.name": "true", "estimator.shadow": [],
                                     "sim.max_time_s": FLY_S, "log.render": False}
+#: the longest the run waits for the helper's MCKF update before compiling it itself
+MCKF_WAIT_S = 60.0
+#: the file the helper writes in its folder once the MCKF update is in the cache
+MCKF_DONE = "mckf-row.done"
 
 
 class Warmer:
@@ -93,16 +108,60 @@ def start(cfg: Any) -> Warmer | None:
     return Warmer(proc, folder)
 
 
-def compile_ins() -> None:
+def compile_ins(w: Warmer | None = None) -> None:
     """Compile the INS's tick kernel and the laws it calls, in this process, now: one tick of a
     one-vehicle bank on zeros. Its arguments have the types a run's bank passes (every bank's
     arrays are C-contiguous float64 or int64, whatever its rules), so the run loads the kernel
-    from the cache at its first tick."""
+    from the cache at its first tick. With a helper ``w``, the MCKF update is the helper's
+    (module docstring)."""
     import numpy as np
 
     from estimators.ins import BatchINS
+    from estimators.mckf import mckf_update_row
 
-    BatchINS(1).step(np.zeros((1, 6)))
+    if w is not None:  # numba asks the law's dispatcher to compile when the caller's typing
+        mckf_update_row.compile = _after_helper(w, mckf_update_row)  # reaches it
+    try:
+        BatchINS(1).step(np.zeros((1, 6)))
+    finally:
+        mckf_update_row.__dict__.pop("compile", None)
+
+
+def _after_helper(w: Warmer, law: Any) -> Any:
+    """``law.compile`` that first waits for the helper's file (see the module docstring)."""
+    compile_law = type(law).compile
+
+    def compile_after_helper(sig: Any) -> Any:
+        law.__dict__.pop("compile", None)  # once
+        deadline = time.monotonic() + MCKF_WAIT_S
+        while (not (w.folder / MCKF_DONE).exists() and w.proc.poll() is None
+               and time.monotonic() < deadline):
+            time.sleep(0.05)
+        return compile_law(law, sig)
+
+    return compile_after_helper
+
+
+def compile_mckf_row() -> None:
+    """Compile :func:`estimators.mckf.mckf_update_row` with the argument types the INS's tick
+    kernel passes it (:func:`mckf_row_args`); on a fix of NaN it returns at once."""
+    from estimators.mckf import mckf_update_row
+
+    mckf_update_row(*mckf_row_args())
+
+
+def mckf_row_args() -> tuple[Any, ...]:
+    """Arguments of :func:`estimators.mckf.mckf_update_row` typed as the INS's tick kernel types
+    its own: C-contiguous float64 arrays, int64 counters, the work arrays as
+    :func:`estimators.mckf.mckf_work` makes them (``tests/test_warm.py`` compares the types)."""
+    import numpy as np
+
+    from estimators.mckf import mckf_work
+
+    n, m = 15, 3
+    return (np.zeros(n), np.eye(n), np.eye(m), np.zeros((m, n)), np.full(m, np.nan),
+            (np.zeros(n), np.zeros(m), np.zeros(5), np.zeros(4, np.int64)),
+            (np.zeros(4, np.int64), np.zeros(m)), mckf_work(n, m))
 
 
 def stop(w: Warmer | None) -> None:
