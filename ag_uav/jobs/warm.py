@@ -8,7 +8,8 @@ controller, the sprayer, the wind, the dose map) does not depend on them. :func:
 launches a helper process that flies the same config on the true state (``estimator.name =
 "true"`` with no shadow filters: no INS) for :data:`FLY_S` simulated seconds into a temporary
 folder, at low priority, with its log but no renders: it compiles those kernels into the same
-numba cache. The run meanwhile compiles the INS before anything else (:func:`compile_ins`, one
+numba cache (first the MCKF update, at the run's priority: see below). The run
+meanwhile compiles the INS before anything else (:func:`compile_ins`, one
 tick of a one-vehicle bank, called by :func:`ag_uav.jobs.run.fly` once the helper is started),
 then plans and flies, and numba loads from the cache what the helper has written by then. The
 helper shares nothing with the run but the cache's files, which numba writes whole (a
