@@ -119,7 +119,7 @@ class _TypingOnly:
         return TypingOnly
 
 
-def test_the_helpers_mckf_update_is_the_one_the_ins_calls(monkeypatch) -> None:
+def test_the_helpers_mckf_update_is_the_one_the_ins_calls() -> None:
     """The INS's tick kernel, typed, asks for the MCKF update with exactly the argument types
     that :func:`warm.compile_ins`'s helper half (:func:`warm.compile_mckf_row`) compiles: the
     run loads the helper's from the cache instead of compiling its own."""
@@ -131,12 +131,13 @@ def test_the_helpers_mckf_update_is_the_one_the_ins_calls(monkeypatch) -> None:
     warm.compile_ins()
     asked: list[object] = []
     law_compile = type(mckf_update_row).compile
-    monkeypatch.setattr(mckf_update_row, "compile",
-                        lambda sig: asked.append(sig) or law_compile(mckf_update_row, sig),
-                        raising=False)
-    typed = numba.njit(pipeline_class=_TypingOnly.compiler())(step_kernel.py_func)
-    with pytest.raises(AttributeError):  # no lowering: no compile result
-        typed.compile(step_kernel.signatures[0])
+    mckf_update_row.compile = lambda sig: asked.append(sig) or law_compile(mckf_update_row, sig)
+    try:
+        typed = numba.njit(pipeline_class=_TypingOnly.compiler())(step_kernel.py_func)
+        with pytest.raises(AttributeError):  # no lowering: no compile result
+            typed.compile(step_kernel.signatures[0])
+    finally:
+        del mckf_update_row.compile   # the dispatcher's own again
     helper = tuple(mckf_update_row.typeof_pyval(a) for a in warm.mckf_row_args())
     assert set(asked) == {helper}
 
