@@ -40,6 +40,57 @@ def _median_rate(fn: Callable[[], tuple[float, float]], repeats: int) -> float:
     return statistics.median(rates)
 
 
+def machine_facts() -> dict[str, Any]:
+    """``machine``: what the figures were measured on. The CPU's model name and the CPU LLVM
+    compiles the kernels for, the cores this process may use, the versions that set the speed,
+    and a plain Python loop's time per iteration (``python_loop_ns``, :func:`python_loop_ns`).
+    Machines of one kind differ in speed (docs/speed.md), and the engine's loop is partly the
+    Python around its kernels: this figure, beside ``raw_mujoco``, tells whether figures from
+    two machines can be compared."""
+    import platform
+
+    import llvmlite.binding as llvm
+    import numba
+
+    return {"cpu": _cpu_model(), "llvm_cpu": llvm.get_host_cpu_name(), "cores": _cores(),
+            "python": platform.python_version(), "numba": numba.__version__,
+            "mujoco": mujoco.__version__, "python_loop_ns": python_loop_ns()}
+
+
+def python_loop_ns(n: int = 1_000_000, repeats: int = 3) -> float:
+    """Nanoseconds per iteration of ``for i in range(n): x += i * 2`` (median of ``repeats``)."""
+
+    def once() -> float:
+        x, t0 = 0, time.perf_counter()
+        for i in range(n):
+            x += i * 2
+        return (time.perf_counter() - t0) / n * 1e9
+
+    return round(statistics.median(once() for _ in range(repeats)), 1)
+
+
+def _cpu_model() -> str:
+    """The CPU's model name (``/proc/cpuinfo``), or the platform's processor string."""
+    import platform
+
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:  # pragma: no cover - not Linux
+        pass
+    return platform.processor() or "unknown"  # pragma: no cover
+
+
+def _cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
 def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float, float]:
     """Raw MuJoCo stepping of the mission's model: hover thrust, ``mj_step(m, d, nstep)`` in a
     Python loop (nstep=1: one call per physics step)."""
@@ -73,7 +124,7 @@ def closed_loop(cfg: Config) -> tuple[float, float, dict]:
 
 
 def run_bench(cfg: Config, repeats: int = 3, quick: bool = False) -> dict[str, Any]:
-    out: dict[str, Any] = {"repeats": repeats}
+    out: dict[str, Any] = {"repeats": repeats, "machine": machine_facts()}
     c = with_overrides(cfg, TRUE_STATE_OVERRIDES)
     if quick:
         c.sim.max_time_s = min(c.sim.max_time_s, 60.0)
