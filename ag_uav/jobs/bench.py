@@ -52,7 +52,9 @@ def machine_facts() -> dict[str, Any]:
     import llvmlite.binding as llvm
     import numba
 
-    return {"cpu": _cpu_model(), "llvm_cpu": llvm.get_host_cpu_name(), "cores": _cores(),
+    from .executor import default_workers
+
+    return {"cpu": _cpu_model(), "llvm_cpu": llvm.get_host_cpu_name(), "cores": default_workers(),
             "python": platform.python_version(), "numba": numba.__version__,
             "mujoco": mujoco.__version__, "python_loop_ns": python_loop_ns()}
 
@@ -81,14 +83,6 @@ def _cpu_model() -> str:
     except OSError:  # pragma: no cover - not Linux
         pass
     return platform.processor() or "unknown"  # pragma: no cover
-
-
-def _cores() -> int:
-    """The cores this process may run on."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
 
 
 def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float, float]:
