@@ -1,0 +1,167 @@
+"""A recorded flight as the replay reads it, in the INS's own frames.
+
+Every reader (:mod:`~ag_uav.navigation.replay.readers`) returns a :class:`FlightLog`:
+
+* ``imu``: (n, 6) body-frame specific force f̃ (m/s²) and rate ω̃ (rad/s) at times ``imu_t``
+  (s), in the INS's body axes **FLU** (x forward, y left, z up: +g on z at rest), as
+  ``ag_uav/vehicle/imu.py`` reports them.  Autopilot logs are FRD (PX4, ArduPilot):
+  ``frd_to_flu`` turns (x, y, z) into (x, −y, −z).
+* ``gnss``: fixes at times ``gnss_t`` as local **ENU** metres about ``origin`` (lat °, lon °,
+  h m; :func:`ag_uav.world.geodesy.lonlat_to_enu`, WGS-84), with the reported per-axis
+  variances (m²) and, where the receiver gives it, the ENU velocity and its variance.
+* ``reference`` (a track flown independently of the INS: an RTK record, a CSV's truth) and
+  ``autopilot`` (the autopilot's own estimate: PX4 EKF2, ArduPilot EKF1): :class:`Track`.
+
+World frames: a NED vector (n, e, d) is ENU (e, n, −d).  Attitudes are Hamilton quaternions
+(w, x, y, z), FLU body → ENU world (MuJoCo's and the INS's); an autopilot's FRD → NED rotation
+R_nf becomes R_ef = T R_nf T', T = ENU←NED = [[0,1,0],[1,0,0],[0,0,−1]], T' = FRD←FLU =
+diag(1, −1, −1) (:func:`ned_frd_to_enu_flu`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimators.ins import quat_to_rot
+
+__all__ = ["ReplayError", "FlightLog", "Track", "euler_zyx_to_rot", "frd_to_flu",
+           "ned_frd_to_enu_flu", "rot_to_euler_zyx", "rot_to_quat", "quat_to_rot_np"]
+
+DEG = math.pi / 180.0
+_T_EN = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+_T_FF = np.diag([1.0, -1.0, -1.0])
+
+
+class ReplayError(ValueError):
+    """A log the replay cannot use (one line naming the file and what is wrong; exit 2)."""
+
+
+@dataclass
+class Track:
+    """A position/attitude track: ``t`` (n,), ``p`` (n, 3) ENU m (NaN where unknown), ``R`` (n,
+    3, 3) FLU → ENU rotation (NaN where unknown), ``v`` (n, 3) ENU m/s or None; ``label``
+    names it in tables."""
+
+    t: np.ndarray
+    p: np.ndarray
+    R: np.ndarray | None = None
+    v: np.ndarray | None = None
+    label: str = "reference"
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """(p, R) linearly interpolated at ``t`` (NaN outside the track's span; R by the
+        interpolated rotation matrix re-orthonormalised by SVD)."""
+        t = np.asarray(t, dtype=float)
+        out = np.full((t.size, 3), np.nan)
+        inside = (t >= self.t[0]) & (t <= self.t[-1])
+        for j in range(3):
+            out[inside, j] = np.interp(t[inside], self.t, self.p[:, j])
+        if self.R is None:
+            return out, None
+        R = np.full((t.size, 3, 3), np.nan)
+        flat = self.R.reshape(-1, 9)
+        M = np.stack([np.interp(t[inside], self.t, flat[:, j]) for j in range(9)], axis=1)
+        M = M.reshape(-1, 3, 3)
+        ok = np.all(np.isfinite(M), axis=(1, 2))
+        if ok.any():
+            u, _, vt = np.linalg.svd(M[ok])
+            d = np.sign(np.linalg.det(u @ vt))
+            u[:, :, 2] *= d[:, None]
+            sub = np.full((int(inside.sum()), 3, 3), np.nan)
+            sub[ok] = u @ vt
+            R[inside] = sub
+        return out, R
+
+
+@dataclass
+class FlightLog:
+    """One recorded flight (module docstring).  ``imu_rate_hz``: the IMU's nominal rate;
+    ``gnss_delay_s``: the age of a fix when it is time-stamped (0 when the stamp is the fix's
+    own epoch); ``lever_arm``: IMU → GNSS antenna, body FLU (m), None = unknown (0 is used);
+    ``notes``: what the reader did that a user should know."""
+
+    source: str
+    path: str
+    imu_t: np.ndarray
+    imu: np.ndarray
+    gnss_t: np.ndarray
+    gnss_p: np.ndarray
+    gnss_var: np.ndarray
+    gnss_v: np.ndarray | None = None
+    gnss_var_v: np.ndarray | None = None
+    origin: tuple[float, float, float] | None = None
+    reference: Track | None = None
+    autopilot: Track | None = None
+    imu_rate_hz: float = 0.0
+    gnss_delay_s: float = 0.0
+    lever_arm: tuple[float, float, float] | None = None
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.imu_t[-1] - self.imu_t[0]) if self.imu_t.size else 0.0
+
+
+def frd_to_flu(a: np.ndarray) -> np.ndarray:
+    """Body FRD vectors (..., 3) → FLU: (x, −y, −z)."""
+    a = np.array(a, dtype=float)
+    a[..., 1:] *= -1.0
+    return a
+
+
+def euler_zyx_to_rot(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """ZYX Euler angles (rad) → rotation matrices (n, 3, 3), R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr = np.cos(roll), np.sin(roll)
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    R = np.empty((np.size(roll), 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = -sp, cp * sr, cp * cr
+    return R
+
+
+def rot_to_euler_zyx(R: np.ndarray) -> np.ndarray:
+    """Rotation matrices (n, 3, 3) → (n, 3) roll, pitch, yaw (rad) of R = Rz Ry Rx."""
+    roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
+    pitch = np.arcsin(np.clip(-R[:, 2, 0], -1.0, 1.0))
+    yaw = np.arctan2(R[:, 1, 0], R[:, 0, 0])
+    return np.stack([roll, pitch, yaw], axis=1)
+
+
+def ned_frd_to_enu_flu(R_nf: np.ndarray) -> np.ndarray:
+    """An autopilot's attitude (FRD body → NED) → the INS's (FLU body → ENU): T R T'."""
+    return _T_EN @ R_nf @ _T_FF
+
+
+def quat_to_rot_np(q: np.ndarray) -> np.ndarray:
+    """Hamilton quaternions (n, 4) (w, x, y, z), normalised here → rotation matrices (n, 3, 3)
+    by the INS's own law (:func:`estimators.ins.quat_to_rot`, Solà eq 115)."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    R = np.empty((q.shape[0], 3, 3))
+    for i in range(q.shape[0]):
+        quat_to_rot(q[i], R[i])
+    return R
+
+
+def rot_to_quat(R: np.ndarray) -> np.ndarray:
+    """One rotation matrix → Hamilton (w, x, y, z) (Shepperd's method)."""
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
+    else:
+        i = int(np.argmax([R[0, 0], R[1, 1], R[2, 2]]))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
+        q = [0.0] * 4
+        q[0] = (R[k, j] - R[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (R[j, i] + R[i, j]) / s
+        q[1 + k] = (R[k, i] + R[i, k]) / s
+    q = np.asarray(q)
+    return q / np.linalg.norm(q) * (1.0 if q[0] >= 0 else -1.0)
