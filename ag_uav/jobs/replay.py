@@ -77,7 +77,8 @@ def replay_table(s: dict, run_dir: Path | None = None) -> str:
     lines.append(f"start: {info['init']['position']}; {info['init']['attitude']}")
     lines += [f"note: {n}" for n in s["notes"]]
     who = s["against_label"] or "nothing (no reference, no autopilot estimate)"
-    lines.append(f"estimators (INS, {'against ' + who if s['against'] != 'autopilot' else 'against the autopilot estimate: ' + who}):")
+    vs = ("against the autopilot's estimate, " if s["against"] == "autopilot" else "against ")
+    lines.append(f"estimators (INS, {vs}{who}):")
     hdr = ("rule", "pos h RMS/max (m)", "pos v (m)", "vel (m/s)", "roll/pitch (°)", "tilt (°)",
            "yaw (°)", "NIS pos", "NIS vel", "rejected", "gap drift (m)")
     rows = [hdr]

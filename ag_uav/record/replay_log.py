@@ -66,7 +66,7 @@ def write_replay_mcap(path: Path, res: ReplayResult, summary: dict) -> dict[str,
     every = max(1, int(round(1.0 / (RATE_HZ * float(res.t[1] - res.t[0])))))
     sel = np.arange(0, res.t.size, every)
     t = res.t[sel]
-    t0 = float(res.t[0])
+    t0 = min(float(res.t[0]), float(res.fix_t.min()) if res.fix_t.size else np.inf) - 1.0
     topics: dict[str, list[dict]] = {}
     for i, rule in enumerate(res.rules):
         x = res.x[sel, i]

@@ -146,6 +146,8 @@ def initial_state(log: FlightLog, t_grid: np.ndarray, imu: np.ndarray, lever: np
         k0 = int(np.searchsorted(t_grid, log.gnss_t[0]))
     if ref is not None:
         k0 = max(k0, int(np.searchsorted(t_grid, ref.t[0])))
+    elif src == "autopilot":   # its attitude may start later than the IMU
+        k0 = max(k0, int(np.searchsorted(t_grid, ap.t[0])))
     k0 = min(k0, t_grid.size - 2)
     t0 = t_grid[k0]
     R, how_att = _attitude(log, t_grid, imu, k0, src)

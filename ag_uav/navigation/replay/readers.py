@@ -333,10 +333,13 @@ def _df_gnss(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
 
 
 def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
-    rows = msgs["EKF1"] or msgs["AHRS2"] or msgs["ATT"]
-    if not rows:
+    def live(rows: list[dict]) -> bool:   # EKF1 logs zeros before it starts (or for ever)
+        return any(abs(r["Roll"]) + abs(r["Pitch"]) + abs(r["Yaw"]) > 0 for r in rows)
+
+    kind = next((k for k in ("EKF1", "AHRS2", "ATT") if msgs[k] and live(msgs[k])), None)
+    if kind is None:
         return
-    kind = "EKF1" if msgs["EKF1"] else ("AHRS2" if msgs["AHRS2"] else "ATT")
+    rows = msgs[kind]
     t = _df_t(rows)
     eul = np.array([[r["Roll"], r["Pitch"], r["Yaw"]] for r in rows], dtype=float) * DEG
     R = ned_frd_to_enu_flu(euler_zyx_to_rot(eul[:, 0], eul[:, 1], eul[:, 2]))

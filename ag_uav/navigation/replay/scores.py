@@ -1,7 +1,8 @@
 """What a replay measured: every rule against the reference (or, without one, against the
 autopilot's own estimate, labelled so), per tick of the replay grid inside the track's span.
 
-Per rule: horizontal position error RMS / max and vertical RMS (m), velocity RMS (m/s; the
+Per rule: horizontal position error RMS / max and vertical RMS (m), the horizontal RMS over
+the ticks within 1 s of a fix (``pos_h_rms_with_fixes_m``: a long GNSS loss left out), velocity RMS (m/s; the
 track's velocity, else the central difference of its positions over ±0.05 s), roll, pitch,
 tilt (the angle between the two body z axes) and yaw RMS (°), the mean NIS of the fused
 position and velocity fixes (3 each for a consistent filter), the fixes the gate rejected
@@ -82,6 +83,10 @@ def _errors(res: ReplayResult, x, p_ref, v_ref, R_ref, e_ref) -> dict:
                "pos_v_rms_m": _rms(dp[:, 2]),
                "vel_rms_mps": _rms(np.linalg.norm(x[:, 3:6] - v_ref, axis=1)),
                "ticks_scored": int(np.isfinite(he).sum())}
+    if res.fix_t.size:   # the ticks within 1 s of a fix handed to the INS (GNSS available)
+        j = np.clip(np.searchsorted(res.fix_t, res.t), 1, res.fix_t.size - 1)
+        near = np.minimum(np.abs(res.t - res.fix_t[j - 1]), np.abs(res.t - res.fix_t[j])) <= 1.0
+        s["pos_h_rms_with_fixes_m"] = _rms(he[near])
     if R_ref is not None and np.isfinite(R_ref).any():
         R = quat_to_rot_np(x[:, 6:10])
         e = rot_to_euler_zyx(R)
