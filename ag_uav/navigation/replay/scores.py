@@ -1,13 +1,13 @@
 """What a replay measured: every rule against the reference (or, without one, against the
 autopilot's own estimate, labelled so), per tick of the replay grid inside the track's span.
 
-Per rule: horizontal position error RMS / max and vertical RMS (m), the horizontal RMS over
-the ticks within 1 s of a fix (``pos_h_rms_with_fixes_m``: a long GNSS loss left out),
+Per rule: horizontal position error RMS / max and vertical RMS (m); the horizontal RMS over
+the ticks within 1 s of a fix (``pos_h_rms_with_fixes_m``: a long GNSS loss left out);
 velocity RMS (m/s; the track's velocity, else the central difference of its positions over
-±0.05 s), roll, pitch, tilt (the angle between the two body z axes) and yaw RMS (°), the
-mean NIS of the fused position and velocity fixes (3 each for a consistent filter), the fixes the gate rejected
-(verdict 1 or 2) or the latch held (3) with their times; with a GNSS gap the horizontal error
-at its start and at its last tick (the drift).
+±0.05 s); roll, pitch, tilt (the angle between the two body z axes) and yaw RMS (°); the
+mean NIS of the fused position and velocity fixes (3 each for a consistent filter); the fixes
+the gate rejected (verdict 1 or 2) or the latch held (3) with their times; with a GNSS gap
+the horizontal error at its start and at its last tick (the drift).
 """
 
 from __future__ import annotations
