@@ -79,12 +79,13 @@ def replay_table(s: dict, run_dir: Path | None = None) -> str:
     who = s["against_label"] or "nothing (no reference, no autopilot estimate)"
     vs = ("against the autopilot's estimate, " if s["against"] == "autopilot" else "against ")
     lines.append(f"estimators (INS, {vs}{who}):")
-    hdr = ("rule", "pos h RMS/max (m)", "pos v (m)", "vel (m/s)", "roll/pitch (°)", "tilt (°)",
+    hdr = ("rule", "pos h RMS/max (m)", "with fixes (m)", "pos v (m)", "vel (m/s)", "roll/pitch (°)", "tilt (°)",
            "yaw (°)", "NIS pos", "NIS vel", "rejected", "gap drift (m)")
     rows = [hdr]
     for i, (rule, e) in enumerate(s["estimators"].items()):
         rows.append((rule + (" *" if i == 0 else ""),
                      f"{_f(e.get('pos_h_rms_m'))} / {_f(e.get('pos_h_max_m'))}",
+                     _f(e.get("pos_h_rms_with_fixes_m")),
                      _f(e.get("pos_v_rms_m")), _f(e.get("vel_rms_mps")),
                      f"{_f(e.get('roll_rms_deg'), '.2f')} / {_f(e.get('pitch_rms_deg'), '.2f')}",
                      _f(e.get("tilt_rms_deg"), ".2f"), _f(e.get("yaw_rms_deg"), ".2f"),
@@ -93,7 +94,8 @@ def replay_table(s: dict, run_dir: Path | None = None) -> str:
                      _f(e.get("gap_drift_m"))))
     w = [max(len(r[j]) for r in rows) for j in range(len(hdr))]
     lines += ["  " + "  ".join(c.ljust(w[j]) for j, c in enumerate(r)) for r in rows]
-    lines.append("  (* flown; rejected = gate rejections + fixes held by the latch / fixes)")
+    lines.append("  (* flown; with fixes: the ticks within 1 s of a fix; rejected = gate "
+                 "rejections + fixes held by the latch / fixes)")
     rej = next(iter(s["estimators"].values()))["rejected_t_s"]
     if rej:
         more = f" ... ({len(rej)} in all)" if len(rej) > 30 else ""

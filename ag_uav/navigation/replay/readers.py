@@ -266,7 +266,7 @@ def _df_messages(path: Path) -> dict[str, list[dict]]:
     except Exception as e:
         raise ReplayError(f"{path}: not a readable DataFlash log ({type(e).__name__}: {e})"
                           .split("\n")[0]) from None
-    want = ("IMU", "GPS", "GPA", "EKF1", "AHRS2", "ATT")
+    want = ("IMU", "GPS", "EKF1", "AHRS2", "ATT")
     out: dict[str, list[dict]] = {k: [] for k in want}
     while True:
         try:
@@ -288,7 +288,7 @@ def _df_t(rows: list[dict], keys=("TimeUS", "TimeMS")) -> np.ndarray:
 
 def read_dataflash(path: Path) -> FlightLog:
     """ArduPilot DataFlash: ``IMU`` (FRD), ``GPS`` (Lat, Lng, Alt, HDop, Spd, GCrs, VZ; the
-    accuracy from ``GPA`` where logged, else σ = HDop × :data:`UERE_M`), ``EKF1`` (or
+    accuracy σ = HDop × :data:`UERE_M`: these logs carry no reported accuracy), ``EKF1`` (or
     ``AHRS2`` / ``ATT``) as the autopilot's estimate."""
     msgs = _df_messages(path)
     imu = msgs["IMU"]
@@ -310,6 +310,10 @@ def read_dataflash(path: Path) -> FlightLog:
 
 def _df_gnss(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
     g = [r for r in msgs["GPS"] if r.get("Status", 0) >= 3 and r.get("Lat", 0) != 0]
+    n_all = len(g)
+    g = [r for r in g if r.get("HDop", 0) > 0]   # HDop 0: no accuracy, the fix is left out
+    if len(g) < n_all:
+        log.notes.append(f"{n_all - len(g)} 3-D fixes with HDop 0 (no accuracy) left out")
     if not g:
         log.notes.append("no 3-D GNSS fix in the log: the INS coasts on the IMU alone")
         return
