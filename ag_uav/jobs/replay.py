@@ -79,8 +79,9 @@ def replay_table(s: dict, run_dir: Path | None = None) -> str:
     who = s["against_label"] or "nothing (no reference, no autopilot estimate)"
     vs = ("against the autopilot's estimate, " if s["against"] == "autopilot" else "against ")
     lines.append(f"estimators (INS, {vs}{who}):")
-    hdr = ("rule", "pos h RMS/max (m)", "with fixes (m)", "pos v (m)", "vel (m/s)", "roll/pitch (°)", "tilt (°)",
-           "yaw (°)", "NIS pos", "NIS vel", "rejected", "gap drift (m)")
+    hdr = ("rule", "pos h RMS/max (m)", "with fixes (m)", "pos v (m)", "vel (m/s)",
+           "roll/pitch (°)", "tilt (°)", "yaw (°)", "NIS pos", "NIS vel", "rejected",
+           "gap drift (m)")
     rows = [hdr]
     for i, (rule, e) in enumerate(s["estimators"].items()):
         rows.append((rule + (" *" if i == 0 else ""),
