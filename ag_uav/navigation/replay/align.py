@@ -18,8 +18,9 @@ det(U Vᵀ)) Vᵀ.
 
 **Initial state** (:func:`initial_state`): position the first fix less the lever arm (or the
 reference's); velocity the fix's (or the reference's, or 0); roll and pitch from the
-reference's attitude, else levelled from the accelerometer averaged over the first 0.2 s
-(φ = atan2(f_y, f_z), θ = atan2(−f_x, √(f_y² + f_z²))); heading from the reference, else from
+reference's attitude, else levelled from the accelerometer (φ = atan2(g_y, g_z), θ =
+atan2(−g_x, √(g_y² + g_z²)), g = f − Rᵀ a with a the GNSS velocity's slope about the start:
+:func:`_level`); heading from the reference, else from
 the autopilot's estimate, else from the GNSS course over ground (ψ = atan2(v_n, v_e) in ENU)
 at the first fix faster than 1 m/s, where the filter then starts.
 """
@@ -160,32 +161,48 @@ def initial_state(log: FlightLog, t_grid: np.ndarray, imu: np.ndarray, lever: np
 def _attitude(log: FlightLog, t_grid, imu, k0: int, src: str) -> tuple[np.ndarray, str]:
     t0 = t_grid[k0]
     ref = log.reference
-    if ref is not None and ref.R is not None:
-        _, Rr = ref.at(np.array([t0]))
-        if np.all(np.isfinite(Rr)):
-            rpy = rot_to_euler_zyx(Rr)[0]
-            how = "roll/pitch from the reference"
-        else:
-            rpy, how = _level(t_grid, imu, k0), "roll/pitch levelled from the accelerometer"
-    else:
-        rpy, how = _level(t_grid, imu, k0), "roll/pitch levelled from the accelerometer"
     if src in ("reference", "autopilot"):
         tr = ref if src == "reference" else log.autopilot
         _, Ry = tr.at(np.array([t0]))
         if not np.all(np.isfinite(Ry)):
             raise ReplayError(f"--heading {src}: no {src} attitude at the start (t = {t0:.2f} s)")
-        rpy[2] = rot_to_euler_zyx(Ry)[0, 2]
+        yaw = float(rot_to_euler_zyx(Ry)[0, 2])
     else:
-        j = int(np.searchsorted(log.gnss_t, t0))
-        j = min(j, log.gnss_t.size - 1)
-        rpy[2] = math.atan2(log.gnss_v[j, 1], log.gnss_v[j, 0])
+        j = min(int(np.searchsorted(log.gnss_t, t0)), log.gnss_t.size - 1)
+        yaw = math.atan2(log.gnss_v[j, 1], log.gnss_v[j, 0])
+    Rr = ref.at(np.array([t0]))[1] if ref is not None and ref.R is not None else None
+    if Rr is not None and np.all(np.isfinite(Rr)):
+        rpy, how = rot_to_euler_zyx(Rr)[0], "roll/pitch from the reference"
+    else:
+        rpy, comp = _level(log, t_grid, imu, k0, yaw)
+        how = "roll/pitch levelled from the accelerometer" + (
+            " less the GNSS acceleration" if comp else "")
+    rpy[2] = yaw
     return euler_zyx_to_rot(*[np.array([a]) for a in rpy])[0], f"{how}, heading from {src}"
 
 
-def _level(t_grid, imu, k0: int) -> np.ndarray:
-    n = max(1, int(round(0.2 / float(t_grid[1] - t_grid[0]))))
-    f = imu[k0:k0 + n, :3].mean(axis=0)
-    return np.array([math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2])), 0.0])
+def _level(log: FlightLog, t_grid, imu, k0: int, yaw: float) -> tuple[np.ndarray, bool]:
+    """Roll and pitch from the accelerometer: f = Rᵀ(a − g_w), so Rᵀ e_z g = f − Rᵀ a; the
+    world acceleration a is the slope of the GNSS velocity over the fixes within ±0.6 s of the
+    start (none: a = 0, the vehicle taken at rest), f the mean over the same window (0.2 s
+    without it); three rounds of levelling f − R(φ, θ, ψ)ᵀ a.  Returns (roll, pitch, 0) and
+    whether the acceleration was taken off."""
+    t0 = t_grid[k0]
+    a_w, comp = np.zeros(3), False
+    sel = slice(k0, k0 + max(1, int(round(0.2 / float(t_grid[1] - t_grid[0])))))
+    if log.gnss_v is not None and log.gnss_t.size >= 2:
+        te = log.gnss_t - log.gnss_delay_s
+        m = (np.abs(te - t0) <= 0.6) & np.all(np.isfinite(log.gnss_v), axis=1)
+        if m.sum() >= 2 and np.ptp(te[m]) > 0:
+            a_w, comp = np.polyfit(te[m], log.gnss_v[m], 1)[0], True
+            sel = (t_grid >= te[m].min()) & (t_grid <= te[m].max())
+    f = imu[sel, :3].mean(axis=0)
+    rpy = np.array([0.0, 0.0, yaw])
+    g = f
+    for _ in range(3):
+        rpy[0], rpy[1] = math.atan2(g[1], g[2]), math.atan2(-g[0], math.hypot(g[1], g[2]))
+        g = f - euler_zyx_to_rot(*[np.array([a]) for a in rpy])[0].T @ a_w
+    return np.array([rpy[0], rpy[1], 0.0]), comp
 
 
 def _position(log: FlightLog, t0: float, R: np.ndarray, lever: np.ndarray):

@@ -353,7 +353,7 @@ def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
         p = np.array([[r["PE"], r["PN"], -r["PD"]] for r in rows], dtype=float)
         v = np.array([[r["VE"], r["VN"], -r["VD"]] for r in rows], dtype=float)
         if log.gnss_t.size:  # the EKF's origin is not logged: its offset to the first fix
-            pe, _ = Track(t, p).at(log.gnss_t)
+            pe, _ = Track(t, p).at(log.gnss_t - log.gnss_delay_s)   # at the fixes' epochs
             d = log.gnss_p - pe
             off = np.nanmedian(d, axis=0)
             if np.all(np.isfinite(off)):
