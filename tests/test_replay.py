@@ -290,3 +290,25 @@ def test_a_ulog_cut_short_is_one_line_and_exit_2(tmp_path, capsys):
     rc = main(["replay", str(path), "--out", str(tmp_path / "runs")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and err.count("\n") == 0 and "cut.ulg" in err
+
+
+def test_a_log_with_an_origin_puts_the_tracks_on_the_map(tmp_path, capsys):
+    """The ULog's replay MCAP carries foxglove.LocationFix tracks (Map panel) of every rule,
+    the autopilot and the fixes, decodable with the schema written beside them."""
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    path = tmp_path / "f.ulg"
+    write_ulog(path, _flight_ned(12.0, 100.0))
+    assert main(["replay", str(path), "--out", str(tmp_path / "runs"), "--run-id", "u"]) == 0
+    assert "against the autopilot's estimate, PX4 EKF2" in capsys.readouterr().out
+    with open(tmp_path / "runs" / "u" / "run.mcap", "rb") as f:
+        r = make_reader(f, decoder_factories=[DecoderFactory()])
+        seen: dict[str, object] = {}
+        for schema, ch, _, msg in r.iter_decoded_messages(topics=["/geo/kf", "/geo/autopilot",
+                                                                   "/geo/gnss"]):
+            assert schema.name == "foxglove.LocationFix"
+            seen.setdefault(ch.topic, msg)
+    assert set(seen) == {"/geo/kf", "/geo/autopilot", "/geo/gnss"}
+    fix = seen["/geo/autopilot"]
+    assert abs(fix.latitude - ORIGIN[0]) < 1e-3 and abs(fix.longitude - ORIGIN[1]) < 1e-3
