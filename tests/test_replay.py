@@ -182,7 +182,7 @@ def _ulog_msg(kind: bytes, body: bytes) -> bytes:
     return struct.pack("<HB", len(body), kind[0]) + body
 
 
-def write_ulog(path, d: dict, cut: int | None = None) -> None:
+def write_ulog(path, d: dict, cut: int | None = None, params: dict | None = None) -> None:
     """A ULog by hand (docs.px4.io, *ULog File Format*): header, flag bits, formats, subscriptions
     and data of sensor_combined, vehicle_gps_position (stamped 0.11 s after its epoch),
     vehicle_local_position and vehicle_attitude."""
@@ -200,6 +200,9 @@ def write_ulog(path, d: dict, cut: int | None = None) -> None:
     out += _ulog_msg(b"B", bytes(40))
     for name, spec in fmts:
         out += _ulog_msg(b"F", f"{name}:{spec}".encode())
+    for key, val in (params or {}).items():   # float parameters
+        k = f"float {key}".encode()
+        out += _ulog_msg(b"P", bytes((len(k),)) + k + struct.pack("<f", val))
     for i, (name, _) in enumerate(fmts):
         out += _ulog_msg(b"A", struct.pack("<BH", 0, i) + name.encode())
     rows = []
@@ -312,3 +315,14 @@ def test_a_log_with_an_origin_puts_the_tracks_on_the_map(tmp_path, capsys):
     assert set(seen) == {"/geo/kf", "/geo/autopilot", "/geo/gnss"}
     fix = seen["/geo/autopilot"]
     assert abs(fix.latitude - ORIGIN[0]) < 1e-3 and abs(fix.longitude - ORIGIN[1]) < 1e-3
+
+
+def test_a_ulog_gives_its_lever_arm_and_gnss_delay(tmp_path):
+    path = tmp_path / "p.ulg"
+    write_ulog(path, _flight_ned(3.0, 100.0),
+               params={"EKF2_GPS_POS_X": 0.1, "EKF2_GPS_POS_Y": 0.05, "EKF2_GPS_POS_Z": -0.3,
+                       "EKF2_IMU_POS_X": 0.02, "EKF2_IMU_POS_Y": 0.0, "EKF2_IMU_POS_Z": 0.0,
+                       "EKF2_GPS_DELAY": 150.0})
+    log = read_log(path)
+    assert np.allclose(log.lever_arm, (0.08, -0.05, 0.3), atol=1e-6)   # FRD → FLU
+    assert abs(log.gnss_delay_s - 0.15) < 1e-6

@@ -208,8 +208,27 @@ def read_ulog(path: Path) -> FlightLog:
     if g is not None:
         _ulog_gnss(log, g)
     _ulog_ekf(log, u)
-    log.notes.append("GNSS delay 0.11 s (PX4 EKF2_GPS_DELAY default; --gnss-delay)")
+    _lever_from_params(log, u.initial_parameters, "EKF2_GPS_POS_", "EKF2_IMU_POS_")
+    d = u.initial_parameters.get("EKF2_GPS_DELAY")
+    if d is not None:
+        log.gnss_delay_s = float(d) * 1e-3
+        log.notes.append(f"GNSS delay {log.gnss_delay_s:g} s (the log's EKF2_GPS_DELAY; "
+                         "--gnss-delay)")
+    else:
+        log.notes.append("GNSS delay 0.11 s (PX4 EKF2_GPS_DELAY default; --gnss-delay)")
     return log
+
+
+def _lever_from_params(log: FlightLog, prm: dict, gps: str, imu: str) -> None:
+    """The lever arm IMU → antenna from the autopilot's parameters (body FRD positions of
+    the antenna and the IMU, ``<prefix>X/Y/Z``), where they are set."""
+    ax = ("X", "Y", "Z")
+    if not all(gps + a in prm for a in ax):
+        return
+    r = np.array([float(prm[gps + a]) - float(prm.get(imu + a, 0.0)) for a in ax])
+    log.lever_arm = tuple(float(x) + 0.0 for x in frd_to_flu(r))
+    log.notes.append(f"lever arm from the parameters {gps}X/Y/Z − {imu}X/Y/Z: "
+                     f"{np.round(log.lever_arm, 3).tolist()} m (body FLU)")
 
 
 def _ulog_gnss(log: FlightLog, g: dict) -> None:
@@ -266,7 +285,7 @@ def _df_messages(path: Path) -> dict[str, list[dict]]:
     except Exception as e:
         raise ReplayError(f"{path}: not a readable DataFlash log ({type(e).__name__}: {e})"
                           .split("\n")[0]) from None
-    want = ("IMU", "GPS", "EKF1", "AHRS2", "ATT")
+    want = ("IMU", "GPS", "EKF1", "AHRS2", "ATT", "PARM")
     out: dict[str, list[dict]] = {k: [] for k in want}
     while True:
         try:
@@ -305,6 +324,8 @@ def read_dataflash(path: Path) -> FlightLog:
     log.notes.append("GNSS delay 0.22 s (ArduPilot EKF's GPS delay default; --gnss-delay)")
     _df_gnss(log, msgs)
     _df_ekf(log, msgs)
+    prm = {r["Name"]: r["Value"] for r in msgs["PARM"] if "Name" in r}
+    _lever_from_params(log, prm, "GPS_POS1_", "INS_POS1_")
     return log
 
 
