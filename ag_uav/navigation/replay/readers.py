@@ -22,7 +22,9 @@ mounting is unknown: :mod:`~ag_uav.navigation.replay.align` finds both.
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
@@ -189,7 +191,8 @@ def read_ulog(path: Path) -> FlightLog:
     from pyulog import ULog
 
     try:
-        u = ULog(str(path))
+        with contextlib.redirect_stdout(io.StringIO()):   # pyulog prints its warnings
+            u = ULog(str(path))
     except Exception as e:  # pyulog raises several kinds on a damaged file
         raise ReplayError(f"{path}: not a readable ULog ({type(e).__name__}: {e})".split("\n")[0]
                           ) from None
@@ -207,6 +210,8 @@ def read_ulog(path: Path) -> FlightLog:
     g = _ulog_topic(u, ("vehicle_gps_position", "sensor_gps"))
     if g is not None:
         _ulog_gnss(log, g)
+    if getattr(u, "file_corruption", False):
+        log.notes.append("the file is damaged or cut short: replayed what pyulog could read")
     _ulog_ekf(log, u)
     _lever_from_params(log, u.initial_parameters, "EKF2_GPS_POS_", "EKF2_IMU_POS_")
     d = u.initial_parameters.get("EKF2_GPS_DELAY")
@@ -280,21 +285,23 @@ UERE_M = 2.0
 def _df_messages(path: Path) -> dict[str, list[dict]]:
     from pymavlink import DFReader
 
-    try:
-        m = DFReader.DFReader_binary(str(path), zero_time_base=True)
-    except Exception as e:
-        raise ReplayError(f"{path}: not a readable DataFlash log ({type(e).__name__}: {e})"
-                          .split("\n")[0]) from None
     want = ("IMU", "GPS", "EKF1", "AHRS2", "ATT", "PARM")
     out: dict[str, list[dict]] = {k: [] for k in want}
-    while True:
+    # pymavlink prints each damaged message on standard output: kept off the terminal
+    with contextlib.redirect_stdout(io.StringIO()):
         try:
-            msg = m.recv_match(type=list(want))
-        except Exception:  # a damaged message: what came before it is kept
-            break
-        if msg is None:
-            break
-        out[msg.get_type()].append(msg.to_dict())
+            m = DFReader.DFReader_binary(str(path), zero_time_base=True)
+        except Exception as e:
+            raise ReplayError(f"{path}: not a readable DataFlash log ({type(e).__name__}: {e})"
+                              .split("\n")[0]) from None
+        while True:
+            try:
+                msg = m.recv_match(type=list(want))
+            except Exception:  # a damaged message: what came before it is kept
+                break
+            if msg is None:
+                break
+            out[msg.get_type()].append(msg.to_dict())
     return out
 
 
