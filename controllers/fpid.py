@@ -1,7 +1,7 @@
 """Fuzzy PID controllers: interval type-2 (IT2-FPID) and type-1 (FPID).
 
-Law (one controller per axis; ``specs/controller.md`` §1; Kumbasar-group structure used by
-Candan & Li's agricultural-UAV paper, Table I)::
+Law (one controller per axis; the Kumbasar-group structure, Kumbasar & Hagras, Information
+Sciences 282 (2014), used by Candan & Li's agricultural-UAV paper, Table I)::
 
     e_k  = error,   ed_k = (e_k - e_{k-1})/dt   or  -(y_k - y_{k-1})/dt (derivative="measurement")
     ed_k = 0 on the first call (no derivative kick); optional low-pass with time constant d_tau

@@ -1,6 +1,7 @@
 """Interval type-2 (and type-1) fuzzy PD cores Φ(E, dE) for fuzzy PID controllers.
 
-Structure (Kumbasar-group IT2-FPID; see ``specs/controller.md``):
+Structure (Kumbasar-group IT2-FPID; Kumbasar & Hagras, Information Sciences 282
+(2014), as used by Candan & Li):
 
 * Inputs ``E`` and ``dE`` are clipped to [-1, 1].
 * Three sets per input, N / Z / P, with triangular upper membership functions (UMFs)

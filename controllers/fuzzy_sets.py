@@ -1,8 +1,8 @@
 """The N / Z / P input sets of the fuzzy PD cores, described with scikit-fuzzy primitives.
 
-This module is the *reference* description of the antecedents (``specs/controller.md`` §1) for
-figures and checks; it is never used in the per-tick loop (the cores in
-:mod:`controllers.fuzzy` evaluate the same functions in a few scalar float operations).
+This module is the *reference* description of the antecedents (the Kumbasar-group IT2-FPID,
+see :mod:`controllers.fpid`) for figures and checks; it is never used in the per-tick loop (the
+cores in :mod:`controllers.fuzzy` evaluate the same functions in a few scalar float operations).
 
 Sets on the clipped input domain [-1, 1], built with :func:`skfuzzy.trimf`:
 

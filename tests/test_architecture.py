@@ -385,3 +385,38 @@ def test_the_reach_in_check_finds_other_modules_privates(tmp_path):
     assert private_reach_ins(tmp_path, ("ag_uav",)) == {
         "ag_uav/a.py: from ag_uav.sub.b import _helper": 1, "ag_uav/a.py: B()._p": 1,
         "ag_uav/a.py: b._helper": 1, "ag_uav/a.py: x._s": 1}
+
+
+def _cited_paths(text: str) -> set[str]:
+    """``a/b.py`` paths and ``stage.module.name`` references in backticks."""
+    return set(re.findall(r"`((?:[a-z_]+/)+[a-z_]+\.py)`", text))
+
+
+def _cited_dotted(text: str) -> set[str]:
+    stages = ("world", "vehicle", "navigation", "engine", "record", "analysis", "jobs", "cli",
+              "controllers", "estimators", "ag_uav")
+    return {m for m in re.findall(r"`([a-z_]+(?:\.[a-z_]+)+)`", text) if m.split(".")[0] in stages}
+
+
+def _resolves(dotted: str) -> bool:
+    """``world.mission.build_field`` names a module (and an attribute in it) of the tree."""
+    parts = dotted.split(".")
+    root = parts[0] if parts[0] in ("ag_uav", "controllers", "estimators") else None
+    mods = parts if root else ["ag_uav", *parts]
+    for k in range(len(mods), 0, -1):
+        base = ROOT.joinpath(*mods[:k])
+        src = base.with_suffix(".py") if base.with_suffix(".py").exists() else base / "__init__.py"
+        if src.exists():
+            rest = mods[k:]
+            return not rest or re.search(rf"\b(def|class)\s+{rest[0]}\b|\b{rest[0]}\s*=|"
+                                         rf"import .*\b{rest[0]}\b", src.read_text()) is not None
+    return False
+
+
+def test_the_hand_written_architecture_text_names_what_exists():
+    """Every module path and dotted name the architecture page cites is in the tree."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    missing = [p for p in _cited_paths(text)
+               if not any((ROOT / base / p).exists() for base in ("", "ag_uav"))]
+    missing += [d for d in _cited_dotted(text) if not _resolves(d)]
+    assert not missing, f"docs/architecture.md cites what the tree does not have: {missing}"

@@ -57,7 +57,7 @@ from ..vehicle.mjcf import Vehicle, build_vehicle
 from .compiling import compile_notice, first_tick
 from .heap import trim_heap
 from .observers import HookObserver, LogObserver, Observer, TickView, frames_of
-from .physics import STATE_SPEC, default_threads, make_stepper
+from .physics import STATE_SPEC, default_threads, make_stepper, reset_rows, unstable_reason
 from .reftable import RefTable
 from .stages import (
     REC_COLUMNS,
@@ -368,7 +368,10 @@ class Engine:
 
     def physics(self) -> None:
         b = self.b
+        t0 = b.S[:, 0].copy()
         self.stepper.step(b.S, b.sens, b.f, b.xf, b.act)
+        for i in reset_rows(t0, b.S, b.act):   # MuJoCo reset an unstable vehicle
+            self.guard.end(i, unstable_reason(float(t0[i])), float(t0[i]))
 
     def tick(self, k: int) -> bool:
         """Tick ``k`` whole (stages, physics, the observers of the stepped state); False when

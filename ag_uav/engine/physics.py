@@ -13,12 +13,20 @@ and hold the rotor commands and the applied force over the period, so they give 
 to hand every model scratch data made for a model of the same sizes: a batch's models must share
 :func:`model_signature` (the field is scenery, not physics, so they do), and models or data of
 other sizes are refused with a clear error rather than stepped (memory safety).
+
+MuJoCo's warnings come to :func:`physics_warnings`, not to the ``MUJOCO_LOG.TXT`` file MuJoCo
+writes into the working directory by default. When a step goes unstable (a non-finite or huge
+``qacc``, ``qvel`` or ``qpos``), MuJoCo resets that vehicle's data to the model's initial state
+and goes on; its clock restarts at 0. :func:`reset_rows` finds those vehicles after a step, and
+the engine ends their flights with MuJoCo's message as the reason.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import threading
+from collections import deque
 from collections.abc import Sequence
 
 import mujoco
@@ -34,6 +42,43 @@ CTRL_SPEC = int(mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_XFRC_APPL
 #: vehicle-sim-s/s against 950-985 with one chunk per thread (uneven vehicles: some on the
 #: ground, with contacts)
 CHUNKS_PER_THREAD = 4
+
+
+_WARNINGS: deque[str] = deque(maxlen=32)
+_WARN_LOCK = threading.Lock()
+_WARN_INSTALLED = [False]
+
+
+def _on_warning(message: str) -> None:
+    with _WARN_LOCK:
+        _WARNINGS.append(message)
+
+
+def capture_warnings() -> None:
+    """Send MuJoCo's warnings to :func:`physics_warnings` from now on, in this process (instead
+    of MuJoCo's default, a ``MUJOCO_LOG.TXT`` file in the working directory)."""
+    if not _WARN_INSTALLED[0]:
+        mujoco.set_mju_user_warning(_on_warning)
+        _WARN_INSTALLED[0] = True
+
+
+def physics_warnings() -> list[str]:
+    """MuJoCo's latest warnings in this process (at most 32, oldest first)."""
+    with _WARN_LOCK:
+        return list(_WARNINGS)
+
+
+def reset_rows(t_before: np.ndarray, S: np.ndarray, act: np.ndarray) -> np.ndarray:
+    """Indices of the active vehicles whose clock went back over a step (``S[:, 0]``, the
+    state's time, below ``t_before``): MuJoCo found their simulation unstable and reset it."""
+    return np.flatnonzero(act & (S[:, 0] < t_before))
+
+
+def unstable_reason(t: float) -> str:
+    """The crash reason of a vehicle MuJoCo reset, with its latest warning."""
+    last = physics_warnings()
+    said = f": MuJoCo: {last[-1]}" if last else ""
+    return f"diverged: the physics went unstable at t={t:.2f}s and MuJoCo reset it{said}"
 
 
 def model_signature(model: mujoco.MjModel) -> tuple[int, ...]:
@@ -84,6 +129,7 @@ class DirectStepper(Stepper):
         """One vehicle steps in the caller's thread whatever it is offered."""
 
     def __init__(self, model: mujoco.MjModel, body: int, nsub: int, S0: np.ndarray) -> None:
+        capture_warnings()
         self.model, self.nsub = model, nsub
         self.data = mujoco.MjData(model)
         mujoco.mj_setState(model, self.data, S0, STATE_SPEC)
@@ -106,6 +152,7 @@ class RolloutStepper(Stepper):
 
     def __init__(self, models: Sequence[mujoco.MjModel], body: int, nsub: int,
                  nthread: int) -> None:
+        capture_warnings()
         self.models, self.nsub = list(models), nsub
         m0 = self.models[0]
         self.data = [mujoco.MjData(m0)]

@@ -139,6 +139,10 @@ class Guard:
                     ended = True
         return bool(flags & ACTIVE) and not (ended and not b.act.any())
 
+    def end(self, i: int, why: str, t: float) -> None:
+        """End vehicle ``i``'s flight at ``t`` with the reason ``why``."""
+        self._end(i, why, t)
+
     def _end(self, i: int, why: str, t: float) -> None:
         b = self.b
         b.crash_reason[i], b.crash_time[i] = why, t
