@@ -36,9 +36,12 @@ def _gap(text: str) -> tuple[float, float]:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from ..config import ConfigError
     from ..jobs.replay import replay, replay_table
     from ..navigation.replay import ReplayError, ReplayOptions
 
+    if args.uere is not None and not args.uere > 0:
+        raise ConfigError(f"--uere = {args.uere:g}: must be > 0 (m per unit of HDOP)")
     opts = ReplayOptions(
         flown=args.rule, gnss_from_reference=args.gnss_from_reference,
         gnss_rate_hz=args.gnss_rate, seed=args.seed,
@@ -48,7 +51,7 @@ def _replay(args: argparse.Namespace) -> int:
         gnss_velocity=not args.no_gnss_velocity)
     try:
         s, run_dir = replay(args.log, opts, args.out, args.run_id, args.overwrite,
-                            args.imu_file, mcap=not args.no_log)
+                            args.imu_file, mcap=not args.no_log, uere_m=args.uere)
     except ReplayError as e:
         print(f"ag-uav replay: {e}", file=sys.stderr)
         return 2
@@ -88,6 +91,8 @@ def register(sub) -> None:
                    "autopilot's, else the GNSS course once faster than 1 m/s)")
     p.add_argument("--imu-file", metavar="NAME", help="the Phantom path's IMU file (default "
                    "IMU_avg.csv, else IMU_1.csv)")
+    p.add_argument("--uere", type=float, metavar="M", help="a DataFlash fix's σ per unit of "
+                   "HDOP (m; default 2): those logs report no accuracy")
     p.add_argument("--no-gnss-velocity", action="store_true", help="fuse GNSS positions only")
     p.add_argument("--out", default="runs", help="root folder of the run folders (default runs)")
     p.add_argument("--run-id", help="run folder name (default replay-<log name>)")

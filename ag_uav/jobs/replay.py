@@ -27,10 +27,10 @@ __all__ = ["replay", "replay_table"]
 
 def replay(path: str, opts: ReplayOptions, out_root: str = "runs", run_id: str | None = None,
            overwrite: bool = False, imu_file: str | None = None,
-           mcap: bool = True) -> tuple[dict, Path]:
+           mcap: bool = True, uere_m: float | None = None) -> tuple[dict, Path]:
     """Replay ``path`` into a run folder; (summary, folder)."""
     t0 = time.perf_counter()
-    log = read_log(path, imu_file)
+    log = read_log(path, imu_file, uere_m)
     res = run_replay(log, opts)
     sc = score_replay(res)
     flown = res.rules[0]
@@ -98,10 +98,9 @@ def replay_table(s: dict, run_dir: Path | None = None) -> str:
     lines.append("  (* flown; with fixes: the ticks within 1 s of a fix; rejected = gate "
                  "rejections + fixes held by the latch / fixes)")
     rej = next(iter(s["estimators"].values()))["rejected_t_s"]
-    if rej:
-        more = f" ... ({len(rej)} in all)" if len(rej) > 30 else ""
-        lines.append("fixes the gate rejected (flown rule), t s: "
-                     + ", ".join(f"{x:.1f}" for x in rej[:30]) + more)
+    more = f" ... ({len(rej)} in all)" if len(rej) > 30 else ""
+    lines.append("fixes the gate rejected (flown rule), t s: "
+                 + (", ".join(f"{x:.1f}" for x in rej[:30]) + more if rej else "none"))
     if "gnss_gap" in s:
         g = s["gnss_gap"]
         lines.append(f"GNSS gap {g[0]:.1f}–{g[1]:.1f} s: drift at its end {_f(s['gap_drift_m'])} m")

@@ -47,8 +47,10 @@ __all__ = ["read_log", "read_csv_folder", "read_phantom", "read_ulog", "read_dat
 MIN_IMU_S = 1.0
 
 
-def read_log(path: str | Path, imu_file: str | None = None) -> FlightLog:
-    """Any supported log, by what ``path`` is (module docstring)."""
+def read_log(path: str | Path, imu_file: str | None = None, uere_m: float | None = None
+             ) -> FlightLog:
+    """Any supported log, by what ``path`` is (module docstring); ``uere_m``: σ per unit HDOP
+    for a DataFlash log's fixes (default :data:`UERE_M`)."""
     p = Path(path)
     if not p.exists():
         raise ReplayError(f"{p}: no such file or folder")
@@ -66,7 +68,7 @@ def read_log(path: str | Path, imu_file: str | None = None) -> FlightLog:
     if head.startswith(b"ULog"):
         return read_ulog(p)
     if head[:2] == b"\xa3\x95":
-        return read_dataflash(p)
+        return read_dataflash(p, UERE_M if uere_m is None else uere_m)
     raise ReplayError(f"{p}: not a PX4 ULog, an ArduPilot DataFlash .BIN or a log folder "
                       "(imu.csv + gnss.csv, or a Phantom 4 RTK path)")
 
@@ -312,9 +314,9 @@ def _df_t(rows: list[dict], keys=("TimeUS", "TimeMS")) -> np.ndarray:
     return np.array([r[k] for r in rows], dtype=float) * (1e-6 if k == "TimeUS" else 1e-3)
 
 
-def read_dataflash(path: Path) -> FlightLog:
+def read_dataflash(path: Path, uere_m: float = 2.0) -> FlightLog:
     """ArduPilot DataFlash: ``IMU`` (FRD), ``GPS`` (Lat, Lng, Alt, HDop, Spd, GCrs, VZ; the
-    accuracy σ = HDop × :data:`UERE_M`: these logs carry no reported accuracy), ``EKF1`` (or
+    accuracy σ = HDop × ``uere_m``: these logs carry no reported accuracy), ``EKF1`` (or
     ``AHRS2`` / ``ATT``) as the autopilot's estimate."""
     msgs = _df_messages(path)
     imu = msgs["IMU"]
@@ -329,14 +331,14 @@ def read_dataflash(path: Path) -> FlightLog:
     log = FlightLog("dataflash", str(path), t, f, np.zeros(0), np.zeros((0, 3)),
                     np.zeros((0, 3)), imu_rate_hz=rate, gnss_delay_s=0.22)
     log.notes.append("GNSS delay 0.22 s (ArduPilot EKF's GPS delay default; --gnss-delay)")
-    _df_gnss(log, msgs)
+    _df_gnss(log, msgs, uere_m)
     _df_ekf(log, msgs)
     prm = {r["Name"]: r["Value"] for r in msgs["PARM"] if "Name" in r}
     _lever_from_params(log, prm, "GPS_POS1_", "INS_POS1_")
     return log
 
 
-def _df_gnss(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
+def _df_gnss(log: FlightLog, msgs: dict[str, list[dict]], uere_m: float) -> None:
     g = [r for r in msgs["GPS"] if r.get("Status", 0) >= 3 and r.get("Lat", 0) != 0]
     n_all = len(g)
     g = [r for r in g if r.get("HDop", 0) > 0]   # HDop 0: no accuracy, the fix is left out
@@ -353,14 +355,14 @@ def _df_gnss(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
     log.gnss_t = tg
     log.gnss_p = lonlat_to_enu(lon, lat, log.origin, alt)
     hd = np.array([r.get("HDop", np.nan) for r in g], dtype=float)
-    sh = hd * UERE_M
+    sh = hd * uere_m
     log.gnss_var = np.stack([sh**2, sh**2, (2 * sh) ** 2], axis=1)
     spd = np.array([r["Spd"] for r in g])
     crs = np.array([r["GCrs"] for r in g]) * DEG
     vz = np.array([r.get("VZ", 0.0) for r in g])
     log.gnss_v = np.stack([spd * np.sin(crs), spd * np.cos(crs), -vz], axis=1)
     log.gnss_var_v = np.full((len(g), 3), 0.3**2)
-    log.notes.append(f"GNSS accuracy not logged: σ_e = σ_n = HDop × {UERE_M:g} m, σ_u = 2 σ_e; "
+    log.notes.append(f"GNSS accuracy not logged: σ_e = σ_n = HDop × {uere_m:g} m (--uere), σ_u = 2 σ_e; "
                      "velocity σ 0.3 m/s")
 
 
