@@ -362,8 +362,8 @@ def _df_gnss(log: FlightLog, msgs: dict[str, list[dict]], uere_m: float) -> None
     vz = np.array([r.get("VZ", 0.0) for r in g])
     log.gnss_v = np.stack([spd * np.sin(crs), spd * np.cos(crs), -vz], axis=1)
     log.gnss_var_v = np.full((len(g), 3), 0.3**2)
-    log.notes.append(f"GNSS accuracy not logged: σ_e = σ_n = HDop × {uere_m:g} m (--uere), σ_u = 2 σ_e; "
-                     "velocity σ 0.3 m/s")
+    log.notes.append(f"GNSS accuracy not logged: σ_e = σ_n = HDop × {uere_m:g} m (--uere), "
+                     "σ_u = 2 σ_e; velocity σ 0.3 m/s")
 
 
 def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
