@@ -5,10 +5,10 @@ mounting needed: a rotation keeps the norm), against the reference's |ω| from i
 (|Log(R_kᵀ R_{k+1})| / Δt), both on a common grid at ``fs`` Hz, the gyro's smoothed over the
 reference's sample interval; the lag is the shift of the IMU's clock that maximises their
 normalised cross-correlation over ±``max_lag_s``, refined by a parabola through the peak and
-its neighbours.  ``t_ref = t_imu + lag``.  (The yaw rate alone — the gyro about the measured vertical against the heading's rate — was
-tried first: on the periodic paths of the Phantom 4 RTK set its correlation peaks at 0.14–0.72
-and at lags seconds apart from path to path; the rate magnitude peaks at 0.976–0.997, with one
-lag on runs of consecutive paths.)
+its neighbours.  ``t_ref = t_imu + lag``.  (The yaw rate alone — the gyro about the measured
+vertical against the heading's rate — was tried first: on the periodic paths of the Phantom 4
+RTK set its correlation peaks at 0.14–0.72 and at lags seconds apart from path to path; the
+rate magnitude peaks at 0.976–0.997, with one lag on runs of consecutive paths.)
 
 **Mounting** (:func:`mount_rotation`): the rotation M (IMU axes → body axes) with ω_imu = M
 ω_body, by the orthogonal Procrustes / Kabsch solution (Kabsch 1976, *Acta Cryst.* A32:922) on
