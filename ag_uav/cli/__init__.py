@@ -58,6 +58,10 @@ def cmd_config(args: argparse.Namespace) -> int:
 
 
 def cmd_fly(args: argparse.Namespace) -> int:
+    if args.run_id is not None:  # a name, not a path: refused before anything is loaded
+        from ..jobs.outdir import check_run_id
+
+        check_run_id(args.run_id)
     cfg = _load(args)  # before importing the simulator: a bad config fails fast
     from ..jobs.run import fly
 
@@ -180,8 +184,9 @@ def build_parser(experiments: bool = True) -> argparse.ArgumentParser:
     _add_config_args(f)
     f.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run "
                    "folder (default: runs)")
-    f.add_argument("--run-id", help="run folder name (default: time-field-seed, with a -2, -3, "
-                   "... suffix where that folder exists)")
+    f.add_argument("--run-id", help="run folder name inside --out, not a path: '/', '\\', "
+                   "'.', '..' and absolute paths are refused (exit 2); default: "
+                   "time-field-seed, with a -2, -3, ... suffix where that folder exists")
     f.add_argument("--overwrite", action="store_true", help="replace the outputs of a previous "
                    "run in the --run-id folder (removed first; without it such a folder is "
                    "refused)")
