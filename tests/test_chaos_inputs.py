@@ -5,9 +5,14 @@ refuses.  Each case ends in one line and exit 2, or in a correct result."""
 
 from __future__ import annotations
 
+import json
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
+import numpy as np
 import pytest
+import shapely
+from shapely.geometry import Polygon
 
 from ag_uav.cli import main
 from ag_uav.config import ConfigError
@@ -44,3 +49,85 @@ def test_run_id_that_is_a_path_is_refused(rid, tmp_path, capsys):
 @pytest.mark.parametrize("rid", ["run-1", "2026_a.b", "feld-Ost", "..x", "a..b"])
 def test_run_id_names_are_accepted(rid):
     assert check_run_id(rid) == rid
+
+
+# ------------------------------------------------------------ a plan flies where the field is
+L_SHAPE = ROOT / "ag_uav" / "data" / "l-shape.geojson"
+
+
+def _file_polygon(path: Path) -> Polygon:
+    """The field's own lon/lat polygon, read straight from its GeoJSON file."""
+    geom = json.loads(path.read_text())
+    geom = geom.get("geometry", geom) if geom["type"] == "Feature" else geom["features"][0][
+        "geometry"]
+    rings = geom["coordinates"]
+    return Polygon(rings[0], rings[1:])
+
+
+def _export_lonlat(path: Path) -> np.ndarray:
+    """Every waypoint (lon, lat) of an exported plan, read as an autopilot or a GIS would."""
+    if path.suffix == ".plan":
+        items = json.loads(path.read_text())["mission"]["items"]
+        return np.array([(it["params"][5], it["params"][4]) for it in items
+                         if it["command"] == 16])
+    if path.suffix == ".geojson":
+        feats = json.loads(path.read_text())["features"]
+        return np.array([c[:2] for f in feats if f["properties"].get("role") == "path"
+                         for c in f["geometry"]["coordinates"]])
+    pts = []
+    for pm in ET.parse(path).getroot().iter(f"{KML}Placemark"):
+        for ls in pm.iter(f"{KML}LineString"):
+            txt = ls.find(f"{KML}coordinates").text
+            pts += [tuple(map(float, t.split(",")[:2])) for t in txt.split()]
+    return np.array(pts)
+
+
+@pytest.mark.parametrize("ext", [".plan", ".geojson", ".kml"])
+def test_every_export_lies_on_the_field_and_origin_is_refused(ext, tmp_path, capsys):
+    poly = _file_polygon(L_SHAPE)
+    out = tmp_path / f"l{ext}"
+    assert main(["plan", str(L_SHAPE), "-o", str(out)]) == 0
+    ll = _export_lonlat(out)
+    assert len(ll) >= 100
+    # every waypoint inside the file's own polygon (1e-7 deg: about 1 cm)
+    inside = shapely.contains_xy(poly.buffer(1e-7), ll[:, 0], ll[:, 1])
+    assert inside.all(), ll[~inside][:3]
+    # and they cover it: the waypoints' extent reaches within 10 m (1.3e-4 deg) of the field's
+    lo, la = poly.bounds[0::2], poly.bounds[1::2]
+    assert abs(ll[:, 0].min() - lo[0]) < 1.3e-4 and abs(ll[:, 0].max() - lo[1]) < 1.3e-4
+    assert abs(ll[:, 1].min() - la[0]) < 1e-4 and abs(ll[:, 1].max() - la[1]) < 1e-4
+    capsys.readouterr()
+    # --origin on a lon/lat field: refused, nothing written
+    moved = tmp_path / f"moved{ext}"
+    _one_line_exit2(capsys, ["plan", str(L_SHAPE), "--origin", "46.74,-117.0", "-o",
+                             str(moved)], "--origin", "georeferenced")
+    assert not moved.exists()
+    # the config's origin projects the field about another point: the waypoints stay on it
+    assert main(["plan", str(L_SHAPE), "--set", "mission.origin_lat_deg=46.74", "--set",
+                 "mission.origin_lon_deg=-117.0", "-o", str(moved)]) == 0
+    ll2 = _export_lonlat(moved)
+    assert shapely.contains_xy(poly.buffer(1e-7), ll2[:, 0], ll2[:, 1]).all()
+    assert np.abs(ll2.min(axis=0) - ll.min(axis=0)).max() < 2e-6  # ~0.2 m
+    assert np.abs(ll2.max(axis=0) - ll.max(axis=0)).max() < 2e-6
+
+
+def test_origin_places_a_local_field_like_the_config(tmp_path, capsys):
+    a, b = tmp_path / "a.plan", tmp_path / "b.plan"
+    assert main(["plan", "default", "--origin=-35.3,149.1", "-o", str(a)]) == 0
+    assert main(["plan", "default", "--set", "mission.origin_lat_deg=-35.3", "--set",
+                 "mission.origin_lon_deg=149.1", "-o", str(b)]) == 0
+    assert np.array_equal(_export_lonlat(a), _export_lonlat(b))
+    assert a.read_text() == b.read_text()
+    _one_line_exit2(capsys, ["plan", "default", "--origin", "95,10", "-o", str(a)], "--origin")
+
+
+def test_write_plan_refuses_to_move_a_georeferenced_field():
+    from ag_uav.world.field import load_field
+    from ag_uav.world.plan import plan_coverage
+    from ag_uav.world.plan_export import plan_waypoints
+
+    fld = load_field("l-shape")
+    plan = plan_coverage(fld)
+    with pytest.raises(ValueError, match="georeferenced"):
+        plan_waypoints(plan, origin=(46.74, -117.0))
+    assert len(plan_waypoints(plan, origin=fld.origin)) == len(plan_waypoints(plan))

@@ -104,7 +104,16 @@ class Waypoint:
 
 
 def _origin(plan: CoveragePlan, origin: Sequence[float] | None) -> tuple[float, float, float]:
-    o = origin if origin is not None else plan.field.origin
+    """The geodetic origin the plan's metres are exported about: ``origin`` for a field in local
+    metres without one, else the field's own (an ``origin`` that differs from it would move
+    every waypoint off the field, so it is refused)."""
+    own = plan.field.origin
+    if origin is not None and own is not None and not np.allclose(
+            [float(v) for v in origin[:2]], own[:2], rtol=0.0, atol=1e-12):
+        raise ValueError(f"field {plan.field.name!r} is georeferenced about {own[0]:.6f}, "
+                         f"{own[1]:.6f}; another origin would move every waypoint off the field "
+                         "(project the field about a point instead: load_field(..., origin=))")
+    o = origin if origin is not None else own
     if o is None:
         raise ValueError(f"field {plan.field.name!r} is in local metres with no geodetic origin; "
                          "give one (LAT,LON) to export lon/lat")
@@ -125,9 +134,11 @@ def plan_waypoints(plan: CoveragePlan, origin: Sequence[float] | None = None,
                    lead_off_m: float = 0.0) -> list[Waypoint]:
     """The plan's waypoints in order (shared segment joints once), in local metres and lon/lat.
 
-    ``origin`` = (lat, lon[, h]) overrides the field's geodetic origin (needed for a field given in
-    local metres). Each segment's polyline is thinned to ``simplify_m`` (its end points are kept,
-    so every leg end and every nozzle switch is a waypoint).
+    ``origin`` = (lat, lon[, h]): the geodetic origin of a field given in local metres without
+    one; a field with its own origin is exported about it (another one raises ValueError).
+
+    Each segment's polyline is thinned to ``simplify_m`` (its end points are kept, so every leg
+    end and every nozzle switch is a waypoint).
 
     ``lead_on_m`` / ``lead_off_m``: the nozzle commands lead the sprayed edges by this much path
     (:func:`nozzle_leads`: v·d for a valve delay d at speed v), so that the nozzles open and close
