@@ -131,3 +131,67 @@ def test_write_plan_refuses_to_move_a_georeferenced_field():
     with pytest.raises(ValueError, match="georeferenced"):
         plan_waypoints(plan, origin=(46.74, -117.0))
     assert len(plan_waypoints(plan, origin=fld.origin)) == len(plan_waypoints(plan))
+
+
+# ------------------------------------------------- experiment axes are checked like config keys
+AXES = [
+    (["spray-settings", "--heights", ""], ["--heights", "empty"]),
+    (["spray-settings", "--speeds", "3,x"], ["--speeds", "not a number"]),
+    (["spray-settings", "--heights", "-2"], ["--heights", "out of range"]),
+    (["spray-settings", "--spectra", " , "], ["--spectra", "empty"]),
+    (["spray-settings", "--spacings", "0.1:2:0.1"], ["--spacings", "mission.swath_m"]),
+    (["spray-settings", "--wind", "nan"], ["--wind"]),
+    (["drift", "--winds", ""], ["--winds", "empty"]),
+    (["drift", "--winds", "-1"], ["--winds", "out of range"]),
+    (["drift", "--winds", "30"], ["--winds", "wind.speed_mps"]),
+    (["drift", "--heights", "10"], ["--heights", "mission.altitude_m"]),
+    (["drift", "--speeds", "0"], ["--speeds"]),
+    (["drift", "--rhs", ""], ["--rhs", "empty"]),
+    (["drift", "--rhs", "120"], ["rh_percent"]),
+    (["drift", "--passes", "0"], ["--passes"]),
+    (["drift", "--mass", "0.1"], ["--mass", "vehicle.mass_kg"]),
+    (["swath", "--heights", ""], ["--heights", "empty"]),
+    (["swath", "--winds", "inf"], ["--winds"]),
+    (["swath", "--turbulence", "-1"], ["--turbulence"]),
+    (["ins-nav", "--what", "sweep", "--sigmas", "", "--kernels", ""], ["--sigmas", "--kernels"]),
+    (["ins-nav", "--what", "sweep", "--sigmas", "0"], ["--sigmas"]),
+    (["table2", "--estimators", ","], ["--estimators", "empty"]),
+    (["outage", "--duration", "-1"], ["--duration"]),
+    (["langevin", "--snr", ""], ["--snr"]),
+    (["controllers", "--controllers", ""], ["--controllers"]),
+    (["optimisers", "--optimizers", ""], ["--optimizers"]),
+    (["bearing-tracking", "--methods", ""], ["--methods"]),
+]
+
+
+@pytest.mark.parametrize(("argv", "words"), AXES, ids=[" ".join(a) for a, _ in AXES])
+def test_bad_experiment_axis_is_one_line(argv, words, tmp_path, capsys):
+    out = tmp_path / "out"
+    _one_line_exit2(capsys, ["experiment", *argv, "--out", str(out)], *words)
+    assert not out.exists() or not any(out.iterdir())  # nothing written
+
+
+def test_spray_settings_searches_only_what_fly_accepts(tmp_path, capsys):
+    out = tmp_path / "ss"
+    # the finding: 10 m was listed as a pick, then the confirming flight failed
+    err = _one_line_exit2(capsys, ["experiment", "spray-settings", "--heights", "10",
+                                   "--confirm", "1", "--out", str(out), "-q"],
+                          "--heights", "mission.altitude_m", "spray.max_height_m = 6")
+    assert "10" in err and not out.exists()
+    # the limits are the base config's, as the confirming flights load it
+    _one_line_exit2(capsys, ["experiment", "spray-settings", "--heights", "2,3.5",
+                             "--set", "spray.max_height_m=3", "--set", "mission.altitude_m=2",
+                             "--out", str(out), "-q"], "3.5", "spray.max_height_m = 3")
+    # inside the envelope: every point of the search is one fly accepts
+    from ag_uav.config import load_config
+
+    assert main(["experiment", "spray-settings", "--heights", "2,5.5", "--speeds", "5",
+                 "--spectra", "medium", "--spacings", "3:4:1", "--out", str(out), "-q"]) == 0
+    import csv
+
+    rows = list(csv.DictReader((out / "settings.csv").open()))
+    assert {float(r["height_m"]) for r in rows} == {2.0, 5.5} and len(rows) == 4
+    for r in rows:
+        load_config(None, {"mission.altitude_m": float(r["height_m"]),
+                           "mission.speed_mps": float(r["speed_mps"]),
+                           "mission.swath_m": float(r["spacing_m"])})

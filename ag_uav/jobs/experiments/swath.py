@@ -23,6 +23,7 @@ deposit beyond the buffer), ``profiles.csv`` (the deposit profiles) and ``swath.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 
@@ -35,7 +36,7 @@ from ...world.pattern import (  # noqa: F401 - the pattern test lives in the wor
     single_pass,
     swath_pattern,
 )
-from . import float_list, toml_overrides
+from . import flight_axes, toml_overrides
 
 NAME = "swath"
 HELP = ("spray pattern test of the deposition model: single passes across a collector line at "
@@ -72,13 +73,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from ...config import ConfigError
     from ..batch import markdown_table, print_table
     from . import write_csv
 
-    cfg = DepositionConfig(**toml_overrides(args.set))
+    winds, heights, speeds = flight_axes(args)
+    if not (math.isfinite(args.turbulence) and args.turbulence >= 0):
+        raise ConfigError(f"--turbulence = {args.turbulence:g}: must be >= 0 (a share of the "
+                          "crosswind)")
+    try:
+        cfg = DepositionConfig(**toml_overrides(args.set))
+    except (ValueError, TypeError) as e:
+        raise ConfigError(f"--set: {e}") from None
     t0 = time.perf_counter()
-    rows, profiles = swath_pattern(cfg, float_list(args.heights), float_list(args.speeds),
-                                   float_list(args.winds), mass_kg=args.mass, turb=args.turbulence)
+    rows, profiles = swath_pattern(cfg, heights, speeds, winds, mass_kg=args.mass,
+                                   turb=args.turbulence)
     wall = time.perf_counter() - t0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
