@@ -195,3 +195,76 @@ def test_spray_settings_searches_only_what_fly_accepts(tmp_path, capsys):
         load_config(None, {"mission.altitude_m": float(r["height_m"]),
                            "mission.speed_mps": float(r["speed_mps"]),
                            "mission.swath_m": float(r["spacing_m"])})
+
+
+# --------------------------------------------------------- bounded inputs: zip bombs, big files
+KML_DOC = (b"<?xml version='1.0'?><kml xmlns='http://www.opengis.net/kml/2.2'><Placemark>"
+           b"<name>f</name><Polygon><outerBoundaryIs><LinearRing><coordinates>"
+           b"-117.0,46.73 -116.999,46.73 -116.999,46.731 -117.0,46.731 -117.0,46.73"
+           b"</coordinates></LinearRing></outerBoundaryIs></Polygon></Placemark></kml>")
+
+
+def _kmz(path: Path, doc: bytes, declared: int | None = None) -> Path:
+    """A KMZ holding ``doc`` as doc.kml; ``declared``: the uncompressed size its local header
+    and central directory claim (a bomb's few bytes that say they inflate to gigabytes)."""
+    import io
+    import struct
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("doc.kml", doc)
+    b = bytearray(buf.getvalue())
+    if declared is not None:  # APPNOTE.TXT 4.3.7 / 4.3.12: uncompressed size at +22 / +24
+        struct.pack_into("<I", b, b.find(b"PK\x03\x04") + 22, declared)
+        struct.pack_into("<I", b, b.find(b"PK\x01\x02") + 24, declared)
+    path.write_bytes(bytes(b))
+    return path
+
+
+def test_kmz_bomb_is_refused_before_it_is_inflated(tmp_path, capsys):
+    import resource
+
+    good = _kmz(tmp_path / "good.kmz", KML_DOC)
+    assert main(["plan", str(good), "-o", str(tmp_path / "g.plan")]) == 0
+    capsys.readouterr()
+    bomb = _kmz(tmp_path / "bomb.kmz", KML_DOC, declared=0xFFFF0000)  # "4 GiB"
+    assert bomb.stat().st_size < 1000
+    rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    err = _one_line_exit2(capsys, ["plan", str(bomb), "-o", str(tmp_path / "b.plan")],
+                          "bomb.kmz", "KMZ document", "4095.9 MiB", "64 MiB")
+    assert "inflated" in err
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss0 < 200_000  # KiB
+    # a member that inflates past the size it declares: the archive's CRC check stops it
+    liar = _kmz(tmp_path / "liar.kmz", KML_DOC + b" " * 100_000, declared=len(KML_DOC))
+    _one_line_exit2(capsys, ["plan", str(liar), "-o", str(tmp_path / "l.plan")],
+                    "liar.kmz", "not a valid zip archive")
+
+
+@pytest.mark.parametrize("name", ["big.geojson", "big.kml", "big.kmz", "big.shp"])
+def test_oversized_field_file_is_refused_before_it_is_read(name, tmp_path, capsys):
+    p = tmp_path / name
+    with open(p, "wb") as f:  # sparse: 2 GiB on paper, no blocks on the disk
+        f.truncate(2 * 2**30)
+    if name.endswith(".shp"):
+        for suf in (".shx", ".dbf"):
+            p.with_suffix(suf).write_bytes(b"")
+    _one_line_exit2(capsys, ["plan", str(p), "-o", str(tmp_path / "x.plan")],
+                    name, "2048.0 MiB", "64 MiB")
+
+
+def test_oversized_shapefile_part_is_refused(tmp_path, capsys):
+    import shapefile
+
+    p = tmp_path / "f.shp"
+    with shapefile.Writer(str(p), shapeType=shapefile.POLYGON) as w:
+        w.field("name", "C")
+        w.poly([[[-117.0, 46.73], [-117.0, 46.731], [-116.999, 46.731], [-116.999, 46.73],
+                 [-117.0, 46.73]]])
+        w.record("f")
+    assert main(["plan", str(p), "-o", str(tmp_path / "ok.plan")]) == 0
+    capsys.readouterr()
+    with open(p.with_suffix(".dbf"), "r+b") as f:
+        f.truncate(2 * 2**30)
+    _one_line_exit2(capsys, ["plan", str(p), "-o", str(tmp_path / "x.plan")],
+                    "f.dbf", "64 MiB")
