@@ -223,7 +223,10 @@ def build_parser(experiments: bool = True) -> argparse.ArgumentParser:
                         description="Plan coverage of FIELD (a built-in name or a .geojson/"
                                     ".kml/.kmz/.shp file; PATH#name=VALUE picks one feature) "
                                     "with the config's swath, headland and direction, and write "
-                                    "it in the format OUT's extension names.")
+                                    "it in the format OUT's extension names. A field file over "
+                                    "64 MiB (a .kmz: once inflated) is refused before it is "
+                                    "read, a file in local metres is refused as such, and a "
+                                    "field across longitude 180 is planned where it is.")
     pl.add_argument("field", nargs="?", metavar="FIELD",
                     help="field (default: the config's mission.field)")
     _add_config_args(pl)

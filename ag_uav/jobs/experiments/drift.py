@@ -178,8 +178,10 @@ def run_cases(base: DepositionConfig, cases: list[Case], passes: int, mass_kg: f
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--winds", default="1,3,5", help="crosswinds at the release height (m/s)")
-    p.add_argument("--heights", default="2,3", help="release heights (m)")
+    p.add_argument("--winds", default="1,3,5", help="crosswinds at the release height (m/s; "
+                   "each one wind.speed_mps accepts)")
+    p.add_argument("--heights", default="2,3", help="release heights (m; each one "
+                   "mission.altitude_m accepts: between spray.min_height_m and max_height_m)")
     p.add_argument("--speeds", default="5", help="ground speeds (m/s)")
     names = ", ".join(f"{k} {v[0]:g}/{v[1]:g}/{v[2]:g}" for k, v in SPECTRA.items())
     p.add_argument("--spectra", default="fine,medium,coarse",

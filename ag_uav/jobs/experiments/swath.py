@@ -61,7 +61,8 @@ def droplet_anchor(cfg: DepositionConfig) -> list[list[str]]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--heights", default="2,3,4", help="release heights (m), comma-separated")
+    p.add_argument("--heights", default="2,3,4", help="release heights (m), comma-separated; "
+                   "each one mission.altitude_m accepts")
     p.add_argument("--speeds", default="3,5,7", help="ground speeds (m/s)")
     p.add_argument("--winds", default="0,1.5,3", help="crosswinds (m/s)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
