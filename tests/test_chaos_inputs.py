@@ -268,3 +268,22 @@ def test_oversized_shapefile_part_is_refused(tmp_path, capsys):
         f.truncate(2 * 2**30)
     _one_line_exit2(capsys, ["plan", str(p), "-o", str(tmp_path / "x.plan")],
                     "f.dbf", "64 MiB")
+
+
+def test_deeply_nested_geojson_and_entity_expansion_are_one_line(tmp_path, capsys):
+    deep = tmp_path / "deep.geojson"
+    deep.write_text('{"type": "Polygon", "coordinates": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    _one_line_exit2(capsys, ["plan", str(deep), "-o", str(tmp_path / "d.plan")],
+                    "deep.geojson", "nested too deeply")
+    import pyexpat
+
+    if tuple(int(v) for v in pyexpat.EXPAT_VERSION.split("_")[1].split(".")) < (2, 4, 1):
+        pytest.skip(f"{pyexpat.EXPAT_VERSION} has no amplification limit")
+    # "billion laughs": 10^10 characters from a few hundred bytes of entities
+    ents = '<!ENTITY a0 "xxxxxxxxxx">' + "".join(
+        f'<!ENTITY a{i} "{f"&a{i - 1};" * 10}">' for i in range(1, 10))
+    laughs = tmp_path / "laughs.kml"
+    laughs.write_text(f'<?xml version="1.0"?><!DOCTYPE kml [{ents}]><kml xmlns="http://www.'
+                      'opengis.net/kml/2.2"><Placemark><name>&a9;</name></Placemark></kml>')
+    _one_line_exit2(capsys, ["plan", str(laughs), "-o", str(tmp_path / "l.plan")],
+                    "laughs.kml", "not well-formed")

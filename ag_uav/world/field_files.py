@@ -75,6 +75,9 @@ def json_loads(s: str | bytes) -> Any:
         return json.loads(s)
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ValueError(f"not valid JSON: {e}") from None
+    except RecursionError:  # "[[[[..." thousands deep: Python's parser recurses per level
+        raise ValueError("JSON nested too deeply (arrays or objects thousands of levels "
+                         "deep); a field's GeoJSON needs four") from None
 
 
 def _parse_selector(select: str) -> tuple[str, str]:
