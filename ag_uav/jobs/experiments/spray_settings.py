@@ -130,11 +130,11 @@ def _axes(args: argparse.Namespace, wind: float) -> tuple[list[Case], np.ndarray
         raise ConfigError(str(e)) from None
     for name, v, ok in (("--wind", wind, 0 <= wind <= 25), ("--along", args.along,
                         abs(args.along) <= 25), ("--buffer", args.buffer, args.buffer >= 0),
-                        ("--cv-max", args.cv_max, 0 < args.cv_max < 1),
+                        ("--cv-max", args.cv_max, args.cv_max > 0),
                         ("--confirm", args.confirm, args.confirm >= 0)):
         if not (ok and math.isfinite(v)):
             raise ConfigError(f"{name} = {v:g}: allowed: --wind 0..25 m/s, --along -25..25 m/s, "
-                              "--buffer >= 0 m, 0 < --cv-max < 1, --confirm >= 0")
+                              "--buffer >= 0 m, --cv-max > 0, --confirm >= 0")
     base = (args.config, args.set)
     check_on_config("--heights", heights, "mission.altitude_m", *base)
     check_on_config("--speeds", speeds, "mission.speed_mps", *base)
