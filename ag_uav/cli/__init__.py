@@ -58,6 +58,10 @@ def cmd_config(args: argparse.Namespace) -> int:
 
 
 def cmd_fly(args: argparse.Namespace) -> int:
+    if args.run_id is not None:  # a name, not a path: refused before anything is loaded
+        from ..jobs.outdir import check_run_id
+
+        check_run_id(args.run_id)
     cfg = _load(args)  # before importing the simulator: a bad config fails fast
     from ..jobs.run import fly
 
@@ -96,23 +100,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
         ov["mission.field"] = args.field
     cfg = load_config(args.config, ov)
     fld = build_field(cfg)
-    plan = build_plan(cfg, fld)
-    origin = None
     if args.origin:
-        try:
-            origin = tuple(float(v) for v in args.origin.split(","))
-            assert len(origin) in (2, 3)
-        except (ValueError, AssertionError):
-            raise ConfigError(f'--origin = "{args.origin}": expected LAT,LON[,H] in degrees '
-                              "(and metres)") from None
-    elif fld.origin is None:
-        raise ConfigError(f'mission.field = "{cfg.mission.field}": a field in local metres has '
-                          "no lon/lat; give --origin LAT,LON")
+        cfg = _plan_origin(args, cfg, ov)
+        fld = build_field(cfg)
+    plan = build_plan(cfg, fld)
     m, sp = cfg.mission, cfg.spray
     leads = nozzle_leads(m.speed_mps, sp.nozzle_on_delay_s, sp.nozzle_off_delay_s,
                          sp.cmd_off_immediate)
-    kw = {"altitude": m.altitude_m, "speed": m.speed_mps, "origin": origin,
-          "simplify_m": args.simplify, "leads": leads}
+    kw = {"altitude": m.altitude_m, "speed": m.speed_mps, "simplify_m": args.simplify,
+          "leads": leads}
     try:
         info = write_plan(plan, args.output, **kw)
     except ValueError as e:
@@ -123,6 +119,29 @@ def cmd_plan(args: argparse.Namespace) -> int:
     print(plan.meta["lanes"].text())
     _write_sorties(cfg, Path(args.output), kw)
     return 0
+
+
+def _plan_origin(args: argparse.Namespace, cfg, ov: dict):
+    """``--origin LAT,LON[,H]``: exactly ``mission.origin_*`` (the config with them set), for a
+    field in local metres only.  A lon/lat field already lies where its coordinates say; an
+    origin would move every waypoint of a plan an autopilot flies, so it is refused."""
+    from ..config import load_config
+    from ..world.field import load_field
+
+    try:
+        origin = tuple(float(v) for v in args.origin.split(","))
+        assert len(origin) in (2, 3) and all(math.isfinite(v) for v in origin)
+        assert abs(origin[0]) < 90 and abs(origin[1]) <= 180
+    except (ValueError, AssertionError):
+        raise ConfigError(f'--origin = "{args.origin}": expected LAT,LON[,H] in degrees '
+                          "(-90 < LAT < 90, -180 <= LON <= 180) and metres") from None
+    if load_field(cfg.mission.field).origin is not None:  # already loaded once: no error here
+        raise ConfigError(f'--origin = "{args.origin}": field "{cfg.mission.field}" is '
+                          "georeferenced (lon/lat); its plan lies where the field is, and "
+                          "--origin places only a field in local metres (to project about "
+                          "another point, --set mission.origin_lat_deg/_lon_deg)")
+    keys = ("mission.origin_lat_deg", "mission.origin_lon_deg", "mission.origin_alt_m")
+    return load_config(args.config, {**ov, **dict(zip(keys, origin, strict=False))})
 
 
 def _write_sorties(cfg, out: Path, kw: dict) -> None:
@@ -180,8 +199,9 @@ def build_parser(experiments: bool = True) -> argparse.ArgumentParser:
     _add_config_args(f)
     f.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run "
                    "folder (default: runs)")
-    f.add_argument("--run-id", help="run folder name (default: time-field-seed, with a -2, -3, "
-                   "... suffix where that folder exists)")
+    f.add_argument("--run-id", help="run folder name inside --out, not a path: '/', '\\', "
+                   "'.', '..' and absolute paths are refused (exit 2); default: "
+                   "time-field-seed, with a -2, -3, ... suffix where that folder exists")
     f.add_argument("--overwrite", action="store_true", help="replace the outputs of a previous "
                    "run in the --run-id folder (removed first; without it such a folder is "
                    "refused)")
@@ -203,14 +223,20 @@ def build_parser(experiments: bool = True) -> argparse.ArgumentParser:
                         description="Plan coverage of FIELD (a built-in name or a .geojson/"
                                     ".kml/.kmz/.shp file; PATH#name=VALUE picks one feature) "
                                     "with the config's swath, headland and direction, and write "
-                                    "it in the format OUT's extension names.")
+                                    "it in the format OUT's extension names. A field file over "
+                                    "64 MiB (a .kmz: once inflated) is refused before it is "
+                                    "read, a file in local metres is refused as such, and a "
+                                    "field across longitude 180 is planned where it is.")
     pl.add_argument("field", nargs="?", metavar="FIELD",
                     help="field (default: the config's mission.field)")
     _add_config_args(pl)
     pl.add_argument("-o", "--output", required=True, metavar="OUT",
                     help="output file: .geojson, .kml or .plan (QGroundControl)")
-    pl.add_argument("--origin", metavar="LAT,LON", help="geodetic origin for a field given in "
-                    "local metres (e.g. the built-in default)")
+    pl.add_argument("--origin", metavar="LAT,LON[,H]", help="where a field given in local "
+                    "metres lies (the built-in default): the same as --set "
+                    "mission.origin_lat_deg/_lon_deg[/_alt_m]; refused (exit 2) for a lon/lat "
+                    "field, whose plan always lies where its coordinates say (a southern "
+                    "latitude: --origin=-35.3,149.1)")
     pl.add_argument("--simplify", type=float, default=0.2, metavar="M",
                     help="thin turn and transit polylines to this tolerance (m; default 0.2)")
     pl.set_defaults(func=cmd_plan)

@@ -13,7 +13,10 @@ def register(sub, load: bool = True) -> None:
     command alone, its experiments not imported (the command line holds no ``experiment``)."""
     p = sub.add_parser("experiment", help="reproduce a paper's experiment (see its --help)",
                        description="Reproduce a paper's experiment and print its table next to "
-                                   "the paper's numbers.")
+                                   "the paper's numbers. Every axis (--heights 2,3,4, --winds, "
+                                   "...) is checked like a config key before anything runs: an "
+                                   "empty list, a negative value or one outside what `ag-uav "
+                                   "fly` accepts for the key it sets is one line and exit 2.")
     if not load:
         p.add_argument("name", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
         return

@@ -16,6 +16,11 @@ rerun with ``--no-log`` leaves no old ``run.mcap`` behind).  The default run id
 (:func:`unique_run_dir`) is the time, the field and the seed, with a counter suffix
 (``-2``, ``-3``, ...) when that folder exists already; the folder is made with an exclusive
 ``mkdir``, so two runs started in the same second get two folders.
+
+A run id is a folder *name*, not a path (:func:`check_run_id`): one with a path separator, ``.``
+or ``..``, an absolute path, a control character or more than 255 bytes is refused with one line
+(a :class:`~ag_uav.config.ConfigError`), so a run never writes outside its ``--out`` folder nor
+into that folder itself.
 """
 
 from __future__ import annotations
@@ -28,6 +33,8 @@ import shutil
 import threading
 from collections.abc import Iterator
 from pathlib import Path
+
+from ..config import ConfigError
 
 LOCK_NAME = ".ag-uav.lock"
 #: what a run writes into its folder (and ``ag-uav plot``'s default output folder)
@@ -96,6 +103,28 @@ def hold(folder: str | os.PathLike[str], what: str, hint: str) -> Iterator[Path]
             with contextlib.suppress(OSError):
                 lock.unlink()  # still held: a process that opened it now retries (see _lock)
             os.close(fd)
+
+
+def check_run_id(run_id: str, flag: str = "--run-id") -> str:
+    """``run_id`` if it is a plain folder name; else :class:`~ag_uav.config.ConfigError` (one
+    line naming ``flag``, the value and what is allowed): not empty, not ``.`` or ``..``, no
+    ``/`` or ``\\`` (nor the platform's separators), not absolute, no control character, at
+    most 255 bytes (a POSIX file name)."""
+    why = None
+    if not isinstance(run_id, str) or not run_id.strip():
+        why = "is empty"
+    elif run_id in (".", ".."):
+        why = "names the --out folder itself or its parent"
+    elif os.path.isabs(run_id) or any(c in run_id for c in {"/", "\\", os.sep, os.altsep or "/"}):
+        why = "is a path"
+    elif any(ord(c) < 32 or ord(c) == 127 for c in run_id):
+        why = "holds a control character"
+    elif len(run_id.encode("utf-8", "surrogateescape")) > 255:
+        why = "is longer than 255 bytes"
+    if why:
+        raise ConfigError(f"{flag} = {run_id!r}: {why}; a run id is a folder name inside --out, "
+                          "not a path (no '/' or '\\', not '.' or '..')")
+    return run_id
 
 
 def unique_run_dir(root: str | os.PathLike[str], base: str) -> Path:

@@ -90,7 +90,9 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     one is made (time, field, seed, and a counter suffix where that name is taken); a folder
     another run is writing into raises :class:`~ag_uav.jobs.outdir.FolderInUse`, and one that
     holds a previous run's outputs raises :class:`~ag_uav.jobs.outdir.RunFolderExists` unless
-    ``overwrite`` (which removes them first).
+    ``overwrite`` (which removes them first).  ``run_id`` is a folder name, not a path
+    (:func:`~ag_uav.jobs.outdir.check_run_id`: a separator, ``.``/``..`` or an absolute path
+    raises :class:`~ag_uav.config.ConfigError`).
 
     A log that cannot be written mid-flight (disk full) stops the flight with an
     :class:`OSError` naming it (the log stays readable up to its last complete chunk); a
@@ -101,8 +103,10 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     loaded: a bad field is refused at once), and the kernels the INS does not need in a helper
     process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
     every core busy, says False)."""
-    from .outdir import check_reuse, hold, unique_run_dir
+    from .outdir import check_reuse, check_run_id, hold, unique_run_dir
 
+    if run_id is not None:
+        check_run_id(run_id)
     run_dir = (Path(out_root) / run_id if run_id else
                unique_run_dir(out_root, default_run_id(cfg)))
     with hold(run_dir, "run", "wait for it to finish, or choose another --run-id"):

@@ -26,11 +26,12 @@ topic           schema                 what
                                        (:data:`DOSE_BANDS`), at the ``/dose`` cadence
 ==============  =====================  ======================================================
 
-GeoJSON is RFC 7946: positions ``[lon, lat]``, rings closed, exterior rings counter-clockwise and
-holes clockwise (in lon/lat, as shapely's ``orient_polygons`` leaves them).  Each feature carries
-``properties.name`` (Foxglove shows it as a tooltip) and ``properties.style`` (Leaflet path
-options: ``color``, ``weight``, ``opacity``, ``fillColor``, ``fillOpacity``, ``dashArray``), which
-the Map panel applies to the feature.
+GeoJSON is RFC 7946: positions ``[lon, lat]``, a geometry across the antimeridian cut in two
+there (§3.1.9: a field at ±180° is two polygons on the map), rings closed, exterior rings
+counter-clockwise and holes clockwise (in lon/lat, as shapely's ``orient_polygons`` leaves
+them).  Each feature carries ``properties.name`` (Foxglove shows it as a tooltip) and
+``properties.style`` (Leaflet path options: ``color``, ``weight``, ``opacity``, ``fillColor``,
+``fillOpacity``, ``dashArray``), which the Map panel applies to the feature.
 
 The LocationFix messages are hand-encoded (protobuf wire format, field numbers of the SDK's
 ``foxglove.LocationFix``; checked in the tests by decoding with the SDK's schema and with
@@ -47,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from ..world.geodesy import ecef_to_geodetic, enu_frame
+from ..world.geodesy import ecef_to_geodetic, enu_frame, split_antimeridian
 
 __all__ = [
     "DOSE_BANDS",
@@ -218,11 +219,14 @@ def _style(**kw: Any) -> dict[str, Any]:
 def _valid_ll(shell: Any, holes: list[Any]) -> list[list[list[list[float]]]]:
     """A polygon of lon/lat rings (rounded to :data:`_DP` places) → GeoJSON polygons: valid
     (a sliver the rounding made self-touching is repaired by ``make_valid``, which may split
-    it), oriented the RFC 7946 way (exterior counter-clockwise, holes clockwise), closed."""
+    it), cut at the antimeridian (:func:`~ag_uav.world.geodesy.split_antimeridian`: a field
+    across ±180° becomes two polygons, not one that jumps across the map), oriented the RFC 7946
+    way (exterior counter-clockwise, holes clockwise), closed."""
     import shapely
 
-    poly = shapely.Polygon(shell, holes)
-    parts = [poly] if poly.is_valid else _polys(shapely.make_valid(poly))
+    parts = []
+    for p in split_antimeridian(shapely.Polygon(shell, holes)):  # RFC 7946 §3.1.9
+        parts += [p] if p.is_valid else _polys(shapely.make_valid(p))
     out = []
     for p in parts:
         p = shapely.orient_polygons(p, exterior_cw=False)
@@ -279,6 +283,19 @@ def field_geojson(frame: GeoFrame, parts: list[tuple[Any, list[Any]]], name: str
     return _collection(feats)
 
 
+def _line(ll: list[list[float]]) -> dict[str, Any]:
+    """A GeoJSON LineString of lon/lat positions, or a MultiLineString of its pieces where it
+    crosses the antimeridian (RFC 7946 §3.1.9)."""
+    import shapely
+
+    line = shapely.LineString(ll)
+    pieces = split_antimeridian(line)
+    if len(pieces) == 1 and pieces[0] is line:
+        return {"type": "LineString", "coordinates": ll}
+    return {"type": "MultiLineString",
+            "coordinates": [np.round(np.asarray(g.coords), _DP).tolist() for g in pieces]}
+
+
 def plan_geojson(frame: GeoFrame, segments: list[tuple[str, Any, bool]]) -> str:
     """The planned path: one LineString feature per segment (spray legs green, transits grey
     and dashed), in flight order."""
@@ -289,8 +306,7 @@ def plan_geojson(frame: GeoFrame, segments: list[tuple[str, Any, bool]]) -> str:
             continue
         st = (_style(color="#22cc44", weight=2, opacity=0.9) if spray else
               _style(color="#909090", weight=2, opacity=0.8, dash_array="4 4"))
-        feats.append({"type": "Feature",
-                      "geometry": {"type": "LineString", "coordinates": frame.lonlat(p[:, :2])},
+        feats.append({"type": "Feature", "geometry": _line(frame.lonlat(p[:, :2])),
                       "properties": {"name": f"{k + 1}: {kind}" + (" (spray)" if spray else ""),
                                      "style": st}})
     return _collection(feats)

@@ -105,8 +105,52 @@ from .geodesy import (
     enu_to_geodetic,
     enu_to_lonlat,
     geodetic_to_ecef,
+    lonlat_centre,
     lonlat_to_enu,
+    pole_winding,
 )
+
+#: the widest a lon/lat field may be (m): its projection about one origin stays a good plane
+#: (:mod:`ag_uav.world.mission` also asks every vertex to lie within 20 km of the origin)
+MAX_FIELD_SPAN_M = 40_000.0
+_METRES = ("; a file in local metres (x, y) must be converted to lon/lat (RFC 7946 §3.1.1: "
+           "positions are longitude, latitude in degrees)")
+
+
+def _extent(r: np.ndarray) -> str:
+    return (f"x/lon {r[:, 0].min():g} to {r[:, 0].max():g}, y/lat {r[:, 1].min():g} to "
+            f"{r[:, 1].max():g}")
+
+
+def _check_span(local: list[list[np.ndarray]], ll: list[list[np.ndarray]]) -> None:
+    """Refuse a lon/lat field wider than :data:`MAX_FIELD_SPAN_M` on the ground: no sprayed
+    field is, and numbers that read as degrees 100 km apart are most often a file written in
+    local metres (the message says so, with the numbers' extent)."""
+    xy = np.concatenate([r for rings in local for r in rings])
+    span = float(max(np.ptp(xy[:, 0]), np.ptp(xy[:, 1])))
+    if span > MAX_FIELD_SPAN_M:
+        allv = np.concatenate([r[:, :2] for rings in ll for r in rings])
+        raise ValueError(f"read as lon/lat degrees ({_extent(allv)}) the field spans "
+                         f"{span / 1000:.1f} km, more than the {MAX_FIELD_SPAN_M / 1000:g} km "
+                         f"a field may span{_METRES}")
+
+
+def _check_lonlat_ring(r: np.ndarray, where: str) -> None:
+    """One lon/lat ring: (N, 2+) finite degrees in range, not around a pole."""
+    if r.ndim != 2 or r.shape[1] < 2 or len(r) == 0:
+        raise ValueError(f"{where}: expected [[lon, lat], ...]")
+    if not np.all(np.isfinite(r[:, :2])):
+        raise ValueError(f"{where}: non-finite coordinates")
+    if np.any(np.abs(r[:, 1]) > 90.0) or np.any(np.abs(r[:, 0]) > 180.0):
+        raise ValueError(f"{where}: coordinates out of range ({_extent(r)}); expected WGS-84 "
+                         f"longitude, latitude in degrees (GeoJSON and KML order is lon, lat)"
+                         f"{_METRES}")
+    turns = abs(pole_winding(r[:, 0])) if len(r) >= 3 else 0
+    if turns:
+        pole = "North" if r[:, 1].mean() > 0 else "South"
+        raise ValueError(f"{where} runs {turns} time(s) around the {pole} pole (its longitudes "
+                         "go all the way round); a lon/lat ring cannot describe a polygon that "
+                         "encloses a pole: split the field into parts beside it")
 
 
 def _as_ring(pts: Iterable[Sequence[float]], what: str) -> np.ndarray:
@@ -231,18 +275,14 @@ class Field:
     ) -> Field:
         """Build from WGS-84 rings: ``parts`` = ``[[outer, hole, ...], ...]`` of (N, 2+) arrays of
         (lon, lat[, alt]) degrees. Converted to local ENU about ``origin`` = (lat, lon[, h]); by
-        default the mean of the parts' outer-ring vertices."""
+        default the centre of the parts' outer-ring vertices (:func:`lonlat_centre`: their mean,
+        taken on the sphere for a field across ±180°).  Refused (ValueError, one line): a ring
+        out of range or around a pole, and a field wider than :data:`MAX_FIELD_SPAN_M` (most
+        often a file in local metres read as degrees; the message says so)."""
         ll = [[np.asarray(r, dtype=float) for r in rings] for rings in parts]
         for k, rings in enumerate(ll):
             for i, r in enumerate(rings):
-                if r.ndim != 2 or r.shape[1] < 2 or len(r) == 0:
-                    raise ValueError(f"ring {i} of part {k + 1}: expected [[lon, lat], ...]")
-                if not np.all(np.isfinite(r[:, :2])):
-                    raise ValueError(f"ring {i} of part {k + 1}: non-finite coordinates")
-                if np.any(np.abs(r[:, 1]) > 90.0) or np.any(np.abs(r[:, 0]) > 180.0):
-                    raise ValueError(f"ring {i} of part {k + 1}: coordinates out of range; "
-                                     "expected WGS-84 longitude, latitude in degrees (GeoJSON "
-                                     "and KML order is lon, lat)")
+                _check_lonlat_ring(r, f"ring {i} of part {k + 1}")
         if origin is None:
             outers = []
             for rings in ll:
@@ -251,13 +291,14 @@ class Field:
                     o = o[:-1]
                 outers.append(o)
             allv = np.concatenate(outers)
-            org = (float(allv[:, 1].mean()), float(allv[:, 0].mean()), 0.0)
+            org = (*lonlat_centre(allv[:, 0], allv[:, 1]), 0.0)
         else:
             org = (float(origin[0]), float(origin[1]),
                    float(origin[2]) if len(origin) > 2 else 0.0)
         # vertices at the origin's height: the ground the field lies on
         local = [[lonlat_to_enu(r[:, 0], r[:, 1], org, org[2])[:, :2] for r in rings]
                  for rings in ll]
+        _check_span(local, ll)
         f = cls.from_parts(local, name=name, origin=org)
         f.meta.update(meta or {})
         return f

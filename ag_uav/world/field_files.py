@@ -1,6 +1,14 @@
 """Reading a field's polygons from GeoJSON, KML / KMZ and ESRI shapefiles (the formats and the
 feature selector are described in :mod:`ag_uav.world.field`): each file's polygon features with
-their properties, and the one picked by the selector."""
+their properties, and the one picked by the selector.
+
+Every input is bounded before it is read: a field file (and each part of a shapefile) larger
+than :data:`MAX_FIELD_BYTES` is refused from its size on disk, and a KMZ's KML document from
+the uncompressed size its zip entry declares (the archive's central directory, APPNOTE.TXT
+§4.4.9), so a small archive that inflates to gigabytes (a "zip bomb") is refused before any of
+it is inflated; a member that inflates past its declared size fails the archive's CRC check
+(Python's :mod:`zipfile` stops at the declared size).  Each refusal is a one-line
+``ValueError``."""
 
 from __future__ import annotations
 
@@ -16,6 +24,26 @@ from shapely.geometry import Polygon
 
 #: file name endings :func:`load_field` and :meth:`Field.from_file` accept
 FIELD_FILE_SUFFIXES = (".geojson", ".json", ".kml", ".kmz", ".shp")
+#: the largest field file (or shapefile part, or KMZ document once inflated) read, in bytes:
+#: 64 MiB, some 300 000 vertices of GeoJSON text, far more than a farm's fields; a parsed
+#: document takes several times its size in memory
+MAX_FIELD_BYTES = 64 * 2**20
+
+
+def _too_big(what: str, p: Path | str, size: int) -> ValueError:
+    return ValueError(f"{what} {p} is {size / 2**20:.1f} MiB, more than the "
+                      f"{MAX_FIELD_BYTES / 2**20:g} MiB a field file may hold; export only the "
+                      "field (one feature) from the GIS")
+
+
+def check_size(p: Path, what: str) -> None:
+    """Refuse ``p`` (one line) where its size on disk exceeds :data:`MAX_FIELD_BYTES`."""
+    try:
+        size = p.stat().st_size
+    except OSError:
+        return  # missing or unreadable: the reader says so
+    if size > MAX_FIELD_BYTES:
+        raise _too_big(f"{what} file", p, size)
 
 
 @dataclass
@@ -27,8 +55,15 @@ class _Feature:
 
 
 def read_bytes(p: Path, what: str) -> bytes:
+    """The bytes of ``p``, at most :data:`MAX_FIELD_BYTES` of them: a larger file is refused
+    from its size before it is read (and a special file that streams more, while reading)."""
     try:
-        return p.read_bytes()
+        check_size(p, what)
+        with open(p, "rb") as f:
+            data = f.read(MAX_FIELD_BYTES + 1)
+        if len(data) > MAX_FIELD_BYTES:
+            raise _too_big(f"{what} file", p, len(data))
+        return data
     except FileNotFoundError:
         raise ValueError(f"{what} file not found: {p}") from None
     except OSError as e:
@@ -40,6 +75,9 @@ def json_loads(s: str | bytes) -> Any:
         return json.loads(s)
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ValueError(f"not valid JSON: {e}") from None
+    except RecursionError:  # "[[[[..." thousands deep: Python's parser recurses per level
+        raise ValueError("JSON nested too deeply (arrays or objects thousands of levels "
+                         "deep); a field's GeoJSON needs four") from None
 
 
 def _parse_selector(select: str) -> tuple[str, str]:
@@ -233,8 +271,10 @@ def kml_features(data: bytes) -> list[_Feature]:
 
 
 def kmz_doc(p: Path) -> bytes:
-    """The KML document inside a KMZ (``doc.kml``, else the first ``.kml`` entry)."""
+    """The KML document inside a KMZ (``doc.kml``, else the first ``.kml`` entry); refused
+    before it is inflated where its entry declares more than :data:`MAX_FIELD_BYTES`."""
     import zipfile
+    import zlib
 
     try:
         with zipfile.ZipFile(p) as z:
@@ -242,8 +282,12 @@ def kmz_doc(p: Path) -> bytes:
             if not names:
                 raise ValueError(f"KMZ {p} holds no .kml document")
             name = "doc.kml" if "doc.kml" in names else names[0]
-            return z.read(name)
-    except zipfile.BadZipFile as e:
+            size = z.getinfo(name).file_size
+            if size > MAX_FIELD_BYTES:
+                raise _too_big("KMZ document", f"{p}!{name} (inflated)", size)
+            with z.open(name) as f:
+                return f.read(MAX_FIELD_BYTES)  # zipfile stops at the declared size
+    except (zipfile.BadZipFile, zlib.error, EOFError, NotImplementedError) as e:
         raise ValueError(f"KMZ {p} is not a valid zip archive: {e}") from None
 
 
@@ -276,6 +320,8 @@ def shp_features(p: Path) -> list[_Feature]:
 
     if not p.exists():
         raise ValueError(f"shapefile not found: {p}")
+    for part in (p, *(p.with_suffix(s) for s in (".shx", ".dbf", ".SHX", ".DBF", ".prj"))):
+        check_size(part, "shapefile part")
     prj = p.with_suffix(".prj")
     if not prj.exists():
         prj = p.with_suffix(".PRJ")

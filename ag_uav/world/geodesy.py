@@ -2,7 +2,14 @@
 about an origin, as :mod:`ag_uav.world.field` projects lon/lat polygons and the run log's
 geographic topics invert it (:mod:`ag_uav.record.geo`).  The equations and their error are in
 :mod:`ag_uav.world.field`'s docstring (NIMA TR8350.2 for the ellipsoid; Bowring's iteration for
-ECEF -> geodetic)."""
+ECEF -> geodetic).
+
+Longitude wraps at ±180°: a field across the antimeridian or close to a pole has vertices whose
+longitudes are far apart though the ground between them is not.  :func:`lonlat_centre` is the
+automatic origin of such a field (the point under the mean of its vertices in ECEF, a mean on
+the sphere rather than of the degrees), :func:`pole_winding` finds a ring that encloses a pole
+(which no lon/lat ring can describe as a simple polygon), and :func:`split_antimeridian` cuts a
+lon/lat geometry at ±180° as GeoJSON asks (RFC 7946 §3.1.9)."""
 
 from __future__ import annotations
 
@@ -12,7 +19,8 @@ from collections.abc import Sequence
 import numpy as np
 
 __all__ = ["WGS84_A", "WGS84_F", "WGS84_E2", "WGS84_B", "geodetic_to_ecef", "lonlat_to_enu",
-           "enu_to_geodetic", "enu_frame", "ecef_to_geodetic", "enu_to_lonlat"]
+           "enu_to_geodetic", "enu_frame", "ecef_to_geodetic", "enu_to_lonlat", "lonlat_centre",
+           "pole_winding", "split_antimeridian"]
 
 # WGS-84 ellipsoid
 WGS84_A = 6378137.0
@@ -102,3 +110,67 @@ def enu_to_lonlat(e, n, origin: Sequence[float], u=0.0) -> tuple[np.ndarray, np.
     (:func:`enu_to_geodetic` without the height)."""
     lon, lat, _ = enu_to_geodetic(e, n, origin, u)
     return lon, lat
+
+
+def _wrap180(d: np.ndarray) -> np.ndarray:
+    """Longitude differences into [-180, 180)."""
+    return (np.asarray(d, dtype=float) + 180.0) % 360.0 - 180.0
+
+
+def lonlat_centre(lon_deg: np.ndarray, lat_deg: np.ndarray) -> tuple[float, float]:
+    """(lat, lon) of the vertices' centre: the plain means of the degrees where the longitudes
+    span less than 180° (every field away from the antimeridian: the rule the field files have
+    always been read with), else the geodetic point under the mean of the vertices in ECEF
+    (:func:`geodetic_to_ecef` at h = 0, then :func:`ecef_to_geodetic`), which neither the
+    antimeridian nor a pole can mislead."""
+    lon, lat = np.asarray(lon_deg, float), np.asarray(lat_deg, float)
+    if float(np.ptp(lon)) < 180.0:
+        return float(lat.mean()), float(lon.mean())
+    c = geodetic_to_ecef(lat, lon).mean(axis=0)
+    lo, la, _ = ecef_to_geodetic(c)
+    return float(la), float(lo)
+
+
+def pole_winding(lon_deg: np.ndarray) -> int:
+    """How many times a closed lon/lat ring winds around the pole: the sum of its steps in
+    longitude, each taken the short way round (within ±180°), over 360° (0 for a ring that does
+    not enclose a pole)."""
+    lon = np.asarray(lon_deg, float)
+    steps = _wrap180(np.diff(np.append(lon, lon[:1])))
+    return int(round(float(steps.sum()) / 360.0))
+
+
+def split_antimeridian(geom):
+    """A shapely geometry in lon/lat degrees (a Polygon or a LineString) whose edges may jump
+    across ±180° (a step of more than 180° in longitude is taken as the short way round, across
+    the antimeridian) → a list of geometries of the same kind, none crossing it: the geometry
+    is unwrapped to continuous longitudes, cut at ±180° and the pieces shifted back by 360°
+    (RFC 7946 §3.1.9: "any geometry that crosses the antimeridian SHOULD be represented by
+    cutting it in two").  A geometry that does not cross comes back alone, unchanged."""
+    import shapely
+    from shapely.affinity import translate
+
+    rings = ([geom.exterior, *geom.interiors] if geom.geom_type == "Polygon" else [geom])
+    if not any(np.any(np.abs(np.diff(np.asarray(r.coords)[:, 0])) > 180.0) for r in rings):
+        return [geom]
+    ref = float(np.asarray(rings[0].coords)[0, 0])
+
+    def unwrap(r):
+        a = np.asarray(r.coords, dtype=float)[:, :2].copy()
+        a[:, 0] = a[0, 0] + np.concatenate([[0.0], np.cumsum(_wrap180(np.diff(a[:, 0])))])
+        a[:, 0] += 360.0 * round((ref - a[0, 0]) / 360.0)  # every ring beside the first
+        return a
+
+    whole = (shapely.Polygon(unwrap(rings[0]), [unwrap(r) for r in rings[1:]])
+             if geom.geom_type == "Polygon" else shapely.LineString(unwrap(rings[0])))
+    if not whole.is_valid:  # a sliver that rounding made self-touching
+        whole = shapely.make_valid(whole)
+    out = []
+    for k in (-1, 0, 1):
+        part = whole.intersection(shapely.box(-180.0 + 360.0 * k, -90.0, 180.0 + 360.0 * k,
+                                              90.0))
+        for g in shapely.get_parts(part):  # the parts, a collection's members flattened
+            for q in (shapely.get_parts(g) if hasattr(g, "geoms") else [g]):
+                if q.geom_type == geom.geom_type and not q.is_empty:
+                    out.append(translate(q, xoff=-360.0 * k))
+    return out

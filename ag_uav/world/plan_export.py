@@ -16,7 +16,8 @@ Formats:
   ``role = "field"`` plus the plan's swath, altitude, speed and lengths), one LineString per plan
   segment (``role = "path"``, ``kind``, ``spray``, ``index``; 2-D positions, the spray height is in
   ``altitude_m_agl``) and one Point per nozzle switch (``role = "spray_on"`` / ``"spray_off"``).
-  :meth:`ag_uav.world.field.Field.from_geojson` reads the field back from it.
+  :meth:`ag_uav.world.field.Field.from_geojson` reads the field back from it.  A polygon or a
+  path across the antimeridian is cut there (RFC 7946 §3.1.9: two polygons, a MultiLineString).
 * **KML** (OGC KML 2.2): a Document with the field Placemark (clamped to the ground), a ``path``
   Folder with one LineString Placemark per segment at the spray height
   (``altitudeMode = relativeToGround``; green when spraying, grey otherwise) and a ``nozzles``
@@ -53,7 +54,7 @@ from typing import Any
 import numpy as np
 from shapely.geometry import LineString
 
-from .geodesy import enu_to_lonlat
+from .geodesy import enu_to_lonlat, split_antimeridian
 from .plan import CoveragePlan
 
 __all__ = [
@@ -104,7 +105,16 @@ class Waypoint:
 
 
 def _origin(plan: CoveragePlan, origin: Sequence[float] | None) -> tuple[float, float, float]:
-    o = origin if origin is not None else plan.field.origin
+    """The geodetic origin the plan's metres are exported about: ``origin`` for a field in local
+    metres without one, else the field's own (an ``origin`` that differs from it would move
+    every waypoint off the field, so it is refused)."""
+    own = plan.field.origin
+    if origin is not None and own is not None and not np.allclose(
+            [float(v) for v in origin[:2]], own[:2], rtol=0.0, atol=1e-12):
+        raise ValueError(f"field {plan.field.name!r} is georeferenced about {own[0]:.6f}, "
+                         f"{own[1]:.6f}; another origin would move every waypoint off the field "
+                         "(project the field about a point instead: load_field(..., origin=))")
+    o = origin if origin is not None else own
     if o is None:
         raise ValueError(f"field {plan.field.name!r} is in local metres with no geodetic origin; "
                          "give one (LAT,LON) to export lon/lat")
@@ -125,9 +135,11 @@ def plan_waypoints(plan: CoveragePlan, origin: Sequence[float] | None = None,
                    lead_off_m: float = 0.0) -> list[Waypoint]:
     """The plan's waypoints in order (shared segment joints once), in local metres and lon/lat.
 
-    ``origin`` = (lat, lon[, h]) overrides the field's geodetic origin (needed for a field given in
-    local metres). Each segment's polyline is thinned to ``simplify_m`` (its end points are kept,
-    so every leg end and every nozzle switch is a waypoint).
+    ``origin`` = (lat, lon[, h]): the geodetic origin of a field given in local metres without
+    one; a field with its own origin is exported about it (another one raises ValueError).
+
+    Each segment's polyline is thinned to ``simplify_m`` (its end points are kept, so every leg
+    end and every nozzle switch is a waypoint).
 
     ``lead_on_m`` / ``lead_off_m``: the nozzle commands lead the sprayed edges by this much path
     (:func:`nozzle_leads`: v·d for a valve delay d at speed v), so that the nozzles open and close
@@ -221,6 +233,31 @@ def _ll(x: np.ndarray, y: np.ndarray, org) -> list[list[float]]:
     return [[round(float(a), 9), round(float(b), 9)] for a, b in zip(lon, lat, strict=True)]
 
 
+def _split_polygon(rings: list[list[list[float]]]) -> list[list[list[list[float]]]]:
+    """A GeoJSON polygon's lon/lat rings → the polygons it is, cut at the antimeridian where it
+    crosses it (:func:`~ag_uav.world.geodesy.split_antimeridian`, RFC 7946 §3.1.9; the pieces
+    oriented the RFC's way); a polygon that does not cross is returned as it is."""
+    import shapely
+
+    poly = shapely.Polygon(rings[0], rings[1:])
+    pieces = split_antimeridian(poly)
+    if len(pieces) == 1 and pieces[0] is poly:
+        return [rings]
+    return [[np.round(np.asarray(r.coords), 9).tolist() for r in (q.exterior, *q.interiors)]
+            for q in (shapely.orient_polygons(p, exterior_cw=False) for p in pieces)]
+
+
+def _split_line(coords: list[list[float]]) -> dict[str, Any]:
+    """A GeoJSON LineString, or a MultiLineString of its pieces where it crosses the
+    antimeridian (RFC 7946 §3.1.9)."""
+    line = LineString(coords)
+    pieces = split_antimeridian(line)
+    if len(pieces) == 1 and pieces[0] is line:
+        return {"type": "LineString", "coordinates": coords}
+    return {"type": "MultiLineString",
+            "coordinates": [np.round(np.asarray(g.coords), 9).tolist() for g in pieces]}
+
+
 def plan_to_geojson(plan: CoveragePlan, *, altitude: float, speed: float,
                     origin: Sequence[float] | None = None, simplify_m: float = 0.2,
                     leads: tuple[float, float] = (0.0, 0.0)) -> dict:
@@ -228,7 +265,7 @@ def plan_to_geojson(plan: CoveragePlan, *, altitude: float, speed: float,
     org = _origin(plan, origin)
     polys = []
     for outer, holes in plan.field.rings():
-        polys.append([_ll(r[:, 0], r[:, 1], org) for r in [outer, *holes]])
+        polys += _split_polygon([_ll(r[:, 0], r[:, 1], org) for r in [outer, *holes]])
     geom = ({"type": "Polygon", "coordinates": polys[0]} if len(polys) == 1
             else {"type": "MultiPolygon", "coordinates": polys})
     feats: list[dict] = [{"type": "Feature", "geometry": geom,
@@ -237,8 +274,7 @@ def plan_to_geojson(plan: CoveragePlan, *, altitude: float, speed: float,
                                          **_plan_props(plan, altitude, speed)}}]
     for k, s in enumerate(plan.segments):
         q = _thin(s.points, simplify_m)
-        feats.append({"type": "Feature",
-                      "geometry": {"type": "LineString", "coordinates": _ll(q[:, 0], q[:, 1], org)},
+        feats.append({"type": "Feature", "geometry": _split_line(_ll(q[:, 0], q[:, 1], org)),
                       "properties": {"role": "path", "index": k, "kind": s.kind,
                                      "spray": bool(s.spray), "altitude_m_agl": altitude}})
     for i, w in enumerate(plan_waypoints(plan, org, simplify_m, *leads)):

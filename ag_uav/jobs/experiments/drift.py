@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ...world.deposition import DepositionConfig, footprints, pack_input
-from . import float_list, toml_overrides
+from . import flight_axes, name_axis, number_axis, toml_overrides
 from .swath import pass_states
 
 NAME = "drift"
@@ -178,8 +178,10 @@ def run_cases(base: DepositionConfig, cases: list[Case], passes: int, mass_kg: f
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--winds", default="1,3,5", help="crosswinds at the release height (m/s)")
-    p.add_argument("--heights", default="2,3", help="release heights (m)")
+    p.add_argument("--winds", default="1,3,5", help="crosswinds at the release height (m/s; "
+                   "each one wind.speed_mps accepts)")
+    p.add_argument("--heights", default="2,3", help="release heights (m; each one "
+                   "mission.altitude_m accepts: between spray.min_height_m and max_height_m)")
     p.add_argument("--speeds", default="5", help="ground speeds (m/s)")
     names = ", ".join(f"{k} {v[0]:g}/{v[1]:g}/{v[2]:g}" for k, v in SPECTRA.items())
     p.add_argument("--spectra", default="fine,medium,coarse",
@@ -240,24 +242,37 @@ def _comparison(rows: list[dict], base_cases: list[Case]) -> tuple[list[str], li
     return header, table
 
 
+def _cases(args: argparse.Namespace) -> tuple[DepositionConfig, list[Case], list[Case]]:
+    """The deposition config, the cases of the axes and the ones plotted (each height and wind
+    at the first speed and temperature, the middle humidity, medium droplets).  Every axis is
+    checked (one line, exit 2): not empty, numbers, the flight envelope
+    (:func:`~ag_uav.jobs.experiments.flight_axes`), temperatures and humidities within
+    :class:`DepositionConfig`'s limits, ``--passes`` >= 1."""
+    from ...config import ConfigError
+
+    winds, heights, speeds = flight_axes(args)
+    spectra = name_axis("--spectra", args.spectra, SPECTRA)
+    temps = number_axis("--temps", args.temps)
+    rhs = number_axis("--rhs", args.rhs)
+    if args.passes < 1:
+        raise ConfigError(f"--passes = {args.passes}: must be >= 1")
+    try:
+        base = DepositionConfig(**toml_overrides(args.set))
+        for t, rh in itertools.product(temps, rhs):
+            DepositionConfig(temperature_c=t, rh_percent=rh)   # validates
+    except (ValueError, TypeError) as e:
+        raise ConfigError(f"--temps/--rhs/--set: {e}") from None
+    cases = [Case(*v) for v in itertools.product(winds, heights, speeds, spectra, temps, rhs)]
+    spec, rh_mid = "medium" if "medium" in spectra else spectra[0], sorted(rhs)[len(rhs) // 2]
+    plotted = [Case(w, h, speeds[0], spec, temps[0], rh_mid) for h in heights for w in winds]
+    return base, cases, plotted
+
+
 def main(args: argparse.Namespace) -> int:
     from ..batch import markdown_table, print_table
     from . import write_csv
 
-    try:
-        base = DepositionConfig(**toml_overrides(args.set))
-        spectra = [s.strip() for s in args.spectra.split(",") if s.strip()]
-        bad = [s for s in spectra if s not in SPECTRA]
-        if bad:
-            raise ValueError(f"--spectra {bad[0]}: expected one of {', '.join(SPECTRA)}")
-        cases = [Case(*v) for v in itertools.product(
-            float_list(args.winds), float_list(args.heights), float_list(args.speeds), spectra,
-            float_list(args.temps), float_list(args.rhs))]
-        for c in cases:
-            DepositionConfig(temperature_c=c.temp_c, rh_percent=c.rh)   # validates
-    except (ValueError, TypeError) as e:
-        print(f"error: {e}")
-        return 2
+    base, cases, base_cases = _cases(args)
     t0 = time.perf_counter()
     rows, summ, curves = run_cases(base, cases, args.passes, args.mass)
     wall = time.perf_counter() - t0
@@ -265,11 +280,6 @@ def main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "drift.csv", rows)
     write_csv(out / "cases.csv", summ)
-    mid_t = float_list(args.temps)[0]
-    rh_mid = sorted(float_list(args.rhs))[len(float_list(args.rhs)) // 2]
-    spec = "medium" if "medium" in spectra else spectra[0]
-    base_cases = [Case(w, h, float_list(args.speeds)[0], spec, mid_t, rh_mid)
-                  for h in float_list(args.heights) for w in float_list(args.winds)]
     _plot(out / "drift.png", curves, base_cases)
     bh = ["wind (m/s)", "h (m)", "v (m/s)", "spectrum", "T (°C)", "RH (%)", "< 1 % beyond (m)",
           "< 0.1 % beyond (m)", "escaped", "evaporated", "airborne"]

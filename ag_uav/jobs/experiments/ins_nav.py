@@ -353,8 +353,16 @@ def falsefix(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 def sweep(args: argparse.Namespace) -> list[dict[str, Any]]:
     cfg = _base(args, {"gps.false_fix_per_hour": 30.0})
-    settings = [("fixed", float(x)) for x in args.sigmas.split(",") if x.strip()]
+    from ...config import ConfigError
+    from . import number_axis
+
+    sigmas = (number_axis("--sigmas", args.sigmas, lo=0.0, lo_open=True, inf=True)
+              if args.sigmas.strip(", ") else [])
+    settings = [("fixed", x) for x in sigmas]
     settings += [(k.strip(), 2.0) for k in args.kernels.split(",") if k.strip()]
+    if not settings:
+        raise ConfigError(f"--sigmas = {args.sigmas!r}, --kernels = {args.kernels!r}: both "
+                          "empty; the sweep needs at least one σ or one kernel")
     rows = []
     for kernel, sig in settings:
         for seed in range(args.runs):

@@ -104,10 +104,15 @@ def main(args: argparse.Namespace) -> int:
 
     if args.runs < 1:
         raise ConfigError(f"--runs = {args.runs}: must be >= 1")
+    if not (0 < args.duration < 1e6):
+        raise ConfigError(f"--duration = {args.duration:g}: must be > 0 s")
     base = load_config(None, {"gps.preset": args.gps, "estimator.name": "kf",
                               "estimator.shadow": ["mckf"], **parse_set_items(args.set)})
     base.log.enabled = False
-    window = leg_outage(base, duration_s=args.duration)
+    try:
+        window = leg_outage(base, duration_s=args.duration)
+    except ValueError as e:
+        raise ConfigError(f"--duration = {args.duration:g}: {e}") from None
     base.sim.max_time_s = window[1] + 5.0
     tasks = []
     for seed in range(args.runs):

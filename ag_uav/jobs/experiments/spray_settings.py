@@ -32,6 +32,12 @@ deposit are reported beside them.
 engine's dose map) in one batch, and their flown dose CV, under-dosed area and off-field deposit
 stand beside the pattern test's: the pattern test has no gusts, turns, leg ends or field edges.
 
+Every axis is checked before the search as ``ag-uav fly`` checks the config key it sets
+(``--heights`` → ``mission.altitude_m``, ``--speeds`` → ``mission.speed_mps``, ``--spacings``
+→ ``mission.swath_m``, ``--wind`` → ``wind.speed_mps``, on the base config with its ``--set``
+items): an empty axis or a value a flight would refuse is one line and exit 2, so the table
+never recommends what the confirming flights cannot fly.
+
 Writes (``--out``): ``settings.csv`` (every point), ``pareto.csv``, ``spray_settings.md`` and
 ``pareto.png`` (work rate against CV, coloured by the drift past the buffer).
 """
@@ -48,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from ...world.pattern import cv_back_and_forth, single_pass
-from . import float_list
+from . import check_on_config, name_axis, number_axis
 
 NAME = "spray-settings"
 HELP = ("search height, speed, lane spacing and droplet spectrum against dose CV, under-dosed "
@@ -68,10 +74,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="wind across the legs (m/s; default: the config's wind.speed_mps)")
     p.add_argument("--along", type=float, default=0.0,
                    help="wind along the legs (m/s): the passes out and back then differ")
-    p.add_argument("--heights", default="2,3,4", help="release heights (m), comma-separated")
-    p.add_argument("--speeds", default="3,5,7", help="ground speeds (m/s)")
+    p.add_argument("--heights", default="2,3,4", help="release heights (m), comma-separated; "
+                   "each one `ag-uav fly` accepts as mission.altitude_m (between "
+                   "spray.min_height_m and spray.max_height_m of the base config), else exit 2")
+    p.add_argument("--speeds", default="3,5,7", help="ground speeds (m/s), each one "
+                   "mission.speed_mps accepts")
     p.add_argument("--spacings", default="2:9:0.5", metavar="LO:HI:STEP",
-                   help="lane spacings (m)")
+                   help="lane spacings (m), each one mission.swath_m accepts")
     p.add_argument("--spectra", default="fine,medium,coarse",
                    help=f"droplet spectra ({', '.join(SPECTRA)})")
     p.add_argument("--buffer", type=float, default=5.0, help="buffer (m) past the downwind edge")
@@ -99,9 +108,39 @@ def _spacings(s: str) -> np.ndarray:
         lo, hi, st = (float(v) for v in s.split(":"))
     except ValueError:
         raise ValueError(f"--spacings = {s!r}: expected LO:HI:STEP") from None
-    if not (0 < lo <= hi and st > 0):
+    if not (0 < lo <= hi and st > 0 and math.isfinite(hi)):
         raise ValueError(f"--spacings = {s!r}: need 0 < LO <= HI and STEP > 0")
+    if (hi - lo) / st > 10_000:
+        raise ValueError(f"--spacings = {s!r}: more than 10000 spacings; use a larger STEP")
     return np.round(np.arange(lo, hi + 1e-9, st), 6)
+
+
+def _axes(args: argparse.Namespace, wind: float) -> tuple[list[Case], np.ndarray]:
+    """The search's cases and spacings, each axis checked as ``ag-uav fly`` checks the key it
+    sets on the mission (:func:`~ag_uav.jobs.experiments.check_on_config`, on the base config
+    and its ``--set`` items): the search holds only settings the confirming flights accept."""
+    from ...config import ConfigError
+
+    heights = number_axis("--heights", args.heights, lo=0.0, lo_open=True)
+    speeds = number_axis("--speeds", args.speeds, lo=0.0, lo_open=True)
+    spectra = name_axis("--spectra", args.spectra, SPECTRA)
+    try:
+        spacings = _spacings(args.spacings)
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+    for name, v, ok in (("--wind", wind, 0 <= wind <= 25), ("--along", args.along,
+                        abs(args.along) <= 25), ("--buffer", args.buffer, args.buffer >= 0),
+                        ("--cv-max", args.cv_max, args.cv_max > 0),
+                        ("--confirm", args.confirm, args.confirm >= 0)):
+        if not (ok and math.isfinite(v)):
+            raise ConfigError(f"{name} = {v:g}: allowed: --wind 0..25 m/s, --along -25..25 m/s, "
+                              "--buffer >= 0 m, --cv-max > 0, --confirm >= 0")
+    base = (args.config, args.set)
+    check_on_config("--heights", heights, "mission.altitude_m", *base)
+    check_on_config("--speeds", speeds, "mission.speed_mps", *base)
+    check_on_config("--spacings", [float(s) for s in spacings], "mission.swath_m", *base)
+    check_on_config("--wind", [wind], "wind.speed_mps", *base)
+    return [Case(h, v, s) for h in heights for v in speeds for s in spectra], spacings
 
 
 def edge_shares(y: np.ndarray, p: np.ndarray, airborne: float, spacing: float,
@@ -263,25 +302,13 @@ def _table(front: list[dict[str, Any]], cv_max: float) -> tuple[list[str], list[
 
 
 def main(args: argparse.Namespace) -> int:
-    from ...config import ConfigError, load_config, parse_set_items
+    from ...config import load_config, parse_set_items
     from ..batch import markdown_table, print_table
     from . import write_csv
 
     cfg = load_config(args.config, parse_set_items(args.set))
     wind = cfg.wind.speed_mps if args.wind is None else float(args.wind)
-    bad = [s for s in args.spectra.split(",") if s.strip() not in SPECTRA]
-    if bad:
-        raise ConfigError(f"--spectra = {args.spectra!r}: {bad[0]!r} unknown; allowed: "
-                          f"{', '.join(SPECTRA)}")
-    try:
-        spacings = _spacings(args.spacings)
-    except ValueError as e:
-        raise ConfigError(str(e)) from None
-    if not (0 <= wind <= 25 and args.buffer >= 0):
-        raise ConfigError(f"--wind = {wind:g}, --buffer = {args.buffer:g}: expected 0..25 m/s "
-                          "and a buffer >= 0 m")
-    cases = [Case(h, v, s.strip()) for h in float_list(args.heights)
-             for v in float_list(args.speeds) for s in args.spectra.split(",")]
+    cases, spacings = _axes(args, wind)
     t0 = time.perf_counter()
     rows = search(cfg, cases, wind, spacings, args.buffer, progress=not args.quiet,
                   along=args.along)

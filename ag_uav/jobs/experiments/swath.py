@@ -23,6 +23,7 @@ deposit beyond the buffer), ``profiles.csv`` (the deposit profiles) and ``swath.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 
@@ -35,7 +36,7 @@ from ...world.pattern import (  # noqa: F401 - the pattern test lives in the wor
     single_pass,
     swath_pattern,
 )
-from . import float_list, toml_overrides
+from . import flight_axes, toml_overrides
 
 NAME = "swath"
 HELP = ("spray pattern test of the deposition model: single passes across a collector line at "
@@ -60,7 +61,8 @@ def droplet_anchor(cfg: DepositionConfig) -> list[list[str]]:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--heights", default="2,3,4", help="release heights (m), comma-separated")
+    p.add_argument("--heights", default="2,3,4", help="release heights (m), comma-separated; "
+                   "each one mission.altitude_m accepts")
     p.add_argument("--speeds", default="3,5,7", help="ground speeds (m/s)")
     p.add_argument("--winds", default="0,1.5,3", help="crosswinds (m/s)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -72,13 +74,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
+    from ...config import ConfigError
     from ..batch import markdown_table, print_table
     from . import write_csv
 
-    cfg = DepositionConfig(**toml_overrides(args.set))
+    winds, heights, speeds = flight_axes(args)
+    if not (math.isfinite(args.turbulence) and args.turbulence >= 0):
+        raise ConfigError(f"--turbulence = {args.turbulence:g}: must be >= 0 (a share of the "
+                          "crosswind)")
+    try:
+        cfg = DepositionConfig(**toml_overrides(args.set))
+    except (ValueError, TypeError) as e:
+        raise ConfigError(f"--set: {e}") from None
     t0 = time.perf_counter()
-    rows, profiles = swath_pattern(cfg, float_list(args.heights), float_list(args.speeds),
-                                   float_list(args.winds), mass_kg=args.mass, turb=args.turbulence)
+    rows, profiles = swath_pattern(cfg, heights, speeds, winds, mass_kg=args.mass,
+                                   turb=args.turbulence)
     wall = time.perf_counter() - t0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -79,6 +79,9 @@ def build_spec(args: argparse.Namespace, out: Path):
         field = str(write_rect_field(out / "field-40x24.geojson", *SHORT_FIELD,
                                      name="table2-short").resolve())
     ests = [e.strip() for e in args.estimators.split(",") if e.strip()]
+    if not ests:
+        raise ConfigError(f"--estimators = {args.estimators!r}: empty; give at least one "
+                          f"(e.g. {','.join(ESTIMATORS)})")
     # each estimator flies (no shadows); the paper's PCA window N = 20 (1 s at its 20 Hz)
     base: dict[str, Any] = {"mission.field": field, "gps.preset": args.gps_preset,
                             "wind.speed_mps": args.wind, "wind.turbulence": args.turbulence,
