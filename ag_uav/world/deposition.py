@@ -130,6 +130,7 @@ from .deposition_kernels import (
     NFOOT,
     NSLOW,
     P_AREA,
+    P_BD0,
     P_CELL,
     P_DELTA,
     P_DOFF,
@@ -161,10 +162,13 @@ from .deposition_kernels import (
     P_QMIN,
     P_RATE,
     P_RHOA,
+    P_RJ,
     P_ROTZ,
     P_S0,
     P_SIG0,
     P_SIGA,
+    P_SM,
+    P_ST50,
     P_SWATH,
     P_TAU,
     P_TMAX,
@@ -273,7 +277,12 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
             P_NOZC: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))), P_QMIN: c.flow_min_l_per_s,
             P_ESC: c.wake_escape, P_ELL: c.shear_eddy_m, P_Z0: c.roughness_m,
             P_TMAX: c.airborne_after_s,
-            P_EDGE: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))) + 0.5 * c.rotor_diameter_m}
+            P_EDGE: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))) + 0.5 * c.rotor_diameter_m,
+            P_SM: (c.jet_merge_lengths * 2.0 * c.rotor_arm_m if c.jet_merge_lengths > 0
+                   else 1e30),
+            P_BD0: c.jet_decay_b * math.sqrt(c.n_rotors) * c.rotor_diameter_m / math.sqrt(2.0),
+            P_RJ: 0.5 * math.sqrt(c.n_rotors) * c.rotor_diameter_m,
+            P_ST50: c.outwash_impaction_st50}
     for k, v in head.items():
         par[k] = v
     o = P_HEADER

@@ -6,7 +6,7 @@ and ``main(args) -> int``. Add a module name to :data:`MODULES` to register it.
 
 MODULES = ("numerical", "table2", "bearing_tracking", "route_prediction", "langevin",
            "outage", "controllers", "swath", "spray_settings", "ins_nav", "optimisers",
-           "drift")
+           "drift", "wind_tunnel")
 
 
 def float_list(s: str) -> list[float]:
