@@ -92,3 +92,24 @@ def test_wind_tunnel_bad_nozzle_is_a_one_line_error(capsys, tmp_path):
     rc = main(["experiment", "wind-tunnel", "--nozzles", "foggy", "--out", str(tmp_path)])
     assert rc == 2
     assert "--nozzles foggy" in capsys.readouterr().out
+
+
+def test_wind_tunnel_reads_another_payloads_rows(tmp_path):
+    """--measured with rows of another payload (here the 2 L figures relabelled 10 L, one
+    condition) runs and writes the same table; the 10 L rotor-on spectrum is used."""
+    from importlib import resources
+
+    from ag_uav.cli import main
+
+    text = resources.files("ag_uav.data").joinpath(
+        "grant2022_deposition_slides_2L.csv").read_text().splitlines()
+    keep = [text[0]] + [ln for ln in text[1:] if ",TT11001 (medium),2,3," in ln]
+    assert len(keep) == 1 + 14 * 3
+    f = tmp_path / "ten.csv"
+    f.write_text("\n".join(ln.replace(",TT11001 (medium),2,", ",TT11001 (medium),10,")
+                           for ln in keep) + "\n")
+    out = tmp_path / "out"
+    assert main(["experiment", "wind-tunnel", "--measured", str(f), "--out", str(out)]) == 0
+    md = (out / "wind_tunnel.md").read_text()
+    assert "| 3 | medium | 10 |" in md
+    assert (out / "wind_tunnel.csv").read_text().count("\n") == 15

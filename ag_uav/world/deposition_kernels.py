@@ -389,17 +389,27 @@ def _class_footprint(par, k: int, env):
     relax = tp * (1.0 - math.exp(-tf / tp))
     wxo = wx * tf + tx * dw + (vx - wx) * relax
     wyo = wy * tf + ty * dw + (vy - wy) * relax
-    # optional (St₅₀ > 0): the ground outwash carries only what turns with it; a droplet of
-    # impaction Stokes number St_g = τ_p u_g / r_j (r_j the merged jet's radius) strikes the
-    # ground with the share η = St_g² / (St_g² + St₅₀²) (round-jet impactor: St₅₀ = 0.24,
-    # Marple & Liu 1974, Environ. Sci. Technol. 8(7):648); the variance is the mixture's
+    # optional (St₅₀ > 0), the outwash layer: only what turns with the ground jet rides it; a
+    # droplet of impaction Stokes number St_g = τ_p u_g / r_j (r_j the merged jet's radius)
+    # strikes the ground with the share η = St_g² / (St_g² + St₅₀²) (round-jet impactor:
+    # St₅₀ = 0.24, Marple & Liu 1974, Environ. Sci. Technol. 8(7):648); the share that rides
+    # settles through the layer δ in δ / v_t, carried by the log-law wind at δ; the mean and
+    # variance are the mixture's
     st50 = par[P_ST50]
     ride = 1.0
+    lvar = 0.0
     if st50 > 0.0:
         st_g = tp * u_g / par[P_RJ]
         ride = st50 * st50 / (st_g * st_g + st50 * st50)
+        w = math.sqrt(wx * wx + wy * wy)
+        z0 = par[P_Z0]
+        if w > 0.0 and par[P_DELTA] > z0:
+            sh = par[P_DELTA] / vt * ust / KAPPA * math.log(par[P_DELTA] / z0) / w
+            wxo += ride * sh * wx
+            wyo += ride * sh * wy
+            lvar = ride * (1.0 - ride) * sh * sh * w * w
     wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * (par[P_DELTA] * u_g / vt) ** 2
-            + (par[P_SIGA] * tf) ** 2)
+            + (par[P_SIGA] * tf) ** 2 + lvar)
     wland = _tab_left(par, k, tf)
     # escape at the wake's edge: ε₀ sin χ, damped by the droplet's response 1/(1 + St)
     st_k = tp * sig_s / par[P_ELL]

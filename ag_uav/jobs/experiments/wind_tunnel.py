@@ -243,6 +243,51 @@ def summary(wind: float, noz: str, pay: float, pos: np.ndarray, meas: np.ndarray
             "peak_model_m": float(pos[int(np.argmax(model))]), "median_abs_log10_2_20m": err}
 
 
+def checks(rows: list[dict], summ: list[dict]) -> list[list[str]]:
+    """The comparison's checks, each a row (check, result): the downwind fraction within a
+    factor 2, its rise with wind per nozzle and its fall from fine to coarse at each wind
+    (where the measured means do), the medium nozzle's peak moving downwind and within 1 m of
+    the measured, and per wind the median |log10(model / measured)| over 2-20 m (all nozzles'
+    positions pooled)."""
+    out = []
+    ok2 = [s for s in summ if 0.5 <= s["ratio"] <= 2.0]
+    out.append(["downwind fraction within a factor 2", f"{len(ok2)} of {len(summ)}"])
+    by = {(s["wind_mps"], s["nozzle"], s["payload_l"]): s for s in summ}
+    winds = sorted({k[0] for k in by})
+    for noz in NOZZLES:
+        for pay in sorted({k[2] for k in by}):
+            seq = [by[(w, noz, pay)] for w in winds if (w, noz, pay) in by]
+            if len(seq) < 2:
+                continue
+            mrise = all(b["downwind_measured"] > a["downwind_measured"]
+                        for a, b in zip(seq, seq[1:], strict=False))
+            rise = all(b["downwind_model"] > a["downwind_model"]
+                       for a, b in zip(seq, seq[1:], strict=False))
+            out.append([f"rises with wind, {noz} {pay:g} L",
+                        f"model {'yes' if rise else 'no'}, measured {'yes' if mrise else 'no'}"])
+    for w in winds:
+        seq = [by[k] for n in NOZZLES for k in by if k[0] == w and k[1] == n]
+        if len(seq) == 3:
+            mfall = all(b["downwind_measured"] < a["downwind_measured"]
+                        for a, b in zip(seq, seq[1:], strict=False))
+            fall = all(b["downwind_model"] < a["downwind_model"]
+                       for a, b in zip(seq, seq[1:], strict=False))
+            out.append([f"falls fine -> coarse at {w:g} m/s",
+                        f"model {'yes' if fall else 'no'}, measured {'yes' if mfall else 'no'}"])
+        med = [by[k] for k in by if k[0] == w and k[1] == "medium"]
+        if med:
+            m = med[0]
+            out.append([f"medium peak at {w:g} m/s (model, measured)",
+                        f"{m['peak_model_m']:+g} m, {m['peak_measured_m']:+g} m"])
+        err = [abs(math.log10(r["model_norm"] / r["measured_norm"])) for r in rows
+               if r["wind_mps"] == w and 2.0 <= r["distance_m"] <= 20.0
+               and r["model_norm"] > 0 and r["measured_norm"] > 0]
+        if err:
+            out.append([f"median |log10(model / measured)| 2-20 m at {w:g} m/s",
+                        f"{float(np.median(err)):.2f}"])
+    return out
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     t = Trial()
     p.add_argument("--measured", default=None, metavar="FILE",
@@ -337,8 +382,11 @@ def main(args: argparse.Namespace) -> int:
     header, tab = table(summ)
     src = args.measured or f"ag_uav/data/{DEFAULT_MEASURED} (Grant et al. 2022, Drones 6(8):204)"
     print_table(header, tab, f"Wind tunnel: model against {src}")
+    ck = checks(rows, summ)
+    print_table(["check", "result"], ck, "Checks")
     (out / "wind_tunnel.md").write_text(
         f"Measured: {src}. Downwind = share of the condition's total at >= 2 m; peak = the "
-        "position of the largest deposit.\n\n" + markdown_table(header, tab))
+        "position of the largest deposit.\n\n" + markdown_table(header, tab) + "\n"
+        + markdown_table(["check", "result"], ck))
     print(f"wrote {out / 'wind_tunnel.csv'}, {out / 'wind_tunnel.png'}, {out / 'wind_tunnel.md'}")
     return 0
