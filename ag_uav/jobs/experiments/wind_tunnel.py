@@ -207,7 +207,7 @@ def compare(base: DepositionConfig, trial: Trial, measured: dict, winds: list[fl
     """Every selected condition of ``measured``: rows per position (normalised deposits) and
     one summary per condition (downwind fraction, peak position, log error over 2-20 m)."""
     rows, summ = [], []
-    for key in sorted(measured):
+    for key in sorted(measured, key=lambda k: (k[0], NOZZLES.index(k[1]), k[2])):
         wind, noz, pay = key
         if ((winds and not any(abs(wind - w) < 1e-6 for w in winds))
                 or (nozzles and noz not in nozzles)
