@@ -11,6 +11,7 @@ import numpy as np
 
 from .._jit import njit
 from .droplets import N_TAB
+from .surface_layer import eddy_k, layer_wind
 from .wake import centreline_speed, fall_time
 
 
@@ -47,7 +48,7 @@ INPUT_WIDTH = 20
 (P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF, P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0, P_ROTZ, P_IW,
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
  P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
- P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50) = range(46)
+ P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL) = range(47)
 P_HEADER = 48
 # state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
 # sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
@@ -360,15 +361,10 @@ def _environment(par, inp):
     z0w = par[P_S0] * cos_chi
     zmw, bdw = par[P_SM] * cos_chi, par[P_BD0] * cos_chi
     u_g = centreline_speed(a, z0w, zmw, bdw, s_g)
-    # log-law surface layer: u* from the wind at the vehicle's height
-    z0 = par[P_Z0]
+    # surface layer (Monin–Obukhov; neutral: the log law): u* from the wind at the vehicle's
+    # height, f_u the mean of u(z) over the layer below the nozzle as a share of it
     w = math.sqrt(wx * wx + wy * wy)
-    ust, fu = 0.0, 0.0
-    if pz > 1.01 * z0:
-        lnv = math.log(pz / z0)
-        ust = KAPPA * w / lnv
-        if zn > z0:                                  # mean of u(z) over the layer below the nozzle
-            fu = (zn * math.log(zn / z0) - zn + z0) / ((zn - z0) * lnv)
+    ust, fu = layer_wind(w, pz, zn, par[P_Z0], par[P_INVL])
     return (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, zn, fu,
             par[P_IW] * 2.0 * vi, zmw, bdw)
 
@@ -416,7 +412,7 @@ def _class_footprint(par, k: int, env):
     esc = par[P_ESC] * sin_chi / (1.0 + st_k)
     # escaped: settles from the nozzle height through the surface layer (first passage)
     mu_t = _tab_time(par, k, h_n)
-    kz = KAPPA * ust * 0.5 * h_n
+    kz = eddy_k(ust, h_n, par[P_INVL])
     lam_t = h_n * h_n / (2.0 * kz) if kz > 1e-12 else 1e30
     tmax = par[P_TMAX]
     pair = 1.0 - _ig_cdf(tmax, mu_t, lam_t) if mu_t > 0.0 else 0.0
