@@ -15,8 +15,9 @@ still aloft after ``airborne_after_s`` is not deposited.
 
 Writes into ``--out`` (``runs/experiment-drift``): ``drift.csv`` (one row per case and
 distance: crosswind, release height, speed, spectrum, temperature, RH, distance, deposit in %
-of the applied rate), ``cases.csv`` (per case: buffers for < 1 % and < 0.1 %, evaporated and
-airborne shares of the sprayed volume), ``drift.png`` (deposit against distance, log scale, with
+of the applied rate), ``cases.csv`` (per case: buffers for < 1 % and < 0.1 %, each with its
+low and high bound from the uncertain inputs (:mod:`.drift_range`), evaporated and airborne
+shares of the sprayed volume), ``drift.png`` (deposit against distance, log scale, with
 the published curves) and ``drift.md`` (the buffer table and the comparison with the published
 field measurements, with the ratio at each distance).
 """

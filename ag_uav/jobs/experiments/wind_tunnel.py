@@ -26,7 +26,8 @@ positions (the slide's area and the sprayed volume drop out).
 **Assumed (not in the published files; the paper's method section could not be read with the
 search tools):** the vehicle (an octocopter of the DJI Agras MG-1P class, the 10 L payload's
 class: 8 rotors of 0.533 m, 1.5 m wheelbase, 13.8 kg with its battery and an empty tank, four
-nozzles under four rotors 0.35 m below the rotor plane), the nozzle height above the slides
+nozzles under four rotors 0.35 m below the rotor plane; DJI's MG-1P figures as recalled, not
+verified), the nozzle height above the slides
 (``--height``, 2 m; the anemometers at 1.2 and 1.8 m have no reading at the vehicle's station),
 the tunnel width (``--tunnel-width``, 4.2 m: the anemometers stand 0.99, 2.1 and 3.3 m across)
 and the vehicle's drag. ``--height`` and ``--tunnel-width`` show their effect.
