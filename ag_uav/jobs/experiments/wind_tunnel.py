@@ -357,7 +357,11 @@ def main(args: argparse.Namespace) -> int:
     from . import write_csv
 
     try:
-        base = DepositionConfig(**toml_overrides(args.set))
+        over = toml_overrides(args.set)
+        bad_keys = [k for k in over if k not in DepositionConfig.__dataclass_fields__]
+        if bad_keys:
+            raise ValueError(f"--set {bad_keys[0]}: not a DepositionConfig field")
+        base = DepositionConfig(**over)
         nozzles = [s.strip() for s in args.nozzles.split(",") if s.strip()]
         bad = [s for s in nozzles if s not in NOZZLES]
         if bad:
@@ -368,7 +372,13 @@ def main(args: argparse.Namespace) -> int:
             raise ValueError(f"--tunnel-width {args.tunnel_width:g}: must be >= 0 (0: no walls)")
         trial = Trial(height_m=args.height, tunnel_width_m=args.tunnel_width)
         measured = read_measured(args.measured)
-        winds, pays = float_list(args.winds), float_list(args.payloads)
+        winds, pays = [], []
+        for name, text, dest in (("--winds", args.winds, winds), ("--payloads", args.payloads,
+                                                                  pays)):
+            try:
+                dest += float_list(text)
+            except ValueError:
+                raise ValueError(f"{name} {text}: expected numbers separated by commas") from None
     except (ValueError, TypeError, OSError, KeyError) as e:
         print(f"error: {e}")
         return 2
