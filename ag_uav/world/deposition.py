@@ -54,7 +54,11 @@ wake reaches 2 v_i and then decays as a round turbulent jet along its skewed axi
 axial distance s < s₀ and 2 v_i s₀ / s beyond, s₀ = B · D/√2 (B ≈ 6, Abdel-Rahman et al., Mech.
 Res. Commun. 23(3):313, 1996). At depth z below the rotor the axial distance is z / cos χ, so the
 wake's vertical speed is a = 2 v_i c for z < z₀ = s₀ cos χ and a z₀ / z beyond (c = R₂₂: the
-wake blows along −ẑ_body): a skewed wake decays within a shorter depth.
+wake blows along −ẑ_body): a skewed wake decays within a shorter depth. With
+``jet_merge_lengths`` > 0 the rotors' jets merge, beyond that many wheelbases (2 ×
+``rotor_arm_m``), into one round jet of the whole vehicle, u = B u₀ D₀ / (s − s_v) with
+D₀ = √n D/√2 (:mod:`ag_uav.world.wake`: Bauersfeld et al. 2024, arXiv 2403.13321; off by
+default).
 
 **The wake part** of a class falls from the nozzle depth s_n to the ground depth s_g at
 ds/dt = v_t + u(s), in closed form::
@@ -67,7 +71,10 @@ lands about x = x_nozzle + W t_f + (ẑ-tilt) D_w / c + (v − W) τ_p (1 − e^
 σ² = σ₀² + (i_w D_w)² + (δ u_g / v_t)² + (σ_a t_f)² (σ₀ the nozzle sheet, i_w ≈ 0.25 the jet's
 turbulence intensity, δ u_g / v_t the ground outwash of speed u_g in a layer δ, σ_a ambient
 turbulence not in the per-tick wind samples). δ = 0.17 m is calibrated (docs: DJI's 11 m T40
-swath).
+swath). With ``outwash_impaction_st50`` > 0 only the share St₅₀² / (St_g² + St₅₀²) of a class
+rides the outwash (St_g = τ_p u_g / r_j, r_j = √n D/2: a round impinging jet's impactor cut,
+Marple & Liu 1974, Environ. Sci. Technol. 8(7):648), drifting with the log-law wind at δ for
+δ / v_t (the mixture's mean and variance; off by default).
 
 **The escaped part.** At the wake's edge the shear layer's eddies (velocity σ_s = i_w 2 v_i,
 size ℓ = ``shear_eddy_m``) carry droplets out as the wake skews; a droplet follows them by the
@@ -130,6 +137,7 @@ from .deposition_kernels import (
     NFOOT,
     NSLOW,
     P_AREA,
+    P_BD0,
     P_CELL,
     P_DELTA,
     P_DOFF,
@@ -140,6 +148,7 @@ from .deposition_kernels import (
     P_FLUSHD,
     P_FLUSHT,
     P_HEADER,
+    P_INVL,
     P_IW,
     P_K,
     P_M,
@@ -161,10 +170,13 @@ from .deposition_kernels import (
     P_QMIN,
     P_RATE,
     P_RHOA,
+    P_RJ,
     P_ROTZ,
     P_S0,
     P_SIG0,
     P_SIGA,
+    P_SM,
+    P_ST50,
     P_SWATH,
     P_TAU,
     P_TMAX,
@@ -273,7 +285,12 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
             P_NOZC: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))), P_QMIN: c.flow_min_l_per_s,
             P_ESC: c.wake_escape, P_ELL: c.shear_eddy_m, P_Z0: c.roughness_m,
             P_TMAX: c.airborne_after_s,
-            P_EDGE: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))) + 0.5 * c.rotor_diameter_m}
+            P_EDGE: float(np.max(np.hypot(noz[:, 0], noz[:, 1]))) + 0.5 * c.rotor_diameter_m,
+            P_SM: (c.jet_merge_lengths * 2.0 * c.rotor_arm_m if c.jet_merge_lengths > 0
+                   else 1e30),
+            P_BD0: c.jet_decay_b * math.sqrt(c.n_rotors) * c.rotor_diameter_m / math.sqrt(2.0),
+            P_RJ: 0.5 * math.sqrt(c.n_rotors) * c.rotor_diameter_m,
+            P_ST50: c.outwash_impaction_st50, P_INVL: c.obukhov_inv_m}
     for k, v in head.items():
         par[k] = v
     o = P_HEADER

@@ -15,7 +15,9 @@ _M350_NOZZLES = ((0.3164, -0.3164, -0.15), (0.3164, 0.3164, -0.15),
 _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
            ("nonvolatile_fraction", 1e-4, 1.0), ("roughness_m", 1e-4, 2.0),
            ("wake_escape", 0.0, 1.0), ("shear_eddy_m", 1e-3, 10.0),
-           ("airborne_after_s", 1.0, 1e5), ("n_classes", 1, 40))
+           ("airborne_after_s", 1.0, 1e5), ("n_classes", 1, 40),
+           ("outwash_impaction_st50", 0.0, 10.0), ("jet_merge_lengths", 0.0, 100.0),
+           ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -44,14 +46,19 @@ class DepositionConfig:
     air_viscosity: float = 1.81e-5
     liquid_density: float = 1000.0
     jet_decay_b: float = 6.0
+    rotor_arm_m: float = 0.4475                   # rotor hub from the centre (895 mm wheelbase)
+    jet_merge_lengths: float = 0.0                # > 0 (2.5): merged jet beyond that many
+                                                  # wheelbases (Bauersfeld); 0: rotor jets only
     wake_turbulence: float = 0.25
     outwash_layer_m: float = 0.17
+    outwash_impaction_st50: float = 0.0           # > 0 (0.24): what impacts skips the outwash
     release_sigma_m: float = 0.1
     ambient_sigma_mps: float = 0.0
     temperature_c: float = 20.0                   # air temperature (°C)
     rh_percent: float = 60.0                      # relative humidity (%)
     nonvolatile_fraction: float = 0.05            # volume share of the mix that never evaporates
     roughness_m: float = 0.05                     # z0 of the log-law wind profile (m)
+    obukhov_inv_m: float = 0.0                    # 1/L (1/m): 0 neutral, > 0 stable, < 0 unstable
     wake_escape: float = 0.3                      # ε₀: share of the sheet at the wake's edge
     shear_eddy_m: float = 0.05                    # eddy length of the wake's shear layer (m)
     airborne_after_s: float = 600.0               # still aloft after this: counted airborne

@@ -11,6 +11,8 @@ import numpy as np
 
 from .._jit import njit
 from .droplets import N_TAB
+from .surface_layer import eddy_k, layer_wind
+from .wake import centreline_speed, fall_time
 
 
 class DepArrays(NamedTuple):
@@ -46,7 +48,7 @@ INPUT_WIDTH = 20
 (P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF, P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0, P_ROTZ, P_IW,
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
  P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
- P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE) = range(42)
+ P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL) = range(47)
 P_HEADER = 48
 # state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
 # sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
@@ -68,20 +70,6 @@ NENV = 16
 (F_WAKE, F_WX, F_WY, F_WVAR, F_WLAND, F_ESC, F_EX, F_EY, F_EVX, F_EVY, F_MUT, F_LAMT, F_PAIR,
  F_RLAND, F_RAIR, F_UX, F_UY) = range(17)
 NFOOT = 17
-
-
-@njit(cache=True, inline="always")
-def _fall_time(vt: float, a: float, s0: float, s1: float, s2: float) -> float:
-    """Time to fall from depth s1 to s2 at ds/dt = vt + u(s), u = a (s < s0), a·s0/s (s ≥ s0)."""
-    t = 0.0
-    if s1 < s0:
-        e = min(s2, s0)
-        t += (e - s1) / (vt + a)
-        s1 = e
-    if s2 > s1:
-        c = a * s0
-        t += ((s2 - s1) - c / vt * math.log1p(vt * (s2 - s1) / (vt * s1 + c))) / vt
-    return t
 
 
 @njit(cache=True, inline="always")
@@ -344,9 +332,9 @@ def _tab_left(par, k: int, t: float) -> float:
 @njit(cache=True)
 def _environment(par, inp):
     """What every class of one tick shares: nozzle and ground depths below the rotor plane, the
-    wake (speed a, skew, decay depth), the wind and the surface layer. Laws in the module
-    docstring. Returns (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin χ, u*, h_n, f_u,
-    σ_s)."""
+    wake (speed a, skew, the rotors' core, the merged jet), the wind and the surface layer.
+    Laws in the module docstring. Returns (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin χ,
+    u*, h_n, f_u, σ_s, s_m cos χ, B D_0 cos χ)."""
     m_n = int(par[P_M])
     o_noz, o_share = int(par[P_O_NOZ]), int(par[P_O_SHARE])
     pz, vx, vy = inp[2], inp[3], inp[4]
@@ -369,19 +357,16 @@ def _environment(par, inp):
     cos_chi = vi / hyp if hyp > 0.0 else 1.0
     sin_chi = math.sqrt(va2) / hyp if hyp > 0.0 else 0.0
     a = 2.0 * vi * cz
-    z0w = par[P_S0] * cos_chi                        # the jet's core ends s₀ along the skewed axis
-    u_g = a if s_g < z0w else a * z0w / max(s_g, 1e-9)
-    # log-law surface layer: u* from the wind at the vehicle's height
-    z0 = par[P_Z0]
+    # the rotors' jets and the merged jet (ag_uav.world.wake); lengths along the skewed axis
+    z0w = par[P_S0] * cos_chi
+    zmw, bdw = par[P_SM] * cos_chi, par[P_BD0] * cos_chi
+    u_g = centreline_speed(a, z0w, zmw, bdw, s_g)
+    # surface layer (Monin–Obukhov; neutral: the log law): u* from the wind at the vehicle's
+    # height, f_u the mean of u(z) over the layer below the nozzle as a share of it
     w = math.sqrt(wx * wx + wy * wy)
-    ust, fu = 0.0, 0.0
-    if pz > 1.01 * z0:
-        lnv = math.log(pz / z0)
-        ust = KAPPA * w / lnv
-        if zn > z0:                                  # mean of u(z) over the layer below the nozzle
-            fu = (zn * math.log(zn / z0) - zn + z0) / ((zn - z0) * lnv)
+    ust, fu = layer_wind(w, pz, zn, par[P_Z0], par[P_INVL])
     return (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, zn, fu,
-            par[P_IW] * 2.0 * vi)
+            par[P_IW] * 2.0 * vi, zmw, bdw)
 
 
 @njit(cache=True)
@@ -390,24 +375,44 @@ def _class_footprint(par, k: int, env):
     docstring): the wake part (share, mean, variance, volume left on landing) and the escaped
     part (share, mean, axis variances, fall-time law IG(μ_T, λ_T), airborne share, volume left
     on landing and when counted airborne, mean wind). Slots F_*."""
-    (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, h_n, fu, sig_s) = env
+    (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, h_n, fu, sig_s, zmw,
+     bdw) = env
     vt, tp = par[int(par[P_O_VT]) + k], par[int(par[P_O_TAUP]) + k]
     sig0 = par[P_SIG0]
     # wake: carried down the decaying skewed jet
-    tf = _fall_time(vt, a, z0w, s_n, s_g) if s_g > s_n else 0.0
+    tf = fall_time(vt, a, z0w, zmw, bdw, s_n, s_g) if s_g > s_n else 0.0
     dw = max((s_g - s_n) - vt * tf, 0.0)
     relax = tp * (1.0 - math.exp(-tf / tp))
     wxo = wx * tf + tx * dw + (vx - wx) * relax
     wyo = wy * tf + ty * dw + (vy - wy) * relax
-    wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + (par[P_DELTA] * u_g / vt) ** 2
-            + (par[P_SIGA] * tf) ** 2)
+    # optional (St₅₀ > 0), the outwash layer: only what turns with the ground jet rides it; a
+    # droplet of impaction Stokes number St_g = τ_p u_g / r_j (r_j the merged jet's radius)
+    # strikes the ground with the share η = St_g² / (St_g² + St₅₀²) (round-jet impactor:
+    # St₅₀ = 0.24, Marple & Liu 1974, Environ. Sci. Technol. 8(7):648); the share that rides
+    # settles through the layer δ in δ / v_t, carried by the log-law wind at δ; the mean and
+    # variance are the mixture's
+    st50 = par[P_ST50]
+    ride = 1.0
+    lvar = 0.0
+    if st50 > 0.0:
+        st_g = tp * u_g / par[P_RJ]
+        ride = st50 * st50 / (st_g * st_g + st50 * st50)
+        w = math.sqrt(wx * wx + wy * wy)
+        z0 = par[P_Z0]
+        if w > 0.0 and par[P_DELTA] > z0:
+            sh = par[P_DELTA] / vt * ust / KAPPA * math.log(par[P_DELTA] / z0) / w
+            wxo += ride * sh * wx
+            wyo += ride * sh * wy
+            lvar = ride * (1.0 - ride) * sh * sh * w * w
+    wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * (par[P_DELTA] * u_g / vt) ** 2
+            + (par[P_SIGA] * tf) ** 2 + lvar)
     wland = _tab_left(par, k, tf)
     # escape at the wake's edge: ε₀ sin χ, damped by the droplet's response 1/(1 + St)
     st_k = tp * sig_s / par[P_ELL]
     esc = par[P_ESC] * sin_chi / (1.0 + st_k)
     # escaped: settles from the nozzle height through the surface layer (first passage)
     mu_t = _tab_time(par, k, h_n)
-    kz = KAPPA * ust * 0.5 * h_n
+    kz = eddy_k(ust, h_n, par[P_INVL])
     lam_t = h_n * h_n / (2.0 * kz) if kz > 1e-12 else 1e30
     tmax = par[P_TMAX]
     pair = 1.0 - _ig_cdf(tmax, mu_t, lam_t) if mu_t > 0.0 else 0.0

@@ -15,8 +15,9 @@ still aloft after ``airborne_after_s`` is not deposited.
 
 Writes into ``--out`` (``runs/experiment-drift``): ``drift.csv`` (one row per case and
 distance: crosswind, release height, speed, spectrum, temperature, RH, distance, deposit in %
-of the applied rate), ``cases.csv`` (per case: buffers for < 1 % and < 0.1 %, evaporated and
-airborne shares of the sprayed volume), ``drift.png`` (deposit against distance, log scale, with
+of the applied rate), ``cases.csv`` (per case: buffers for < 1 % and < 0.1 %, each with its
+low and high bound from the uncertain inputs (:mod:`.drift_range`), evaporated and airborne
+shares of the sprayed volume), ``drift.png`` (deposit against distance, log scale, with
 the published curves) and ``drift.md`` (the buffer table and the comparison with the published
 field measurements, with the ratio at each distance).
 """
@@ -33,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ...world.deposition import DepositionConfig, footprints, pack_input
-from . import flight_axes, name_axis, number_axis, toml_overrides
+from . import drift_range, flight_axes, name_axis, number_axis, toml_overrides
 from .swath import pass_states
 
 NAME = "drift"
@@ -42,6 +43,9 @@ HELP = ("simulated drift trial (ISO 22866 style): a treated strip upwind of coll
         "droplet spectrum, temperature and humidity, with buffers and published curves")
 
 DISTANCES = (1.0, 2.0, 3.0, 5.0, 10.0, 15.0, 20.0, 30.0, 50.0)
+#: what the buffers' bounds are (:mod:`.drift_range`)
+BOUNDS_NOTE = ("low: wake_escape halved, an unstable surface layer, the wind's direction "
+               "meandering 20°; high: wake_escape doubled, a stable layer, a steady direction")
 #: illustrative spectra (Dv10, Dv50, Dv90 in µm); "medium" is the product default
 SPECTRA = {"fine": (80.0, 160.0, 290.0), "medium": (120.0, 250.0, 420.0),
            "coarse": (180.0, 360.0, 600.0)}
@@ -177,6 +181,21 @@ def run_cases(base: DepositionConfig, cases: list[Case], passes: int, mass_kg: f
     return rows, summ, curves
 
 
+def bound_buffers(base: DepositionConfig, cases: list[Case], passes: int, mass_kg: float
+                  ) -> dict:
+    """Per case the buffers (< 1 %, < 0.1 %) at the low and the high bound of the uncertain
+    inputs (:mod:`.drift_range`): {case: {"low": (m, m), "high": (m, m)}}."""
+    out: dict = {c: {} for c in cases}
+    for which in drift_range.BOUNDS:
+        cfg, sig = drift_range.bound_config(base, which)
+        _, _, curves = run_cases(cfg, cases, passes, mass_kg)
+        for c in cases:
+            x, dep = curves[c]
+            d = drift_range.meander(x, dep, sig)
+            out[c][which] = (buffer_m(x, d, 1.0), buffer_m(x, d, 0.1))
+    return out
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--winds", default="1,3,5", help="crosswinds at the release height (m/s; "
                    "each one wind.speed_mps accepts)")
@@ -275,24 +294,32 @@ def main(args: argparse.Namespace) -> int:
     base, cases, base_cases = _cases(args)
     t0 = time.perf_counter()
     rows, summ, curves = run_cases(base, cases, args.passes, args.mass)
+    rng = bound_buffers(base, cases, args.passes, args.mass)
+    for s, c in zip(summ, cases, strict=True):
+        for which, (b1, b01) in rng[c].items():
+            s[f"buffer_1pct_{which}_m"], s[f"buffer_0p1pct_{which}_m"] = b1, b01
     wall = time.perf_counter() - t0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "drift.csv", rows)
     write_csv(out / "cases.csv", summ)
     _plot(out / "drift.png", curves, base_cases)
-    bh = ["wind (m/s)", "h (m)", "v (m/s)", "spectrum", "T (°C)", "RH (%)", "< 1 % beyond (m)",
-          "< 0.1 % beyond (m)", "escaped", "evaporated", "airborne"]
+    bh = ["wind (m/s)", "h (m)", "v (m/s)", "spectrum", "T (°C)", "RH (%)",
+          "< 1 % beyond (m) (low–high)", "< 0.1 % beyond (m) (low–high)", "escaped",
+          "evaporated", "airborne"]
     bt = [[f"{s['crosswind_mps']:g}", f"{s['release_height_m']:g}", f"{s['speed_mps']:g}",
            s["spectrum"], f"{s['temperature_c']:g}", f"{s['rh_percent']:g}",
-           f"{s['buffer_1pct_m']:g}", f"{s['buffer_0p1pct_m']:g}",
+           f"{s['buffer_1pct_m']:g} ({s['buffer_1pct_low_m']:g}–{s['buffer_1pct_high_m']:g})",
+           f"{s['buffer_0p1pct_m']:g} ({s['buffer_0p1pct_low_m']:g}–"
+           f"{s['buffer_0p1pct_high_m']:g})",
            f"{100 * s['escaped_fraction']:.1f} %", f"{100 * s['evaporated_fraction']:.2f} %",
            f"{100 * s['airborne_fraction']:.3f} %"] for s in summ]
     print_table(bh, bt, f"Drift trial: buffers ({len(cases)} cases, {wall:.1f} s)")
     ch, ct = _comparison(rows, base_cases)
     print_table(ch, ct, "Deposit (% of the applied rate) beside the JKI basic drift values")
     (out / "drift.md").write_text(
-        "## Buffers\n\n" + markdown_table(bh, bt) + "\n## Against published measurements\n\n"
+        "## Buffers\n\nIn brackets the low and high bounds (" + BOUNDS_NOTE + ").\n\n"
+        + markdown_table(bh, bt) + "\n## Against published measurements\n\n"
         + markdown_table(ch, ct))
     print(f"wrote {out / 'drift.csv'}, {out / 'cases.csv'}, {out / 'drift.png'}, "
           f"{out / 'drift.md'}")

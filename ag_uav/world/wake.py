@@ -1,0 +1,130 @@
+"""The downwash of a multirotor from its geometry: each rotor's own jet near the vehicle, one
+merged round jet of the whole vehicle below it.
+
+**Near the vehicle** each rotor's far wake (momentum theory: 2 v_i over the contracted area
+A_r/2, diameter D/√2; Leishman, *Principles of Helicopter Aerodynamics* §2.3) keeps its speed
+over a core of length s_r = B D/√2 and then decays as a round jet, u = 2 v_i s_r / s.
+
+**Below the vehicle** the rotors' jets merge into one turbulent round jet: Bauersfeld, Muller,
+Ziegler, Coletti & Scaramuzza (2024, "Robotics meets Fluid Dynamics: A Characterization of the
+Induced Airflow below a Quadrotor as a Turbulent Jet", arXiv 2403.13321; 16 h of flights of six
+quadrotors) find the combined flow a turbulent jet beyond about 2.5 vehicle length scales l (the
+motor-to-motor distance; here l = 2 × the arm, the wheelbase), scaled by the hover induced
+velocity, the rotor size and the vehicle size. A round jet's centreline decays as
+
+    u_c(s) = B u_0 D_0 / (s − s_v)        (Pope 2000, *Turbulent Flows* §5.1; B ≈ 5.8-6.1)
+
+with u_0 D_0 the exit velocity × diameter of a jet with the same momentum flux. The merged jet
+carries the whole thrust T = ρ u_0² π D_0²/4 (its momentum flux), so with u_0 = 2 v_i and
+D_0 = D_eq/√2, D_eq = √n D (n rotors of diameter D: the total disc area), B u_0 D_0 = √n × a
+single rotor's. Its virtual origin s_v makes the velocity continuous at the merge depth
+s_m = 2.5 l: s_v = s_m − B u_0 D_0 / u_near(s_m). The speed never exceeds u_0.
+
+In forward flight or wind the wake skews back by χ (tan χ = V_a / v_i, Glauert); every length
+is along the skewed axis, so at depth z the axial distance is z / cos χ (the lengths in depth
+are the axial lengths × cos χ).
+
+The compiled :func:`centreline_speed` and :func:`fall_time` are the laws the deposition kernels
+use (:mod:`ag_uav.world.deposition_kernels`); :class:`MultirotorWake` is the same law from a
+vehicle's mass and geometry (mass, rotor count, rotor diameter, arm), for tests and reports.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .._jit import njit
+
+#: the round jet's centreline decay constant (Pope 2000, table 5.1: 5.8-6.1 over the cited
+#: experiments; 6.11 at Re 19,400, Abdel-Rahman et al. 1996, Mech. Res. Commun. 23(3):313)
+JET_B = 6.0
+#: merged jet beyond this many vehicle length scales (Bauersfeld et al. 2024)
+MERGE_LENGTHS = 2.5
+
+
+@njit(cache=True, inline="always")
+def centreline_speed(a: float, s_r: float, s_m: float, bd0: float, s: float) -> float:
+    """Wake speed at axial distance ``s`` below the rotors: ``a`` (= 2 v_i) in the rotors'
+    cores (s < s_r), a s_r / s in their own decay (s_r ≤ s < s_m), the merged jet
+    a·bd0 / (s − s_v) beyond s_m (bd0 = B D_0 of the merged jet, s_v from continuity); never
+    above ``a``."""
+    if s < s_m:
+        return a if s < s_r else a * s_r / s
+    un = a if s_m < s_r else a * s_r / s_m
+    sv = s_m - a * bd0 / max(un, 1e-12)
+    return min(a, a * bd0 / max(s - sv, 1e-12))
+
+
+@njit(cache=True, inline="always")
+def _decay_time(vt: float, c: float, s1: float, s2: float) -> float:
+    """Time to fall from s1 to s2 (> s1 > 0) at ds/dt = vt + c / s, in closed form."""
+    return ((s2 - s1) - c / vt * math.log1p(vt * (s2 - s1) / (vt * s1 + c))) / vt
+
+
+@njit(cache=True, inline="always")
+def fall_time(vt: float, a: float, s_r: float, s_m: float, bd0: float, s1: float,
+              s2: float) -> float:
+    """Time for a droplet of terminal velocity ``vt`` to fall from depth s1 to s2 through the
+    wake of :func:`centreline_speed` (ds/dt = vt + u(s)), segment by segment in closed form."""
+    t = 0.0
+    core = min(s_r, s_m)
+    if s1 < core:                                   # the cores: u = a
+        e = min(s2, core)
+        t += (e - s1) / (vt + a)
+        s1 = e
+    if s1 < s_m and s2 > s1:                        # the rotors' own decay: u = a s_r / s
+        e = min(s2, s_m)
+        t += _decay_time(vt, a * s_r, s1, e)
+        s1 = e
+    if s2 > s1:                                     # the merged jet: u = a bd0 / (s − s_v)
+        un = a if s_m < s_r else a * s_r / s_m
+        sv = s_m - a * bd0 / max(un, 1e-12)
+        # below s_m the speed is a bd0/(s − s_v) ≤ a, exactly (continuity at s_m)
+        t += _decay_time(vt, a * bd0, s1 - sv, s2 - sv)
+    return t
+
+
+@dataclass(frozen=True)
+class MultirotorWake:
+    """A vehicle's downwash from its mass and geometry (laws in the module docstring)."""
+
+    mass_kg: float
+    n_rotors: int = 4
+    rotor_d_m: float = 0.533
+    arm_m: float = 0.4475               # rotor hub from the centre (M350 class: 895 mm wheelbase)
+    rho: float = 1.225
+    b: float = JET_B
+    merge_lengths: float = MERGE_LENGTHS
+
+    @property
+    def disc_area(self) -> float:
+        return self.n_rotors * math.pi * self.rotor_d_m ** 2 / 4.0
+
+    @property
+    def d_eq(self) -> float:
+        """The diameter of one disc of the total disc area: √n D."""
+        return math.sqrt(self.n_rotors) * self.rotor_d_m
+
+    def v_induced(self, thrust: float | None = None, airspeed: float = 0.0) -> float:
+        """Induced velocity v_i: v_h = sqrt(T/(2ρA)), and in edgewise flow (Glauert)
+        v_i⁴ + V_a² v_i² = v_h⁴."""
+        t = self.mass_kg * 9.81 if thrust is None else thrust
+        vh2 = t / (2.0 * self.rho * self.disc_area)
+        va2 = airspeed * airspeed
+        return math.sqrt(0.5 * (-va2 + math.sqrt(va2 * va2 + 4.0 * vh2 * vh2)))
+
+    def lengths(self) -> tuple[float, float, float]:
+        """Axial lengths (s_r, s_m, B D_0): a rotor jet's core, the merge depth 2.5 l, and
+        the merged jet's B D_0 = B √n D / √2."""
+        s_r = self.b * self.rotor_d_m / math.sqrt(2.0)
+        s_m = self.merge_lengths * 2.0 * self.arm_m
+        return s_r, s_m, self.b * self.d_eq / math.sqrt(2.0)
+
+    def centreline(self, depth: float, airspeed: float = 0.0) -> float:
+        """The wake's speed along its axis at ``depth`` below the rotors (m/s), skewed by the
+        airspeed (lengths × cos χ, tan χ = V_a / v_i)."""
+        vi = self.v_induced(None, airspeed)
+        c = vi / math.hypot(vi, airspeed)
+        s_r, s_m, bd0 = self.lengths()
+        return centreline_speed(2.0 * vi, s_r * c, s_m * c, bd0 * c, depth)

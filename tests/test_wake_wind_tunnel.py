@@ -1,0 +1,115 @@
+"""The multirotor wake from its geometry (ag_uav.world.wake) and the wind-tunnel experiment
+(ag_uav.jobs.experiments.wind_tunnel) against the measured trial of Grant et al. 2022."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from ag_uav.world.deposition import Deposition, DepositionConfig
+from ag_uav.world.wake import JET_B, MultirotorWake, centreline_speed, fall_time
+
+
+def test_merged_jet_centreline_is_the_round_jet_formula_at_three_depths():
+    w = MultirotorWake(mass_kg=6.47, n_rotors=4, rotor_d_m=0.533, arm_m=0.4475)
+    vh = math.sqrt(6.47 * 9.81 / (2 * 1.225 * 4 * math.pi * 0.533 ** 2 / 4))
+    u0 = 2.0 * vh
+    d0 = math.sqrt(4) * 0.533 / math.sqrt(2.0)           # D_eq / √2 of the whole vehicle
+    # the merged jet carries the whole thrust as its momentum flux
+    assert 1.225 * u0 ** 2 * math.pi * d0 ** 2 / 4 == pytest.approx(6.47 * 9.81)
+    s_r = JET_B * 0.533 / math.sqrt(2.0)
+    s_m = 2.5 * 2 * 0.4475
+    u_m = u0 if s_m < s_r else u0 * s_r / s_m            # continuity at the merge depth
+    z0 = s_m - JET_B * u0 * d0 / u_m
+    for z in (3.0, 5.0, 8.0):
+        assert z > s_m
+        assert w.centreline(z) == pytest.approx(JET_B * u0 * d0 / (z - z0), rel=1e-9)
+    # far below it decays √n times slower than one rotor's own jet would
+    far = 200.0
+    assert w.centreline(far) / (u0 * s_r / far) == pytest.approx(2.0, rel=0.05)
+    assert w.centreline(0.5) == pytest.approx(u0)        # the cores
+    assert max(w.centreline(z) for z in np.linspace(0.1, 20, 200)) <= u0 + 1e-12
+
+
+def test_fall_time_through_the_merged_jet_matches_integration():
+    a, s_r, s_m, bd0, vt = 10.0, 1.0, 2.0, 4.0, 0.8
+    s1, s2 = 0.2, 6.0
+    n = 200_000
+    s = np.linspace(s1, s2, n + 1)
+    u = np.array([centreline_speed(a, s_r, s_m, bd0, x) for x in s])
+    dt = np.diff(s) / (vt + 0.5 * (u[1:] + u[:-1]))
+    assert fall_time(vt, a, s_r, s_m, bd0, s1, s2) == pytest.approx(dt.sum(), rel=1e-6)
+
+
+def test_the_wake_skews_and_weakens_in_wind():
+    w = MultirotorWake(mass_kg=15.8, n_rotors=8, rotor_d_m=0.533, arm_m=0.75)
+    calm, windy = w.centreline(6.0), w.centreline(6.0, airspeed=4.5)
+    assert windy < calm                                    # lengths shrink with cos χ
+    assert w.v_induced(airspeed=4.5) < w.v_induced()
+
+
+@pytest.mark.parametrize("opts", [{}, {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24}])
+def test_mass_balance_closes_with_the_wake_options(opts):
+    from ag_uav.world.field import Field
+
+    fld = Field.from_coords([(0, 0), (40, 0), (40, 30), (0, 30)])
+    cfg = dataclasses.replace(DepositionConfig(), **opts)
+    dep = Deposition(cfg, fld)
+    R = np.eye(3).ravel()
+    for i in range(300):
+        dep.step(0.02, np.array([5.0 + 5 * 0.02 * i, 15.0, 4.0]), np.array([5.0, 0.0, 0.0]), R,
+                 63.5, np.array([0.0, 3.0, 0.0]), True)
+    m = dep.metrics()
+    assert m["sprayed_l"] > 0
+    assert abs(m["mass_balance_error"]) < 1e-12
+
+
+def test_wind_tunnel_one_condition_against_the_measured_trial():
+    from ag_uav.jobs.experiments import wind_tunnel as wt
+
+    measured = wt.read_measured(None)
+    assert len(measured) == 9                               # 3 winds x 3 nozzles, 2 L
+    rows, summ = wt.compare(DepositionConfig(), wt.Trial(), measured, [3.0], ["medium"], [2.0])
+    assert len(rows) == 14 and len(summ) == 1
+    s = summ[0]
+    assert sum(r["model_norm"] for r in rows) == pytest.approx(1.0)
+    assert sum(r["measured_norm"] for r in rows) == pytest.approx(1.0)
+    # the measured figures: 9.5 % of the deposit at >= 2 m, the peak 1 m downwind
+    assert s["downwind_measured"] == pytest.approx(0.095, abs=0.001)
+    assert s["peak_measured_m"] == 1.0
+    assert 0.25 < s["ratio"] < 4.0
+    assert abs(s["peak_model_m"] - s["peak_measured_m"]) <= 1.0
+    up = [r["model_norm"] for r in rows if r["distance_m"] <= -2.0]
+    assert sum(up) < 0.1                                    # little lands 2-3 m upwind
+
+
+def test_wind_tunnel_bad_nozzle_is_a_one_line_error(capsys, tmp_path):
+    from ag_uav.cli import main
+
+    rc = main(["experiment", "wind-tunnel", "--nozzles", "foggy", "--out", str(tmp_path)])
+    assert rc == 2
+    assert "--nozzles foggy" in capsys.readouterr().out
+
+
+def test_wind_tunnel_reads_another_payloads_rows(tmp_path):
+    """--measured with rows of another payload (here the 2 L figures relabelled 10 L, one
+    condition) runs and writes the same table; the 10 L rotor-on spectrum is used."""
+    from importlib import resources
+
+    from ag_uav.cli import main
+
+    text = resources.files("ag_uav.data").joinpath(
+        "grant2022_deposition_slides_2L.csv").read_text().splitlines()
+    keep = [text[0]] + [ln for ln in text[1:] if ",TT11001 (medium),2,3," in ln]
+    assert len(keep) == 1 + 14 * 3
+    f = tmp_path / "ten.csv"
+    f.write_text("\n".join(ln.replace(",TT11001 (medium),2,", ",TT11001 (medium),10,")
+                           for ln in keep) + "\n")
+    out = tmp_path / "out"
+    assert main(["experiment", "wind-tunnel", "--measured", str(f), "--out", str(out)]) == 0
+    md = (out / "wind_tunnel.md").read_text()
+    assert "| 3 | medium | 10 |" in md
+    assert (out / "wind_tunnel.csv").read_text().count("\n") == 15
