@@ -91,7 +91,7 @@ def test_wind_tunnel_bad_nozzle_is_a_one_line_error(capsys, tmp_path):
 
     rc = main(["experiment", "wind-tunnel", "--nozzles", "foggy", "--out", str(tmp_path)])
     assert rc == 2
-    assert "--nozzles foggy" in capsys.readouterr().out
+    assert "--nozzles = 'foggy'" in capsys.readouterr().out
 
 
 def test_wind_tunnel_reads_another_payloads_rows(tmp_path):

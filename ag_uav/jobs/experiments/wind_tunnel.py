@@ -294,9 +294,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--measured", default=None, metavar="FILE",
                    help="measured deposits, a CSV in the published column layout (default: the "
                         "2 L rows of Grant et al. 2022 shipped with the product)")
-    p.add_argument("--payloads", default="", help="initial payloads (L) to compare (default: all)")
-    p.add_argument("--winds", default="", help="tunnel winds (m/s) to compare (default: all)")
-    p.add_argument("--nozzles", default="", help="fine, medium, coarse (default: all)")
+    p.add_argument("--payloads", default=None,
+                   help="initial payloads (L) to compare (default: all)")
+    p.add_argument("--winds", default=None, help="tunnel winds (m/s) to compare (default: all)")
+    p.add_argument("--nozzles", default=None, help="fine, medium, coarse (default: all)")
     p.add_argument("--height", type=float, default=t.height_m,
                    help="nozzle height above the slides (m; assumed)")
     p.add_argument("--tunnel-width", type=float, default=t.tunnel_width_m,
@@ -362,15 +363,17 @@ def main(args: argparse.Namespace) -> int:
         if bad_keys:
             raise ValueError(f"--set {bad_keys[0]}: not a DepositionConfig field")
         base = DepositionConfig(**over)
-        nozzles = name_axis("--nozzles", args.nozzles, NOZZLES)
+        nozzles = None if args.nozzles is None else name_axis("--nozzles", args.nozzles, NOZZLES)
         if not 0.3 <= args.height <= 10.0:
             raise ValueError(f"--height {args.height:g}: must be within [0.3, 10] m")
         if args.tunnel_width < 0.0:
             raise ValueError(f"--tunnel-width {args.tunnel_width:g}: must be >= 0 (0: no walls)")
         trial = Trial(height_m=args.height, tunnel_width_m=args.tunnel_width)
         measured = read_measured(args.measured)
-        winds = number_axis("--winds", args.winds, lo=0.0, lo_open=True)
-        pays = number_axis("--payloads", args.payloads, lo=0.0, lo_open=True)
+        winds = (None if args.winds is None
+                 else number_axis("--winds", args.winds, lo=0.0, lo_open=True))
+        pays = (None if args.payloads is None
+                else number_axis("--payloads", args.payloads, lo=0.0, lo_open=True))
     except (ValueError, TypeError, OSError, KeyError) as e:
         print(f"error: {e}")
         return 2
