@@ -269,6 +269,20 @@ class GpsSensor:
             * np.asarray(self.axis_scale) ** 2
         return float(v[0]), float(v[1]), float(v[2])
 
+    def spread_variance(self, mode: str | None = None) -> tuple[float, float, float]:
+        """Per-axis variance of a fix (:attr:`variance`, or fix type ``mode``'s
+        :meth:`mode_variance`) with each component's finite spread in place of an infinite
+        variance (:attr:`~ag_uav.vehicle.gps.noise.NoiseComponent.spread`: alpha-stable's
+        ``2 scale²``); the position failsafe's automatic bound is built from it."""
+        v = comp_variance(self.components, spread=True)
+        if mode is not None:
+            if mode not in self.fix_types:
+                raise bad("gps.spread_variance", "mode", mode,
+                          f"allowed: {', '.join(self.fix_types) or '(no fix_quality)'}")
+            v = v + comp_variance(self.mode_components[self.fix_types.index(mode)], spread=True)
+        v = v * np.asarray(self.axis_scale) ** 2
+        return float(v[0]), float(v[1]), float(v[2])
+
     def reported_variance(self, mode: str | None) -> tuple[float, float, float]:
         """The per-axis variance a receiver reports with a fix of type ``mode``: the mode's
         (:meth:`mode_variance`), or the nominal :attr:`variance` for no or an unknown type
