@@ -117,6 +117,8 @@ class GpsSensor:
         self._block_start = 0
         self._hist: deque[tuple[float, float, float, float]] = deque()
         self.last_fix_time: float | None = None
+        #: the true position the last fix measured (at ``last_fix_time - latency_s``)
+        self.last_truth: tuple[float, float, float] | None = None
         #: fix type of the last delivered fix (None without fix_quality or before any fix)
         self.last_fix_type: str | None = None
         #: delivered fixes per fix type (empty without fix_quality)
@@ -245,6 +247,7 @@ class GpsSensor:
             x, y, z = self._truth_at(t - self.latency_s)
         else:
             x, y, z = p_true_xyz[0], p_true_xyz[1], p_true_xyz[2]
+        self.last_truth = (x, y, z)
         return (x + ex, y + ey, z + ez)
 
     @property
