@@ -83,3 +83,18 @@ def test_the_gps_message_is_stamped_at_its_measurement(default_run):
     for _, _, rec, pose in msgs[10:20]:
         stamp = pose.timestamp.seconds + 1e-9 * pose.timestamp.nanos
         assert rec.log_time * 1e-9 - stamp == pytest.approx(0.11, abs=1e-6)
+
+
+@pytest.mark.slow
+def test_the_whole_default_run(tmp_path):
+    """The finding as written: the whole default run (with its false-fix episode, 0.17 m for
+    31 s, which is the receiver's error too). Measured: 0.033 m RMSE, median 0.009 m; the
+    arrival-time comparison read 0.43 m."""
+    cfg = ag_uav.load_config(None, {"log.render": False})
+    _, folder = fly(cfg, out_root=tmp_path, run_id="full", log_writer="inline")
+    d = run_data(folder, images=False)
+    _, err, _ = gps_fix_error(d.series)
+    assert float(np.sqrt(np.mean(err ** 2))) < 0.05
+    assert float(np.median(err)) < 0.015
+    _, err_old, _ = gps_fix_error({k: v for k, v in d.series.items() if k != "/gps/error"})
+    assert float(np.sqrt(np.mean(err_old ** 2))) > 0.3
