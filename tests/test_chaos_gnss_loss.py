@@ -68,11 +68,15 @@ def test_alpha_stable_spread_matches_its_interquartile_range():
         assert 0.95 < ratio < 1.12, (alpha, ratio)
 
 
-def test_a_bound_past_the_ceiling_is_warned_about():
+def test_a_bound_past_the_ceiling_is_warned_about(capsys):
     far = ag_uav.load_config(None, {"gps.failsafe_sigma_m": 50.0})
     line = failsafe_warning(far)
     assert line is not None and "\n" not in line
     assert line.startswith("gps.failsafe_sigma_m = 50 m is above 5 m")
+    s = simulate(ag_uav.load_config(None, {"gps.failsafe_sigma_m": 50.0, "sim.max_time_s": 1.0,
+                                           "log.enabled": False})).summary
+    assert line in s["notes"]
+    assert f"ag-uav: {line}" in capsys.readouterr().err.splitlines()
     assert failsafe_warning(ag_uav.load_config(None, {})) is None
     assert failsafe_warning(ag_uav.load_config(None, {"gps.failsafe_sigma_m": 5.0})) is None
     assert failsafe_warning(ag_uav.load_config(None, {"gps.failsafe_sigma_m": 50.0,
