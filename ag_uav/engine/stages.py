@@ -280,7 +280,7 @@ def failsafe_warning(cfg: Any) -> str | None:
     """One line when an explicit ``gps.failsafe_sigma_m`` lies above
     :data:`FAILSAFE_CEILING_M` with the failsafe on (else None): reachable only after the dead
     reckoning has drifted that far, so with the fix lost the vehicle sprays on for a long time
-    (the default INS's 1σ on the default mission: about 3 m 10 s after the last fix, 10 m
+    (the default INS's 1σ on the default mission: about 3 m 12 s after the last fix, 10 m
     after 20 s)."""
     v = cfg.gps.failsafe_sigma_m
     if v == "auto" or cfg.gps.failsafe == "off" or float(v) <= FAILSAFE_CEILING_M:
