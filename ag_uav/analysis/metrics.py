@@ -22,6 +22,9 @@ the true
 - With sorties (:mod:`ag_uav.world.spray_job`) the inserted transits, climbs, descents and the time
 on the
   ground at the base (seg < 0) are left out of the tracking and altitude errors.
+- ``gnss_loss`` / ``gnss_lost_s`` / ``gnss_loss_off_target_m2`` / ``gnss_losses``: every
+  GNSS loss (no fix for 1 s) with its time and the off-target area sprayed while the fix was
+  lost, whatever ``gps.failsafe`` is. :func:`gnss_loss_summary`.
 - ``mission_time_s``: time at which the drone's own position (the one it flies on: truth or
   estimate) first came within 0.5 m of the path's end after the last leg started, as an
   autopilot's "waypoint reached" (None if never).
@@ -262,6 +265,44 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
         "field_area_m2": r(res.field.area, 1),
         "sweep_direction_deg": r(plan.direction_deg, 2),
     }
+
+
+def _off_target_in(res, cfg: Config, swath: float, windows: list[tuple[float, float]]) -> float:
+    """Off-target area (m², :func:`off_target`) of the swath sprayed in the time ``windows``."""
+    m = np.zeros(len(res.t), dtype=bool)
+    for a, b in windows:
+        m |= (res.t >= a) & (res.t < b)
+    runs = contiguous_runs(res.spray & m)
+    tracks = [res.p_true[a:b, :2] for a, b in runs if b - a >= 2]
+    off = off_target(res.field, tracks, swath, cfg.spray.offtarget_buffer_m)
+    return round(off["outside"] + off["holes"], 1)
+
+
+def gnss_loss_summary(res, cfg: Config, losses: list[dict[str, Any]], swath: float
+                      ) -> dict[str, Any]:
+    """The summary's GNSS losses (``{}`` without one), whatever ``gps.failsafe`` is:
+    ``gnss_losses`` (each episode of :class:`ag_uav.engine.stages.GnssLoss` with its
+    ``off_target_m2``: the off-target area of the swath sprayed from its last fix to its next
+    one, or the end), ``gnss_lost_s`` (the first loss's time), ``gnss_loss_off_target_m2``
+    (over every loss) and ``gnss_loss``, one line naming the first loss."""
+    if not losses:
+        return {}
+    end = math.inf
+
+    def window(ep: dict[str, Any]) -> tuple[float, float]:
+        return ep["last_fix_s"], end if ep["regained_s"] is None else ep["regained_s"]
+
+    for ep in losses:
+        ep["off_target_m2"] = _off_target_in(res, cfg, swath, [window(ep)])
+    total = _off_target_in(res, cfg, swath, [window(ep) for ep in losses])
+    ep = losses[0]
+    back = ("not regained" if ep["regained_s"] is None
+            else f"regained at t={ep['regained_s']}s")
+    more = f" (and {len(losses) - 1} more)" if len(losses) > 1 else ""
+    line = (f"GNSS lost at t={ep['lost_s']}s (no fix after t={ep['last_fix_s']}s), {back}"
+            f"{more}: {total:.1f} m² sprayed off target while lost")
+    return {"gnss_loss": line, "gnss_lost_s": ep["lost_s"], "gnss_loss_off_target_m2": total,
+            "gnss_losses": losses}
 
 
 #: a vehicle whose highest point is less than this above its start never left the ground (m)

@@ -89,7 +89,7 @@ def plot(run: str | Path | RunData, out_dir: str | Path) -> list[Path]:
         paths.append(_plot_errors(st, ests, out / "errors.png"))
         paths.append(_plot_controller(d, st, out / "controller.png"))
     if ests or gps is not None:
-        paths.append(_plot_estimators(st, gps, ests, out / "estimators.png"))
+        paths.append(_plot_estimators(gps_fix_error(d.series), ests, out / "estimators.png"))
     return paths
 
 
@@ -287,20 +287,45 @@ def _plot_controller(d: RunData, st: Series, path: Path) -> Path:
     return _save(fig, path, 100)
 
 
-def _plot_estimators(st: Series | None, gps: Series | None, ests: dict[str, Series],
+#: what estimators.png compares (its caption)
+GPS_CAPTION = ("GPS fix: the fix minus the true position of the point it measured (the antenna "
+               "on the INS chain) at its measurement time (arrival less the latency)")
+GPS_CAPTION_OLD = ("GPS fix: the fix minus the true body position at its arrival (a log "
+                   "without /gps/error: the receiver's latency and the antenna offset count as "
+                   "error)")
+EST_CAPTION = "each filter: its estimate minus the true body position when it was logged"
+
+
+def gps_fix_error(series: dict[str, Series]) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """(time, horizontal error, what is compared) of the run's GPS fixes, None without fixes:
+    ``/gps/error`` (the fix against the truth of the point it measured at its measurement
+    time, both logged with the fix), else, for an older log, ``/gps`` against ``/drone/state``
+    at the fix's arrival, as :data:`GPS_CAPTION_OLD` says."""
+    ge = series.get("/gps/error")
+    if ge is not None and len(ge.t):
+        return ge["t_meas"], ge["err.horiz"], GPS_CAPTION
+    gps, st = series.get("/gps"), series.get("/drone/state")
+    if gps is None or st is None or not len(gps.t):
+        return None
+    gx = gps["pose.position.x"] - np.interp(gps.t, st.t, st["pos.x"])
+    gy = gps["pose.position.y"] - np.interp(gps.t, st.t, st["pos.y"])
+    return gps.t, np.hypot(gx, gy), GPS_CAPTION_OLD
+
+
+def _plot_estimators(fix: tuple[np.ndarray, np.ndarray, str] | None, ests: dict[str, Series],
                      path: Path) -> Path:
-    """estimators.png: each estimator's (and the GPS fixes') horizontal error and RMSE."""
+    """estimators.png: each estimator's (and the GPS fixes') horizontal error and RMSE; the
+    caption says what each is compared with (:func:`gps_fix_error`)."""
     import matplotlib.pyplot as plt
 
     fig, axs = plt.subplots(1, 2, figsize=(12, 4.5), gridspec_kw={"width_ratios": [3, 1]})
-    names, rmse = [], []
-    if gps is not None and st is not None and len(gps.t):
-        gx = gps["pose.position.x"] - np.interp(gps.t, st.t, st["pos.x"])
-        gy = gps["pose.position.y"] - np.interp(gps.t, st.t, st["pos.y"])
-        gh = np.hypot(gx, gy)
-        axs[0].plot(gps.t, gh, color="orange", lw=0.6, alpha=0.7, label="GPS fix")
+    names, rmse, caption = [], [], [EST_CAPTION]
+    if fix is not None:
+        t, gh, what = fix
+        axs[0].plot(t, gh, color="orange", lw=0.6, alpha=0.7, label="GPS fix")
         names.append("GPS")
         rmse.append(float(np.sqrt(np.nanmean(gh ** 2))))
+        caption.insert(0, what)
     for name, s in ests.items():
         axs[0].plot(s.t, s["err.horiz"], lw=0.9, label=name)
         names.append(name)
@@ -317,6 +342,7 @@ def _plot_estimators(st: Series | None, gps: Series | None, ests: dict[str, Seri
         axs[1].text(i, v, f"{v:.2f}" if v >= 0.1 else f"{v:.3f}", ha="center",
                     va="bottom", fontsize=8)
     fig.suptitle("Estimator comparison (error against the true position)")
+    fig.text(0.01, -0.02, "\n".join(caption), fontsize=8, va="top")
     return _save(fig, path, 110)
 
 

@@ -15,6 +15,7 @@ ROWS = [
     ("crashed", "crashed", "{}", ""),
     ("crash_reason", "crash reason", "{}", ""),
     ("incomplete_reason", "not completed", "{}", ""),
+    ("gnss_loss", "GNSS loss", "{}", ""),
     ("mission_time_s", "mission time", "{:.1f}", "s"),
     ("tracking_rmse_m", "tracking RMSE (horizontal)", "{:.3f}", "m"),
     ("cross_track_rmse_m", "cross-track RMSE", "{:.3f}", "m"),

@@ -102,8 +102,8 @@ class RunData:
     undecodable: int = 0  # messages in intact chunks that did not decode
 
 
-_SERIES_TOPICS = ("/drone/state", "/gps", "/drone/pose", "/drone/pose_est", "/drone/pose_ref",
-                  "/drone/spray", "/geo/true")
+_SERIES_TOPICS = ("/drone/state", "/gps", "/gps/error", "/drone/pose", "/drone/pose_est",
+                  "/drone/pose_ref", "/drone/spray", "/geo/true")
 
 
 def summary_json(d: RunData) -> dict[str, Any]:

@@ -109,7 +109,10 @@ def register(sub) -> None:
                        "or of a controller config (--controller)",
                        description="Write PNG plots of a run: top-down map (field, path, true "
                                    "and estimated tracks, GPS fixes), errors over time, "
-                                   "controller signals, estimator comparison.")
+                                   "controller signals, estimator comparison (each GPS "
+                                   "fix against the true antenna position at its measurement "
+                                   "time, each filter against the true position when logged: "
+                                   "the figure's caption says so).")
     p.add_argument("run", nargs="?", help=run_help)
     p.add_argument("-o", "--out", metavar="DIR", help="output folder (default: RUN/plots, or "
                    "plots/controller with --controller)")

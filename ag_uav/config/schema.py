@@ -338,13 +338,15 @@ class GpsConfig:
                        "land; off = fly on, dead reckoning. The mission is cut either way "
                        "(the reference is timed)", choices=("land", "hold", "off"))
     failsafe_sigma_m: float | str = _f("auto", "the failsafe's bound on the horizontal "
-                                       "position 1-sigma (m), or \"auto\": 1 m, or the "
-                                       "receiver's horizontal 1-sigma of one fix of its worst "
-                                       "type when larger (rtk-m350: 1.24 m, its DGPS; "
-                                       "standalone: 2.04 m): a filter fed fixes stays below "
-                                       "one fix's error, so past it the fixes have stopped "
-                                       "(PX4 COM_POS_FS_EPH is 5 m)", gt=0, le=1000,
-                                       choices=("auto",))
+                                       "position 1-sigma (m), or \"auto\": the receiver's "
+                                       "horizontal 1-sigma of one fix of its worst type "
+                                       "(alpha-stable: from its scale), clipped to [1, 5] m "
+                                       "(rtk-m350: 1.24 m, its DGPS; standalone: 2.04 m; "
+                                       "paper-scale presets: 5 m): a filter fed fixes stays "
+                                       "below one fix's error, so past it the fixes have "
+                                       "stopped (PX4 COM_POS_FS_EPH is 5 m). A value above "
+                                       "5 m is warned about: dead reckoning reaches it late",
+                                       gt=0, le=1000, choices=("auto",))
     failsafe_hold_s: float = _f(30.0, "failsafe = hold: seconds of hover before landing",
                                 ge=0, le=3600)
     receiver: str = _f("honest", "what the receiver reports with each fix (presets with fix "

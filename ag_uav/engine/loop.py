@@ -120,6 +120,7 @@ class LoopOutput:
     dose: Any = None                      # the dose map (ag_uav.world.deposition.DoseMap) or None
     lanes: int = 1                        # the lanes its batch flew in (threads of the engine)
     failsafe: dict | None = None          # the position failsafe's reason and times, if engaged
+    gnss_losses: list = field(default_factory=list)  # GNSS loss episodes (stages.GnssLoss)
 
 
 # ------------------------------------------------------------------------------------ setup
@@ -531,7 +532,8 @@ def _outputs(e: Engine, wall: float, compile_s: float, cpu: float) -> list[LoopO
                          frames=int(frames[i]),
                          notes=b.notes[i], sprayer=e.sprayers[i], compile_s=compile_s,
                          dose=e.depositing.dose_map(i) if e.depositing is not None else None,
-                         failsafe=None if e.failsafe is None else e.failsafe.info[i])
+                         failsafe=None if e.failsafe is None else e.failsafe.info[i],
+                         gnss_losses=[] if e.failsafe is None else e.failsafe.loss.losses[i])
         if imu is not None:
             out.imu = np.ascontiguousarray(e.sensing.rec[:n, i])
             out.imu_bias0 = imu.bias0[i].copy()

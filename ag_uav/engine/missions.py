@@ -43,6 +43,7 @@ from ..world.pattern import lane_choice, mission_swath
 from ..world.reference import Reference
 from .heap import trim_heap
 from .loop import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
+from .stages import failsafe_warning
 
 # ------------------------------------------------------------------------------------ building
 #: Bytes one vehicle's run holds per control tick, for the memory budget
@@ -322,9 +323,10 @@ def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = 
             log.summary(grounded.summary)
         return grounded
     prep = prepare_run(cfg, feedback, tick_hook, log)
-    if prep.notice and prep.notice not in _SAID:  # once per process: loops of runs repeat it
-        _SAID.add(prep.notice)
-        print(f"ag-uav: {prep.notice}", file=sys.stderr, flush=True)
+    for notice in (prep.notice, failsafe_warning(cfg)):
+        if notice and notice not in _SAID:  # once per process: loops of runs repeat it
+            _SAID.add(notice)
+            print(f"ag-uav: {notice}", file=sys.stderr, flush=True)
     out = fly([prep.flight], progress=progress)[0]
     return finish_run(prep, out, batch=1)
 
@@ -487,6 +489,11 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
                              reference=ref)
     trim_heap()   # each phase's freed temporaries go back before the next (engine/heap.py)
+    loss = metrics.gnss_loss_summary(res, cfg, out.gnss_losses, plan.swath)
+    if loss:
+        summ.update(loss)
+        out.notes.append(f"GNSS loss: {loss['gnss_loss_off_target_m2']:.1f} m² sprayed off "
+                         "target while the fix was lost")
     cut = _cut_reason(cfg, ref, out, summ, metrics.incomplete_reason(summ, res, cfg))
     if cut:
         summ["incomplete_reason"] = cut

@@ -250,19 +250,44 @@ class Feedback:
             self.bank.finish(self.b.flown)
 
 
+#: the automatic failsafe bound's floor and ceiling (m)
+FAILSAFE_FLOOR_M = 1.0
+FAILSAFE_CEILING_M = 5.0  # PX4 COM_POS_FS_EPH default: the horizontal error that fails position
+
+
 def failsafe_bound(cfg: Any, gps: Any) -> float:
-    """``gps.failsafe_sigma_m`` (m); ``"auto"``: 1 m, or the receiver's horizontal 1σ of one
-    fix of its worst type (its nominal level without fix types) when larger; inf for a receiver
-    without a finite variance (alpha-stable), which never trips it. A filter fed fixes at the
-    fix rate stays below one fix's error (the default INS under DGPS fixes: under 0.3 m)."""
+    """``gps.failsafe_sigma_m`` (m); ``"auto"``: the receiver's horizontal 1σ of one fix of its
+    worst type (its nominal level without fix types), ``sqrt(var_x + var_y)`` of
+    :meth:`~ag_uav.vehicle.gps.GpsSensor.spread_variance`, clipped to
+    [:data:`FAILSAFE_FLOOR_M`, :data:`FAILSAFE_CEILING_M`] (rtk-m350: 1.24 m, its DGPS;
+    standalone 2.04 m; rtk, sbas: the 1 m floor; the paper-scale presets, 10.5 m, and
+    alpha-stable, whose spread stands in for its infinite variance: the 5 m ceiling). Always
+    finite: the dead-reckoned 1σ grows without bound once the fixes stop, so the failsafe
+    engages in every outage long enough. A filter fed fixes stays below one fix's error (the
+    default INS under DGPS fixes: under 0.3 m; the paper-scale presets: the INS under 1.1 m,
+    the ideal-attitude chain under 2.1 m once airborne)."""
     v = cfg.gps.failsafe_sigma_m
     if v != "auto":
         return float(v)
     if gps is None:
-        return 1.0
-    var = [gps.variance, *(gps.mode_variance(m) for m in getattr(gps, "fix_types", ()))]
-    worst = max(math.sqrt(x + y) for x, y, _ in var)
-    return max(1.0, worst)
+        return FAILSAFE_FLOOR_M
+    modes = (None, *getattr(gps, "fix_types", ()))
+    worst = max(math.sqrt(x + y) for x, y, _ in (gps.spread_variance(m) for m in modes))
+    return min(FAILSAFE_CEILING_M, max(FAILSAFE_FLOOR_M, worst))
+
+
+def failsafe_warning(cfg: Any) -> str | None:
+    """One line when an explicit ``gps.failsafe_sigma_m`` lies above
+    :data:`FAILSAFE_CEILING_M` with the failsafe on (else None): reachable only after the dead
+    reckoning has drifted that far, so with the fix lost the vehicle sprays on for a long time
+    (the default INS's 1σ on the default mission: about 3 m 12 s after the last fix, 10 m
+    after 20 s)."""
+    v = cfg.gps.failsafe_sigma_m
+    if v == "auto" or cfg.gps.failsafe == "off" or float(v) <= FAILSAFE_CEILING_M:
+        return None
+    return (f"gps.failsafe_sigma_m = {float(v):g} m is above {FAILSAFE_CEILING_M:g} m: with "
+            "the GNSS fix lost the vehicle flies on dead reckoning until its position 1-sigma "
+            "reaches it (\"auto\" derives a bound in [1, 5] m from the receiver)")
 
 
 class Failsafe:
@@ -301,10 +326,16 @@ class Failsafe:
         self.v0 = np.zeros((n, 3))  # the horizontal velocity it brakes from
         self.t0 = np.zeros(n)
         self.info: list[dict[str, Any] | None] = [None] * n
+        self.loss = GnssLoss(b, getattr(bank, "fbs", [None] * n))
+        for c, notes in zip(cfgs, b.notes, strict=True):
+            w = failsafe_warning(c)
+            if w is not None:
+                notes.append(w)
 
     def step(self, k: int, t: float) -> None:
         b = self.b
         if k % self.every == 0:
+            self.loss.check(t)
             self.bank.pos_sigma(self.sig)
             over = self.sig > self.bound   # NaN (no fix yet) compares False, silently
             if over.any():
@@ -361,6 +392,49 @@ class Failsafe:
             self.info[i]["failsafe_landed_s"] = round(t, 2)
             b.notes[i].append(f"GNSS failsafe: landed at t={t:.1f}s")
             b.act[i] = False
+
+
+class GnssLoss:
+    """Every GNSS loss of every vehicle, whatever ``gps.failsafe`` says: checked with the
+    failsafe (10 Hz), a receiver that has delivered no fix for :attr:`LOSS_S` (or two fix
+    intervals of a slower receiver) has lost the fix: ``losses[i]`` gets an episode
+    ``{"lost_s", "last_fix_s", "regained_s"}`` (``regained_s`` None while lost) and the run's
+    notes a line at the loss and at the next fix. PX4's EKF2 calls GNSS intermittent after
+    the same 1 s without a sample (2 × ``GNSS_MAX_INTERVAL``)."""
+
+    LOSS_S = 1.0
+
+    def __init__(self, b: Batch, fbs: Sequence[Any]) -> None:
+        self.b = b
+        self.gps = [getattr(fb, "gps", None) for fb in fbs]
+        self.rows = [i for i, g in enumerate(self.gps) if g is not None]
+        self.gap = np.array([max(self.LOSS_S, 2.0 / g.rate_hz) if g is not None else np.inf
+                             for g in self.gps])
+        self.last = np.full(b.n, np.nan)
+        self.down = np.zeros(b.n, dtype=bool)   # lost, not regained yet
+        self.losses: list[list[dict[str, Any]]] = [[] for _ in range(b.n)]
+
+    def check(self, t: float) -> None:
+        if not self.rows:
+            return
+        last = self.last
+        was = last.copy()
+        last[self.rows] = [np.nan if (x := self.gps[i].last_fix_time) is None else x
+                           for i in self.rows]
+        back = self.down & (last > was)
+        new = ~self.down & self.b.act & (t - last > self.gap)  # NaN (no fix yet): False
+        for i in np.flatnonzero(back).tolist():
+            ep = self.losses[i][-1]
+            ep["regained_s"] = round(float(last[i]), 2)
+            self.b.notes[i].append(f"GNSS regained at t={last[i]:.2f}s after "
+                                   f"{last[i] - ep['last_fix_s']:.1f} s without a fix")
+            self.down[i] = False
+        for i in np.flatnonzero(new).tolist():
+            self.losses[i].append({"lost_s": round(t, 2), "last_fix_s": round(float(last[i]), 2),
+                                   "regained_s": None})
+            self.b.notes[i].append(f"GNSS lost at t={t:.1f}s: no fix since "
+                                   f"t={last[i]:.2f}s")
+            self.down[i] = True
 
 
 class Control:

@@ -262,7 +262,8 @@ class EstimatorFeedback(FilterBank, Feedback):
             var = self.gps.reported_variance(mode)
             if self.radar:
                 var = (var[0], var[1], self.radar_sigma**2)
-            self.log.gps(t, z, var, mode)
+            self.log.gps(t, z, var, mode, t_meas=t - self.gps.latency_s,
+                         truth=self.gps.last_truth)  # the body centre (no antenna offset)
             self.log.set_truth(p_true)
         return z, R_new
 

@@ -283,7 +283,8 @@ class InsFeedback(Feedback):
         self.fixes += 1
         if self.log is not None:  # the reported type and its variance (times the calibration)
             v, s2 = self.gps.reported_variance(rep), scale * scale
-            self.log.gps(t, np.array((zx, zy, zz)), (v[0] * s2, v[1] * s2, v[2] * s2), rep)
+            self.log.gps(t, np.array((zx, zy, zz)), (v[0] * s2, v[1] * s2, v[2] * s2), rep,
+                         t_meas=t - self.age_s, truth=p_ant)  # the antenna, age_s ago
         vv = self.var_v
         return [self.age_s, zx, zy, zz,
                 v_ant[0] + sv * n[0], v_ant[1] + sv * n[1], v_ant[2] + sv * n[2],

@@ -207,9 +207,10 @@ def encode_flat(rows: np.ndarray, tmpl: np.ndarray, slots: np.ndarray, out: np.n
 def encode_poses(rows: np.ndarray, pose_tmpl: np.ndarray, pose_slots: np.ndarray,
                  pose_head: np.ndarray, out: np.ndarray, starts: np.ndarray,
                  tns: np.ndarray) -> int:
-    """Rows ``(t, x, y, z)`` -> ``foxglove.PoseInFrame`` messages at the position with the
+    """Rows ``(t, x, y, z, …)`` -> ``foxglove.PoseInFrame`` messages at the position with the
     identity orientation (``/gps``): message ``r`` is ``out[starts[r]:starts[r + 1]]`` at log
-    time ``tns[r]``; returns the end of the last."""
+    time ``tns[r]`` (``t``); its ``timestamp`` is column 8 where the rows have one (the fix's
+    measurement time), else ``t``; returns the end of the last."""
     f8 = np.empty(1)
     b8 = f8.view(np.uint8)
     pv = np.array((0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
@@ -217,9 +218,11 @@ def encode_poses(rows: np.ndarray, pose_tmpl: np.ndarray, pose_slots: np.ndarray
     for r in range(rows.shape[0]):
         tn = int(np.rint(rows[r, 0] * 1e9))
         tn = tn if tn > 0 else 0
+        ts = int(np.rint(rows[r, 8] * 1e9)) if rows.shape[1] > 8 else tn
+        ts = ts if ts > 0 else 0
         starts[r], tns[r] = o, tn
         pv[0], pv[1], pv[2] = rows[r, 1], rows[r, 2], rows[r, 3]
-        o = _fill(out, _copy(out, _stamp(out, o, tn), pose_head), pose_tmpl, pose_slots, pv,
+        o = _fill(out, _copy(out, _stamp(out, o, ts), pose_head), pose_tmpl, pose_slots, pv,
                   f8, b8)
     starts[rows.shape[0]] = o
     return o

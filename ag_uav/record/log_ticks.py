@@ -241,16 +241,28 @@ class TickLog:
         return t >= self._next_spray
 
 
+    #: ``/gps/error``'s fields (:meth:`gps`)
+    GPS_ERROR_FIELDS = ("t", "t_meas", "age", "truth.x", "truth.y", "truth.z", "err.x", "err.y",
+                        "err.z", "err.horiz")
+
     def gps(self, t: float, fix_xyz: Sequence[float], var: Sequence[float] | None = None,
-            fix_type: str | None = None) -> None:
-        """A GPS fix (local ENU metres) -> ``/gps`` PoseInFrame and, once :meth:`geo` gave the
-        origin, ``/geo/gnss`` LocationFix with the receiver's reported variances ``var`` (east,
-        north, up, m²) and its ``fix_type`` (a colour and metadata ``fix_type``)."""
+            fix_type: str | None = None, *, t_meas: float | None = None,
+            truth: Sequence[float] | None = None) -> None:
+        """A GPS fix (local ENU metres) arriving at ``t`` -> ``/gps`` PoseInFrame (log time
+        ``t``, ``timestamp`` ``t_meas``: the time it was measured, default ``t``) and, once
+        :meth:`geo` gave the origin, ``/geo/gnss`` LocationFix with the receiver's reported
+        variances ``var`` (east, north, up, m²) and its ``fix_type`` (a colour and metadata
+        ``fix_type``). With ``truth`` (the true position of the point the receiver measured,
+        at ``t_meas``) also ``/gps/error``: the fix's own error, like with like."""
         if t < self._next["gps"]:  # inf when off or closed
             return
         self._next["gps"] = t + self._p_gps
+        tm = t if t_meas is None else t_meas
+        if truth is not None:
+            self._gps_error(t, tm, fix_xyz, truth)
         row = self._gps_rows.open_row()
         row[0] = t
+        row[8] = tm
         row[1], row[2] = fix_xyz[0], fix_xyz[1]
         row[3] = fix_xyz[2] if len(fix_xyz) > 2 else 0.0
         if var is None:
@@ -267,6 +279,18 @@ class TickLog:
         self._n_gps += 1
         if self._geo is not None and "gnss" in self._geo_ids:
             self._n_geo_gnss += 1
+
+    def _gps_error(self, t: float, tm: float, fix: Sequence[float], tr: Sequence[float]
+                   ) -> None:
+        """One ``/gps/error`` row (its channel declared at the first)."""
+        if self._ch_gps_err is None:
+            schema = FlatSchema("ag_uav.GnssError", [(k, 0) for k in self.GPS_ERROR_FIELDS])
+            self._ch_gps_err = self._register_flat(FlatRows(schema, self._chan(
+                "/gps/error", "ag_uav.GnssError", schema.schema_data)))
+        ex, ey = float(fix[0]) - float(tr[0]), float(fix[1]) - float(tr[1])
+        ez = float(fix[2]) - float(tr[2]) if len(fix) > 2 else NAN
+        self._ch_gps_err.put((t, tm, t - tm, float(tr[0]), float(tr[1]), float(tr[2]), ex, ey,
+                              ez, (ex * ex + ey * ey) ** 0.5))
 
     def _fix_code(self, fix_type: str) -> int:
         """The code of a GNSS fix type in the gps rows (declared to the writer once)."""

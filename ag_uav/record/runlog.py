@@ -41,7 +41,12 @@ Channels (Foxglove well-known schemas where one fits; groups in brackets):
               tank_l, mass_kg,
                                       flow_lps, nozzles, power_w, energy_wh, battery_frac, sortie,
                                       ground
-  [gps]       ``/gps``                foxglove.PoseInFrame at each fix (3D + plots)
+  [gps]       ``/gps``                foxglove.PoseInFrame at each fix (3D + plots): log time
+                                      = its arrival, ``timestamp`` = its measurement (arrival
+                                      less the receiver's latency)
+              ``/gps/error``          ag_uav.GnssError at each fix: t (arrival), t_meas, age,
+                                      truth (the true position of the point measured, the
+                                      antenna on the INS chain, at t_meas), err = fix - truth
   [estimator] ``/estimator/<name>``   ag_uav.EstimatorState: x[], p_diag[], innovation[], pos,
                                       err (pos - last true position), extra{...}
   [scene]     ``/field`` (field polygon + planned path), ``/sprayed`` (sprayed area),
@@ -290,6 +295,7 @@ class RunLog(TickLog, EstimateLog, SceneLog):
         self._n_chan = 0
         self._flat_rows: list[FlatRows] = []  # estimator and spray channels, encoded at flush
         self._ch_spray: FlatRows | None = None
+        self._ch_gps_err: FlatRows | None = None
         self._ch_dose: Any = None
         self._dose_bytes = 0  # bytes of dose maps logged (their period doubles per quota)
         self._next_spray = -INF if self._period["state"] < INF and self.enabled else INF
@@ -319,8 +325,8 @@ class RunLog(TickLog, EstimateLog, SceneLog):
                           np.frombuffer(POSE_MID, dtype=np.uint8).copy(),
                           np.frombuffer(WORLD2 + str_field(3, "base_link"),
                                         dtype=np.uint8).copy()))
-        # (t, x, y, z, var e, n, u, fix type code) of the fixes since the last flush
-        self._gps_rows = Rows(8, cap=16)
+        # (t, x, y, z, var e, n, u, fix type code, t_meas) of the fixes since the last flush
+        self._gps_rows = Rows(9, cap=16)
         self._state_schema: FlatSchema | None = None
         self._ctrl_keys: tuple[str, ...] = ()
         self._n_motors = 0
@@ -394,6 +400,8 @@ class RunLog(TickLog, EstimateLog, SceneLog):
                 out.update(dict.fromkeys(bank.topics, bank.count))
         if self._ch_spray is not None and self._ch_spray.count:
             out["/drone/spray"] = self._ch_spray.count
+        if self._ch_gps_err is not None and self._ch_gps_err.count:
+            out["/gps/error"] = self._ch_gps_err.count
         return out
 
     @property

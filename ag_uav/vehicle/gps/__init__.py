@@ -14,7 +14,9 @@ type                model (per fix k)
 ``weibull``         +/- lambda * Weibull(k), lambda = sigma / sqrt(Gamma(1 + 2/k)), random sign
 ``mixture``         (1-eps) N(0, sigma1^2) + eps N(0, sigma2^2)
 ``alpha-stable``    S(alpha, beta, scale) by Chambers-Mallows-Stuck (scipy ``levy_stable`` S1
-                    parametrisation); infinite variance for alpha < 2
+                    parametrisation); infinite variance for alpha < 2 (its finite
+                    ``spread`` 2 scale^2, the Gaussian variance of the same interquartile
+                    range, sets the position failsafe's automatic bound)
 ``gauss-markov``    b_{k+1} = e^{-dt/tau} b_k + sigma sqrt(1 - e^{-2 dt/tau}) N(0,1) (exact)
 ``ar1``             v_k = rho v_{k-1} + g(rho) xi_k with xi from a ``driver`` distribution above;
                     g = sqrt(1 - rho^2) keeps the variance (for an alpha-stable driver

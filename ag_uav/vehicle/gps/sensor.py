@@ -117,6 +117,8 @@ class GpsSensor:
         self._block_start = 0
         self._hist: deque[tuple[float, float, float, float]] = deque()
         self.last_fix_time: float | None = None
+        #: the true position the last fix measured (at ``last_fix_time - latency_s``)
+        self.last_truth: tuple[float, float, float] | None = None
         #: fix type of the last delivered fix (None without fix_quality or before any fix)
         self.last_fix_type: str | None = None
         #: delivered fixes per fix type (empty without fix_quality)
@@ -245,6 +247,7 @@ class GpsSensor:
             x, y, z = self._truth_at(t - self.latency_s)
         else:
             x, y, z = p_true_xyz[0], p_true_xyz[1], p_true_xyz[2]
+        self.last_truth = (x, y, z)
         return (x + ex, y + ey, z + ez)
 
     @property
@@ -267,6 +270,20 @@ class GpsSensor:
         i = self.fix_types.index(mode)
         v = (comp_variance(self.components) + comp_variance(self.mode_components[i])) \
             * np.asarray(self.axis_scale) ** 2
+        return float(v[0]), float(v[1]), float(v[2])
+
+    def spread_variance(self, mode: str | None = None) -> tuple[float, float, float]:
+        """Per-axis variance of a fix (:attr:`variance`, or fix type ``mode``'s
+        :meth:`mode_variance`) with each component's finite spread in place of an infinite
+        variance (:attr:`~ag_uav.vehicle.gps.noise.NoiseComponent.spread`: alpha-stable's
+        ``2 scale²``); the position failsafe's automatic bound is built from it."""
+        v = comp_variance(self.components, spread=True)
+        if mode is not None:
+            if mode not in self.fix_types:
+                raise bad("gps.spread_variance", "mode", mode,
+                          f"allowed: {', '.join(self.fix_types) or '(no fix_quality)'}")
+            v = v + comp_variance(self.mode_components[self.fix_types.index(mode)], spread=True)
+        v = v * np.asarray(self.axis_scale) ** 2
         return float(v[0]), float(v[1]), float(v[2])
 
     def reported_variance(self, mode: str | None) -> tuple[float, float, float]:
