@@ -180,6 +180,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if res.n_fallback:
         print(f"ag-uav: warning: batch {spec.name}: {res.n_fallback} runs flown one at a time "
               "after their engine batch failed (column engine_fallback)", file=sys.stderr)
+    early = res.early_line()
+    if early:
+        where = "results.csv (column status)" + ("" if args.no_report else " and report.md")
+        print(f"ag-uav: warning: batch {spec.name}: {early}; see {where}", file=sys.stderr)
     line = res.failure_line()
     return 0 if line is None else _fail(f"batch {spec.name}: {line}")
 

@@ -17,7 +17,7 @@ from ..executor import Executor, ExecutorLost, SerialExecutor
 from .journal import Journal, json_default, signals_held
 from .report import write_report, write_results_csv
 from .spec import BatchSpec, RunTask, expand
-from .worker import exception_line, run_chunk
+from .worker import EARLY_STATUSES, exception_line, row_reason, run_chunk, run_status
 
 
 # ---------------------------------------------------------------------------------- run_batch
@@ -57,6 +57,18 @@ class BatchResult:
             parts.append(f"{len(bad) - len(lost)} raised in the product (first: run "
                          f"{first.get('run_id')}: {first.get('crash_reason')})")
         return f"{len(bad)} of {len(self.rows)} runs failed: " + "; ".join(parts)
+
+    def early_line(self) -> str | None:
+        """None when no run ended early; else one line: how many runs ended early and why
+        (failsafe, cut, incomplete), the first one's reason; they are results, not in the
+        means, and listed with the failed runs in ``report.md``."""
+        early = [r for r in self.rows if r.get("status") in EARLY_STATUSES]
+        if not early:
+            return None
+        why = ", ".join(f"{s} {n}" for s in EARLY_STATUSES
+                        if (n := sum(r.get("status") == s for r in early)))
+        return (f"{len(early)} of {len(self.rows)} runs ended early ({why}; first: run "
+                f"{early[0].get('run_id')}: {row_reason(early[0])}): not ok, not in the means")
 
 
 #: ``crash_reason`` of a row whose run was lost to the machinery (journalled as a retry)
@@ -222,7 +234,7 @@ class _BatchRun:
             if self.bar is not None:
                 self.bar.update(1)
                 if self.n_bad:
-                    self.bar.set_postfix(failed=self.n_bad, refresh=False)
+                    self.bar.set_postfix(not_ok=self.n_bad, refresh=False)
 
     def finish(self, journal: Journal, rows_by_index: dict[int, dict[str, Any]], csv_path: Path,
                spec: BatchSpec, quiet: bool = False) -> list[dict[str, Any]]:
@@ -247,4 +259,6 @@ def _rebase_row(row: dict[str, Any], task: RunTask) -> dict[str, Any]:
     r = dict(row)
     r.update({"index": task.index, "run_id": task.run_id, **task.axis_values})
     r.setdefault("engine_fallback", "")
+    if r.get("status") in ("ok", *EARLY_STATUSES):  # a journal written before the early statuses
+        r["status"] = run_status(r)
     return r
