@@ -100,7 +100,8 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     ``helper``: on an empty kernel cache, compile the INS first, here (after the field is
     loaded: a bad field is refused at once), and the kernels the INS does not need in a helper
     process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
-    every core busy, says False)."""
+    every core busy, says False). The helper dies with this process, and a helper's folder left
+    by a run that was killed is removed here (:func:`ag_uav.jobs.warm.sweep`)."""
     from .outdir import check_reuse, hold, unique_run_dir
 
     run_dir = (Path(out_root) / run_id if run_id else
@@ -115,6 +116,8 @@ def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
     from . import warm
 
     w = None
+    if helper:  # the folders of helpers whose runs were killed (SIGKILL) before removing them
+        warm.sweep()
     if helper and feedback is None and warm.wanted(cfg):  # an empty kernel cache
         from ..world.mission import build_field
 
