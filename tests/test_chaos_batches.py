@@ -201,3 +201,159 @@ def test_an_unowned_folder_waits_out_its_grace(tmp_path, monkeypatch):
     (tmp_path / f"{warm.PREFIX}file").write_text("not a folder")
     assert warm.sweep() == [old]
     assert young.is_dir() and (tmp_path / f"{warm.PREFIX}file").exists()
+
+
+# ------------------------------------------------------------------------------ provenance
+DASK = Path(sys.executable).with_name("dask")
+
+
+def _tiny_spec(path: Path, seeds: int = 2) -> Path:
+    path.write_text(tomli_w.dumps({
+        "name": "prov", "base": {"sim.max_time_s": 1.0, "estimator.name": "true",
+                                 "wind.turbulence": "none"},
+        "axes": {"seed": list(range(seeds))}}))
+    return path
+
+
+def _copy_sources(dst: Path, edit: str | None) -> Path:
+    """The product's packages copied to ``dst`` (a tree a worker imports from), with a line
+    appended to the file ``edit``."""
+    import shutil
+
+    from ag_uav.jobs.provenance import PACKAGES
+
+    for pkg in PACKAGES:
+        shutil.copytree(ROOT / pkg, dst / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    if edit:
+        with (dst / edit).open("a") as f:
+            f.write("# edited on this worker only\n")
+    return dst
+
+
+class _Cluster:
+    """A ``dask scheduler`` and named ``dask worker`` processes on 127.0.0.1, each worker
+    importing the product from its own folder (no nanny: the worker is the process)."""
+
+    def __init__(self, tmp: Path) -> None:
+        self.file = tmp / "scheduler.json"
+        self.procs: list[subprocess.Popen] = []
+        self.workers: dict[str, subprocess.Popen] = {}
+        self.procs.append(subprocess.Popen(
+            [str(DASK), "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+             "--scheduler-file", str(self.file)], env=ENV, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL))
+        t0 = time.monotonic()
+        while not self.file.exists() and time.monotonic() - t0 < 30:
+            time.sleep(0.05)
+        time.sleep(0.2)
+        import json
+
+        self.address = json.loads(self.file.read_text())["address"]
+
+    def worker(self, name: str, root: Path) -> subprocess.Popen:
+        p = subprocess.Popen([str(DASK), "worker", self.address, "--nthreads", "1",
+                              "--no-nanny", "--no-dashboard", "--host", "127.0.0.1",
+                              "--name", name], cwd=root, env={**ENV, "PYTHONPATH": str(root)},
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self.procs.append(p)
+        self.workers[name] = p
+        return p
+
+    def wait_for(self, n: int) -> None:
+        from distributed import Client
+
+        with Client(self.address, timeout="20s") as c:
+            c.wait_for_workers(n, timeout=60)
+
+    def close(self) -> None:
+        for p in reversed(self.procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGKILL)
+            p.wait(timeout=30)
+
+
+@pytest.fixture
+def cluster(tmp_path):
+    c = _Cluster(tmp_path)
+    yield c
+    c.close()
+
+
+def _batch(spec: Path, out: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ag_uav.cli", "batch", str(spec), "--out",
+                           str(out), "-q", *args], env=ENV, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_a_worker_on_edited_sources_is_refused_before_any_run(cluster, tmp_path):
+    from ag_uav.jobs.provenance import provenance
+
+    edited = _copy_sources(tmp_path / "edited", "ag_uav/jobs/batch/worker.py")
+    cluster.worker("same", ROOT)
+    bad = cluster.worker("edited", edited)
+    cluster.wait_for(2)
+    out = tmp_path / "out"
+    r = _batch(_tiny_spec(tmp_path / "spec.toml"), out, "--dask", cluster.address)
+    assert r.returncode == 2, r.stderr
+    (line,) = r.stderr.strip().splitlines()
+    mine = provenance()["source_hash"]
+    assert line.startswith(f'ag-uav: config error: --dask = "{cluster.address}": worker tcp://')
+    assert f"(edited) on {__import__('socket').gethostname()}, pid {bad.pid}, runs other" in line
+    assert f"from {edited}" in line and f"source hash {mine} from {ROOT}" in line
+    assert not out.exists()  # nothing ran, nothing written
+    # with the edited worker gone, the same cluster flies, and every row says which code
+    bad.send_signal(signal.SIGKILL)
+    bad.wait(timeout=30)
+    time.sleep(1.0)
+    r = _batch(tmp_path / "spec.toml", out, "--dask", cluster.address, "--logs")
+    assert r.returncode == 0, r.stderr
+    rows = read_results_csv(out / "results.csv")
+    assert len(rows) == 2
+    for row in rows:
+        assert (row["ag_uav_version"], row["source_hash"]) == (provenance()["ag_uav_version"],
+                                                               mine)
+        assert row["worker_pid"] == str(cluster.workers["same"].pid)
+    import json
+
+    summ = json.loads((out / "runs" / rows[0]["run_id"] / "summary.json").read_text())
+    assert summ["source_hash"] == mine and summ["ag_uav_version"] == rows[0]["ag_uav_version"]
+
+
+def test_the_source_hash_sees_one_edited_file(tmp_path):
+    """The hash of a copied tree equals this tree's; one line appended to one file changes it."""
+    code = ("from ag_uav.jobs.provenance import source_hash, source_root; "
+            "print(source_hash(), source_root())")
+
+    def hash_of(root: Path) -> list[str]:
+        return subprocess.run([sys.executable, "-c", code], cwd=root,
+                              env={**ENV, "PYTHONPATH": str(root)}, capture_output=True,
+                              text=True, timeout=120, check=True).stdout.split()
+
+    from ag_uav.jobs.provenance import source_hash
+
+    same = hash_of(_copy_sources(tmp_path / "same", None))
+    edited = hash_of(_copy_sources(tmp_path / "edited", "controllers/pid.py"))
+    assert same == [source_hash(), str(tmp_path / "same")]
+    assert edited[0] != source_hash() and edited[1] == str(tmp_path / "edited")
+
+
+def test_a_row_from_other_code_stops_the_batch_unjournalled(tmp_path):
+    """A worker that joins after the check (or sources edited under a running pool): its first
+    row stops the batch with one line; nothing of it is journalled."""
+    from ag_uav.config import ConfigError
+    from ag_uav.jobs.batch import BatchOptions, load_spec, run_batch
+    from ag_uav.jobs.executor import SerialExecutor
+
+    class Other(SerialExecutor):
+        def map_unordered(self, fn, items, *, return_exceptions=False):
+            for i, rows in super().map_unordered(fn, items, return_exceptions=return_exceptions):
+                yield i, [{**r, "source_hash": "0" * 16} for r in rows]
+
+    out = tmp_path / "out"
+    with pytest.raises(ConfigError) as e:
+        run_batch(load_spec(str(_tiny_spec(tmp_path / "s.toml", seeds=1))), out, Other(),
+                  BatchOptions(progress=False, report=False))
+    msg = str(e.value)
+    assert "\n" not in msg and "source hash 0000000000000000" in msg and "--resume" in msg
+    assert (out / "journal.jsonl").read_text() == ""
+    assert read_results_csv(out / "results.csv") == []

@@ -78,7 +78,9 @@ def _add_exec_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dask", metavar="ADDR", default=None,
                    help='run on Dask distributed: "local" starts a LocalCluster of --workers '
                         "single-threaded process workers; tcp://host:port uses a running "
-                        "scheduler")
+                        "scheduler, whose workers must run this client's ag-uav version and "
+                        "sources (checked before any run: exit 2 naming a worker that does "
+                        "not)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted job in --out (finished work is not re-run)")
     p.add_argument("--fresh", action="store_true",
@@ -119,7 +121,7 @@ def _check_workers(n: int | None) -> None:
 
 
 def _executor(args: argparse.Namespace):
-    from ..jobs.executor import make_executor
+    from ..jobs.executor import WorkerMismatch, make_executor
 
     _check_workers(args.workers)
     if args.resume and args.fresh:
@@ -128,6 +130,8 @@ def _executor(args: argparse.Namespace):
         raise ConfigError(f"--dask-timeout = {args.dask_timeout}: must be > 0")
     try:
         return make_executor(args.workers, args.dask, dask_timeout_s=args.dask_timeout)
+    except WorkerMismatch as e:
+        raise ConfigError(f'--dask = "{args.dask}": {e}') from None
     except ValueError as e:
         if not args.dask:
             raise

@@ -27,11 +27,12 @@ METRIC_ORDER = ("status", "crash_reason", "incomplete_reason", "engine_fallback"
 
 def is_timing_column(name: str) -> bool:
     """Columns that measure the machine (or how the run was scheduled: ``batch_size``, the size
-    of the lockstep chunk it flew in), not the run (excluded from determinism checks)."""
+    of the lockstep chunk it flew in; ``worker_host`` and ``worker_pid``, the process that flew
+    it), not the run (excluded from determinism checks)."""
     n = name.lower()
     return ("wall" in n or "cpu_time" in n or "real_time_factor" in n
             or n.endswith(("_per_s", "_us"))
-            or "timing" in n or n == "batch_size")
+            or "timing" in n or n in ("batch_size", "worker_host", "worker_pid"))
 
 
 # ------------------------------------------------------------------------------------ results

@@ -9,6 +9,7 @@ import time
 from typing import Any
 
 from ...config import config_from_dict
+from ..provenance import row_provenance
 from .journal import json_default
 from .spec import RunTask
 
@@ -154,6 +155,7 @@ def _row(task: RunTask, res: Any, t0: float) -> dict[str, Any]:
     row.update({"status": status, "crash_reason": summ.pop("crash_reason", None) or ""})
     row.update(summ)
     row["engine_fallback"] = ""
+    row.update(row_provenance())
     return row
 
 
@@ -161,4 +163,4 @@ def _error_row(task: RunTask, e: BaseException, t0: float) -> dict[str, Any]:
     return {"index": task.index, "run_id": task.run_id, **task.axis_values, "status": "error",
             "crash_reason": exception_line(e), "completed": False,
             "crashed": True, "wall_time_s": round(time.perf_counter() - t0, 3),
-            "engine_fallback": ""}
+            "engine_fallback": "", **row_provenance()}
