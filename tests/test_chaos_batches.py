@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -298,7 +299,7 @@ def test_a_worker_on_edited_sources_is_refused_before_any_run(cluster, tmp_path)
     (line,) = r.stderr.strip().splitlines()
     mine = provenance()["source_hash"]
     assert line.startswith(f'ag-uav: config error: --dask = "{cluster.address}": worker tcp://')
-    assert f"(edited) on {__import__('socket').gethostname()}, pid {bad.pid}, runs other" in line
+    assert f"(edited) on {socket.gethostname()}, pid {bad.pid}, runs other" in line
     assert f"from {edited}" in line and f"source hash {mine} from {ROOT}" in line
     assert not out.exists()  # nothing ran, nothing written
     # with the edited worker gone, the same cluster flies, and every row says which code
