@@ -202,7 +202,8 @@ def test_report_files(tmp_path):
     md = (tmp_path / "report.md").read_text()
     assert "1 crashed" in md and "| kf | standalone | 3 | 3 |" in md
     assert "| mckf | coloured-impulsive | 3 | 2 | 1 |" not in md  # crash was in kf/coloured
-    assert "| kf | coloured-impulsive | 3 | 2 | 0 | 1 | 0 |" in md  # runs, ok, early, crashed, error
+    # runs, ok, ended early, crashed, error
+    assert "| kf | coloured-impulsive | 3 | 2 | 0 | 1 | 0 |" in md
 
 
 def _children(pid: int) -> list[int]:
