@@ -195,7 +195,12 @@ def build_parser(experiments: bool = True) -> argparse.ArgumentParser:
 
     f = sub.add_parser("fly", help="fly one mission; writes runs/<run-id>/summary.json (+ MCAP)",
                        description="Fly the configured field once, print a summary table and "
-                                   "write runs/<run-id>/summary.json and run.mcap.")
+                                   "write runs/<run-id>/summary.json and run.mcap. The summary "
+                                   "names the code that flew it (ag_uav_version, source_hash). "
+                                   "On an empty kernel cache a helper process compiles on a "
+                                   "second core; it dies with the run (SIGKILL included), and "
+                                   "the folder a killed run leaves in the temporary directory is "
+                                   "removed by the next run.")
     _add_config_args(f)
     f.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run "
                    "folder (default: runs)")

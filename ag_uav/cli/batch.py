@@ -1,10 +1,12 @@
 """``ag-uav batch`` and ``ag-uav tune``: headless runs on a process pool or Dask.
 
-Exit codes: 0 when every run produced a result (a crashed vehicle is a result); 1 with one line
+Exit codes: 0 when every run produced a result (a crashed vehicle is a result, and so is a run
+that ended early: a warning line counts those); 1 with one line
 when runs failed (lost to the machinery, or an exception in the product), when the executor was
 lost (Dask scheduler gone, no worker left: the journal is kept and ``--resume`` completes the
 job), or when an output could not be written (no space, no permission: the line names the
-path); 2 for a bad spec, flag or ``--dask`` address; 130 on Ctrl-C and 143 on SIGTERM, after
+path); 2 for a bad spec, flag or ``--dask`` address, or a Dask worker that runs other
+ag-uav sources than this client (named; before any run); 130 on Ctrl-C and 143 on SIGTERM, after
 writing ``results.csv`` (batch) from what is done.
 """
 
@@ -78,7 +80,9 @@ def _add_exec_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dask", metavar="ADDR", default=None,
                    help='run on Dask distributed: "local" starts a LocalCluster of --workers '
                         "single-threaded process workers; tcp://host:port uses a running "
-                        "scheduler")
+                        "scheduler, whose workers must run this client's ag-uav version and "
+                        "sources (checked before any run: exit 2 naming a worker that does "
+                        "not)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted job in --out (finished work is not re-run)")
     p.add_argument("--fresh", action="store_true",
@@ -119,7 +123,7 @@ def _check_workers(n: int | None) -> None:
 
 
 def _executor(args: argparse.Namespace):
-    from ..jobs.executor import make_executor
+    from ..jobs.executor import WorkerMismatch, make_executor
 
     _check_workers(args.workers)
     if args.resume and args.fresh:
@@ -128,6 +132,8 @@ def _executor(args: argparse.Namespace):
         raise ConfigError(f"--dask-timeout = {args.dask_timeout}: must be > 0")
     try:
         return make_executor(args.workers, args.dask, dask_timeout_s=args.dask_timeout)
+    except WorkerMismatch as e:
+        raise ConfigError(f'--dask = "{args.dask}": {e}') from None
     except ValueError as e:
         if not args.dask:
             raise
@@ -180,6 +186,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if res.n_fallback:
         print(f"ag-uav: warning: batch {spec.name}: {res.n_fallback} runs flown one at a time "
               "after their engine batch failed (column engine_fallback)", file=sys.stderr)
+    early = res.early_line()
+    if early:
+        where = "results.csv (column status)" + ("" if args.no_report else " and report.md")
+        print(f"ag-uav: warning: batch {spec.name}: {early}; see {where}", file=sys.stderr)
     line = res.failure_line()
     return 0 if line is None else _fail(f"batch {spec.name}: {line}")
 
@@ -217,7 +227,12 @@ def register(sub) -> None:
         "batch", help="run a base config × axes (seeds, estimators, noise, wind, ...) in parallel",
         description="Run every combination of a batch spec's axes on a process pool or Dask; "
                     "write results.csv (one row per run), report.md and PNG figures, and print a "
-                    "summary table. See examples/batch.toml.")
+                    "summary table. See examples/batch.toml. A run's status is ok only when its "
+                    "mission was flown to its end; one that ended early says why (failsafe, cut "
+                    "by sim.max_time_s, incomplete), is listed with the failed runs, and the "
+                    "means cover the ok runs only, saying how many. Every row names the code "
+                    "that flew it (ag_uav_version, source_hash, worker_host, worker_pid); a "
+                    "Dask worker running other sources is refused before any run (exit 2).")
     b.add_argument("spec", metavar="SPEC.toml", help="batch spec: [base] and [axes]")
     b.add_argument("--out", metavar="DIR", help="output folder (default: runs/batch-<name>)")
     b.add_argument("--logs", action="store_true",

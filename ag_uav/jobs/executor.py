@@ -37,6 +37,8 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any
 
+from ..config import ConfigError
+
 #: Environment that pins numerical libraries to one thread in every worker process.
 THREAD_ENV = {
     "OMP_NUM_THREADS": "1",
@@ -89,6 +91,22 @@ def _pop_env(old: dict[str, str | None]) -> None:
 
 class ExecutorLost(RuntimeError):
     """The executor can run nothing more (scheduler gone, no worker left); one line."""
+
+
+class WorkerMismatch(ConfigError):
+    """A worker runs other code than this client (another ``ag_uav`` version or other
+    sources): one line naming the worker; nothing has run."""
+
+
+def _first_line(e: BaseException) -> str:
+    return (str(e).splitlines() or [""])[0][:120]
+
+
+def _worker_sources() -> dict[str, Any]:
+    """What a Dask worker reports to :meth:`DaskExecutor.check_sources`."""
+    from .provenance import row_provenance, source_root
+
+    return {**row_provenance(), "source_root": source_root()}
 
 
 def default_workers() -> int:
@@ -283,8 +301,9 @@ def _warm(_: int) -> int:
 class DaskExecutor(Executor):
     """``dask.distributed``: ``address="local"`` starts a ``LocalCluster`` of ``workers``
     single-threaded process workers (loopback only, no dashboard); ``"tcp://host:port"``
-    connects to a running scheduler (its workers should import ``ag_uav`` from the same code
-    and run one thread each, e.g. ``dask worker ADDR --nthreads 1``).
+    connects to a running scheduler (its workers must import ``ag_uav`` from the same code,
+    which :meth:`check_sources` checks before anything runs, and should run one thread each,
+    e.g. ``dask worker ADDR --nthreads 1``).
 
     ``map_unordered`` watches the cluster every ``poll_s``: a scheduler that is gone, or no
     worker connected for ``lost_timeout_s``, raises :class:`ExecutorLost` (one line) instead of
@@ -331,13 +350,45 @@ class DaskExecutor(Executor):
                 raise
             self.name = f"dask:{address}"
         self.address = address
-        nthreads = self._client.nthreads()
-        self.workers = max(1, sum(nthreads.values()))
-        self._client.run(_worker_init, self._env)
+        try:
+            nthreads = self._client.nthreads()
+            self.workers = max(1, sum(nthreads.values()))
+            self._client.run(_worker_init, self._env)
+            self.check_sources()
+        except BaseException:
+            self.close()
+            raise
 
     @property
     def client(self) -> Any:
         return self._client
+
+    def check_sources(self) -> None:
+        """Raise :class:`WorkerMismatch` (one line naming the worker) unless every connected
+        worker runs the same ``ag_uav`` version and sources as this client (the
+        :func:`~ag_uav.jobs.provenance.source_hash` of its ``ag_uav``, ``controllers``,
+        ``estimators`` and ``jitcache``), as Dask's own version check does for packages."""
+        from .provenance import provenance, source_root
+
+        mine = provenance()
+        theirs = self._client.run(_worker_sources, on_error="return")
+        names = {a: w.get("name") for a, w in
+                 self._client.scheduler_info().get("workers", {}).items()}
+        for addr, got in sorted(theirs.items()):
+            name = f" ({names[addr]})" if names.get(addr) not in (None, addr) else ""
+            if isinstance(got, BaseException):
+                raise WorkerMismatch(f"worker {addr}{name} cannot tell which ag-uav sources it "
+                                     f"runs ({type(got).__name__}: {_first_line(got)}); start it "
+                                     f"from the same code as this client ({source_root()})")
+            if {k: got.get(k) for k in mine} != mine:
+                raise WorkerMismatch(
+                    f"worker {addr}{name} on {got.get('worker_host')}, pid "
+                    f"{got.get('worker_pid')}, runs "
+                    f"other ag-uav sources than this client: version {got.get('ag_uav_version')}"
+                    f", source hash {got.get('source_hash')} from {got.get('source_root')} "
+                    f"against version {mine['ag_uav_version']}, source hash "
+                    f"{mine['source_hash']} from {source_root()}; start every worker from the "
+                    "same code")
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> Any:
         return self._client.submit(fn, *args, pure=False)
@@ -486,4 +537,4 @@ def make_executor(workers: int | None = None, dask: str | None = None,
 
 
 __all__ = ["Executor", "SerialExecutor", "LocalPoolExecutor", "DaskExecutor", "make_executor",
-           "default_workers", "THREAD_ENV", "ExecutorLost"]
+           "default_workers", "THREAD_ENV", "ExecutorLost", "WorkerMismatch"]

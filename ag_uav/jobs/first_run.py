@@ -3,7 +3,8 @@
 :func:`measure_first_run` starts a fresh Python process whose numba cache is an empty folder
 (``NUMBA_CACHE_DIR``; numba then neither reads nor writes the package's ``__pycache__``), flies
 the default mission for :data:`FLY_S` simulated seconds with the full log (no renders), and
-reports the process's wall time, the seconds spent compiling and the kernels that cost most.
+reports the process's wall time, the seconds spent compiling and the kernels that cost most
+(the child ends with this process, however it ends: :func:`ag_uav.jobs.warm.die_with_parent`).
 The compile is read from numba's own ``numba:compile`` events: each event spans a kernel's
 compile including the kernels it compiles on the way, so a kernel's *own* time is its span less
 its nested spans, and the total is the sum of the outermost spans.  ``ag-uav bench`` reports it
@@ -15,9 +16,9 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from typing import Any
 
@@ -25,6 +26,9 @@ __all__ = ["FLY_S", "compile_spans", "measure_first_run"]
 
 #: simulated seconds the child flies: every per-tick kernel and the log's encoders run in them
 FLY_S = 2.0
+#: the measurement's folder in the temporary directory (removed after; a killed measurement's
+#: by the next, :func:`ag_uav.jobs.warm.sweep`)
+TMP_PREFIX = "ag-uav-first-run-"
 
 
 def compile_spans(events: list[tuple[float, str, bool]]) -> tuple[float, dict[str, float]]:
@@ -88,13 +92,19 @@ def measure_first_run(timeout_s: float = 900.0, helper: bool = True) -> dict[str
     ``top_kernels_s`` (the ten costliest, own time). ``helper``: whether the second-core
     helper of :mod:`ag_uav.jobs.warm` may start (as it does for a user; ``warm_helper`` says
     whether it did), or the flying process compiles every kernel itself."""
-    with tempfile.TemporaryDirectory(prefix="ag-uav-first-run-") as tmp:
+    from . import warm
+
+    warm.sweep(TMP_PREFIX)  # the folders of measurements that were killed (SIGKILL)
+    tmp = str(warm.owned_folder(TMP_PREFIX))
+    try:
         env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(tmp, "numba"),
-               "AG_UAV_WARM": "1" if helper else "0"}
+               "AG_UAV_WARM": "1" if helper else "0", warm.PARENT_ENV: str(os.getpid())}
         t0 = time.perf_counter()
         p = subprocess.run([sys.executable, "-m", "ag_uav.jobs.first_run", "--child", tmp],
                            env=env, capture_output=True, text=True, timeout=timeout_s)
         process_s = time.perf_counter() - t0
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     if p.returncode != 0:
         tail = (p.stderr or p.stdout).strip().splitlines()[-1:] or ["no output"]
         raise RuntimeError(f"first-run child exited {p.returncode}: {tail[0]}")
@@ -114,6 +124,9 @@ def _print(out: dict[str, Any]) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] == "--child":
+        from .warm import die_with_parent
+
+        die_with_parent()  # a measurement killed takes its child (and the child's helper) along
         res = _child(sys.argv[2])
         sys.stdout.flush()
         print(json.dumps(res))

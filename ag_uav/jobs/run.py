@@ -1,5 +1,6 @@
 """One run end to end: config → run folder → (log + renderer) → simulate → summary.json (and
-dose.npz, the dose map on the ground)."""
+dose.npz, the dose map on the ground). The summary and the log's metadata say which code flew
+the run (:func:`ag_uav.jobs.provenance.provenance`: version and source hash)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from typing import Any
 
 from ..config import Config
 from ..engine.missions import RunResult, simulate
+from .provenance import provenance
 
 
 def default_run_id(cfg: Config) -> str:
@@ -74,7 +76,8 @@ def _open_log(cfg: Config, run_dir: Path, writer: str = "process"):
     rates = {"camera": cfg.log.render_hz if cfg.log.render else 0.0}
     return RunLog(run_dir / "run.mcap", channels=cfg.log.channels, rates=rates,
                   metadata={"run_id": run_dir.name, "seed": cfg.seed,
-                            "ag_uav": __version__, "field": cfg.mission.field,
+                            "ag_uav": __version__, "source_hash": provenance()["source_hash"],
+                            "field": cfg.mission.field,
                             "estimator": cfg.estimator.name},
                   config_toml=cfg.to_toml(), writer=writer)
 
@@ -102,7 +105,8 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
     ``helper``: on an empty kernel cache, compile the INS first, here (after the field is
     loaded: a bad field is refused at once), and the kernels the INS does not need in a helper
     process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
-    every core busy, says False)."""
+    every core busy, says False). The helper dies with this process, and a helper's folder left
+    by a run that was killed is removed here (:func:`ag_uav.jobs.warm.sweep`)."""
     from .outdir import check_reuse, check_run_id, hold, unique_run_dir
 
     if run_id is not None:
@@ -119,6 +123,8 @@ def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
     from . import warm
 
     w = None
+    if helper:  # the folders of helpers whose runs were killed (SIGKILL) before removing them
+        warm.sweep()
     if helper and feedback is None and warm.wanted(cfg):  # an empty kernel cache
         from ..world.mission import build_field
 
@@ -172,6 +178,7 @@ def _fly_logged(cfg: Config, run_dir: Path, progress: bool, feedback,
         res.summary["log_error"] = (f"the log stops at t = {log.lost_at:.1f} s: "
                                     if log.lost is not None else "") + disk_error_line(log_err)
     res.summary["run_dir"] = str(run_dir)
+    res.summary.update(provenance())  # which code flew it: version and source hash
     try:  # the summary first: on a full disk it is the file that must not be lost
         write_summary(res.summary, run_dir / "summary.json")
         if res.extra.get("dose") is not None:  # the dose map, for `ag-uav plot`

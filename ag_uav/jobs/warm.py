@@ -31,12 +31,20 @@ cache. The INS's compile is then shared between the two cores instead of running
 It starts only when it can help: the run flies the INS, the INS's tick kernel is not in the
 cache, this process may use at least two cores, and ``AG_UAV_WARM`` is not ``0``.
 ``python -m ag_uav.jobs.first_run`` measures the first run with and without it.
+
+Nothing outlives the run. The helper dies with the process that started it, however that ends
+(SIGKILL included: :func:`die_with_parent`, Linux's ``PR_SET_PDEATHSIG``, and a thread that
+watches the parent's pid elsewhere), and its folder (:data:`PREFIX` in the temporary
+directory) names its owner (:data:`OWNER`: the run's pid and start time); a run that could not
+remove it (SIGKILL) leaves it to the next run, which removes every such folder whose owner is
+gone (:func:`sweep`, called at the start of each run).
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import stat
 import subprocess
 import sys
 import tempfile
@@ -44,8 +52,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["FLY_S", "MCKF_DONE", "MCKF_WAIT_S", "Warmer", "compile_ins", "compile_mckf_row",
-           "mckf_row_args", "start", "stop", "wanted"]
+__all__ = ["FLY_S", "MCKF_DONE", "MCKF_WAIT_S", "OWNER", "PARENT_ENV", "PREFIX", "Warmer",
+           "compile_ins", "compile_mckf_row", "die_with_parent", "mckf_row_args", "owned_folder",
+           "owner_alive", "start", "stop", "sweep", "wanted"]
 
 #: simulated seconds the helper flies (every per-tick kernel and the log's encoders run in them)
 FLY_S = 2.0
@@ -56,6 +65,15 @@ HELPER_OVERRIDES: dict[str, Any] = {"estimator.name": "true", "estimator.shadow"
 MCKF_WAIT_S = 60.0
 #: the file the helper writes in its folder once the MCKF update is in the cache
 MCKF_DONE = "mckf-row.done"
+#: the helper's folder in the temporary directory: this prefix and a random suffix
+PREFIX = "ag-uav-warm-"
+#: the file in such a folder naming its owner: ``"PID START"`` (START: the process's start
+#: time in clock ticks since boot, ``/proc/PID/stat`` field 22; 0 where there is no /proc)
+OWNER = "owner"
+#: the environment variable that gives the helper its parent's pid (checked at its start)
+PARENT_ENV = "AG_UAV_WARM_PARENT"
+#: a folder of ours with no owner file yet is left alone this long (it is being made; s)
+UNOWNED_GRACE_S = 600.0
 
 
 class Warmer:
@@ -91,15 +109,124 @@ def wanted(cfg: Any) -> bool:
             and not _ins_kernel_cached())
 
 
+def _start_ticks(pid: int) -> int:
+    """The process's start time (clock ticks since boot, ``/proc/PID/stat`` field 22; 0 where
+    it cannot be read): with the pid, it tells a process from a later one given the same pid."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+        return int(text.rsplit(")", 1)[1].split()[19])
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def owned_folder(prefix: str = PREFIX) -> Path:
+    """A new folder ``prefix*`` in the temporary directory, its :data:`OWNER` file naming this
+    process (so that :func:`sweep` removes it once this process is gone)."""
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
+    pid = os.getpid()
+    (folder / OWNER).write_text(f"{pid} {_start_ticks(pid)}\n")
+    return folder
+
+
+def owner_alive(folder: Path, now: float | None = None) -> bool:
+    """Whether the process named in ``folder/``:data:`OWNER` still runs (the same pid and start
+    time). A folder with no owner file counts as alive for :data:`UNOWNED_GRACE_S` after it was
+    last modified (its maker may be writing the file), then as gone."""
+    try:
+        pid_s, ticks_s = (folder / OWNER).read_text().split()
+        pid, ticks = int(pid_s), int(ticks_s)
+    except FileNotFoundError:
+        try:
+            age = (time.time() if now is None else now) - folder.stat().st_mtime
+        except OSError:
+            return False
+        return age < UNOWNED_GRACE_S
+    except (OSError, ValueError):  # unreadable or damaged: not a live run's
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process: alive (and not ours to judge)
+        return True
+    return ticks == 0 or _start_ticks(pid) in (0, ticks)
+
+
+def sweep(prefix: str = PREFIX) -> list[Path]:
+    """Remove the folders ``prefix*`` in the temporary directory whose owner is gone (a run
+    SIGKILLed before it could remove its helper's folder); returns those removed. Folders of
+    another user, or that cannot be removed, are left as they are."""
+    removed = []
+    for folder in Path(tempfile.gettempdir()).glob(f"{prefix}*"):
+        try:
+            st = folder.lstat()
+        except OSError:
+            continue
+        if not stat.S_ISDIR(st.st_mode) or st.st_uid != _uid():
+            continue
+        if owner_alive(folder):
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
+        if not folder.exists():
+            removed.append(folder)
+    return removed
+
+
+def _uid() -> int:
+    return os.getuid() if hasattr(os, "getuid") else -1
+
+
+def die_with_parent(parent: int | None = None) -> None:
+    """Make this process end when its parent does, however the parent ends (SIGKILL included):
+    on Linux ``prctl(PR_SET_PDEATHSIG, SIGKILL)`` (the kernel kills this process when the
+    thread that started it exits); elsewhere, or if that fails, a daemon thread that exits the
+    process once its parent pid changes (polled every 0.5 s). ``parent``: the pid the parent
+    gave (:data:`PARENT_ENV`); a parent already gone before this call is caught by comparing
+    it with ``os.getppid()``."""
+    if parent is None:
+        try:
+            parent = int(os.environ.get(PARENT_ENV, ""))
+        except ValueError:
+            parent = os.getppid()
+    armed = False
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            pr_set_pdeathsig = 1
+            armed = libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    if os.getppid() != parent:  # the parent died before the prctl (or this was reparented)
+        os._exit(1)
+    if not armed:
+        import threading
+
+        def watch() -> None:
+            while os.getppid() == parent:
+                time.sleep(0.5)
+            os._exit(1)
+
+        threading.Thread(target=watch, name="ag-uav-parent-watch", daemon=True).start()
+
+
 def start(cfg: Any) -> Warmer | None:
     """The helper for ``cfg``'s run, started, or None when :func:`wanted` says no (or it could
-    not start: the run then compiles everything itself, as it would anyway)."""
+    not start: the run then compiles everything itself, as it would anyway). The helper ends
+    with this process (:func:`die_with_parent`); its folder names this process as its owner
+    (:func:`owned_folder`)."""
     if not wanted(cfg):
         return None
-    folder = Path(tempfile.mkdtemp(prefix="ag-uav-warm-"))
+    try:
+        folder = owned_folder(PREFIX)
+    except OSError:
+        return None
     try:
         (folder / "config.toml").write_text(cfg.to_toml())
-        env = {**os.environ, "AG_UAV_WARM": "0", "AG_UAV_ENGINE_THREADS": "1"}
+        env = {**os.environ, "AG_UAV_WARM": "0", "AG_UAV_ENGINE_THREADS": "1",
+               PARENT_ENV: str(os.getpid())}
         proc = subprocess.Popen([sys.executable, "-m", "ag_uav.jobs.warm_helper", str(folder)],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL, env=env)

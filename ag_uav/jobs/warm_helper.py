@@ -2,7 +2,8 @@
 compiles the MCKF's update (:func:`ag_uav.jobs.warm.compile_mckf_row`) and writes
 ``FOLDER/``:data:`~ag_uav.jobs.warm.MCKF_DONE` at the run's priority (the run waits for it), then
 flies ``FOLDER/config.toml`` with :data:`ag_uav.jobs.warm.HELPER_OVERRIDES` into ``FOLDER`` at
-low priority, so that the kernels it runs land in numba's cache."""
+low priority, so that the kernels it runs land in numba's cache. It ends with the run that
+started it (:func:`ag_uav.jobs.warm.die_with_parent`), whatever ends the run."""
 
 from __future__ import annotations
 
@@ -14,8 +15,9 @@ from pathlib import Path
 
 def main(folder: str) -> None:
     """The MCKF's update, then the run's config on the true state, briefly, into ``folder``."""
-    from .warm import MCKF_DONE, compile_mckf_row
+    from .warm import MCKF_DONE, compile_mckf_row, die_with_parent
 
+    die_with_parent()
     compile_mckf_row()  # what the run waits for: at the run's own priority
     (Path(folder) / MCKF_DONE).touch()
     with contextlib.suppress(OSError, AttributeError):

@@ -26,12 +26,14 @@ preset ``default`` is the empty fragment). Every run's config is ``base ⊕ pres
 validated with the usual one-line :class:`~ag_uav.config.ConfigError` before anything runs.
 
 Each finished run becomes one row (every scalar summary metric, the axis values, ``status`` =
-ok | crashed | error, ``crash_reason`` and ``engine_fallback``) appended to ``journal.jsonl``
-(flushed and fsynced per run). ``results.csv`` is regenerated (atomically) from the journal,
-sorted by run index, so it never depends on scheduling; it is written however the batch ends
-(Ctrl-C and SIGTERM included). ``--resume`` skips the runs whose *config hash* is already in
-the journal (so a spec that grows — more seeds — reuses the finished runs); unreadable journal
-lines are skipped with a warning saying how many.
+ok | failsafe | cut | incomplete | crashed | error, ``crash_reason``, ``incomplete_reason`` and
+``engine_fallback``; :func:`~ag_uav.jobs.batch.worker.run_status`: only a mission flown to its
+end is ok, and the report's means cover the ok runs only, saying how many) appended to
+``journal.jsonl`` (flushed and fsynced per run). ``results.csv`` is regenerated (atomically)
+from the journal, sorted by run index, so it never depends on scheduling; it is written
+however the batch ends (Ctrl-C and SIGTERM included). ``--resume`` skips the runs whose
+*config hash* is already in the journal (so a spec that grows — more seeds — reuses the
+finished runs); unreadable journal lines are skipped with a warning saying how many.
 
 Failures are never silent. A crashed vehicle is a result (status ``crashed``). A run that
 raises is a row with status ``error`` and the exception; a chunk whose worker died (after the
@@ -66,6 +68,7 @@ from .report import (
     ordered_columns,
     print_table,
     read_results_csv,
+    status_counts,
     summary_rows,
     write_report,
     write_results_csv,
@@ -92,7 +95,17 @@ from .spec import (
     set_dotted,
     spec_from_dict,
 )
-from .worker import DROP_KEYS, exception_line, flatten_summary, run_chunk, run_task
+from .worker import (
+    DROP_KEYS,
+    EARLY_STATUSES,
+    STATUSES,
+    exception_line,
+    flatten_summary,
+    row_reason,
+    run_chunk,
+    run_status,
+    run_task,
+)
 
 __all__ = ["Axis", "BatchSpec", "RunTask", "BatchResult", "BatchOptions", "load_spec",
            "spec_from_dict", "expand", "run_task", "run_chunk", "run_batch", "Journal",
@@ -103,4 +116,5 @@ __all__ = ["Axis", "BatchSpec", "RunTask", "BatchResult", "BatchOptions", "load_
            "flatten_summary", "group_rows", "markdown_table", "print_table", "ordered_columns",
            "read_jsonl", "repair_jsonl", "json_default", "signals_held", "LEAD_COLUMNS",
            "METRIC_ORDER", "SUMMARY_METRICS", "DROP_KEYS", "LOST_PREFIX", "PATH_KEYS",
-           "SHAPEFILE_PARTS", "SPEC_KEYS"]
+           "SHAPEFILE_PARTS", "SPEC_KEYS", "STATUSES", "EARLY_STATUSES", "run_status",
+           "row_reason", "status_counts"]

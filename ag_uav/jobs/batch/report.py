@@ -11,12 +11,13 @@ from typing import Any
 
 from ...record.atomic import atomic_open, atomic_write_text, savefig
 from .spec import BatchSpec
+from .worker import EARLY_STATUSES, row_reason
 
 #: columns that lead results.csv, before the axis columns
 LEAD_COLUMNS = ("index", "run_id")
 #: summary metrics in display order (any other scalar metric follows, sorted by name)
-METRIC_ORDER = ("status", "crash_reason", "engine_fallback", "completed", "crashed",
-                "crash_time_s", "mission_time_s",
+METRIC_ORDER = ("status", "crash_reason", "incomplete_reason", "engine_fallback", "completed",
+                "crashed", "crash_time_s", "mission_time_s",
                 "tracking_rmse_m", "estimate_rmse_m", "cross_track_rmse_m", "cross_track_max_m",
                 "altitude_rmse_m", "coverage_fraction", "overlap_fraction", "path_length_m",
                 "planned_path_length_m", "legs", "legs_flown", "final_position_error_m",
@@ -26,11 +27,12 @@ METRIC_ORDER = ("status", "crash_reason", "engine_fallback", "completed", "crash
 
 def is_timing_column(name: str) -> bool:
     """Columns that measure the machine (or how the run was scheduled: ``batch_size``, the size
-    of the lockstep chunk it flew in), not the run (excluded from determinism checks)."""
+    of the lockstep chunk it flew in; ``worker_host`` and ``worker_pid``, the process that flew
+    it), not the run (excluded from determinism checks)."""
     n = name.lower()
     return ("wall" in n or "cpu_time" in n or "real_time_factor" in n
             or n.endswith(("_per_s", "_us"))
-            or "timing" in n or n == "batch_size")
+            or "timing" in n or n in ("batch_size", "worker_host", "worker_pid"))
 
 
 # ------------------------------------------------------------------------------------ results
@@ -112,25 +114,39 @@ SUMMARY_METRICS = (
 
 def summary_rows(rows: Sequence[dict[str, Any]], group_keys: Sequence[str]
                  ) -> tuple[list[str], list[list[str]]]:
-    """The batch summary table: per group, runs, ok/crashed/error and mean ± 95 % CI."""
+    """The batch summary table: per group, runs, ok, ended early (failsafe, cut, incomplete),
+    crashed, error, and mean ± 95 % CI over the ok runs only (the column "ok = in the means"
+    says how many; a metric a run lacks is averaged over fewer, marked "(n = k)")."""
     metrics = [m for m in SUMMARY_METRICS if any(r.get(m[0]) not in (None, "") for r in rows)]
-    header = list(group_keys) + ["runs", "ok", "crashed", "error"] + [m[1] for m in metrics]
+    header = list(group_keys) + ["runs", "ok = in the means", "ended early", "crashed",
+                                 "error"] + [m[1] for m in metrics]
     table = []
     for key, rs in sorted(group_rows(rows, group_keys).items(), key=lambda kv: _natural(kv[0])):
+        n_ok = sum(r.get("status") == "ok" for r in rs)
         line = [str(k) for k in key]
-        line += [str(len(rs)), str(sum(r.get("status") == "ok" for r in rs)),
+        line += [str(len(rs)), str(n_ok), str(sum(r.get("status") in EARLY_STATUSES for r in rs)),
                  str(sum(r.get("status") == "crashed" for r in rs)),
                  str(sum(r.get("status") == "error" for r in rs))]
         for col, _, scale, fmt in metrics:
             m, h, n = mean_ci(r.get(col) for r in rs if r.get("status") == "ok")
             if n == 0:
                 line.append("–")
-            elif math.isnan(h):
-                line.append(fmt.format(m * scale))
-            else:
-                line.append(f"{fmt.format(m * scale)} ± {fmt.format(h * scale)}")
+                continue
+            cell = (fmt.format(m * scale) if math.isnan(h)
+                    else f"{fmt.format(m * scale)} ± {fmt.format(h * scale)}")
+            line.append(cell if n == n_ok else f"{cell} (n = {n})")
         table.append(line)
     return header, table
+
+
+def status_counts(rows: Sequence[dict[str, Any]]) -> str:
+    """``"8 runs: 5 ok, 2 ended early (failsafe 1, cut 1), 1 crashed, 0 error"``."""
+    n = {s: sum(r.get("status") == s for r in rows)
+         for s in ("ok", *EARLY_STATUSES, "crashed", "error")}
+    early = sum(n[s] for s in EARLY_STATUSES)
+    why = ", ".join(f"{s} {n[s]}" for s in EARLY_STATUSES if n[s])
+    return (f"{len(rows)} runs: {n['ok']} ok, {early} ended early" + (f" ({why})" if why else "")
+            + f", {n['crashed']} crashed, {n['error']} error")
 
 
 def _natural(key: tuple[Any, ...]) -> tuple[tuple[int, float, str], ...]:
@@ -252,23 +268,26 @@ def _report_markdown(rows: Sequence[dict[str, Any]], spec: BatchSpec, group_keys
     md = [f"# Batch `{spec.name}`", ""]
     if spec.description:
         md += [spec.description, ""]
-    md += [f"- runs: {len(rows)} ({sum(r.get('status') == 'ok' for r in rows)} ok, "
-           f"{sum(r.get('status') == 'crashed' for r in rows)} crashed, "
-           f"{sum(r.get('status') == 'error' for r in rows)} error)"]
+    md += [f"- {status_counts(rows)}"]
     n_fb = sum(bool(r.get("engine_fallback")) for r in rows)
     md += [f"- engine fallbacks: {n_fb} runs flown one at a time after their engine batch "
            "failed (column `engine_fallback`)" if n_fb else "- engine fallbacks: 0"]
     md += ["- axes: " + "; ".join(f"`{a.name}` × {len(a.values)}" for a in spec.axes)]
     for k, v in info.items():
         md.append(f"- {k}: {v}")
-    md += ["", "Mean ± 95 % confidence half-width (Student t) over the runs with status ok.", "",
+    n_ok = sum(r.get("status") == "ok" for r in rows)
+    md += ["", f"Mean ± 95 % confidence half-width (Student t) over the {n_ok} of {len(rows)} "
+           "runs with status ok (the column \"ok = in the means\"; a mission flown to its end): "
+           "the runs that ended early (failsafe, cut by `sim.max_time_s`, incomplete), crashed "
+           "or failed are not in the means and are listed below.", "",
            markdown_table(header, table)]
     bad = [r for r in rows if r.get("status") != "ok"]
     if bad:
         md += ["## Crashed / failed runs", "",
+               "Every run whose status is not ok: ended early, crashed, or failed.", "",
                markdown_table(["index", "status", "reason"],
                               [[str(r.get("index")), str(r.get("status")),
-                                str(r.get("crash_reason"))] for r in bad[:50]])]
+                                row_reason(r).replace("|", "\\|")] for r in bad[:50]])]
         if len(bad) > 50:
             md.append(f"... and {len(bad) - 50} more (see results.csv)\n")
     for p in figures:

@@ -13,11 +13,12 @@ from typing import Any
 from ...config import ConfigError
 from ...record.atomic import atomic_write_text
 from ..batch_memory import default_memory_mb, memory_plan, this_process_mb
-from ..executor import Executor, ExecutorLost, SerialExecutor
+from ..executor import Executor, ExecutorLost, SerialExecutor, WorkerMismatch
+from ..provenance import provenance
 from .journal import Journal, json_default, signals_held
 from .report import write_report, write_results_csv
 from .spec import BatchSpec, RunTask, expand
-from .worker import exception_line, run_chunk
+from .worker import EARLY_STATUSES, exception_line, row_reason, run_chunk, run_status
 
 
 # ---------------------------------------------------------------------------------- run_batch
@@ -57,6 +58,18 @@ class BatchResult:
             parts.append(f"{len(bad) - len(lost)} raised in the product (first: run "
                          f"{first.get('run_id')}: {first.get('crash_reason')})")
         return f"{len(bad)} of {len(self.rows)} runs failed: " + "; ".join(parts)
+
+    def early_line(self) -> str | None:
+        """None when no run ended early; else one line: how many runs ended early and why
+        (failsafe, cut, incomplete), the first one's reason; they are results, not in the
+        means, and listed with the failed runs in ``report.md``."""
+        early = [r for r in self.rows if r.get("status") in EARLY_STATUSES]
+        if not early:
+            return None
+        why = ", ".join(f"{s} {n}" for s in EARLY_STATUSES
+                        if (n := sum(r.get("status") == s for r in early)))
+        return (f"{len(early)} of {len(self.rows)} runs ended early ({why}; first: run "
+                f"{early[0].get('run_id')}: {row_reason(early[0])}): not ok, not in the means")
 
 
 #: ``crash_reason`` of a row whose run was lost to the machinery (journalled as a retry)
@@ -102,7 +115,12 @@ def run_batch(spec: BatchSpec, out_dir: str | Path, executor: Executor | None = 
     ``results.csv`` is written however the call ends (an interrupt or SIGTERM included). When
     the executor is lost (:class:`~ag_uav.jobs.executor.ExecutorLost`), raises
     :class:`BatchStopped` after writing it. Warnings (unreadable journal lines, engine batches
-    that fell back to one run at a time) go to ``options.warn`` (default: one line on stderr).
+    that fell back to one run at a time, resumed rows flown by other sources) go to
+    ``options.warn`` (default: one line on stderr).
+
+    Every row carries the code that flew it (:func:`ag_uav.jobs.provenance.row_provenance`:
+    version, source hash, worker host and pid); a row flown by other code than this process's
+    raises :class:`~ag_uav.jobs.executor.WorkerMismatch` (one line; not journalled).
     """
     from ..outdir import hold
 
@@ -138,6 +156,12 @@ def _run_batch(spec: BatchSpec, out: Path, executor: Executor | None, opt: Batch
     if journal.skipped:
         run.warn(f"{journal.path}: skipped {journal.skipped} unreadable line(s); their runs "
                  "are run again")
+    other = [r for r in rows_by_index.values() if r.get("source_hash") != run.code["source_hash"]]
+    if other:
+        run.warn(f"{len(other)} of the {len(rows_by_index)} resumed runs were flown by other "
+                 f"ag-uav sources (source hash {other[0].get('source_hash') or 'not recorded'}) "
+                 f"than this batch ({run.code['source_hash']}); results.csv's column "
+                 "source_hash says which (--fresh flies them all again)")
     t0 = time.perf_counter()
     journal.open(fresh=fresh and not resume)
     stopped = None
@@ -181,6 +205,7 @@ class _BatchRun:
                                     dynamic_ncols=True, smoothing=0.05)
         self._warn, self.on_row = opt.warn, opt.on_row
         self.n_bad = self.n_lost = 0
+        self.code = provenance()  # the code this batch's rows must come from
 
     def warn(self, msg: str) -> None:
         if self._warn is not None:
@@ -202,12 +227,13 @@ class _BatchRun:
             reason = f"{LOST_PREFIX}{exception_line(rs)}"[:300]
             rs = [{"index": t.index, "run_id": t.run_id, **t.axis_values, "status": "error",
                    "completed": False, "crashed": True, "crash_reason": reason,
-                   "engine_fallback": ""} for t in tasks]
+                   "engine_fallback": "", **provenance()} for t in tasks]
             self.n_lost += len(tasks)
             self.warn(f"runs {tasks[0].run_id}..{tasks[-1].run_id}: {reason}")
             retry = True
         else:
             retry = False
+            self._check_code(tasks, rs)
             fb = next((r.get("engine_fallback") for r in rs if r.get("engine_fallback")), "")
             if fb:
                 self.warn(f"runs {tasks[0].run_id}..{tasks[-1].run_id}: the engine batch failed "
@@ -222,7 +248,22 @@ class _BatchRun:
             if self.bar is not None:
                 self.bar.update(1)
                 if self.n_bad:
-                    self.bar.set_postfix(failed=self.n_bad, refresh=False)
+                    self.bar.set_postfix(not_ok=self.n_bad, refresh=False)
+
+    def _check_code(self, tasks: list[RunTask], rs: list[dict[str, Any]]) -> None:
+        """Raise :class:`~ag_uav.jobs.executor.WorkerMismatch` (one line; the rows are not
+        journalled) when a row was flown by other code than this client's (a Dask worker that
+        joined after the check at the start, or sources edited under a running pool)."""
+        for r in rs:
+            got = {k: r.get(k) for k in self.code}
+            if got != self.code:
+                raise WorkerMismatch(
+                    f"runs {tasks[0].run_id}..{tasks[-1].run_id} were flown by a worker "
+                    f"({r.get('worker_host')}, pid {r.get('worker_pid')}) running other ag-uav "
+                    f"sources (version {got['ag_uav_version']}, source hash "
+                    f"{got['source_hash']}) than this client (version "
+                    f"{self.code['ag_uav_version']}, source hash {self.code['source_hash']}); "
+                    "not journalled: start every worker from the same code, then --resume")
 
     def finish(self, journal: Journal, rows_by_index: dict[int, dict[str, Any]], csv_path: Path,
                spec: BatchSpec, quiet: bool = False) -> list[dict[str, Any]]:
@@ -247,4 +288,6 @@ def _rebase_row(row: dict[str, Any], task: RunTask) -> dict[str, Any]:
     r = dict(row)
     r.update({"index": task.index, "run_id": task.run_id, **task.axis_values})
     r.setdefault("engine_fallback", "")
+    if r.get("status") in ("ok", *EARLY_STATUSES):  # a journal written before the early statuses
+        r["status"] = run_status(r)
     return r

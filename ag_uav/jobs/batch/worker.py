@@ -9,6 +9,7 @@ import time
 from typing import Any
 
 from ...config import config_from_dict
+from ..provenance import row_provenance
 from .journal import json_default
 from .spec import RunTask
 
@@ -116,15 +117,45 @@ def exception_line(e: BaseException) -> str:
     return f"{type(e).__name__}: {msg}"[:300]
 
 
+#: a row's ``status``: ``ok`` only for a mission flown to its end; the others say why not
+STATUSES = ("ok", "failsafe", "cut", "incomplete", "crashed", "error")
+#: the statuses of a run that ended early without crashing (not ok, not in the report's means)
+EARLY_STATUSES = ("failsafe", "cut", "incomplete")
+
+
+def run_status(summary: dict[str, Any]) -> str:
+    """The ``status`` of a flown run from its (flattened) summary: ``crashed``; ``ok`` when the
+    mission was completed; else why it ended early: ``failsafe`` (the GNSS failsafe landed or
+    held it), ``cut`` (``sim.max_time_s`` cut the plan) or ``incomplete`` (any other reason: no
+    take-off, the pre-flight check, legs not flown, ended off the plan's end; the reason is in
+    ``incomplete_reason``)."""
+    if summary.get("crashed"):
+        return "crashed"
+    if summary.get("completed"):
+        return "ok"
+    if summary.get("failsafe"):
+        return "failsafe"
+    if str(summary.get("incomplete_reason") or "").startswith("cut by sim.max_time_s"):
+        return "cut"
+    return "incomplete"
+
+
+def row_reason(row: dict[str, Any]) -> str:
+    """Why a row is not ok, in one line: its crash or error reason, else its
+    ``incomplete_reason`` ("" for an ok row)."""
+    return str(row.get("crash_reason") or row.get("incomplete_reason") or "")
+
+
 def _row(task: RunTask, res: Any, t0: float) -> dict[str, Any]:
     row: dict[str, Any] = {"index": task.index, "run_id": task.run_id, **task.axis_values}
     summ = flatten_summary(res.summary)
     for k in task.axis_values:
         summ.pop(k, None)
-    status = "crashed" if summ.get("crashed") else "ok"
+    status = run_status(summ)
     row.update({"status": status, "crash_reason": summ.pop("crash_reason", None) or ""})
     row.update(summ)
     row["engine_fallback"] = ""
+    row.update(row_provenance())
     return row
 
 
@@ -132,4 +163,4 @@ def _error_row(task: RunTask, e: BaseException, t0: float) -> dict[str, Any]:
     return {"index": task.index, "run_id": task.run_id, **task.axis_values, "status": "error",
             "crash_reason": exception_line(e), "completed": False,
             "crashed": True, "wall_time_s": round(time.perf_counter() - t0, 3),
-            "engine_fallback": ""}
+            "engine_fallback": "", **row_provenance()}

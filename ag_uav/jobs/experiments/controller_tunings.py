@@ -267,8 +267,11 @@ def fly_every_tuning(rows: list[dict[str, Any]], spec_dir: Path, out: Path, exec
             if r["controller"] != label:
                 continue
             fl = [x for x in res.rows if x.get("controller") == f"{label}#{r['seed']}"]
-            crashed += sum(x.get("status") != "ok" for x in fl)
-            m, _, n = mean_ci(x.get("tracking_rmse_m") for x in fl if x.get("status") == "ok")
+            # a flight cut by sim.max_time_s (``base``'s window) measured its tracking; any
+            # other status (crashed, failsafe, error, ...) is counted, not averaged
+            crashed += sum(x.get("status") not in ("ok", "cut") for x in fl)
+            m, _, n = mean_ci(x.get("tracking_rmse_m") for x in fl
+                              if x.get("status") in ("ok", "cut"))
             per[r["seed"]] = 1000.0 * m if n else math.nan
             recs.append({"controller": label, "seed": r["seed"], "tracking_mm": per[r["seed"]],
                          "validation_cost": r["validation_cost"], "flights": len(fl)})
