@@ -234,7 +234,8 @@ def _register_optional(sub, experiments: bool = True) -> None:
     ``experiments``: with each experiment's own arguments (see :func:`build_parser`)."""
     import importlib
 
-    for mod in ("ag_uav.cli.view", "ag_uav.cli.experiments", "ag_uav.cli.batch"):
+    for mod in ("ag_uav.cli.view", "ag_uav.cli.experiments", "ag_uav.cli.batch",
+                "ag_uav.cli.gnss"):
         try:
             m = importlib.import_module(mod)
         except ModuleNotFoundError as e:
