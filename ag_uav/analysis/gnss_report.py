@@ -61,8 +61,8 @@ def fit_report(fit: LogFit, name: str) -> str:
 def compare_report(fit: LogFit, label: str, sims: list[dict[str, float]], seeds: range) -> str:
     """The log's scatter figures beside those of ``sims`` (one per seed): seed 0, the median
     and the RMS over seeds (the RMS estimates the model's expected value), and RMS / log."""
-    lines = [f"simulated {label} with the product's generator: {fit.n} fixes at "
-             f"{1 / fit.dt:g} Hz, seeds {seeds.start}-{seeds.stop - 1}",
+    lines = [f"simulated {label} with the product's generator at the log's rate and length: "
+             f"{fit.n} fixes at {1 / fit.dt:g} Hz, seeds {seeds.start}-{seeds.stop - 1}",
              f"{'quantity':<42} {'log':>9} {'seed 0':>9} {'median':>9} {'RMS':>9} "
              f"{'RMS/log':>8}"]
     for key, text in _STAT_NAMES:

@@ -29,10 +29,11 @@ def _fit(args: argparse.Namespace) -> int:
         print(f"ag-uav gnss fit: --seeds = {args.seeds} is invalid; must be >= 1",
               file=sys.stderr)
         return 2
-    if args.compare is not None and args.compare not in available_presets():
-        print(f"ag-uav gnss fit: --compare = {args.compare!r} is invalid; allowed: "
-              f"{', '.join(available_presets())}", file=sys.stderr)
-        return 2
+    for name in args.compare:
+        if name not in available_presets():
+            print(f"ag-uav gnss fit: --compare = {name!r} is invalid; allowed: "
+                  f"{', '.join(available_presets())}", file=sys.stderr)
+            return 2
     try:
         log = read_gnss_log(args.log)
         sel = select_epochs(log, args.fix)
@@ -43,10 +44,11 @@ def _fit(args: argparse.Namespace) -> int:
     name = args.name or _stem(args.log)
     print(fit_report(fit, name))
     seeds = range(args.seeds)
-    cfg, label = preset_components(fit), "the fitted model"
-    if args.compare is not None:
-        cfg, label = gps_preset(args.compare), f"preset {args.compare!r}"
-    print(compare_report(fit, label, simulate_stats(cfg, fit.n, fit.dt, seeds), seeds))
+    runs = [(preset_components(fit), "the fitted model")]
+    runs += [(gps_preset(c), f"preset {c!r}") for c in args.compare]
+    for cfg, label in runs:
+        print()
+        print(compare_report(fit, label, simulate_stats(cfg, fit.n, fit.dt, seeds), seeds))
     out = Path(args.out)
     if not args.no_files:
         from ..analysis.gnss_fit import preset_toml
@@ -82,8 +84,9 @@ def register(sub) -> None:
                    help="terms fitted (auto adds a random walk where it halves the residual)")
     f.add_argument("--name", help="preset name in the block and the files (default: the "
                    "log's name)")
-    f.add_argument("--compare", metavar="PRESET", help="simulate this preset instead of the "
-                   "fitted model for the check against the log")
+    f.add_argument("--compare", metavar="PRESET", action="append", default=[],
+                   help="also simulate this preset (at the log's rate and length) against the "
+                        "log; repeatable")
     f.add_argument("--seeds", type=int, default=20, help="seeds of the simulated check")
     f.add_argument("--out", default=".", metavar="DIR", help="folder of NAME-allan.png and "
                    "NAME-preset.toml")
