@@ -174,6 +174,45 @@ def test_ubx_nav_sol_with_gga_quality_gz(tmp_path):
     np.testing.assert_allclose(got, want, atol=0.01)  # NAV-SOL is in whole centimetres
 
 
+def test_nmea_gga_gst_log_parses(tmp_path):
+    from pynmeagps import NMEAMessage
+    from pyubx2 import GET
+
+    from ag_uav.world.geodesy import ecef_to_geodetic
+
+    n = 200
+    enu = 50.0 * _static_errors(n, 8)  # decimetres: above NMEA's 1e-5 minute grid
+    lon, lat, h = ecef_to_geodetic(_ecef(enu))
+    out = bytearray()
+    for k in range(n):
+        sod = 43_200 + k
+        tm = f"{sod // 3600:02d}{sod % 3600 // 60:02d}{sod % 60:02d}.00"
+        out += NMEAMessage("GP", "GGA", GET, time=tm, lat=float(lat[k]), NS="N",
+                           lon=float(lon[k]), EW="W", quality=2, numSV=9, HDOP=0.9,
+                           alt=round(float(h[k]) - 56.0, 3), altUnit="M", sep=56.0,
+                           sepUnit="M").serialize()
+        out += NMEAMessage("GP", "GST", GET, time=tm, rangeRms=1.0, stdMajor=0.5,
+                           stdMinor=0.4, orient=0.0, stdLat=0.3, stdLong=0.4,
+                           stdAlt=0.9).serialize()
+    p = tmp_path / "fixes.nmea"
+    p.write_bytes(bytes(out))
+    log = read_gnss_log(p)
+    assert log.source == "NMEA GGA + GST"
+    sel = select_epochs(log)
+    assert sel.keep == ("dgps",) and int(sel.mask.sum()) == n
+    assert log.h_acc[0] == pytest.approx(0.5) and log.v_acc[0] == pytest.approx(0.9)
+    got = log.enu(sel.mask)
+    want = enu - enu.mean(axis=0)
+    np.testing.assert_allclose(got[:, :2], want[:, :2], atol=0.02)
+    np.testing.assert_allclose(got[:, 2], want[:, 2], atol=0.06)
+
+
+def test_constant_positions_one_line_exit_2(tmp_path, capsys):
+    p = tmp_path / "still.csv"
+    p.write_text("time_s,e_m,n_m,u_m\n" + "".join(f"{k},1.0,2.0,3.0\n" for k in range(64)))
+    assert "does not vary" in _one_line_exit2(capsys, ["gnss", "fit", str(p)])
+
+
 def test_csv_and_preset_block_round_trip(tmp_path):
     n = 3000
     enu = _static_errors(n, 5)

@@ -54,7 +54,7 @@ from .allan import (
     scatter_rw,
     scatter_white,
 )
-from .gnss_log import GnssLog, Selection
+from .gnss_log import GnssLog, GnssLogError, Selection
 
 __all__ = ["AxisFit", "fit_axis", "fit_log", "LogFit", "preset_components", "preset_toml",
            "scatter_stats", "simulate_stats"]
@@ -107,6 +107,9 @@ def fit_axis(axis: str, avar: np.ndarray, m: np.ndarray, dt: float, n: int, scat
     from scipy.optimize import least_squares
 
     ok = np.isfinite(avar) & (avar > 0)
+    if ok.sum() < 2:
+        raise GnssLogError(f"axis {axis}: the position does not vary (Allan variance zero or "
+                           "undefined at all but one tau); nothing to fit")
     mm, la = m[ok], np.log(avar[ok])
     ws = SCATTER_WEIGHT * math.sqrt(mm.size)
     ls = math.log(max(scatter_var, 1e-30))
@@ -194,7 +197,10 @@ def fit_log(log: GnssLog, sel: Selection, model: str = "auto") -> LogFit:
         var[ax] = float(enu[:, i].var())
     av["H"] = 0.5 * (av["E"] + av["N"])
     var["H"] = 0.5 * (var["E"] + var["N"])
-    axes = {ax: fit_axis(ax, av[ax], m, sel.dt, n, var[ax], model) for ax in "ENUH"}
+    try:
+        axes = {ax: fit_axis(ax, av[ax], m, sel.dt, n, var[ax], model) for ax in "ENUH"}
+    except GnssLogError as e:
+        raise GnssLogError(f"{log.path}: {e}") from None
     return LogFit(log.path, log.source, sel, n, sel.dt, axes,
                   scatter_stats(enu, sel.dt, sel.segments), _ratios(log, sel.mask, enu))
 

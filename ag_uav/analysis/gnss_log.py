@@ -39,7 +39,8 @@ import numpy as np
 
 from ..world.geodesy import ecef_to_geodetic, enu_frame, geodetic_to_ecef
 
-__all__ = ["FIX_CLASSES", "GnssLog", "GnssLogError", "read_gnss_log", "select_epochs"]
+__all__ = ["FIX_CLASSES", "KEEP_SETS", "GnssLog", "GnssLogError", "Selection", "read_gnss_log",
+           "select_epochs"]
 
 #: solution types, worst to best
 FIX_CLASSES = ("none", "time-only", "2d", "3d", "dgps", "rtk-float", "rtk-fixed")
@@ -108,7 +109,7 @@ def read_gnss_log(path: str | Path) -> GnssLog:
     if b"\xb5\x62" in head or head.lstrip()[:1] == b"$":
         return _read_ubx_nmea(p, raw)
     text = head.decode("utf-8", errors="replace")
-    if "time_s" in text.split("\n", 50)[0] or "time_s" in text:
+    if "time_s" in text:
         return _read_csv(p, raw)
     raise GnssLogError(f"{p}: not a UBX, NMEA or CSV GNSS log (no UBX sync bytes, no '$' "
                        "sentence, no CSV header with time_s)")
@@ -188,7 +189,7 @@ def _read_ubx_nmea(p: Path, raw: bytes) -> GnssLog:
 
 
 def _from_pvt(p: Path, msgs: list) -> GnssLog:
-    t = np.array([m.iTOW for m in msgs], dtype=float) / 1000.0
+    t = np.unwrap(np.array([m.iTOW for m in msgs], dtype=float) / 1000.0, period=604800.0)
     llh = np.array([[m.lat, m.lon, m.height / 1000.0] for m in msgs], dtype=float)
     fix = []
     for m in msgs:
