@@ -210,14 +210,27 @@ def _from_pvt(p: Path, msgs: list) -> GnssLog:
                  np.hypot(h_acc, v_acc))
 
 
-def _leap(c: dict[str, list]) -> float | None:
-    """GPS − UTC (s): the most frequent whole-second difference between a NAV-SOL's iTOW
-    and the UTC time of the GGA after it."""
-    d = Counter()
+#: GPS − UTC (s) from these UTC dates on (IERS Bulletin C; none announced after 2017-01-01)
+_LEAPS = ((1981, 7), (1982, 7), (1983, 7), (1985, 7), (1988, 1), (1990, 1), (1991, 1),
+          (1992, 7), (1993, 7), (1994, 7), (1996, 1), (1997, 7), (1999, 1), (2006, 1),
+          (2009, 1), (2012, 7), (2015, 7), (2017, 1))
+
+
+def _leap(c: dict[str, list]) -> tuple[float, str] | None:
+    """GPS − UTC (s) and how it was found: from the GPS week of the first NAV-SOL with a valid
+    week (the leap-second table), else the most frequent whole-second difference between a
+    NAV-SOL's iTOW and the UTC time of the GGA after it."""
+    import datetime as dt
+
+    m0 = next((m for m in c["sol"] if getattr(m, "wknSet", 0) and m.week > 0), None)
+    if m0 is not None:
+        day = dt.date(1980, 1, 6) + dt.timedelta(days=7 * int(m0.week) + m0.iTOW // 86_400_000)
+        return float(sum((day.year, day.month) >= ym for ym in _LEAPS)), "GPS week"
+    d: Counter = Counter()
     for m, itow in zip(c["gga"], c["sol_for_gga"], strict=True):
         if itow is not None:
             d[round((itow / 1000.0 - _sod(m.time)) % 86400.0) % 86400] += 1
-    return float(d.most_common(1)[0][0]) if d else None
+    return (float(d.most_common(1)[0][0]), "message order") if d else None
 
 
 def _from_sol(p: Path, c: dict[str, list]) -> GnssLog:
@@ -232,15 +245,16 @@ def _from_sol(p: Path, c: dict[str, list]) -> GnssLog:
         else:
             fix.append("dgps" if m.diffSoln else "3d")
     src = "UBX NAV-SOL"
-    leap = _leap(c) if c["gga"] else None
-    if leap is not None:
+    found = _leap(c) if c["gga"] else None
+    if found is not None:
+        leap, how = found
         q = {round(_sod(m.time) * 10): _GGA_Q.get(int(_num(m.quality)), "none")
              for m in c["gga"] if _num(m.quality) == _num(m.quality)}
         for i, tw in enumerate(itow):
             g = q.get(round(((tw - leap) % 86400.0) * 10))
-            if g is not None and fix[i] != "none":
+            if g is not None and fix[i] in ("3d", "dgps"):
                 fix[i] = g
-        src += f" + NMEA GGA quality (GPS-UTC {leap:.0f} s)"
+        src += f" + NMEA GGA quality (GPS-UTC {leap:.0f} s, from the {how})"
     p_acc = np.array([m.pAcc for m in msgs], dtype=float) / 100.0
     nan = np.full(len(msgs), np.nan)
     t = np.unwrap(itow, period=604800.0)
