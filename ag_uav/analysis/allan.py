@@ -21,7 +21,7 @@ IEEE 952 / El-Sheimy et al. as τ0 → 0):
   block means ``ȳ`` of m samples, ``σ² = Var(ȳ) − Cov(ȳ_A, ȳ_B)`` for adjacent blocks, and
   ``Var(ȳ) = σ²/m² [m + 2 Σ_{k=1}^{m−1} (m − k) ρ^k]``, ``Cov = σ² ρ S² / m²``,
   ``S = (1 − ρ^m)/(1 − ρ)``.  Continuous form (IEEE 952 Annex C, "exponentially correlated
-  (Markov) noise"; El-Sheimy et al. 2008 eq. 13), with ``q_c² = 2σ²/T``::
+  (Markov) noise"; El-Sheimy et al. 2008, correlated noise), with ``q_c² = 2σ²/T``::
 
       σ²(τ) = (q_c T)²/τ · [1 − T/(2τ) (3 − 4 e^{−τ/T} + e^{−2τ/T})]
 
@@ -53,9 +53,9 @@ def octave_m(n: int, max_frac: float = 0.25) -> np.ndarray:
 
 def overlapping_avar(y: np.ndarray, m: np.ndarray, segments: list[tuple[int, int]] | None = None
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """Overlapping Allan variance of ``y`` (per sample interval τ0 = 1; divide τ by nothing,
-    the result is in y's units squared) at cluster sizes ``m``, and the number of second
-    differences behind each value.  ``segments``: (start, stop) index ranges of contiguous data
+    """Overlapping Allan variance of ``y`` at cluster sizes ``m`` (τ = m τ0; the result is in
+    y's units squared and does not depend on τ0, which cancels between ``x = τ0 Σ y`` and τ),
+    and the number of second differences behind each value.  ``segments``: (start, stop) index ranges of contiguous data
     (a log with gaps); the squared second differences of all segments are pooled, a segment
     shorter than ``2m + 1`` samples adds none.  NaN where no segment is long enough."""
     y = np.asarray(y, dtype=float)
@@ -99,7 +99,7 @@ def avar_gm(sigma: float, tau_s: float, m: np.ndarray, dt: float) -> np.ndarray:
 
 
 def avar_gm_continuous(sigma: float, tau_s: float, tau: np.ndarray) -> np.ndarray:
-    """IEEE 952 Annex C / El-Sheimy et al. 2008 eq. 13 (module docstring), ``q_c² = 2σ²/T``."""
+    """IEEE 952 Annex C / El-Sheimy et al. 2008 (module docstring), ``q_c² = 2σ²/T``."""
     t = np.asarray(tau, dtype=float)
     r = t / tau_s
     return (2.0 * sigma**2 * tau_s / t) * (1.0 - (3.0 - 4.0 * np.exp(-r) + np.exp(-2.0 * r))

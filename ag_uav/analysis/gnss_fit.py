@@ -19,14 +19,17 @@ the standalone M8P log shows up to ~60 s), no first-order term can follow it, an
 keeps the scatter and the long-τ level at the cost of overstating the short-τ deviation; the
 RMS log error of the fit (``rms_log_err``) says by how much.  The GM analytic form is
 IEEE Std 952-1997 Annex C and El-Sheimy, Hou & Niu 2008 (IEEE Trans. Instrum. Meas. 57(1),
-eq. 13); see :func:`~ag_uav.analysis.allan.avar_gm_continuous` and the exact discrete form
+correlated noise); see :func:`~ag_uav.analysis.allan.avar_gm_continuous` and the exact discrete form
 used here, :func:`~ag_uav.analysis.allan.avar_gm`.  The random-walk term is tried too and kept
 ("auto") only when it halves the fit's sum of squares.
 
 The product's generator (:mod:`ag_uav.vehicle.gps.noise`) has white and Gauss–Markov terms but
 no random walk: a fitted random walk of step q is written as a Gauss–Markov term with
-``T_rw = 100 ×`` the log's length and ``σ = q √(T_rw / (2 τ0))``, whose Allan variance
-``2σ²τ/(3T_rw) = q²τ/(3τ0)`` is the random walk's for every τ up to the log's length.
+``T_rw`` = the log's length and ``σ = q √(T_rw / (2 τ0))``, whose Allan variance
+``2σ²τ/(3T_rw) = q²τ/(3τ0)`` is the random walk's for τ ≪ T_rw; its expected scatter over the
+log's length is 0.79 of the random walk's.  No correlation time is fitted beyond the log's
+length either (the bound of T): a log cannot show a longer one, and a longer T would put into
+the preset a stationary variance (a per-flight offset) the log never showed.
 
 The preset block models the horizontal axes with one isotropic model fitted to the mean of the
 east and north Allan variances (a flight's direction is arbitrary) and the vertical with its
