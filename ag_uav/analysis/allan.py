@@ -57,7 +57,8 @@ def overlapping_avar(y: np.ndarray, m: np.ndarray, segments: list[tuple[int, int
     y's units squared and does not depend on τ0, which cancels between ``x = τ0 Σ y`` and τ),
     and the number of second differences behind each value.  ``segments``: (start, stop)
     index ranges of contiguous data (a log with gaps); the squared second differences of all
-    segments are pooled, a segment shorter than ``2m + 1`` samples adds none.  NaN where no segment is long enough."""
+    segments are pooled, a segment shorter than ``2m + 1`` samples adds none.  NaN where no
+    segment is long enough."""
     y = np.asarray(y, dtype=float)
     segs = segments if segments is not None else [(0, y.size)]
     avar = np.full(len(m), np.nan)
