@@ -268,6 +268,15 @@ def test_cli_gnss_fit_prints_table_and_writes_files(tmp_path, capsys):
     tomllib.loads((tmp_path / "f-preset.toml").read_text())
 
 
+def test_cli_choices_match_the_library():
+    from ag_uav.analysis.gnss_fit import MODELS
+    from ag_uav.analysis.gnss_log import KEEP_SETS
+    from ag_uav.cli import gnss
+
+    assert gnss.MODEL_CHOICES == MODELS
+    assert set(gnss.FIX_CHOICES) == {"auto", *KEEP_SETS}
+
+
 def _one_line_exit2(capsys, args) -> str:
     assert main(args) == 2
     err = capsys.readouterr().err.strip()

@@ -64,6 +64,8 @@ __all__ = ["AxisFit", "fit_axis", "fit_log", "LogFit", "preset_components", "pre
 
 #: the τ (s) at which a log and a simulation are compared besides the scatter
 CHECK_TAU_S = 60.0
+#: the terms :func:`fit_axis` can fit
+MODELS = ("auto", "white+gm", "white+gm+rw")
 #: weight of the scatter residual, per √(number of τ): large enough to act as a constraint
 SCATTER_WEIGHT = 10.0
 _RW_T_FACTOR = 1.0
@@ -109,6 +111,8 @@ def fit_axis(axis: str, avar: np.ndarray, m: np.ndarray, dt: float, n: int, scat
     ``dt``) and the variance ``scatter_var`` about the mean of ``n`` samples."""
     from scipy.optimize import least_squares
 
+    if model not in MODELS:
+        raise ValueError(f"model = {model!r} is invalid; allowed: {', '.join(MODELS)}")
     ok = np.isfinite(avar) & (avar > 0)
     if ok.sum() < 2:
         raise GnssLogError(f"axis {axis}: the position does not vary (Allan variance zero or "

@@ -7,8 +7,9 @@ import argparse
 import sys
 from pathlib import Path
 
-_FIX_CHOICES = ("auto", "rtk-fixed", "rtk", "differential", "3d")
-_MODELS = ("auto", "white+gm", "white+gm+rw")
+FIX_CHOICES = ("auto", "rtk-fixed", "rtk", "differential", "3d")
+#: :data:`ag_uav.analysis.gnss_fit.MODELS` (not imported: every command builds this parser)
+MODEL_CHOICES = ("auto", "white+gm", "white+gm+rw")
 
 
 def _stem(path: str) -> str:
@@ -77,10 +78,10 @@ def register(sub) -> None:
                     "simulated by the product's generator. See docs/gnss.md.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     f.add_argument("log", metavar="LOG", help="the receiver's log (.ubx, .nmea, .csv, .gz)")
-    f.add_argument("--fix", default="auto", choices=_FIX_CHOICES,
+    f.add_argument("--fix", default="auto", choices=FIX_CHOICES,
                    help="epochs kept: auto = the most frequent of 3d / dgps / rtk-float / "
                         "rtk-fixed; rtk = fixed or float; differential = dgps or RTK")
-    f.add_argument("--model", default="auto", choices=_MODELS,
+    f.add_argument("--model", default="auto", choices=MODEL_CHOICES,
                    help="terms fitted (auto adds a random walk where it halves the residual)")
     f.add_argument("--name", help="preset name in the block and the files (default: the "
                    "log's name)")
