@@ -266,7 +266,7 @@ def _register_optional(sub, experiments: bool = True) -> None:
     import importlib
 
     for mod in ("ag_uav.cli.view", "ag_uav.cli.experiments", "ag_uav.cli.batch",
-                "ag_uav.cli.replay"):
+                "ag_uav.cli.replay", "ag_uav.cli.gnss"):
         try:
             m = importlib.import_module(mod)
         except ModuleNotFoundError as e:

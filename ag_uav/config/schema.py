@@ -300,7 +300,8 @@ class WindConfig:
 
 
 GPS_PRESETS = ("perfect", "rtk", "sbas", "standalone", "paper-numerical", "student-t", "laplace",
-               "weibull", "mixture", "alpha-stable", "coloured", "coloured-impulsive", "rtk-m350")
+               "weibull", "mixture", "alpha-stable", "coloured", "coloured-impulsive", "rtk-m350",
+               "m8p-rtk-static", "m8p-standalone")
 ESTIMATORS = ("true", "kf", "mckf", "pca-kf", "pca-mckf", "kf-bias", "kf-diff")
 
 
