@@ -103,7 +103,7 @@ class Flight:
 @dataclass
 class LoopOutput:
     t: np.ndarray
-    rec: np.ndarray              # (n, 21) see REC_COLUMNS
+    rec: np.ndarray              # (n, 21 + rotors past the fourth) see REC_COLUMNS
     crash_reason: str | None
     crash_time: float | None
     wall_loop_s: float
@@ -191,7 +191,8 @@ def _batch(flights: Sequence[Flight], vehs: Sequence[Vehicle], dt: float
               airborne=np.array([not fl.cfg.sim.takeoff for fl in flights]),
               hover_z=np.array([v.hover_z for v in vehs]),
               box=np.array([_box(fl) for fl in flights], dtype=float),
-              ref=ref, ref_ids=ref_ids, n_max=int(n_ticks.max()), notes=[[] for _ in range(N)])
+              ref=ref, ref_ids=ref_ids, n_max=int(n_ticks.max()), notes=[[] for _ in range(N)],
+              n_rot=int(m0.nu))
     return b, job_tabs
 
 
