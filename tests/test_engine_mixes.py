@@ -73,9 +73,10 @@ def test_the_physics_model_does_not_depend_on_the_field():
 
 
 def _model_with_extra_geom() -> mujoco.MjModel:
-    from ag_uav.vehicle.mjcf import MODEL_XML
+    from ag_uav.vehicle.mjcf import vehicle_mjspec
+    from ag_uav.vehicle.spec import vehicle_spec
 
-    spec = mujoco.MjSpec.from_file(str(MODEL_XML))
+    spec = vehicle_mjspec(vehicle_spec(_cfg()))
     spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.1, 0, 0],
                             pos=[5, 5, 0.1], contype=0, conaffinity=0)
     return spec.compile()
