@@ -322,14 +322,20 @@ def effectiveness(positions: Sequence[Sequence[float]], spin: Sequence[int], k_y
     ])
 
 
-def allocation(B: np.ndarray) -> np.ndarray:
+def allocation(B: np.ndarray, eff: Sequence[float] | None = None) -> np.ndarray:
     """The allocation ``Ainv`` (n × 4) of an effectiveness matrix ``B`` (4 × n): its inverse
-    when square (four rotors), else its Moore–Penrose pseudo-inverse ``Bᵀ (B Bᵀ)⁻¹``, the
-    least-squares (minimum total squared thrust) split of a wrench over more rotors than it
-    has components."""
+    when square (four rotors), else the weighted pseudo-inverse
+    ``W⁻¹ Bᵀ (B W⁻¹ Bᵀ)⁻¹``, ``W = diag(e_i)`` (the rotors' thrust per unit command), the
+    split of a wrench over more rotors than it has components that minimises ``Σ e_i f_i²``.
+    With all ``e_i = 1`` it is the Moore–Penrose pseudo-inverse ``Bᵀ (B Bᵀ)⁻¹``; on a coaxial
+    frame it gives both rotors of a pair the same command for thrust, roll and pitch (the
+    plain pseudo-inverse would load the upper rotors more, ``f ∝ e``, and saturate them first:
+    the collective would top out at ``f_max Σ e_i² / max e`` instead of ``f_max Σ e_i``)."""
     if B.shape[0] == B.shape[1]:
         return np.linalg.inv(B)
-    return np.linalg.pinv(B)
+    w_inv = np.ones(B.shape[1]) if eff is None else 1.0 / np.asarray(eff, dtype=float)
+    BW = B * w_inv  # B W⁻¹
+    return BW.T @ np.linalg.inv(BW @ B.T)
 
 
 class XMixer(RowBlocks):
@@ -339,8 +345,8 @@ class XMixer(RowBlocks):
     ``[T, τx, τy, τz]ᵀ = B f`` with the frame's effectiveness matrix ``B``
     (:func:`effectiveness`: rotor ``i`` at ``(x_i, y_i)`` pushes ``e_i f_i`` along body z with
     the yaw reaction torque ``s_i k e_i f_i``, ``s_i = ±1``); the allocation is
-    ``f = B⁺ [T, τ]`` (:func:`allocation`: the inverse for four rotors, the pseudo-inverse for
-    more).
+    ``f = B⁺ [T, τ]`` (:func:`allocation`: the inverse for four rotors, the efficiency-weighted
+    pseudo-inverse for more).
 
     Saturation priority (as in PX4's and Betaflight's mixers): roll/pitch first, then collective
     thrust, then yaw. Yaw torque is scaled down until the rotors fit, then the collective is
@@ -359,7 +365,7 @@ class XMixer(RowBlocks):
         self._p = np.zeros(MIX_NP)
         self._s = np.zeros(MIX_NS)
         self._out = np.zeros(n)
-        self._p[MIX_AINV:MIX_AINV + 4 * n] = allocation(A).ravel()
+        self._p[MIX_AINV:MIX_AINV + 4 * n] = allocation(A, eff).ravel()
         self._p[MIX_N] = n
         self.f_max = f_max
 

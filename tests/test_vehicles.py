@@ -164,6 +164,7 @@ def test_a_preset_fills_what_the_config_leaves_unset():
     ("vehicle.rotor_thrust_loss", [0.1, 0.0], "4 for vehicle.frame"),
     ("vehicle.inertia_kgm2", [1.0, 2.0], "expected [Ixx, Iyy, Izz]"),
     ("vehicle.rotor_mass_kg", 2.0, "must weigh less than vehicle.mass_kg"),
+    ("vehicle.battery_mass_kg", 4.0, "must be less than vehicle.mass_kg = 6.47"),
     ("vehicle.coaxial_efficiency", 1.5, "must be <= 1.0"),
 ])
 def test_bad_vehicle_values_are_named(key, value, words):

@@ -284,14 +284,15 @@ def _check_vehicle(v: VehicleConfig) -> None:
                           "Izz] (kg m^2) or [] (from the components)")
     arms = 4 if v.frame == "octo-x8" else n
     parts = n * v.rotor_mass_kg + arms * v.arm_mass_kg
+    parts_are = (f"vehicle.rotor_mass_kg = {_fmt(v.rotor_mass_kg)} ({n} rotors), "
+                 f"vehicle.arm_mass_kg = {_fmt(v.arm_mass_kg)} ({arms} arms)")
     if parts >= v.mass_kg:
-        raise ConfigError(f"vehicle.rotor_mass_kg = {_fmt(v.rotor_mass_kg)}: {n} rotors and "
-                          f"{arms} arms ({parts:g} kg) must weigh less than vehicle.mass_kg = "
+        raise ConfigError(f"{parts_are}: {parts:g} kg, must weigh less than vehicle.mass_kg = "
                           f"{_fmt(v.mass_kg)}")
     if v.battery_mass_kg >= v.mass_kg - parts:
         raise ConfigError(f"vehicle.battery_mass_kg = {_fmt(v.battery_mass_kg)}: must be less "
-                          f"than vehicle.mass_kg less the rotors and arms ({v.mass_kg - parts:g} "
-                          "kg)")
+                          f"than vehicle.mass_kg = {_fmt(v.mass_kg)} less the rotors and arms "
+                          f"({parts_are}: {parts:g} kg)")
 
 
 def _validate(cfg: Config) -> None:
