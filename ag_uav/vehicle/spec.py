@@ -96,6 +96,12 @@ class VehicleSpec:
                      - len(self.arms) * self.arm_mass_kg, 6)
 
     @property
+    def disc_count(self) -> int:
+        """Distinct rotor discs (a coaxial pair is one disc): what a downwash model's disc
+        area counts, ``disc_count · π D² / 4``."""
+        return len({(r.x, r.y) for r in self.rotors})
+
+    @property
     def thrust_sum(self) -> float:
         """Σ e_i: total thrust per unit of a common command."""
         return sum(r.eff for r in self.rotors)
@@ -107,6 +113,7 @@ class VehicleSpec:
 
     def info(self) -> dict:
         return {"preset": self.preset, "frame": self.frame, "rotors": self.n_rotors,
+                "rotor_discs": self.disc_count,
                 "rotor_diameter_m": self.rotor_diameter_m,
                 "mass_empty_kg": round(self.empty_mass_kg, 4),
                 "mass_battery_kg": self.battery_mass_kg,
