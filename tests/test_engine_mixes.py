@@ -196,8 +196,8 @@ def test_a_batch_of_octocopters_equals_solo(rect_field):
     """Eight-rotor vehicles (coaxial X8) in one engine batch, with a refill sortie: every rotor's
     command, state and summary equal the same config flown alone; the presets are grouped
     by their model layouts."""
-    over = {"vehicle.preset": "x8-40l", "spray.tank_l": 0.05, "spray.service_s": 0.0,
-            "sim.max_time_s": 30.0}
+    over = {"vehicle.preset": "x8-40l", "spray.tank_l": 0.01, "spray.service_s": 0.0,
+            "sim.max_time_s": 45.0}
     cfgs = [_cfg(1, **{**over, "mission.field": rect_field}),
             _cfg(2, **{**over, "vehicle.payload_kg": 10.0}),
             _cfg(3, **{**over, "wind.speed_mps": 5.0})]
