@@ -338,6 +338,27 @@ def allocation(B: np.ndarray, eff: Sequence[float] | None = None) -> np.ndarray:
     return BW.T @ np.linalg.inv(BW @ B.T)
 
 
+def fault_allocation(B: np.ndarray, eff: Sequence[float] | None, failed: int,
+                     keep_yaw: bool) -> np.ndarray:
+    """The allocation (n × 4) without rotor ``failed`` (its row zero): the other rotors'
+    columns of ``B`` allocated by :func:`allocation` (five or more rotors keep all four
+    components); with ``keep_yaw`` False, the rows ``T, τx, τy`` only (a quad's three rotors
+    cannot balance yaw: it gives yaw up, its ``τz`` column zero, and spins, as in Mueller and
+    D'Andrea, "Stability and control of a quadrocopter despite the complete loss of one, two,
+    or three propellers", ICRA 2014)."""
+    n = B.shape[1]
+    keep = [i for i in range(n) if i != failed]
+    e = [1.0] * n if eff is None else list(eff)
+    out = np.zeros((n, 4))
+    if keep_yaw:
+        out[keep] = allocation(B[:, keep], [e[i] for i in keep])
+    else:
+        sub_b = B[:3, keep]
+        a3 = np.linalg.inv(sub_b) if len(keep) == 3 else allocation(sub_b, [e[i] for i in keep])
+        out[keep, :3] = a3
+    return out
+
+
 class XMixer(RowBlocks):
     """Allocation of collective thrust and body torques to n rotors (4 to :data:`MIX_NMAX`),
     with saturation: one law for every frame (quad X, hexa X, coaxial octo X8).

@@ -158,6 +158,8 @@ def _vehicle_rules(g: Any) -> list[str]:
     n = FRAME_ROTORS.get(g("vehicle.frame"), 4)
     if len(g("vehicle.rotor_thrust_loss")) != n:
         return ["vehicle.rotor_thrust_loss", "vehicle.frame"]
+    if g("vehicle.rotor_fault.rotor") >= n:
+        return ["vehicle.rotor_fault.rotor", "vehicle.frame"]
     if len(g("vehicle.inertia_kgm2")) not in (0, 3):
         return ["vehicle.inertia_kgm2"]
     arms = 4 if g("vehicle.frame") == "octo-x8" else n
@@ -207,6 +209,7 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
 
 
 CROSS = {"vehicle.preset", "vehicle.frame", "vehicle.rotor_thrust_loss", "vehicle.inertia_kgm2",
+         "vehicle.rotor_fault.rotor",
          "vehicle.rotor_mass_kg", "vehicle.arm_mass_kg", "vehicle.mass_kg",
          "vehicle.battery_mass_kg",
          "sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",
@@ -400,7 +403,8 @@ def test_schema_walk_sees_every_kind() -> None:
             "list[float]", "list[str]"} <= kinds
     for lf in PLAIN:  # every plain leaf has an oracle, and its default passes it
         assert allowed(lf, _get(DEFAULT, lf.key)), lf.key
-    assert len(PLAIN) > 60 and len(TABLES) == 15  # 12 + [imu] [spray] [battery]
+    assert len(PLAIN) > 60 and len(TABLES) == 16  # 12 + [imu] [spray] [battery]
+    #                                               + [vehicle.rotor_fault]
 
 
 JUNK_VALUES: list[Any] = [True, False, "", "x", "1", [], [1.0], {}, {"a": 1},

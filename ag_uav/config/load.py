@@ -279,6 +279,9 @@ def _check_vehicle(v: VehicleConfig) -> None:
     if len(v.rotor_thrust_loss) != n:
         raise ConfigError(f"vehicle.rotor_thrust_loss = {_fmt(v.rotor_thrust_loss)}: expected one "
                           f"value per rotor, {n} for vehicle.frame = {_fmt(v.frame)}")
+    if v.rotor_fault.rotor >= n:
+        raise ConfigError(f"vehicle.rotor_fault.rotor = {_fmt(v.rotor_fault.rotor)}: must be "
+                          f"-1 (none) or a rotor of vehicle.frame = {_fmt(v.frame)}, 0 to {n - 1}")
     if len(v.inertia_kgm2) not in (0, 3):
         raise ConfigError(f"vehicle.inertia_kgm2 = {_fmt(v.inertia_kgm2)}: expected [Ixx, Iyy, "
                           "Izz] (kg m^2) or [] (from the components)")

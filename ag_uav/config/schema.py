@@ -104,6 +104,20 @@ FRAMES = ("quad-x", "hexa-x", "octo-x8")
 
 
 @dataclass
+class RotorFaultConfig:
+    """A rotor that fails in flight (ag_uav.engine.rotor_fault; docs/vehicles.md)."""
+
+    rotor: int = _f(-1, "the rotor that fails, in the frame's order (-1: none)", ge=-1, le=7)
+    at_s: float = _f(300.0, "when it fails (s of simulated time)", ge=0)
+    efficiency: float = _f(0.0, "the share of its thrust it keeps (0: stopped)", ge=0, lt=1)
+    response: str = _f("auto", "auto: the failure detector, then by frame (hexa-x, octo-x8: "
+                       "re-allocate without the rotor and fly on; quad-x: give up yaw and "
+                       "land where it is); land: re-allocate and land on every frame; none: "
+                       "no detector (the fault is a model error)",
+                       choices=("auto", "land", "none"))
+
+
+@dataclass
 class VehicleConfig:
     """The airframe (ag_uav.vehicle.spec; docs/vehicles.md). ``preset`` fills the keys of
     [vehicle], [battery] and [spray] a config leaves unset (ag_uav.config.vehicles)."""
@@ -154,6 +168,8 @@ class VehicleConfig:
                                             "by m_u r / m_total, unknown to the controller "
                                             "(no effect without unknown_payload_kg)",
                                             ge=-0.5, le=0.5, length=3)
+    rotor_fault: RotorFaultConfig = field(default_factory=RotorFaultConfig,
+                                          metadata={"help": "a rotor failing in flight"})
     rotor_thrust_loss: list[float] = _f([0.0, 0.0, 0.0, 0.0], "model error: fraction of the "
                                         "commanded thrust (and yaw torque) each rotor (in the "
                                         "frame's order; quad-x: fr, fl, rl, rr) fails to "

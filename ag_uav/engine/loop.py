@@ -120,6 +120,7 @@ class LoopOutput:
     dose: Any = None                      # the dose map (ag_uav.world.deposition.DoseMap) or None
     lanes: int = 1                        # the lanes its batch flew in (threads of the engine)
     failsafe: dict | None = None          # the position failsafe's reason and times, if engaged
+    rotor_fault: dict | None = None       # vehicle.rotor_fault: when, detected, response, end
 
 
 # ------------------------------------------------------------------------------------ setup
@@ -334,6 +335,7 @@ class Engine:
         self.sprayers, self.vehicles = st.sprayers, st.vehicles
         self.depositing = st.depositing
         self.failsafe: Failsafe | None = None
+        self.rotor_faults: Any = None  # ag_uav.engine.rotor_fault.RotorFaults, when a fault is set
         self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
         self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
         self._pre_next = -math.inf  # the earliest time a pre-physics observer is due
@@ -351,6 +353,8 @@ class Engine:
         self.feedback.step(k, t)
         if self.failsafe is not None:
             self.failsafe.step(k, t)
+        if self.rotor_faults is not None:
+            self.rotor_faults.step(k, t)
         self.control.step()
         if self.spraying is not None:
             self.spraying.step(k, t)
@@ -438,6 +442,10 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
     e = Engine(st, TickView(b, [v.model for v in vehs], body), stepper, capture)
     if hasattr(feedback.bank, "pos_sigma"):
         e.failsafe = Failsafe(b, feedback.bank, [fl.cfg for fl in flights])
+    if any(fl.cfg.vehicle.rotor_fault.rotor >= 0 for fl in flights):
+        from .rotor_fault import RotorFaults
+
+        e.rotor_faults = RotorFaults(b, [fl.cfg for fl in flights], vehs, control.bc)
     return e
 
 
@@ -532,7 +540,9 @@ def _outputs(e: Engine, wall: float, compile_s: float, cpu: float) -> list[LoopO
                          frames=int(frames[i]),
                          notes=b.notes[i], sprayer=e.sprayers[i], compile_s=compile_s,
                          dose=e.depositing.dose_map(i) if e.depositing is not None else None,
-                         failsafe=None if e.failsafe is None else e.failsafe.info[i])
+                         failsafe=None if e.failsafe is None else e.failsafe.info[i],
+                         rotor_fault=(None if e.rotor_faults is None
+                                      else e.rotor_faults.info[i]))
         if imu is not None:
             out.imu = np.ascontiguousarray(e.sensing.rec[:n, i])
             out.imu_bias0 = imu.bias0[i].copy()

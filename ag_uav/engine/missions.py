@@ -490,6 +490,11 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
                              reference=ref)
     trim_heap()   # each phase's freed temporaries go back before the next (engine/heap.py)
     cut = _cut_reason(cfg, ref, out, summ, metrics.incomplete_reason(summ, res, cfg))
+    if out.rotor_fault is not None:
+        summ["rotor_fault"] = out.rotor_fault
+        if out.rotor_fault["landed_s"] is not None and not summ.get("crashed"):
+            cut = (f"rotor {out.rotor_fault['rotor']} failed: {out.rotor_fault['action']}; "
+                   f"landed at t={out.rotor_fault['landed_s']}s")
     if cut:
         summ["incomplete_reason"] = cut
     if not summ["legs_flown"]:  # the end of a mission never flown is no mission time
