@@ -36,8 +36,6 @@ from .spec import VehicleSpec, vehicle_spec
 
 MODEL_DIR = Path(__file__).resolve().parents[2] / "models"
 SCENE_XML = MODEL_DIR / "scene.xml"
-#: the quad-x rotor names (the order of the M350's actuators)
-ROTORS = ("fr", "fl", "rl", "rr")
 G = 9.81
 _GEOM = mujoco.mjtGeom
 
