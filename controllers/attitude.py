@@ -1,4 +1,4 @@
-"""Inner loops of the multirotor cascade: thrust vectoring, attitude control and the X mixer.
+"""Inner loops of the multirotor cascade: thrust vectoring, attitude control and the mixer.
 
 The laws are compiled functions (numba via :mod:`controllers._jit`), each written once:
 :func:`thrust_attitude`, :func:`geometric_torque` and its row form :func:`attitude_step`, and the
@@ -122,8 +122,10 @@ def geometric_torque(R: Mat3, omega: Sequence[float], R_d: Mat3, J: Sequence[flo
 # --- attitude block: parameters J (3), kR (3), kw (3); state τ (3), e_R (3) -----------------------
 ATT_J, ATT_KR, ATT_KW, ATT_NP = 0, 3, 6, 9
 ATT_TAU, ATT_ER, ATT_NS = 0, 3, 6
-# --- mixer block: parameters Ainv (16, row-major), f_max; state: saturated flag ---------------
-MIX_AINV, MIX_FMAX, MIX_NP = 0, 16, 17
+# --- mixer block: parameters Ainv (MIX_NMAX × 4, row-major, one row per rotor), f_max, number of
+# rotors n; state: saturated flag
+MIX_NMAX = 8
+MIX_AINV, MIX_FMAX, MIX_N, MIX_NP = 0, 4 * MIX_NMAX, 4 * MIX_NMAX + 1, 4 * MIX_NMAX + 2
 MIX_SAT, MIX_NS = 0, 1
 
 
@@ -144,12 +146,10 @@ def attitude_step(prm: np.ndarray, st: np.ndarray, R: Sequence[float], omega: Se
 
 
 @njit
-def _alloc(a: np.ndarray, T: float, tx: float, ty: float, tz: float) -> tuple[float, ...]:
-    """Rotor thrusts ``Ainv [T, τx, τy, τz]ᵀ`` (``a``: Ainv row-major)."""
-    return (a[0] * T + a[1] * tx + a[2] * ty + a[3] * tz,
-            a[4] * T + a[5] * tx + a[6] * ty + a[7] * tz,
-            a[8] * T + a[9] * tx + a[10] * ty + a[11] * tz,
-            a[12] * T + a[13] * tx + a[14] * ty + a[15] * tz)
+def _alloc_one(a: np.ndarray, i: int, T: float, tx: float, ty: float, tz: float) -> float:
+    """Rotor ``i``'s thrust ``(Ainv [T, τx, τy, τz]ᵀ)_i`` (``a``: Ainv row-major)."""
+    j = 4 * i
+    return a[j] * T + a[j + 1] * tx + a[j + 2] * ty + a[j + 3] * tz
 
 
 @njit
@@ -175,50 +175,60 @@ def _clip0(v: float, fmax: float) -> float:
 
 
 @njit
+def _yaw_free_range(a: np.ndarray, n: int, T: float, tx: float, ty: float) -> tuple[float, float]:
+    """Lowest and highest rotor thrust of the yaw-free allocation ``Ainv [T, τx, τy, 0]``."""
+    lo0 = math.inf
+    hi0 = -math.inf
+    for i in range(n):
+        g = _alloc_one(a, i, T, tx, ty, 0.0)
+        lo0 = min(lo0, g)
+        hi0 = max(hi0, g)
+    return lo0, hi0
+
+
+@njit
 def mix_step(prm: np.ndarray, st: np.ndarray, T: float, tx: float, ty: float, tz: float,
              out: np.ndarray) -> None:
-    """The X mixer with its saturation priority (:class:`XMixer`) on a mixer block (``prm``:
-    Ainv, f_max; ``st``: saturated flag written here); writes the four rotor thrusts to ``out``.
+    """The allocation with its saturation priority (:class:`XMixer`) on a mixer block
+    (``prm``: Ainv, f_max, n; ``st``: saturated flag written here); writes the ``n`` rotor
+    thrusts to ``out[:n]``.
 
     Not saturated: ``f = Ainv [T, τ]``. Otherwise, with ``g`` the yaw-free allocation: if ``g``
     fits ``[0, f_max]``, keep the largest yaw fraction s that fits (``g + s (f − g)``, linear in
-    τz); else if its spread fits, shift the collective; else clip ``g`` to ``[0, f_max]``.
+    τz); else if its spread fits, shift the collective (the same thrust on every rotor; the
+    frame's rows of ``Ainv`` for T are equal where the allocation is symmetric); else clip ``g``
+    to ``[0, f_max]``. Roll and pitch come first, then the collective, then yaw (PX4's and
+    Betaflight's priority).
     """
-    a = prm[MIX_AINV:MIX_AINV + 16]
+    a = prm[MIX_AINV:MIX_AINV + 4 * MIX_NMAX]
     fmax = prm[MIX_FMAX]
-    f0, f1, f2, f3 = _alloc(a, T, tx, ty, tz)
-    lo = min(min(f0, f1), min(f2, f3))
-    hi = max(max(f0, f1), max(f2, f3))
+    n = int(prm[MIX_N])
+    lo = math.inf
+    hi = -math.inf
+    for i in range(n):
+        f = _alloc_one(a, i, T, tx, ty, tz)
+        out[i] = f
+        lo = min(lo, f)
+        hi = max(hi, f)
     sat = lo < 0.0 or hi > fmax
     st[MIX_SAT] = 1.0 if sat else 0.0
-    if sat:
-        g0, g1, g2, g3 = _alloc(a, T, tx, ty, 0.0)  # 1. drop yaw
-        lo0 = min(min(g0, g1), min(g2, g3))
-        hi0 = max(max(g0, g1), max(g2, g3))
-        if lo0 >= 0.0 and hi0 <= fmax:
-            s = _yaw_frac(1.0, g0, f0, fmax)
-            s = _yaw_frac(s, g1, f1, fmax)
-            s = _yaw_frac(s, g2, f2, fmax)
-            s = _yaw_frac(s, g3, f3, fmax)
-            f0 = g0 + s * (f0 - g0)
-            f1 = g1 + s * (f1 - g1)
-            f2 = g2 + s * (f2 - g2)
-            f3 = g3 + s * (f3 - g3)
-        elif hi0 - lo0 <= fmax:  # 2. shift the collective to keep roll/pitch
-            shift = -lo0 if lo0 < 0.0 else fmax - hi0
-            f0 = g0 + shift
-            f1 = g1 + shift
-            f2 = g2 + shift
-            f3 = g3 + shift
-        else:  # 3. roll/pitch alone exceed the range: clip
-            f0 = _clip0(g0, fmax)
-            f1 = _clip0(g1, fmax)
-            f2 = _clip0(g2, fmax)
-            f3 = _clip0(g3, fmax)
-    out[0] = f0
-    out[1] = f1
-    out[2] = f2
-    out[3] = f3
+    if not sat:
+        return
+    lo0, hi0 = _yaw_free_range(a, n, T, tx, ty)  # 1. drop yaw
+    if lo0 >= 0.0 and hi0 <= fmax:
+        s = 1.0
+        for i in range(n):
+            s = _yaw_frac(s, _alloc_one(a, i, T, tx, ty, 0.0), out[i], fmax)
+        for i in range(n):
+            g = _alloc_one(a, i, T, tx, ty, 0.0)
+            out[i] = g + s * (out[i] - g)
+    elif hi0 - lo0 <= fmax:  # 2. shift the collective to keep roll/pitch
+        shift = -lo0 if lo0 < 0.0 else fmax - hi0
+        for i in range(n):
+            out[i] = _alloc_one(a, i, T, tx, ty, 0.0) + shift
+    else:  # 3. roll/pitch alone exceed the range: clip
+        for i in range(n):
+            out[i] = _clip0(_alloc_one(a, i, T, tx, ty, 0.0), fmax)
 
 
 @njit
@@ -292,12 +302,72 @@ class GeometricAttitudeController(RowBlocks):
         return _attitude_call(self._p, self._s, x)
 
 
-class XMixer(RowBlocks):
-    """Allocation of collective thrust and body torques to four rotors, with saturation.
+def effectiveness(positions: Sequence[Sequence[float]], spin: Sequence[int], k_yaw: float,
+                  eff: Sequence[float] | None = None) -> np.ndarray:
+    """The frame's effectiveness matrix ``B`` (4 × n): ``[T, τx, τy, τz]ᵀ = B f``.
 
-    Rotor ``i`` sits at ``(x_i, y_i)`` in the body frame and pushes ``f_i`` along body z; its yaw
-    reaction torque is ``s_i k f_i`` (``s_i = ±1``). Then
-    ``[T, τx, τy, τz]ᵀ = A f``, rows ``1``, ``y_i``, ``−x_i``, ``s_i k``; ``A`` is inverted once.
+    Rotor ``i`` at ``(x_i, y_i)`` (body frame) pushes ``e_i f_i`` along body z (``e_i``: its
+    thrust per unit of command, 1 for an isolated rotor, the coaxial efficiency for the lower
+    rotor of a coaxial pair) with the yaw reaction torque ``s_i k e_i f_i``; column ``i`` is
+    ``e_i [1, y_i, −x_i, s_i k]``.
+    """
+    n = len(positions)
+    e = [1.0] * n if eff is None else [float(v) for v in eff]
+    # (× 1.0 is exact: a four-rotor frame's B is the plain X-mixer matrix, bit for bit)
+    return np.array([
+        [e[i] for i in range(n)],
+        [e[i] * p[1] for i, p in enumerate(positions)],
+        [e[i] * -p[0] for i, p in enumerate(positions)],
+        [e[i] * (s * k_yaw) for i, s in enumerate(spin)],
+    ])
+
+
+def allocation(B: np.ndarray, eff: Sequence[float] | None = None) -> np.ndarray:
+    """The allocation ``Ainv`` (n × 4) of an effectiveness matrix ``B`` (4 × n): its inverse
+    when square (four rotors), else the weighted pseudo-inverse
+    ``W⁻¹ Bᵀ (B W⁻¹ Bᵀ)⁻¹``, ``W = diag(e_i)`` (the rotors' thrust per unit command), the
+    split of a wrench over more rotors than it has components that minimises ``Σ e_i f_i²``.
+    With all ``e_i = 1`` it is the Moore–Penrose pseudo-inverse ``Bᵀ (B Bᵀ)⁻¹``; on a coaxial
+    frame it gives both rotors of a pair the same command for thrust, roll and pitch (the
+    plain pseudo-inverse would load the upper rotors more, ``f ∝ e``, and saturate them first:
+    the collective would top out at ``f_max Σ e_i² / max e`` instead of ``f_max Σ e_i``)."""
+    if B.shape[0] == B.shape[1]:
+        return np.linalg.inv(B)
+    w_inv = np.ones(B.shape[1]) if eff is None else 1.0 / np.asarray(eff, dtype=float)
+    BW = B * w_inv  # B W⁻¹
+    return BW.T @ np.linalg.inv(BW @ B.T)
+
+
+def fault_allocation(B: np.ndarray, eff: Sequence[float] | None, failed: int,
+                     keep_yaw: bool) -> np.ndarray:
+    """The allocation (n × 4) without rotor ``failed`` (its row zero): the other rotors'
+    columns of ``B`` allocated by :func:`allocation` (five or more rotors keep all four
+    components); with ``keep_yaw`` False, the rows ``T, τx, τy`` only (a quad's three rotors
+    cannot balance yaw: it gives yaw up, its ``τz`` column zero, and spins, as in Mueller and
+    D'Andrea, "Stability and control of a quadrocopter despite the complete loss of one, two,
+    or three propellers", ICRA 2014)."""
+    n = B.shape[1]
+    keep = [i for i in range(n) if i != failed]
+    e = [1.0] * n if eff is None else list(eff)
+    out = np.zeros((n, 4))
+    if keep_yaw:
+        out[keep] = allocation(B[:, keep], [e[i] for i in keep])
+    else:
+        sub_b = B[:3, keep]
+        a3 = np.linalg.inv(sub_b) if len(keep) == 3 else allocation(sub_b, [e[i] for i in keep])
+        out[keep, :3] = a3
+    return out
+
+
+class XMixer(RowBlocks):
+    """Allocation of collective thrust and body torques to n rotors (4 to :data:`MIX_NMAX`),
+    with saturation: one law for every frame (quad X, hexa X, coaxial octo X8).
+
+    ``[T, τx, τy, τz]ᵀ = B f`` with the frame's effectiveness matrix ``B``
+    (:func:`effectiveness`: rotor ``i`` at ``(x_i, y_i)`` pushes ``e_i f_i`` along body z with
+    the yaw reaction torque ``s_i k e_i f_i``, ``s_i = ±1``); the allocation is
+    ``f = B⁺ [T, τ]`` (:func:`allocation`: the inverse for four rotors, the efficiency-weighted
+    pseudo-inverse for more).
 
     Saturation priority (as in PX4's and Betaflight's mixers): roll/pitch first, then collective
     thrust, then yaw. Yaw torque is scaled down until the rotors fit, then the collective is
@@ -305,24 +375,26 @@ class XMixer(RowBlocks):
     """
 
     def __init__(self, positions: Sequence[Sequence[float]], spin: Sequence[int], k_yaw: float,
-                 f_max: float) -> None:
-        A = np.array([
-            [1.0, 1.0, 1.0, 1.0],
-            [p[1] for p in positions],
-            [-p[0] for p in positions],
-            [s * k_yaw for s in spin],
-        ])
+                 f_max: float, eff: Sequence[float] | None = None) -> None:
+        n = len(positions)
+        if not 4 <= n <= MIX_NMAX or len(spin) != n or (eff is not None and len(eff) != n):
+            raise ValueError(f"XMixer: 4 to {MIX_NMAX} rotors, one spin (and efficiency) each; "
+                             f"got {n} positions, {len(spin)} spins")
+        A = effectiveness(positions, spin, k_yaw, eff)
         self.A = A
+        self.n = n
         self._p = np.zeros(MIX_NP)
         self._s = np.zeros(MIX_NS)
-        self._out = np.zeros(4)
-        self._p[MIX_AINV:MIX_AINV + 16] = np.linalg.inv(A).ravel()
+        self._out = np.zeros(n)
+        self._p[MIX_AINV:MIX_AINV + 4 * n] = allocation(A, eff).ravel()
+        self._p[MIX_N] = n
         self.f_max = f_max
 
     @property
     def Ainv(self) -> tuple[tuple[float, ...], ...]:
-        """Inverse allocation (4 × 4, rows per rotor)."""
-        return tuple(tuple(r) for r in self._p[MIX_AINV:MIX_AINV + 16].reshape(4, 4).tolist())
+        """The allocation (n × 4, rows per rotor)."""
+        n = int(self._p[MIX_N])
+        return tuple(tuple(r) for r in self._p[MIX_AINV:MIX_AINV + 4 * n].reshape(n, 4).tolist())
 
     @property
     def f_max(self) -> float:

@@ -17,7 +17,8 @@ state row — the very function :class:`~controllers.cascade.PositionCascade` ca
   :func:`controllers.cascade.command_step`;
 * geometric attitude torques: :func:`controllers.attitude.attitude_step`
   (:func:`controllers.attitude.geometric_torque`);
-* X mixer with its saturation priority: :func:`controllers.attitude.mix_step`.
+* the allocation to the frame's rotors with its saturation priority:
+  :func:`controllers.attitude.mix_step`.
 
 So a row's results are the scalar classes' bit for bit, and a vehicle's row does not depend on
 the other rows (identical bits whatever the batch size or the neighbours).
@@ -69,6 +70,7 @@ from .cascade import (
     P_G,
     P_J,
     P_MASS,
+    P_NROT,
     P_TILT,
     ROW_AXES,
     S_ACMD,
@@ -120,7 +122,8 @@ def cascade_step(P: np.ndarray, S: np.ndarray, pose: tuple, ref: tuple, dt: floa
 
     ``P`` (N, NP) parameters, ``S`` (N, NS) state (advanced in place for active rows),
     ``pose``: :class:`PoseRows`, ``ref``: :class:`RefRows` (plain tuples in field order),
-    ``out`` (N, 4) rotor thrusts (inactive rows set to 0). See the module docstring.
+    ``out`` (N, n) rotor thrusts (inactive rows set to 0; an active row's columns past its own
+    rotor count are left as they are). See the module docstring.
     """
     po, rf = PoseRows(*pose), RefRows(*ref)
     p, v, R, omega = po.p, po.v, po.R, po.omega
@@ -135,17 +138,19 @@ def cascade_step(P: np.ndarray, S: np.ndarray, pose: tuple, ref: tuple, dt: floa
         raise ValueError("every input needs the batch size N as its first dimension")
     if (p.shape[1] != 3 or v.shape[1] != 3 or omega.shape[1] != 3 or p_ref.shape[1] != 3
             or v_ref.shape[1] != 3 or a_ref.shape[1] != 3 or R.shape[1] != 9
-            or out.shape[1] != 4 or P.shape[1] != NP or S.shape[1] != NS):
-        raise ValueError("p, v, omega, p_ref, v_ref, a_ref need (N, 3), R (N, 9), out (N, 4)")
+            or out.shape[1] < 4 or P.shape[1] != NP or S.shape[1] != NS):
+        raise ValueError("p, v, omega, p_ref, v_ref, a_ref need (N, 3), R (N, 9), out (N, n) "
+                         "with n >= every row's rotor count")
+    for i in range(n):
+        if P[i, P_NROT] > out.shape[1]:
+            raise ValueError("out has fewer columns than a row has rotors")
     for i in range(n):
         if active[i]:
             vehicle_step(P[i], S[i], (p[i], v[i], R[i], omega[i]),
                          (p_ref[i], v_ref[i], a_ref[i], yaw_ref[i]), dt, out[i])
         else:
-            out[i, 0] = 0.0
-            out[i, 1] = 0.0
-            out[i, 2] = 0.0
-            out[i, 3] = 0.0
+            for j in range(out.shape[1]):
+                out[i, j] = 0.0
 
 
 # ======================================================================== Python side
@@ -204,7 +209,8 @@ class BatchCascade:
             if state.shape != (n, NS):
                 raise ValueError(f"state must be ({n}, {NS}), got {state.shape}")
             self.state = np.ascontiguousarray(state).copy()
-        self._out = np.zeros((n, 4))
+        #: rotor thrusts (N, n): n the most rotors of any row
+        self._out = np.zeros((n, int(params[:, P_NROT].max())))
         self._all = np.ones(n, dtype=np.bool_)
         self._keys: dict[tuple[int, int, int], list[tuple[str, int]]] = {}
 
@@ -250,7 +256,7 @@ class BatchCascade:
     def update(self, pose: Sequence[np.ndarray], ref: Sequence[np.ndarray], dt: float,
                out: np.ndarray | None = None,
                active: np.ndarray | None = None) -> np.ndarray:
-        """Rotor thrusts (N, 4) in N for one control tick of every (active) vehicle.
+        """Rotor thrusts (N, n) in N for one control tick of every (active) vehicle.
 
         Inputs as :meth:`PositionCascade.update`, batched: ``pose`` (:class:`PoseRows`, or a
         plain tuple ``(p, v, R, omega)``) and ``ref`` (:class:`RefRows`, or ``(p_ref, v_ref,

@@ -1,5 +1,5 @@
 """The multirotor cascade: position controller per axis → acceleration → thrust and attitude →
-attitude loop → X mixer; :func:`vehicle_step` is its one implementation, on one vehicle's
+attitude loop → mixer (n rotors); :func:`vehicle_step` is its one implementation, on one vehicle's
 parameter row and state row.
 
 Per tick (:func:`vehicle_step`):
@@ -11,7 +11,8 @@ Per tick (:func:`vehicle_step`):
   :func:`controllers.attitude.thrust_attitude` (tilt limit, ``f_z ≥ 0.2 m g``); collective
   ``T = |f| (R_d e3)·(R e3)`` floored at 0;
 * :func:`controllers.attitude.attitude_step` (geometric attitude torques);
-* :func:`controllers.attitude.mix_step` (X mixer with its saturation priority).
+* :func:`controllers.attitude.mix_step` (the allocation to the frame's rotors with its
+  saturation priority).
 
 :class:`PositionCascade` is the scalar shell (a batch of one): it owns one row and adopts its
 axis controllers', attitude controller's and mixer's blocks (:class:`controllers.rows.RowBlocks`:
@@ -25,7 +26,7 @@ Row layouts
 -----------
 ``params`` (NP,): the three axis parameter blocks (``AX_NP`` each, :mod:`controllers.axis`), then
 mass, g, tilt_max, feed-forward factor (1/0), a_limit, the attitude block (J, kR, kw) and the
-mixer block (Ainv row-major, f_max) (:mod:`controllers.attitude`).
+mixer block (Ainv row-major, f_max, number of rotors) (:mod:`controllers.attitude`).
 ``state`` (NS,): the three axis state blocks (``AX_NS`` each), then the commanded acceleration
 (3), collective thrust, tilt, R_d (9, row-major), the attitude block (τ, e_R) and the mixer block
 (saturated flag).
@@ -50,6 +51,8 @@ from .attitude import (
     ATT_TAU,
     MIX_AINV,
     MIX_FMAX,
+    MIX_N,
+    MIX_NMAX,
     MIX_NP,
     MIX_NS,
     MIX_SAT,
@@ -64,7 +67,7 @@ from .axis import AX_NP, AX_NS, ControllerBase, axis_step
 from .fpid import FPID, IT2FPID
 from .pid import PID
 
-__all__ = ["NP", "NS", "PositionCascade", "command_step", "vehicle_step"]
+__all__ = ["MIX_NMAX", "NP", "NS", "PositionCascade", "command_step", "vehicle_step"]
 
 #: Axis controller classes the compiled row runs itself (exact classes).
 ROW_AXES: tuple[type, ...] = (PID, FPID, IT2FPID)
@@ -80,8 +83,9 @@ P_J = P_ATT + ATT_J  # 3
 P_KR = P_ATT + ATT_KR  # 3
 P_KW = P_ATT + ATT_KW  # 3
 P_MIX = P_ATT + ATT_NP  # mixer block
-P_AINV = P_MIX + MIX_AINV  # 16, row-major
+P_AINV = P_MIX + MIX_AINV  # 4 MIX_NMAX, row-major (rotor rows)
 P_FMAX = P_MIX + MIX_FMAX
+P_NROT = P_MIX + MIX_N  # number of rotors
 NP = P_MIX + MIX_NP
 # --- state row ----------------------------------------------------------------------------------
 S_ACMD = 3 * AX_NS  # 3
@@ -143,7 +147,7 @@ def command_step(prm: np.ndarray, st: np.ndarray, ux: float, uy: float, uz: floa
 @njit
 def vehicle_step(prm: np.ndarray, st: np.ndarray, fb: tuple, ref: tuple, dt: float,
                  out: np.ndarray) -> None:
-    """One control tick of one vehicle's row (module docstring); rotor thrusts to ``out`` (4,).
+    """One control tick of one vehicle's row (module docstring); rotor thrusts to ``out`` (n,).
 
     ``prm`` (NP,), ``st`` (NS,) advanced in place; ``fb`` = (p, v, R, omega) the fed-back
     state, ``ref`` = (p_ref, v_ref, a_ref, yaw) the reference: ``p, v, omega, p_ref, v_ref,
@@ -242,7 +246,7 @@ class PositionCascade:
         self._S = np.zeros(NS)
         self._S[S_RD:S_RD + 9] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
         self._x = np.zeros(NX)
-        self._out = np.zeros(4)
+        self._out = np.zeros(getattr(mixer, "n", 4))
         self.mass = mass
         self.g = g
         self.tilt_max = tilt_max

@@ -35,6 +35,7 @@ from hypothesis import strategies as st
 from ag_uav import cli
 from ag_uav import config as C
 from ag_uav.config import load as config_load
+from ag_uav.config.vehicles import FRAME_ROTORS, PRESETS
 from ag_uav.vehicle.gps import available_presets, gps_preset
 
 FUZZ = settings(max_examples=100, deadline=None, derandomize=True, database=None,
@@ -135,11 +136,53 @@ def _divides(timestep_s: float, control_hz: float) -> bool:
     return math.isfinite(steps) and abs(steps - round(steps)) <= 1e-6 and round(steps) >= 1
 
 
+def _base(vals: Mapping[str, Any]) -> dict[str, Any]:
+    """The defaults as ``vals`` change them: a ``vehicle.preset`` fills the keys of its tables
+    that ``vals`` leaves unset."""
+    want = DEFAULT.to_dict()
+    p = vals.get("vehicle.preset")
+    if isinstance(p, str) and p in PRESETS and p != "m350":
+        for table, kv in PRESETS[p].items():
+            want[table].update(json.loads(json.dumps(kv)))
+    return want
+
+
+def _dotted(d: Mapping[str, Any], key: str) -> Any:
+    for part in key.split("."):
+        d = d[part]
+    return d
+
+
+def _vehicle_rules(g: Any) -> list[str]:
+    """The ``[vehicle]`` rules across keys (ag_uav.config.load._check_vehicle)."""
+    n = FRAME_ROTORS.get(g("vehicle.frame"), 4)
+    if len(g("vehicle.rotor_thrust_loss")) != n:
+        return ["vehicle.rotor_thrust_loss", "vehicle.frame"]
+    if g("vehicle.rotor_fault.rotor") >= n:
+        return ["vehicle.rotor_fault.rotor", "vehicle.frame"]
+    if len(g("vehicle.inertia_kgm2")) not in (0, 3):
+        return ["vehicle.inertia_kgm2"]
+    arms = 4 if g("vehicle.frame") == "octo-x8" else n
+    parts = n * g("vehicle.rotor_mass_kg") + arms * g("vehicle.arm_mass_kg")
+    if parts >= g("vehicle.mass_kg"):
+        return ["vehicle.rotor_mass_kg", "vehicle.arm_mass_kg", "vehicle.mass_kg"]
+    if g("vehicle.battery_mass_kg") >= g("vehicle.mass_kg") - parts:
+        return ["vehicle.battery_mass_kg", "vehicle.mass_kg", "vehicle.rotor_mass_kg",
+                "vehicle.arm_mass_kg"]
+    return []
+
+
 def cross_ok(vals: Mapping[str, Any]) -> list[str]:
-    """The rules across keys (dotted keys; the rest at their defaults): the keys of the first
-    one broken, else []."""
+    """The rules across keys (dotted keys; the rest at their defaults, or their preset's):
+    the keys of the first one broken, else []."""
+    base = _base(vals)
+
     def g(k: str) -> Any:
-        return vals.get(k, _get(DEFAULT, k))
+        return vals.get(k, _dotted(base, k))
+
+    broken = _vehicle_rules(g)
+    if broken:
+        return broken
 
     if (g("mission.origin_lat_deg") == "auto") != (g("mission.origin_lon_deg") == "auto"):
         return ["mission.origin_lat_deg", "mission.origin_lon_deg"]  # both, or neither
@@ -165,7 +208,11 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
     return []
 
 
-CROSS = {"sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",
+CROSS = {"vehicle.preset", "vehicle.frame", "vehicle.rotor_thrust_loss", "vehicle.inertia_kgm2",
+         "vehicle.rotor_fault.rotor",
+         "vehicle.rotor_mass_kg", "vehicle.arm_mass_kg", "vehicle.mass_kg",
+         "vehicle.battery_mass_kg",
+         "sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",
          "mission.altitude_m", "spray.nozzle_xyz_m", "spray.nozzle_share", "spray.dv10_um",
          "spray.dv50_um", "spray.dv90_um", "gps.rate_hz", "gps.preset",
          "mission.origin_lat_deg", "mission.origin_lon_deg"}
@@ -340,7 +387,7 @@ def assert_lands(cfg: C.Config, leaf: Leaf, v: Any) -> None:
     """``v`` is in ``cfg`` unchanged and nothing else moved from the defaults."""
     got = _get(cfg, leaf.key)
     assert got == landed(leaf, v) and type(got) is type(landed(leaf, v)), (leaf.key, v, got)
-    want = DEFAULT.to_dict()
+    want = _base({leaf.key: v})
     node = want
     *head, last = leaf.key.split(".")
     for part in head:
@@ -356,7 +403,8 @@ def test_schema_walk_sees_every_kind() -> None:
             "list[float]", "list[str]"} <= kinds
     for lf in PLAIN:  # every plain leaf has an oracle, and its default passes it
         assert allowed(lf, _get(DEFAULT, lf.key)), lf.key
-    assert len(PLAIN) > 60 and len(TABLES) == 15  # 12 + [imu] [spray] [battery]
+    assert len(PLAIN) > 60 and len(TABLES) == 16  # 12 + [imu] [spray] [battery]
+    #                                               + [vehicle.rotor_fault]
 
 
 JUNK_VALUES: list[Any] = [True, False, "", "x", "1", [], [1.0], {}, {"a": 1},
@@ -465,7 +513,7 @@ def test_whole_configs(data: st.DataObject, tmp_path: Path,
             assert any(body.startswith((f"{k} = ", f"{k}[")) for k in bad), (bad, body)
     if not bad:
         cfg = C.config_from_dict(doc)
-        want = DEFAULT.to_dict()
+        want = _base(vals)
         for lf in leaves:
             node = want
             *head, last = lf.key.split(".")

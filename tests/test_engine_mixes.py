@@ -73,9 +73,10 @@ def test_the_physics_model_does_not_depend_on_the_field():
 
 
 def _model_with_extra_geom() -> mujoco.MjModel:
-    from ag_uav.vehicle.mjcf import MODEL_XML
+    from ag_uav.vehicle.mjcf import vehicle_mjspec
+    from ag_uav.vehicle.spec import vehicle_spec
 
-    spec = mujoco.MjSpec.from_file(str(MODEL_XML))
+    spec = vehicle_mjspec(vehicle_spec(_cfg()))
     spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.1, 0, 0],
                             pos=[5, 5, 0.1], contype=0, conaffinity=0)
     return spec.compile()
@@ -126,6 +127,7 @@ _CONTROLLERS = ("it2-fpid", "t1-fpid", "pid")
 _FILTER_SETS = (("true", []), ("pca-mckf", ["kf", "mckf", "pca-kf"]), ("kf", []),
                 ("mckf", ["kf"]))
 _GPS = ("rtk-m350", "rtk", "coloured-impulsive", "sbas")
+_PRESETS = ("m350", "quad-10l", "x8-40l")
 
 
 @st.composite
@@ -134,6 +136,7 @@ def _run(draw, rect: str):
     name, shadow = draw(st.sampled_from(_FILTER_SETS))
     over = {
         "mission.field": field,
+        "vehicle.preset": draw(st.sampled_from(_PRESETS)),
         "vehicle.payload_kg": draw(st.sampled_from([0.0, 1.2, 2.7])),
         "vehicle.motor_tau_s": draw(st.sampled_from([0.02, 0.04, 0.08])),
         "wind.speed_mps": draw(st.sampled_from([0.0, 3.0, 7.0])),
@@ -156,8 +159,9 @@ def rect_field(tmp_path_factory):
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(data=st.data())
 def test_any_mix_flies_every_vehicle_as_alone(rect_field, data):
-    """Batches drawn over fields (built-in and a file), payloads, motor lags, winds, GPS
-    presets, filter sets and controllers, grouped by batch key as the batch runner does, one
+    """Batches drawn over vehicle presets (quad, coaxial octo), fields (built-in and a file),
+    payloads, motor lags, winds, GPS presets, filter sets and controllers, grouped by batch
+    key as the batch runner does (a frame's model layout is part of it), one
     engine or split into lanes (each in a thread of its own): each vehicle's whole mission
     (sorties included) equals the same config flown alone."""
     cfgs = data.draw(st.lists(_run(rect_field), min_size=2, max_size=5))
@@ -185,6 +189,24 @@ def test_a_mixed_batch_with_sorties_equals_solo(rect_field):
     many = simulate_many(cfgs)
     assert max(r.summary["sorties"] for r in many) >= 2
     for c, r in zip(cfgs, many, strict=True):
+        _same_mission(simulate(c), r)
+
+
+def test_a_batch_of_octocopters_equals_solo(rect_field):
+    """Eight-rotor vehicles (coaxial X8) in one engine batch, with a refill sortie: every rotor's
+    command, state and summary equal the same config flown alone; the presets are grouped
+    by their model layouts."""
+    over = {"vehicle.preset": "x8-40l", "spray.tank_l": 0.01, "spray.service_s": 0.0,
+            "sim.max_time_s": 45.0}
+    cfgs = [_cfg(1, **{**over, "mission.field": rect_field}),
+            _cfg(2, **{**over, "vehicle.payload_kg": 10.0}),
+            _cfg(3, **{**over, "wind.speed_mps": 5.0})]
+    assert len({batch_key(c) for c in cfgs}) == 1
+    assert batch_key(_cfg(1)) != batch_key(cfgs[0])
+    many = simulate_many(cfgs)
+    assert max(r.summary["sorties"] for r in many) >= 2
+    for c, r in zip(cfgs, many, strict=True):
+        assert r.motors.shape[1] == 8 and not r.summary["crashed"]
         _same_mission(simulate(c), r)
 
 

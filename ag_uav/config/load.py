@@ -24,6 +24,7 @@ from .schema import (
     GpsConfig,
     MissionConfig,
     SprayConfig,
+    VehicleConfig,
 )
 
 __all__ = ["config_from_dict", "parse_set_items", "load_config", "default_config",
@@ -270,8 +271,36 @@ def _check_nozzles(sp: SprayConfig) -> None:
                           f"{sp.dv10_um} and spray.dv90_um = {sp.dv90_um} (Dv10 < Dv50 < Dv90)")
 
 
+def _check_vehicle(v: VehicleConfig) -> None:
+    """The ``[vehicle]`` keys that depend on the frame (rules across keys)."""
+    from .vehicles import FRAME_ROTORS
+
+    n = FRAME_ROTORS[v.frame]
+    if len(v.rotor_thrust_loss) != n:
+        raise ConfigError(f"vehicle.rotor_thrust_loss = {_fmt(v.rotor_thrust_loss)}: expected one "
+                          f"value per rotor, {n} for vehicle.frame = {_fmt(v.frame)}")
+    if v.rotor_fault.rotor >= n:
+        raise ConfigError(f"vehicle.rotor_fault.rotor = {_fmt(v.rotor_fault.rotor)}: must be "
+                          f"-1 (none) or a rotor of vehicle.frame = {_fmt(v.frame)}, 0 to {n - 1}")
+    if len(v.inertia_kgm2) not in (0, 3):
+        raise ConfigError(f"vehicle.inertia_kgm2 = {_fmt(v.inertia_kgm2)}: expected [Ixx, Iyy, "
+                          "Izz] (kg m^2) or [] (from the components)")
+    arms = 4 if v.frame == "octo-x8" else n
+    parts = n * v.rotor_mass_kg + arms * v.arm_mass_kg
+    parts_are = (f"vehicle.rotor_mass_kg = {_fmt(v.rotor_mass_kg)} ({n} rotors), "
+                 f"vehicle.arm_mass_kg = {_fmt(v.arm_mass_kg)} ({arms} arms)")
+    if parts >= v.mass_kg:
+        raise ConfigError(f"{parts_are}: {parts:g} kg, must weigh less than vehicle.mass_kg = "
+                          f"{_fmt(v.mass_kg)}")
+    if v.battery_mass_kg >= v.mass_kg - parts:
+        raise ConfigError(f"vehicle.battery_mass_kg = {_fmt(v.battery_mass_kg)}: must be less "
+                          f"than vehicle.mass_kg = {_fmt(v.mass_kg)} less the rotors and arms "
+                          f"({parts_are}: {parts:g} kg)")
+
+
 def _validate(cfg: Config) -> None:
     """Checks across fields (one field's own range is :func:`_check_range`'s)."""
+    _check_vehicle(cfg.vehicle)
     _check_field(cfg.mission.field)
     _check_origin(cfg.mission)
     s = cfg.sim
@@ -300,7 +329,12 @@ def _validate(cfg: Config) -> None:
 
 
 def config_from_dict(data: dict[str, Any]) -> Config:
-    """Build and validate a :class:`Config` from a (TOML-shaped) dict."""
+    """Build and validate a :class:`Config` from a (TOML-shaped) dict; ``vehicle.preset``
+    fills the keys the dict leaves unset (:func:`ag_uav.config.vehicles.apply_vehicle_preset`)."""
+    from .vehicles import apply_vehicle_preset
+
+    if isinstance(data, dict):
+        data = apply_vehicle_preset(data)
     cfg = _build(Config, data, "")
     _validate(cfg)
     return cfg

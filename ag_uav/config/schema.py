@@ -99,8 +99,55 @@ class MissionConfig:
                                    ge=-500, le=9000)
 
 
+VEHICLE_PRESETS = ("m350", "quad-10l", "x8-40l")
+FRAMES = ("quad-x", "hexa-x", "octo-x8")
+
+
+@dataclass
+class RotorFaultConfig:
+    """A rotor that fails in flight (ag_uav.engine.rotor_fault; docs/vehicles.md)."""
+
+    rotor: int = _f(-1, "the rotor that fails, in the frame's order (-1: none)", ge=-1, le=7)
+    at_s: float = _f(300.0, "when it fails (s of simulated time)", ge=0)
+    efficiency: float = _f(0.0, "the share of its thrust it keeps (0: stopped)", ge=0, lt=1)
+    response: str = _f("auto", "auto: the failure detector, then by frame (hexa-x, octo-x8: "
+                       "re-allocate without the rotor and fly on; quad-x: give up yaw and "
+                       "land where it is); land: re-allocate and land on every frame; none: "
+                       "no detector (the fault is a model error)",
+                       choices=("auto", "land", "none"))
+
+
 @dataclass
 class VehicleConfig:
+    """The airframe (ag_uav.vehicle.spec; docs/vehicles.md). ``preset`` fills the keys of
+    [vehicle], [battery] and [spray] a config leaves unset (ag_uav.config.vehicles)."""
+
+    preset: str = _f("m350", "vehicle preset: m350 (DJI Matrice 350 RTK class, 4 rotors), "
+                     "quad-10l (10 L class spray quad, DJI Agras T10 figures), x8-40l (40 L "
+                     "coaxial X8 with rotary atomisers, DJI Agras T40 figures)",
+                     choices=VEHICLE_PRESETS)
+    frame: str = _f("quad-x", "rotor layout: quad-x (4 rotors fr, fl, rl, rr), hexa-x (6), "
+                    "octo-x8 (8: 4 coaxial pairs, upper then lower)", choices=FRAMES)
+    arm_m: float = _f(0.4475, "centre to rotor axis (m); M350: 895 mm diagonal wheelbase / 2",
+                      gt=0.1, le=3.0)
+    rotor_height_m: float = _f(0.08, "rotor plane above the body origin (m; the upper rotors' "
+                               "on a coaxial frame)", ge=0.0, le=1.0)
+    coaxial_gap_m: float = _f(0.2, "octo-x8: upper to lower rotor plane (m)", gt=0.0, le=1.0)
+    coaxial_efficiency: float = _f(0.8, "octo-x8: thrust of a lower rotor per unit command, "
+                                   "relative to an isolated rotor (in the upper's slipstream)",
+                                   gt=0.3, le=1.0)
+    rotor_mass_kg: float = _f(0.575, "motor + propeller + ESC of each rotor (kg; part of "
+                              "mass_kg, sets the inertia)", ge=0.0)
+    arm_mass_kg: float = _f(0.05, "each arm tube (kg; part of mass_kg)", ge=0.0)
+    battery_mass_kg: float = _f(2.7, "batteries (kg; part of mass_kg): M350 two TB65 packs",
+                                ge=0.0)
+    inertia_kgm2: list[float] = _f([], "body-axis inertia [Ixx, Iyy, Izz] (kg m^2) without "
+                                   "liquid; [] = from the components (body box, arms, rotors)",
+                                   gt=0.0, le=1000.0)
+    sprayer: str = _f("hydraulic", "spray heads: hydraulic nozzles or rotary atomisers (at "
+                      "spray.nozzle_xyz_m)", choices=("hydraulic", "rotary"))
+    pump_l_per_min: float = _f(1.0, "pump flow limit (L/min); M350 add-on tank: an estimate",
+                               gt=0.0, le=100.0)
     mass_kg: float = _f(6.47, "dry mass with batteries (DJI M350 RTK: 6.47 kg)", gt=0.5)
     payload_kg: float = _f(0.0, "spray payload carried in the tank (kg)", ge=0)
     thrust_to_weight: float = _f(2.0, "max total thrust / weight at mass_kg (no payload)", gt=1.05,
@@ -121,10 +168,13 @@ class VehicleConfig:
                                             "by m_u r / m_total, unknown to the controller "
                                             "(no effect without unknown_payload_kg)",
                                             ge=-0.5, le=0.5, length=3)
+    rotor_fault: RotorFaultConfig = field(default_factory=RotorFaultConfig,
+                                          metadata={"help": "a rotor failing in flight"})
     rotor_thrust_loss: list[float] = _f([0.0, 0.0, 0.0, 0.0], "model error: fraction of the "
-                                        "commanded thrust (and yaw torque) each rotor (fr, fl, "
-                                        "rl, rr) fails to deliver: a failing motor the "
-                                        "controller does not know", ge=0, lt=0.9, length=4)
+                                        "commanded thrust (and yaw torque) each rotor (in the "
+                                        "frame's order; quad-x: fr, fl, rl, rr) fails to "
+                                        "deliver: a failing motor the controller does not "
+                                        "know; one value per rotor", ge=0, lt=0.9)
 
 
 @dataclass
@@ -520,7 +570,7 @@ class Config:
     mission: MissionConfig = field(default_factory=MissionConfig,
                                    metadata={"help": "field and coverage plan"})
     vehicle: VehicleConfig = field(default_factory=VehicleConfig,
-                                   metadata={"help": "M350-class quadrotor"})
+                                   metadata={"help": "airframe: preset, frame, masses"})
     sim: SimConfig = field(default_factory=SimConfig, metadata={"help": "simulation loop"})
     spray: SprayConfig = field(default_factory=SprayConfig,
                                metadata={"help": "tank, application, off-target, sorties"})

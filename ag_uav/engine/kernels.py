@@ -81,7 +81,7 @@ class RefRows(NamedTuple):
 class RecordRow(NamedTuple):
     """What a tick's record row holds (:data:`~ag_uav.engine.loop.REC_COLUMNS`): ``p``, ``v``,
     the reference ``rp``, the fed-back ``p_fb``, the wind ``w`` (N, 3), the rotor commands
-    ``f`` (N, 4), ``spray`` (N,), and the reference's block ``ref_tab`` from tick
+    ``f`` (N, rotors), ``spray`` (N,), and the reference's block ``ref_tab`` from tick
     ``ref_k0[0]`` with each vehicle's ``ref_ids``."""
 
     p: np.ndarray
@@ -192,8 +192,8 @@ def tick_out(rec, k, act, flown, row):  # pragma: no cover
             r[18 + j] = w[i, j]
         r[12] = ref_tab[ref_ids[i], kr, 10]
         r[13] = 1.0 if spray[i] else 0.0
-        for j in range(4):
-            r[14 + j] = f[i, j]
+        for j in range(f.shape[1]):  # rotors past the fourth after the wind
+            r[14 + j if j < 4 else 17 + j] = f[i, j]
         flown[i] = k + 1
 
 
@@ -221,7 +221,7 @@ def controls(U, f, xf, col, act):  # pragma: no cover
         if not act[i]:
             continue
         for s in range(U.shape[1]):
-            for j in range(4):
+            for j in range(f.shape[1]):
                 U[i, s, j] = f[i, j]
             for j in range(3):
                 U[i, s, col + j] = xf[i, j]

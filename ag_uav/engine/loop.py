@@ -103,7 +103,7 @@ class Flight:
 @dataclass
 class LoopOutput:
     t: np.ndarray
-    rec: np.ndarray              # (n, 21) see REC_COLUMNS
+    rec: np.ndarray              # (n, 21 + rotors past the fourth) see REC_COLUMNS
     crash_reason: str | None
     crash_time: float | None
     wall_loop_s: float
@@ -121,6 +121,7 @@ class LoopOutput:
     lanes: int = 1                        # the lanes its batch flew in (threads of the engine)
     failsafe: dict | None = None          # the position failsafe's reason and times, if engaged
     gnss_losses: list = field(default_factory=list)  # GNSS loss episodes (stages.GnssLoss)
+    rotor_fault: dict | None = None       # vehicle.rotor_fault: when, detected, response, end
 
 
 # ------------------------------------------------------------------------------------ setup
@@ -192,7 +193,8 @@ def _batch(flights: Sequence[Flight], vehs: Sequence[Vehicle], dt: float
               airborne=np.array([not fl.cfg.sim.takeoff for fl in flights]),
               hover_z=np.array([v.hover_z for v in vehs]),
               box=np.array([_box(fl) for fl in flights], dtype=float),
-              ref=ref, ref_ids=ref_ids, n_max=int(n_ticks.max()), notes=[[] for _ in range(N)])
+              ref=ref, ref_ids=ref_ids, n_max=int(n_ticks.max()), notes=[[] for _ in range(N)],
+              n_rot=int(m0.nu))
     return b, job_tabs
 
 
@@ -334,6 +336,7 @@ class Engine:
         self.sprayers, self.vehicles = st.sprayers, st.vehicles
         self.depositing = st.depositing
         self.failsafe: Failsafe | None = None
+        self.rotor_faults: Any = None  # ag_uav.engine.rotor_fault.RotorFaults, when a fault is set
         self.pre_obs = [ob for ob in observers if type(ob).tick is not Observer.tick]
         self.post_obs = [ob for ob in observers if type(ob).stepped is not Observer.stepped]
         self._pre_next = -math.inf  # the earliest time a pre-physics observer is due
@@ -351,6 +354,8 @@ class Engine:
         self.feedback.step(k, t)
         if self.failsafe is not None:
             self.failsafe.step(k, t)
+        if self.rotor_faults is not None:
+            self.rotor_faults.step(k, t)
         self.control.step()
         if self.spraying is not None:
             self.spraying.step(k, t)
@@ -438,6 +443,10 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
     e = Engine(st, TickView(b, [v.model for v in vehs], body), stepper, capture)
     if hasattr(feedback.bank, "pos_sigma"):
         e.failsafe = Failsafe(b, feedback.bank, [fl.cfg for fl in flights])
+    if any(fl.cfg.vehicle.rotor_fault.rotor >= 0 for fl in flights):
+        from .rotor_fault import RotorFaults
+
+        e.rotor_faults = RotorFaults(b, [fl.cfg for fl in flights], vehs, control.bc)
     return e
 
 
@@ -533,7 +542,9 @@ def _outputs(e: Engine, wall: float, compile_s: float, cpu: float) -> list[LoopO
                          notes=b.notes[i], sprayer=e.sprayers[i], compile_s=compile_s,
                          dose=e.depositing.dose_map(i) if e.depositing is not None else None,
                          failsafe=None if e.failsafe is None else e.failsafe.info[i],
-                         gnss_losses=[] if e.failsafe is None else e.failsafe.loss.losses[i])
+                         gnss_losses=[] if e.failsafe is None else e.failsafe.loss.losses[i],
+                         rotor_fault=(None if e.rotor_faults is None
+                                      else e.rotor_faults.info[i]))
         if imu is not None:
             out.imu = np.ascontiguousarray(e.sensing.rec[:n, i])
             out.imu_bias0 = imu.bias0[i].copy()

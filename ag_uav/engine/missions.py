@@ -43,7 +43,7 @@ from ..world.pattern import lane_choice, mission_swath
 from ..world.reference import Reference
 from .heap import trim_heap
 from .loop import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
-from .stages import failsafe_warning
+from .stages import failsafe_warning, rec_motors
 
 # ------------------------------------------------------------------------------------ building
 #: Bytes one vehicle's run holds per control tick, for the memory budget
@@ -165,7 +165,7 @@ class RunResult:
     p_fb: np.ndarray             # (n, 3) position the controller flew on
     seg: np.ndarray              # (n,) active plan segment
     spray: np.ndarray            # (n,) sprayer on
-    motors: np.ndarray           # (n, 4) rotor thrust commands (N)
+    motors: np.ndarray           # (n, rotors) rotor thrust commands (N)
     field: Field | None = None
     plan: Any = None
     extra: dict[str, Any] = dataclasses.field(default_factory=dict)
@@ -304,7 +304,8 @@ def _preflight(cfg: Config) -> RunResult | None:
             "mission_time_s": None, "path_length_m": 0.0, "legs_flown": 0,
             "coverage_fraction": 0.0, "seed": cfg.seed}
     return RunResult(summary=summ, t=np.zeros(0), p_true=z, v_true=z, p_ref=z, p_fb=z,
-                     seg=np.zeros(0, int), spray=np.zeros(0, bool), motors=np.zeros((0, 4)))
+                     seg=np.zeros(0, int), spray=np.zeros(0, bool),
+                     motors=np.zeros((0, len(cfg.vehicle.rotor_thrust_loss))))
 
 
 def simulate(cfg: Config, *, feedback: Feedback | None = None, progress: bool = False,
@@ -481,7 +482,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     res = RunResult(
         summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
         p_fb=arr[:, 9:12], seg=arr[:, 12].astype(np.int32), spray=arr[:, 13].astype(bool),
-        motors=arr[:, 14:18], field=fld, plan=plan,
+        motors=rec_motors(arr), field=fld, plan=plan,
         extra={"wind": arr[:, 18:21], "reference": ref, "vehicle": out.vehicle.info(),
                "imu": out.imu, "imu_bias0": out.imu_bias0},
     )
@@ -495,6 +496,11 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         out.notes.append(f"GNSS loss: {loss['gnss_loss_off_target_m2']:.1f} m² sprayed off "
                          "target while the fix was lost")
     cut = _cut_reason(cfg, ref, out, summ, metrics.incomplete_reason(summ, res, cfg))
+    if out.rotor_fault is not None:
+        summ["rotor_fault"] = out.rotor_fault
+        if out.rotor_fault["landed_s"] is not None and not summ.get("crashed"):
+            cut = (f"rotor {out.rotor_fault['rotor']} failed: {out.rotor_fault['action']}; "
+                   f"landed at t={out.rotor_fault['landed_s']}s")
     if cut:
         summ["incomplete_reason"] = cut
     if not summ["legs_flown"]:  # the end of a mission never flown is no mission time

@@ -110,7 +110,7 @@ def default_threads(n: int) -> int:
 class Stepper:
     """Advances the full physics state ``S`` (N, ns) and the sensor readings ``sens``
     (N, nsensordata) of the active rows by one control period of ``nsub`` steps, holding the
-    rotor commands ``f`` (N, 4) and the applied force ``xf`` (N, 3)."""
+    rotor commands ``f`` (N, rotors) and the applied force ``xf`` (N, 3)."""
 
     def step(self, S: np.ndarray, sens: np.ndarray, f: np.ndarray, xf: np.ndarray,
              act: np.ndarray) -> None:

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Config
-from ..world.spray_job import TANK_HALF, SprayJob, liquid_l_per_m, rotor_power_coeff
+from ..world.spray_job import SprayJob, liquid_l_per_m, rotor_power_coeff
 
 
 class Sprayer:
@@ -51,6 +51,8 @@ class Sprayer:
         self.cap_j = b.capacity_wh * 3600.0
         self.reserve_j = self.cap_j * b.reserve_frac
         self.liq = self.model.body("liquid").id
+        #: the liquid's box (half sizes, m): the tank geom's footprint (the vehicle's)
+        self.tank_half = tuple(float(x) for x in self.model.geom("tank").size)
         self.drone = veh.body_id
         self.dry = float(self.model.body_subtreemass[self.drone] - self.model.body_mass[self.liq])
         self.com_dry_z = float(self.model.body_ipos[self.drone][2])
@@ -92,7 +94,7 @@ class Sprayer:
         """Liquid body mass and inertia (a box of liquid filling the tank's footprint from the
         bottom; parallel-axis terms about the composite centre of mass go to the controller)."""
         body_mass, inertia, ipos, subtree = self._mass_views
-        a, c, h = TANK_HALF
+        a, c, h = self.tank_half
         frac = min(1.0, m_liq / max(self.job.fill_l * self.rho, 1e-9))
         hz = max(h * frac, 1e-3)  # liquid half-height
         body_mass[self.liq] = max(m_liq, 1e-6)

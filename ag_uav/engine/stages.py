@@ -40,9 +40,17 @@ from .kernels import (
 from .physics import ground_contact
 from .reftable import RefTable
 
-#: the loop record's columns (one row per control tick)
+#: the loop record's columns (one row per control tick); a frame with more than four rotors
+#: records rotors 4, 5, ... after them (:func:`rec_motors`)
 REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy", "fz", "seg",
                "spray", "f0", "f1", "f2", "f3", "wx", "wy", "wz")
+
+
+def rec_motors(rec: np.ndarray) -> np.ndarray:
+    """The rotor commands (n, rotors) of a loop record (:data:`REC_COLUMNS`)."""
+    if rec.shape[1] == len(REC_COLUMNS):
+        return rec[:, 14:18]
+    return np.concatenate([rec[:, 14:18], rec[:, len(REC_COLUMNS):]], axis=1)
 #: the MEMS IMU record's keys in the log (measured f, gyro, attitude error)
 IMU_KEYS = ("imu.fx", "imu.fy", "imu.fz", "imu.wx", "imu.wy", "imu.wz", "imu.att_err_x",
             "imu.att_err_y", "imu.att_err_z")
@@ -63,6 +71,7 @@ class Batch:
     ref_ids: np.ndarray           # (N,) each vehicle's row of ref.tab
     n_max: int                    # ticks of the longest flight
     notes: list[list[str]]
+    n_rot: int = 4                # rotors (actuators) of every vehicle of the batch
     act: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
@@ -78,7 +87,7 @@ class Batch:
         self.code = np.zeros(N, dtype=np.int8)
         self.low = np.zeros(N, dtype=bool)
         self.flown = np.zeros(N, dtype=np.int64)
-        self.f = np.zeros((N, 4))
+        self.f = np.zeros((N, self.n_rot))
         self.xf, self.w = z3(), z3()
         self.Rc, self.om = self.R, self.omega      # what the controller flies on
         self.imu_in: tuple | None = None
@@ -537,9 +546,10 @@ class Recorder:
 
     def __init__(self, b: Batch, capture: bool = False) -> None:
         self.b = b
-        self.rec = zeros_touched((b.n_max, b.n, len(REC_COLUMNS)))  # tick-major, as Sensing.rec
+        extra = max(0, b.n_rot - 4)  # rotors past the fourth: after the wind
+        self.rec = zeros_touched((b.n_max, b.n, len(REC_COLUMNS) + extra))  # tick-major
         self.s0 = b.S.copy() if capture else None
-        self.controls = zeros_touched((b.n_max, b.n, 7)) if capture else None
+        self.controls = zeros_touched((b.n_max, b.n, b.n_rot + 3)) if capture else None
 
     def step(self, k: int) -> None:
         b = self.b
@@ -547,8 +557,8 @@ class Recorder:
         tick_out(self.rec, k, b.act, b.flown,
                  (b.p, b.v, b.rp, b.p_fb, b.w, b.f, b.spray, b.ref.tab, b.ref.k0, b.ref_ids))
         if self.controls is not None:
-            self.controls[k, :, :4] = b.f
-            self.controls[k, :, 4:] = b.xf
+            self.controls[k, :, :b.n_rot] = b.f
+            self.controls[k, :, b.n_rot:] = b.xf
 
     def of(self, i: int, n: int) -> np.ndarray:
         return np.ascontiguousarray(self.rec[:n, i])

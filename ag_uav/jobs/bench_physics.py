@@ -63,12 +63,12 @@ def physics_alone(cfg: Config, n: int, sim_s: float, nthread: int,
     m = veh.model
     d = mujoco.MjData(m)
     d.qpos[2], d.qpos[3] = 3.0, 1.0
-    d.ctrl[:] = d.act[:] = veh.mass * G / 4
+    d.ctrl[:] = d.act[:] = veh.mass * G / sum(veh.eff)
     mujoco.mj_forward(m, d)
     s0 = np.empty(mujoco.mj_stateSize(m, STATE_SPEC))
     mujoco.mj_getState(m, d, s0, STATE_SPEC)
     periods = int(round(sim_s * cfg.sim.control_hz))
-    f = np.full((periods, 4), veh.mass * G / 4)
+    f = np.full((periods, m.nu), veh.mass * G / sum(veh.eff))
     ctl = np.concatenate([f, np.zeros((periods, 3))], axis=1)
     models = [m] + [copy.copy(m) for _ in range(n - 1)]
     nsub = round(1.0 / (cfg.sim.timestep_s * cfg.sim.control_hz))
@@ -81,8 +81,8 @@ def replay_physics(models: list, body: int, nsub: int, s0: list, controls: list,
                    chunk_size: int | None | str = None, masses: list | None = None,
                    ) -> tuple[float, np.ndarray]:
     """MuJoCo alone replaying recorded flights: vehicle i from state ``s0[i]`` with
-    ``controls[i]`` ((n_i, 7): rotor commands, applied force) held over each control period, as
-    the engine hands them to the physics, and the spray job's liquid-mass changes
+    ``controls[i]`` ((n_i, rotors + 3): rotor commands, applied force) held over each control
+    period, as the engine hands them to the physics, and the spray job's liquid-mass changes
     (``masses[i]``: its Sprayer, whose ``mass_events`` are replayed at their ticks); the same
     bits as the flight. ``chunk_size``: the rollout pool's chunking (None: MuJoCo's default);
     ``"lanes"``: one single-thread rollout per thread on its own part of the batch, the parts
@@ -94,7 +94,8 @@ def replay_physics(models: list, body: int, nsub: int, s0: list, controls: list,
 
     N = len(models)
     n_i = np.array([len(c) for c in controls])
-    C = np.zeros((int(n_i.max()), N, 7))
+    nu = models[0].nu
+    C = np.zeros((int(n_i.max()), N, nu + 3))
     for i, c in enumerate(controls):
         C[:len(c), i] = c
     S = np.array(s0, dtype=float)
@@ -112,7 +113,7 @@ def replay_physics(models: list, body: int, nsub: int, s0: list, controls: list,
             for sp, m in ev.get(k, ()):
                 sp.set_liquid_mass(m)
             act = k < n_i
-            pack(rep.U, C[k, rep.sl, :4], C[k, rep.sl, 4:], xcol, act[rep.sl])
+            pack(rep.U, C[k, rep.sl, :nu], C[k, rep.sl, nu:], xcol, act[rep.sl])
             rep.step(S, act)
 
     try:

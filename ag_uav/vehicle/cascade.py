@@ -1,6 +1,6 @@
 """The flight controller of a vehicle: the per-axis position controllers named by
 ``controller.type`` (PID, type-1 or interval type-2 fuzzy PID, from :mod:`controllers`) in the
-position → attitude → mixer cascade."""
+position → attitude → mixer cascade (the mixer allocates to the frame's rotors)."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ def make_cascade(cfg: Config, veh: Vehicle) -> PositionCascade:
             make_axis_controller(c.type, c.z)]
     # the controller's model of the vehicle (without vehicle.unknown_payload_*: model error)
     att = GeometricAttitudeController(veh.ctrl_inertia, wn=c.attitude.wn, zeta=c.attitude.zeta)
-    mixer = XMixer(veh.ctrl_rotor_xy, veh.spin, veh.k_yaw, veh.f_max)
+    mixer = XMixer(veh.ctrl_rotor_xy, veh.spin, veh.k_yaw, veh.f_max, veh.eff)
     return PositionCascade(axes, veh.ctrl_mass, G, att, mixer,
                            tilt_max=math.radians(c.tilt_max_deg),
                            accel_feedforward=c.accel_feedforward)

@@ -22,7 +22,7 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
 
 @dataclass(frozen=True)
 class DepositionConfig:
-    """Deposition parameters (defaults: the M350-class quad of ``models/quad.xml``, one nozzle
+    """Deposition parameters (defaults: the M350-class quad, the ``m350`` vehicle preset, one nozzle
     under each rotor). Sources in the module docstring."""
 
     rate_l_per_ha: float = 1.0

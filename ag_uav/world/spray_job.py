@@ -73,8 +73,6 @@ SEG_TRANSIT = -2
 SEG_GROUND = -3
 #: control ticks per piece when the planner walks the single-sortie reference
 _WALK_CHUNK = 1 << 16
-#: the liquid body's box (half sizes, m): the tank geom's footprint in models/quad.xml
-TANK_HALF = (0.10, 0.08, 0.06)
 
 
 # ------------------------------------------------------------------------------ energy model
@@ -101,11 +99,22 @@ def implied_figure_of_merit(capacity_wh: float = 526.0, hover_min: float = 55.0,
     return ideal / (p_total - avionics_w)
 
 
+def rotor_counts(cfg: Config) -> tuple[float, float]:
+    """``(n, Σe)``: the frame's rotors and their total thrust per unit of a common command (a
+    coaxial pair's lower rotor counts its efficiency): in hover each rotor's command is
+    ``m g / Σe`` and the rotors draw ``n k (m g / Σe)^{3/2}``."""
+    from ..config.vehicles import FRAME_ROTORS, rotor_thrust_sum
+
+    v = cfg.vehicle
+    return float(FRAME_ROTORS[v.frame]), rotor_thrust_sum(v.frame, v.coaxial_efficiency)
+
+
 def hover_endurance_min(cfg: Config, mass_kg: float) -> float:
-    """Minutes the full battery hovers ``mass_kg`` (no reserve)."""
+    """Minutes the full battery hovers ``mass_kg`` (no reserve) on ``cfg``'s frame."""
     b = cfg.battery
     k = rotor_power_coeff(b.figure_of_merit, b.rotor_diameter_m, b.air_density_kgm3)
-    return 60.0 * b.capacity_wh / hover_power(mass_kg, k, b.avionics_w)
+    n, se = rotor_counts(cfg)
+    return 60.0 * b.capacity_wh / (n * k * (mass_kg * G / se) ** 1.5 + b.avionics_w)
 
 
 def base_point(cfg: Config, field, takeoff_xy) -> np.ndarray:
@@ -365,9 +374,11 @@ def _energy_model(cfg: Config, dry_mass_kg: float, z_land: float) -> tuple[Any, 
         return (np.asarray(d) / v_tr + v_tr / a_max + (m.altitude_m - z_land - 0.6) / climb
                 + 0.6 / 0.3 + climb / a_max + 3.0)  # the last 0.6 m at 0.3 m/s (Reference)
 
+    n, se = rotor_counts(cfg)
+
     def power(litres_left: np.ndarray | float) -> np.ndarray | float:
         mass = dry_mass_kg + np.asarray(litres_left) * rho
-        return (4.0 * k_p * (mass * G / 4.0) ** 1.5 + b.avionics_w) * (1.0 + b.plan_margin)
+        return (n * k_p * (mass * G / se) ** 1.5 + b.avionics_w) * (1.0 + b.plan_margin)
 
     return t_way, power
 

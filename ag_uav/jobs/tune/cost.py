@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ...config import Config, config_from_dict
+from ...engine.stages import rec_motors
 from ..batch import (
     exception_line,
     set_dotted,
@@ -57,7 +58,7 @@ def scenario_costs(cfgs: list[Config], sc: Scenario, metric: str, crash_penalty:
                                             duration=sc.duration, t_step=sc.t_step,
                                             wind_speed=sc.wind_speed):
             sel = out.t >= sc.t_step
-            trajs.append((out.t[sel], out.rec[sel, 6:9] - out.rec[sel, 0:3], out.rec[:, 14:18],
+            trajs.append((out.t[sel], out.rec[sel, 6:9] - out.rec[sel, 0:3], rec_motors(out.rec),
                           out.crash_reason, out.crash_time, sc.duration, (t_rel, y)))
     else:
         runs = _mission_runs([_mission_cfg(c, sc) for c in cfgs])
@@ -152,7 +153,7 @@ def _mission_runs(cfgs: list[Config]) -> list[tuple[tuple, dict[str, Any] | None
         if o.dose is not None:
             d = dose_summary(cfg, fld, o.dose)
             dose = {k: d[k] for k in DOSE_KEYS}
-        out.append(((o.t, rec[:, 0:3], rec[:, 6:9], rec[:, 14:18], o.crash_reason,
+        out.append(((o.t, rec[:, 0:3], rec[:, 6:9], rec_motors(rec), o.crash_reason,
                      o.crash_time, min(cfg.sim.max_time_s, ref.duration)), dose))
     return out
 

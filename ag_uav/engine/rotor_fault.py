@@ -1,0 +1,192 @@
+"""A rotor failing in flight (``vehicle.rotor_fault``), the autopilot's failure detector and
+its response by frame: a stage of the engine's tick, before the controller.
+
+* **The fault.** At ``at_s`` the rotor's actuator keeps ``efficiency`` of its thrust and yaw
+  torque per unit command (0: stopped): the vehicle's own MuJoCo model is changed, which the
+  controller does not know.
+* **Detection**, PX4's FailureDetector's two checks, airborne: (1) the attitude and rate
+  errors: the controller's attitude error about the roll/pitch axes above
+  :attr:`RotorFaults.TILT_ERR_RAD` (10°) or the yaw rate above
+  :attr:`RotorFaults.YAW_RATE_RAD_S` (60°/s) for :attr:`RotorFaults.TRIGGER_S` (0.3 s, PX4's
+  ``FD_FAIL_R_TTRI``); (2) the motors' ESC telemetry (PX4's actuator failure check,
+  ``FD_ACT_EN``, compares each motor's current with its command): a motor delivering less than
+  :attr:`RotorFaults.ESC_RATIO` (half) of its command while commanded above 5 % of ``f_max``,
+  for :attr:`RotorFaults.ESC_TIMEOUT_S` (0.1 s, ``FD_ACT_MOT_TOUT``). **Isolation**: the motor
+  the telemetry reports delivering least of its command (here the actuator's thrust per unit
+  command); after an attitude trigger with every motor above half, a false alarm, noted, and
+  flown on. A weak rotor that keeps more than half its thrust is left to the attitude check.
+* **Response** (``response``): ``auto`` — a hexa or octo re-allocates without the rotor
+  (:func:`controllers.attitude.fault_allocation`, all four wrench components) and flies on; a
+  quad gives up yaw (its three rotors allocate thrust, roll and pitch; the yaw reference follows
+  the spinning vehicle) and lands where it is; ``land`` — re-allocate and land on every frame;
+  ``none`` — no detector. The landing is the position failsafe's: brake at 2 m/s², descend at
+  0.7 m/s, the last metre at 0.3 m/s (PX4's ``MPC_LAND_SPEED``, ``MPC_LAND_CRWL``), nozzles off;
+  once the set point is on the ground and the vehicle still for 1 s (PX4's land detector) the
+  flight ends; the touchdown speed is the largest vertical speed over the last 0.3 m (a skid
+  contact above 1 m/s ends the flight as a crash first).
+
+The run's summary gets ``rotor_fault``: the rotor, when it failed, when it was detected (and the
+delay), the response and how it ended (landed at, touchdown vertical speed).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from controllers.attitude import effectiveness, fault_allocation
+from controllers.cascade import P_AINV, S_ER
+
+from .stages import Batch
+
+
+class RotorFaults:
+    """The stage (module docstring); built only when a vehicle of the batch has a fault."""
+
+    TILT_ERR_RAD = math.radians(10.0)
+    YAW_RATE_RAD_S = math.radians(60.0)
+    TRIGGER_S = 0.3
+    ESC_RATIO = 0.5
+    ESC_TIMEOUT_S = 0.1
+    DESCENT_MPS, CRAWL_MPS, BRAKE_MPS2 = 0.7, 0.3, 2.0
+    LAND_S = 1.0  # still on the ground this long: landed (PX4 LNDMC_TRIG_TIME)
+
+    def __init__(self, b: Batch, cfgs: Sequence[Any], vehicles: Sequence[Any], bc: Any) -> None:
+        self.b, self.bc, self.vehs = b, bc, list(vehicles)
+        n = b.n
+        rf = [c.vehicle.rotor_fault for c in cfgs]
+        self.rotor = np.array([f.rotor for f in rf])
+        self.at = np.array([f.at_s if f.rotor >= 0 else math.inf for f in rf])
+        self.eff = [f.efficiency for f in rf]
+        self.response = [f.response for f in rf]
+        self.frame = [c.vehicle.frame for c in cfgs]
+        self.watch = np.array([f.response != "none" for f in rf])
+        self.next_fault = float(self.at.min()) if n else math.inf
+        self.applied = np.zeros(n, dtype=bool)
+        self.over_s = np.zeros(n)
+        self.esc_low = np.full(n, -1)  # the motor whose telemetry reads low (-1: none)
+        self.esc_s = np.zeros(n)
+        self.detected = np.zeros(n, dtype=bool)
+        self.landing = np.zeros(n, dtype=bool)
+        self.at_xy = np.zeros((n, 3))
+        self.v0 = np.zeros((n, 3))
+        self.t0 = np.zeros(n)
+        self.zr = np.zeros(n)
+        self.still_s = np.zeros(n)
+        self.info: list[dict[str, Any] | None] = [
+            None if f.rotor < 0 else {"rotor": int(f.rotor), "at_s": f.at_s,
+                                      "efficiency": f.efficiency, "response": f.response,
+                                      "detected_s": None, "detection_delay_s": None,
+                                      "action": None, "landed_s": None, "touchdown_mps": None}
+            for f in rf]
+
+    def step(self, k: int, t: float) -> None:
+        b = self.b
+        if t >= self.next_fault:
+            self._inject(t)
+        if self.watch.any():
+            self._detect(t)
+        for i in np.flatnonzero(self.landing & b.act):
+            self._land(int(i), t)
+
+    # ------------------------------------------------------------------------------- the fault
+    def _inject(self, t: float) -> None:
+        for i in np.flatnonzero(~self.applied & (self.at <= t)):
+            m, j = self.vehs[i].model, int(self.rotor[i])
+            m.actuator_gear[j, 2] *= self.eff[i]
+            m.actuator_gear[j, 5] *= self.eff[i]
+            self.applied[i] = True
+            if self.eff[i] < self.ESC_RATIO:
+                self.esc_low[i] = j
+            self.b.notes[i].append(f"rotor {j} failed at t={t:.2f}s (keeps "
+                                   f"{self.eff[i]:.0%} of its thrust)")
+        rest = self.at[~self.applied]
+        self.next_fault = float(rest.min()) if rest.size else math.inf
+
+    # ---------------------------------------------------------------------------- the detector
+    def _detect(self, t: float) -> None:
+        b, st = self.b, self.bc.state
+        eR = st[:, S_ER:S_ER + 2]
+        tilt = np.sqrt(eR[:, 0] ** 2 + eR[:, 1] ** 2)
+        over = (tilt > math.sin(self.TILT_ERR_RAD)) | (np.abs(b.om[:, 2]) > self.YAW_RATE_RAD_S)
+        live = self.watch & ~self.detected & b.act & b.airborne
+        self.over_s = np.where(live & over, self.over_s + b.dt, 0.0)
+        for i in np.flatnonzero(live & (self.esc_low >= 0)):
+            j = int(self.esc_low[i])
+            on = b.f[i, j] > 0.05 * self.vehs[i].f_max
+            self.esc_s[i] = self.esc_s[i] + b.dt if on else 0.0
+        fire = (self.over_s >= self.TRIGGER_S - 1e-9) | (self.esc_s >= self.ESC_TIMEOUT_S - 1e-9)
+        for i in np.flatnonzero(fire & live):
+            self._isolate(int(i), t)
+
+    def _isolate(self, i: int, t: float) -> None:
+        """ESC telemetry: the motor delivering least of its command."""
+        b, veh = self.b, self.vehs[i]
+        self.over_s[i] = 0.0
+        ratio = veh.model.actuator_gear[:, 2] / np.asarray(veh.eff)
+        j = int(np.argmin(ratio))
+        if ratio[j] >= self.ESC_RATIO:
+            b.notes[i].append(f"failure detector: attitude/rate errors at t={t:.2f}s, every "
+                              "motor's telemetry normal: flying on")
+            return
+        self.detected[i] = True
+        info = self.info[i] if self.info[i] is not None else {"rotor": None}
+        self.info[i] = info
+        info["detected_s"] = round(t, 2)
+        if self.applied[i]:
+            info["detection_delay_s"] = round(t - float(self.at[i]), 2)
+        quad = self.frame[i] == "quad-x"
+        land = quad or self.response[i] == "land"
+        B = effectiveness(veh.ctrl_rotor_xy, veh.spin, veh.k_yaw, veh.eff)
+        A = fault_allocation(B, veh.eff, j, keep_yaw=not quad)
+        self.bc.params[i, P_AINV:P_AINV + A.size] = A.ravel()
+        info["action"] = ("gave up yaw, re-allocated to three rotors, landing" if quad else
+                          "re-allocated without the rotor, " + ("landing" if land else
+                                                                 "flying on"))
+        b.notes[i].append(f"failure detector: rotor {j} at t={t:.2f}s: {info['action']}")
+        if land:
+            self._start_landing(i, t)
+
+    # ----------------------------------------------------------------------------- the landing
+    def _start_landing(self, i: int, t: float) -> None:
+        b = self.b
+        self.landing[i] = True
+        v0 = b.v_fb[i].copy()
+        v0[2] = 0.0
+        self.v0[i], self.at_xy[i], self.t0[i] = v0, b.p_fb[i], t
+        self.zr[i] = b.p_fb[i, 2]
+
+    def _land(self, i: int, t: float) -> None:
+        """Brake to a stop where the failure was met, descend there (the failsafe's profile);
+        a quad's yaw reference follows its heading (yaw given up)."""
+        b, v0 = self.b, self.v0[i]
+        sp = math.hypot(v0[0], v0[1])
+        s = min(t - self.t0[i], sp / self.BRAKE_MPS2)
+        a = self.BRAKE_MPS2 / sp if sp > 0.0 else 0.0
+        b.rp[i] = self.at_xy[i] + (s - 0.5 * a * s * s) * v0
+        b.rv[i] = (1.0 - a * s) * v0
+        b.ra[i] = -a * v0 if s < sp / self.BRAKE_MPS2 else 0.0
+        ground = b.hover_z[i]
+        speed = self.DESCENT_MPS if self.zr[i] > ground + 1.0 else self.CRAWL_MPS
+        self.zr[i] = max(self.zr[i] - speed * b.dt, ground - 0.5)
+        b.rp[i, 2] = self.zr[i]
+        b.rv[i, 2] = -speed if self.zr[i] > ground - 0.5 else 0.0
+        b.spray[i] = False
+        if self.frame[i] == "quad-x":
+            R = b.Rc[i]
+            b.yaw[i] = math.atan2(R[3], R[0])
+        info = self.info[i]
+        vz = abs(float(b.v[i, 2]))
+        if info is not None and b.p[i, 2] < ground + 0.3:  # the last 0.3 m: the touchdown
+            info["touchdown_mps"] = max(info["touchdown_mps"] or 0.0, round(vz, 3))
+        # PX4's land detector: the set point on the ground, still for LAND_S
+        still = self.zr[i] <= ground - 0.5 and vz < 0.2 and float(np.abs(b.v[i, :2]).max()) < 0.2
+        self.still_s[i] = self.still_s[i] + b.dt if still else 0.0
+        if self.still_s[i] >= self.LAND_S - 1e-9:
+            if info is not None:
+                info["landed_s"] = round(t, 2)
+            b.notes[i].append(f"rotor failure: landed at t={t:.1f}s")
+            b.act[i] = False

@@ -1,0 +1,66 @@
+"""A rotor failing in flight: detected within a stated time on every frame, and the
+octocopter's response (re-allocate, land) brings it down softly."""
+
+from __future__ import annotations
+
+import pytest
+
+import ag_uav
+from ag_uav.config import ConfigError
+
+#: the failure detector's stated bound: the ESC check's 0.1 s (FD_ACT_MOT_TOUT) plus a tick
+DETECT_WITHIN_S = 0.11
+
+FRAMES = {
+    "quad-x": {"vehicle.preset": "m350"},
+    "hexa-x": {"vehicle.preset": "m350", "vehicle.frame": "hexa-x",
+               "vehicle.rotor_thrust_loss": [0.0] * 6},
+    "octo-x8": {"vehicle.preset": "x8-40l", "spray.tank_l": 2.0},
+}
+
+
+def _cfg(**over) -> ag_uav.Config:
+    c = ag_uav.load_config(None, {"log.enabled": False, "estimator.name": "true",
+                                  "estimator.shadow": [], **over})
+    return c
+
+
+@pytest.mark.parametrize("frame", sorted(FRAMES))
+@pytest.mark.parametrize("rotor", [0, 3])
+def test_a_stopped_rotor_is_detected_within_the_stated_time(frame, rotor):
+    c = _cfg(**FRAMES[frame], **{"vehicle.rotor_fault.rotor": rotor,
+                                  "vehicle.rotor_fault.at_s": 12.0, "sim.max_time_s": 12.6})
+    rf = ag_uav.simulate(c).summary["rotor_fault"]
+    assert rf["rotor"] == rotor and rf["at_s"] == 12.0
+    assert rf["detected_s"] is not None
+    assert 0.0 < rf["detection_delay_s"] <= DETECT_WITHIN_S
+    assert rf["action"].startswith("gave up yaw" if frame == "quad-x" else "re-allocated")
+
+
+def test_no_fault_no_detection():
+    """The detector runs beside a faulty vehicle's batch-mate without false alarms."""
+    from ag_uav.engine.missions import simulate_many
+
+    base = {**FRAMES["octo-x8"], "sim.max_time_s": 20.0}
+    ok, bad = simulate_many([_cfg(**base), _cfg(**base, **{"vehicle.rotor_fault.rotor": 2,
+                                                          "vehicle.rotor_fault.at_s": 15.0})])
+    assert "rotor_fault" not in ok.summary and not ok.summary["crashed"]
+    assert bad.summary["rotor_fault"]["detected_s"] == pytest.approx(15.09, abs=0.02)
+
+
+def test_the_octocopter_lands_softly_on_seven_rotors():
+    c = _cfg(**FRAMES["octo-x8"], **{"vehicle.rotor_fault.rotor": 0,
+                                     "vehicle.rotor_fault.at_s": 12.0,
+                                     "vehicle.rotor_fault.response": "land",
+                                     "sim.max_time_s": 30.0})
+    s = ag_uav.simulate(c).summary
+    rf = s["rotor_fault"]
+    assert not s["crashed"], s["crash_reason"]
+    assert rf["landed_s"] is not None and rf["landed_s"] < 25.0
+    assert rf["touchdown_mps"] < 1.0
+    assert "landed" in s["incomplete_reason"]
+
+
+def test_a_rotor_the_frame_lacks_is_named():
+    with pytest.raises(ConfigError, match=r"vehicle.rotor_fault.rotor = 6: .* 0 to 3"):
+        ag_uav.load_config(None, {"vehicle.rotor_fault.rotor": 6})
