@@ -51,14 +51,17 @@ def centreline_speed(a: float, s_r: float, s_m: float, bd0: float, s: float) -> 
     above ``a``."""
     if s < s_m:
         return a if s < s_r else a * s_r / s
-    un = a if s_m < s_r else a * s_r / s_m
+    un = a if s_m <= s_r else a * s_r / s_m
     sv = s_m - a * bd0 / max(un, 1e-12)
     return min(a, a * bd0 / max(s - sv, 1e-12))
 
 
 @njit(cache=True, inline="always")
 def _decay_time(vt: float, c: float, s1: float, s2: float) -> float:
-    """Time to fall from s1 to s2 (> s1 > 0) at ds/dt = vt + c / s, in closed form."""
+    """Time to fall from s1 to s2 (> s1 > 0) at ds/dt = vt + c / s, in closed form (c = 0,
+    no wake: (s2 - s1) / vt)."""
+    if c <= 0.0:
+        return (s2 - s1) / vt
     return ((s2 - s1) - c / vt * math.log1p(vt * (s2 - s1) / (vt * s1 + c))) / vt
 
 
@@ -78,7 +81,7 @@ def fall_time(vt: float, a: float, s_r: float, s_m: float, bd0: float, s1: float
         t += _decay_time(vt, a * s_r, s1, e)
         s1 = e
     if s2 > s1:                                     # the merged jet: u = a bd0 / (s − s_v)
-        un = a if s_m < s_r else a * s_r / s_m
+        un = a if s_m <= s_r else a * s_r / s_m
         sv = s_m - a * bd0 / max(un, 1e-12)
         # below s_m the speed is a bd0/(s − s_v) ≤ a, exactly (continuity at s_m)
         t += _decay_time(vt, a * bd0, s1 - sv, s2 - sv)
