@@ -51,7 +51,11 @@ def test_the_wake_skews_and_weakens_in_wind():
     assert w.v_induced(airspeed=4.5) < w.v_induced()
 
 
-@pytest.mark.parametrize("opts", [{}, {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24}])
+WALL_JET = {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24, "wall_jet_growth": 0.098}
+
+
+@pytest.mark.parametrize("opts", [{}, {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24},
+                                  WALL_JET])
 def test_mass_balance_closes_with_the_wake_options(opts):
     from ag_uav.world.field import Field
 
@@ -113,3 +117,48 @@ def test_wind_tunnel_reads_another_payloads_rows(tmp_path):
     md = (out / "wind_tunnel.md").read_text()
     assert "| 3 | medium | 10 |" in md
     assert (out / "wind_tunnel.csv").read_text().count("\n") == 15
+
+
+def test_wall_jet_travel_is_the_settling_law():
+    from ag_uav.world.deposition_kernels import wall_jet
+
+    beta, r_j, u_g = 0.098, 0.75, 12.0
+    for vt, tp in ((0.1, 0.01), (0.5, 0.05), (2.0, 0.2)):
+        ride, dj, var = wall_jet(beta, r_j, 0.24, tp, vt, u_g)
+        st_g = tp * u_g / r_j
+        assert ride == pytest.approx(0.24 ** 2 / (st_g ** 2 + 0.24 ** 2))
+        assert dj == pytest.approx(beta * r_j)
+        # integrate dr/dt = u_g r_j / r for the settling time δ_j / v_t
+        r, dt = r_j, 1e-4
+        for _ in range(int(dj / vt / dt)):
+            r += u_g * r_j / r * dt
+        assert math.sqrt(2.0 * var) == pytest.approx(r - r_j, rel=2e-3)
+    # without impaction everything rides
+    assert wall_jet(beta, r_j, 0.0, 0.2, 2.0, u_g)[0] == 1.0
+
+
+def test_wall_jet_narrows_the_hover_outwash_of_fines():
+    from ag_uav.world.deposition import footprints, pack_input
+
+    cfg = DepositionConfig(dv10_um=83.0, dv50_um=148.0, dv90_um=229.0)
+    inp = pack_input([0.0, 0.0, 2.3], [0.0, 0.0, 0.0], np.eye(3).ravel(), 63.5,
+                     [1.5, 0.0, 0.0], 1)
+    layer = footprints(cfg, inp)
+    wj = footprints(dataclasses.replace(cfg, **WALL_JET), inp)
+    fine = int(np.argmax(layer["d_m"] > 60e-6))
+    assert np.sqrt(wj["wvar"][fine]) < 0.5 * np.sqrt(layer["wvar"][fine])
+    assert np.all(wj["wvar"] <= layer["wvar"] + 1e-12)
+
+
+def test_wind_tunnel_fine_low_wind_with_the_wall_jet():
+    """One condition at one wind (1.5 m/s, fine): the layer law puts 4.5 x the measured share
+    at >= 2 m; the wall jet brings it within a factor 2."""
+    from ag_uav.jobs.experiments import wind_tunnel as wt
+
+    measured = wt.read_measured(None)
+    args = (wt.Trial(), measured, [1.5], ["fine"], [2.0])
+    _, base = wt.compare(DepositionConfig(), *args)
+    _, wj = wt.compare(DepositionConfig(**WALL_JET), *args)
+    assert base[0]["ratio"] > 2.0
+    assert 0.5 <= wj[0]["ratio"] <= 2.0
+    assert wj[0]["median_abs_log10_2_20m"] < base[0]["median_abs_log10_2_20m"]

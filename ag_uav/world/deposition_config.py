@@ -17,7 +17,8 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
            ("wake_escape", 0.0, 1.0), ("shear_eddy_m", 1e-3, 10.0),
            ("airborne_after_s", 1.0, 1e5), ("n_classes", 1, 40),
            ("outwash_impaction_st50", 0.0, 10.0), ("jet_merge_lengths", 0.0, 100.0),
-           ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0))
+           ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0),
+           ("wall_jet_growth", 0.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -52,6 +53,8 @@ class DepositionConfig:
     wake_turbulence: float = 0.25
     outwash_layer_m: float = 0.17
     outwash_impaction_st50: float = 0.0           # > 0 (0.24): what impacts skips the outwash
+    wall_jet_growth: float = 0.0                  # > 0 (0.098): the outwash a radial wall jet,
+                                                  # δ = β r (Poreh et al.); 0: the layer δ
     release_sigma_m: float = 0.1
     ambient_sigma_mps: float = 0.0
     temperature_c: float = 20.0                   # air temperature (°C)

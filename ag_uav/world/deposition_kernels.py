@@ -48,7 +48,8 @@ INPUT_WIDTH = 20
 (P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF, P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0, P_ROTZ, P_IW,
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
  P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
- P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL) = range(47)
+ P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL,
+ P_WJ) = range(48)
 P_HEADER = 48
 # state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
 # sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
@@ -369,6 +370,23 @@ def _environment(par, inp):
             par[P_IW] * 2.0 * vi, zmw, bdw)
 
 
+@njit(cache=True, inline="always")
+def wall_jet(beta: float, r_j: float, st50: float, tp: float, vt: float, u_g: float):
+    """The radial wall jet of the impinging jet (Glauert 1956; Poreh, Tsuei & Cermak 1967):
+    thickness δ(r) = β r, speed u_g r_j / r beyond the impingement radius r_j. A droplet that
+    turns with it (share St₅₀² / (St_g² + St₅₀²), St_g = τ_p u_g / r_j, Marple & Liu 1974)
+    settles through the layer δ_j = β r_j in t_s = δ_j / v_t while riding dr/dt = u_g r_j / r,
+    so it travels r_s = √(r_j² + 2 u_g r_j t_s) − r_j; its ring projected on a line has the
+    variance r_s²/2. Returns (ride share, δ_j, variance)."""
+    ride = 1.0
+    if st50 > 0.0:
+        st_g = tp * u_g / r_j
+        ride = st50 * st50 / (st_g * st_g + st50 * st50)
+    dj = beta * r_j
+    rs = math.sqrt(r_j * r_j + 2.0 * u_g * r_j * dj / vt) - r_j
+    return ride, dj, 0.5 * rs * rs
+
+
 @njit(cache=True)
 def _class_footprint(par, k: int, env):
     """Class ``k``'s landing law at one tick (offsets from the nozzle; laws in the module
@@ -394,17 +412,22 @@ def _class_footprint(par, k: int, env):
     st50 = par[P_ST50]
     ride = 1.0
     lvar = 0.0
-    if st50 > 0.0:
+    delta = par[P_DELTA]
+    ovar = (delta * u_g / vt) ** 2
+    if par[P_WJ] > 0.0:
+        ride, delta, ovar = wall_jet(par[P_WJ], par[P_RJ], st50, tp, vt, u_g)
+    elif st50 > 0.0:
         st_g = tp * u_g / par[P_RJ]
         ride = st50 * st50 / (st_g * st_g + st50 * st50)
+    if st50 > 0.0 or par[P_WJ] > 0.0:
         w = math.sqrt(wx * wx + wy * wy)
         z0 = par[P_Z0]
-        if w > 0.0 and par[P_DELTA] > z0:
-            sh = par[P_DELTA] / vt * ust / KAPPA * math.log(par[P_DELTA] / z0) / w
+        if w > 0.0 and delta > z0:
+            sh = delta / vt * ust / KAPPA * math.log(delta / z0) / w
             wxo += ride * sh * wx
             wyo += ride * sh * wy
             lvar = ride * (1.0 - ride) * sh * sh * w * w
-    wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * (par[P_DELTA] * u_g / vt) ** 2
+    wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * ovar
             + (par[P_SIGA] * tf) ** 2 + lvar)
     wland = _tab_left(par, k, tf)
     # escape at the wake's edge: ε₀ sin χ, damped by the droplet's response 1/(1 + St)
