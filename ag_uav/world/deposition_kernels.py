@@ -371,9 +371,11 @@ def _environment(par, inp):
 
 
 @njit(cache=True, inline="always")
-def wall_jet(beta: float, r_j: float, st50: float, tp: float, vt: float, u_g: float):
+def wall_jet(beta: float, r_j: float, st50: float, tp: float, vt: float, u_g: float
+             ) -> tuple[float, float, float]:
     """The radial wall jet of the impinging jet (Glauert 1956; Poreh, Tsuei & Cermak 1967):
-    thickness δ(r) = β r, speed u_g r_j / r beyond the impingement radius r_j. A droplet that
+    thickness δ(r) = β r (β ≈ 0.098, the half-velocity thickness's growth), speed u_g r_j / r
+    beyond the impingement radius r_j (the merged jet's, √n D / 2). A droplet that
     turns with it (share St₅₀² / (St_g² + St₅₀²), St_g = τ_p u_g / r_j, Marple & Liu 1974)
     settles through the layer δ_j = β r_j in t_s = δ_j / v_t while riding dr/dt = u_g r_j / r,
     so it travels r_s = √(r_j² + 2 u_g r_j t_s) − r_j; its ring projected on a line has the
