@@ -52,10 +52,12 @@ def test_the_wake_skews_and_weakens_in_wind():
 
 
 WALL_JET = {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24, "wall_jet_growth": 0.098}
+#: the hover law checked on the tunnel: the wall jet, the impingement region, ε₀ from the tunnel
+TUNNEL = {**WALL_JET, "impingement_diameters": 1.2, "wake_escape": 0.6}
 
 
 @pytest.mark.parametrize("opts", [{}, {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24},
-                                  WALL_JET])
+                                  WALL_JET, TUNNEL])
 def test_mass_balance_closes_with_the_wake_options(opts):
     from ag_uav.world.field import Field
 
@@ -162,3 +164,33 @@ def test_wind_tunnel_fine_low_wind_with_the_wall_jet():
     assert base[0]["ratio"] > 2.0
     assert 0.5 <= wj[0]["ratio"] <= 2.0
     assert wj[0]["median_abs_log10_2_20m"] < base[0]["median_abs_log10_2_20m"]
+
+
+def test_impinging_fall_time_matches_integration():
+    from ag_uav.world.deposition_kernels import impinging_fall_time
+
+    a, s_r, s_m, bd0 = 12.0, 2.26, 3.75, 6.0 * 1.07
+    for vt, h_i, s1, s2 in ((0.2, 1.28, 0.4, 2.4), (1.3, 1.28, 0.4, 2.4), (2.0, 0.9, 1.8, 2.4)):
+        u_i = centreline_speed(a, s_r, s_m, bd0, s2 - h_i)
+        s, t, dt = s1, 0.0, 1e-5
+        while s < s2 - 1e-9:                  # depth s; in the region w = u_i (s2 - s) / h_i
+            u = centreline_speed(a, s_r, s_m, bd0, s) if s < s2 - h_i else u_i * (s2 - s) / h_i
+            s += (vt + u) * dt
+            t += dt
+        assert impinging_fall_time(vt, a, s_r, s_m, bd0, s1, s2, h_i) == pytest.approx(t, rel=2e-3)
+    # no region: the free jet's fall time
+    assert impinging_fall_time(1.0, a, s_r, s_m, bd0, 0.4, 2.4, 1e-9) == pytest.approx(
+        fall_time(1.0, a, s_r, s_m, bd0, 0.4, 2.4), rel=1e-6)
+
+
+def test_wind_tunnel_medium_high_wind_with_the_hover_law():
+    """One condition at one wind (4.5 m/s, medium): with the impingement region the in-swath
+    peak sits 1 m downwind as measured and the downwind share is within a factor 2."""
+    from ag_uav.jobs.experiments import wind_tunnel as wt
+
+    args = (wt.Trial(), wt.read_measured(None), [4.5], ["medium"], [2.0])
+    _, wj = wt.compare(DepositionConfig(**{**TUNNEL, "impingement_diameters": 0.0}), *args)
+    _, hov = wt.compare(DepositionConfig(**TUNNEL), *args)
+    assert wj[0]["ratio"] < 0.5                             # the free jet: too little shift
+    assert 0.5 <= hov[0]["ratio"] <= 2.0
+    assert hov[0]["peak_model_m"] == hov[0]["peak_measured_m"] == 1.0

@@ -18,7 +18,7 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
            ("airborne_after_s", 1.0, 1e5), ("n_classes", 1, 40),
            ("outwash_impaction_st50", 0.0, 10.0), ("jet_merge_lengths", 0.0, 100.0),
            ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0),
-           ("wall_jet_growth", 0.0, 1.0))
+           ("wall_jet_growth", 0.0, 1.0), ("impingement_diameters", 0.0, 10.0))
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,8 @@ class DepositionConfig:
     outwash_impaction_st50: float = 0.0           # > 0 (0.24): what impacts skips the outwash
     wall_jet_growth: float = 0.0                  # > 0 (0.098): the outwash a radial wall jet,
                                                   # δ = β r (Poreh et al.); 0: the layer δ
+    impingement_diameters: float = 0.0            # > 0 (1.2): the jet stagnates over that many
+                                                  # merged-jet diameters above the ground
     release_sigma_m: float = 0.1
     ambient_sigma_mps: float = 0.0
     temperature_c: float = 20.0                   # air temperature (°C)

@@ -49,8 +49,8 @@ INPUT_WIDTH = 20
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
  P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
  P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL,
- P_WJ) = range(48)
-P_HEADER = 48
+ P_WJ, P_HI) = range(49)
+P_HEADER = 49
 # state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
 # sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
 (S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
@@ -361,13 +361,38 @@ def _environment(par, inp):
     # the rotors' jets and the merged jet (ag_uav.world.wake); lengths along the skewed axis
     z0w = par[P_S0] * cos_chi
     zmw, bdw = par[P_SM] * cos_chi, par[P_BD0] * cos_chi
-    u_g = centreline_speed(a, z0w, zmw, bdw, s_g)
+    # the free jet's speed at the ground, or (option) at the top of the impingement region
+    u_g = centreline_speed(a, z0w, zmw, bdw, max(s_g - par[P_HI], 0.0))
     # surface layer (Monin–Obukhov; neutral: the log law): u* from the wind at the vehicle's
     # height, f_u the mean of u(z) over the layer below the nozzle as a share of it
     w = math.sqrt(wx * wx + wy * wy)
     ust, fu = layer_wind(w, pz, zn, par[P_Z0], par[P_INVL])
     return (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, zn, fu,
             par[P_IW] * 2.0 * vi, zmw, bdw)
+
+
+@njit(cache=True, inline="always")
+def impinging_fall_time(vt: float, a: float, s_r: float, s_m: float, bd0: float, s1: float,
+                        s2: float, h_i: float) -> float:
+    """Fall time from depth s1 to the ground at s2 through a jet that impinges on it: the free
+    jet (:func:`fall_time`) down to the impingement region's top s_i = s2 − h_i, then the
+    region's stagnation flow, whose downward speed falls linearly from the free jet's u_i to 0 at
+    the ground (w = u_i z / h over the region's height h = s2 − max(s_i, s1) above it), so
+    dz/dt = −(v_t + u_i z / h), so t = (h / u_i) ln(1 + u_i / v_t) from z = h (a nozzle inside
+    the region: u_i scaled by h / h_i). The region's height h_i ≈ 1.2 jet diameters
+    (the deflection zone of an impinging round jet: Zuckerman & Lior 2006, Adv. Heat Transfer
+    39:565, after Viskanta 1993)."""
+    si = s2 - h_i
+    t = 0.0
+    if si > s1:
+        t = fall_time(vt, a, s_r, s_m, bd0, s1, si)
+    else:
+        si = s1
+    h = s2 - si
+    ui = centreline_speed(a, s_r, s_m, bd0, max(s2 - h_i, 0.0)) * h / h_i
+    if ui <= 1e-9:
+        return t + h / vt
+    return t + h / ui * math.log1p(ui / vt)
 
 
 @njit(cache=True, inline="always")
@@ -401,6 +426,8 @@ def _class_footprint(par, k: int, env):
     sig0 = par[P_SIG0]
     # wake: carried down the decaying skewed jet
     tf = fall_time(vt, a, z0w, zmw, bdw, s_n, s_g) if s_g > s_n else 0.0
+    if par[P_HI] > 0.0 and s_g > s_n:
+        tf = impinging_fall_time(vt, a, z0w, zmw, bdw, s_n, s_g, par[P_HI])
     dw = max((s_g - s_n) - vt * tf, 0.0)
     relax = tp * (1.0 - math.exp(-tf / tp))
     wxo = wx * tf + tx * dw + (vx - wx) * relax
