@@ -56,6 +56,13 @@ WALL_JET = {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24, "wall_jet_
 TUNNEL = {**WALL_JET, "impingement_diameters": 1.2, "wake_escape": 0.6}
 
 
+def test_the_hover_law_is_the_one_documented():
+    from ag_uav.world.deposition_config import HOVER_LAW, LAWS
+
+    assert HOVER_LAW == TUNNEL and LAWS["hover"] is HOVER_LAW and LAWS["default"] == {}
+    assert DepositionConfig(**HOVER_LAW).wall_jet_growth == 0.098
+
+
 @pytest.mark.parametrize("opts", [{}, {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24},
                                   WALL_JET, TUNNEL])
 def test_mass_balance_closes_with_the_wake_options(opts):
@@ -194,3 +201,13 @@ def test_wind_tunnel_medium_high_wind_with_the_hover_law():
     assert wj[0]["ratio"] < 0.5                             # the free jet: too little shift
     assert 0.5 <= hov[0]["ratio"] <= 2.0
     assert hov[0]["peak_model_m"] == hov[0]["peak_measured_m"] == 1.0
+
+
+def test_wind_tunnel_cli_runs_the_hover_law(tmp_path):
+    from ag_uav.cli import main
+
+    rc = main(["experiment", "wind-tunnel", "--law", "hover", "--winds", "4.5", "--nozzles",
+               "medium", "--out", str(tmp_path)])
+    assert rc == 0
+    md = (tmp_path / "wind_tunnel.md").read_text()
+    assert "1 of 1" in md and "+1 m, +1 m" in md          # within 2 x; the peak as measured

@@ -21,6 +21,15 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
            ("wall_jet_growth", 0.0, 1.0), ("impingement_diameters", 0.0, 10.0))
 
 
+#: the hover law's options (off by default): the merged jet, the impaction cut, the outwash as a
+#: radial wall jet, the impinging jet's stagnation zone, and the escape share from the one
+#: calibration on the wind tunnel's 2 L rows (docs/spray_deposition.md, "A hover law")
+HOVER_LAW = {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24, "wall_jet_growth": 0.098,
+             "impingement_diameters": 1.2, "wake_escape": 0.6}
+#: the laws ``--law`` selects in the experiments
+LAWS = {"default": {}, "hover": HOVER_LAW}
+
+
 @dataclass(frozen=True)
 class DepositionConfig:
     """Deposition parameters (defaults: the M350-class quad, the ``m350`` vehicle preset, one nozzle
