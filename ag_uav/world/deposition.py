@@ -148,6 +148,7 @@ from .deposition_kernels import (
     P_FLUSHD,
     P_FLUSHT,
     P_HEADER,
+    P_HI,
     P_INVL,
     P_IW,
     P_K,
@@ -181,6 +182,7 @@ from .deposition_kernels import (
     P_TAU,
     P_TMAX,
     P_VMIN,
+    P_WJ,
     P_X0,
     P_Y0,
     P_Z0,
@@ -290,7 +292,9 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
                    else 1e30),
             P_BD0: c.jet_decay_b * math.sqrt(c.n_rotors) * c.rotor_diameter_m / math.sqrt(2.0),
             P_RJ: 0.5 * math.sqrt(c.n_rotors) * c.rotor_diameter_m,
-            P_ST50: c.outwash_impaction_st50, P_INVL: c.obukhov_inv_m}
+            P_ST50: c.outwash_impaction_st50, P_INVL: c.obukhov_inv_m,
+            P_WJ: c.wall_jet_growth,
+            P_HI: c.impingement_diameters * math.sqrt(c.n_rotors / 2.0) * c.rotor_diameter_m}
     for k, v in head.items():
         par[k] = v
     o = P_HEADER

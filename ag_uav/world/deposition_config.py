@@ -17,7 +17,17 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
            ("wake_escape", 0.0, 1.0), ("shear_eddy_m", 1e-3, 10.0),
            ("airborne_after_s", 1.0, 1e5), ("n_classes", 1, 40),
            ("outwash_impaction_st50", 0.0, 10.0), ("jet_merge_lengths", 0.0, 100.0),
-           ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0))
+           ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0),
+           ("wall_jet_growth", 0.0, 1.0), ("impingement_diameters", 0.0, 10.0))
+
+
+#: the hover law's options (off by default): the merged jet, the impaction cut, the outwash as a
+#: radial wall jet, the impinging jet's stagnation zone, and the escape share from the one
+#: calibration on the wind tunnel's 2 L rows (docs/spray_deposition.md, "A hover law")
+HOVER_LAW = {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24, "wall_jet_growth": 0.098,
+             "impingement_diameters": 1.2, "wake_escape": 0.6}
+#: the laws ``--law`` selects in the experiments
+LAWS = {"default": {}, "hover": HOVER_LAW}
 
 
 @dataclass(frozen=True)
@@ -52,6 +62,10 @@ class DepositionConfig:
     wake_turbulence: float = 0.25
     outwash_layer_m: float = 0.17
     outwash_impaction_st50: float = 0.0           # > 0 (0.24): what impacts skips the outwash
+    wall_jet_growth: float = 0.0                  # > 0 (0.098): the outwash a radial wall jet,
+                                                  # δ = β r (Poreh et al.); 0: the layer δ
+    impingement_diameters: float = 0.0            # > 0 (1.2): the jet stagnates over that many
+                                                  # merged-jet diameters above the ground
     release_sigma_m: float = 0.1
     ambient_sigma_mps: float = 0.0
     temperature_c: float = 20.0                   # air temperature (°C)

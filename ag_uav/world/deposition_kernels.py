@@ -48,8 +48,9 @@ INPUT_WIDTH = 20
 (P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF, P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0, P_ROTZ, P_IW,
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
  P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
- P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL) = range(47)
-P_HEADER = 48
+ P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL,
+ P_WJ, P_HI) = range(49)
+P_HEADER = 49
 # state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
 # sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
 (S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
@@ -360,13 +361,57 @@ def _environment(par, inp):
     # the rotors' jets and the merged jet (ag_uav.world.wake); lengths along the skewed axis
     z0w = par[P_S0] * cos_chi
     zmw, bdw = par[P_SM] * cos_chi, par[P_BD0] * cos_chi
-    u_g = centreline_speed(a, z0w, zmw, bdw, s_g)
+    # the free jet's speed at the ground, or (option) at the top of the impingement region
+    u_g = centreline_speed(a, z0w, zmw, bdw, max(s_g - par[P_HI], 0.0))
     # surface layer (Monin–Obukhov; neutral: the log law): u* from the wind at the vehicle's
     # height, f_u the mean of u(z) over the layer below the nozzle as a share of it
     w = math.sqrt(wx * wx + wy * wy)
     ust, fu = layer_wind(w, pz, zn, par[P_Z0], par[P_INVL])
     return (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, zn, fu,
             par[P_IW] * 2.0 * vi, zmw, bdw)
+
+
+@njit(cache=True, inline="always")
+def impinging_fall_time(vt: float, a: float, s_r: float, s_m: float, bd0: float, s1: float,
+                        s2: float, h_i: float) -> float:
+    """Fall time from depth s1 to the ground at s2 through a jet that impinges on it: the free
+    jet (:func:`fall_time`) down to the impingement region's top s_i = s2 − h_i, then the
+    region's stagnation flow, whose downward speed falls linearly from the free jet's u_i to 0 at
+    the ground (w = u_i z / h over the region's height h = s2 − max(s_i, s1) above it), so
+    dz/dt = −(v_t + u_i z / h), so t = (h / u_i) ln(1 + u_i / v_t) from z = h (a nozzle inside
+    the region: u_i scaled by h / h_i). The region's height h_i ≈ 1.2 jet diameters
+    (the deflection zone of an impinging round jet: Zuckerman & Lior 2006, Adv. Heat Transfer
+    39:565, after Viskanta 1993)."""
+    si = s2 - h_i
+    t = 0.0
+    if si > s1:
+        t = fall_time(vt, a, s_r, s_m, bd0, s1, si)
+    else:
+        si = s1
+    h = s2 - si
+    ui = centreline_speed(a, s_r, s_m, bd0, max(s2 - h_i, 0.0)) * h / h_i
+    if ui <= 1e-9:
+        return t + h / vt
+    return t + h / ui * math.log1p(ui / vt)
+
+
+@njit(cache=True, inline="always")
+def wall_jet(beta: float, r_j: float, st50: float, tp: float, vt: float, u_g: float
+             ) -> tuple[float, float, float]:
+    """The radial wall jet of the impinging jet (Glauert 1956; Poreh, Tsuei & Cermak 1967):
+    thickness δ(r) = β r (β ≈ 0.098, the half-velocity thickness's growth), speed u_g r_j / r
+    beyond the impingement radius r_j (the merged jet's, √n D / 2). A droplet that
+    turns with it (share St₅₀² / (St_g² + St₅₀²), St_g = τ_p u_g / r_j, Marple & Liu 1974)
+    settles through the layer δ_j = β r_j in t_s = δ_j / v_t while riding dr/dt = u_g r_j / r,
+    so it travels r_s = √(r_j² + 2 u_g r_j t_s) − r_j; its ring projected on a line has the
+    variance r_s²/2. Returns (ride share, δ_j, variance)."""
+    ride = 1.0
+    if st50 > 0.0:
+        st_g = tp * u_g / r_j
+        ride = st50 * st50 / (st_g * st_g + st50 * st50)
+    dj = beta * r_j
+    rs = math.sqrt(r_j * r_j + 2.0 * u_g * r_j * dj / vt) - r_j
+    return ride, dj, 0.5 * rs * rs
 
 
 @njit(cache=True)
@@ -381,6 +426,8 @@ def _class_footprint(par, k: int, env):
     sig0 = par[P_SIG0]
     # wake: carried down the decaying skewed jet
     tf = fall_time(vt, a, z0w, zmw, bdw, s_n, s_g) if s_g > s_n else 0.0
+    if par[P_HI] > 0.0 and s_g > s_n:
+        tf = impinging_fall_time(vt, a, z0w, zmw, bdw, s_n, s_g, par[P_HI])
     dw = max((s_g - s_n) - vt * tf, 0.0)
     relax = tp * (1.0 - math.exp(-tf / tp))
     wxo = wx * tf + tx * dw + (vx - wx) * relax
@@ -394,17 +441,22 @@ def _class_footprint(par, k: int, env):
     st50 = par[P_ST50]
     ride = 1.0
     lvar = 0.0
-    if st50 > 0.0:
+    delta = par[P_DELTA]
+    ovar = (delta * u_g / vt) ** 2
+    if par[P_WJ] > 0.0:
+        ride, delta, ovar = wall_jet(par[P_WJ], par[P_RJ], st50, tp, vt, u_g)
+    elif st50 > 0.0:
         st_g = tp * u_g / par[P_RJ]
         ride = st50 * st50 / (st_g * st_g + st50 * st50)
+    if st50 > 0.0 or par[P_WJ] > 0.0:
         w = math.sqrt(wx * wx + wy * wy)
         z0 = par[P_Z0]
-        if w > 0.0 and par[P_DELTA] > z0:
-            sh = par[P_DELTA] / vt * ust / KAPPA * math.log(par[P_DELTA] / z0) / w
+        if w > 0.0 and delta > z0:
+            sh = delta / vt * ust / KAPPA * math.log(delta / z0) / w
             wxo += ride * sh * wx
             wyo += ride * sh * wy
             lvar = ride * (1.0 - ride) * sh * sh * w * w
-    wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * (par[P_DELTA] * u_g / vt) ** 2
+    wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * ovar
             + (par[P_SIGA] * tf) ** 2 + lvar)
     wland = _tab_left(par, k, tf)
     # escape at the wake's edge: ε₀ sin χ, damped by the droplet's response 1/(1 + St)

@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 from ...world.deposition import DepositionConfig
+from ...world.deposition_config import LAWS
 from ...world.pattern import (  # noqa: F401 - the pattern test lives in the world stage
     CV_LIMIT,
     cv_vs_spacing,
@@ -67,6 +68,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--winds", default="0,1.5,3", help="crosswinds (m/s)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a DepositionConfig field (e.g. outwash_layer_m=0.2)")
+    p.add_argument("--law", default="default", choices=sorted(LAWS),
+                   help="the deposition law: default (the outwash layer calibrated on the T40) "
+                        "or hover (the options checked on the wind tunnel); --set overrides it")
     p.add_argument("--mass", type=float, default=6.47, help="vehicle mass (kg); hover thrust")
     p.add_argument("--turbulence", type=float, default=0.2,
                    help="ambient turbulence sigma as a share of the crosswind")
@@ -83,7 +87,7 @@ def main(args: argparse.Namespace) -> int:
         raise ConfigError(f"--turbulence = {args.turbulence:g}: must be >= 0 (a share of the "
                           "crosswind)")
     try:
-        cfg = DepositionConfig(**toml_overrides(args.set))
+        cfg = DepositionConfig(**{**LAWS[args.law], **toml_overrides(args.set)})
     except (ValueError, TypeError) as e:
         raise ConfigError(f"--set: {e}") from None
     t0 = time.perf_counter()

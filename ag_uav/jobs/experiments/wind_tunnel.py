@@ -32,6 +32,11 @@ verified), the nozzle height above the slides
 the tunnel width (``--tunnel-width``, 4.2 m: the anemometers stand 0.99, 2.1 and 3.3 m across)
 and the vehicle's drag. ``--height`` and ``--tunnel-width`` show their effect.
 
+``--law hover`` runs the hover law (:data:`ag_uav.world.deposition_config.HOVER_LAW`: the merged
+jet, the impaction cut, the outwash as a radial wall jet, the impinging jet's stagnation zone,
+and the escape share ε₀ = 0.6 from one calibration on the 2 L rows); the default law is the
+product's.
+
 Writes into ``--out`` (``runs/experiment-wind-tunnel``): ``wind_tunnel.csv`` (one row per
 condition and position: wind m/s, nozzle, payload L, distance m, measured and model deposit, both
 normalised), ``wind_tunnel.png`` (the profiles: model line, measured replicates as points) and
@@ -52,6 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from ...world.deposition import DepositionConfig, footprints, pack_input
+from ...world.deposition_config import LAWS
 from ...world.pattern import pass_states
 from . import name_axis, number_axis, toml_overrides
 
@@ -302,6 +308,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="nozzle height above the slides (m; assumed)")
     p.add_argument("--tunnel-width", type=float, default=t.tunnel_width_m,
                    help="tunnel width (m; assumed); 0: no side walls")
+    p.add_argument("--law", default="default", choices=sorted(LAWS),
+                   help="the deposition law: default (the outwash layer calibrated on the T40) "
+                        "or hover (the wall jet and the impinging jet; ε₀ from these rows)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a DepositionConfig field (e.g. wake_escape=0.6)")
     p.add_argument("--out", default="runs/experiment-wind-tunnel", metavar="DIR",
@@ -362,7 +371,7 @@ def main(args: argparse.Namespace) -> int:
         bad_keys = [k for k in over if k not in DepositionConfig.__dataclass_fields__]
         if bad_keys:
             raise ValueError(f"--set {bad_keys[0]}: not a DepositionConfig field")
-        base = DepositionConfig(**over)
+        base = DepositionConfig(**{**LAWS[args.law], **over})
         nozzles = None if args.nozzles is None else name_axis("--nozzles", args.nozzles, NOZZLES)
         if not 0.3 <= args.height <= 10.0:
             raise ValueError(f"--height {args.height:g}: must be within [0.3, 10] m")
