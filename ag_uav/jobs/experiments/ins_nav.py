@@ -20,6 +20,9 @@
   fitted on real u-blox M8P logs) with R from the receiver's report and from the generator
   (``--r-sources``): NEES/NIS per dimension, RMSE, crashes, each rule paired against the KF,
   and reported − truth paired per rule;
+* ``replay``: the four rules on recorded flights (``--logs``; the GNSS built from their
+  reference per seed with ``--gnss-from-reference``): per rule the median position and tilt
+  RMS and position NIS, and the paired difference to the KF of the same run;
 * ``sweep``: the MCKF kernel in the loop, false fixes on (30 per hour of RTK fixed unless
   ``--set`` says otherwise): the fixed kernel at each σ of ``--sigmas`` (``inf``: every weight
   1, the KF), then each variant of ``--kernels`` (``estimator.mckf_kernel``) at σ = 2; per
@@ -46,7 +49,11 @@ RULES = ("pca-mckf", "kf", "mckf", "pca-kf")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--what", choices=("recovery", "consistency", "outage", "falsefix", "sweep",
-                                      "rules"), required=True)
+                                      "rules", "replay"), required=True)
+    p.add_argument("--logs", default="", help="replay: recorded flights (comma-separated: a "
+                   "Phantom 4 RTK path folder, a ULog, a DataFlash log, a CSV folder)")
+    p.add_argument("--gnss-from-reference", default=None, metavar="PRESET",
+                   help="replay: GNSS built from the reference with this preset, per seed")
     p.add_argument("--presets", default="m8p-rtk-static,m8p-standalone",
                    help="rules: the GNSS presets (comma-separated)")
     p.add_argument("--r-sources", default="reported,truth",
@@ -224,6 +231,74 @@ def rules(args: argparse.Namespace) -> list[dict[str, Any]]:
             _print_sources(preset, sources, rows)
     _print_verdict(rows)
     return rows
+
+
+#: the replay comparison's scores: (summary key, label, scale to the printed unit, unit)
+REPLAY_KEYS = (("pos_h_rms_m", "pos h RMS", 1e3, "mm"), ("tilt_rms_deg", "tilt RMS", 1.0, "°"),
+               ("nis_pos_mean", "NIS pos", 1.0, ""))
+
+
+def replay_rules(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """The four rules on recorded flights (``--logs``, :mod:`ag_uav.navigation.replay`, the
+    very bank ``ag-uav replay`` runs): with ``--gnss-from-reference PRESET`` each log once per
+    seed (``--runs`` from ``--seed0``), else once with the log's own GNSS. Per log and seed
+    each rule's horizontal position RMS, tilt RMS, position NIS and gate counts (against the
+    reference, else the autopilot's estimate); then per rule its median over the runs and its
+    difference to the KF of the same run, paired (mean ± 95 % CI, runs where it is lower)."""
+    from ...navigation.replay import ReplayOptions, read_log, run_replay, score_replay
+
+    logs = [x for x in args.logs.split(",") if x.strip()]
+    if not logs:
+        from ...config import ConfigError
+        raise ConfigError("--logs: give the flights to replay (comma-separated paths)")
+    seeds = (list(range(args.seed0, args.seed0 + args.runs)) if args.gnss_from_reference
+             else [None])
+    rows: list[dict[str, Any]] = []
+    for path in logs:
+        for seed in seeds:
+            log = read_log(path)
+            res = run_replay(log, ReplayOptions(gnss_from_reference=args.gnss_from_reference,
+                                                seed=seed or 0))
+            sc = score_replay(res)
+            for rule, e in sc["estimators"].items():
+                rows.append({"log": path, "seed": seed, "rule": rule, "against": sc["against"],
+                             **{k: e.get(k) for k, *_ in REPLAY_KEYS},
+                             **{k: e.get(k) for k in ("gate_rejected", "gate_latched",
+                                                      "gate_resets")}})
+            kf = next(x for x in rows[-len(sc["estimators"]):] if x["rule"] == "kf")
+            print(f"{Path(path).name} seed {seed}: " + "; ".join(
+                f"{x['rule']} {x['pos_h_rms_m']} m, tilt {x['tilt_rms_deg']}°, NIS "
+                f"{x['nis_pos_mean']}, rejected {x['gate_rejected']}"
+                for x in rows[-len(sc["estimators"]):]) + f" (vs {kf['against']})", flush=True)
+    _print_replay_verdict(rows)
+    return rows
+
+
+def _print_replay_verdict(rows: list[dict[str, Any]]) -> None:
+    """Per rule: the median of each score over the runs, and its difference to the KF of the
+    same run (mean ± 95 % CI; the runs where it is lower)."""
+    import numpy as np
+
+    runs = sorted({(x["log"], x["seed"]) for x in rows}, key=str)
+    by = {(x["log"], x["seed"], x["rule"]): x for x in rows}
+    print(f"-- {len(runs)} runs ({len({r[0] for r in runs})} logs)")
+    for rule in RULES:
+        parts = []
+        for key, label, sc, unit in REPLAY_KEYS:
+            v = [by[(lg, sd, rule)][key] for lg, sd in runs if (lg, sd, rule) in by
+                 and by[(lg, sd, rule)][key] is not None]
+            if not v:
+                continue
+            part = f"{label} median {np.median(v) * sc:.3g} {unit}"
+            d = [sc * (by[(lg, sd, rule)][key] - by[(lg, sd, "kf")][key]) for lg, sd in runs
+                 if (lg, sd, rule) in by and (lg, sd, "kf") in by
+                 and by[(lg, sd, rule)][key] is not None
+                 and by[(lg, sd, "kf")][key] is not None]
+            if rule != "kf" and d:
+                part += (f", − kf {_ci(d)} {unit} (median {np.median(d):.3g}; "
+                         f"{sum(x < 0 for x in d)} of {len(d)} lower)")
+            parts.append(part)
+        print(f"{rule}: " + "; ".join(parts), flush=True)
 
 
 def _print_sources(preset: str, sources: list[str], rows: list[dict[str, Any]]) -> None:
@@ -454,7 +529,8 @@ def main(args: argparse.Namespace) -> int:
     from . import write_csv
 
     rows = {"recovery": recovery, "consistency": consistency, "outage": outage,
-            "falsefix": falsefix, "sweep": sweep, "rules": rules}[args.what](args)
+            "falsefix": falsefix, "sweep": sweep, "rules": rules,
+            "replay": replay_rules}[args.what](args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / f"{args.what}.csv", rows)
