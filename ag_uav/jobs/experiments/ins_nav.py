@@ -234,8 +234,9 @@ def rules(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 
 #: the replay comparison's scores: (summary key, label, scale to the printed unit, unit)
-REPLAY_KEYS = (("pos_h_rms_m", "pos h RMS", 1e3, "mm"), ("tilt_rms_deg", "tilt RMS", 1.0, "°"),
-               ("nis_pos_mean", "NIS pos", 1.0, ""))
+REPLAY_KEYS = (("pos_h_rms_m", "pos h RMS", 1e3, "mm"),
+               ("pos_h_rms_with_fixes_m", "with fixes", 1e3, "mm"),
+               ("tilt_rms_deg", "tilt RMS", 1.0, "°"), ("nis_pos_mean", "NIS pos", 1.0, ""))
 
 
 def replay_rules(args: argparse.Namespace) -> list[dict[str, Any]]:
