@@ -35,8 +35,9 @@ def _rows(fb: InsFeedback, reports: list[tuple[str, float]]) -> list[list[float]
 
 
 def test_default_r_is_the_reported_accuracy_and_grows_with_it():
-    """A fix reported with twice the accuracy figure gets 4× the R (above the 1 cm floor); a reported DGPS fix a
-    larger R than an RTK-fixed one; R = (1 − share) × the reported variance (hAcc² / vAcc²)."""
+    """A fix reported with twice the accuracy figure gets 4× the R (above the 1 cm floor); a
+    reported DGPS fix a larger R than an RTK-fixed one; R = (1 − share) × the reported
+    variance (hAcc² / vAcc²)."""
     cfg = _cfg()
     assert cfg.estimator.ins_r_source == "reported"
     fb = InsFeedback(cfg, seed_sequences(0))

@@ -246,20 +246,23 @@ def replay_rules(args: argparse.Namespace) -> list[dict[str, Any]]:
     each rule's horizontal position RMS, tilt RMS, position NIS and gate counts (against the
     reference, else the autopilot's estimate); then per rule its median over the runs and its
     difference to the KF of the same run, paired (mean ± 95 % CI, runs where it is lower)."""
+    from ...config import ConfigError
     from ...navigation.replay import ReplayOptions, read_log, run_replay, score_replay
+    from ...navigation.replay.data import ReplayError
 
     logs = [x for x in args.logs.split(",") if x.strip()]
     if not logs:
-        from ...config import ConfigError
         raise ConfigError("--logs: give the flights to replay (comma-separated paths)")
     seeds = (list(range(args.seed0, args.seed0 + args.runs)) if args.gnss_from_reference
              else [None])
     rows: list[dict[str, Any]] = []
     for path in logs:
         for seed in seeds:
-            log = read_log(path)
-            res = run_replay(log, ReplayOptions(gnss_from_reference=args.gnss_from_reference,
-                                                seed=seed or 0))
+            try:
+                res = run_replay(read_log(path), ReplayOptions(
+                    gnss_from_reference=args.gnss_from_reference, seed=seed or 0))
+            except ReplayError as e:
+                raise ConfigError(f"--logs: {e}") from None
             sc = score_replay(res)
             for rule, e in sc["estimators"].items():
                 rows.append({"log": path, "seed": seed, "rule": rule, "against": sc["against"],
