@@ -247,7 +247,7 @@ def test_consider_never_fuses_a_fix_as_exact():
     R keeps R_WHITE_FLOOR (R = 0 made the position block singular and the gate divide by zero),
     the rest is considered; the default receiver's R is its floored whole less the Gauss–Markov
     part, above that floor."""
-    from ag_uav.navigation.ins_feedback import R_FLOOR, R_WHITE_FLOOR
+    from ag_uav.navigation.receiver import R_FLOOR, R_WHITE_FLOOR
     from ag_uav.seeds import seed_sequences
 
     gm = _cfg(gps__preset="perfect", gps__overrides={"components": [

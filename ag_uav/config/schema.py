@@ -464,6 +464,22 @@ class EstimatorConfig:
                               choices=("white", "inflate", "consider"))
     ins_gnss_window_s: float = _f(2.0, "nav = ins, ins_gnss_colour = inflate: the filter's "
                                   "averaging window (s) for the R inflation", gt=0, le=600)
+    ins_r_source: str = _f("reported", "nav = ins: where the GNSS position R comes from: "
+                           "reported = the receiver's reported accuracy (hAcc / vAcc, with "
+                           "the honest receiver's calibration error), split by the configured "
+                           "ins_gnss_gm_share / ins_gnss_gm_tau_s; truth = the error "
+                           "generator's own white and Gauss-Markov variances (a filter that "
+                           "knows the noise; measured against each other in docs/ins.md)",
+                           choices=("reported", "truth"))
+    ins_gnss_gm_share: float = _f(0.5, "nav = ins, ins_r_source = reported: the share of the "
+                                  "reported variance taken as Gauss-Markov (considered or "
+                                  "inflated by ins_gnss_colour); engineering judgement: the "
+                                  "fitted u-blox M8P logs are 0.96-1.0, the illustrative "
+                                  "presets 0.36-0.94 (docs/ins.md)", ge=0, le=1)
+    ins_gnss_gm_tau_s: float = _f(30.0, "nav = ins, ins_r_source = reported, ins_gnss_colour "
+                                  "= inflate: the Gauss-Markov part's correlation time (s) "
+                                  "(engineering judgement: RTK multipath, tens of seconds)",
+                                  gt=0, le=1e5)
     ins_q_accel: float = _f(2.0, "nav = ins: the filter's accelerometer white-noise variance "
                             "(incl. vibration) is [imu]'s times this margin (an autopilot's "
                             "noise parameters exceed the data sheet's: vibration, coning, model "

@@ -33,12 +33,18 @@ turn-on bias figures (``[imu]``). Before the first fix the output is the radar h
 velocity and the levelled attitude (on the skids the engine holds the horizontal part at the
 reference).
 
-**R.** Position: ``max(r_scale · variance, (1 cm)²)`` of the *reported* fix type
-(``gps.r_from_fix_type``; with ``gps.receiver = "honest"`` the reported type lags and its
-accuracy carries the per-episode calibration error), else the preset's nominal variance;
-the variance's Gauss–Markov part is inflated by `receiver.colour_factor` for the window
-``estimator.ins_gnss_window_s`` (0, the default: fused as white); velocity
-``gps.velocity_sigma_mps²``, heading ``gps.heading_sigma_deg²``, radar ``gps.radar_sigma_m²``.
+**R.** Position (``estimator.ins_r_source``): ``"reported"`` (the default) from the
+receiver's reported accuracy, as a real filter gets it: hAcc² on both horizontal axes, vAcc²
+on the height (:func:`~.receiver.reported_acc`: the reported type's variance times the honest
+receiver's calibration error ``s²``, one draw per reported-type episode, or per run on presets
+without fix types), floored at (1 cm)², its configured Gauss–Markov share
+(``estimator.ins_gnss_gm_share``, τ ``estimator.ins_gnss_gm_tau_s``) considered or inflated
+per ``estimator.ins_gnss_colour`` (:func:`~.receiver.reported_r`); ``"truth"``:
+``max(r_scale · variance, (1 cm)²)`` of the error generator's white and Gauss–Markov parts
+for the reported type (``gps.r_from_fix_type``; else the preset's nominal), times ``s²``,
+the Gauss–Markov part considered or inflated by `receiver.colour_factor` over
+``estimator.ins_gnss_window_s``; velocity ``gps.velocity_sigma_mps²``, heading
+``gps.heading_sigma_deg²``, radar ``gps.radar_sigma_m²``.
 
 **Gate** (PX4 EKF2's innovation test, common to the four rules: ``estimator.ins_gate_sigma``,
 ``estimator.ins_gate_reset_s``; :func:`estimators.ins.gate_ratio`): every fix's position,
@@ -122,13 +128,9 @@ from .ins_kernels import (
     tick_in,
 )
 from .nees_stats import chi2_band, effective_n, finite_mean, finite_rms_max
-from .receiver import fix_variance
+from .receiver import colour_factor, reported_acc, reported_r, truth_r
 
 _chi2_band, _mean = chi2_band, finite_mean   # the scores' statistics (nees_stats)
-R_FLOOR = 1e-4
-#: the least variance (m², (5 mm)²) a "consider" fix is fused with: a receiver whose error is
-#: all Gauss–Markov leaves no white part, and R = 0 would make the position block singular
-R_WHITE_FLOOR = 2.5e-5
 #: the variance (m², σ = 1 km) that keeps a fix's height out of the update under range aid
 NOT_FUSED_VAR = 1e6
 DEG = math.pi / 180.0
@@ -215,17 +217,7 @@ class InsFeedback(Feedback):
         self.age_s = self.D * self.dt   # every fix's age (s): the latency in whole ticks
         self.radar = g.altitude_source == "radar"
         self.radar_rng = np.random.default_rng(seeds["altimeter"])
-        # R and the considered variance per reported fix type (module docstring, "R")
-        self.colour = e.ins_gnss_colour
-        self.n_window = max(1, int(round(e.ins_gnss_window_s * self.gps.rate_hz)))
-        self.var_nominal = self._r(None)
-        self.var_by_type = ({m: self._r(m) for m in self.gps.fix_types}
-                            if g.r_from_fix_type else {})
-        # the same as Python floats for fix() (R per reported type)
-        self._var_nominal_list = self.var_nominal[0].tolist()
-        self._var_lists = {m: vp.tolist() for m, (vp, _) in self.var_by_type.items()}
-        self._cv_nominal_list = self.var_nominal[1].tolist()
-        self._cv_lists = {m: cv.tolist() for m, (_, cv) in self.var_by_type.items()}
+        self._setup_r(cfg, spare)   # R and the considered variance (module docstring, "R")
         #: the Gauss-Markov variance (3 floats) of the last fix (consider: the position
         #: covariance the INS reports is its P plus this; zero otherwise)
         self.cvar = [0.0, 0.0, 0.0]
@@ -255,6 +247,36 @@ class InsFeedback(Feedback):
         self.rec: dict[str, Any] = {}
         self.att: dict[str, float] = {}
 
+    def _setup_r(self, cfg: Config, spare: np.random.SeedSequence) -> None:
+        """R and the considered variance per reported fix type, from the generator
+        (``"truth"``) and from the receiver's report (``"reported"``; module docstring,
+        "R")."""
+        e, g = cfg.estimator, cfg.gps
+        self.colour = e.ins_gnss_colour
+        self.n_window = max(1, int(round(e.ins_gnss_window_s * self.gps.rate_hz)))
+        self.var_nominal = truth_r(self.gps, None, self.colour, self.n_window, e.r_scale)
+        self.var_by_type = ({m: truth_r(self.gps, m, self.colour, self.n_window, e.r_scale)
+                             for m in self.gps.fix_types}
+                            if g.r_from_fix_type else {})
+        # the same as Python floats for fix() (R per reported type)
+        self._var_nominal_list = self.var_nominal[0].tolist()
+        self._var_lists = {m: vp.tolist() for m, (vp, _) in self.var_by_type.items()}
+        self._cv_nominal_list = self.var_nominal[1].tolist()
+        self._cv_lists = {m: cv.tolist() for m, (_, cv) in self.var_by_type.items()}
+        #: ins_r_source = "reported": the receiver's report per type (a finite spread for
+        #: alpha-stable), the configured split, and on presets without fix types one
+        #: calibration error per run (as ReceiverReport draws one per reported-type episode)
+        self.r_reported = e.ins_r_source == "reported"
+        self._acc = {m: list(self.gps.spread_variance(m))
+                     for m in (None, *(self.gps.fix_types if g.r_from_fix_type else ()))}
+        rho = math.exp(-1.0 / (self.gps.rate_hz * e.ins_gnss_gm_tau_s))
+        self._r_args = (self.colour, e.ins_gnss_gm_share, colour_factor(rho, self.n_window),
+                        e.r_scale)
+        self.scale0 = 1.0
+        if self.r_reported and g.receiver == "honest" and self.report is None:
+            cal = np.random.default_rng(derive_seed(spare, "accuracy")).standard_normal()
+            self.scale0 = math.exp(g.accuracy_calibration_sigma * cal)
+
     def fix(self, t: float, p_ant, v_ant, yaw: float) -> list[float] | None:
         """The receiver's fix of this tick from the delayed antenna truth (position, velocity,
         heading), as one :meth:`BatchINS.gnss_row` (a list of 15; None: no fix due, or lost).
@@ -274,41 +296,30 @@ class InsFeedback(Feedback):
                 self.last_false = bool(bias.any())
             else:   # the bias is zero (added, as it always was: -0.0 becomes 0.0)
                 zx, zy, zz = zx + 0.0, zy + 0.0, zz + 0.0
-        vp = self._var_lists.get(rep, self._var_nominal_list)
-        if self.colour == "consider":   # else the considered variance stays zero
-            cv, s2 = self._cv_lists.get(rep, self._cv_nominal_list), scale * scale
-            self.cvar = [cv[0] * s2, cv[1] * s2, cv[2] * s2]
+        s2, rs = scale * scale, scale
+        if self.r_reported:   # module docstring, "R"
+            vp, cv = reported_r(reported_acc(self._acc.get(rep, self._acc[None]),
+                                             s2 * self.scale0 * self.scale0), *self._r_args)
+            rs = 1.0
+            if self.colour == "consider":
+                self.cvar = cv
+        else:
+            vp = self._var_lists.get(rep, self._var_nominal_list)
+            if self.colour == "consider":   # else the considered variance stays zero
+                cv = self._cv_lists.get(rep, self._cv_nominal_list)
+                self.cvar = [cv[0] * s2, cv[1] * s2, cv[2] * s2]
         n = self._aux4()
         sv = self.sig_v
         self.fixes += 1
         if self.log is not None:  # the reported type and its variance (times the calibration)
-            v, s2 = self.gps.reported_variance(rep), scale * scale
-            self.log.gps(t, np.array((zx, zy, zz)), (v[0] * s2, v[1] * s2, v[2] * s2), rep,
+            v, c2 = self.gps.reported_variance(rep), scale * scale * self.scale0 ** 2
+            self.log.gps(t, np.array((zx, zy, zz)), (v[0] * c2, v[1] * c2, v[2] * c2), rep,
                          t_meas=t - self.age_s, truth=p_ant)  # the antenna, age_s ago
         vv = self.var_v
         return [self.age_s, zx, zy, zz,
                 v_ant[0] + sv * n[0], v_ant[1] + sv * n[1], v_ant[2] + sv * n[2],
-                yaw + self.sig_yaw * n[3],
-                vp[0] * scale * scale, vp[1] * scale * scale, vp[2] * scale * scale,
+                yaw + self.sig_yaw * n[3], vp[0] * rs * rs, vp[1] * rs * rs, vp[2] * rs * rs,
                 vv, vv, vv, self.var_yaw]
-
-    def _r(self, mode: str | None) -> tuple[np.ndarray, np.ndarray]:
-        """(R, considered variance) per axis of a fix of type ``mode`` (None: the preset's
-        nominal): "white" R = the whole variance; "inflate" its Gauss–Markov part times
-        `receiver.colour_factor` over the window; "consider" R = the floored whole less the
-        Gauss–Markov part, which is considered (added to the position covariance the INS
-        reports, not estimated: Schmidt's consider covariance without its cross terms)."""
-        r_scale = self.cfg.estimator.r_scale
-        white, gm = fix_variance(self.gps, mode, 1)
-        if self.colour == "white":
-            return np.maximum(r_scale * (white + gm), R_FLOOR), np.zeros(3)
-        if self.colour == "inflate":
-            wi, gi = fix_variance(self.gps, mode, self.n_window)
-            return np.maximum(r_scale * (wi + gi), R_FLOOR), np.zeros(3)
-        # the floor applies to the whole reported variance (as EKF2's to hAcc); the considered
-        # part comes off after it, and what is fused keeps R_WHITE_FLOOR
-        tot = np.maximum(r_scale * (white + gm), R_FLOOR)
-        return np.maximum(tot - r_scale * gm, R_WHITE_FLOOR), r_scale * gm
 
     def _aux4(self) -> list[float]:
         """The next four standard normals of the receiver's auxiliary stream (velocity noise,

@@ -101,3 +101,59 @@ def fix_variance(gps: Any, mode: str | None, n: int) -> tuple[np.ndarray, np.nda
             v[1, ax] += scale[ax] ** 2 * var * colour_factor(rho, n)
     v *= np.asarray(gps.axis_scale, dtype=float) ** 2
     return v[0], v[1]
+
+
+#: the least variance (m², (1 cm)²) of a fix's whole reported variance (as EKF2 floors hAcc)
+R_FLOOR = 1e-4
+#: the least variance (m², (5 mm)²) a "consider" fix is fused with: a receiver whose error is
+#: all Gauss–Markov leaves no white part, and R = 0 would make the position block singular
+R_WHITE_FLOOR = 2.5e-5
+
+
+def reported_acc(var: tuple[float, float, float] | list[float], s2: float) -> list[float]:
+    """The per-axis variance (east, north, up; m²) of a receiver's report ``(hAcc, vAcc)``:
+    hAcc² = s² (σ_x² + σ_y²)/2 on both horizontal axes and vAcc² = s² σ_z², ``var`` the fix
+    type's per-axis variance and ``s`` the receiver's calibration error
+    (:class:`~ag_uav.vehicle.gps.ReceiverReport`): one horizontal and one vertical figure, as
+    u-blox UBX-NAV-PVT ``hAcc``/``vAcc`` and NMEA GST give, and as PX4's EKF2 uses ``eph``
+    for both horizontal axes."""
+    h = 0.5 * (var[0] + var[1]) * s2
+    return [h, h, var[2] * s2]
+
+
+def reported_r(acc: list[float], colour: str, share: float, inflate: float,
+               r_scale: float) -> tuple[list[float], list[float]]:
+    """(R, considered variance) per axis from the receiver's reported variance ``acc``
+    (:func:`reported_acc`), not from the error generator's components:
+    ``V = max(r_scale · acc, R_FLOOR)``; the share ``g`` of ``V`` the configured model takes
+    as Gauss–Markov (``estimator.ins_gnss_gm_share``): "white" R = V; "inflate"
+    R = (1 − g) V + g V · ``inflate`` (:func:`colour_factor` at the model's τ over the
+    filter's window); "consider" R = max(V − g V, R_WHITE_FLOOR), g V considered
+    (Schmidt's consider covariance without its cross terms; Bar-Shalom, Li & Kirubarajan
+    2001, §8.1 for the coloured part)."""
+    v = [max(r_scale * a, R_FLOOR) for a in acc]
+    if colour == "white":
+        return v, [0.0, 0.0, 0.0]
+    if colour == "inflate":
+        return [x * (1.0 - share) + x * share * inflate for x in v], [0.0, 0.0, 0.0]
+    cv = [share * x for x in v]
+    return [max(x - c, R_WHITE_FLOOR) for x, c in zip(v, cv, strict=True)], cv
+
+
+def truth_r(gps: Any, mode: str | None, colour: str, n_window: int,
+            r_scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """(R, considered variance) per axis of a fix of type ``mode`` (None: the preset's
+    nominal) read from the error generator's own components (``estimator.ins_r_source =
+    "truth"``: a filter that knows the noise): "white" R = the whole variance; "inflate" its
+    Gauss–Markov part times :func:`colour_factor` over the window of ``n_window`` fixes;
+    "consider" R = the floored whole less the Gauss–Markov part, which is considered."""
+    white, gm = fix_variance(gps, mode, 1)
+    if colour == "white":
+        return np.maximum(r_scale * (white + gm), R_FLOOR), np.zeros(3)
+    if colour == "inflate":
+        wi, gi = fix_variance(gps, mode, n_window)
+        return np.maximum(r_scale * (wi + gi), R_FLOOR), np.zeros(3)
+    # the floor applies to the whole variance (as EKF2's to hAcc); the considered part comes
+    # off after it, and what is fused keeps R_WHITE_FLOOR
+    tot = np.maximum(r_scale * (white + gm), R_FLOOR)
+    return np.maximum(tot - r_scale * gm, R_WHITE_FLOOR), r_scale * gm

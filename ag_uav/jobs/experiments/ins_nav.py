@@ -16,6 +16,13 @@
   the end of the outage, peak estimate error and peak cross-track inside it;
 * ``falsefix``: the in-loop table with false fixes on: per rule the position error RMS, and the
   paired difference to the KF (mean ± 95 % CI over seeds);
+* ``rules``: the four rules on each GNSS preset of ``--presets`` (default the presets
+  fitted on real u-blox M8P logs) with R from the receiver's report and from the generator
+  (``--r-sources``): NEES/NIS per dimension, RMSE, crashes, each rule paired against the KF,
+  and reported − truth paired per rule;
+* ``replay``: the four rules on recorded flights (``--logs``; the GNSS built from their
+  reference per seed with ``--gnss-from-reference``): per rule the median position and tilt
+  RMS and position NIS, and the paired difference to the KF of the same run;
 * ``sweep``: the MCKF kernel in the loop, false fixes on (30 per hour of RTK fixed unless
   ``--set`` says otherwise): the fixed kernel at each σ of ``--sigmas`` (``inf``: every weight
   1, the KF), then each variant of ``--kernels`` (``estimator.mckf_kernel``) at σ = 2; per
@@ -35,13 +42,22 @@ from typing import Any
 
 NAME = "ins-nav"
 HELP = ("the INS in the loop: MCKF recovery × σ, NEES consistency, a GNSS outage with the "
-        "INS vs the ideal-attitude stand-in, the false-fix in-loop table, the MCKF kernel sweep")
+        "INS vs the ideal-attitude stand-in, the false-fix in-loop table, the MCKF kernel "
+        "sweep, the four rules per GNSS preset and R source")
 RULES = ("pca-mckf", "kf", "mckf", "pca-kf")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--what", choices=("recovery", "consistency", "outage", "falsefix", "sweep"),
-                   required=True)
+    p.add_argument("--what", choices=("recovery", "consistency", "outage", "falsefix", "sweep",
+                                      "rules", "replay"), required=True)
+    p.add_argument("--logs", default="", help="replay: recorded flights (comma-separated: a "
+                   "Phantom 4 RTK path folder, a ULog, a DataFlash log, a CSV folder)")
+    p.add_argument("--gnss-from-reference", default=None, metavar="PRESET",
+                   help="replay: GNSS built from the reference with this preset, per seed")
+    p.add_argument("--presets", default="m8p-rtk-static,m8p-standalone",
+                   help="rules: the GNSS presets (comma-separated)")
+    p.add_argument("--r-sources", default="reported,truth",
+                   help="rules: estimator.ins_r_source values (comma-separated)")
     p.add_argument("--sigmas", default="1,2,4,8,inf", help="sweep: fixed-kernel σ values")
     p.add_argument("--kernels", default="adaptive,multi",
                    help="sweep: estimator.mckf_kernel variants flown at σ = 2")
@@ -156,23 +172,155 @@ def consistency(args: argparse.Namespace) -> list[dict[str, Any]]:
             continue
         res = _fly_seeds(cfg, seeds, over)
         series[name] = [r.extra.get("nav_series") for r in res]
-        for seed, r in zip(seeds, res, strict=True):
-            s = r.summary
-            for rule, e in s["estimators"].items():
-                rows.append({"condition": name, "seed": seed, "rule": rule,
-                             "flown": e["flown"], "crashed": s["crashed"],
-                             "false_fix_fixes": s.get("false_fix_fixes") or 0,
-                             **{k: e.get(k) for k, _ in DIMS},
-                             **{k: e.get(k) for k in ("estimate_rmse_m", "estimate_max_m",
-                                                      "gate_rejected", "gate_resets",
-                                                      "false_fixes_rejected",
-                                                      "false_fix_peak_m")},
-                             "cross_track_rmse_m": s.get("cross_track_rmse_m")})
+        rows += _score_rows(name, seeds, res)
         _print_condition(name, [x for x in rows if x["condition"] == name])
     _print_false_fix([x for x in rows if x["condition"].startswith("false")])
     _print_verdict(rows)
     _plot_nees(series, Path(args.out) / "nees.png")
     return rows
+
+
+def _score_rows(name: str, seeds: list[int], res: list[Any]) -> list[dict[str, Any]]:
+    """One row per seed and rule of a condition's flights: the NEES blocks, NIS, errors and
+    the gate's counts."""
+    rows = []
+    for seed, r in zip(seeds, res, strict=True):
+        s = r.summary
+        for rule, e in s["estimators"].items():
+            rows.append({"condition": name, "seed": seed, "rule": rule,
+                         "flown": e["flown"], "crashed": s["crashed"],
+                         "false_fix_fixes": s.get("false_fix_fixes") or 0,
+                         **{k: e.get(k) for k, _ in DIMS},
+                         **{k: e.get(k) for k in ("estimate_rmse_m", "estimate_max_m",
+                                                  "gate_rejected", "gate_resets",
+                                                  "false_fixes_rejected",
+                                                  "false_fix_peak_m")},
+                         "cross_track_rmse_m": s.get("cross_track_rmse_m")})
+    return rows
+
+
+def rules(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """The four rules on each GNSS preset of ``--presets`` with each R source of
+    ``--r-sources`` (``estimator.ins_r_source``), the same seeds for all: per condition the
+    NEES/NIS per dimension and RMSE (:func:`_print_condition`), the crashes, each rule paired
+    against the KF of the same flights (:func:`_print_verdict`), and per preset each rule's
+    reported − truth difference paired on the seeds (:func:`_print_sources`)."""
+    cfg = _base(args, {})
+    seeds = list(range(args.seed0, args.seed0 + args.runs))
+    presets = [x.strip() for x in args.presets.split(",") if x.strip()]
+    sources = [x.strip() for x in args.r_sources.split(",") if x.strip()]
+    from ...config import ConfigError
+    from ...vehicle.gps import available_presets
+
+    for flag, got, allowed in (("--presets", presets, available_presets()),
+                               ("--r-sources", sources, ["reported", "truth"])):
+        bad = [x for x in got if x not in allowed] if got else ["(none)"]
+        if bad:
+            raise ConfigError(f"{flag} = {', '.join(bad)}: allowed {', '.join(allowed)}")
+    rows: list[dict[str, Any]] = []
+    for preset in presets:
+        for src in sources:
+            name = f"{preset}, R {src}"
+            res = _fly_seeds(cfg, seeds, {"gps.preset": preset, "estimator.ins_r_source": src})
+            new = _score_rows(name, seeds, res)
+            rows += new
+            crashed = [x["seed"] for x in new if x["flown"] and x["crashed"]]
+            _print_condition(name, new)
+            print(f"   crashed: {len(crashed)} of {len(seeds)} {crashed}", flush=True)
+        if len(sources) == 2:
+            _print_sources(preset, sources, rows)
+    _print_verdict(rows)
+    return rows
+
+
+#: the replay comparison's scores: (summary key, label, scale to the printed unit, unit)
+REPLAY_KEYS = (("pos_h_rms_m", "pos h RMS", 1e3, "mm"),
+               ("pos_h_rms_with_fixes_m", "with fixes", 1e3, "mm"),
+               ("tilt_rms_deg", "tilt RMS", 1.0, "°"), ("nis_pos_mean", "NIS pos", 1.0, ""))
+
+
+def replay_rules(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """The four rules on recorded flights (``--logs``, :mod:`ag_uav.navigation.replay`, the
+    very bank ``ag-uav replay`` runs): with ``--gnss-from-reference PRESET`` each log once per
+    seed (``--runs`` from ``--seed0``), else once with the log's own GNSS. Per log and seed
+    each rule's horizontal position RMS, tilt RMS, position NIS and gate counts (against the
+    reference, else the autopilot's estimate); then per rule its median over the runs and its
+    difference to the KF of the same run, paired (mean ± 95 % CI, runs where it is lower)."""
+    from ...config import ConfigError
+    from ...navigation.replay import ReplayOptions, read_log, run_replay, score_replay
+    from ...navigation.replay.data import ReplayError
+
+    logs = [x for x in args.logs.split(",") if x.strip()]
+    if not logs:
+        raise ConfigError("--logs: give the flights to replay (comma-separated paths)")
+    seeds = (list(range(args.seed0, args.seed0 + args.runs)) if args.gnss_from_reference
+             else [None])
+    rows: list[dict[str, Any]] = []
+    for path in logs:
+        for seed in seeds:
+            try:
+                res = run_replay(read_log(path), ReplayOptions(
+                    gnss_from_reference=args.gnss_from_reference, seed=seed or 0))
+            except ReplayError as e:
+                raise ConfigError(f"--logs: {e}") from None
+            sc = score_replay(res)
+            for rule, e in sc["estimators"].items():
+                rows.append({"log": path, "seed": seed, "rule": rule, "against": sc["against"],
+                             **{k: e.get(k) for k, *_ in REPLAY_KEYS},
+                             **{k: e.get(k) for k in ("gate_rejected", "gate_latched",
+                                                      "gate_resets")}})
+            kf = next(x for x in rows[-len(sc["estimators"]):] if x["rule"] == "kf")
+            print(f"{Path(path).name} seed {seed}: " + "; ".join(
+                f"{x['rule']} {x['pos_h_rms_m']} m, tilt {x['tilt_rms_deg']}°, NIS "
+                f"{x['nis_pos_mean']}, rejected {x['gate_rejected']}"
+                for x in rows[-len(sc["estimators"]):]) + f" (vs {kf['against']})", flush=True)
+    _print_replay_verdict(rows)
+    return rows
+
+
+def _print_replay_verdict(rows: list[dict[str, Any]]) -> None:
+    """Per rule: the median of each score over the runs, and its difference to the KF of the
+    same run (mean ± 95 % CI; the runs where it is lower)."""
+    import numpy as np
+
+    runs = sorted({(x["log"], x["seed"]) for x in rows}, key=str)
+    by = {(x["log"], x["seed"], x["rule"]): x for x in rows}
+    print(f"-- {len(runs)} runs ({len({r[0] for r in runs})} logs)")
+    for rule in RULES:
+        parts = []
+        for key, label, sc, unit in REPLAY_KEYS:
+            v = [by[(lg, sd, rule)][key] for lg, sd in runs if (lg, sd, rule) in by
+                 and by[(lg, sd, rule)][key] is not None]
+            if not v:
+                continue
+            part = f"{label} median {np.median(v) * sc:.3g} {unit}"
+            d = [sc * (by[(lg, sd, rule)][key] - by[(lg, sd, "kf")][key]) for lg, sd in runs
+                 if (lg, sd, rule) in by and (lg, sd, "kf") in by
+                 and by[(lg, sd, rule)][key] is not None
+                 and by[(lg, sd, "kf")][key] is not None]
+            if rule != "kf" and d:
+                part += (f", − kf {_ci(d)} {unit} (median {np.median(d):.3g}; "
+                         f"{sum(x < 0 for x in d)} of {len(d)} lower)")
+            parts.append(part)
+        print(f"{rule}: " + "; ".join(parts), flush=True)
+
+
+def _print_sources(preset: str, sources: list[str], rows: list[dict[str, Any]]) -> None:
+    """Per rule, the first R source less the second on the same seeds (mean ± 95 % CI):
+    position RMSE (mm), NEES15/15, position NIS/3."""
+    a, b = (f"{preset}, R {s}" for s in sources)
+    for rule in RULES:
+        on = {x["seed"]: x for x in rows if x["condition"] == a and x["rule"] == rule}
+        off = {x["seed"]: x for x in rows if x["condition"] == b and x["rule"] == rule}
+        parts = []
+        for key, d, label in (("estimate_rmse_m", 1e-3, "RMSE (mm)"),
+                              ("nees15_mean", 15, "NEES15/15"), ("nis_mean", 3, "NIS/3")):
+            dd = [(on[k][key] - off[k][key]) / d for k in on
+                  if k in off and on[k][key] is not None and off[k][key] is not None]
+            if dd:
+                parts.append(f"{label} {_ci(dd)} ({sum(x < 0 for x in dd)} of {len(dd)} "
+                             "lower)")
+        print(f"{preset}: {rule} {sources[0]} − {sources[1]}: " + "; ".join(parts), flush=True)
 
 
 def _print_condition(name: str, rows: list[dict[str, Any]]) -> None:
@@ -385,7 +533,8 @@ def main(args: argparse.Namespace) -> int:
     from . import write_csv
 
     rows = {"recovery": recovery, "consistency": consistency, "outage": outage,
-            "falsefix": falsefix, "sweep": sweep}[args.what](args)
+            "falsefix": falsefix, "sweep": sweep, "rules": rules,
+            "replay": replay_rules}[args.what](args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / f"{args.what}.csv", rows)
