@@ -529,6 +529,15 @@ class ImuConfig:
                     "estimate with a Gauss-Markov error; ideal: the true acceleration (finite "
                     "difference of the velocity) + white noise and the true attitude",
                     choices=("mems", "ideal"))
+    sampling: str = _f("increments", "increments: each sample is the mean of the "
+                       "delta-velocity and delta-angle over the sample, integrated from the "
+                       "physics sub-steps through the anti-alias filter, and the INS applies "
+                       "coning and sculling corrections; point: the physics' reading at one "
+                       "instant, held over the sample (no coning or sculling terms)",
+                       choices=("increments", "point"))
+    filter_hz: float = _f(116.0, "anti-alias filter: first-order low-pass, -3 dB bandwidth "
+                          "(Hz) on the physics-rate readings before integration (BMI088 "
+                          "gyro at 1000 Hz output rate: 116 Hz); 0 = none", ge=0, le=1e5)
     accel_noise_density_ug: float = _f(70.0, "accelerometer noise density (ug/sqrt(Hz); "
                                        "ICM-42688-P: 70)", ge=0, le=1e5)
     gyro_noise_density_mdps: float = _f(2.8, "gyro noise density (mdps/sqrt(Hz); ICM-42688-P: "

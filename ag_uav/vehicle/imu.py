@@ -67,8 +67,8 @@ UG = 1e-6 * G                # one micro-g in m/s²
 DEG = math.pi / 180.0
 
 __all__ = ["AttitudeError", "AttitudeRow", "ImuRow", "ImuSensor", "accel_sigma", "attitude_row",
-           "attitude_rows", "block_used_up",
-           "gauss_markov_block", "gyro_sigma", "imu_error_block", "imu_row", "imu_rows",
+           "attitude_rows", "block_used_up", "filter_alpha", "gauss_markov_block", "gyro_sigma",
+           "imu_error_block", "imu_integrate_row", "imu_integrate_rows", "imu_row", "imu_rows",
            "process_noise_psd", "rows_need"]
 
 
@@ -159,6 +159,62 @@ def imu_row(f: np.ndarray, w: np.ndarray, err: np.ndarray, ist: np.ndarray, i: i
         w_out[i, j] = w[i, j] + err[i, k, 3 + j]
 
 
+def filter_alpha(filter_hz: float, h: float) -> float:
+    """The gain of the anti-alias filter's step at the physics rate ``1/h``:
+    ``α = 1 − exp(−2π f_c h)`` (a first-order low-pass of −3 dB bandwidth ``f_c``, its pole
+    mapped exactly); ``f_c = 0``: no filter (α = 1)."""
+    if filter_hz <= 0.0:
+        return 1.0
+    return 1.0 - math.exp(-2.0 * math.pi * filter_hz * h)
+
+
+@njit(cache=True)
+def imu_integrate_row(sub: np.ndarray, ia: int, ig: int, w_end: np.ndarray, i: int,
+                      alpha: float, lp: np.ndarray, f_out: np.ndarray,
+                      w_out: np.ndarray) -> None:
+    """Row ``i``'s IMU sample over one control period of ``n`` physics sub-steps of ``h``:
+    the mean specific force and rate, ``Δv/Δt`` and ``Δθ/Δt`` (module docstring)::
+
+        y_j = y_j−1 + α (x_j − y_j−1)                      (the anti-alias low-pass)
+        Δv = h Σ_j y_f,j,   Δθ = h Σ_j y_ω,j,   f_out = Δv / (n h),   w_out = Δθ / (n h)
+
+    ``x_j``: the specific force and the rate the physics applied over sub-step ``j``:
+    ``sub[i, j, ia:ia+3]`` (the accelerometer at the sub-step's start, the acceleration its
+    semi-implicit Euler step integrates) and the gyro after the sub-step's velocity update
+    (``sub[i, j+1, ig:ig+3]``; for the last, ``w_end[i]``, the rate at the period's end), the
+    rate its position step integrates. ``lp[i]`` (6): the filter's state (NaN: not started,
+    then it starts at the first sample)."""
+    n = sub.shape[1]
+    if lp[i, 0] != lp[i, 0]:
+        for k in range(3):
+            lp[i, k] = sub[i, 0, ia + k]
+            lp[i, 3 + k] = sub[i, 1, ig + k] if n > 1 else w_end[i, k]
+    for k in range(3):
+        f_out[i, k] = 0.0
+        w_out[i, k] = 0.0
+    for j in range(n):
+        for k in range(3):
+            xf = sub[i, j, ia + k]
+            xw = sub[i, j + 1, ig + k] if j + 1 < n else w_end[i, k]
+            lp[i, k] += alpha * (xf - lp[i, k])
+            lp[i, 3 + k] += alpha * (xw - lp[i, 3 + k])
+            f_out[i, k] += lp[i, k]
+            w_out[i, k] += lp[i, 3 + k]
+    for k in range(3):
+        f_out[i, k] /= n
+        w_out[i, k] /= n
+
+
+@njit(cache=True)
+def imu_integrate_rows(sub: np.ndarray, ia: int, ig: int, w_end: np.ndarray,
+                       active: np.ndarray, alpha: np.ndarray, lp: np.ndarray,
+                       f_out: np.ndarray, w_out: np.ndarray) -> None:
+    """:func:`imu_integrate_row` of every active row (``alpha`` per row)."""
+    for i in range(sub.shape[0]):
+        if active[i]:
+            imu_integrate_row(sub, ia, ig, w_end, i, alpha[i], lp, f_out, w_out)
+
+
 @njit(cache=True)
 def attitude_row(R: np.ndarray, dth: np.ndarray, ist: np.ndarray, i: int, out: np.ndarray,
                  last: np.ndarray) -> None:
@@ -235,12 +291,13 @@ def attitude_rows(R: np.ndarray, active: np.ndarray, dth: np.ndarray, ist: np.nd
 
 class ImuRow(NamedTuple):
     """An :class:`ImuSensor`'s row state, one row each: the bias after the buffered block
-    ``bias`` (6,), the buffered errors ``err`` (1, block, 6) and ``ist`` (1, 2: the next sample,
-    the samples buffered). :class:`~ag_uav.vehicle.sensors_batched.BatchImu` stacks them."""
+    ``bias`` (6,), the buffered errors ``err`` (1, block, 6), ``ist`` (1, 2: the next sample,
+    the samples buffered) and the anti-alias filter's state ``lp`` (1, 6). :class:`~ag_uav.vehicle.sensors_batched.BatchImu` stacks them."""
 
     bias: np.ndarray
     err: np.ndarray
     ist: np.ndarray
+    lp: np.ndarray    # (1, 6): the anti-alias filter's state (NaN: not started)
 
 
 class AttitudeRow(NamedTuple):
@@ -280,6 +337,8 @@ class ImuSensor:
         self._ist = np.zeros((1, 2), dtype=np.int64)    # next sample, samples buffered
         self._io = np.zeros((4, 1, 3))                  # f, w in; f, w out
         self._last_bias_block = np.zeros((0, 6))
+        self._lp = np.full((1, 6), np.nan)   # the anti-alias filter's state (integrate)
+        self.alpha: float | None = None
         self.bias_log: list[np.ndarray] = []   # the bias at the start of every block
 
     def _refill(self) -> None:
@@ -294,7 +353,7 @@ class ImuSensor:
     @property
     def row_state(self) -> ImuRow:
         """This sensor's row state (the arrays themselves: a batch taking it over copies them)."""
-        return ImuRow(self._bias, self._err, self._ist)
+        return ImuRow(self._bias, self._err, self._ist, self._lp)
 
     def walk_block(self) -> np.ndarray:
         """Draw this sensor's next block and return its walked bias ``b_k`` (block, 6): the
@@ -305,6 +364,20 @@ class ImuSensor:
         returned array is overwritten by the next call."""
         self._refill()
         return self._last_bias_block
+
+    def integrate(self, sub: np.ndarray, ia: int, ig: int, w_end) -> tuple[np.ndarray,
+                                                                          np.ndarray]:
+        """The noiseless sample of one control period from the physics' sub-step readings
+        ``sub`` (nsub, nsensordata) and the rate at its end ``w_end`` (3): the means of the
+        filtered delta-velocity and delta-angle (:func:`imu_integrate_row`), to hand to
+        :meth:`measure`. ``h`` is ``dt / nsub``."""
+        if self.alpha is None:
+            self.alpha = filter_alpha(self.cfg.filter_hz, self.dt / sub.shape[0])
+        io = self._io
+        io[1, 0] = w_end
+        imu_integrate_row(np.ascontiguousarray(sub)[None], ia, ig, io[1], 0, self.alpha,
+                          self._lp, io[2], io[3])
+        return io[2, 0].copy(), io[3, 0].copy()
 
     def measure(self, f, w) -> tuple[list[float], list[float]]:
         if block_used_up(self._ist, 0):
