@@ -464,11 +464,11 @@ class EstimatorConfig:
                               choices=("white", "inflate", "consider"))
     ins_gnss_window_s: float = _f(2.0, "nav = ins, ins_gnss_colour = inflate: the filter's "
                                   "averaging window (s) for the R inflation", gt=0, le=600)
-    ins_q_accel: float = _f(2.0, "nav = ins: the filter's accelerometer white-noise variance "
+    ins_q_accel: float = _f(1.0, "nav = ins: the filter's accelerometer white-noise variance "
                             "(incl. vibration) is [imu]'s times this margin (an autopilot's "
                             "noise parameters exceed the data sheet's: vibration, coning, model "
                             "error); calibrated in docs/ins.md", gt=0, le=100)
-    ins_q_gyro: float = _f(32.0, "nav = ins: the filter's gyro white-noise variance is [imu]'s "
+    ins_q_gyro: float = _f(1.0, "nav = ins: the filter's gyro white-noise variance is [imu]'s "
                            "times this margin; calibrated in docs/ins.md", gt=0, le=100)
     ins_range_aid_m: float = _f(5.0, "nav = ins: range aid (PX4 EKF2_RNG_CTRL = 1, "
                                 "conditional; EKF2_RNG_A_HMAX = 5 m): while the radar reads "
@@ -536,8 +536,8 @@ class ImuConfig:
                        "instant, held over the sample (no coning or sculling terms)",
                        choices=("increments", "point"))
     filter_hz: float = _f(116.0, "anti-alias filter: first-order low-pass, -3 dB bandwidth "
-                          "(Hz) on the physics-rate readings before integration (BMI088 "
-                          "gyro at 1000 Hz output rate: 116 Hz); 0 = none", ge=0, le=1e5)
+                          "(Hz) on the physics-rate readings before integration (Bosch "
+                          "BMI088 gyro at its 1000 Hz output rate: 116 Hz); 0 = none", ge=0, le=1e5)
     accel_noise_density_ug: float = _f(70.0, "accelerometer noise density (ug/sqrt(Hz); "
                                        "ICM-42688-P: 70)", ge=0, le=1e5)
     gyro_noise_density_mdps: float = _f(2.8, "gyro noise density (mdps/sqrt(Hz); ICM-42688-P: "

@@ -19,6 +19,21 @@ zero-rate offset ±0.5 dps). The turn-on biases default to what is left after th
 controller's calibrations (5 mg, 0.05 dps, 1σ); the bias random walks and the vibration level are
 engineering judgement (no datasheet gives them); all are ``[imu]`` config keys.
 
+**What a sample is.** By default (``imu.sampling = "increments"``) ``f_k``, ``ω_k`` are what a
+real IMU hands an autopilot: the means of the delta-velocity and delta-angle over the sample,
+``Δv_k / Δt`` and ``Δθ_k / Δt``, integrated from the physics' sub-steps (MuJoCo's 2 ms steps
+inside the 10 ms sample; :func:`imu_integrate_row`) after the sensor's anti-alias filter, a
+**first-order** low-pass of −3 dB bandwidth ``imu.filter_hz`` (default 116 Hz: the Bosch BMI088
+gyro's filter at its 1000 Hz output rate, datasheet BST-BMI088-DS001, register
+GYRO_BANDWIDTH), its pole mapped exactly onto the physics rate, ``α = 1 − exp(−2π f_c h)``.
+PX4's sensor pipeline likewise integrates delta-angles (with a coning correction) and
+delta-velocities at the sensor rate, and its EKF2 predicts with them. The samples are exact
+for the physics: the accelerometer at each sub-step's start is the acceleration MuJoCo's
+semi-implicit Euler step integrates, the gyro after the sub-step's velocity update the rate its
+position step integrates (``tests/test_imu_increments.py``). The INS applies the coning and
+sculling corrections (``estimators.ins.model.increments``). ``imu.sampling = "point"``: the
+physics' reading at the last sub-step, held over the sample (the earlier model).
+
 **Attitude estimate.** The navigation filters need the attitude to rotate ``f̃`` into the world
 frame. ag-uav does not run an AHRS: on a multirotor the accelerometer mostly measures the thrust
 direction, not gravity, so a gyro + accelerometer complementary filter has a tilt error that
