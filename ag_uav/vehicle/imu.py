@@ -307,7 +307,8 @@ def attitude_rows(R: np.ndarray, active: np.ndarray, dth: np.ndarray, ist: np.nd
 class ImuRow(NamedTuple):
     """An :class:`ImuSensor`'s row state, one row each: the bias after the buffered block
     ``bias`` (6,), the buffered errors ``err`` (1, block, 6), ``ist`` (1, 2: the next sample,
-    the samples buffered) and the anti-alias filter's state ``lp`` (1, 6). :class:`~ag_uav.vehicle.sensors_batched.BatchImu` stacks them."""
+    the samples buffered) and the anti-alias filter's state ``lp`` (1, 6).
+    :class:`~ag_uav.vehicle.sensors_batched.BatchImu` stacks them."""
 
     bias: np.ndarray
     err: np.ndarray

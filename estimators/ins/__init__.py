@@ -113,8 +113,9 @@ docs.px4.io *Using the ECL EKF*; ``EKF2_GPS_DELAY`` default 110 ms, ekf2_params.
 filter (nominal + P) runs ``D = round(delay / Δt)`` IMU samples behind now, from a ring of the
 last D+2 samples (the core's previous sample feeds its coning and sculling corrections).
 Every measurement carries its time tag (``now − age``) into a queue and is fused when the
-core reaches it (at once if it is already late, counted in ``n_late``).  The output for the controller is the core nominal propagated through the buffered samples (the
-same nominal step, so with no new correction it advances one sample per tick).  With
+core reaches it (at once if it is already late, counted in ``n_late``).  The output for the
+controller is the core nominal propagated through the buffered samples (the same nominal
+step, so with no new correction it advances one sample per tick).  With
 ``delayed = False`` (fuse at receipt) D = 0 and every fix is fused as if it were current.
 
 Everything is one compiled kernel per tick over the rows (vehicles × filters): the

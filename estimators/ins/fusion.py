@@ -61,7 +61,6 @@ from .layout import (
     PRM_D,
     PRM_DELAYED,
     PRM_DT,
-    PRM_G,
     PRM_GATE,
     PRM_GLATCH,
     PRM_GRESET,
