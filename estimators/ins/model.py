@@ -108,9 +108,9 @@ def increments(x, u, up, dt, coning, w):
     α = (ω̃ − b_g)Δt, ν = (f̃ − b_a)Δt (and α', ν' of ``up``, with the same bias estimate); with
     ``coning`` the two-sample (previous-sample) corrections of Savage, *Strapdown inertial
     navigation integration algorithm design, part 1: attitude algorithms*, JGCD 21(1) 1998
-    (coning) and *part 2: velocity and position algorithms*, JGCD 21(2) 1998 (sculling), as
-    Groves, *Principles of GNSS, Inertial, and Multisensor Integrated Navigation* (2nd ed.,
-    2013) eqs 5.97-5.98 write them::
+    (coning) and *part 2: velocity and position algorithms*, JGCD 21(2) 1998 (sculling); also
+    Groves, *Principles of GNSS, Inertial, and Multisensor Integrated Navigation Systems* (2nd
+    ed., 2013), ch. 5::
 
         φ  = α + (1/12) α' × α                                        (coning)
         Δv = ν + ½ α × ν + (1/12) (α' × ν + ν' × α)      (rotation + sculling)
