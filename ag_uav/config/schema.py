@@ -480,11 +480,11 @@ class EstimatorConfig:
                                   "= inflate: the Gauss-Markov part's correlation time (s) "
                                   "(engineering judgement: RTK multipath, tens of seconds)",
                                   gt=0, le=1e5)
-    ins_q_accel: float = _f(2.0, "nav = ins: the filter's accelerometer white-noise variance "
+    ins_q_accel: float = _f(1.0, "nav = ins: the filter's accelerometer white-noise variance "
                             "(incl. vibration) is [imu]'s times this margin (an autopilot's "
                             "noise parameters exceed the data sheet's: vibration, coning, model "
                             "error); calibrated in docs/ins.md", gt=0, le=100)
-    ins_q_gyro: float = _f(32.0, "nav = ins: the filter's gyro white-noise variance is [imu]'s "
+    ins_q_gyro: float = _f(1.0, "nav = ins: the filter's gyro white-noise variance is [imu]'s "
                            "times this margin; calibrated in docs/ins.md", gt=0, le=100)
     ins_range_aid_m: float = _f(5.0, "nav = ins: range aid (PX4 EKF2_RNG_CTRL = 1, "
                                 "conditional; EKF2_RNG_A_HMAX = 5 m): while the radar reads "
@@ -545,6 +545,15 @@ class ImuConfig:
                     "estimate with a Gauss-Markov error; ideal: the true acceleration (finite "
                     "difference of the velocity) + white noise and the true attitude",
                     choices=("mems", "ideal"))
+    sampling: str = _f("increments", "increments: each sample is the mean of the "
+                       "delta-velocity and delta-angle over the sample, integrated from the "
+                       "physics sub-steps through the anti-alias filter, and the INS applies "
+                       "coning and sculling corrections; point: the physics' reading at one "
+                       "instant, held over the sample (no coning or sculling terms)",
+                       choices=("increments", "point"))
+    filter_hz: float = _f(116.0, "anti-alias filter: first-order low-pass, -3 dB bandwidth "
+                          "(Hz) on the physics-rate readings before integration (Bosch "
+                          "BMI088 gyro at its 1000 Hz output rate: 116 Hz); 0 = none", ge=0, le=1e5)
     accel_noise_density_ug: float = _f(70.0, "accelerometer noise density (ug/sqrt(Hz); "
                                        "ICM-42688-P: 70)", ge=0, le=1e5)
     gyro_noise_density_mdps: float = _f(2.8, "gyro noise density (mdps/sqrt(Hz); ICM-42688-P: "

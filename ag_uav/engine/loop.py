@@ -214,7 +214,11 @@ def _sensing(b: Batch, flights: Sequence[Flight], fbs: Sequence[Any], m0: Any) -
             imus.append(ImuSensor(c.imu, c.sim.control_hz, ss["imu"]))
             atts.append(AttitudeError(c.imu, c.sim.control_hz, ss["attitude"]))
         imu, att = BatchImu.from_sensors(imus), BatchAttitudeError.from_errors(atts)
-    return Sensing(b, imu, att, int(m0.sensor("accel").adr[0]), int(m0.sensor("gyro").adr[0]))
+    inc = imu is not None and flights[0].cfg.imu.sampling == "increments"
+    if inc:
+        b.sub = np.repeat(b.sens[:, None, :], round(b.dt / m0.opt.timestep), axis=1)
+    return Sensing(b, imu, att, int(m0.sensor("accel").adr[0]), int(m0.sensor("gyro").adr[0]),
+                   inc)
 
 
 def _disturbance(b: Batch, flights: Sequence[Flight]) -> Disturbance:
@@ -375,7 +379,7 @@ class Engine:
     def physics(self) -> None:
         b = self.b
         t0 = b.S[:, 0].copy()
-        self.stepper.step(b.S, b.sens, b.f, b.xf, b.act)
+        self.stepper.step(b.S, b.sens, b.f, b.xf, b.act, b.sub)
         for i in reset_rows(t0, b.S, b.act):   # MuJoCo reset an unstable vehicle
             self.guard.end(i, unstable_reason(float(t0[i])), float(t0[i]))
 

@@ -402,7 +402,8 @@ def batch_key(cfg: Config) -> tuple:
     filters = (e.source, e.name, tuple(s for s in e.shadow if s != e.name), e.model, e.nav,
                round(gnss_latency_s(cfg) * cfg.sim.control_hz) if e.nav == "ins" else 0,
                _ins_key(cfg) if e.nav == "ins" and imu else None)
-    return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, cfg.spray.enabled, filters,
+    sampling = cfg.imu.sampling if imu else None   # one IMU sampling per batch
+    return (cfg.sim.control_hz, cfg.sim.timestep_s, imu, sampling, cfg.spray.enabled, filters,
             model_layout(cfg))
 
 

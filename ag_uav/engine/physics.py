@@ -113,7 +113,11 @@ class Stepper:
     rotor commands ``f`` (N, rotors) and the applied force ``xf`` (N, 3)."""
 
     def step(self, S: np.ndarray, sens: np.ndarray, f: np.ndarray, xf: np.ndarray,
-             act: np.ndarray) -> None:
+             act: np.ndarray, sub: np.ndarray | None = None) -> None:
+        """``sub`` (N, nsub, nsensordata), when given: the sensor readings of every sub-step
+        of the active rows (row j: at the start of sub-step j, as ``mj_step`` computes them
+        before it integrates; the last is ``sens``), for the IMU's integration
+        (:func:`ag_uav.vehicle.imu.imu_integrate_row`)."""
         raise NotImplementedError
 
     def close(self) -> None:
@@ -135,12 +139,17 @@ class DirectStepper(Stepper):
         mujoco.mj_setState(model, self.data, S0, STATE_SPEC)
         self._xfrc = self.data.xfrc_applied[body, :3]
 
-    def step(self, S, sens, f, xf, act) -> None:
+    def step(self, S, sens, f, xf, act, sub=None) -> None:
         m, d = self.model, self.data
         d.ctrl[:] = f[0]
         self._xfrc[:] = xf[0]
         d.qacc_warmstart[:] = 0.0
-        mujoco.mj_step(m, d, self.nsub)
+        if sub is None:
+            mujoco.mj_step(m, d, self.nsub)
+        else:  # one sub-step at a time: the same steps, each one's sensor readings kept
+            for j in range(self.nsub):
+                mujoco.mj_step(m, d)
+                sub[0, j] = d.sensordata
         mujoco.mj_getState(m, d, S[0], STATE_SPEC)
         sens[0] = d.sensordata
 
@@ -180,15 +189,15 @@ class RolloutStepper(Stepper):
         self.data += [mujoco.MjData(m0) for _ in range(max(nthread, 1) - len(self.data))]
         self.n_chunks = CHUNKS_PER_THREAD * max(nthread, 1)
 
-    def step(self, S, sens, f, xf, act) -> None:
+    def step(self, S, sens, f, xf, act, sub=None) -> None:
         controls(self.U, f, xf, self.xcol, act)
         if act.all():
-            self._run(self.models, S, self.U, S, sens, None)
+            self._run(self.models, S, self.U, S, sens, None, sub)
             return
         ii = self.idx[act]
-        self._run([self.models[i] for i in ii], S[ii], self.U[ii], S, sens, ii)
+        self._run([self.models[i] for i in ii], S[ii], self.U[ii], S, sens, ii, sub)
 
-    def _run(self, models, S0, U, S, sens, ii) -> None:
+    def _run(self, models, S0, U, S, sens, ii, sub) -> None:
         n = len(models)
         so, se = self.S_out[:n], self.sens_out[:n]
         self.runner.rollout(models, self.data[:max(self.nthread, 1)], S0, U,
@@ -198,9 +207,13 @@ class RolloutStepper(Stepper):
         if ii is None:
             S[:] = so[:, -1]
             sens[:] = se[:, -1]
+            if sub is not None:
+                sub[:] = se
         else:
             S[ii] = so[:, -1]
             sens[ii] = se[:, -1]
+            if sub is not None:
+                sub[ii] = se
 
     def close(self) -> None:
         self.runner.close()

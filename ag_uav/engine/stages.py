@@ -72,6 +72,7 @@ class Batch:
     n_max: int                    # ticks of the longest flight
     notes: list[list[str]]
     n_rot: int = 4                # rotors (actuators) of every vehicle of the batch
+    sub: np.ndarray | None = None  # (N, nsub, nsensordata): the last period's sub-steps
     act: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
@@ -160,11 +161,17 @@ class Guard:
 
 class Sensing:
     """The MEMS IMU (accelerometer and gyro from MuJoCo's sensors, with their errors) and the
-    attitude estimate the controller flies on; without the IMU, the true attitude and rates."""
+    attitude estimate the controller flies on; without the IMU, the true attitude and rates.
+    With ``increments`` each sample integrates the control period's physics sub-steps
+    (:meth:`~ag_uav.vehicle.sensors_batched.BatchImu.integrate`)."""
 
-    def __init__(self, b: Batch, imu: Any, att: Any, accel_adr: int, gyro_adr: int) -> None:
+    def __init__(self, b: Batch, imu: Any, att: Any, accel_adr: int, gyro_adr: int,
+                 increments: bool = False) -> None:
         self.b, self.imu, self.att = b, imu, att
         self.ia, self.ig = accel_adr, gyro_adr
+        #: the IMU integrates the period's sub-steps (``imu.sampling = "increments"``; the
+        #: physics then keeps them in ``b.sub``), else reads the last sub-step's sensors
+        self.increments = increments and imu is not None
         # tick-major (n_max, N, 9): one tick's rows are contiguous (the per-tick writes stay in
         # cache lines the physics step did not evict); a vehicle's record is copied out at the
         # end. float32: a record for plots and checks (7 significant digits), half the memory
@@ -176,8 +183,11 @@ class Sensing:
         if self.imu is None:
             return
         sens = b.sens
-        f_m, b.om = self.imu.measure(sens[:, self.ia:self.ia + 3], sens[:, self.ig:self.ig + 3],
-                                     b.act)
+        if self.increments:   # the rates at the period's end: the state's (Guard, b.omega)
+            f, w = self.imu.integrate(b.sub, self.ia, self.ig, b.omega, b.act)
+        else:
+            f, w = sens[:, self.ia:self.ia + 3], sens[:, self.ig:self.ig + 3]
+        f_m, b.om = self.imu.measure(f, w, b.act)
         b.Rc = self.att.apply(b.R, b.act)
         imu_record(self.rec, self.now, k, b.act, f_m, b.om, self.att.last)
         b.imu_in = (f_m, b.Rc, b.om)

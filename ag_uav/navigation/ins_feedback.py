@@ -162,7 +162,8 @@ def ins_config(cfg: Config) -> INSConfig:
         pca_window=e.window, pca_mode=e.pca_mode,
         gate_sigma=e.ins_gate_sigma if e.ins_gate_sigma > 0 else math.inf,
         gate_reset_s=e.ins_gate_reset_s if e.ins_gate_reset_s > 0 else math.inf,
-        gate_latch_s=e.ins_gate_latch_s if e.ins_gate_latch_s >= 0 else math.inf)
+        gate_latch_s=e.ins_gate_latch_s if e.ins_gate_latch_s >= 0 else math.inf,
+        coning=im.sampling == "increments")
 
 
 def ins_bank_key(cfg: Config) -> tuple:

@@ -19,6 +19,21 @@ zero-rate offset ±0.5 dps). The turn-on biases default to what is left after th
 controller's calibrations (5 mg, 0.05 dps, 1σ); the bias random walks and the vibration level are
 engineering judgement (no datasheet gives them); all are ``[imu]`` config keys.
 
+**What a sample is.** By default (``imu.sampling = "increments"``) ``f_k``, ``ω_k`` are what a
+real IMU hands an autopilot: the means of the delta-velocity and delta-angle over the sample,
+``Δv_k / Δt`` and ``Δθ_k / Δt``, integrated from the physics' sub-steps (MuJoCo's 2 ms steps
+inside the 10 ms sample; :func:`imu_integrate_row`) after the sensor's anti-alias filter, a
+**first-order** low-pass of −3 dB bandwidth ``imu.filter_hz`` (default 116 Hz: the Bosch BMI088
+gyro's filter at its 1000 Hz output rate, datasheet BST-BMI088-DS001, register
+GYRO_BANDWIDTH), its pole mapped exactly onto the physics rate, ``α = 1 − exp(−2π f_c h)``.
+PX4's sensor pipeline likewise integrates delta-angles (with a coning correction) and
+delta-velocities at the sensor rate, and its EKF2 predicts with them. The samples are exact
+for the physics: the accelerometer at each sub-step's start is the acceleration MuJoCo's
+semi-implicit Euler step integrates, the gyro after the sub-step's velocity update the rate its
+position step integrates (``tests/test_imu_increments.py``). The INS applies the coning and
+sculling corrections (``estimators.ins.model.increments``). ``imu.sampling = "point"``: the
+physics' reading at the last sub-step, held over the sample (the earlier model).
+
 **Attitude estimate.** The navigation filters need the attitude to rotate ``f̃`` into the world
 frame. ag-uav does not run an AHRS: on a multirotor the accelerometer mostly measures the thrust
 direction, not gravity, so a gyro + accelerometer complementary filter has a tilt error that
@@ -67,8 +82,8 @@ UG = 1e-6 * G                # one micro-g in m/s²
 DEG = math.pi / 180.0
 
 __all__ = ["AttitudeError", "AttitudeRow", "ImuRow", "ImuSensor", "accel_sigma", "attitude_row",
-           "attitude_rows", "block_used_up",
-           "gauss_markov_block", "gyro_sigma", "imu_error_block", "imu_row", "imu_rows",
+           "attitude_rows", "block_used_up", "filter_alpha", "gauss_markov_block", "gyro_sigma",
+           "imu_error_block", "imu_integrate_row", "imu_integrate_rows", "imu_row", "imu_rows",
            "process_noise_psd", "rows_need"]
 
 
@@ -159,6 +174,62 @@ def imu_row(f: np.ndarray, w: np.ndarray, err: np.ndarray, ist: np.ndarray, i: i
         w_out[i, j] = w[i, j] + err[i, k, 3 + j]
 
 
+def filter_alpha(filter_hz: float, h: float) -> float:
+    """The gain of the anti-alias filter's step at the physics rate ``1/h``:
+    ``α = 1 − exp(−2π f_c h)`` (a first-order low-pass of −3 dB bandwidth ``f_c``, its pole
+    mapped exactly); ``f_c = 0``: no filter (α = 1)."""
+    if filter_hz <= 0.0:
+        return 1.0
+    return 1.0 - math.exp(-2.0 * math.pi * filter_hz * h)
+
+
+@njit(cache=True)
+def imu_integrate_row(sub: np.ndarray, ia: int, ig: int, w_end: np.ndarray, i: int,
+                      alpha: float, lp: np.ndarray, f_out: np.ndarray,
+                      w_out: np.ndarray) -> None:
+    """Row ``i``'s IMU sample over one control period of ``n`` physics sub-steps of ``h``:
+    the mean specific force and rate, ``Δv/Δt`` and ``Δθ/Δt`` (module docstring)::
+
+        y_j = y_j−1 + α (x_j − y_j−1)                      (the anti-alias low-pass)
+        Δv = h Σ_j y_f,j,   Δθ = h Σ_j y_ω,j,   f_out = Δv / (n h),   w_out = Δθ / (n h)
+
+    ``x_j``: the specific force and the rate the physics applied over sub-step ``j``:
+    ``sub[i, j, ia:ia+3]`` (the accelerometer at the sub-step's start, the acceleration its
+    semi-implicit Euler step integrates) and the gyro after the sub-step's velocity update
+    (``sub[i, j+1, ig:ig+3]``; for the last, ``w_end[i]``, the rate at the period's end), the
+    rate its position step integrates. ``lp[i]`` (6): the filter's state (NaN: not started,
+    then it starts at the first sample)."""
+    n = sub.shape[1]
+    if lp[i, 0] != lp[i, 0]:
+        for k in range(3):
+            lp[i, k] = sub[i, 0, ia + k]
+            lp[i, 3 + k] = sub[i, 1, ig + k] if n > 1 else w_end[i, k]
+    for k in range(3):
+        f_out[i, k] = 0.0
+        w_out[i, k] = 0.0
+    for j in range(n):
+        for k in range(3):
+            xf = sub[i, j, ia + k]
+            xw = sub[i, j + 1, ig + k] if j + 1 < n else w_end[i, k]
+            lp[i, k] += alpha * (xf - lp[i, k])
+            lp[i, 3 + k] += alpha * (xw - lp[i, 3 + k])
+            f_out[i, k] += lp[i, k]
+            w_out[i, k] += lp[i, 3 + k]
+    for k in range(3):
+        f_out[i, k] /= n
+        w_out[i, k] /= n
+
+
+@njit(cache=True)
+def imu_integrate_rows(sub: np.ndarray, ia: int, ig: int, w_end: np.ndarray,
+                       active: np.ndarray, alpha: np.ndarray, lp: np.ndarray,
+                       f_out: np.ndarray, w_out: np.ndarray) -> None:
+    """:func:`imu_integrate_row` of every active row (``alpha`` per row)."""
+    for i in range(sub.shape[0]):
+        if active[i]:
+            imu_integrate_row(sub, ia, ig, w_end, i, alpha[i], lp, f_out, w_out)
+
+
 @njit(cache=True)
 def attitude_row(R: np.ndarray, dth: np.ndarray, ist: np.ndarray, i: int, out: np.ndarray,
                  last: np.ndarray) -> None:
@@ -235,12 +306,14 @@ def attitude_rows(R: np.ndarray, active: np.ndarray, dth: np.ndarray, ist: np.nd
 
 class ImuRow(NamedTuple):
     """An :class:`ImuSensor`'s row state, one row each: the bias after the buffered block
-    ``bias`` (6,), the buffered errors ``err`` (1, block, 6) and ``ist`` (1, 2: the next sample,
-    the samples buffered). :class:`~ag_uav.vehicle.sensors_batched.BatchImu` stacks them."""
+    ``bias`` (6,), the buffered errors ``err`` (1, block, 6), ``ist`` (1, 2: the next sample,
+    the samples buffered) and the anti-alias filter's state ``lp`` (1, 6).
+    :class:`~ag_uav.vehicle.sensors_batched.BatchImu` stacks them."""
 
     bias: np.ndarray
     err: np.ndarray
     ist: np.ndarray
+    lp: np.ndarray    # (1, 6): the anti-alias filter's state (NaN: not started)
 
 
 class AttitudeRow(NamedTuple):
@@ -280,6 +353,8 @@ class ImuSensor:
         self._ist = np.zeros((1, 2), dtype=np.int64)    # next sample, samples buffered
         self._io = np.zeros((4, 1, 3))                  # f, w in; f, w out
         self._last_bias_block = np.zeros((0, 6))
+        self._lp = np.full((1, 6), np.nan)   # the anti-alias filter's state (integrate)
+        self.alpha: float | None = None
         self.bias_log: list[np.ndarray] = []   # the bias at the start of every block
 
     def _refill(self) -> None:
@@ -294,7 +369,7 @@ class ImuSensor:
     @property
     def row_state(self) -> ImuRow:
         """This sensor's row state (the arrays themselves: a batch taking it over copies them)."""
-        return ImuRow(self._bias, self._err, self._ist)
+        return ImuRow(self._bias, self._err, self._ist, self._lp)
 
     def walk_block(self) -> np.ndarray:
         """Draw this sensor's next block and return its walked bias ``b_k`` (block, 6): the
@@ -305,6 +380,20 @@ class ImuSensor:
         returned array is overwritten by the next call."""
         self._refill()
         return self._last_bias_block
+
+    def integrate(self, sub: np.ndarray, ia: int, ig: int, w_end) -> tuple[np.ndarray,
+                                                                          np.ndarray]:
+        """The noiseless sample of one control period from the physics' sub-step readings
+        ``sub`` (nsub, nsensordata) and the rate at its end ``w_end`` (3): the means of the
+        filtered delta-velocity and delta-angle (:func:`imu_integrate_row`), to hand to
+        :meth:`measure`. ``h`` is ``dt / nsub``."""
+        if self.alpha is None:
+            self.alpha = filter_alpha(self.cfg.filter_hz, self.dt / sub.shape[0])
+        io = self._io
+        io[1, 0] = w_end
+        imu_integrate_row(np.ascontiguousarray(sub)[None], ia, ig, io[1], 0, self.alpha,
+                          self._lp, io[2], io[3])
+        return io[2, 0].copy(), io[3, 0].copy()
 
     def measure(self, f, w) -> tuple[list[float], list[float]]:
         if block_used_up(self._ist, 0):

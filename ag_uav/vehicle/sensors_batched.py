@@ -82,8 +82,10 @@ from .imu import (
     AttitudeError,
     ImuSensor,
     attitude_rows,
+    filter_alpha,
     gauss_markov_block,
     imu_error_block,
+    imu_integrate_rows,
     imu_rows,
 )
 
@@ -235,6 +237,12 @@ class BatchImu:
         self._ones = np.ones(n, dtype=np.bool_)
         self.f_meas: F64 = np.zeros((n, 3))
         self.w_meas: F64 = np.zeros((n, 3))
+        self._filter_hz = np.array([s.cfg.filter_hz for s in imus])
+        self._dt = np.array([s.dt for s in imus])
+        self._alpha: F64 | None = None
+        self._lp = np.concatenate([r.lp for r in rows])
+        self.f_int: F64 = np.zeros((n, 3))
+        self.w_int: F64 = np.zeros((n, 3))
         #: the walked bias ``b_k`` of each row's buffered block (accel m/s^2, gyro rad/s), sample
         #: k of the block at ``walked[i, k]`` (zeros before the first block; scoring truth of
         #: the INS bias states, ``ag_uav.navigation.ins_feedback``)
@@ -255,6 +263,22 @@ class BatchImu:
             self._err[i, :n] = err
             self.walked[i, :n] = walked
             ist[i] = 0, n
+
+    def integrate(self, sub: F64, ia: int, ig: int, w_end: F64,
+                  active: NDArray[np.bool_] | None = None) -> tuple[F64, F64]:
+        """The noiseless samples of one control period, ``(f (N, 3), w (N, 3))``: the means
+        of each row's filtered delta-velocity and delta-angle over the period
+        (:func:`~ag_uav.vehicle.imu.imu_integrate_row`) from the physics' sub-step readings
+        ``sub`` (N, nsub, nsensordata; accelerometer at ``ia``, gyro at ``ig``) and the rates
+        at the period's end ``w_end`` (N, 3); hand them to :meth:`measure`."""
+        act = _active(active, self._ones)
+        if self._alpha is None:
+            h = self._dt / sub.shape[1]
+            self._alpha = np.array([filter_alpha(float(fc), float(hh))
+                                    for fc, hh in zip(self._filter_hz, h, strict=True)])
+        imu_integrate_rows(sub, ia, ig, w_end, act, self._alpha, self._lp, self.f_int,
+                           self.w_int)
+        return self.f_int, self.w_int
 
     def measure(self, f: F64, w: F64,
                 active: NDArray[np.bool_] | None = None) -> tuple[F64, F64]:

@@ -15,7 +15,13 @@ Kalman filter* (2017, arXiv:1711.02508), §5 with the local (body) angular error
 Prediction, one IMU sample (Solà eqs 5.3.3 / 260 without the gravity state; a = f̃ − b_a,
 ω = ω̃ − b_g, R at the start of the step)::
 
-    p ← p + v Δt + ½ (R a + g_w) Δt²,   v ← v + (R a + g_w) Δt,   q ← q ⊗ Exp(ω Δt)
+    p ← p + v Δt + ½ (R Δv/Δt + g_w) Δt²,   v ← v + R Δv + g_w Δt,   q ← q ⊗ Exp(φ)
+    φ  = ω Δt + (1/12) α' × ω Δt                                  (coning)
+    Δv = a Δt + ½ ω Δt × a Δt + (1/12) (α' × a Δt + ν' × ω Δt)      (rotation + sculling)
+
+with α' = ω' Δt, ν' = a' Δt of the previous sample (the IMU's samples are the means of its
+delta-angles and delta-velocities over Δt; ``INSConfig.coning = False``: φ = ω Δt, Δv = a Δt,
+rates held over the step; :func:`estimators.ins.model.increments` has the sources)
     P ← F P Fᵀ + Q,   F = I + blocks:  F_pv = I Δt,  F_vθ = −R [a]× Δt,  F_vba = −R Δt,
                                        F_θθ = Exp(ω Δt)ᵀ (replaces I),  F_θbg = −I Δt
     Q = diag(σ_a² Δt² I, σ_g² Δt² I, σ_ba² Δt I, σ_bg² Δt I)   on (δv, δθ, δb_a, δb_g)
@@ -105,10 +111,11 @@ The laws live in :mod:`estimators._ins_laws` (the bank's own row functions).
 predictor … uses buffered IMU data to propagate the states forward to the current time",
 docs.px4.io *Using the ECL EKF*; ``EKF2_GPS_DELAY`` default 110 ms, ekf2_params.c): the core
 filter (nominal + P) runs ``D = round(delay / Δt)`` IMU samples behind now, from a ring of the
-last D+1 samples.  Every measurement carries its time tag (``now − age``) into a queue and is
-fused when the core reaches it (at once if it is already late, counted in ``n_late``).  The
-output for the controller is the core nominal propagated through the buffered samples (the
-same nominal step, so with no new correction it advances one sample per tick).  With
+last D+2 samples (the core's previous sample feeds its coning and sculling corrections).
+Every measurement carries its time tag (``now − age``) into a queue and is fused when the
+core reaches it (at once if it is already late, counted in ``n_late``).  The output for the
+controller is the core nominal propagated through the buffered samples (the same nominal
+step, so with no new correction it advances one sample per tick).  With
 ``delayed = False`` (fuse at receipt) D = 0 and every fix is fused as if it were current.
 
 Everything is one compiled kernel per tick over the rows (vehicles × filters): the
@@ -134,6 +141,7 @@ from .model import (
     h_gnss_vel,
     h_heading,
     h_radar,
+    increments,
     inject_reset,
     nominal_step,
     quat_exp,
@@ -143,5 +151,6 @@ from .model import (
 )
 
 __all__ = ["DEG", "G_STD", "KERNELS", "RULES", "BatchINS", "INS", "INSConfig", "cov_step",
-           "gate_ratio", "h_gnss_pos", "h_gnss_vel", "h_heading", "h_radar", "inject_reset",
+           "gate_ratio", "h_gnss_pos", "h_gnss_vel", "h_heading", "h_radar", "increments",
+           "inject_reset",
            "layout", "nominal_step", "quat_exp", "quat_log_err", "quat_mul", "quat_to_rot"]

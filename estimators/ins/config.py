@@ -52,7 +52,10 @@ class INSConfig:
     after the last fused position and the last fused velocity, or twice that long after the
     last fused position, resets the position to the receiver (``inf`` = never);
     ``gate_latch_s``: the step latch's hold limit (s; 0 = no latch, ``inf`` = no limit; the
-    module docstring of :mod:`estimators.ins`).
+    module docstring of :mod:`estimators.ins`).  ``coning``: the IMU samples are the means of
+    delta-angles and delta-velocities over Δt, and the prediction applies the previous-sample
+    coning and sculling corrections (:func:`estimators.ins.model.increments`); False: rates
+    held over the step.
     """
 
     dt: float = 0.01
@@ -87,6 +90,7 @@ class INSConfig:
     gate_sigma: float = 5.0
     gate_reset_s: float = 5.0
     gate_latch_s: float = 60.0
+    coning: bool = True
     extra: dict = field(default_factory=dict)
 
     @classmethod
@@ -122,7 +126,7 @@ class INSConfig:
         p[layout.PRM_RMAX] = self.radar_max_range
         D = self.delay_ticks()
         p[layout.PRM_D], p[layout.PRM_DELAYED] = D, float(self.delayed)
-        p[layout.PRM_B], p[layout.PRM_QC] = D + 1, self.queue
+        p[layout.PRM_B], p[layout.PRM_QC] = D + 2, self.queue
         if not (self.gate_sigma > 0 and self.gate_reset_s > 0):
             raise ValueError(f"gate_sigma and gate_reset_s must be > 0 (inf = off), got "
                              f"{self.gate_sigma!r}, {self.gate_reset_s!r}")
@@ -133,6 +137,7 @@ class INSConfig:
                              f"{self.gate_latch_s!r}")
         p[layout.PRM_GLATCH] = self.gate_latch_s / dt
         p[layout.PRM_PCAW] = self.pca_window
+        p[layout.PRM_CONING] = float(bool(self.coning))
         return p
 
     def kernel_widths(self) -> np.ndarray:

@@ -61,7 +61,6 @@ from .layout import (
     PRM_D,
     PRM_DELAYED,
     PRM_DT,
-    PRM_G,
     PRM_GATE,
     PRM_GLATCH,
     PRM_GRESET,
@@ -466,7 +465,8 @@ def _enqueue(ints, mq, prm, kind, age_ticks, z, zp, var):
 # ------------------------------------------------------------------------ one row, one tick
 @njit
 def _advance(xc, P, ib, ints, u, prm, M, S3, w):
-    """now += 1, store u; the core takes the sample D ticks back once the ring holds it."""
+    """now += 1, store u; the core takes the sample D ticks back once the ring holds it (and
+    the one before it, for the coning and sculling corrections: the ring holds D + 2)."""
     B = int(prm[PRM_B])
     D = int(prm[PRM_D])
     now = ints[INTS_NOW] + 1
@@ -478,7 +478,7 @@ def _advance(xc, P, ib, ints, u, prm, M, S3, w):
         R = S3[0]
         quat_to_rot(xc[6:10], R)   # one R(q) for F and the nominal step
         cov_step(P, xc, uc, prm, R, M, S3, w)
-        nominal_step_R(xc, uc, prm[PRM_DT], prm[PRM_G], R, w)
+        nominal_step_R(xc, uc, ib[(now - D - 1) % B], prm, R, w)
         ints[INTS_CORE] = now - D
 
 
@@ -487,16 +487,15 @@ def _refresh_output(xc, xo, ib, ints, prm, predicted, S3, w):
     """xo = the core nominal propagated through the buffered samples core+1 … now (or one
     step on the previous output when nothing was fused since)."""
     B = int(prm[PRM_B])
-    dt, g = prm[PRM_DT], prm[PRM_G]
     now, core = ints[INTS_NOW], ints[INTS_CORE]
     if ints[INTS_DIRTY] or now == core:
         for k in range(16):
             xo[k] = xc[k]
         for t in range(core + 1, now + 1):
-            nominal_step(xo, ib[t % B], dt, g, S3, w)
+            nominal_step(xo, ib[t % B], ib[(t - 1) % B], prm, S3, w)
         ints[INTS_DIRTY] = 0
     elif predicted:
-        nominal_step(xo, ib[now % B], dt, g, S3, w)
+        nominal_step(xo, ib[now % B], ib[(now - 1) % B], prm, S3, w)
 
 
 @njit
@@ -513,7 +512,7 @@ def step_kernel(rows, prm, popt, imu, predict, gin, rin, fb):
     N = xc.shape[0]
     NV = imu.shape[0]
     nr = N // NV
-    M, S3, w = view2(fb, W_M, 9, 15), view3(fb, W_S3P, 5), fb[W_W:W_W + 16]
+    M, S3, w = view2(fb, W_M, 9, 15), view3(fb, W_S3P, 5), fb[W_W:W_W + 18]
     zp, nan3 = fb[W_ZP:W_ZP + 3], fb[W_NAN:W_NAN + 3]
     dt = prm[PRM_DT]
     Nw, L, r, mode, any_pca = popt[0], popt[1], popt[2], popt[3], popt[4]

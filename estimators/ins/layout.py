@@ -53,14 +53,15 @@ class Layout:
 
 #: shared parameters: Δt, g, the Q impulses (δv, δθ, δb_a, δb_g), lever arm, heading baseline,
 #: radar offset, ground height, cos(max tilt), max range, delay D (ticks), delayed (0/1), ring
-#: length B = D + 1, queue length, the innovation gate (σ; inf = off), its reset time (ticks),
-#: the step latch's hold limit (ticks; 0 = no latch, inf = no limit), the PCA block's window
-#: (fixes)
+#: length B = D + 2 (the core's sample and the one before it, for the coning correction),
+#: queue length, the innovation gate (σ; inf = off), its reset time (ticks), the step latch's
+#: hold limit (ticks; 0 = no latch, inf = no limit), the PCA block's window (fixes), the
+#: coning and sculling corrections (0/1)
 PRM = Layout("dt g qv qt qba qbg r_ant:3 r_b:3 r_rad:3 z_g cos_max r_max delay delayed ring "
-             "queue gate gate_reset gate_latch pca_window")
+             "queue gate gate_reset gate_latch pca_window coning")
 (PRM_DT, PRM_G, PRM_QV, PRM_QT, PRM_QBA, PRM_QBG, PRM_RANT, PRM_RB, PRM_RRAD, PRM_ZG,
  PRM_COSMAX, PRM_RMAX, PRM_D, PRM_DELAYED, PRM_B, PRM_QC, PRM_GATE, PRM_GRESET,
- PRM_GLATCH, PRM_PCAW) = PRM.offsets
+ PRM_GLATCH, PRM_PCAW, PRM_CONING) = PRM.offsets
 
 #: per row: ticks now and of the core, queued records, output dirty (0/1), records fused late,
 #: records dropped (queue full), the MCKF state (n_rejected, n_iter, rejected, recovered),
@@ -113,7 +114,7 @@ RIN_RANGE, RIN_VAR, RIN_AGE = RIN.offsets
 #: update (``mckf_work_size(15, 3)`` floats, whose head is the KF work: the two updates never
 #: run at once)
 SCRATCH = Layout("H3:3x15 nu3:3 R3:3x3 H1:1x15 nu1:1 R1:1x1 dx:15 S3:3x3x3 v:8 kx:15 ky:3 "
-                 f"M:9x15 S3P:5x3x3 w:16 zp:3 nan:3 nur:3 "
+                 f"M:9x15 S3P:5x3x3 w:18 zp:3 nan:3 nur:3 "
                  f"kf:{getattr(mckf_work_size, 'py_func', mckf_work_size)(15, 3)}")
 (W_H3, W_NU3, W_R3, W_H1, W_NU1, W_R1, W_DX, W_S3, W_V, W_KX, W_KY, W_M, W_S3P, W_W, W_ZP,
  W_NAN, W_NUR, W_KF) = SCRATCH.offsets

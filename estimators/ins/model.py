@@ -12,8 +12,10 @@ import numpy as np
 
 from .._jit import njit
 from .layout import (
+    PRM_CONING,
     PRM_COSMAX,
     PRM_DT,
+    PRM_G,
     PRM_QV,
     PRM_RANT,
     PRM_RB,
@@ -24,7 +26,7 @@ from .layout import (
 
 __all__ = ["cov_step", "gate_ratio", "h_gnss_pos", "h_gnss_pos_w", "h_gnss_vel", "h_gnss_vel_w",
            "h_heading", "h_heading_w", "h_radar", "h_radar_w", "inject_reset", "inject_reset_w",
-           "innov_var", "nominal_step", "nominal_step_R", "quat_exp", "quat_log_err",
+           "increments", "innov_var", "nominal_step", "nominal_step_R", "quat_exp", "quat_log_err",
            "quat_mul", "quat_to_rot", "skew_mul", "step_llr"]
 
 
@@ -98,22 +100,64 @@ def skew_mul(M, r, out):
 
 # ------------------------------------------------------------------------ prediction
 @njit
-def nominal_step_R(x, u, dt, g, R, w):
-    """:func:`nominal_step` given R = R(q) of the current x; ``w`` (≥ 14): scratch."""
+def increments(x, u, up, dt, coning, w):
+    """The bias-corrected body-frame rotation vector ``w[3:6]`` and velocity increment
+    ``w[0:3]`` of one IMU sample ``u = (f̃, ω̃)`` (the means of the sample's delta-velocity and
+    delta-angle over Δt), with ``up`` the previous sample; ``w`` (≥ 18): scratch.
+
+    α = (ω̃ − b_g)Δt, ν = (f̃ − b_a)Δt (and α', ν' of ``up``, with the same bias estimate); with
+    ``coning`` the two-sample (previous-sample) corrections of Savage, *Strapdown inertial
+    navigation integration algorithm design, part 1: attitude algorithms*, JGCD 21(1) 1998
+    (coning) and *part 2: velocity and position algorithms*, JGCD 21(2) 1998 (sculling); also
+    Groves, *Principles of GNSS, Inertial, and Multisensor Integrated Navigation Systems* (2nd
+    ed., 2013), ch. 5::
+
+        φ  = α + (1/12) α' × α                                        (coning)
+        Δv = ν + ½ α × ν + (1/12) (α' × ν + ν' × α)      (rotation + sculling)
+
+    without ``coning``: φ = α, Δv = ν (rates held over the step)."""
     a = w[0:3]
+    phi = w[3:6]
+    ap = w[12:15]
+    vp = w[15:18]
     for k in range(3):
-        a[k] = u[k] - x[10 + k]
+        a[k] = (u[k] - x[10 + k]) * dt
+        phi[k] = (u[3 + k] - x[13 + k]) * dt
+        vp[k] = (up[k] - x[10 + k]) * dt
+        ap[k] = (up[3 + k] - x[13 + k]) * dt
+    if not coning:
+        return
+    c0 = ap[1] * phi[2] - ap[2] * phi[1]
+    c1 = ap[2] * phi[0] - ap[0] * phi[2]
+    c2 = ap[0] * phi[1] - ap[1] * phi[0]
+    r0 = 0.5 * (phi[1] * a[2] - phi[2] * a[1])
+    r1 = 0.5 * (phi[2] * a[0] - phi[0] * a[2])
+    r2 = 0.5 * (phi[0] * a[1] - phi[1] * a[0])
+    s0 = (ap[1] * a[2] - ap[2] * a[1] + vp[1] * phi[2] - vp[2] * phi[1]) / 12.0
+    s1 = (ap[2] * a[0] - ap[0] * a[2] + vp[2] * phi[0] - vp[0] * phi[2]) / 12.0
+    s2 = (ap[0] * a[1] - ap[1] * a[0] + vp[0] * phi[1] - vp[1] * phi[0]) / 12.0
+    a[0] += r0 + s0
+    a[1] += r1 + s1
+    a[2] += r2 + s2
+    phi[0] += c0 / 12.0
+    phi[1] += c1 / 12.0
+    phi[2] += c2 / 12.0
+
+
+@njit
+def nominal_step_R(x, u, up, prm, R, w):
+    """:func:`nominal_step` given R = R(q) of the current x; ``w`` (≥ 18): scratch."""
+    dt, g = prm[PRM_DT], prm[PRM_G]
+    increments(x, u, up, dt, prm[PRM_CONING] > 0.0, w)
+    dv = w[0:3]
     for i in range(3):
-        acc = R[i, 0] * a[0] + R[i, 1] * a[1] + R[i, 2] * a[2]
+        acc = (R[i, 0] * dv[0] + R[i, 1] * dv[1] + R[i, 2] * dv[2]) / dt
         if i == 2:
             acc -= g
         x[i] += x[3 + i] * dt + 0.5 * acc * dt * dt
         x[3 + i] += acc * dt
-    phi = w[3:6]
-    for k in range(3):
-        phi[k] = (u[3 + k] - x[13 + k]) * dt
     dq = w[6:10]
-    quat_exp(phi, dq)
+    quat_exp(w[3:6], dq)
     qn = w[10:14]
     quat_mul(x[6:10], dq, qn)
     nrm = math.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
@@ -122,11 +166,12 @@ def nominal_step_R(x, u, dt, g, R, w):
 
 
 @njit
-def nominal_step(x, u, dt, g, S3, w):
-    """One IMU sample u = (f̃, ω̃) on the nominal x = [p, v, q, b_a, b_g] (module docstring).
-    ``S3`` (≥ 1, 3, 3), ``w`` (≥ 14): scratch (the per-tick path allocates nothing)."""
+def nominal_step(x, u, up, prm, S3, w):
+    """One IMU sample u = (f̃, ω̃) after the sample ``up`` on the nominal x = [p, v, q, b_a,
+    b_g] (module docstring; :func:`increments`).  ``S3`` (≥ 1, 3, 3), ``w`` (≥ 18): scratch
+    (the per-tick path allocates nothing)."""
     quat_to_rot(x[6:10], S3[0])
-    nominal_step_R(x, u, dt, g, S3[0], w)
+    nominal_step_R(x, u, up, prm, S3[0], w)
 
 
 @njit

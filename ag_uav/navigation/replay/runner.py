@@ -2,14 +2,16 @@
 with the four GNSS rules (the flown one first), its gate and step latch, run on the log's IMU
 samples and fixes — the very kernel a simulated flight navigates on, with the settings
 :func:`ag_uav.navigation.ins_feedback.ins_config` gives the default config (σ, kernel, recovery,
-PCA window, gate, reset and latch, the process-noise margins), and these from the log:
+PCA window, gate, reset and latch), and these from the log:
 
 * **Rate and Δt.** The IMU is put on a uniform grid at its nominal rate (median interval) by
   linear interpolation (real logs jitter; the INS integrates at a fixed Δt).
 * **Process noise.** The per-sample white noise of each sensor is read from the log itself:
   σ = std(f̃_k+1 − f̃_k)/√2 per axis (the difference removes the slow motion and keeps the
-  white part, vibration included), the median over the three axes, times the default config's
-  margins (``estimator.ins_q_accel``, ``ins_q_gyro``, on the variance).  The bias random walks
+  white part, vibration included), the median over the three axes, times the margins
+  :data:`REPLAY_Q_ACCEL`, :data:`REPLAY_Q_GYRO` (× 2, × 32 on the variance).  The samples are
+  integrated as rates held over Δt (``INSConfig.coning = False``: no coning or sculling
+  correction; not measured with them on real logs).  The bias random walks
   are the ``[imu]`` defaults; the initial bias σ are ``bias_sd`` (0.2 m/s², 0.3 °/s: a MEMS
   unit's turn-on bias without a calibration).
 * **Fixes.** A fix stamped ``t`` (the arrival stamp of an autopilot log, whose position is
@@ -137,6 +139,13 @@ def gnss_from_reference(log: FlightLog, preset: str, rate_hz: float, seed: int) 
                      f" ({int(ok.sum())} fixes)")
 
 
+#: the process-noise margins (variance) on the log's white noise: those calibrated on the
+#: simulated IMU when it was point-sampled, which docs/replay.md was measured with (the
+#: simulation's default is 1, 1 since its IMU reports delta-angles and delta-velocities; not
+#: measured on real logs)
+REPLAY_Q_ACCEL, REPLAY_Q_GYRO = 2.0, 32.0
+
+
 def white_sigma(a: np.ndarray) -> float:
     """Per-sample white noise σ of a sampled signal (n, 3): median over the axes of
     std(diff)/√2 (module docstring)."""
@@ -153,9 +162,9 @@ def _ins_cfg(log: FlightLog, dt: float, delay: float, lever: np.ndarray, info: d
     info["imu_white_sigma"] = {"accel_mps2": round(sa, 4), "gyro_dps": round(sg / DEG, 4)}
     base = ins_config(cfg)
     return dataclasses.replace(
-        base, dt=dt, accel_sigma=sa * math.sqrt(e.ins_q_accel),
-        gyro_sigma=sg * math.sqrt(e.ins_q_gyro), lever_arm=tuple(lever),
-        delay_s=delay + 2.0 * dt, delayed=True), e.name
+        base, dt=dt, accel_sigma=sa * math.sqrt(REPLAY_Q_ACCEL),
+        gyro_sigma=sg * math.sqrt(REPLAY_Q_GYRO), lever_arm=tuple(lever),
+        delay_s=delay + 2.0 * dt, delayed=True, coning=False), e.name
 
 
 def _gap(opts: ReplayOptions, t0: float, t1: float) -> tuple[float, float] | None:
