@@ -83,6 +83,8 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
     console.print(t)
     if isinstance(summary.get("lanes"), dict):
         console.print(summary["lanes"]["text"], markup=False, highlight=False)
+    if isinstance(summary.get("plan_wind"), dict):
+        console.print(summary["plan_wind"]["text"], markup=False, highlight=False)
     est = summary.get("estimators")
     if est:
         console.print(estimator_table(est))

@@ -38,6 +38,7 @@ from ..navigation.feedback import Feedback, TrueFeedback
 from ..seeds import rng_streams, seed_sequences
 from ..vehicle.mjcf import build_vehicle
 from ..world.field import Field
+from ..world.forecast import plan_wind
 from ..world.mission import build_field, build_plan, field_outline
 from ..world.pattern import lane_choice, mission_swath
 from ..world.reference import Reference
@@ -509,6 +510,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         summ["planned_to_m"] = round(ref.plan_cut.planned_m, 1)
     if "lanes" in plan.meta:
         summ["lanes"] = plan.meta["lanes"].summary(plan.spacing)
+    summ["plan_wind"] = plan_wind(cfg).summary()
     if out.sprayer is not None:
         summ.update(out.sprayer.summary(sim_time))
         res.extra["spray"] = out.sprayer.series(len(out.t))
