@@ -331,7 +331,9 @@ def plot(rows: list[dict[str, Any]], front: list[dict[str, Any]], path: Path, ti
     ax.set_ylabel("dose CV of the overlaid pattern (%)")
     ax.set_ylim(0, min(100.0, max(100 * r["cv"] for r in rows) * 1.05))
     fig.colorbar(sc, ax=ax, label="drift past the buffer (% of sprayed)")
-    ax.set_title(title, fontsize=9)
+    import textwrap
+
+    ax.set_title("\n".join(textwrap.wrap(title, 90)), fontsize=8)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
