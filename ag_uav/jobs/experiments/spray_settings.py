@@ -25,6 +25,14 @@ S), on a 100 m wide field whose downwind edge is at y = 0 with the outermost lan
 - ``work_rate_ha_h``: the theoretical field capacity S · v · 0.36 (ha/h; no turns, no refills:
   an upper bound; the flights of ``--confirm`` give the job time).
 
+**Against the forecast's spread.** ``--wind`` is the forecast the plan is made on. With
+``--draws K`` (4) every figure above is the mean over K flown winds (:func:`flown_winds`: the
+forecast's vector turned by σ_θ z₂ and its length changed by σ_U z₁, the config's
+``forecast.direction_sigma_deg`` and ``forecast.speed_sigma_mps``, z from the config seed's
+``"forecast"`` stream, :mod:`ag_uav.world.forecast`); the part of a drawn wind along the legs
+makes the passes out and back differ, and both are flown. ``cv_exact`` (and ``*_exact``) are
+the figures at the forecast itself, ``cv_p90`` the 90th percentile of the CV over the draws.
+
 The **Pareto front** keeps the settings no other beats on all three of work rate (higher),
 CV (lower) and drift past the buffer (lower); the table lists the front's points with
 CV ≤ ``--cv-max`` (the effective swath's 25 % by default). Under-dosed area and off-target
