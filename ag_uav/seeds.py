@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 #: Names of the seeded random streams; appending a name never changes the others' draws.
-STREAMS = ("wind", "gps", "estimator", "altimeter", "imu", "attitude", "spare4", "spare5")
+STREAMS = ("wind", "gps", "estimator", "altimeter", "imu", "attitude", "spare4", "spare5",
+           "forecast", "meander")
 
 
 def seed_sequences(seed: int) -> dict[str, np.random.SeedSequence]:

@@ -403,8 +403,8 @@ def test_schema_walk_sees_every_kind() -> None:
             "list[float]", "list[str]"} <= kinds
     for lf in PLAIN:  # every plain leaf has an oracle, and its default passes it
         assert allowed(lf, _get(DEFAULT, lf.key)), lf.key
-    assert len(PLAIN) > 60 and len(TABLES) == 16  # 12 + [imu] [spray] [battery]
-    #                                               + [vehicle.rotor_fault]
+    assert len(PLAIN) > 60 and len(TABLES) == 17  # 12 + [imu] [spray] [battery]
+    #                                               + [vehicle.rotor_fault] [forecast]
 
 
 JUNK_VALUES: list[Any] = [True, False, "", "x", "1", [], [1.0], {}, {"a": 1},

@@ -59,8 +59,10 @@ def test_true_state_batch_matches_solo_and_mixes_controllers():
 
 
 def test_a_crash_leaves_the_batch_with_its_reason_and_the_others_go_on():
+    # a steady wind direction: the unstable gains' crash path is chaotic (with the direction
+    # meandering this seed's vehicle wobbles on to a hard landing instead of tilting over)
     bad = {"controller.attitude.zeta": [0.01, 0.01, 0.9],
-           "controller.attitude.wn": [60.0, 60.0, 3.0]}
+           "controller.attitude.wn": [60.0, 60.0, 3.0], "wind.meander_deg": 0.0}
     cfgs = [_cfg(0), _cfg(1, **bad), _cfg(2)]
     many = simulate_many(cfgs)
     assert many[1].summary["crashed"]

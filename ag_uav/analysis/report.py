@@ -80,9 +80,14 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
         t.add_row(label, f"{s} {unit}".strip())
         if key == "legs" and isinstance(summary.get("lanes"), dict):
             t.add_row("lane spacing", _lanes_cell(summary["lanes"]))
+        if key == "drift_fraction" and summary.get("drift_fraction_low") is not None:
+            t.add_row("  its low – high bounds", f"{summary['drift_fraction_low']:.3%} – "
+                      f"{summary['drift_fraction_high']:.3%}")
     console.print(t)
     if isinstance(summary.get("lanes"), dict):
         console.print(summary["lanes"]["text"], markup=False, highlight=False)
+    if isinstance(summary.get("plan_wind"), dict):
+        console.print(summary["plan_wind"]["text"], markup=False, highlight=False)
     est = summary.get("estimators")
     if est:
         console.print(estimator_table(est))

@@ -90,6 +90,7 @@ def cmd_fly(args: argparse.Namespace) -> int:
 def cmd_plan(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..engine.missions import build_field, build_plan
+    from ..world.forecast import plan_wind
     from ..world.plan_export import nozzle_leads, write_plan
 
     if not (math.isfinite(args.simplify) and args.simplify >= 0):
@@ -117,6 +118,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     print(f"{args.output}: {info['format']}, {info['waypoints']} waypoints{items}, "
           f"{info['spray_switches']} nozzle switches; {plan.summary()}")
     print(plan.meta["lanes"].text())
+    print(plan_wind(cfg).text())
     _write_sorties(cfg, Path(args.output), kw)
     return 0
 

@@ -36,6 +36,7 @@ from .schema import (
     ConfigError,
     ControllerConfig,
     EstimatorConfig,
+    ForecastConfig,
     GpsConfig,
     ImuConfig,
     LogConfig,
@@ -49,7 +50,8 @@ from .schema import (
 __all__ = [
     "CONTROLLER_TYPES", "ESTIMATORS", "FLOAT_LIMIT", "GPS_PRESETS", "INT_MAX", "INT_MIN",
     "REDUCERS", "AttitudeGains", "AxisGains", "BatteryConfig", "Config", "ConfigError",
-    "ControllerConfig", "EstimatorConfig", "GpsConfig", "ImuConfig", "LogConfig", "MissionConfig",
+    "ControllerConfig", "EstimatorConfig", "ForecastConfig", "GpsConfig", "ImuConfig",
+    "LogConfig", "MissionConfig",
     "SimConfig", "SprayConfig", "VehicleConfig", "WindConfig", "config_from_dict",
     "parse_set_items", "load_config", "default_config", "config_toml_with_comments",
     "toml_repr",

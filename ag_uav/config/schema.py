@@ -347,6 +347,36 @@ class WindConfig:
                          "the mean wind speed, the intensity consistent with the configured "
                          "wind (sigma_u about 20 % of it at 3 m)",
                          choices=("none", "light", "moderate", "severe", "mean"))
+    meander_deg: float = _f(10.0, "the flown wind's direction meanders about direction_deg: "
+                            "a Gauss-Markov angle of this std (deg; 0 = a steady direction), "
+                            "slower than the Dryden gusts (whose lateral gust already turns "
+                            "the wind by about 11 deg at 3 m). 10: mid-range of the neutral "
+                            "class D sigma-theta, 7.5-12.5 deg (US EPA-454/R-99-005, table "
+                            "6-8)", ge=0, le=60)
+    meander_tau_s: float = _f(120.0, "the meander's time constant (s): its angle decorrelates "
+                              "as exp(-t/tau); 120 s, minutes as the submeso motions of the "
+                              "surface layer (chosen)", gt=0, le=3600)
+
+
+@dataclass
+class ForecastConfig:
+    """The wind the plan is made on (ag_uav.world.forecast): the lanes (mission.swath_m =
+    "auto") and the crosswind heading take it; the flight takes [wind]."""
+
+    speed_mps: float | str = _f("auto", "forecast mean wind speed (m/s), or \"auto\": the "
+                                "flown wind.speed_mps plus an error drawn with std "
+                                "speed_sigma_mps (clipped at 0)", ge=0, le=25,
+                                choices=("auto",))
+    direction_deg: float | str = _f("auto", "forecast direction the wind blows FROM (deg), "
+                                    "or \"auto\": the flown wind.direction_deg plus an error "
+                                    "drawn with std direction_sigma_deg", choices=("auto",))
+    speed_sigma_mps: float = _f(1.5, "std of the drawn speed error (m/s; 0 = the plan knows "
+                                "the flown speed). 1.5: the 10 m wind RMSE of short-range "
+                                "NWP forecasts at stations, 1.5-2.3 m/s", ge=0, le=10)
+    direction_sigma_deg: float = _f(30.0, "std of the drawn direction error (deg; 0 = the "
+                                    "plan knows the flown direction). 30: the direction MAE of "
+                                    "the same forecasts, 22-40 deg (a normal error's MAE is "
+                                    "0.8 std)", ge=0, le=180)
 
 
 GPS_PRESETS = ("perfect", "rtk", "sbas", "standalone", "paper-numerical", "student-t", "laplace",
@@ -604,6 +634,8 @@ class Config:
     controller: ControllerConfig = field(default_factory=ControllerConfig,
                                          metadata={"help": "position cascade"})
     wind: WindConfig = field(default_factory=WindConfig, metadata={"help": "mean wind + Dryden"})
+    forecast: ForecastConfig = field(default_factory=ForecastConfig,
+                                     metadata={"help": "the wind the plan is made on"})
     gps: GpsConfig = field(default_factory=GpsConfig, metadata={"help": "GPS sensor and errors"})
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig,
                                        metadata={"help": "state estimation in the loop"})

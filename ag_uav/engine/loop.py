@@ -224,15 +224,24 @@ def _sensing(b: Batch, flights: Sequence[Flight], fbs: Sequence[Any], m0: Any) -
 def _disturbance(b: Batch, flights: Sequence[Flight]) -> Disturbance:
     from ..seeds import rng_streams
     from ..vehicle.sensors_batched import BatchWind
+    from ..world.forecast import MEANDER_STEP_S, meander_angles
     from ..world.wind import Wind
 
-    winds = []
-    for fl in flights:
+    winds, phis = [], []
+    for i, fl in enumerate(flights):
         w, streams = fl.cfg.wind, fl.streams or rng_streams(fl.cfg.seed)
         winds.append(Wind(w.speed_mps, w.direction_deg, w.turbulence, rng=streams["wind"]))
+        phis.append(meander_angles(streams["meander"], w.meander_deg, w.meander_tau_s,
+                                   float(b.n_ticks[i]) * b.dt))
     c_lin = np.array([fl.cfg.vehicle.drag_linear for fl in flights], dtype=float)
     c_quad = np.array([fl.cfg.vehicle.drag_quadratic for fl in flights], dtype=float)
-    return Disturbance(b, BatchWind.from_winds(winds), c_lin, c_quad)
+    meander = None
+    if any(p.any() for p in phis):
+        meander = np.zeros((len(phis), max(len(p) for p in phis)))
+        for i, p in enumerate(phis):
+            meander[i, :len(p)], meander[i, len(p):] = p, p[-1]
+    every = max(1, int(round(MEANDER_STEP_S / b.dt)))
+    return Disturbance(b, BatchWind.from_winds(winds), c_lin, c_quad, meander, every)
 
 
 def _spraying(b: Batch, flights: Sequence[Flight], vehs: Sequence[Vehicle],
@@ -363,7 +372,7 @@ class Engine:
         self.control.step()
         if self.spraying is not None:
             self.spraying.step(k, t)
-        self.disturbance.step()
+        self.disturbance.step(k)
         if self.depositing is not None:
             self.depositing.step()
         if self.spraying is not None:

@@ -38,6 +38,7 @@ from ..navigation.feedback import Feedback, TrueFeedback
 from ..seeds import rng_streams, seed_sequences
 from ..vehicle.mjcf import build_vehicle
 from ..world.field import Field
+from ..world.forecast import plan_wind
 from ..world.mission import build_field, build_plan, field_outline
 from ..world.pattern import lane_choice, mission_swath
 from ..world.reference import Reference
@@ -443,16 +444,45 @@ def dose_summary(cfg: Config, fld: Field, dose: Any, tank_l: float | None = None
     tank gave ``tank_l`` (``litres_sprayed_l`` unrounded), the difference
     ``nozzle_minus_tank_l``: the tank draws what the nozzle model lets out (at most what is in
     it), so it is 0 unless the tank ran dry while the line pressure was still falling.
-    Undefined values (nothing sprayed on the field) are None."""
+    ``drift_fraction_low`` / ``_high``: the drift past the buffer scaled by the low and high
+    bounds of the uncertain inputs (:func:`drift_bounds`). Undefined values (nothing sprayed
+    on the field) are None."""
     m = dose.metrics(fld, cfg.spray.rate_l_per_ha, cfg.spray.dose_margin_m)
     out: dict[str, Any] = {k: (None if math.isnan(m[k]) else m[k]) for k in DOSE_KEYS}
     out["nozzle_sprayed_l"] = m["sprayed_l"]
     if tank_l is not None:
         out["nozzle_minus_tank_l"] = m["sprayed_l"] - tank_l
+    if out["drift_fraction"] is not None:
+        r = drift_bounds(cfg)
+        out["drift_fraction_low"] = out["drift_fraction"] * r["low"]
+        out["drift_fraction_high"] = out["drift_fraction"] * r["high"]
     out["dose_cell_m"] = dose.grid.cell
     out["dose_mass_balance_error"] = m["mass_balance_error"]
     out["evaporated_fraction"] = m["evaporated_fraction"]
     return out
+
+
+_DRIFT_RATIOS: dict[str, dict[str, float]] = {}
+
+
+def drift_bounds(cfg: Config) -> dict[str, float]:
+    """The low / central and high / central ratios of the drift past the buffer
+    (:func:`ag_uav.world.drift_bounds.drift_ratios`) for ``cfg``'s mission: a strip of its
+    lanes at its height and speed, the flown mean wind taken wholly across them, a full tank;
+    cached per those inputs."""
+    from ..world.deposition import DepositionConfig
+    from ..world.drift_bounds import drift_ratios
+
+    v, sp = cfg.vehicle, cfg.spray
+    lane = mission_swath(cfg)
+    dep = DepositionConfig.from_config(cfg, swath_m=lane)
+    mass = v.mass_kg + v.payload_kg + v.unknown_payload_kg + sp.tank_l * sp.density_kg_per_l
+    args = (dep, float(cfg.wind.speed_mps), float(cfg.mission.altitude_m),
+            float(cfg.mission.speed_mps), lane, mass, dep.buffer_m)
+    key = repr(args)
+    if key not in _DRIFT_RATIOS:
+        _DRIFT_RATIOS[key] = drift_ratios(*args)
+    return _DRIFT_RATIOS[key]
 
 
 def _cut_reason(cfg: Config, ref: Any, out: LoopOutput, summ: dict[str, Any],
@@ -510,6 +540,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         summ["planned_to_m"] = round(ref.plan_cut.planned_m, 1)
     if "lanes" in plan.meta:
         summ["lanes"] = plan.meta["lanes"].summary(plan.spacing)
+    summ["plan_wind"] = plan_wind(cfg).summary()
     if out.sprayer is not None:
         summ.update(out.sprayer.summary(sim_time))
         res.extra["spray"] = out.sprayer.series(len(out.t))

@@ -506,13 +506,20 @@ class Spraying:
 
 
 class Disturbance:
-    """Wind (mean + Dryden turbulence) as a drag force, held over the control period."""
+    """Wind (mean + Dryden turbulence) as a drag force, held over the control period. With
+    ``meander`` (N, M) the mean wind's direction of row i is turned by ``meander[i, j]``
+    radians from tick j·``every`` on (:func:`ag_uav.world.forecast.meander_angles`; a tick
+    count of the flight's own, so a row turns alike in any batch)."""
 
-    def __init__(self, b: Batch, wind: Any, c_lin: np.ndarray, c_quad: np.ndarray) -> None:
+    def __init__(self, b: Batch, wind: Any, c_lin: np.ndarray, c_quad: np.ndarray,
+                 meander: np.ndarray | None = None, every: int = 1) -> None:
         self.b, self.wind, self.c_lin, self.c_quad = b, wind, c_lin, c_quad
+        self.meander, self.every = meander, every
 
-    def step(self) -> None:
+    def step(self, k: int = 0) -> None:
         b = self.b
+        if self.meander is not None and k % self.every == 0:
+            self.wind.turn(self.meander[:, min(k // self.every, self.meander.shape[1] - 1)])
         b.w, b.xf = self.wind.step_drag(b.dt, b.p[:, 2], b.v, self.c_lin, self.c_quad, b.act)
 
 

@@ -66,6 +66,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..world.wind import (
+    WF_EX,
+    WF_EY,
     WF_LU,
     WF_LW,
     WF_MX,
@@ -148,6 +150,20 @@ class BatchWind:
         self.turbulent: NDArray[np.bool_] = ist[:, WI_TURB] != 0
         self.wind: F64 = self.mean.copy()   # last output (N, 3)
         self.force: F64 = np.zeros((n, 3))  # last drag force of step_drag (N, 3)
+        self._e0: F64 = fs[:, [WF_EX, WF_EY]].copy()          # the downwind unit vectors
+        self._speed: F64 = np.hypot(fs[:, WF_MX], fs[:, WF_MY])
+
+    def turn(self, phi: F64) -> None:
+        """Turn each row's mean wind (and its gusts' frame) by ``phi`` (N,) radians
+        counter-clockwise from the direction it was built with (the meander of the flown
+        wind's direction, :func:`ag_uav.world.forecast.meander_angles`): ``e = R(φ) e₀``,
+        mean = U e."""
+        c, s = np.cos(phi), np.sin(phi)
+        ex = c * self._e0[:, 0] - s * self._e0[:, 1]
+        ey = s * self._e0[:, 0] + c * self._e0[:, 1]
+        self._fs[:, WF_EX], self._fs[:, WF_EY] = ex, ey
+        self._fs[:, WF_MX], self._fs[:, WF_MY] = self._speed * ex, self._speed * ey
+        self.mean[:, 0], self.mean[:, 1] = self._fs[:, WF_MX], self._fs[:, WF_MY]
 
     @classmethod
     def from_winds(cls, winds: Sequence[Wind]) -> BatchWind:

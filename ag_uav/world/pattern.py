@@ -16,7 +16,8 @@ with CV ≤ 25 % (:func:`effective_swath`).
 **Lanes of a mission** (:func:`lane_choice`). With ``mission.swath_m = "auto"`` (the default) the
 pattern test is run at the mission's height, ground speed, drag, nozzles, droplet spectrum and
 two masses, a full tank and an empty one, with the mean wind split across and along the legs the
-planner will fly (:func:`mission_direction`: by default ``"crosswind"``, legs across the mean
+planner will fly (the planning wind of :func:`ag_uav.world.forecast.plan_wind`, a forecast, not
+the wind flown; :func:`mission_direction`: by default ``"crosswind"``, legs across the mean
 wind, so that the passes out and back meet the same airspeed), a pass out and a pass back
 overlaid alternately; the lane spacing is the widest spacing whose overlaid CV is at most
 ``mission.swath_cv_max`` at both masses (default 0.15, the spacing at which a normally spread
@@ -38,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from .deposition import DepositionBatch, DepositionConfig
+from .forecast import plan_wind
 
 __all__ = ["pass_states", "single_pass", "cv_vs_spacing", "effective_swath", "swath_pattern",
            "LaneChoice", "lane_choice", "mission_swath", "mission_headland", "mission_direction",
@@ -270,11 +272,12 @@ def crosswind_heading(wind_from_deg: float) -> float:
 
 def mission_direction(cfg: Any) -> float | None:
     """The legs' heading given to the planner: ``mission.direction_deg`` when a number; for
-    ``"crosswind"`` the heading across the mean wind (:func:`crosswind_heading`), or None in calm
+    ``"crosswind"`` the heading across the planning wind (:func:`~ag_uav.world.forecast.
+    plan_wind`; :func:`crosswind_heading`), or None in calm
     air; for ``"auto"`` None (the planner's fewest turns)."""
     d = cfg.mission.direction_deg
     if d == "crosswind":
-        w = cfg.wind
+        w = plan_wind(cfg)
         return crosswind_heading(w.direction_deg) if w.speed_mps > 0 else None
     return None if d == "auto" else float(d)
 
@@ -308,9 +311,10 @@ def pattern_case(cfg: Any) -> PatternCase:
     """The pattern test of ``cfg``'s mission: height, ground speed, the masses it sprays at (dry
     + payload + unknown payload, with a full tank and with an empty one when the sprayer is
     modelled: the rotor wake, hence the pattern, follows the thrust), drag along the body x
-    axis, the deposition config (nozzles, spectrum, rotors, air) and the mean wind split across
+    axis, the deposition config (nozzles, spectrum, rotors, air) and the planning wind
+    (:func:`~ag_uav.world.forecast.plan_wind`) split across
     and along the legs (:func:`_legs_heading`)."""
-    v, sp, m, wd = cfg.vehicle, cfg.spray, cfg.mission, cfg.wind
+    v, sp, m, wd = cfg.vehicle, cfg.spray, cfg.mission, plan_wind(cfg)
     dry = v.mass_kg + v.payload_kg + v.unknown_payload_kg
     masses = (dry + sp.tank_l * sp.density_kg_per_l, dry) if sp.enabled else (dry,)
     dep = DepositionConfig.from_config(cfg, swath_m=1.0)  # the profile is per unit swath flow

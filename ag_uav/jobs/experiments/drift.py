@@ -33,9 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...world.deposition import DepositionConfig, footprints, pack_input
+from ...world.deposition import DepositionConfig
+from ...world.drift_bounds import DY, FAR, pass_profile  # noqa: F401 - the profile's law
 from . import drift_range, flight_axes, name_axis, number_axis, toml_overrides
-from .swath import pass_states
 
 NAME = "drift"
 HELP = ("simulated drift trial (ISO 22866 style): a treated strip upwind of collector lines at "
@@ -49,8 +49,6 @@ BOUNDS_NOTE = ("low: wake_escape halved, an unstable surface layer, the wind's d
 #: illustrative spectra (Dv10, Dv50, Dv90 in µm); "medium" is the product default
 SPECTRA = {"fine": (80.0, 160.0, 290.0), "medium": (120.0, 250.0, 420.0),
            "coarse": (180.0, 360.0, 600.0)}
-DY = 0.02              # m, the grid the single-pass profile is evaluated on
-FAR = 400.0            # m, the furthest distance the profile (and the buffers) are evaluated to
 
 #: JKI basic drift values, % of the applied rate, 90th percentile, one application (JKI 2010
 #: "Tabelle der Abdrifteckwerte", Rautmann, Streloke & Winkler 2001, Mitt. Biol. Bundesanst.
@@ -79,55 +77,11 @@ class Case:
     rh: float
 
 
-def _ig_pdf(t: np.ndarray, mu: float, lam: float) -> np.ndarray:
-    from scipy.stats import invgauss
-
-    out = np.zeros_like(t)
-    pos = t > 0
-    out[pos] = invgauss.pdf(t[pos], mu / lam, scale=lam)
-    return out
-
-
 def single_pass_profile(cfg: DepositionConfig, case: Case, mass_kg: float = 6.47,
                         drag_lin: float = 0.25, drag_quad: float = 0.18
                         ) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Tracer deposit density across one pass (1/m; integrates to the landed share): y grid,
-    density, and the volume book of the pass (shares of the sprayed volume)."""
-    R, thrust = pass_states(case.speed, case.height, case.wind, mass_kg, drag_lin, drag_quad)
-    inp = pack_input([0.0, 0.0, case.height], [case.speed, 0.0, 0.0], R, thrust,
-                     [0.0, case.wind, 0.0], 1)
-    fp = footprints(cfg, inp)
-    noz = np.asarray(cfg.nozzle_xyz_m, float).reshape(-1, 3)
-    ym = noz @ R.reshape(3, 3)[1]                    # nozzle y in the world frame
-    share = np.asarray(cfg.nozzle_share, float)
-    y = np.arange(-30.0, FAR + 30.0, DY)
-    dens = np.zeros_like(y)
-    edge2 = np.max(np.hypot(noz[:, 0], noz[:, 1])) + 0.5 * cfg.rotor_diameter_m
-    s_e = math.sqrt(cfg.release_sigma_m ** 2 + 0.5 * edge2 ** 2)
-    kern_y = np.arange(-5 * s_e, 5 * s_e + DY, DY)
-    kern = np.exp(-0.5 * (kern_y / s_e) ** 2)
-    kern /= kern.sum()
-    for k in range(len(fp["frac"])):
-        f = fp["frac"][k]
-        sw = math.sqrt(fp["wvar"][k])
-        esc = np.zeros_like(y)
-        uy = fp["uy"][k]
-        if fp["esc"][k] > 0 and uy > 1e-9:
-            y0 = fp["ey"][k] - uy * fp["mut"][k]     # where the escaped part starts to settle
-            esc = _ig_pdf((y - y0) / uy, fp["mut"][k], fp["lamt"][k]) / uy
-            esc = np.convolve(esc, kern, mode="same")
-        elif fp["esc"][k] > 0:
-            esc = np.exp(-0.5 * ((y - fp["ey"][k]) / s_e) ** 2) / (s_e * math.sqrt(2 * math.pi))
-        for m in range(len(ym)):
-            g = np.exp(-0.5 * ((y - ym[m] - fp["wy"][k]) / sw) ** 2) / (sw * math.sqrt(2 * math.pi))
-            e = np.interp(y - ym[m], y, esc, left=0.0, right=0.0)
-            dens += share[m] * f * (fp["wake"][k] * g + fp["esc"][k] * e)
-    book = {"evaporated": float(np.sum(fp["frac"] * (
-        fp["wake"] * (1 - fp["wland"]) + fp["esc"] * ((1 - fp["pair"]) * (1 - fp["rland"])
-                                                      + fp["pair"] * (1 - fp["rair"]))))),
-            "airborne": float(np.sum(fp["frac"] * fp["esc"] * fp["pair"] * fp["rair"])),
-            "escaped": float(np.sum(fp["frac"] * fp["esc"]))}
-    return y, dens, book
+    """:func:`ag_uav.world.drift_bounds.pass_profile` of ``case``."""
+    return pass_profile(cfg, case.wind, case.height, case.speed, mass_kg, drag_lin, drag_quad)
 
 
 def strip_deposit(y: np.ndarray, dens: np.ndarray, lane: float, passes: int,

@@ -17,40 +17,12 @@ The central trial is the one the docs tabulate (ε₀ = 0.3, neutral, a steady d
 strip). The bounds take each input at the end that lowers / raises the far deposit: **low** =
 ε₀/2, unstable, σθ = 20°; **high** = 2ε₀, stable, a steady direction. They are corners of the
 inputs' ranges, not a statistical interval.
+
+The law is :mod:`ag_uav.world.drift_bounds` (the flight's summary uses it too).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
+from ...world.drift_bounds import BOUNDS, bound_config, meander  # noqa: F401
 
-import numpy as np
-
-from ...world.deposition import DepositionConfig
-from ...world.surface_layer import STABILITY
-
-#: the bounds' inputs: (ε₀ factor, stability class, σθ in degrees)
-BOUNDS = {"low": (0.5, "unstable", 20.0), "high": (2.0, "stable", 0.0)}
-
-
-def meander(x: np.ndarray, dep: np.ndarray, sigma_deg: float) -> np.ndarray:
-    """The deposit ``dep`` at the distances ``x`` from a strip's edge averaged over wind
-    directions θ ~ N(0, σθ) off the edge's normal: E[dep(x / cos θ) / cos θ]."""
-    if sigma_deg <= 0.0:
-        return dep.copy()
-    z, w = np.polynomial.hermite_e.hermegauss(9)
-    w = w / w.sum()
-    out = np.zeros_like(dep)
-    for zi, wi in zip(z, w, strict=True):
-        th = min(abs(zi * math.radians(sigma_deg)), math.radians(80.0))
-        c = math.cos(th)
-        out += wi * np.interp(x / c, x, dep, left=dep[0], right=0.0) / c
-    return out
-
-
-def bound_config(base: DepositionConfig, which: str) -> tuple[DepositionConfig, float]:
-    """The deposition config and σθ (degrees) of the ``"low"`` or ``"high"`` bound."""
-    f, stab, sig = BOUNDS[which]
-    return (dataclasses.replace(base, wake_escape=min(1.0, base.wake_escape * f),
-                                obukhov_inv_m=STABILITY[stab]), sig)
-
+__all__ = ["BOUNDS", "bound_config", "meander"]

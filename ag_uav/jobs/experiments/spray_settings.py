@@ -5,8 +5,11 @@ spray evenly in a given wind, at what work rate and with how much drift.
 spectrum single passes of the deposition model's pattern test are flown, with a full tank and an
 empty one (each figure below is the worse of the two, as the mission's automatic lanes take it);
 the passes out and back are overlaid alternately (:func:`ag_uav.world.pattern.cv_back_and_forth`:
-with ``--along``, a wind along the legs, the pass back is flown too; without, it is the pass out
-mirrored across the track, exact for the default nozzle layout, symmetric across it)
+with ``--along``, a wind along the legs, the pass back is flown too; without, it lays the pass
+out's profile on the ground: flown the other way, it meets the crosswind on its other side, and
+its mirror image across the track is the pass out's, exact for the default nozzle layout,
+symmetric across it; the mission's lanes test, :func:`ag_uav.world.pattern.run_pattern`, flies
+it and finds the same)
 (:func:`ag_uav.world.pattern.single_pass`: a kinematic pass across a collector line, the mean
 wind as a crosswind, 60 m long, collectors every 0.25 m to 20 m on each side), and its
 profile p(y) (per unit flow) is overlaid at every candidate lane spacing S. Per (h, v, spectrum,
@@ -21,6 +24,14 @@ S), on a 100 m wide field whose downwind edge is at y = 0 with the outermost lan
 - ``drift_past_buffer``: the same beyond the edge plus ``--buffer`` metres;
 - ``work_rate_ha_h``: the theoretical field capacity S · v · 0.36 (ha/h; no turns, no refills:
   an upper bound; the flights of ``--confirm`` give the job time).
+
+**Against the forecast's spread.** ``--wind`` is the forecast the plan is made on. With
+``--draws K`` (4) every figure above is the mean over K flown winds (:func:`flown_winds`: the
+forecast's vector turned by σ_θ z₂ and its length changed by σ_U z₁, the config's
+``forecast.direction_sigma_deg`` and ``forecast.speed_sigma_mps``, z from the config seed's
+``"forecast"`` stream, :mod:`ag_uav.world.forecast`); the part of a drawn wind along the legs
+makes the passes out and back differ, and both are flown. ``cv_exact`` (and ``*_exact``) are
+the figures at the forecast itself, ``cv_p90`` the 90th percentile of the CV over the draws.
 
 The **Pareto front** keeps the settings no other beats on all three of work rate (higher),
 CV (lower) and drift past the buffer (lower); the table lists the front's points with
@@ -86,6 +97,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--buffer", type=float, default=5.0, help="buffer (m) past the downwind edge")
     p.add_argument("--cv-max", type=float, default=0.25, help="CV limit of the table and "
                    "of the flights that confirm it")
+    p.add_argument("--draws", type=int, default=4, metavar="K",
+                   help="draws of the forecast's error (the config's forecast.speed_sigma_mps "
+                   "and forecast.direction_sigma_deg, from its seed): every figure is the mean "
+                   "over the K flown winds, the plan's exact wind beside it; 0: the exact wind "
+                   "only")
     p.add_argument("--confirm", type=int, default=0, metavar="N",
                    help="fly the N fastest front points with CV <= --cv-max on the mission")
     p.add_argument("--config", default=None, help="base config (TOML)")
@@ -131,10 +147,11 @@ def _axes(args: argparse.Namespace, wind: float) -> tuple[list[Case], np.ndarray
     for name, v, ok in (("--wind", wind, 0 <= wind <= 25), ("--along", args.along,
                         abs(args.along) <= 25), ("--buffer", args.buffer, args.buffer >= 0),
                         ("--cv-max", args.cv_max, args.cv_max > 0),
-                        ("--confirm", args.confirm, args.confirm >= 0)):
+                        ("--confirm", args.confirm, args.confirm >= 0),
+                        ("--draws", args.draws, 0 <= args.draws <= 1000)):
         if not (ok and math.isfinite(v)):
             raise ConfigError(f"{name} = {v:g}: allowed: --wind 0..25 m/s, --along -25..25 m/s, "
-                              "--buffer >= 0 m, --cv-max > 0, --confirm >= 0")
+                              "--buffer >= 0 m, --cv-max > 0, --confirm >= 0, --draws 0..1000")
     base = (args.config, args.set)
     check_on_config("--heights", heights, "mission.altitude_m", *base)
     check_on_config("--speeds", speeds, "mission.speed_mps", *base)
@@ -170,8 +187,8 @@ def case_rows(case: Case, y: np.ndarray, p: np.ndarray, airborne: float, wind: f
               spacings: np.ndarray, buffer_m: float, back: np.ndarray | None = None
               ) -> list[dict[str, Any]]:
     """The figures of every spacing of one pass out (``p``) and back (``back``, in the frame of
-    the pass out; None: ``p`` mirrored across the track)."""
-    back = p[::-1] if back is None else back
+    the pass out; None: ``p``, the pass back in a pure crosswind with symmetric nozzles)."""
+    back = p if back is None else back
     cvs = cv_back_and_forth(y, p, back, spacings)
     dy = y[1] - y[0]
     rows = []
@@ -200,37 +217,76 @@ def pareto(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return sorted(keep, key=lambda r: -r["work_rate_ha_h"])
 
 
+FIGURES = ("cv", "underdosed", "offtarget", "drift_past_buffer")
+
+
+def flown_winds(wind: float, along: float, draws: int, speed_sigma: float, direction_sigma: float,
+                seed: int) -> list[tuple[float, float]]:
+    """The winds (across, along the legs; m/s) the plan made on the forecast (``wind`` across,
+    ``along`` along) meets in flight: ``draws`` draws of the forecast's error
+    (:mod:`ag_uav.world.forecast`: speed error σ_U z₁, direction error σ_θ z₂, from the
+    ``"forecast"`` stream of ``seed``), the forecast's vector turned by σ_θ z₂ and its length
+    changed by σ_U z₁ (at least 0)."""
+    from ...seeds import seed_sequences
+
+    z = np.random.default_rng(seed_sequences(seed)["forecast"]).standard_normal((draws, 2))
+    speed, head = math.hypot(wind, along), math.atan2(along, wind)
+    out = []
+    for z1, z2 in z:
+        u = max(0.0, speed + speed_sigma * z1)
+        a = head + math.radians(direction_sigma) * z2
+        out.append((u * math.cos(a), u * math.sin(a)))
+    return out
+
+
+def _mass_rows(c: Case, dc: Any, base: Any, m: float, cross: float, along: float,
+               spacings: np.ndarray, buffer_m: float) -> list[dict[str, Any]]:
+    """One mass's passes out and back in the wind (``cross``, ``along``), every spacing."""
+    drag = (base.drag_linear, base.drag_quadratic)
+    y, p, info = single_pass(dc, c.speed_mps, c.height_m, cross, m, *drag, wind_x=along)
+    back = None
+    if along != 0.0:
+        _, b, _ = single_pass(dc, c.speed_mps, c.height_m, -cross, m, *drag, wind_x=-along)
+        back = b[::-1].copy()
+    airborne = info["drift_l"] / info["sprayed_l"] if info["sprayed_l"] > 0 else 0.0
+    return case_rows(c, y, p, airborne, cross, spacings, buffer_m, back)
+
+
 def search(cfg: Any, cases: list[Case], wind: float, spacings: np.ndarray, buffer_m: float,
-           progress: bool = True, along: float = 0.0) -> list[dict[str, Any]]:
+           progress: bool = True, along: float = 0.0,
+           winds: list[tuple[float, float]] | None = None) -> list[dict[str, Any]]:
     """Every case's single passes at the mission's masses (a full tank and an empty one, as
     :func:`ag_uav.world.pattern.lane_choice` tests) and drag, overlaid at every spacing; each
-    figure is the worse of the two masses."""
+    figure is the worse of the two masses. With ``winds`` (the flown winds of
+    :func:`flown_winds`) the figures are their means over those winds and the forecast's own
+    (the plan's exact wind) stand beside them as ``*_exact``."""
     from ..._progress import progress_bar
     from ...world.deposition import DepositionConfig
     from ...world.pattern import pattern_case
 
-    base = pattern_case(dataclasses.replace(
-        cfg, wind=dataclasses.replace(cfg.wind, speed_mps=0.0)))   # its masses, drag, nozzles
+    calm = dataclasses.replace(cfg, wind=dataclasses.replace(cfg.wind, speed_mps=0.0),
+                               forecast=dataclasses.replace(cfg.forecast, speed_mps="auto",
+                                                            speed_sigma_mps=0.0))
+    base = pattern_case(calm)   # its masses, drag, nozzles
     rows: list[dict[str, Any]] = []
-    bar = progress_bar(total=len(cases), desc="pattern tests", unit="pass", disable=not progress)
+    bar = progress_bar(total=len(cases), desc="pattern tests", unit="case", disable=not progress)
     for c in cases:
         d10, d50, d90 = SPECTRA[c.spectrum]
         dc: DepositionConfig = dataclasses.replace(base.dep, dv10_um=d10, dv50_um=d50,
                                                    dv90_um=d90)
-        per_mass = []
-        for m in base.masses_kg:
-            drag = (base.drag_linear, base.drag_quadratic)
-            y, p, info = single_pass(dc, c.speed_mps, c.height_m, wind, m, *drag, wind_x=along)
-            back = None
-            if along != 0.0:
-                _, b, _ = single_pass(dc, c.speed_mps, c.height_m, -wind, m, *drag,
-                                      wind_x=-along)
-                back = b[::-1].copy()
-            airborne = info["drift_l"] / info["sprayed_l"] if info["sprayed_l"] > 0 else 0.0
-            per_mass.append(case_rows(c, y, p, airborne, wind, spacings, buffer_m, back))
-        for worst in zip(*per_mass, strict=True):
-            rows.append({**worst[0], **{k: max(r[k] for r in worst) for k in
-                                        ("cv", "underdosed", "offtarget", "drift_past_buffer")}})
+        per_wind = []
+        for cross, al in [(wind, along), *(winds or [])]:
+            per_mass = [_mass_rows(c, dc, base, m, cross, al, spacings, buffer_m)
+                        for m in base.masses_kg]
+            per_wind.append([{**worst[0], **{k: max(r[k] for r in worst) for k in FIGURES}}
+                             for worst in zip(*per_mass, strict=True)])
+        for exact, *drawn in zip(*per_wind, strict=True):
+            row = {**exact, "wind_mps": wind}
+            if drawn:
+                row.update({f"{k}_exact": exact[k] for k in FIGURES})
+                row.update({k: float(np.mean([r[k] for r in drawn])) for k in FIGURES})
+                row["cv_p90"] = float(np.quantile([r["cv"] for r in drawn], 0.9))
+            rows.append(row)
         bar.update(1)
     bar.close()
     return rows
@@ -283,7 +339,9 @@ def plot(rows: list[dict[str, Any]], front: list[dict[str, Any]], path: Path, ti
     ax.set_ylabel("dose CV of the overlaid pattern (%)")
     ax.set_ylim(0, min(100.0, max(100 * r["cv"] for r in rows) * 1.05))
     fig.colorbar(sc, ax=ax, label="drift past the buffer (% of sprayed)")
-    ax.set_title(title, fontsize=9)
+    import textwrap
+
+    ax.set_title("\n".join(textwrap.wrap(title, 90)), fontsize=8)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
@@ -298,6 +356,10 @@ def _table(front: list[dict[str, Any]], cv_max: float) -> tuple[list[str], list[
              f"{100 * r['underdosed']:.0f} %", f"{100 * r['offtarget']:.2f} %",
              f"{100 * r['drift_past_buffer']:.3f} %"]
             for r in front if r["cv"] <= cv_max]
+    if front and "cv_exact" in front[0]:
+        header[6:6] = ["CV p90", "CV exact wind"]
+        for b, r in zip(body, [r for r in front if r["cv"] <= cv_max], strict=True):
+            b[6:6] = [f"{100 * r['cv_p90']:.0f} %", f"{100 * r['cv_exact']:.0f} %"]
     return header, body
 
 
@@ -310,16 +372,21 @@ def main(args: argparse.Namespace) -> int:
     wind = cfg.wind.speed_mps if args.wind is None else float(args.wind)
     cases, spacings = _axes(args, wind)
     t0 = time.perf_counter()
+    fc = cfg.forecast
+    winds = (flown_winds(wind, args.along, args.draws, fc.speed_sigma_mps,
+                         fc.direction_sigma_deg, cfg.seed) if args.draws else None)
     rows = search(cfg, cases, wind, spacings, args.buffer, progress=not args.quiet,
-                  along=args.along)
+                  along=args.along, winds=winds)
     wall = time.perf_counter() - t0
     front = pareto(rows)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "settings.csv", rows)
     write_csv(out / "pareto.csv", front)
+    spread = (f"; mean over {args.draws} draws of the forecast's error ({fc.speed_sigma_mps:g} "
+              f"m/s, {fc.direction_sigma_deg:g} deg)" if args.draws else "; exact wind")
     title = (f"{len(cases)} pattern tests x {len(spacings)} lane spacings, {wind:g} m/s "
-             f"crosswind, buffer {args.buffer:g} m ({wall:.0f} s)")
+             f"crosswind forecast{spread}, buffer {args.buffer:g} m ({wall:.0f} s)")
     header, body = _table(front, args.cv_max)
     print_table(header, body, f"Pareto front (work rate, CV, drift), CV <= "
                               f"{100 * args.cv_max:g} %: {title}")
