@@ -152,17 +152,21 @@ class SprayJob:
 
     base_xy: np.ndarray
     sorties: list[Sortie]
-    fill_l: float
+    fill_l: float                # litres each sortie takes off with (:func:`sortie_fill`)
     dry_mass_kg: float
     service_s: float
+    tank_l: float | None = None  # the tank's volume (None: ``fill_l``)
 
     def summary(self) -> dict[str, Any]:
-        return {
+        out = {
             "base_xy": [round(float(v), 3) for v in self.base_xy],
             "sorties_planned": len(self.sorties),
             "litres_planned": round(sum(s.litres for s in self.sorties), 4),
             "energy_planned_wh": round(sum(s.energy_wh for s in self.sorties), 2),
         }
+        if self.tank_l is not None and self.fill_l < self.tank_l:
+            out["fill_l"] = round(self.fill_l, 3)  # a part-filled tank: the battery binds
+        return out
 
 
 class ChainedReference:
@@ -345,10 +349,12 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
     base = base_point(cfg, field, plan.start)
     dt = 1.0 / cfg.sim.control_hz
     walk = _walk(ref, base, liquid_l_per_m(cfg), dt)
-    cuts = _cuts(cfg, _energy_model(cfg, dry_mass_kg, z_land), walk, dt, truncated)
+    energy = _energy_model(cfg, dry_mass_kg, z_land)
+    fill = sortie_fill(cfg, energy, walk, dt, truncated)
+    cuts = _cuts(cfg, energy, walk, dt, truncated, fill)
     sp = cfg.spray
-    job = SprayJob(base_xy=base, sorties=[], fill_l=sp.tank_l, dry_mass_kg=dry_mass_kg,
-                   service_s=sp.service_s)
+    job = SprayJob(base_xy=base, sorties=[], fill_l=fill, dry_mass_kg=dry_mass_kg,
+                   service_s=sp.service_s, tank_l=sp.tank_l)
     if len(cuts) == 1:
         job.sorties.append(Sortie(0, 0.0, ref.duration, None, cuts[0][1], cuts[0][2] / 3600.0,
                                   False))
@@ -383,48 +389,92 @@ def _energy_model(cfg: Config, dry_mass_kg: float, z_land: float) -> tuple[Any, 
     return t_way, power
 
 
-def _cuts(cfg: Config, energy: tuple[Any, Any], walk: tuple[np.ndarray, np.ndarray, np.ndarray],
-          dt: float, truncated: bool) -> list[tuple[int, float, float]]:
-    """Where the sorties end: (tick of the cut, litres, energy J) each, the last at the end of
-    the job; ``walk`` from :func:`_walk`, ``energy`` from :func:`_energy_model`."""
+def _sortie_run(cfg: Config, energy: tuple[Any, Any],
+                walk: tuple[np.ndarray, np.ndarray, np.ndarray], dt: float, i0: int,
+                fill: float, e_pre: float, truncated: bool) -> tuple[str, int, Any]:
+    """One sortie from tick ``i0`` with ``fill`` litres and ``e_pre`` joules already spent:
+    ``("end" | "tank" | "battery", first failing tick (local), (left, e_run, e_home))``.
+    Only the ticks one battery can fly are walked (past them the energy test fails anyway:
+    every tick costs at least the empty-tank power), so a sortie costs its own length."""
     sp, b = cfg.spray, cfg.battery
     t_way, power = energy
     seg, litres_cum, d_home = walk
-    fill = sp.tank_l
     e_use = b.capacity_wh * 3600.0 * (1.0 - b.reserve_frac)  # J
     n = len(seg)
+    span = int(math.ceil(e_use / (float(power(0.0)) * dt))) + 2
+    hi = n if i0 + span >= n else i0 + span
+    left = fill - (litres_cum[i0:hi] - litres_cum[i0])
+    p = power(np.maximum(left, 0.0))
+    e_run = e_pre + np.concatenate([[0.0], np.cumsum(p[:-1] * dt)])
+    e_home = power(np.maximum(left, 0.0)) * t_way(d_home[i0:hi])
+    ok = (left >= fill * sp.plan_margin) & (e_run + e_home <= e_use)
+    arrays = (left, e_run, e_home)
+    # the job's end: no way home needed (the pilot collects the drone where it hovers)
+    if hi == n and (ok.all() if truncated else left[-1] >= 0.0 and e_run[-1] <= e_use):
+        return "end", hi - i0 - 1, arrays
+    if ok.all():  # not reached: the walked ticks cost more than the battery holds
+        raise ConfigError(f"battery.capacity_wh = {b.capacity_wh}: the sortie planner's window "
+                          "ended before the battery")
+    bad = int(np.argmin(ok))  # first tick that fails
+    return ("tank" if left[bad] < fill * sp.plan_margin else "battery"), bad, arrays
+
+
+def sortie_fill(cfg: Config, energy: tuple[Any, Any],
+                walk: tuple[np.ndarray, np.ndarray, np.ndarray], dt: float,
+                truncated: bool = False) -> float:
+    """The litres each sortie takes off with: the full tank, unless a sortie with the full
+    tank is cut by the battery (the liquid would be ballast); then the least fill with which
+    the first sortie is not cut by the tank (the battery's reserve or the job's end comes
+    first), rounded up to 0.1 L: the liquid the battery can carry and spray in one sortie, as
+    operators fill a drone that cannot fly a full tank empty. Bisection on the fill: the tank
+    cut comes later and the battery cut earlier as the fill grows."""
+    full = cfg.spray.tank_l
+    if _sortie_run(cfg, energy, walk, dt, 0, full, 0.0, truncated)[0] != "battery":
+        return full
+    lo, hi = 0.0, full
+    for _ in range(24):
+        mid = 0.5 * (lo + hi)
+        if _sortie_run(cfg, energy, walk, dt, 0, mid, 0.0, truncated)[0] == "tank":
+            lo = mid
+        else:
+            hi = mid
+    return min(full, math.ceil(hi * 10.0 - 1e-9) / 10.0)
+
+
+def _cuts(cfg: Config, energy: tuple[Any, Any], walk: tuple[np.ndarray, np.ndarray, np.ndarray],
+          dt: float, truncated: bool, fill: float) -> list[tuple[int, float, float]]:
+    """Where the sorties end: (tick of the cut, litres, energy J) each, the last at the end of
+    the job; ``walk`` from :func:`_walk`, ``energy`` from :func:`_energy_model`, ``fill`` the
+    litres each sortie takes off with (:func:`sortie_fill`)."""
+    sp, b = cfg.spray, cfg.battery
+    t_way, power = energy
+    seg = walk[0]
     i0 = 0
     cuts: list[tuple[int, float, float]] = []  # (tick of the cut, litres, energy J)
     e_pre = 0.0
     while True:
         if len(cuts) >= sp.max_sorties:
             raise ConfigError(f"spray.max_sorties = {sp.max_sorties}: the job needs more sorties "
-                              f"(one {fill:g} L tank sprays {fill / liquid_l_per_m(cfg):.0f} m "
+                              f"(one {fill:g} L fill sprays {fill / liquid_l_per_m(cfg):.0f} m "
                               "of track)")
-        left = fill - (litres_cum[i0:] - litres_cum[i0])
-        p = power(np.maximum(left, 0.0))
-        e_run = e_pre + np.concatenate([[0.0], np.cumsum(p[:-1] * dt)])
-        e_home = power(np.maximum(left, 0.0)) * t_way(d_home[i0:])
-        ok = (left >= fill * sp.plan_margin) & (e_run + e_home <= e_use)
-        # the job's end: no way home needed (the pilot collects the drone where it hovers)
-        if (ok.all() if truncated else left[-1] >= 0.0 and e_run[-1] <= e_use):
-            cuts.append((n - 1, float(left[0] - left[-1]), float(e_run[-1])))
+        kind, bad, (left, e_run, e_home) = _sortie_run(cfg, energy, walk, dt, i0, fill, e_pre,
+                                                       truncated)
+        if kind == "end":
+            cuts.append((i0 + bad, float(left[0] - left[-1]), float(e_run[-1])))
             return cuts
-        bad = int(np.argmin(ok))  # first tick that fails
         k = i0 + bad - 1
         while k > i0 and seg[k] < 0:
             k -= 1
         if k <= i0 + 1:
-            what = ("spray.tank_l" if left[bad] < fill * sp.plan_margin
-                    else "battery.capacity_wh")
+            what = "spray.tank_l" if kind == "tank" else "battery.capacity_wh"
             val = sp.tank_l if what == "spray.tank_l" else b.capacity_wh
             raise ConfigError(f"{what} = {val}: too small to spray from the base and come back "
                               f"(sortie {len(cuts) + 1})")
         kk = k - i0
         cuts.append((k, float(left[0] - left[kk]), float(e_run[kk] + e_home[kk])))
         i0 = k
-        # next sortie: climb at the base and transit out to the cut point, at the full tank
-        e_pre = float(power(fill) * t_way(d_home[k]))
+        # next sortie: climb at the base and transit out to the cut point, with the fill
+        e_pre = float(power(fill) * t_way(walk[2][k]))
 
 
 def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray,
