@@ -446,8 +446,19 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
     if any(fl.cfg.vehicle.rotor_fault.rotor >= 0 for fl in flights):
         from .rotor_fault import RotorFaults
 
-        e.rotor_faults = RotorFaults(b, [fl.cfg for fl in flights], vehs, control.bc)
+        e.rotor_faults = RotorFaults(b, [fl.cfg for fl in flights], vehs, control.bc,
+                                     _homes(flights))
     return e
+
+
+def _homes(flights: Sequence[Flight]) -> np.ndarray:
+    """Where each vehicle's base is: its spray job's, else where its reference starts."""
+    out = np.zeros((len(flights), 2))
+    for i, fl in enumerate(flights):
+        job = getattr(fl.reference, "spray_job", None)
+        out[i] = (job.base_xy if job is not None
+                  else np.asarray(fl.reference.sample(0.0).pos, float)[:2])
+    return out
 
 
 def _run(lanes: list[Engine], bar: Any) -> tuple[float, float, float]:

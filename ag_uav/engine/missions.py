@@ -98,7 +98,8 @@ def build_reference(cfg: Config, plan, *, spray: bool = True,
 
         ref, _job = plan_job(cfg, fly_plan, ref, plan.field, dry_mass_kg=cfg.vehicle.mass_kg
                              + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08,
-                             truncated=fly_plan is not plan)
+                             truncated=fly_plan is not plan,
+                             plan_s=plan.length / m.speed_mps)
     ref.plan_cut = None if fly_plan is plan else PlanCut(plan.length, fly_plan.length,
                                                          plan.length / m.speed_mps)
     return ref

@@ -335,7 +335,8 @@ def _walk(ref: Reference, base: np.ndarray, lpm: float, dt: float
 
 
 def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
-             z_land: float, truncated: bool = False) -> tuple[Any, SprayJob]:
+             z_land: float, truncated: bool = False,
+             plan_s: float | None = None) -> tuple[Any, SprayJob]:
     """Split the mission into sorties (see the module docstring).
 
     Returns ``(reference, job)``: ``ref`` itself (with ``spray_job`` set) when one sortie does
@@ -344,13 +345,14 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
 
     ``truncated``: ``plan`` is the head of a longer plan (:meth:`CoveragePlan.head`, a mission
     cut by ``sim.max_time_s``), so its end is not the job's end: a sortie reaching it must still
-    keep its way home at every tick, or it is cut as anywhere else.
+    keep its way home at every tick, or it is cut as anywhere else; ``plan_s``: the whole
+    plan's length over the mission speed (what :func:`sortie_fill` weighs a head against).
     """
     base = base_point(cfg, field, plan.start)
     dt = 1.0 / cfg.sim.control_hz
     walk = _walk(ref, base, liquid_l_per_m(cfg), dt)
     energy = _energy_model(cfg, dry_mass_kg, z_land)
-    fill = sortie_fill(cfg, energy, walk, dt, truncated)
+    fill = sortie_fill(cfg, energy, walk, dt, truncated, plan_s)
     cuts = _cuts(cfg, energy, walk, dt, truncated, fill)
     sp = cfg.spray
     job = SprayJob(base_xy=base, sorties=[], fill_l=fill, dry_mass_kg=dry_mass_kg,
@@ -421,15 +423,24 @@ def _sortie_run(cfg: Config, energy: tuple[Any, Any],
 
 def sortie_fill(cfg: Config, energy: tuple[Any, Any],
                 walk: tuple[np.ndarray, np.ndarray, np.ndarray], dt: float,
-                truncated: bool = False) -> float:
+                truncated: bool = False, plan_s: float | None = None) -> float:
     """The litres each sortie takes off with: the full tank, unless a sortie with the full
     tank is cut by the battery (the liquid would be ballast); then the least fill with which
     the first sortie is not cut by the tank (the battery's reserve or the job's end comes
     first), rounded up to 0.1 L: the liquid the battery can carry and spray in one sortie, as
     operators fill a drone that cannot fly a full tank empty. Bisection on the fill: the tank
-    cut comes later and the battery cut earlier as the fill grows."""
+    cut comes later and the battery cut earlier as the fill grows. The head of a longer plan
+    (``truncated``) that ends before either cut: the full tank when the whole plan
+    (``plan_s`` seconds at the mission speed) is shorter than a full-tank battery, else
+    :func:`_fill_by_rate`."""
     full = cfg.spray.tank_l
-    if _sortie_run(cfg, energy, walk, dt, 0, full, 0.0, truncated)[0] != "battery":
+    kind = _sortie_run(cfg, energy, walk, dt, 0, full, 0.0, truncated)[0]
+    if kind == "end" and truncated:
+        e_use = cfg.battery.capacity_wh * 3600.0 * (1.0 - cfg.battery.reserve_frac)
+        if plan_s is not None and plan_s <= e_use / float(energy[1](full)):
+            return full  # the whole job is shorter than a full-tank battery
+        return _fill_by_rate(cfg, energy, walk, dt)
+    if kind != "battery":
         return full
     lo, hi = 0.0, full
     for _ in range(24):
@@ -438,6 +449,34 @@ def sortie_fill(cfg: Config, energy: tuple[Any, Any],
             lo = mid
         else:
             hi = mid
+    return min(full, math.ceil(hi * 10.0 - 1e-9) / 10.0)
+
+
+def _fill_by_rate(cfg: Config, energy: tuple[Any, Any],
+                  walk: tuple[np.ndarray, np.ndarray, np.ndarray], dt: float) -> float:
+    """:func:`sortie_fill` for the head of a longer plan too short to show a full sortie (a
+    mission cut by ``sim.max_time_s``): the least fill ``F`` whose tank time at the head's mean
+    flow ``q``, ``F (1 − margin) / q``, is no shorter than the battery's time at the power of
+    half that fill, ``E_use / P(F/2)`` (the battery binds); the full tank when even it empties
+    first."""
+    sp, b = cfg.spray, cfg.battery
+    power = energy[1]
+    litres_cum = walk[1]
+    q = float(litres_cum[-1]) / max(len(litres_cum) * dt, dt)
+    full = sp.tank_l
+    if q <= 0.0:
+        return full
+    e_use = b.capacity_wh * 3600.0 * (1.0 - b.reserve_frac)
+
+    def tank_first(f: float) -> bool:
+        return f * (1.0 - sp.plan_margin) / q < e_use / float(power(0.5 * f))
+
+    if tank_first(full):
+        return full
+    lo, hi = 0.0, full
+    for _ in range(24):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if tank_first(mid) else (lo, mid)
     return min(full, math.ceil(hi * 10.0 - 1e-9) / 10.0)
 
 
