@@ -73,6 +73,7 @@ class RotorFaults:
         self.v_home = np.array([c.spray.transit_speed_mps for c in cfgs])
         self.going = np.zeros(n, dtype=bool)
         self.yaw_free = np.array([c.vehicle.frame == "quad-x" for c in cfgs])
+        self.yaw_hold = np.zeros(n)
         self.hp = np.zeros((n, 3))
         self.hs = np.zeros(n)
         rf = [c.vehicle.rotor_fault for c in cfgs]
@@ -108,6 +109,8 @@ class RotorFaults:
             self._inject(t)
         if self.watch.any():
             self._detect(t)
+        held = self.detected & b.act & ~self.yaw_free
+        b.yaw[held] = self.yaw_hold[held]  # no heading changes on the rotors left
         for i in np.flatnonzero(self.going & b.act):
             self._go_home(int(i), t)
         for i in np.flatnonzero(self.landing & b.act):
@@ -154,6 +157,7 @@ class RotorFaults:
                               "motor's telemetry normal: flying on")
             return
         self.detected[i] = True
+        self.yaw_hold[i] = b.yaw[i]
         info = self.info[i] if self.info[i] is not None else {"rotor": None}
         self.info[i] = info
         info["detected_s"] = round(t, 2)
