@@ -248,7 +248,7 @@ def _spraying(b: Batch, flights: Sequence[Flight], vehs: Sequence[Vehicle],
             for i, (fl, veh, job) in enumerate(zip(flights, vehs, jobs, strict=True))]
     spr = BatchSprayer.from_sprayers(objs, control.set_mass, push_initial=False)
     ia = mujoco.mj_stateSize(m0, mujoco.mjtState.mjSTATE_TIME) + m0.nq + m0.nv
-    return Spraying(b, spr, control, ia), objs
+    return Spraying(b, spr, control, ia, m0.na), objs
 
 
 def _depositing(b: Batch, flights: Sequence[Flight], act_adr: int, n_act: int

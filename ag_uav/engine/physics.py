@@ -186,6 +186,8 @@ class RolloutStepper(Stepper):
             self._run(self.models, S, self.U, S, sens, None)
             return
         ii = self.idx[act]
+        if not ii.size:  # every vehicle ended in this tick's earlier stages (a landing)
+            return
         self._run([self.models[i] for i in ii], S[ii], self.U[ii], S, sens, ii)
 
     def _run(self, models, S0, U, S, sens, ii) -> None:

@@ -44,7 +44,7 @@ mass × (1 + ``battery.plan_margin``) × time, plus the way home: the distance t
 cost above hover, +2–3 % measured). The sortie ends at the last tick where (a) the tank still holds
 ``spray.plan_margin`` of its volume and (b) the energy used plus the way home leaves
 ``battery.reserve_frac`` of the capacity. There the drone stops, flies to the base, lands (a
-deliberate phase: the last 0.6 m at 0.3 m/s, the skids touch at ~0.3 m/s, within the crash
+deliberate phase: the last 1.5 m at 0.3 m/s, the skids touch at ~0.3 m/s, within the crash
 detector's 1 m/s for the skids; then motors off), is refilled and gets a fresh battery
 (``spray.service_s``), takes off, flies back to the cut point and resumes. A job that fits one
 battery and one tank is flown exactly as the plain mission (no base visit). The loop then
@@ -71,6 +71,13 @@ G = 9.81
 #: seg index of the inserted transits to and from the base, and of the time on the ground there
 SEG_TRANSIT = -2
 SEG_GROUND = -3
+#: a sortie's set point stays on the ground this long after the landing before the motors stop
+#: (a heavy, slow-motored vehicle lags its descent by centimetres: cut at once, it drops)
+LAND_SETTLE_S = 1.5
+#: a sortie's landing descends at the climb speed to this height above the ground, then at the
+#: landing speed (0.3 m/s): the heavy octocopter, braking from 1.5 m/s at 0.6 m, touched down at
+#: about 1 m/s (PX4 likewise slows its landing descent below MPC_LAND_ALT2)
+LAND_FLARE_M = 1.5
 #: control ticks per piece when the planner walks the single-sortie reference
 _WALK_CHUNK = 1 << 16
 
@@ -377,10 +384,13 @@ def _energy_model(cfg: Config, dry_mass_kg: float, z_land: float) -> tuple[Any, 
     a_max = m.accel_max_mps2
     climb = 1.5  # Reference's default climb speed (m/s)
 
+    drop = m.altitude_m - z_land
+
     def t_way(d: np.ndarray | float) -> np.ndarray | float:
         """Predicted time (s) of a transit of d metres plus a descent or climb and dwells."""
-        return (np.asarray(d) / v_tr + v_tr / a_max + (m.altitude_m - z_land - 0.6) / climb
-                + 0.6 / 0.3 + climb / a_max + 3.0)  # the last 0.6 m at 0.3 m/s (Reference)
+        return (np.asarray(d) / v_tr + v_tr / a_max
+                + max(drop - LAND_FLARE_M, 0.0) / climb + min(drop, LAND_FLARE_M) / 0.3
+                + climb / a_max + 3.0 + LAND_SETTLE_S)  # the last metres at 0.3 m/s
 
     n, se = rotor_counts(cfg)
 
@@ -554,8 +564,9 @@ def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray
             resume = (j_to, end_xy)
         opts = dict(speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
                     takeoff=cfg.sim.takeoff or si > 0,
-                    hover_time=cfg.sim.hover_after_s if last else 0.0,
-                    rate=cfg.sim.control_hz, landing=not last, z_land=z_land, seg_speeds=speeds)
+                    hover_time=cfg.sim.hover_after_s if last else LAND_SETTLE_S,
+                    rate=cfg.sim.control_hz, landing=not last, z_land=z_land, seg_speeds=speeds,
+                    flare_height=LAND_FLARE_M)
         made.append((dataclasses.replace(plan, segments=sub), opts, gmap, cut_q, litres, e_j,
                      last))
     refs = _references([(a[0], a[1]) for a in made])
