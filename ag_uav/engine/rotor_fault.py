@@ -26,7 +26,7 @@ its response by frame: a stage of the engine's tick, before the controller.
   — no detector. A quad on any response but ``none`` gives up yaw (its three rotors allocate
   thrust, roll and pitch; the yaw reference follows the spinning vehicle) and lands where it
   is. The landing is the position failsafe's: brake at 2 m/s², descend at
-  0.7 m/s, the last metre at 0.3 m/s (PX4's ``MPC_LAND_SPEED``, ``MPC_LAND_CRWL``), nozzles off;
+  0.7 m/s, the last 1.5 m at 0.3 m/s (PX4's ``MPC_LAND_SPEED``, ``MPC_LAND_CRWL``), nozzles off;
   once the set point is on the ground and the vehicle still for 1 s (PX4's land detector) the
   flight ends; the touchdown speed is the largest vertical speed over the last 0.3 m (a skid
   contact above 1 m/s ends the flight as a crash first). The way home: the set point moves
@@ -60,6 +60,7 @@ class RotorFaults:
     ESC_RATIO = 0.5
     ESC_TIMEOUT_S = 0.1
     DESCENT_MPS, CRAWL_MPS, BRAKE_MPS2 = 0.7, 0.3, 2.0
+    CRAWL_FROM_M = 1.5  # the crawl's height above the ground (a sortie landing's flare)
     LAND_S = 1.0  # still on the ground this long: landed (PX4 LNDMC_TRIG_TIME)
     HOVER_SHARE_MAX = 0.9  # auto: fly on only if the re-allocated hover needs at most this
     HOME_ACC = 1.0  # m/s², the way home
@@ -248,7 +249,7 @@ class RotorFaults:
         b.rv[i] = (1.0 - a * s) * v0
         b.ra[i] = -a * v0 if s < sp / self.BRAKE_MPS2 else 0.0
         ground = b.hover_z[i]
-        speed = self.DESCENT_MPS if self.zr[i] > ground + 1.0 else self.CRAWL_MPS
+        speed = self.DESCENT_MPS if self.zr[i] > ground + self.CRAWL_FROM_M else self.CRAWL_MPS
         self.zr[i] = max(self.zr[i] - speed * b.dt, ground - 0.5)
         b.rp[i, 2] = self.zr[i]
         b.rv[i, 2] = -speed if self.zr[i] > ground - 0.5 else 0.0

@@ -146,6 +146,20 @@ def _nested(d: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _simulate(cfgs: list[Any]) -> list[Any]:
+    """Each config's run, flown in one batch per preset (a batch steps models of one layout)."""
+    from ...engine.missions import simulate_many
+
+    out: list[Any] = [None] * len(cfgs)
+    groups: dict[str, list[int]] = {}
+    for i, c in enumerate(cfgs):
+        groups.setdefault(c.vehicle.preset, []).append(i)
+    for idx in groups.values():
+        for i, r in zip(idx, simulate_many([cfgs[i] for i in idx]), strict=True):
+            out[i] = r
+    return out
+
+
 def _plot(rows: list[dict[str, Any]], path: Path) -> None:
     import matplotlib
 
@@ -175,7 +189,6 @@ def _plot(rows: list[dict[str, Any]], path: Path) -> None:
 
 def main(args: argparse.Namespace) -> int:
     from ...config.schema import VEHICLE_PRESETS
-    from ...engine.missions import simulate_many
     from ..batch import markdown_table, print_table
 
     presets = name_axis("--presets", args.presets, VEHICLE_PRESETS)
@@ -183,7 +196,7 @@ def main(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    res = simulate_many([c for _p, _f, c in jobs])
+    res = _simulate([c for _p, _f, c in jobs])
     rows = [job_row(p, f, r.summary) for (p, f, _c), r in zip(jobs, res, strict=True)]
     write_csv(out / "vehicles.csv", rows)
     header = ["preset", "field", "done", "coverage", "job time", "work rate (ha/h)", "stated",
@@ -214,11 +227,10 @@ def main(args: argparse.Namespace) -> int:
 
 def _faults(args: argparse.Namespace, jobs: list[tuple[str, str, Any]], out: Path) -> str:
     """The rotor-failure campaign: faults.csv, faults.md; its markdown."""
-    from ...engine.missions import simulate_many
     from ..batch import markdown_table, print_table
 
     runs = _fault_configs(args, jobs)
-    res = simulate_many([c for _p, _s, c in runs])
+    res = _simulate([c for _p, _s, c in runs])
     rows = [fault_row(p, s, r.summary) for (p, s, _c), r in zip(runs, res, strict=True)]
     write_csv(out / "faults.csv", rows)
     header = ["preset", "seed", "rotor", "at (s)", "detected after", "response", "end"]
