@@ -71,6 +71,8 @@ def _configs(args: argparse.Namespace, presets: list[str]) -> list[tuple[str, st
 
 def job_row(preset: str, field: str, s: dict[str, Any]) -> dict[str, Any]:
     """One flight's figures (module docstring) from its summary."""
+    from ...config.vehicles import STATED_WORK_RATE
+
     area_ha = float(s.get("field_area_m2") or 0.0) / 1e4
     cov = float(s.get("coverage_fraction") or 0.0)
     job_s = s.get("job_time_s") or s.get("sim_time_s") or 0.0
@@ -80,7 +82,8 @@ def job_row(preset: str, field: str, s: dict[str, Any]) -> dict[str, Any]:
         "field_ha": round(area_ha, 3), "coverage": round(cov, 5),
         "job_time_s": round(float(job_s), 1),
         "work_rate_ha_per_h": round(area_ha * cov / (job_s / 3600.0), 3) if job_s else None,
-        "stated_rate_ha_per_h": s.get("work_rate_stated_ha_per_h"),
+        "stated_rate_ha_per_h": (STATED_WORK_RATE[preset][0] if preset in STATED_WORK_RATE
+                                 else None),
         "sorties": s.get("sorties"), "batteries": s.get("sorties"),
         "fill_l": s.get("fill_l", s.get("config", {}).get("spray", {}).get("tank_l")),
         "litres": s.get("litres_sprayed_l"), "energy_wh": energy,
