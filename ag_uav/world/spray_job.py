@@ -564,6 +564,9 @@ def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray
             resume = (j_to, end_xy)
         opts = dict(speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
                     takeoff=cfg.sim.takeoff or si > 0,
+                    # a take-off from the base starts where the landing left the set point (the
+                    # vehicle's resting height, not 0: a tall vehicle would be pushed down)
+                    **({"z0": z_land} if si > 0 else {}),
                     hover_time=cfg.sim.hover_after_s if last else LAND_SETTLE_S,
                     rate=cfg.sim.control_hz, landing=not last, z_land=z_land, seg_speeds=speeds,
                     flare_height=LAND_FLARE_M)
