@@ -339,24 +339,63 @@ def allocation(B: np.ndarray, eff: Sequence[float] | None = None) -> np.ndarray:
 
 
 def fault_allocation(B: np.ndarray, eff: Sequence[float] | None, failed: int,
-                     keep_yaw: bool) -> np.ndarray:
+                     keep_yaw: bool, hover_share: float | None = None) -> np.ndarray:
     """The allocation (n × 4) without rotor ``failed`` (its row zero): the other rotors'
     columns of ``B`` allocated by :func:`allocation` (five or more rotors keep all four
     components); with ``keep_yaw`` False, the rows ``T, τx, τy`` only (a quad's three rotors
     cannot balance yaw: it gives yaw up, its ``τz`` column zero, and spins, as in Mueller and
     D'Andrea, "Stability and control of a quadrocopter despite the complete loss of one, two,
-    or three propellers", ICRA 2014)."""
+    or three propellers", ICRA 2014).
+
+    ``hover_share`` (five or more rotors): the hover thrust over ``f_max`` (``m g / f_max``).
+    When the weighted pseudo-inverse puts a rotor's hover command above 0.8 ``f_max``, the
+    weights are redistributed (:func:`balanced_weights`) so that the highest hover command is
+    as low as the frame allows: still a right inverse of the remaining columns (the wrench is
+    reproduced exactly when nothing saturates), only the split among the rotors changes."""
     n = B.shape[1]
     keep = [i for i in range(n) if i != failed]
     e = [1.0] * n if eff is None else list(eff)
     out = np.zeros((n, 4))
     if keep_yaw:
-        out[keep] = allocation(B[:, keep], [e[i] for i in keep])
+        w = [e[i] for i in keep]
+        sub = B[:, keep]
+        if hover_share is not None:
+            w = balanced_weights(sub, w, hover_share, 0.8)
+        out[keep] = allocation(sub, w)
     else:
         sub_b = B[:3, keep]
-        a3 = np.linalg.inv(sub_b) if len(keep) == 3 else allocation(sub_b, [e[i] for i in keep])
+        w = [e[i] for i in keep]
+        if hover_share is not None and len(keep) > 3:
+            w = balanced_weights(sub_b, w, hover_share, 0.8)
+        a3 = np.linalg.inv(sub_b) if len(keep) == 3 else allocation(sub_b, w)
         out[keep, :3] = a3
     return out
+
+
+def balanced_weights(B: np.ndarray, w0: Sequence[float], hover: float, limit: float,
+                     iters: int = 200) -> list[float]:
+    """Weights ``w`` of :func:`allocation` (``f = W⁻¹Bᵀ(BW⁻¹Bᵀ)⁻¹ u``, the split minimising
+    ``Σ w_i f_i²``) for which the hover command ``f_h = A [hover, 0, 0, 0]`` (in units of
+    ``f_max``) keeps every rotor at or below ``limit`` when it can, else makes the largest as
+    small as it can: iteratively reweighted least squares towards the minimax split, each
+    rotor's weight multiplied by ``f_i / mean f`` while the largest exceeds ``limit`` (a
+    heavily loaded rotor costs more, so the others take its share). ``w0`` unchanged when its
+    split already fits."""
+    w = np.asarray(w0, dtype=float).copy()
+    u = np.zeros(B.shape[0])
+    u[0] = hover
+    best, best_w = math.inf, w.copy()
+    for _ in range(iters):
+        f = allocation(B, w) @ u
+        top = float(f.max())
+        if top < best and float(f.min()) >= 0.0:
+            best, best_w = top, w.copy()
+        if top <= limit:
+            break
+        fp = np.maximum(f, 1e-3 * top)
+        w = np.clip(w * fp / float(fp.mean()), 1e-3, 1e3)
+        w = w / float(w.mean())
+    return [float(v) for v in best_w]
 
 
 class XMixer(RowBlocks):

@@ -64,3 +64,53 @@ def test_the_octocopter_lands_softly_on_seven_rotors():
 def test_a_rotor_the_frame_lacks_is_named():
     with pytest.raises(ConfigError, match=r"vehicle.rotor_fault.rotor = 6: .* 0 to 3"):
         ag_uav.load_config(None, {"vehicle.rotor_fault.rotor": 6})
+
+
+def test_the_reallocation_is_balanced_for_the_hover():
+    """On seven rotors of the X8 at 90 kg the weighted pseudo-inverse asks more of a lower rotor
+    than its limit when an upper one stops; the balanced split still reproduces the wrench and
+    lowers the highest hover command (giving up yaw, it fits)."""
+    import numpy as np
+
+    from ag_uav.vehicle.mjcf import build_vehicle
+    from controllers.attitude import effectiveness, fault_allocation
+
+    v = build_vehicle(_cfg(**{"vehicle.preset": "x8-40l"}))
+    B = effectiveness(v.ctrl_rotor_xy, v.spin, v.k_yaw, v.eff)
+    u = np.array([90.0 * 9.81, 0.0, 0.0, 0.0])
+    h = u[0] / v.f_max
+    plain = fault_allocation(B, v.eff, 4, True)
+    bal = fault_allocation(B, v.eff, 4, True, hover_share=h)
+    assert np.abs(B @ bal - np.eye(4)).max() < 1e-9
+    assert (bal @ u).max() < (plain @ u).max() - 0.05 * v.f_max
+    assert (bal @ u).min() >= 0.0
+    free = fault_allocation(B, v.eff, 0, False, hover_share=h)
+    assert np.abs(B[:3] @ free - np.eye(4)[:3]).max() < 1e-9
+    assert (free @ u).max() < v.f_max < (fault_allocation(B, v.eff, 0, True) @ u).max()
+
+
+def test_auto_stops_the_spray_and_lands_a_full_tank():
+    """A full 40 L tank (the run cut short keeps it) cannot hover on seven rotors holding yaw:
+    auto gives yaw up and lands with the nozzles off, and says so."""
+    c = _cfg(**{"vehicle.preset": "x8-40l", "vehicle.rotor_fault.rotor": 0,
+                "vehicle.rotor_fault.at_s": 12.0, "sim.max_time_s": 12.5})
+    rf = ag_uav.simulate(c).summary["rotor_fault"]
+    assert "gave up yaw" in rf["action"] and "spray stopped" in rf["action"]
+    assert rf["action"].endswith("landing")
+    assert 0.85 < rf["hover_share"] < 1.0
+
+
+def test_home_flies_to_the_base_and_lands():
+    """A lower rotor stopped (an upper one leaves the opposite arm's lower rotor at 14 % of its
+    limit in hover, and the final descent can run it to zero: docs/vehicles.md)."""
+    c = _cfg(**FRAMES["octo-x8"], **{"vehicle.rotor_fault.rotor": 4,
+                                     "vehicle.rotor_fault.at_s": 30.0,
+                                     "vehicle.rotor_fault.response": "home",
+                                     "sim.max_time_s": 80.0})
+    s = ag_uav.simulate(c).summary
+    rf = s["rotor_fault"]
+    assert not s["crashed"], s["crash_reason"]
+    assert rf["action"].endswith("spray stopped, returning home")
+    assert rf["landed_s"] is not None and rf["touchdown_mps"] < 1.0
+    dx = [a - b for a, b in zip(rf["landed_xy"], s["base_xy"], strict=True)]
+    assert (dx[0] ** 2 + dx[1] ** 2) ** 0.5 < 0.5

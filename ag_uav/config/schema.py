@@ -110,11 +110,12 @@ class RotorFaultConfig:
     rotor: int = _f(-1, "the rotor that fails, in the frame's order (-1: none)", ge=-1, le=7)
     at_s: float = _f(300.0, "when it fails (s of simulated time)", ge=0)
     efficiency: float = _f(0.0, "the share of its thrust it keeps (0: stopped)", ge=0, lt=1)
-    response: str = _f("auto", "auto: the failure detector, then by frame (hexa-x, octo-x8: "
-                       "re-allocate without the rotor and fly on; quad-x: give up yaw and "
-                       "land where it is); land: re-allocate and land on every frame; none: "
-                       "no detector (the fault is a model error)",
-                       choices=("auto", "land", "none"))
+    response: str = _f("auto", "after the failure detector: hexa-x, octo-x8 re-allocate "
+                       "without the rotor, then continue: fly on; home: spray off, fly to the "
+                       "base and land; land: land where it is; auto: continue if the hover "
+                       "needs at most 90 % of a rotor's limit, else spray off and land. quad-x: "
+                       "give up yaw and land where it is. none: no detector (the fault is a "
+                       "model error)", choices=("auto", "continue", "home", "land", "none"))
 
 
 @dataclass

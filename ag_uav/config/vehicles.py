@@ -118,6 +118,13 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
 }
 
 
+#: the manufacturer's stated area rate (ha/h) of a preset's class, with where it comes from
+STATED_WORK_RATE: dict[str, tuple[float, str]] = {
+    "x8-40l": (27.7, "DJI Agras T40 sheet: 11 m max effective spray width at 7 m/s "
+                     "(11 m × 7 m/s = 27.7 ha/h spraying, without turns or base visits)"),
+}
+
+
 def apply_vehicle_preset(data: dict[str, Any]) -> dict[str, Any]:
     """``data`` (a TOML-shaped config) with the keys of its ``vehicle.preset`` filled in where
     it leaves them unset (a copy; ``data`` is not changed). An unknown preset is left for the

@@ -261,7 +261,7 @@ def _spraying(b: Batch, flights: Sequence[Flight], vehs: Sequence[Vehicle],
             for i, (fl, veh, job) in enumerate(zip(flights, vehs, jobs, strict=True))]
     spr = BatchSprayer.from_sprayers(objs, control.set_mass, push_initial=False)
     ia = mujoco.mj_stateSize(m0, mujoco.mjtState.mjSTATE_TIME) + m0.nq + m0.nv
-    return Spraying(b, spr, control, ia), objs
+    return Spraying(b, spr, control, ia, m0.na), objs
 
 
 def _depositing(b: Batch, flights: Sequence[Flight], act_adr: int, n_act: int
@@ -459,8 +459,19 @@ def _build(flights: Sequence[Flight], nthread: int | None, capture: bool = False
     if any(fl.cfg.vehicle.rotor_fault.rotor >= 0 for fl in flights):
         from .rotor_fault import RotorFaults
 
-        e.rotor_faults = RotorFaults(b, [fl.cfg for fl in flights], vehs, control.bc)
+        e.rotor_faults = RotorFaults(b, [fl.cfg for fl in flights], vehs, control.bc,
+                                     _homes(flights))
     return e
+
+
+def _homes(flights: Sequence[Flight]) -> np.ndarray:
+    """Where each vehicle's base is: its spray job's, else where its reference starts."""
+    out = np.zeros((len(flights), 2))
+    for i, fl in enumerate(flights):
+        job = getattr(fl.reference, "spray_job", None)
+        out[i] = (job.base_xy if job is not None
+                  else np.asarray(fl.reference.sample(0.0).pos, float)[:2])
+    return out
 
 
 def _run(lanes: list[Engine], bar: Any) -> tuple[float, float, float]:

@@ -99,7 +99,8 @@ def build_reference(cfg: Config, plan, *, spray: bool = True,
 
         ref, _job = plan_job(cfg, fly_plan, ref, plan.field, dry_mass_kg=cfg.vehicle.mass_kg
                              + cfg.vehicle.payload_kg, z_land=build_vehicle(cfg).hover_z - 0.08,
-                             truncated=fly_plan is not plan)
+                             truncated=fly_plan is not plan,
+                             plan_s=plan.length / m.speed_mps)
     ref.plan_cut = None if fly_plan is plan else PlanCut(plan.length, fly_plan.length,
                                                          plan.length / m.speed_mps)
     return ref
@@ -503,6 +504,26 @@ def _cut_reason(cfg: Config, ref: Any, out: LoopOutput, summ: dict[str, Any],
     return out.failsafe["failsafe"] + ("" if landed is None else f"; landed at t={landed}s")
 
 
+def work_rate(cfg: Config, summ: dict[str, Any]) -> dict[str, Any]:
+    """A job with base visits: the area covered per hour of job time (flight, transits and the
+    time on the ground at the base), ``field_area × coverage / job_time`` (ha/h), and the
+    manufacturer's stated rate of the vehicle preset where its sheet gives one
+    (:data:`ag_uav.config.vehicles.STATED_WORK_RATE`). Empty for a one-sortie job."""
+    from ..config.vehicles import STATED_WORK_RATE
+
+    if (summ.get("sorties") or 0) < 2 or not summ.get("job_time_s"):
+        return {}
+    area_ha = float(summ.get("field_area_m2") or 0.0) * float(summ.get("coverage_fraction")
+                                                             or 0.0) / 1e4
+    out: dict[str, Any] = {"work_rate_ha_per_h": round(area_ha / (summ["job_time_s"] / 3600.0),
+                                                        3)}
+    stated = STATED_WORK_RATE.get(cfg.vehicle.preset)
+    if stated is not None:
+        out["work_rate_stated_ha_per_h"] = stated[0]
+        out["work_rate_stated_source"] = stated[1]
+    return out
+
+
 def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     """Metrics and the summary of one flown run (``batch``: the size of the engine batch it
     flew in)."""
@@ -547,6 +568,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         from ..analysis.metrics import add_sortie_areas
 
         add_sortie_areas(summ, res, plan.swath)
+        summ.update(work_rate(cfg, summ))
     if out.dose is not None:
         tank_l = None if out.sprayer is None else out.sprayer.litres_total
         summ.update(dose_summary(cfg, fld, out.dose, tank_l))

@@ -195,6 +195,8 @@ class RolloutStepper(Stepper):
             self._run(self.models, S, self.U, S, sens, None, sub)
             return
         ii = self.idx[act]
+        if not ii.size:  # every vehicle ended in this tick's earlier stages (a landing)
+            return
         self._run([self.models[i] for i in ii], S[ii], self.U[ii], S, sens, ii, sub)
 
     def _run(self, models, S0, U, S, sens, ii, sub) -> None:
@@ -231,13 +233,15 @@ def make_stepper(models: Sequence[mujoco.MjModel], body: int, nsub: int, S: np.n
 
 def ground_contact(model: mujoco.MjModel, data: mujoco.MjData, s: np.ndarray, ground: int,
                    skids: set[int], vel: np.ndarray, t: float) -> str | None:
-    """Ground contact other than the skids, or any at more than 1 m/s (a crash), else None."""
+    """Ground contact other than the skids, or any at more than 1 m/s (a crash), else None.
+    A skid's speed counts the horizontal and the downward motion: a vehicle lifting off with a
+    skid still touching (a heavy take-off climbs at up to 1.5 m/s) is not a crash."""
     mujoco.mj_setState(model, data, s, STATE_SPEC)
     mujoco.mj_kinematics(model, data)
     mujoco.mj_collision(model, data)
     if not data.ncon:
         return None
-    speed = math.sqrt(float(vel[0]) ** 2 + float(vel[1]) ** 2 + float(vel[2]) ** 2)
+    speed = math.sqrt(float(vel[0]) ** 2 + float(vel[1]) ** 2 + min(float(vel[2]), 0.0) ** 2)
     # the geom pairs as one array: a Python object per contact costs more than the collision
     for g1, g2 in data.contact.geom[:data.ncon].tolist():
         if ground not in (g1, g2):

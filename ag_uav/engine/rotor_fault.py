@@ -15,15 +15,23 @@ its response by frame: a stage of the engine's tick, before the controller.
   the telemetry reports delivering least of its command (here the actuator's thrust per unit
   command); after an attitude trigger with every motor above half, a false alarm, noted, and
   flown on. A weak rotor that keeps more than half its thrust is left to the attitude check.
-* **Response** (``response``): ``auto`` — a hexa or octo re-allocates without the rotor
-  (:func:`controllers.attitude.fault_allocation`, all four wrench components) and flies on; a
-  quad gives up yaw (its three rotors allocate thrust, roll and pitch; the yaw reference follows
-  the spinning vehicle) and lands where it is; ``land`` — re-allocate and land on every frame;
-  ``none`` — no detector. The landing is the position failsafe's: brake at 2 m/s², descend at
-  0.7 m/s, the last metre at 0.3 m/s (PX4's ``MPC_LAND_SPEED``, ``MPC_LAND_CRWL``), nozzles off;
+* **Response** (``response``), on a hexa or octo always after re-allocating without the rotor
+  (:func:`controllers.attitude.fault_allocation`, all four wrench components, the split among
+  the remaining rotors balanced for the hover at the current mass, tank included): ``continue``
+  — fly on (spraying); ``home`` — the nozzles off, fly to the base (the spray job's, else the
+  take-off point) at ``spray.transit_speed_mps`` and land there; ``land`` — land where it is;
+  ``auto`` — ``continue`` when the re-allocated hover needs at most
+  :attr:`RotorFaults.HOVER_SHARE_MAX` (90 %) of a rotor's limit, else the nozzles off and
+  ``land`` (the load-dependent answer: a full tank on seven rotors leaves no margin); ``none``
+  — no detector. A quad on any response but ``none`` gives up yaw (its three rotors allocate
+  thrust, roll and pitch; the yaw reference follows the spinning vehicle) and lands where it
+  is. The landing is the position failsafe's: brake at 2 m/s², descend at
+  0.7 m/s, the last 1.5 m at 0.3 m/s (PX4's ``MPC_LAND_SPEED``, ``MPC_LAND_CRWL``), nozzles off;
   once the set point is on the ground and the vehicle still for 1 s (PX4's land detector) the
   flight ends; the touchdown speed is the largest vertical speed over the last 0.3 m (a skid
-  contact above 1 m/s ends the flight as a crash first).
+  contact above 1 m/s ends the flight as a crash first). The way home: the set point moves
+  from where the failure was met towards the base at up to the transit speed (accelerating
+  and braking at 1 m/s²), at the height it had.
 
 The run's summary gets ``rotor_fault``: the rotor, when it failed, when it was detected (and the
 delay), the response and how it ended (landed at, touchdown vertical speed).
@@ -38,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from controllers.attitude import effectiveness, fault_allocation
-from controllers.cascade import P_AINV, S_ER
+from controllers.cascade import P_AINV, P_G, P_MASS, S_ER
 
 from .stages import Batch
 
@@ -52,11 +60,23 @@ class RotorFaults:
     ESC_RATIO = 0.5
     ESC_TIMEOUT_S = 0.1
     DESCENT_MPS, CRAWL_MPS, BRAKE_MPS2 = 0.7, 0.3, 2.0
+    CRAWL_FROM_M = 1.5  # the crawl's height above the ground (a sortie landing's flare)
     LAND_S = 1.0  # still on the ground this long: landed (PX4 LNDMC_TRIG_TIME)
+    HOVER_SHARE_MAX = 0.9  # auto: fly on only if the re-allocated hover needs at most this
+    HOME_ACC = 1.0  # m/s², the way home
 
-    def __init__(self, b: Batch, cfgs: Sequence[Any], vehicles: Sequence[Any], bc: Any) -> None:
+    def __init__(self, b: Batch, cfgs: Sequence[Any], vehicles: Sequence[Any], bc: Any,
+                 homes: np.ndarray | None = None) -> None:
         self.b, self.bc, self.vehs = b, bc, list(vehicles)
         n = b.n
+        #: where ``home`` flies to (the base), and the way's set point and speed
+        self.home = np.zeros((n, 2)) if homes is None else np.asarray(homes, float)[:, :2]
+        self.v_home = np.array([c.spray.transit_speed_mps for c in cfgs])
+        self.going = np.zeros(n, dtype=bool)
+        self.yaw_free = np.array([c.vehicle.frame == "quad-x" for c in cfgs])
+        self.yaw_hold = np.zeros(n)
+        self.hp = np.zeros((n, 3))
+        self.hs = np.zeros(n)
         rf = [c.vehicle.rotor_fault for c in cfgs]
         self.rotor = np.array([f.rotor for f in rf])
         self.at = np.array([f.at_s if f.rotor >= 0 else math.inf for f in rf])
@@ -80,7 +100,8 @@ class RotorFaults:
             None if f.rotor < 0 else {"rotor": int(f.rotor), "at_s": f.at_s,
                                       "efficiency": f.efficiency, "response": f.response,
                                       "detected_s": None, "detection_delay_s": None,
-                                      "action": None, "landed_s": None, "touchdown_mps": None}
+                                      "action": None, "landed_s": None, "touchdown_mps": None,
+                                      "hover_share": None}
             for f in rf]
 
     def step(self, k: int, t: float) -> None:
@@ -89,6 +110,10 @@ class RotorFaults:
             self._inject(t)
         if self.watch.any():
             self._detect(t)
+        held = self.detected & b.act & ~self.yaw_free
+        b.yaw[held] = self.yaw_hold[held]  # no heading changes on the rotors left
+        for i in np.flatnonzero(self.going & b.act):
+            self._go_home(int(i), t)
         for i in np.flatnonzero(self.landing & b.act):
             self._land(int(i), t)
 
@@ -133,22 +158,76 @@ class RotorFaults:
                               "motor's telemetry normal: flying on")
             return
         self.detected[i] = True
+        self.yaw_hold[i] = b.yaw[i]
         info = self.info[i] if self.info[i] is not None else {"rotor": None}
         self.info[i] = info
         info["detected_s"] = round(t, 2)
         if self.applied[i]:
             info["detection_delay_s"] = round(t - float(self.at[i]), 2)
         quad = self.frame[i] == "quad-x"
-        land = quad or self.response[i] == "land"
         B = effectiveness(veh.ctrl_rotor_xy, veh.spin, veh.k_yaw, veh.eff)
-        A = fault_allocation(B, veh.eff, j, keep_yaw=not quad)
+        mg = float(self.bc.params[i, P_MASS] * self.bc.params[i, P_G])
+        A = fault_allocation(B, veh.eff, j, keep_yaw=not quad,
+                             hover_share=None if quad else mg / veh.f_max)
         self.bc.params[i, P_AINV:P_AINV + A.size] = A.ravel()
-        info["action"] = ("gave up yaw, re-allocated to three rotors, landing" if quad else
-                          "re-allocated without the rotor, " + ("landing" if land else
-                                                                 "flying on"))
+        if quad:
+            info["action"] = "gave up yaw, re-allocated to three rotors, landing"
+            resp = "land"
+        else:
+            share = float((A[:, 0] * mg).max()) / veh.f_max
+            what = f"re-allocated without the rotor (hover at {share:.0%} of a rotor's limit)"
+            if share > 1.0:  # no hover with yaw held: give yaw up (the vehicle spins)
+                A = fault_allocation(B, veh.eff, j, keep_yaw=False, hover_share=mg / veh.f_max)
+                self.bc.params[i, P_AINV:P_AINV + A.size] = A.ravel()
+                self.yaw_free[i] = True
+                share = float((A[:, 0] * mg).max()) / veh.f_max
+                what += f"; gave up yaw (hover at {share:.0%})"
+            info["hover_share"] = round(share, 3)
+            resp = self.response[i]
+            if resp == "auto":
+                resp = "continue" if share <= self.HOVER_SHARE_MAX else "land"
+                if resp == "land":
+                    what += (f"; above {self.HOVER_SHARE_MAX:.0%} at "
+                             f"{mg / 9.81:.1f} kg: spray stopped")
+            info["action"] = what + {"continue": ", flying on", "land": ", landing",
+                                     "home": ", spray stopped, returning home"}[resp]
         b.notes[i].append(f"failure detector: rotor {j} at t={t:.2f}s: {info['action']}")
-        if land:
+        if resp == "land":
             self._start_landing(i, t)
+        elif resp == "home":
+            self.going[i] = True
+            self.hp[i] = b.p_fb[i]
+            self.hs[i] = 0.0
+
+    # ----------------------------------------------------------------------------- the way home
+    def _go_home(self, i: int, t: float) -> None:
+        """The set point moves towards the base at up to the transit speed (trapezoidal: 1 m/s²
+        up, and down so that it stops there), nozzles off; there, the landing."""
+        b = self.b
+        d = self.home[i] - self.hp[i, :2]
+        dist = math.hypot(d[0], d[1])
+        b.spray[i] = False
+        if dist < 0.05:
+            self.going[i] = False
+            b.rp[i] = self.hp[i]
+            b.rv[i] = 0.0
+            b.ra[i] = 0.0
+            self._start_landing(i, t)
+            self.v0[i] = 0.0
+            self.at_xy[i] = self.hp[i]
+            return
+        u = d / dist
+        v = min(self.v_home[i], self.hs[i] + self.HOME_ACC * b.dt,
+                math.sqrt(2.0 * self.HOME_ACC * dist))
+        self.hs[i] = v
+        self.hp[i, :2] += u * min(v * b.dt, dist)
+        b.rp[i] = self.hp[i]
+        b.rv[i, :2] = u * v
+        b.rv[i, 2] = 0.0
+        b.ra[i] = 0.0
+        if self.yaw_free[i]:
+            R = b.Rc[i]
+            b.yaw[i] = math.atan2(R[3], R[0])
 
     # ----------------------------------------------------------------------------- the landing
     def _start_landing(self, i: int, t: float) -> None:
@@ -170,12 +249,12 @@ class RotorFaults:
         b.rv[i] = (1.0 - a * s) * v0
         b.ra[i] = -a * v0 if s < sp / self.BRAKE_MPS2 else 0.0
         ground = b.hover_z[i]
-        speed = self.DESCENT_MPS if self.zr[i] > ground + 1.0 else self.CRAWL_MPS
+        speed = self.DESCENT_MPS if self.zr[i] > ground + self.CRAWL_FROM_M else self.CRAWL_MPS
         self.zr[i] = max(self.zr[i] - speed * b.dt, ground - 0.5)
         b.rp[i, 2] = self.zr[i]
         b.rv[i, 2] = -speed if self.zr[i] > ground - 0.5 else 0.0
         b.spray[i] = False
-        if self.frame[i] == "quad-x":
+        if self.yaw_free[i]:
             R = b.Rc[i]
             b.yaw[i] = math.atan2(R[3], R[0])
         info = self.info[i]
@@ -188,5 +267,6 @@ class RotorFaults:
         if self.still_s[i] >= self.LAND_S - 1e-9:
             if info is not None:
                 info["landed_s"] = round(t, 2)
+                info["landed_xy"] = [round(float(v), 2) for v in b.p[i, :2]]
             b.notes[i].append(f"rotor failure: landed at t={t:.1f}s")
             b.act[i] = False

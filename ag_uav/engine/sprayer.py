@@ -95,7 +95,8 @@ class Sprayer:
         bottom; parallel-axis terms about the composite centre of mass go to the controller)."""
         body_mass, inertia, ipos, subtree = self._mass_views
         a, c, h = self.tank_half
-        frac = min(1.0, m_liq / max(self.job.fill_l * self.rho, 1e-9))
+        vol = self.job.tank_l if self.job.tank_l is not None else self.job.fill_l
+        frac = min(1.0, m_liq / max(vol * self.rho, 1e-9))
         hz = max(h * frac, 1e-3)  # liquid half-height
         body_mass[self.liq] = max(m_liq, 1e-6)
         ml = max(m_liq, 1e-6)

@@ -482,13 +482,15 @@ class Spraying:
     """The spray job (:class:`ag_uav.engine.spray_batched.BatchSprayer`): nozzles, tank, battery
     and sorties; a vehicle landed at the base gets zero thrust and a reset controller."""
 
-    def __init__(self, b: Batch, sprayer: Any, control: Control, act_adr: int) -> None:
+    def __init__(self, b: Batch, sprayer: Any, control: Control, act_adr: int,
+                 n_act: int = 4) -> None:
         self.b, self.spr, self.control, self.ia = b, sprayer, control, act_adr
+        self.na = n_act  # every rotor's actuator state: the energy counts them all
 
     def step(self, k: int, t: float) -> None:
         b = self.b
         on, reset = self.spr.step(k, t, b.p[:, 2], b.v[:, 0], b.v[:, 1], b.spray, b.f,
-                                  b.S[:, self.ia:self.ia + 4], b.act)
+                                  b.S[:, self.ia:self.ia + self.na], b.act)
         b.spray[:] = on
         if np.count_nonzero(reset):  # every tick: cheaper than reset.any()
             self.control.bc.reset_rows(np.flatnonzero(reset))

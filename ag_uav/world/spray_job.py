@@ -44,7 +44,7 @@ mass × (1 + ``battery.plan_margin``) × time, plus the way home: the distance t
 cost above hover, +2–3 % measured). The sortie ends at the last tick where (a) the tank still holds
 ``spray.plan_margin`` of its volume and (b) the energy used plus the way home leaves
 ``battery.reserve_frac`` of the capacity. There the drone stops, flies to the base, lands (a
-deliberate phase: the last 0.6 m at 0.3 m/s, the skids touch at ~0.3 m/s, within the crash
+deliberate phase: the last 1.5 m at 0.3 m/s, the skids touch at ~0.3 m/s, within the crash
 detector's 1 m/s for the skids; then motors off), is refilled and gets a fresh battery
 (``spray.service_s``), takes off, flies back to the cut point and resumes. A job that fits one
 battery and one tank is flown exactly as the plain mission (no base visit). The loop then
@@ -71,6 +71,13 @@ G = 9.81
 #: seg index of the inserted transits to and from the base, and of the time on the ground there
 SEG_TRANSIT = -2
 SEG_GROUND = -3
+#: a sortie's set point stays on the ground this long after the landing before the motors stop
+#: (a heavy, slow-motored vehicle lags its descent by centimetres: cut at once, it drops)
+LAND_SETTLE_S = 1.5
+#: a sortie's landing descends at the climb speed to this height above the ground, then at the
+#: landing speed (0.3 m/s): the heavy octocopter, braking from 1.5 m/s at 0.6 m, touched down at
+#: about 1 m/s (PX4 likewise slows its landing descent below MPC_LAND_ALT2)
+LAND_FLARE_M = 1.5
 #: control ticks per piece when the planner walks the single-sortie reference
 _WALK_CHUNK = 1 << 16
 
@@ -152,17 +159,21 @@ class SprayJob:
 
     base_xy: np.ndarray
     sorties: list[Sortie]
-    fill_l: float
+    fill_l: float                # litres each sortie takes off with (:func:`sortie_fill`)
     dry_mass_kg: float
     service_s: float
+    tank_l: float | None = None  # the tank's volume (None: ``fill_l``)
 
     def summary(self) -> dict[str, Any]:
-        return {
+        out = {
             "base_xy": [round(float(v), 3) for v in self.base_xy],
             "sorties_planned": len(self.sorties),
             "litres_planned": round(sum(s.litres for s in self.sorties), 4),
             "energy_planned_wh": round(sum(s.energy_wh for s in self.sorties), 2),
         }
+        if self.tank_l is not None and self.fill_l < self.tank_l:
+            out["fill_l"] = round(self.fill_l, 3)  # a part-filled tank: the battery binds
+        return out
 
 
 class ChainedReference:
@@ -331,7 +342,8 @@ def _walk(ref: Reference, base: np.ndarray, lpm: float, dt: float
 
 
 def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
-             z_land: float, truncated: bool = False) -> tuple[Any, SprayJob]:
+             z_land: float, truncated: bool = False,
+             plan_s: float | None = None) -> tuple[Any, SprayJob]:
     """Split the mission into sorties (see the module docstring).
 
     Returns ``(reference, job)``: ``ref`` itself (with ``spray_job`` set) when one sortie does
@@ -340,15 +352,18 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
 
     ``truncated``: ``plan`` is the head of a longer plan (:meth:`CoveragePlan.head`, a mission
     cut by ``sim.max_time_s``), so its end is not the job's end: a sortie reaching it must still
-    keep its way home at every tick, or it is cut as anywhere else.
+    keep its way home at every tick, or it is cut as anywhere else; ``plan_s``: the whole
+    plan's length over the mission speed (what :func:`sortie_fill` weighs a head against).
     """
     base = base_point(cfg, field, plan.start)
     dt = 1.0 / cfg.sim.control_hz
     walk = _walk(ref, base, liquid_l_per_m(cfg), dt)
-    cuts = _cuts(cfg, _energy_model(cfg, dry_mass_kg, z_land), walk, dt, truncated)
+    energy = _energy_model(cfg, dry_mass_kg, z_land)
+    fill = sortie_fill(cfg, energy, walk, dt, truncated, plan_s)
+    cuts = _cuts(cfg, energy, walk, dt, truncated, fill)
     sp = cfg.spray
-    job = SprayJob(base_xy=base, sorties=[], fill_l=sp.tank_l, dry_mass_kg=dry_mass_kg,
-                   service_s=sp.service_s)
+    job = SprayJob(base_xy=base, sorties=[], fill_l=fill, dry_mass_kg=dry_mass_kg,
+                   service_s=sp.service_s, tank_l=sp.tank_l)
     if len(cuts) == 1:
         job.sorties.append(Sortie(0, 0.0, ref.duration, None, cuts[0][1], cuts[0][2] / 3600.0,
                                   False))
@@ -369,10 +384,13 @@ def _energy_model(cfg: Config, dry_mass_kg: float, z_land: float) -> tuple[Any, 
     a_max = m.accel_max_mps2
     climb = 1.5  # Reference's default climb speed (m/s)
 
+    drop = m.altitude_m - z_land
+
     def t_way(d: np.ndarray | float) -> np.ndarray | float:
         """Predicted time (s) of a transit of d metres plus a descent or climb and dwells."""
-        return (np.asarray(d) / v_tr + v_tr / a_max + (m.altitude_m - z_land - 0.6) / climb
-                + 0.6 / 0.3 + climb / a_max + 3.0)  # the last 0.6 m at 0.3 m/s (Reference)
+        return (np.asarray(d) / v_tr + v_tr / a_max
+                + max(drop - LAND_FLARE_M, 0.0) / climb + min(drop, LAND_FLARE_M) / 0.3
+                + climb / a_max + 3.0 + LAND_SETTLE_S)  # the last metres at 0.3 m/s
 
     n, se = rotor_counts(cfg)
 
@@ -383,48 +401,129 @@ def _energy_model(cfg: Config, dry_mass_kg: float, z_land: float) -> tuple[Any, 
     return t_way, power
 
 
-def _cuts(cfg: Config, energy: tuple[Any, Any], walk: tuple[np.ndarray, np.ndarray, np.ndarray],
-          dt: float, truncated: bool) -> list[tuple[int, float, float]]:
-    """Where the sorties end: (tick of the cut, litres, energy J) each, the last at the end of
-    the job; ``walk`` from :func:`_walk`, ``energy`` from :func:`_energy_model`."""
+def _sortie_run(cfg: Config, energy: tuple[Any, Any],
+                walk: tuple[np.ndarray, np.ndarray, np.ndarray], dt: float, i0: int,
+                fill: float, e_pre: float, truncated: bool) -> tuple[str, int, Any]:
+    """One sortie from tick ``i0`` with ``fill`` litres and ``e_pre`` joules already spent:
+    ``("end" | "tank" | "battery", first failing tick (local), (left, e_run, e_home))``.
+    Only the ticks one battery can fly are walked (past them the energy test fails anyway:
+    every tick costs at least the empty-tank power), so a sortie costs its own length."""
     sp, b = cfg.spray, cfg.battery
     t_way, power = energy
     seg, litres_cum, d_home = walk
-    fill = sp.tank_l
     e_use = b.capacity_wh * 3600.0 * (1.0 - b.reserve_frac)  # J
     n = len(seg)
+    span = int(math.ceil(e_use / (float(power(0.0)) * dt))) + 2
+    hi = n if i0 + span >= n else i0 + span
+    left = fill - (litres_cum[i0:hi] - litres_cum[i0])
+    p = power(np.maximum(left, 0.0))
+    e_run = e_pre + np.concatenate([[0.0], np.cumsum(p[:-1] * dt)])
+    e_home = power(np.maximum(left, 0.0)) * t_way(d_home[i0:hi])
+    ok = (left >= fill * sp.plan_margin) & (e_run + e_home <= e_use)
+    arrays = (left, e_run, e_home)
+    # the job's end: no way home needed (the pilot collects the drone where it hovers)
+    if hi == n and (ok.all() if truncated else left[-1] >= 0.0 and e_run[-1] <= e_use):
+        return "end", hi - i0 - 1, arrays
+    if ok.all():  # not reached: the walked ticks cost more than the battery holds
+        raise ConfigError(f"battery.capacity_wh = {b.capacity_wh}: the sortie planner's window "
+                          "ended before the battery")
+    bad = int(np.argmin(ok))  # first tick that fails
+    return ("tank" if left[bad] < fill * sp.plan_margin else "battery"), bad, arrays
+
+
+def sortie_fill(cfg: Config, energy: tuple[Any, Any],
+                walk: tuple[np.ndarray, np.ndarray, np.ndarray], dt: float,
+                truncated: bool = False, plan_s: float | None = None) -> float:
+    """The litres each sortie takes off with: the full tank, unless a sortie with the full
+    tank is cut by the battery (the liquid would be ballast); then the least fill with which
+    the first sortie is not cut by the tank (the battery's reserve or the job's end comes
+    first), rounded up to 0.1 L: the liquid the battery can carry and spray in one sortie, as
+    operators fill a drone that cannot fly a full tank empty. Bisection on the fill: the tank
+    cut comes later and the battery cut earlier as the fill grows. The head of a longer plan
+    (``truncated``) that ends before either cut: the full tank when the whole plan
+    (``plan_s`` seconds at the mission speed) is shorter than a full-tank battery, else
+    :func:`_fill_by_rate`."""
+    full = cfg.spray.tank_l
+    kind = _sortie_run(cfg, energy, walk, dt, 0, full, 0.0, truncated)[0]
+    if kind == "end" and truncated:
+        e_use = cfg.battery.capacity_wh * 3600.0 * (1.0 - cfg.battery.reserve_frac)
+        if plan_s is not None and plan_s <= e_use / float(energy[1](full)):
+            return full  # the whole job is shorter than a full-tank battery
+        return _fill_by_rate(cfg, energy, walk, dt)
+    if kind != "battery":
+        return full
+    lo, hi = 0.0, full
+    for _ in range(24):
+        mid = 0.5 * (lo + hi)
+        if _sortie_run(cfg, energy, walk, dt, 0, mid, 0.0, truncated)[0] == "tank":
+            lo = mid
+        else:
+            hi = mid
+    return min(full, math.ceil(hi * 10.0 - 1e-9) / 10.0)
+
+
+def _fill_by_rate(cfg: Config, energy: tuple[Any, Any],
+                  walk: tuple[np.ndarray, np.ndarray, np.ndarray], dt: float) -> float:
+    """:func:`sortie_fill` for the head of a longer plan too short to show a full sortie (a
+    mission cut by ``sim.max_time_s``): the least fill ``F`` whose tank time at the head's mean
+    flow ``q``, ``F (1 − margin) / q``, is no shorter than the battery's time at the power of
+    half that fill, ``E_use / P(F/2)`` (the battery binds); the full tank when even it empties
+    first."""
+    sp, b = cfg.spray, cfg.battery
+    power = energy[1]
+    litres_cum = walk[1]
+    q = float(litres_cum[-1]) / max(len(litres_cum) * dt, dt)
+    full = sp.tank_l
+    if q <= 0.0:
+        return full
+    e_use = b.capacity_wh * 3600.0 * (1.0 - b.reserve_frac)
+
+    def tank_first(f: float) -> bool:
+        return f * (1.0 - sp.plan_margin) / q < e_use / float(power(0.5 * f))
+
+    if tank_first(full):
+        return full
+    lo, hi = 0.0, full
+    for _ in range(24):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if tank_first(mid) else (lo, mid)
+    return min(full, math.ceil(hi * 10.0 - 1e-9) / 10.0)
+
+
+def _cuts(cfg: Config, energy: tuple[Any, Any], walk: tuple[np.ndarray, np.ndarray, np.ndarray],
+          dt: float, truncated: bool, fill: float) -> list[tuple[int, float, float]]:
+    """Where the sorties end: (tick of the cut, litres, energy J) each, the last at the end of
+    the job; ``walk`` from :func:`_walk`, ``energy`` from :func:`_energy_model`, ``fill`` the
+    litres each sortie takes off with (:func:`sortie_fill`)."""
+    sp, b = cfg.spray, cfg.battery
+    t_way, power = energy
+    seg = walk[0]
     i0 = 0
     cuts: list[tuple[int, float, float]] = []  # (tick of the cut, litres, energy J)
     e_pre = 0.0
     while True:
         if len(cuts) >= sp.max_sorties:
             raise ConfigError(f"spray.max_sorties = {sp.max_sorties}: the job needs more sorties "
-                              f"(one {fill:g} L tank sprays {fill / liquid_l_per_m(cfg):.0f} m "
+                              f"(one {fill:g} L fill sprays {fill / liquid_l_per_m(cfg):.0f} m "
                               "of track)")
-        left = fill - (litres_cum[i0:] - litres_cum[i0])
-        p = power(np.maximum(left, 0.0))
-        e_run = e_pre + np.concatenate([[0.0], np.cumsum(p[:-1] * dt)])
-        e_home = power(np.maximum(left, 0.0)) * t_way(d_home[i0:])
-        ok = (left >= fill * sp.plan_margin) & (e_run + e_home <= e_use)
-        # the job's end: no way home needed (the pilot collects the drone where it hovers)
-        if (ok.all() if truncated else left[-1] >= 0.0 and e_run[-1] <= e_use):
-            cuts.append((n - 1, float(left[0] - left[-1]), float(e_run[-1])))
+        kind, bad, (left, e_run, e_home) = _sortie_run(cfg, energy, walk, dt, i0, fill, e_pre,
+                                                       truncated)
+        if kind == "end":
+            cuts.append((i0 + bad, float(left[0] - left[-1]), float(e_run[-1])))
             return cuts
-        bad = int(np.argmin(ok))  # first tick that fails
         k = i0 + bad - 1
         while k > i0 and seg[k] < 0:
             k -= 1
         if k <= i0 + 1:
-            what = ("spray.tank_l" if left[bad] < fill * sp.plan_margin
-                    else "battery.capacity_wh")
+            what = "spray.tank_l" if kind == "tank" else "battery.capacity_wh"
             val = sp.tank_l if what == "spray.tank_l" else b.capacity_wh
             raise ConfigError(f"{what} = {val}: too small to spray from the base and come back "
                               f"(sortie {len(cuts) + 1})")
         kk = k - i0
         cuts.append((k, float(left[0] - left[kk]), float(e_run[kk] + e_home[kk])))
         i0 = k
-        # next sortie: climb at the base and transit out to the cut point, at the full tank
-        e_pre = float(power(fill) * t_way(d_home[k]))
+        # next sortie: climb at the base and transit out to the cut point, with the fill
+        e_pre = float(power(fill) * t_way(walk[2][k]))
 
 
 def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray,
@@ -465,8 +564,12 @@ def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray
             resume = (j_to, end_xy)
         opts = dict(speed=m.speed_mps, altitude=m.altitude_m, a_max=m.accel_max_mps2,
                     takeoff=cfg.sim.takeoff or si > 0,
-                    hover_time=cfg.sim.hover_after_s if last else 0.0,
-                    rate=cfg.sim.control_hz, landing=not last, z_land=z_land, seg_speeds=speeds)
+                    # a take-off from the base starts where the landing left the set point (the
+                    # vehicle's resting height, not 0: a tall vehicle would be pushed down)
+                    **({"z0": z_land} if si > 0 else {}),
+                    hover_time=cfg.sim.hover_after_s if last else LAND_SETTLE_S,
+                    rate=cfg.sim.control_hz, landing=not last, z_land=z_land, seg_speeds=speeds,
+                    flare_height=LAND_FLARE_M)
         made.append((dataclasses.replace(plan, segments=sub), opts, gmap, cut_q, litres, e_j,
                      last))
     refs = _references([(a[0], a[1]) for a in made])

@@ -51,7 +51,7 @@ def centreline_speed(a: float, s_r: float, s_m: float, bd0: float, s: float) -> 
     above ``a``."""
     if s < s_m:
         return a if s < s_r else a * s_r / s
-    un = a if s_m <= s_r else a * s_r / s_m
+    un = a if s_m <= s_r else a * s_r / s_m  # s_m = s_r = 0: no wake (motors off)
     sv = s_m - a * bd0 / max(un, 1e-12)
     return min(a, a * bd0 / max(s - sv, 1e-12))
 
@@ -81,7 +81,7 @@ def fall_time(vt: float, a: float, s_r: float, s_m: float, bd0: float, s1: float
         t += _decay_time(vt, a * s_r, s1, e)
         s1 = e
     if s2 > s1:                                     # the merged jet: u = a bd0 / (s − s_v)
-        un = a if s_m <= s_r else a * s_r / s_m
+        un = a if s_m <= s_r else a * s_r / s_m  # s_m = s_r = 0: no wake (motors off)
         sv = s_m - a * bd0 / max(un, 1e-12)
         # below s_m the speed is a bd0/(s − s_v) ≤ a, exactly (continuity at s_m)
         t += _decay_time(vt, a * bd0, s1 - sv, s2 - sv)

@@ -15,7 +15,7 @@ from typing import Any
 
 MODULES = ("numerical", "table2", "bearing_tracking", "route_prediction", "langevin",
            "outage", "controllers", "swath", "spray_settings", "ins_nav", "optimisers",
-           "drift", "wind_tunnel")
+           "drift", "wind_tunnel", "vehicles")
 
 
 def number_axis(flag: str, text: str, *, lo: float | None = None, lo_open: bool = False,
