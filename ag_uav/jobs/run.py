@@ -208,5 +208,7 @@ def _warm_helper(folder: str) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) != 3 or sys.argv[1] != "--warm-helper":
-        sys.exit("usage: python -m ag_uav.jobs.run --warm-helper FOLDER (started by a first run)")
+        print("usage: python -m ag_uav.jobs.run --warm-helper FOLDER (the first run's helper "
+              "process, which a run starts itself)", file=sys.stderr)
+        sys.exit(2)
     _warm_helper(sys.argv[2])
