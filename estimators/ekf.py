@@ -76,7 +76,7 @@ class NonlinearModelMixin:
                 raise ValueError("predict(u) needs B")
             xb = xb + _dot(self.B, np.asarray(u, dtype=float).reshape(-1))
         self.x = xb
-        self.P = _dot(_dot(F, self.P), FT) + self._Q
+        self.P = _dot(_dot(F, self.P), FT) + self.Q  # the base filter's Q (a property)
 
 
 class EKF(NonlinearModelMixin, LinearGaussianBase):

@@ -1,6 +1,6 @@
 """Settings for the whole suite.
 
-The first run's helper process (:mod:`ag_uav.jobs.warm`) is off in the tests: the suite's workers
+The first run's helper process (:mod:`ag_uav.engine.warm`) is off in the tests: the suite's workers
 already keep every core busy, so a helper would only contend with them (``AG_UAV_WARM=0`` unless
 the environment sets it). ``tests/test_warm.py`` turns it on where it tests it.
 
@@ -31,7 +31,7 @@ with tempfile.TemporaryDirectory() as out:
 def pytest_configure(config: pytest.Config) -> None:
     if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", 0):
         return  # a worker, or no workers
-    from ag_uav.jobs import warm
+    from ag_uav.engine import warm
 
     if warm._ins_kernel_cached():
         return

@@ -4,12 +4,24 @@ picture in docs/architecture.md matches the code, and product text says what is 
 issue or session numbers, no clock times of single runs: history belongs in git)."""
 
 import ast
+import importlib.util
 import re
+import sys
 from pathlib import Path
 
-from ag_uav.jobs import architecture as arch
-
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _tool(name: str):
+    """A development tool of ``tools/`` (not part of the installed package), as a module."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+arch = _tool("architecture")
 
 
 def test_the_import_graph_sees_function_local_and_relative_imports():
@@ -72,13 +84,13 @@ def test_top_level_is_small_and_every_folder_is_a_stage():
 def test_architecture_doc_is_current():
     text = arch.DOC.read_text(encoding="utf-8")
     assert arch.render_doc(text) == text, (
-        "docs/architecture.md is stale: run python -m ag_uav.jobs.architecture --write")
+        "docs/architecture.md is stale: run python tools/architecture.py --write")
 
 
 #: product text: what a reader of the code, docs and examples sees (globs under ROOT)
 PRODUCT_TEXT = ("README.md", "mkdocs.yml", "pyproject.toml", "docs/**/*.md", "ag_uav/**/*.py",
                 "controllers/**/*.py", "estimators/**/*.py", "examples/**/*", "models/**/*",
-                "tests/*.py")
+                "tests/*.py", "tools/*.py")
 #: left out of the history check (none)
 NOT_YET: set[str] = set()
 _CLOCK = r"[0-2]\d:[0-5]\d(?::[0-5]\d)?"
@@ -225,23 +237,88 @@ def _own_attributes(tree: ast.AST) -> set[str]:
     body (methods, class attributes) and ``__slots__``."""
     own: set[str] = set()
     for c in ast.walk(tree):
-        if not isinstance(c, ast.ClassDef):
-            continue
-        for b in c.body:
-            if isinstance(b, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
-                own.add(b.name)
-            targets = (b.targets if isinstance(b, ast.Assign)
-                       else [b.target] if isinstance(b, ast.AnnAssign) else [])
-            for t in targets:
-                if isinstance(t, ast.Name):
-                    own.add(t.id)
-                    if t.id == "__slots__" and b.value is not None:
-                        own |= {e.value for e in ast.walk(b.value)
-                                if isinstance(e, ast.Constant) and isinstance(e.value, str)}
-        own |= {n.attr for n in ast.walk(c) if isinstance(n, ast.Attribute)
-                and isinstance(n.ctx, ast.Store) and isinstance(n.value, ast.Name)
-                and n.value.id in ("self", "cls")}
+        if isinstance(c, ast.ClassDef):
+            own |= _class_attributes(c)
     return own
+
+
+def _class_attributes(c: ast.ClassDef) -> set[str]:
+    """What one class defines (:func:`_own_attributes`)."""
+    own: set[str] = set()
+    for b in c.body:
+        if isinstance(b, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            own.add(b.name)
+        targets = (b.targets if isinstance(b, ast.Assign)
+                   else [b.target] if isinstance(b, ast.AnnAssign) else [])
+        for t in targets:
+            if isinstance(t, ast.Name):
+                own.add(t.id)
+                if t.id == "__slots__" and b.value is not None:
+                    own |= {e.value for e in ast.walk(b.value)
+                            if isinstance(e, ast.Constant) and isinstance(e.value, str)}
+    own |= {n.attr for n in ast.walk(c) if isinstance(n, ast.Attribute)
+            and isinstance(n.ctx, ast.Store) and isinstance(n.value, ast.Name)
+            and n.value.id in ("self", "cls")}
+    return own
+
+
+#: bases that define no private attribute a subclass could read
+_PLAIN_BASES = {"object", "Protocol", "Generic", "NamedTuple", "Exception", "ABC"}
+
+
+def _inherited(module: str, c: ast.ClassDef, trees: dict[str, ast.AST],
+               classes: dict[str, dict[str, ast.ClassDef]], packages: set[str],
+               seen: frozenset = frozenset()) -> set[str] | None:
+    """The attributes ``c``'s bases define, transitively, resolved through this module's
+    classes and its ``from ... import`` of the product's; None when a base is not the
+    product's (a library class: what it defines is not known here)."""
+    names: dict[str, tuple[str, str]] = {}
+    for node in ast.walk(trees[module]):
+        if isinstance(node, ast.ImportFrom):
+            src = _import_source(module, module in packages, node)
+            names |= {a.asname or a.name: (src, a.name) for a in node.names}
+    out: set[str] = set()
+    for b in c.bases:
+        name = b.id if isinstance(b, ast.Name) else ast.unparse(b)
+        if name.split("[")[0].split(".")[-1] in _PLAIN_BASES:
+            continue
+        where = (module, name) if name in classes.get(module, {}) else names.get(name)
+        if where is None or where[1] not in classes.get(where[0], {}) or where in seen:
+            return None
+        base = classes[where[0]][where[1]]
+        out |= _class_attributes(base)
+        more = _inherited(where[0], base, trees, classes, packages, seen | {where})
+        if more is None:
+            return None
+        out |= more
+    return out
+
+
+def self_reach_ins(trees: dict[str, ast.AST]) -> dict[str, int]:
+    """``file: self._x`` -> occurrences of a class reading a private attribute that neither its
+    own module nor any class it inherits from defines: a mixin reading the state of the class
+    it is mixed into, which lives in another module (give the part an object of its own and
+    what it needs through a public interface instead). Classes with a base from outside the
+    product are left out (what their bases define is not known here)."""
+    by_module = {_module_name(rel): (rel, tree) for rel, tree in trees.items()}
+    mods = {m: t for m, (_, t) in by_module.items()}
+    packages = {m for m, (rel, _) in by_module.items() if rel.endswith("__init__.py")}
+    classes = {m: {c.name: c for c in ast.walk(t) if isinstance(c, ast.ClassDef)}
+               for m, (_, t) in by_module.items()}
+    found: dict[str, int] = {}
+    for module, (rel, tree) in by_module.items():
+        own = _own_attributes(tree)
+        for c in classes[module].values():
+            inherited = _inherited(module, c, mods, classes, packages)
+            if inherited is None:
+                continue
+            for n in ast.walk(c):
+                if (isinstance(n, ast.Attribute) and _is_private(n.attr)
+                        and isinstance(n.value, ast.Name) and n.value.id in ("self", "cls")
+                        and n.attr not in own and n.attr not in inherited):
+                    key = f"{rel}: {ast.unparse(n)}"
+                    found[key] = found.get(key, 0) + 1
+    return found
 
 
 def private_reach_ins(root: Path = ROOT, code=PRODUCT_CODE) -> dict[str, int]:
@@ -255,7 +332,9 @@ def private_reach_ins(root: Path = ROOT, code=PRODUCT_CODE) -> dict[str, int]:
       when no class of this module defines ``_name``, or when a class of a module this one
       imports defines it too (a class's privates belong to its module; its own module's
       functions may use them; keeping a same-named copy of another module's private does not
-      make it one's own)."""
+      make it one's own);
+    - ``self._name`` in a class when neither its module nor a class it inherits from defines
+      ``_name`` (:func:`self_reach_ins`: a mixin reading its host's state)."""
     files = dict(_product_files(root, code))
     trees = {rel: ast.parse(text) for rel, text in files.items()}
     by_module = {_module_name(rel): rel for rel in trees}
@@ -304,6 +383,8 @@ def private_reach_ins(root: Path = ROOT, code=PRODUCT_CODE) -> dict[str, int]:
             mine = rel in owners.get(node.attr, ())
             if on_module or not mine or owners.get(node.attr, set()) & (imported - {rel}):
                 hit(rel, ast.unparse(node))
+    for key, n in self_reach_ins(trees).items():
+        found[key] = found.get(key, 0) + n
     return found
 
 
@@ -385,6 +466,25 @@ def test_the_reach_in_check_finds_other_modules_privates(tmp_path):
     assert private_reach_ins(tmp_path, ("ag_uav",)) == {
         "ag_uav/a.py: from ag_uav.sub.b import _helper": 1, "ag_uav/a.py: B()._p": 1,
         "ag_uav/a.py: b._helper": 1, "ag_uav/a.py: x._s": 1}
+
+
+def test_the_reach_in_check_finds_a_mixin_reading_its_host_s_state(tmp_path):
+    """A class reading ``self._x`` that neither its module nor its bases define (a mixin whose
+    host, in another module, holds the state) is a reach-in; a subclass reading what its base
+    defines, or a class with a library base, is not."""
+    pkg = tmp_path / "ag_uav"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "host.py").write_text(
+        "from .part import Part\n\n\nclass Host(Part):\n    def __init__(self):\n"
+        "        self._chan = {}\n        self._period = 1.0\n")
+    (pkg / "part.py").write_text(
+        "import threading\n\n\nclass Part:\n    def f(self):\n        self._mine = 1\n"
+        "        return self._chan, self._period, self._period, self._mine\n\n\n"
+        "class Sub(Part):\n    def g(self):\n        return self._mine\n\n\n"
+        "class T(threading.Thread):\n    def h(self):\n        return self._target\n")
+    assert private_reach_ins(tmp_path, ("ag_uav",)) == {
+        "ag_uav/part.py: self._chan": 1, "ag_uav/part.py: self._period": 2}
 
 
 def _cited_paths(text: str) -> set[str]:

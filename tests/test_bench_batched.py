@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from ag_uav.config import load_config
-from ag_uav.jobs.bench import TRUE_STATE_OVERRIDES, with_overrides
-from ag_uav.jobs.bench_physics import paired
+from ag_uav.jobs.bench.physics import paired
+from ag_uav.jobs.bench.suite import TRUE_STATE_OVERRIDES, with_overrides
 
 
 def test_each_engine_batch_is_paired_with_the_replay_of_its_own_flights() -> None:
@@ -22,7 +22,7 @@ def test_stage_costs_add_up_to_the_loop_and_restore_the_engine() -> None:
     """``stages``: every stage and the physics timed per vehicle-tick, the rest of the loop
     small; the stage classes are left as they were."""
     from ag_uav.engine import loop, stages
-    from ag_uav.jobs.bench import _stages
+    from ag_uav.jobs.bench.suite import _stages
 
     before = (stages.Guard.start, stages.Depositing.step, loop.Engine.physics)
     cfg = with_overrides(load_config(None), TRUE_STATE_OVERRIDES)
@@ -39,7 +39,7 @@ def test_stage_costs_add_up_to_the_loop_and_restore_the_engine() -> None:
 def test_the_target_batches_are_also_paired_without_the_dose_model() -> None:
     """``ratio_vs_physics_without_deposition``: the workload the speed targets are stated for,
     paired with its own replay like the default one."""
-    from ag_uav.jobs.bench import ALSO_WITHOUT_DOSE, _without_dose
+    from ag_uav.jobs.bench.suite import ALSO_WITHOUT_DOSE, _without_dose
 
     assert ALSO_WITHOUT_DOSE == ("batched", "batched_ideal_attitude")
     cfg = with_overrides(load_config(None), TRUE_STATE_OVERRIDES)
@@ -52,7 +52,7 @@ def test_the_target_batches_are_also_paired_without_the_dose_model() -> None:
 def test_first_run_compile_spans_count_nested_kernels_once() -> None:
     """A kernel's own compile time is its span less its callees' spans; the total is the
     outermost spans' sum (numba's compile events nest)."""
-    from ag_uav.jobs.first_run import compile_spans
+    from ag_uav.jobs.bench.first_run import compile_spans
 
     ev = [(0.0, "a", True), (1.0, "b", True), (3.0, "c", True), (4.0, "c", False),
           (6.0, "b", False), (10.0, "a", False), (11.0, "d", True), (12.5, "d", False)]

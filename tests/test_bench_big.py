@@ -5,8 +5,8 @@ model's stage share."""
 from __future__ import annotations
 
 from ag_uav.config import load_config
-from ag_uav.jobs import bench
-from ag_uav.jobs.bench_big import BIG_JOB_OVERRIDES, FIELD_38HA
+from ag_uav.jobs.bench import suite as bench
+from ag_uav.jobs.bench.big import BIG_JOB_OVERRIDES, FIELD_38HA
 from ag_uav.world.field import Field
 
 
@@ -26,7 +26,12 @@ def test_big_job_is_left_out_of_quick_bench():
 def test_the_dose_stage_share_is_the_stage_over_its_own_loop():
     """``deposition.loop_share``: the deposition stage's time over the loop's, of one flight
     (a share strictly between 0 and 1 with the dose model on; none timed without it)."""
-    from ag_uav.jobs.bench import TRUE_STATE_OVERRIDES, _stage_share, closed_loop, with_overrides
+    from ag_uav.jobs.bench.suite import (
+        TRUE_STATE_OVERRIDES,
+        _stage_share,
+        closed_loop,
+        with_overrides,
+    )
 
     c = with_overrides(load_config(None, {}), TRUE_STATE_OVERRIDES)
     on = with_overrides(c, {"spray.deposition": True, "sim.max_time_s": 30.0})

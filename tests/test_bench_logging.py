@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 
 from ag_uav.config import default_config
-from ag_uav.jobs.bench import TRUE_STATE_OVERRIDES, logging_cost, with_overrides
+from ag_uav.jobs.bench.suite import TRUE_STATE_OVERRIDES, logging_cost, with_overrides
 
 
 def test_logging_cost_reports_ratios_and_the_cost_per_message():

@@ -9,7 +9,7 @@ import platform
 import mujoco
 import numba
 
-from ag_uav.jobs.bench import machine_facts, print_bench, python_loop_ns
+from ag_uav.jobs.bench.suite import machine_facts, print_bench, python_loop_ns
 
 
 def test_the_machine_section_names_the_cpu_cores_versions_and_python_speed():

@@ -141,7 +141,7 @@ def _gone(pid: int) -> bool:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 def test_a_sigkilled_first_run_takes_its_helper_along_and_the_next_run_sweeps(
         tmp_path, monkeypatch):
-    from ag_uav.jobs import warm
+    from ag_uav.engine import warm
 
     if warm._cores() < 2:
         pytest.skip("the helper starts only with two cores or more")
@@ -157,7 +157,7 @@ def test_a_sigkilled_first_run_takes_its_helper_along_and_the_next_run_sweeps(
     try:
         while helper is None and time.monotonic() - t0 < 180 and proc.poll() is None:
             helper = next((p for p, cmd in _children(proc.pid).items()
-                           if "ag_uav.jobs.warm_helper" in cmd), None)
+                           if "--warm-helper" in cmd), None)
             time.sleep(0.05)
         assert helper is not None, "the first run started no helper"
         (folder,) = tmp.glob(f"{warm.PREFIX}*")
@@ -190,7 +190,7 @@ def test_a_sigkilled_first_run_takes_its_helper_along_and_the_next_run_sweeps(
 def test_an_unowned_folder_waits_out_its_grace(tmp_path, monkeypatch):
     """A folder of ours with no owner file (being made, or left by an older version) is kept
     for ``UNOWNED_GRACE_S`` after its last change, then removed."""
-    from ag_uav.jobs import warm
+    from ag_uav.engine import warm
 
     monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
     young = tmp_path / f"{warm.PREFIX}young"

@@ -216,7 +216,7 @@ def test_the_physics_replay_reproduces_the_flights_bit_for_bit():
     changes captured from the engine): the replay lands on the engine's states exactly, pool or
     lanes, so the reference really is the engine's own physics."""
     from ag_uav.engine.missions import fly_many
-    from ag_uav.jobs.bench_physics import replay_physics
+    from ag_uav.jobs.bench.physics import replay_physics
 
     over = {"spray.tank_l": 0.02, "spray.service_s": 0.0, "sim.max_time_s": 30.0}
     cfgs = [_cfg(s, **over) for s in (1, 2, 3)]

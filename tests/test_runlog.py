@@ -424,7 +424,7 @@ def test_a_writer_process_killed_on_its_own_is_not_silent(tmp_path):
     log.tick(0.0, _tick_values((0.0, 0.0, 1.0)))
     log.flush()
     time.sleep(0.1)  # the writer polls its ring every millisecond
-    os.kill(log._sink.pid, signal.SIGKILL)
+    os.kill(log.channels.sink.pid, signal.SIGKILL)
     time.sleep(1.1)
     for k in range(1, 200):
         log.tick(k * 0.01, _tick_values((k * 0.01, 0.0, 1.0)))
@@ -448,12 +448,12 @@ def test_a_log_past_the_spare_cores_writes_in_process_and_says_so(tmp_path, monk
     a = RunLog(tmp_path / "a.mcap", metadata={}, config_toml="", layout=False)
     with pytest.warns(UserWarning, match=r"b\.mcap: written in this process \(1 writer"):
         b = RunLog(tmp_path / "b.mcap", metadata={}, config_toml="", layout=False)
-    assert a._sink.process and not b._sink.process
+    assert a.channels.sink.process and not b.channels.sink.process
     for log in (a, b):
         log.tick(0.0, _tick_values((1.0, 2.0, 3.0)))
         log.close()
     c = RunLog(tmp_path / "c.mcap", metadata={}, config_toml="", layout=False)
-    assert c._sink.process  # a's writer is gone: the core is spare again
+    assert c.channels.sink.process  # a's writer is gone: the core is spare again
     c.close()
     assert [len(_decoded(tmp_path / f"{x}.mcap")) for x in "ab"] == [5, 5]
 

@@ -1,5 +1,6 @@
-"""The first run's second-core helper (ag_uav.jobs.warm): when it starts, that it flies the run's
-config on the true state in a process of its own, and that it leaves nothing behind."""
+"""The first run's second-core helper (ag_uav.engine.warm, started by ag_uav.jobs.run): when it
+starts, that it flies the run's config on the true state in a process of its own, and that it
+leaves nothing behind."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import json
 import pytest
 
 from ag_uav.config import load_config
-from ag_uav.jobs import warm
+from ag_uav.engine import warm
+from ag_uav.jobs.run import WARM_HELPER
 
 
 @pytest.fixture
@@ -46,7 +48,7 @@ def test_the_ins_kernel_cache_check_reads_numba_s_index() -> None:
 
 def test_helper_flies_the_config_on_the_true_state_and_leaves_nothing(can_help) -> None:
     cfg = load_config(None, {"seed": 3})
-    w = warm.start(cfg)
+    w = warm.start(cfg, WARM_HELPER)
     assert w is not None
     assert w.proc.wait(timeout=600) == 0
     summary = json.loads((w.folder / "helper" / "summary.json").read_text())
@@ -58,7 +60,7 @@ def test_helper_flies_the_config_on_the_true_state_and_leaves_nothing(can_help) 
 
 
 def test_stop_ends_a_helper_still_running(can_help) -> None:
-    w = warm.start(load_config(None, {}))
+    w = warm.start(load_config(None, {}), WARM_HELPER)
     assert w is not None
     warm.stop(w)  # at once: the helper is still importing
     assert w.proc.poll() is not None and not w.folder.exists()
@@ -85,7 +87,7 @@ def test_a_bad_field_is_said_before_any_compile(can_help, monkeypatch, tmp_path)
     from ag_uav.jobs import run
 
     started: list[object] = []
-    monkeypatch.setattr(warm, "start", lambda cfg: started.append(cfg))
+    monkeypatch.setattr(warm, "start", lambda cfg, command: started.append(cfg))
     monkeypatch.setattr(warm, "compile_ins", lambda w=None: started.append("ins"))
     bow = tmp_path / "bow.geojson"
     bow.write_text(json.dumps({"type": "Polygon", "coordinates": [[[0, 0], [1, 1], [1, 0],

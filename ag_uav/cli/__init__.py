@@ -171,14 +171,14 @@ def _write_sorties(cfg, out: Path, kw: dict) -> None:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from ..jobs.bench import run_bench
+    from ..jobs.bench.suite import run_bench
 
     cfg = _load(args)
     out = run_bench(cfg, repeats=args.repeats, quick=args.quick)
     if args.json:
         print(json.dumps(out, indent=2))
     else:
-        from ..jobs.bench import print_bench
+        from ..jobs.bench.suite import print_bench
 
         print_bench(out)
     return 0

@@ -3,7 +3,7 @@ starts compiling (before the wait, once per process), the kernels counted on the
 bar as they compile, and how long the compile took, said at tick 0: tick 0's own time when it
 compiled (kept out of the loop's wall time) plus what compiled before it under
 :func:`compile_notice` (the INS, compiled first while a helper takes the rest:
-:mod:`ag_uav.jobs.warm`)."""
+:mod:`ag_uav.engine.warm`)."""
 
 from __future__ import annotations
 

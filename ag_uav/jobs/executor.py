@@ -1,7 +1,7 @@
 """One executor seam for batches and tuning: serial, a local process pool, or Dask distributed.
 
 Every parallel consumer (``ag-uav batch``, ``ag-uav tune``, ``ag-uav experiment table2``,
-:func:`ag_uav.jobs.bench_workers.bench_workers`) goes through :class:`Executor`:
+:func:`ag_uav.jobs.bench.workers.bench_workers`) goes through :class:`Executor`:
 
 - ``submit(fn, *args)`` → a :class:`concurrent.futures.Future`-like object with ``result()``;
 - ``map_unordered(fn, items)`` → yields ``(index, result)`` pairs in completion order; with

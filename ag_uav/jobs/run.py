@@ -16,6 +16,10 @@ from ..config import Config
 from ..engine.missions import RunResult, simulate
 from .provenance import provenance
 
+#: how :func:`ag_uav.engine.warm.start` runs the first run's helper process (after the
+#: interpreter; its folder appended): this module, flying with :func:`fly` (:func:`_warm_helper`)
+WARM_HELPER = ("-m", "ag_uav.jobs.run", "--warm-helper")
+
 
 def default_run_id(cfg: Config) -> str:
     field = re.sub(r"[^A-Za-z0-9_-]+", "_", Path(cfg.mission.field).stem)
@@ -104,9 +108,9 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
 
     ``helper``: on an empty kernel cache, compile the INS first, here (after the field is
     loaded: a bad field is refused at once), and the kernels the INS does not need in a helper
-    process on another core meanwhile (:mod:`ag_uav.jobs.warm`; a batch, whose workers keep
+    process on another core meanwhile (:mod:`ag_uav.engine.warm`; a batch, whose workers keep
     every core busy, says False). The helper dies with this process, and a helper's folder left
-    by a run that was killed is removed here (:func:`ag_uav.jobs.warm.sweep`)."""
+    by a run that was killed is removed here (:func:`ag_uav.engine.warm.sweep`)."""
     from .outdir import check_reuse, check_run_id, hold, unique_run_dir
 
     if run_id is not None:
@@ -120,7 +124,7 @@ def fly(cfg: Config, *, out_root: str | Path = "runs", run_id: str | None = None
 
 def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
               log_writer: str, helper: bool = True) -> tuple[RunResult, Path]:
-    from . import warm
+    from ..engine import warm
 
     w = None
     if helper:  # the folders of helpers whose runs were killed (SIGKILL) before removing them
@@ -129,7 +133,7 @@ def _fly_into(cfg: Config, run_dir: Path, progress: bool, feedback,
         from ..world.mission import build_field
 
         build_field(cfg)  # a bad field is said at once, not after the compile
-        w = warm.start(cfg)
+        w = warm.start(cfg, WARM_HELPER)
     try:
         if w is not None:  # the INS here while the helper compiles what comes before it
             _compile_ins_ahead(progress, w)
@@ -143,8 +147,8 @@ def _compile_ins_ahead(progress: bool, w: Any) -> None:
     kernels as they compile (``progress``)."""
     from tqdm import tqdm
 
+    from ..engine import warm
     from ..engine.compiling import compile_notice
-    from . import warm
 
     with tqdm(total=0, desc="compiling the INS", bar_format="{desc}{postfix}", leave=False,
               disable=not progress, file=sys.stderr) as bar, \
@@ -188,3 +192,23 @@ def _fly_logged(cfg: Config, run_dir: Path, progress: bool, feedback,
     if log_err is not None:
         raise RunOutputError(log_err, res, run_dir, True) from None
     return res, run_dir
+
+
+def _helper_flight(cfg: Config, folder: Path) -> None:
+    fly(cfg, out_root=folder, run_id="helper", progress=False, log_writer="inline")
+
+
+def _warm_helper(folder: str) -> None:
+    """The first run's helper process (:func:`ag_uav.engine.warm.helper.run_helper`), flying
+    into ``folder/helper`` with :func:`fly` (its log written inline: one core is the point)."""
+    from ..engine.warm.helper import run_helper
+
+    run_helper(folder, _helper_flight)
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3 or sys.argv[1] != "--warm-helper":
+        print("usage: python -m ag_uav.jobs.run --warm-helper FOLDER (the first run's helper "
+              "process, which a run starts itself)", file=sys.stderr)
+        sys.exit(2)
+    _warm_helper(sys.argv[2])

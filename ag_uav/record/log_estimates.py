@@ -1,6 +1,5 @@
-"""The estimator and geographic channels of a :class:`~ag_uav.record.runlog.RunLog` (a part of
-it): ``/estimator/<name>`` (one filter or a bank), and the origin that turns on the ``/geo/*``
-topics (:mod:`ag_uav.record.geo`)."""
+"""The estimator channels of a :class:`~ag_uav.record.runlog.RunLog` (one of its writers):
+``/estimator/<name>``, one filter at a time or a bank of filters at once."""
 
 from __future__ import annotations
 
@@ -9,86 +8,60 @@ from typing import Any
 
 import numpy as np
 
+from .channels import Channels
+from .log_ticks import TickWriter
 from .wire import (
     INF,
     NAN,
-    TICK_P,
     EstBank,
     EstChan,
-    FlatRows,
     FlatSchema,
     as_floats,
     fit,
-    ns,
     sanitize_name,
-    str_field,
 )
 
 
-class EstimateLog:
-    """The estimator and geographic part of :class:`~ag_uav.record.runlog.RunLog`."""
+class EstimateWriter:
+    """The ``estimator`` group of a run log, written through ``ch``; ``ticks``: the log's tick
+    writer (the true position an estimate's ``err`` is measured against)."""
 
-    def geo(self, origin: Sequence[float], *, dose_target_l_per_ha: float | None = None) -> None:
-        """The run's geodetic origin (lat °, lon °, WGS-84 height m of the local frame's
-        origin): turns on the geographic topics (:mod:`ag_uav.record.geo`; group ``geo``):
-        LocationFix of the true position, the estimate and the GNSS fixes, and GeoJSON of the
-        field, plan, sprayed area and dose (in bands of ``dose_target_l_per_ha``) that
-        :meth:`scene`, :meth:`sprayed` and :meth:`dose` log from now on.  Also the metadata
-        record ``geo``.  Call once, before :meth:`scene`."""
-        if self.closed or self._period["geo"] == INF or self._geo is not None:
-            return
-        from .geo import GeoFrame
+    def __init__(self, ch: Channels, ticks: TickWriter) -> None:
+        self._ch, self._ticks = ch, ticks
+        self._p_est = ch.period["estimator"] - 1e-9
+        self._est: dict[str, EstChan] = {}
+        self._banks: dict[tuple[str, ...], EstBank] = {}
 
-        self._geo = frame = GeoFrame(origin)
-        self._dose_target = float(dose_target_l_per_ha or 0.0)
-        M = self._M
-        ids = self._geo_ids
-        ids["true"] = self._chan("/geo/true", M.LocationFix)
-        if self._period["gps"] < INF:
-            ids["gnss"] = self._chan("/geo/gnss", M.LocationFix)
-        self._ops.append(("geofmt", frame.origin, ids["true"], -1, ids.get("gnss", -1)))
-        lat, lon, h = frame.origin
-        self._ops.append(("meta", "geo", {
-            "origin_lat_deg": repr(lat), "origin_lon_deg": repr(lon), "origin_alt_m": repr(h),
-            "frame": "local ENU metres (x east, y north, z up) about the origin, WGS-84"}))
-        self._next["geo"] = -INF
-        self._next_tick = self._tick_clock()
+    def names(self) -> list[str]:
+        """The estimators declared so far (one channel each)."""
+        return [*self._est, *(n for b in self._banks for n in b)]
 
-    def _geo_est(self) -> None:
-        """``/geo/est``: declared at the first tick row with an estimate (a run without one
-        has no such topic)."""
-        self._n_geo_est += 1
-        if "est" not in self._geo_ids:
-            ids = self._geo_ids
-            ids["est"] = self._chan("/geo/est", self._M.LocationFix)
-            self._ops.append(("geofmt", self._geo.origin, ids["true"], ids["est"],
-                              ids.get("gnss", -1)))
+    def want(self, name: str, t: float) -> bool:
+        """Would :meth:`estimator` log ``name`` at sim time ``t``? (no side effects)"""
+        ec = self._est.get(name)
+        if ec is not None:
+            return t >= ec.next_t
+        return not self._ch.closed and self._ch.on("estimator")
 
-    def _geo_json(self, key: str, t: float, text: str) -> None:
-        """A GeoJSON message on ``/geo/<key>`` (declared at its first), sent with the next
-        hand-over."""
-        lid = self._geo_ids.get(key)
-        if lid is None:
-            from .geo import GEO_TOPICS
+    def stop(self) -> None:
+        """Log nothing more (:class:`~ag_uav.record.channels.Source`)."""
+        for ec in self._est.values():
+            ec.next_t = INF
+        for bank in self._banks.values():
+            bank.next_t = INF
 
-            lid = self._geo_ids[key] = self._chan(GEO_TOPICS[key], self._M.GeoJson)
-        tn = ns(t)
-        self._pending.append((lid, str_field(1, text), tn))  # foxglove.GeoJSON.geojson
-        self._count(f"/geo/{key}")
+    def take(self, partial: bool) -> list[tuple[Any, ...]]:
+        """Nothing of its own: its rows are flat-schema blocks the hand-over takes."""
+        return []
 
-    def set_truth(self, p_true: Sequence[float]) -> None:
-        """The true position at the time of the next ``estimator`` calls (their ``err``): the
-        estimator bank calls it before logging a fix's update, so that ``err`` is not measured
-        against a pose up to one state period old (at 5 m/s, 50 ms is 0.25 m)."""
-        self._last_true = (float(p_true[0]), float(p_true[1]), float(p_true[2]))
-
-    def _truth(self) -> tuple[float, float, float]:
-        """The last true position given to :meth:`set_truth` or a tick row."""
-        lt = self._last_true
-        if lt is None:
-            r = self._last_row
-            lt = self._last_true = (float(r[TICK_P]), float(r[TICK_P + 1]), float(r[TICK_P + 2]))
-        return lt
+    def counts_into(self, out: dict[str, int]) -> None:
+        """Add the messages of its topics written so far to ``out`` (topic -> count)."""
+        for ec in self._est.values():
+            if ec.count:
+                out[ec.topic] = ec.count
+        for bank in self._banks.values():
+            if bank.count:
+                out.update(dict.fromkeys(bank.topics, bank.count))
 
     def estimator(
         self,
@@ -111,7 +84,7 @@ class EstimateLog:
         """
         ec = self._est.get(name)
         if ec is None:
-            if self.closed or self._period["estimator"] == INF:
+            if self._ch.closed or not self._ch.on("estimator"):
                 return
             xs = as_floats(x)
             ec = self._est[name] = self._make_est(name, len(xs), innovation, extra)
@@ -124,7 +97,7 @@ class EstimateLog:
             pl = x[:3].tolist() if xa else as_floats(x)[:3]
         else:
             pl = pos if len(pos) == 3 else as_floats(pos)
-        tx, ty, tz = self._truth()
+        tx, ty, tz = self._ticks.truth()
         if len(pl) == 3:
             px, py, pz = pl
         else:
@@ -158,7 +131,7 @@ class EstimateLog:
         key = tuple(names)
         bank = self._banks.get(key)
         if bank is None:
-            if self.closed or self._period["estimator"] == INF:
+            if self._ch.closed or not self._ch.on("estimator"):
                 return
             bank = self._banks[key] = self._make_bank(key, x.shape[1], p_diag.shape[1])
         if t < bank.next_t:  # inf once closed
@@ -171,8 +144,9 @@ class EstimateLog:
                             + [(f"pos.{a}", 0) for a in "xyz"]
                             + [(f"err.{a}", 0) for a in ("x", "y", "z", "horiz")])
         topics = [f"/estimator/{sanitize_name(nm)}" for nm in names]
-        lids = [self._chan(tp, "ag_uav.EstimatorState", schema.schema_data) for tp in topics]
-        return self._register_flat(EstBank(schema, lids, topics, n, m))
+        lids = [self._ch.declare(tp, "ag_uav.EstimatorState", schema.schema_data)
+                for tp in topics]
+        return self._ch.register_flat(EstBank(schema, lids, topics, n, m))
 
     def _make_est(self, name: str, n: int, innovation: Any, extra: Any) -> EstChan:
         m = len(as_floats(innovation)) if innovation is not None else 0
@@ -190,14 +164,5 @@ class EstimateLog:
             schema = FlatSchema("ag_uav.EstimatorState", [f for f in fields
                                                            if not f[0].startswith("extra.")])
         topic = f"/estimator/{sanitize_name(name)}"
-        lid = self._chan(topic, "ag_uav.EstimatorState", schema.schema_data)
-        return self._register_flat(EstChan(schema, lid, topic, n, m, keys))
-
-    def _register_flat(self, fr: FlatRows) -> Any:
-        """Register a flat-schema channel's row block with the writer (its encoding)."""
-        fr.fid = len(self._flat_rows)
-        bank = ((fr.k, fr.n, fr.m, fr.lids.astype(int).tolist()) if isinstance(fr, EstBank)
-                else None)
-        self._ops.append(("flat", fr.fid, fr.tmpl, fr.slots, fr.lid, fr.it, bank))
-        self._flat_rows.append(fr)
-        return fr
+        lid = self._ch.declare(topic, "ag_uav.EstimatorState", schema.schema_data)
+        return self._ch.register_flat(EstChan(schema, lid, topic, n, m, keys))

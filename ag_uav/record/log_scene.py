@@ -1,5 +1,6 @@
-"""The scene, dose-map and camera channels of a :class:`~ag_uav.record.runlog.RunLog` (a part of
-it): ``/field``, ``/sprayed``, ``/dose``, ``/camera/<name>``."""
+"""The scene, dose-map and camera channels of a :class:`~ag_uav.record.runlog.RunLog` (one of its
+writers): ``/field``, ``/sprayed``, ``/dose``, ``/camera/<name>`` (and the GeoJSON of the field,
+plan, sprayed area and dose through the geographic writer)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from .channels import Channels
+from .log_geo import GeoWriter
 from .wire import INF, enc_grid, enc_transform, ns, sanitize_name, str_field, ts_pb
 
 #: channel set: a map sums the whole fine dose grid, the light set's budget takes one in six
@@ -23,25 +26,51 @@ GEO_DOSE_PERIOD_S = {"full": 15.0, "light": 60.0}
 
 
 
-class SceneLog:
-    """The scene, dose-map and camera part of :class:`~ag_uav.record.runlog.RunLog`."""
+class SceneWriter:
+    """The ``scene`` and ``camera`` groups of a run log, written through ``ch``; ``geo``: the
+    log's geographic writer (the GeoJSON of what the scene draws).
+
+    :param preset: the channel set's name (``"full"``, ``"light"``; ``""`` for a list of
+        groups): the dose maps' periods (:data:`DOSE_PERIOD_S`, :data:`GEO_DOSE_PERIOD_S`).
+    """
+
+    def __init__(self, ch: Channels, geo: GeoWriter, preset: str) -> None:
+        self._ch, self._geo = ch, geo
+        self.tf_id = -1  #: the ``/tf`` channel for camera poses (set once it is declared)
+        self._dose_period = DOSE_PERIOD_S.get(preset, DOSE_PERIOD_S["full"])
+        self._geo_dose_period = GEO_DOSE_PERIOD_S.get(preset, GEO_DOSE_PERIOD_S["full"])
+        self._next_dose = -INF
+        self._next_geo_dose = -INF
+        self._ch_dose: Any = None
+        self._dose_bytes = 0  # bytes of dose maps logged (their period doubles per quota)
+        self._scene_ch: dict[str, int] = {}
+        #: camera name -> (image channel, calibration channel, topic)
+        self._cam: dict[str, tuple[int, int, str]] = {}
+        self._next_cam: dict[str, float] = {}  # per-camera clocks
+
+    def cameras(self) -> tuple[str, ...]:
+        """The cameras logged so far."""
+        return tuple(self._cam)
+
+    def _off(self) -> bool:
+        return self._ch.closed or not self._ch.on("scene")
 
     def _scene_entities(self, t: float, entities: list[Any], topic: str) -> None:
-        if self.closed or self._period["scene"] == INF:
+        if self._off():
             return
+        ch = self._ch
         lid = self._scene_ch.get(topic)
         if lid is None:
-            lid = self._scene_ch[topic] = self._chan(topic, self._M.SceneUpdate)
-        self._drain()
-        self._send([("log", lid, self._M.SceneUpdate(entities=entities).encode(), ns(t)),
-                    ("flush",)])
-        self._count(topic)
+            lid = self._scene_ch[topic] = ch.declare(topic, ch.M.SceneUpdate)
+        ch.drain()
+        ch.send([("log", lid, ch.M.SceneUpdate(entities=entities).encode(), ns(t)), ("flush",)])
+        ch.count(topic)
 
     def _triangles(self, polys: list[Any], z: float, rgba: tuple[float, ...]) -> list[Any]:
         """Fill shapely polygons with a TriangleListPrimitive (constrained Delaunay)."""
         import shapely
 
-        M = self._M
+        M = self._ch.M
         pts: list[Any] = []
         for poly in polys:
             if poly.is_empty:
@@ -59,7 +88,7 @@ class SceneLog:
 
     def _loops(self, rings: list[np.ndarray], z: float, rgba: tuple[float, ...],
                thickness: float = 3.0) -> list[Any]:
-        M = self._M
+        M = self._ch.M
         out = []
         for ring in rings:
             ring = np.asarray(ring, dtype=float)
@@ -87,11 +116,11 @@ class SceneLog:
         the others (transits) grey.  ``parts``: ``[(outer, holes), ...]`` of a multi-part field
         (replaces ``field_outer_xy`` / ``field_holes_xy``).  Call once at the start.
         """
-        if self.closed or self._period["scene"] == INF:
+        if self._off():
             return
         import shapely
 
-        M = self._M
+        M = self._ch.M
         if parts is None:
             parts = [(field_outer_xy, field_holes_xy or [])]
         outers = [np.asarray(o, dtype=float)[:, :2] for o, _ in parts]
@@ -99,7 +128,7 @@ class SceneLog:
         polys = [shapely.Polygon(o, [np.asarray(h, dtype=float)[:, :2] for h in hs])
                  for o, (_, hs) in zip(outers, parts, strict=True)]
         poly = shapely.union_all(polys)
-        ts = self._ts(ns(t))
+        ts = self._ch.ts(ns(t))
         field = M.SceneEntity(
             timestamp=ts, frame_id="world", id="field",
             triangles=self._triangles(polys, -0.02, (0.55, 0.45, 0.25, 0.6)),
@@ -122,20 +151,21 @@ class SceneLog:
                         for (a, b), c in zip(pts[:, :2], z, strict=True)],
                 color=M.Color(r=col[0], g=col[1], b=col[2], a=col[3])))
         plan = M.SceneEntity(timestamp=ts, frame_id="world", id="plan", lines=lines)
-        if self._geo is not None:
+        frame = self._geo.frame
+        if frame is not None:
             from .geo import field_geojson, plan_geojson
 
             rings = [(o, [np.asarray(h, float) for h in hs])
                      for o, (_, hs) in zip(outers, parts, strict=True)]
-            self._geo_json("field", t, field_geojson(self._geo, rings))
-            self._geo_json("plan", t, plan_geojson(self._geo, plan_segments))
+            self._geo.json("field", t, field_geojson(frame, rings))
+            self._geo.json("plan", t, plan_geojson(frame, plan_segments))
         self._scene_entities(t, [field, plan], "/field")
-        if self._geo is not None:
-            self._write_layout()  # with its Map panel, should the run be cut short
+        if frame is not None:
+            self._ch.on_layout()  # with its Map panel, should the run be cut short
 
     def sprayed(self, t: float, polygons_xy: list[Any]) -> None:
         """Sprayed area (shapely Polygon/MultiPolygon or Nx2 rings) -> ``/sprayed``."""
-        if self.closed or self._period["scene"] == INF:
+        if self._off():
             return
         import shapely
 
@@ -147,23 +177,22 @@ class SceneLog:
                 polys.append(p)
             else:
                 polys.append(shapely.Polygon(np.asarray(p, dtype=float)[:, :2]))
-        ent = self._M.SceneEntity(
-            timestamp=self._ts(ns(t)), frame_id="world", id="sprayed",
+        ent = self._ch.M.SceneEntity(
+            timestamp=self._ch.ts(ns(t)), frame_id="world", id="sprayed",
             triangles=self._triangles(polys, 0.0, (0.1, 0.7, 1.0, 0.45)),
             lines=self._loops([np.asarray(p.exterior.coords) for p in polys], 0.01,
                               (0.1, 0.7, 1.0, 1.0), 1.0),
         )
-        if self._geo is not None:
+        if self._geo.frame is not None:
             from .geo import sprayed_geojson
 
-            self._geo_json("sprayed", t, sprayed_geojson(self._geo, polys))
+            self._geo.json("sprayed", t, sprayed_geojson(self._geo.frame, polys))
         self._scene_entities(t, [ent], "/sprayed")
 
     # ---------------------------------------------------------------- dose map
     def want_dose(self, t: float) -> bool:
         """Would :meth:`dose` log a map at sim time ``t``? (no side effects)"""
-        return (not self.closed and self._period["scene"] < INF
-                and t >= getattr(self, "_next_dose", -INF))
+        return not self._off() and t >= self._next_dose
 
     def dose(self, t: float, x0: float, y0: float, cell: float, l_per_ha: Any, *,
              final: bool = False) -> None:
@@ -174,28 +203,23 @@ class SceneLog:
         :meth:`geo`, a logged map at least :data:`GEO_DOSE_PERIOD_S` after the last (and the
         final one) also goes to ``/geo/dose``: the map in bands of the target rate, made by the
         writer."""
-        if self.closed or self._period["scene"] == INF:
+        if self._off():
             return
-        if not final and t < getattr(self, "_next_dose", -INF):
+        if not final and t < self._next_dose:
             return
+        ch = self._ch
         if self._ch_dose is None:
-            self._ch_dose = self._chan("/dose", self._M.Grid)
+            self._ch_dose = ch.declare("/dose", ch.M.Grid)
         tn = ns(t)
         msg = enc_grid(ts_pb(tn), float(x0), float(y0), 0.02, float(cell), l_per_ha)
-        self._pending.append((self._ch_dose, msg, tn))
-        self._count("/dose")
+        ch.post(self._ch_dose, msg, tn)
+        ch.count("/dose")
         self._dose_bytes += len(msg)
         self._next_dose = t + self._dose_period * 2 ** (self._dose_bytes // DOSE_QUOTA_B) - 1e-9
-        if (self._geo is not None and self._dose_target > 0
+        if (self._geo.frame is not None and self._geo.dose_target > 0
                 and (final or t >= self._next_geo_dose)):  # the bands: in the writer
             self._next_geo_dose = t + self._geo_dose_period - 1e-9
-            lid = self._geo_ids.get("dose")
-            if lid is None:
-                lid = self._geo_ids["dose"] = self._chan("/geo/dose", self._M.GeoJson)
-            self._ops.append(("geodose", lid, tn, float(x0), float(y0), float(cell),
-                              self._dose_target,
-                              np.ascontiguousarray(l_per_ha, dtype=np.float64)))
-            self._count("/geo/dose")
+            self._geo.dose_bands(tn, x0, y0, cell, l_per_ha)
 
     # ---------------------------------------------------------------- camera
     def frame(
@@ -212,20 +236,21 @@ class SceneLog:
         always finds one).  ``pose`` = (position, quaternion wxyz) of the camera's optical frame
         (z forward, x right, y down; :meth:`ag_uav.record.render.Renderer.camera_pose`) ->
         ``/tf``."""
-        if self.closed or not self._due_cam(camera, t):
+        ch = self._ch
+        if ch.closed or not self._due_cam(camera, t):
             return
-        M = self._M
+        M = ch.M
         tn = ns(t)
-        ts = self._ts(tn)
+        ts = ch.ts(tn)
         frame_id = f"cam_{sanitize_name(camera)}"
-        ch = self._cam.get(camera)
-        if ch is None:
+        cam = self._cam.get(camera)
+        if cam is None:
             base = f"/camera/{sanitize_name(camera)}"
-            ch = self._cam[camera] = (self._chan(base, M.CompressedImage),
-                                      self._chan(base + "/calibration", M.CameraCalibration),
-                                      base)
-        img, cal, base = ch
-        self._drain()
+            cam = self._cam[camera] = (ch.declare(base, M.CompressedImage),
+                                       ch.declare(base + "/calibration", M.CameraCalibration),
+                                       base)
+        img, cal, base = cam
+        ch.drain()
         fy = 0.5 * height / math.tan(math.radians(fovy_deg) / 2.0)
         fx = fy
         cx, cy = 0.5 * width, 0.5 * height
@@ -237,25 +262,24 @@ class SceneLog:
                    K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
                    R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
                    P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]).encode(), tn)]
-        self._count(base)
-        self._count(base + "/calibration")
-        if pose is not None and self._tf_id >= 0:
-            ops.append(("log", self._tf_id, enc_transform(ts_pb(tn), str_field(3, frame_id),
-                                                          pose[0], pose[1]), tn))
-            self._count("/tf")
-        self._send(ops)
-        self._maybe_flush(t)
+        ch.count(base)
+        ch.count(base + "/calibration")
+        if pose is not None and self.tf_id >= 0:
+            ops.append(("log", self.tf_id, enc_transform(ts_pb(tn), str_field(3, frame_id),
+                                                         pose[0], pose[1]), tn))
+            ch.count("/tf")
+        ch.send(ops)
+        ch.maybe_flush(t)
 
     def _due_cam(self, camera: str, t: float) -> bool:
         """Camera rate is per camera; ``want_frame`` checks the group clock."""
-        p = self._period["camera"]
+        p = self._ch.period["camera"]
         if p == INF:
             return False
-        key = "camera:" + camera
-        if t < self._next_est.get(key, -INF):
+        clocks = self._next_cam
+        if t < clocks.get(camera, -INF):
             return False
-        self._next_est[key] = t + p - 1e-9
+        clocks[camera] = t + p - 1e-9
         # the group clock is the earliest of the cameras' clocks
-        self._next["camera"] = min(v for k, v in self._next_est.items()
-                                   if k.startswith("camera:"))
+        self._ch.next["camera"] = min(clocks.values())
         return True

@@ -94,7 +94,7 @@ import json
 import os
 import platform
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -103,28 +103,19 @@ import numpy as np
 
 from . import crash
 from .atomic import silent_write_failure
-from .log_estimates import EstimateLog
-from .log_scene import DOSE_PERIOD_S, GEO_DOSE_PERIOD_S, SceneLog
-from .log_ticks import Tick, TickLog
+from .channels import Channels
+from .log_estimates import EstimateWriter
+from .log_geo import GeoWriter
+from .log_scene import SceneWriter
+from .log_ticks import Tick, TickWriter
 from .sink import WriterLost
 from .wire import (
     INF,
-    NAN,
-    POSE_MID,
-    POSE_SLOTS,
-    POSE_TMPL,
-    TICK_HEAD,
-    WORLD2,
-    EstBank,
-    EstChan,
-    FlatRows,
     FlatSchema,
-    Rows,
     enc_pose_in_frame,
     enc_transform,
     ns,
     sanitize_name,
-    str_field,
     warm_encoders,
 )
 
@@ -153,7 +144,6 @@ PRESETS: dict[str, dict[str, float | None]] = {
     "none": {g: 0.0 for g in GROUPS},
 }
 
-_perf_counter = time.perf_counter
 
 
 def _versions() -> dict[str, str]:
@@ -218,8 +208,15 @@ def group_rates(channels: str | Iterable[str],
     return base
 
 
-class RunLog(TickLog, EstimateLog, SceneLog):
+class RunLog:
     """MCAP run log (context manager).  See the module docstring for channels and usage.
+
+    It owns four writers, which reach the file only through its :class:`Channels`
+    (:attr:`channels`): the tick rows, spray state and GNSS fixes
+    (:class:`~ag_uav.record.log_ticks.TickWriter`), the estimators
+    (:class:`~ag_uav.record.log_estimates.EstimateWriter`), the scene, dose maps and cameras
+    (:class:`~ag_uav.record.log_scene.SceneWriter`) and the geographic topics
+    (:class:`~ag_uav.record.log_geo.GeoWriter`); its methods are theirs.
 
     :param path: the ``.mcap`` file to write (parent folders are created); a Foxglove layout
         ``layout.json`` is written beside it.
@@ -235,6 +232,9 @@ class RunLog(TickLog, EstimateLog, SceneLog):
     :param io: flush periods, chunk size and compression (:class:`LogIO`).
     """
 
+    SPRAY_FIELDS = TickWriter.SPRAY_FIELDS
+    GPS_ERROR_FIELDS = TickWriter.GPS_ERROR_FIELDS
+
     def __init__(
         self,
         path: str | os.PathLike[str],
@@ -249,105 +249,63 @@ class RunLog(TickLog, EstimateLog, SceneLog):
     ):
         self.path = Path(path)
         self._write_failed = False  # the writer failed once (disk full): close() quietly
-        #: the writer process died mid-flight (:class:`~ag_uav.record.sink.WriterLost`): the
-        #: log ends there, the flight goes on unlogged
-        self.lost: OSError | None = None
-        self.lost_at = 0.0  #: the sim time of the last hand-over before the loss
         self.rates = base = group_rates(channels, rates)
-        preset = channels if isinstance(channels, str) else ""
-        self._dose_period = DOSE_PERIOD_S.get(preset, DOSE_PERIOD_S["full"])
-        self._geo_dose_period = GEO_DOSE_PERIOD_S.get(preset, GEO_DOSE_PERIOD_S["full"])
-        self._next_geo_dose = -INF
         # period per group: 0.0 = every call, inf = off
-        self._period = {
-            g: (0.0 if r is None else (INF if r <= 0 else 1.0 / float(r))) for g, r in base.items()
-        }
-        self.enabled = any(p < INF for p in self._period.values())
-        self.closed = not self.enabled
-        self._init_state()
-        if not self.enabled:
+        period = {g: (0.0 if r is None else (INF if r <= 0 else 1.0 / float(r)))
+                  for g, r in base.items()}
+        enabled = any(p < INF for p in period.values())
+        #: what the writers share: the groups' clocks, the channels, the hand-over
+        self.channels = ch = Channels(period, enabled)
+        self._geo = GeoWriter(ch)
+        self._ticks = TickWriter(ch, self._geo)
+        self._est = EstimateWriter(ch, self._ticks)
+        self._scene = SceneWriter(ch, self._geo,
+                                  channels if isinstance(channels, str) else "")
+        ch.sources += [self._ticks, self._est]
+        self._layout = _Layout(self.path.parent / "layout.json", layout and enabled,
+                               ch.on("camera"), self._ticks, self._est, self._scene, self._geo)
+        ch.on_layout = self._layout.write
+        if not enabled:
             return
         self._open_writer(writer, io)
         self._declare_run(channels, metadata, config_toml)
-        self._layout = layout
-        self._write_layout()
+        self._layout.write()
         crash.track(self)
 
-    def _init_state(self) -> None:
-        """The clocks, counters and channel tables of a log with nothing written yet."""
-        self._next_tick = INF
-        self._t_last = 0.0
-        # next sim time each group is due (inf = off or closed): the hot paths test only this
-        self._next = {g: (-INF if self._period[g] < INF and self.enabled else INF)
-                      for g in GROUPS}
-        self._counts: dict[str, int] = {}  # rare topics; the frequent ones count in _n_*
-        self._n_tf = self._n_pose = self._n_pose_est = self._n_state = self._n_gps = 0
-        self._n_geo = self._n_geo_est = self._n_geo_gnss = 0
-        self._geo: Any = None  # the GeoFrame once geo() has given the origin
-        self._geo_ids: dict[str, int] = {}  # geo topic key -> channel index
-        self._fix_codes: dict[str, int] = {}  # GNSS fix type -> its code in the gps rows
-        self._est: dict[str, EstChan] = {}
-        self._banks: dict[tuple[str, ...], EstBank] = {}
-        # encoded messages (channel index, bytes, log_time) not yet handed to the writer (the
-        # dose maps): they go with the rows at the next flush
-        self._pending: list[tuple[int, bytes, int]] = []
-        self._ops: list[tuple[Any, ...]] = []  # declarations for the writer's next hand-over
-        self._n_chan = 0
-        self._flat_rows: list[FlatRows] = []  # estimator and spray channels, encoded at flush
-        self._ch_spray: FlatRows | None = None
-        self._ch_gps_err: FlatRows | None = None
-        self._ch_dose: Any = None
-        self._dose_bytes = 0  # bytes of dose maps logged (their period doubles per quota)
-        self._next_spray = -INF if self._period["state"] < INF and self.enabled else INF
+    @property
+    def enabled(self) -> bool:
+        """Whether anything is logged at all."""
+        return self.channels.enabled
+
+    @property
+    def closed(self) -> bool:
+        """Nothing more is logged (closed, or the writer was lost)."""
+        return self.channels.closed
+
+    @property
+    def lost(self) -> OSError | None:
+        """The writer process died mid-flight (:class:`~ag_uav.record.sink.WriterLost`): the
+        log ends there, the flight goes on unlogged."""
+        return self.channels.lost
+
+    @property
+    def lost_at(self) -> float:
+        """The sim time of the last hand-over before the loss."""
+        return self.channels.lost_at
 
     def _open_writer(self, writer: str, io: LogIO) -> None:
         """Start the writer, declare the pose channels and set the groups' clocks."""
-        import foxglove
-
         from .sink import open_sink
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
         warm_encoders()  # before a writer process is forked: it inherits them
-        self._sink = open_sink(str(self.path), io.compression, io.chunk_size, writer)
+        sink = open_sink(str(self.path), io.compression, io.chunk_size, writer)
         flush_sim_s = io.flush_sim_s
         if flush_sim_s is None:
-            flush_sim_s = 0.3 if self._sink.process else 0.9
-        en = {g: self._period[g] < INF for g in GROUPS}
-        M = foxglove.messages
-        self._M = M
-        pose = M.PoseInFrame
-        self._tf_id = self._chan("/tf", M.FrameTransforms) if en["tf"] else -1
-        if en["pose"]:
-            self._pose_ids = [self._chan(tp, pose) for tp in
-                              ("/drone/pose", "/drone/pose_est", "/drone/pose_ref")]
-        self._gps_id = self._chan("/gps", pose) if en["gps"] else -1
-        self._ops.append(("posefmt", POSE_TMPL, POSE_SLOTS,
-                          np.frombuffer(POSE_MID, dtype=np.uint8).copy(),
-                          np.frombuffer(WORLD2 + str_field(3, "base_link"),
-                                        dtype=np.uint8).copy()))
-        # (t, x, y, z, var e, n, u, fix type code, t_meas) of the fixes since the last flush
-        self._gps_rows = Rows(9, cap=16)
-        self._state_schema: FlatSchema | None = None
-        self._ctrl_keys: tuple[str, ...] = ()
-        self._n_motors = 0
-        self._rows = Rows(TICK_HEAD)  # the tick rows to encode (re-made by the state schema)
-        self._last_row: np.ndarray | None = None
-        self._cam: dict[str, Any] = {}
-        self._scene_ch: dict[str, int] = {}
-        self._next_est: dict[str, float] = {}  # per-camera clocks
-        pe = self._period
-        self._p_tf, self._p_pose, self._p_state = (pe["tf"] - 1e-9, pe["pose"] - 1e-9,
-                                                   pe["state"] - 1e-9)
-        self._p_gps, self._p_est = pe["gps"] - 1e-9, pe["estimator"] - 1e-9
-        self._p_geo = pe["geo"] - 1e-9
-        self._next["geo"] = INF  # on once geo() gives the origin
-        self._tick_groups = [g for g in ("tf", "pose", "state") if en[g]]
-        self._next_tick = -INF if self._tick_groups else INF
-        self._last_true = (NAN, NAN, NAN)
-        self._flush_wall_s = float(io.flush_wall_s)
-        self._flush_sim_s = float(flush_sim_s)
-        self._last_flush_wall = time.perf_counter()
-        self._last_flush_sim = -INF
+            flush_sim_s = 0.3 if sink.process else 0.9
+        self.channels.open(sink, io.flush_wall_s, flush_sim_s)
+        self._ticks.open()
+        self._scene.tf_id = self._ticks.tf_id
 
     def _declare_run(self, channels: str | Iterable[str], metadata: dict[str, Any] | None,
                      config_toml: str) -> None:
@@ -356,12 +314,13 @@ class RunLog(TickLog, EstimateLog, SceneLog):
         md.setdefault("channels", channels if isinstance(channels, str) else ",".join(channels))
         md.setdefault("rates_hz", json.dumps(self.rates))
         md.setdefault("created_utc", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
-        self._ops += [("meta", "run", md), ("meta", "versions", _versions())]
+        ops = self.channels.ops
+        ops += [("meta", "run", md), ("meta", "versions", _versions())]
         if config_toml:
-            self._ops.append(("attach", {"log_time": 0, "create_time": time.time_ns(),
-                                         "name": "config.toml", "media_type": "application/toml",
-                                         "data": config_toml.encode("utf-8")}))
-        self._send([])
+            ops.append(("attach", {"log_time": 0, "create_time": time.time_ns(),
+                                   "name": "config.toml", "media_type": "application/toml",
+                                   "data": config_toml.encode("utf-8")}))
+        self.channels.send([])
 
     # ---------------------------------------------------------------- context manager
     def __enter__(self) -> RunLog:
@@ -376,228 +335,191 @@ class RunLog(TickLog, EstimateLog, SceneLog):
         except Exception:  # noqa: BLE001
             pass
 
-    # ---------------------------------------------------------------- helpers
-    def _count(self, topic: str) -> None:
-        self._counts[topic] = self._counts.get(topic, 0) + 1
-
+    # ---------------------------------------------------------------- what is due
     @property
     def counts(self) -> dict[str, int]:
         """Messages written so far, per topic."""
-        out = dict(self._counts)
-        n_pose = self._n_pose  # the tick rows count when they are handed out
-        for topic, n in (("/tf", self._n_tf), ("/drone/pose", n_pose),
-                         ("/drone/pose_ref", n_pose), ("/drone/pose_est", self._n_pose_est),
-                         ("/drone/state", self._n_state), ("/gps", self._n_gps),
-                         ("/geo/true", self._n_geo), ("/geo/est", self._n_geo_est),
-                         ("/geo/gnss", self._n_geo_gnss)):
-            if n:
-                out[topic] = out.get(topic, 0) + n
-        for ec in self._est.values():
-            if ec.count:
-                out[ec.topic] = ec.count
-        for bank in self._banks.values():
-            if bank.count:
-                out.update(dict.fromkeys(bank.topics, bank.count))
-        if self._ch_spray is not None and self._ch_spray.count:
-            out["/drone/spray"] = self._ch_spray.count
-        if self._ch_gps_err is not None and self._ch_gps_err.count:
-            out["/gps/error"] = self._ch_gps_err.count
+        out = dict(self.channels.counts)
+        self._ticks.counts_into(out)
+        self._est.counts_into(out)
         return out
 
     @property
     def writer_cpu_s(self) -> float:
         """CPU seconds of the writer process once the log is closed (0 with the inline writer,
         whose work is this process's own)."""
-        sink = getattr(self, "_sink", None)
+        sink = self.channels.sink
         return sink.cpu_s if sink is not None else 0.0
-
-    def _send(self, ops: list[tuple[Any, ...]]) -> None:
-        """Hand the declarations made since the last hand-over, then ``ops``, to the writer."""
-        if self._ops:
-            ops = self._ops + ops
-            self._ops = []
-        try:
-            self._sink.send(ops)
-        except WriterLost as e:  # the flight goes on unlogged; its summary names the loss
-            self._stop_writing(e)
-
-    def _stop_writing(self, err: OSError) -> None:
-        """The writer is gone: record ``err`` in :attr:`lost`, log nothing more (every group's
-        clock goes to infinity), reap the writer."""
-        self.lost, self.lost_at = err, self._t_last
-        self._stop_clocks()
-        crash.untrack(self)
-        try:
-            self._sink.close()
-        except Exception:  # noqa: BLE001 - reaping the dead writer is best effort
-            pass
-
-    def _stop_clocks(self) -> None:
-        self.closed = True
-        self._next_tick = INF
-        for g in self._next:
-            self._next[g] = INF
-        for ec in self._est.values():
-            ec.next_t = INF
-        for bank in self._banks.values():
-            bank.next_t = INF
-        self._next_spray = INF
-
-    def _drain(self, partial: bool = False, flush: bool = False) -> None:
-        """Hand the rows and messages waiting since the last hand-over to the writer (it
-        encodes them and writes them merged by log time; ``flush``: then finishes the chunk and
-        writes it to the OS).  ``partial``: a row still being filled (a signal arrived
-        mid-tick) is dropped, not written half-done."""
-        rows = self._rows
-        if rows.open and not partial:
-            rows.commit()
-        elif rows.open:  # dropped: uncounted
-            m = int(rows.a[rows.n, 1])
-            self._n_tf -= m & 1
-            self._n_pose -= (m & 2) >> 1
-            self._n_pose_est -= (m & 10) == 10
-            self._n_state -= (m & 4) >> 2
-            self._n_geo -= (m & 16) >> 4
-            self._n_geo_est -= (m & 24) == 24
-        rows.open = False
-        ops: list[tuple[Any, ...]] = []
-        if self._pending:
-            ops.append(("msgs", self._pending))
-            self._pending = []  # swapped first: a signal handler's close() sends only the rest
-        for fr in self._flat_rows:
-            r = fr.take()
-            if r is not None:
-                ops.append(("block", fr.fid, r))
-        if self._gps_rows.n:
-            ops.append(("gps", self._gps_id, self._gps_rows.take()))
-        if rows.n:
-            ops.append(("ticks", rows.take()))
-        ops.append(("emit",))
-        if flush:
-            ops.append(("flush",))
-        self._send(ops)
-
-    def _maybe_flush(self, t: float) -> None:
-        now = _perf_counter()
-        if now - self._last_flush_wall >= self._flush_wall_s or (
-            t - self._last_flush_sim >= self._flush_sim_s
-        ):
-            self._drain(flush=True)
-            self._last_flush_wall = now
-            self._last_flush_sim = t
 
     def flush(self) -> None:
         """Finish the current chunk and hand everything to the OS now (with the writer
         process: hand it to the writer, which does so)."""
-        if not self.closed:
-            self._drain(flush=True)
-            self._last_flush_wall = time.perf_counter()
+        self.channels.flush()
 
     def want(self, group: str, t: float) -> bool:
         """Would a message of ``group`` at sim time ``t`` be logged? (no side effects)
 
         For ``"estimator"`` this is the group (any estimator); :meth:`want_estimator` answers
         for one estimator."""
-        return not self.closed and self._period[group] < INF and t >= self._next[group]
+        ch = self.channels
+        return not ch.closed and ch.on(group) and t >= ch.next[group]
 
     def want_estimator(self, name: str, t: float) -> bool:
         """Would :meth:`estimator` log ``name`` at sim time ``t``? (no side effects)  Lets a
         caller skip building the arguments (e.g. a covariance diagonal) when it would not."""
-        ec = self._est.get(name)
-        if ec is not None:
-            return t >= ec.next_t
-        return not self.closed and self._period["estimator"] < INF
+        return self._est.want(name, t)
 
     def due(self, t: float) -> bool:
         """True when :meth:`tick` at sim time ``t`` would log something (no side effects): the
         engine builds a tick's arguments only then."""
-        return t >= self._next_tick
+        return self._ticks.due(t)
 
     def next_due(self, frames: bool = False) -> float:
         """The earliest sim time at which :meth:`tick` (or, with ``frames``, a camera frame)
         would log something (``inf`` when nothing will): the engine calls the log only then."""
-        nxt = self._next_tick
-        if frames and not self.closed and self._period["camera"] < INF:
-            nxt = min(nxt, self._next["camera"])
+        nxt = self._ticks.next_tick
+        ch = self.channels
+        if frames and not ch.closed and ch.on("camera"):
+            nxt = min(nxt, ch.next["camera"])
         return nxt
 
     def period(self, group: str) -> float:
         """Sim seconds between two messages of ``group`` (``inf``: the group is not logged)."""
-        return self._period[group]
+        return self.channels.period[group]
 
     def want_frame(self, t: float) -> bool:
         """True when a camera frame at sim time ``t`` would be logged: render only then."""
         return self.want("camera", t)
 
-    def _chan(self, topic: str, schema: Any, data: bytes | None = None) -> int:
-        """A new channel on ``topic`` -> its index, which the writer's operations name.
-        ``schema``: a foxglove message class (its well-known schema), or the schema's name
-        with ``data`` (a protobuf FileDescriptorSet)."""
-        if data is None:
-            sc = schema.get_schema()
-            name, enc, data = sc.name, sc.encoding, bytes(sc.data)
-        else:
-            name, enc = schema, "protobuf"
-        self._ops.append(("chan", topic, name, enc, data))
-        self._n_chan += 1
-        return self._n_chan - 1
+    # ---------------------------------------------------------------- the writers' methods
+    def tick(self, t: float, v: Tick) -> None:
+        """:meth:`TickWriter.tick <ag_uav.record.log_ticks.TickWriter.tick>`."""
+        self._ticks.tick(t, v)
 
-    def _ts(self, t_ns: int) -> Any:
-        return self._M.Timestamp(sec=t_ns // 1_000_000_000, nsec=t_ns % 1_000_000_000)
+    def bind_ticks(self, n_motors: int, ctrl_keys: Sequence[str], ctrl_src: Sequence[int],
+                   extra: int) -> None:
+        """:meth:`TickWriter.bind_ticks <ag_uav.record.log_ticks.TickWriter.bind_ticks>`."""
+        self._ticks.bind_ticks(n_motors, ctrl_keys, ctrl_src, extra)
+
+    def tick_slot(self, t: float, est: bool = False) -> np.ndarray | None:
+        """:meth:`TickWriter.tick_slot <ag_uav.record.log_ticks.TickWriter.tick_slot>`."""
+        return self._ticks.tick_slot(t, est)
+
+    def spray_state(self, t: float, *, tank_l: float, mass_kg: float, flow_lps: float,
+                    nozzles: bool, power_w: float, energy_wh: float, soc: float, sortie: int,
+                    ground: bool) -> None:
+        """:meth:`TickWriter.spray_state <ag_uav.record.log_ticks.TickWriter.spray_state>`."""
+        self._ticks.spray_state(t, tank_l=tank_l, mass_kg=mass_kg, flow_lps=flow_lps,
+                                nozzles=nozzles, power_w=power_w, energy_wh=energy_wh, soc=soc,
+                                sortie=sortie, ground=ground)
+
+    def spray_row(self, t: float, values: Sequence[float]) -> None:
+        """:meth:`TickWriter.spray_row <ag_uav.record.log_ticks.TickWriter.spray_row>`."""
+        self._ticks.spray_row(t, values)
+
+    def spray_slot(self, t: float) -> np.ndarray | None:
+        """:meth:`TickWriter.spray_slot <ag_uav.record.log_ticks.TickWriter.spray_slot>`."""
+        return self._ticks.spray_slot(t)
+
+    def spray_commit(self) -> None:
+        """:meth:`TickWriter.spray_commit <ag_uav.record.log_ticks.TickWriter.spray_commit>`."""
+        self._ticks.spray_commit()
+
+    def spray_due(self, t: float) -> bool:
+        """:meth:`TickWriter.spray_due <ag_uav.record.log_ticks.TickWriter.spray_due>`."""
+        return self._ticks.spray_due(t)
+
+    def gps(self, t: float, fix_xyz: Sequence[float], var: Sequence[float] | None = None,
+            fix_type: str | None = None, *, t_meas: float | None = None,
+            truth: Sequence[float] | None = None) -> None:
+        """:meth:`TickWriter.gps <ag_uav.record.log_ticks.TickWriter.gps>`."""
+        self._ticks.gps(t, fix_xyz, var, fix_type, t_meas=t_meas, truth=truth)
+
+    def set_truth(self, p_true: Sequence[float]) -> None:
+        """The true position at the time of the next ``estimator`` calls (their ``err``): the
+        estimator bank calls it before logging a fix's update, so that ``err`` is not measured
+        against a pose up to one state period old (at 5 m/s, 50 ms is 0.25 m)."""
+        self._ticks.set_truth(p_true)
+
+    def estimator(self, t: float, name: str, x: Sequence[float], p_diag: Sequence[float],
+                  innovation: Sequence[float] | None = None,
+                  extra: dict[str, float] | None = None, *,
+                  pos: Sequence[float] | None = None) -> None:
+        """:meth:`EstimateWriter.estimator
+        <ag_uav.record.log_estimates.EstimateWriter.estimator>`."""
+        self._est.estimator(t, name, x, p_diag, innovation, extra, pos=pos)
+
+    def estimator_bank(self, t: float, names: Sequence[str], x: np.ndarray,
+                       p_diag: np.ndarray, p_true: Sequence[float]) -> None:
+        """:meth:`EstimateWriter.estimator_bank
+        <ag_uav.record.log_estimates.EstimateWriter.estimator_bank>`."""
+        self._est.estimator_bank(t, names, x, p_diag, p_true)
+
+    def geo(self, origin: Sequence[float], *, dose_target_l_per_ha: float | None = None) -> None:
+        """The run's geodetic origin (lat °, lon °, WGS-84 height m of the local frame's
+        origin): turns on the geographic topics (:mod:`ag_uav.record.geo`; group ``geo``):
+        LocationFix of the true position, the estimate and the GNSS fixes, and GeoJSON of the
+        field, plan, sprayed area and dose (in bands of ``dose_target_l_per_ha``) that
+        :meth:`scene`, :meth:`sprayed` and :meth:`dose` log from now on.  Also the metadata
+        record ``geo``.  Call once, before :meth:`scene`."""
+        if self._geo.start(origin, dose_target_l_per_ha):
+            self._ticks.retime()
+
+    def scene(self, t: float, field_outer_xy: Any, field_holes_xy: list[Any],
+              plan_segments: list[tuple[str, Any, bool]], swath: float, altitude: float,
+              parts: list[tuple[Any, list[Any]]] | None = None) -> None:
+        """:meth:`SceneWriter.scene <ag_uav.record.log_scene.SceneWriter.scene>`."""
+        self._scene.scene(t, field_outer_xy, field_holes_xy, plan_segments, swath, altitude,
+                          parts)
+
+    def sprayed(self, t: float, polygons_xy: list[Any]) -> None:
+        """:meth:`SceneWriter.sprayed <ag_uav.record.log_scene.SceneWriter.sprayed>`."""
+        self._scene.sprayed(t, polygons_xy)
+
+    def want_dose(self, t: float) -> bool:
+        """Would :meth:`dose` log a map at sim time ``t``? (no side effects)"""
+        return self._scene.want_dose(t)
+
+    def dose(self, t: float, x0: float, y0: float, cell: float, l_per_ha: Any, *,
+             final: bool = False) -> None:
+        """:meth:`SceneWriter.dose <ag_uav.record.log_scene.SceneWriter.dose>`."""
+        self._scene.dose(t, x0, y0, cell, l_per_ha, final=final)
+
+    def frame(self, t: float, camera: str, jpeg: bytes, width: int, height: int,
+              fovy_deg: float, pose: tuple[Sequence[float], Sequence[float]] | None = None
+              ) -> None:
+        """:meth:`SceneWriter.frame <ag_uav.record.log_scene.SceneWriter.frame>`."""
+        self._scene.frame(t, camera, jpeg, width, height, fovy_deg, pose)
 
     # ---------------------------------------------------------------- end
     def summary(self, summary: dict[str, Any]) -> None:
         """Final metrics -> metadata record ``summary`` and attachment ``summary.json``."""
-        if self.closed:
+        ch = self.channels
+        if ch.closed:
             return
-        self._drain()
-        self._send([("meta", "summary", {k: _meta_str(v) for k, v in summary.items()}),
-                    ("attach", {"log_time": ns(self._t_last), "create_time": time.time_ns(),
-                                "name": "summary.json", "media_type": "application/json",
-                                "data": json.dumps(summary, default=str, indent=1).encode()})])
-
-    def _write_layout(self, final: bool = False) -> None:
-        """``layout.json`` beside the log, for the channels seen so far (before any frame: the
-        configured cameras, so that a killed run has a layout; at the end: only the cameras
-        that were logged, so a run whose renders failed gets no empty image panels)."""
-        if not self._layout:
-            return
-        try:
-            from .layout import write_foxglove_layout
-
-            cams = tuple(self._cam)
-            if not cams and not final and self._period["camera"] < INF:
-                cams = ("chase", "down")
-            write_foxglove_layout(self.path.parent / "layout.json", cameras=cams,
-                                  estimators=tuple(sanitize_name(n) for n in
-                                                   [*self._est, *(n for b in self._banks
-                                                                  for n in b)]),
-                                  ctrl_keys=self._ctrl_keys, n_motors=self._n_motors or 4,
-                                  spray=self._ch_spray is not None,
-                                  geo=self._geo_topics())
-        except Exception:  # noqa: BLE001 - a missing layout never stops a run
-            pass
-
-    def _geo_topics(self) -> tuple[str, ...]:
-        """The geographic topics declared so far (what the layout's Map panel names)."""
-        from .geo import GEO_TOPICS
-
-        return tuple(GEO_TOPICS[k] for k in GEO_TOPICS if k in self._geo_ids)
+        ch.drain()
+        ch.send([("meta", "summary", {k: _meta_str(v) for k, v in summary.items()}),
+                 ("attach", {"log_time": ns(ch.t_last), "create_time": time.time_ns(),
+                             "name": "summary.json", "media_type": "application/json",
+                             "data": json.dumps(summary, default=str, indent=1).encode()})])
 
     def close(self, partial: bool = False) -> None:
         """Finish the file (summary, indexes, footer).  Idempotent; safe in signal handlers
         (which pass ``partial``: a tick row still being filled is dropped)."""
-        if self.closed:
+        ch = self.channels
+        if ch.closed:
+            if ch.lost is not None:
+                crash.untrack(self)
             return
-        self._stop_clocks()
+        ch.stop_clocks()
         try:
             try:
-                self._drain(partial)
+                ch.drain(partial)
             finally:
-                if self.lost is None:
-                    self._sink.close()
+                if ch.lost is None:
+                    ch.sink.close()
         except WriterLost as e:
-            self.lost, self.lost_at = e, self._t_last
+            ch.lost, ch.lost_at = e, ch.t_last
             raise
         except RuntimeError as e:  # the SDK's writer errors: an OSError naming the file
             err = self.write_error(e)
@@ -607,7 +529,7 @@ class RunLog(TickLog, EstimateLog, SceneLog):
                 raise err from None
         finally:
             crash.untrack(self)
-        self._write_layout(final=True)
+        self._layout.write(final=True)
 
     def write_error(self, exc: BaseException) -> OSError | None:
         """``exc`` as an :class:`OSError` naming the log if it is the MCAP writer failing to
@@ -622,3 +544,32 @@ class RunLog(TickLog, EstimateLog, SceneLog):
         self._write_failed = True
         return silent_write_failure(self.path, "the run log stops at its last complete chunk; "
                                                "`ag-uav recover` indexes it")
+
+
+class _Layout:
+    """``layout.json`` beside the log, for the channels seen so far (:meth:`write`)."""
+
+    def __init__(self, path: Path, on: bool, cameras_on: bool, ticks: TickWriter,
+                 est: EstimateWriter, scene: SceneWriter, geo: GeoWriter) -> None:
+        self.path, self.on, self.cameras_on = path, on, cameras_on
+        self.ticks, self.est, self.scene, self.geo = ticks, est, scene, geo
+
+    def write(self, final: bool = False) -> None:
+        """Before any frame: with the configured cameras, so that a killed run has a layout; at
+        the end (``final``): only the cameras that were logged, so a run whose renders failed
+        gets no empty image panels."""
+        if not self.on:
+            return
+        try:
+            from .layout import write_foxglove_layout
+
+            cams = self.scene.cameras()
+            if not cams and not final and self.cameras_on:
+                cams = ("chase", "down")
+            write_foxglove_layout(self.path, cameras=cams,
+                                  estimators=tuple(sanitize_name(n) for n in self.est.names()),
+                                  ctrl_keys=self.ticks.ctrl_keys,
+                                  n_motors=self.ticks.n_motors or 4,
+                                  spray=self.ticks.has_spray, geo=self.geo.topics())
+        except Exception:  # noqa: BLE001 - a missing layout never stops a run
+            pass

@@ -19,9 +19,9 @@ from typing import Any
 
 import mujoco
 
-from ..config import Config
-from ..vehicle.mjcf import G, build_vehicle
-from .bench_physics import (
+from ...config import Config
+from ...vehicle.mjcf import G, build_vehicle
+from .physics import (
     batched_capture,
     batched_rate,
     batched_summaries,
@@ -52,7 +52,7 @@ def machine_facts() -> dict[str, Any]:
     import llvmlite.binding as llvm
     import numba
 
-    from .executor import default_workers
+    from ..executor import default_workers
 
     return {"cpu": _cpu_model(), "llvm_cpu": llvm.get_host_cpu_name(), "cores": default_workers(),
             "python": platform.python_version(), "numba": numba.__version__,
@@ -108,7 +108,7 @@ def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float
 
 
 def closed_loop(cfg: Config) -> tuple[float, float, dict]:
-    from ..engine.missions import simulate
+    from ...engine.missions import simulate
 
     c = copy.deepcopy(cfg)
     c.log.enabled = False
@@ -177,7 +177,7 @@ ESTIMATOR_LOG_OVERRIDES: dict[str, Any] = {
 
 def with_overrides(cfg: Config, overrides: dict[str, Any]) -> Config:
     """``cfg`` with dotted-key ``overrides`` applied (validated like ``--set``)."""
-    from ..config import config_from_dict
+    from ...config import config_from_dict
 
     data = cfg.to_dict()
     for k, v in overrides.items():
@@ -230,8 +230,8 @@ def logging_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
     import tempfile
     from pathlib import Path
 
-    from ..engine.missions import simulate
-    from ..record.runlog import RunLog
+    from ...engine.missions import simulate
+    from ...record.runlog import RunLog
 
     c = copy.deepcopy(cfg)
     c.log.render = False
@@ -312,13 +312,13 @@ def _log_figures(runs: dict[str, list[tuple[float, ...]]], msgs: dict[str, int],
 
 
 def _workers(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
-    from .bench_workers import bench_workers
+    from .workers import bench_workers
 
     return bench_workers(cfg, repeats=max(1, min(repeats, 2)), quick=quick)
 
 
 def _estimators(cfg: Config, repeats: int, quick: bool) -> dict[str, Any]:
-    from .bench_estimators import bench_estimators
+    from .estimators import bench_estimators
 
     return {"estimators": bench_estimators(repeats=repeats, n=500 if quick else 2000)}
 
@@ -338,7 +338,7 @@ def _batched(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     rollout uses every thread (no lanes), against the same reference. The batches of
     :data:`ALSO_WITHOUT_DOSE` are flown once more without the dose model
     (:func:`_without_dose`)."""
-    from ..engine.physics import default_threads
+    from ...engine.physics import default_threads
 
     n, sim_s = (16, 20.0) if quick else (64, 60.0)
     threads = default_threads(n)
@@ -469,7 +469,7 @@ _STAGES = (("Guard", "start", "guard"), ("Sensing", "step", "imu"),
 def _timed_stages(acc: Counter, only: tuple[str, ...] | None = None) -> Iterator[None]:
     """Every stage's method (and the physics step; ``only``: those keys alone) wrapped to add
     its wall time to ``acc`` for the duration of the block; the classes are restored after it."""
-    from ..engine import loop, stages
+    from ...engine import loop, stages
 
     saved = [(getattr(stages, c), m, k) for c, m, k in _STAGES] + [(loop.Engine, "physics",
                                                                      "physics")]
@@ -533,7 +533,7 @@ def _one_thread() -> Iterator[None]:
 
 def _first_run(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     """``first_run``: the default mission's first run in a fresh process with an empty numba
-    cache (:mod:`ag_uav.jobs.first_run`): its wall time and the compile, kernel by kernel."""
+    cache (:mod:`ag_uav.jobs.bench.first_run`): its wall time and the compile, kernel by kernel."""
     from .first_run import measure_first_run
 
     return {"first_run": measure_first_run()}
@@ -541,10 +541,10 @@ def _first_run(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
 
 def _big_job(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     """``big_job``: the 38 ha job flown whole in a fresh process, with the full log
-    (:mod:`ag_uav.jobs.bench_big`); skipped with ``--quick``."""
+    (:mod:`ag_uav.jobs.bench.big`); skipped with ``--quick``."""
     if quick:
         return {}
-    from .bench_big import measure_big_job
+    from .big import measure_big_job
 
     return {"big_job": measure_big_job()}
 

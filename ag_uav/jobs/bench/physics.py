@@ -12,8 +12,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from ..config import Config
-from ..vehicle.mjcf import G, build_vehicle
+from ...config import Config
+from ...vehicle.mjcf import G, build_vehicle
 
 
 def spread(ratios: list[float]) -> dict[str, float]:
@@ -37,7 +37,7 @@ def _batch_cfgs(cfg: Config, n: int, sim_s: float) -> list[Config]:
 def batched_summaries(cfg: Config, n: int, sim_s: float) -> list[dict]:
     """The summaries of ``n`` missions of ``cfg`` (seeds 0…n-1, cut at ``sim_s``) flown as one
     lockstep batch (:func:`ag_uav.engine.missions.simulate_many`)."""
-    from ..engine.missions import simulate_many
+    from ...engine.missions import simulate_many
 
     return [r.summary for r in simulate_many(_batch_cfgs(cfg, n, sim_s))]
 
@@ -57,7 +57,7 @@ def physics_alone(cfg: Config, n: int, sim_s: float, nthread: int,
     (hovering: no ground contacts, so cheaper than a mission's take-off and landings)."""
     import numpy as np
 
-    from ..engine.physics import STATE_SPEC
+    from ...engine.physics import STATE_SPEC
 
     veh = build_vehicle(cfg)
     m = veh.model
@@ -90,7 +90,7 @@ def replay_physics(models: list, body: int, nsub: int, s0: list, controls: list,
     the end on its own (the engine's lanes). Returns (wall seconds, final states)."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from ..engine.kernels import controls as pack
+    from ...engine.kernels import controls as pack
 
     N = len(models)
     n_i = np.array([len(c) for c in controls])
@@ -160,7 +160,7 @@ class _Replayer:
                  nthread: int, chunk: int | None) -> None:
         from mujoco import rollout
 
-        from ..engine.physics import CTRL_SPEC
+        from ...engine.physics import CTRL_SPEC
 
         m0 = models[0]
         self.ii, self.nsub, self.chunk, self.spec = ii, nsub, chunk, CTRL_SPEC
@@ -211,7 +211,7 @@ def best_replay(outs: list, nthread: int, repeats: int) -> tuple[float, str]:
     replayed at MuJoCo's best way of spreading it on ``nthread`` threads (the rollout pool at
     its default chunking or 1, 2, 4, 8 chunks per thread, or one rollout per thread):
     (best wall seconds, how)."""
-    from ..engine.physics import default_threads
+    from ...engine.physics import default_threads
 
     nthread = nthread or default_threads(len(outs))
     n = len(outs)
@@ -233,7 +233,7 @@ def batched_capture(cfg: Config, n: int, sim_s: float, lanes: int | None = None
     """Vehicle-sim-seconds, loop wall seconds and the captured outputs (initial states and
     controls) of ``n`` missions of ``cfg`` (seeds 0…n-1, cut at ``sim_s``) as one engine
     batch (``lanes``: the engine's default split, or 1 for one engine)."""
-    from ..engine.missions import fly_many
+    from ...engine.missions import fly_many
 
     outs = fly_many(_batch_cfgs(cfg, n, sim_s), capture=True, lanes=lanes)
     dt = 1.0 / cfg.sim.control_hz

@@ -4,12 +4,13 @@
 (``NUMBA_CACHE_DIR``; numba then neither reads nor writes the package's ``__pycache__``), flies
 the default mission for :data:`FLY_S` simulated seconds with the full log (no renders), and
 reports the process's wall time, the seconds spent compiling and the kernels that cost most
-(the child ends with this process, however it ends: :func:`ag_uav.jobs.warm.die_with_parent`).
+(the child ends with this process, however it ends: :func:`ag_uav.engine.warm.die_with_parent`).
 The compile is read from numba's own ``numba:compile`` events: each event spans a kernel's
 compile including the kernels it compiles on the way, so a kernel's *own* time is its span less
 its nested spans, and the total is the sum of the outermost spans.  ``ag-uav bench`` reports it
-as ``first_run``; ``python -m ag_uav.jobs.first_run`` prints it alone (``--one-process``: without
-the second-core helper of :mod:`ag_uav.jobs.warm`, every kernel compiled by the flying process).
+as ``first_run``; ``python -m ag_uav.jobs.bench.first_run`` prints it alone (``--one-process``:
+without the second-core helper of :mod:`ag_uav.engine.warm`, every kernel compiled by the flying
+process).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ __all__ = ["FLY_S", "compile_spans", "measure_first_run"]
 #: simulated seconds the child flies: every per-tick kernel and the log's encoders run in them
 FLY_S = 2.0
 #: the measurement's folder in the temporary directory (removed after; a killed measurement's
-#: by the next, :func:`ag_uav.jobs.warm.sweep`)
+#: by the next, :func:`ag_uav.engine.warm.sweep`)
 TMP_PREFIX = "ag-uav-first-run-"
 
 
@@ -56,9 +57,9 @@ def _child(out_dir: str) -> dict[str, Any]:
     t0 = time.perf_counter()
     from numba.core import event
 
-    from ..config import load_config
-    from ..engine.compiling import kernel_name
-    from .run import fly
+    from ...config import load_config
+    from ...engine.compiling import kernel_name
+    from ..run import fly
 
     events: list[tuple[float, str, bool]] = []
 
@@ -70,7 +71,7 @@ def _child(out_dir: str) -> dict[str, Any]:
             events.append((time.perf_counter(), kernel_name(ev), False))
 
     cfg = load_config(None, {"sim.max_time_s": FLY_S, "log.render": False})
-    from . import warm
+    from ...engine import warm
 
     helper = warm.wanted(cfg)  # checked before the run fills the cache, as fly() checks it
     with event.install_listener("numba:compile", _Rec()):
@@ -90,9 +91,9 @@ def measure_first_run(timeout_s: float = 900.0, helper: bool = True) -> dict[str
     cache: ``wall_s`` (interpreter start to the summary), ``compile_s`` (all kernels the
     flying process compiled or loaded, the log's encoders included), ``kernels_compiled`` and
     ``top_kernels_s`` (the ten costliest, own time). ``helper``: whether the second-core
-    helper of :mod:`ag_uav.jobs.warm` may start (as it does for a user; ``warm_helper`` says
+    helper of :mod:`ag_uav.engine.warm` may start (as it does for a user; ``warm_helper`` says
     whether it did), or the flying process compiles every kernel itself."""
-    from . import warm
+    from ...engine import warm
 
     warm.sweep(TMP_PREFIX)  # the folders of measurements that were killed (SIGKILL)
     tmp = str(warm.owned_folder(TMP_PREFIX))
@@ -100,7 +101,7 @@ def measure_first_run(timeout_s: float = 900.0, helper: bool = True) -> dict[str
         env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(tmp, "numba"),
                "AG_UAV_WARM": "1" if helper else "0", warm.PARENT_ENV: str(os.getpid())}
         t0 = time.perf_counter()
-        p = subprocess.run([sys.executable, "-m", "ag_uav.jobs.first_run", "--child", tmp],
+        p = subprocess.run([sys.executable, "-m", "ag_uav.jobs.bench.first_run", "--child", tmp],
                            env=env, capture_output=True, text=True, timeout=timeout_s)
         process_s = time.perf_counter() - t0
     finally:
@@ -124,7 +125,7 @@ def _print(out: dict[str, Any]) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) == 3 and sys.argv[1] == "--child":
-        from .warm import die_with_parent
+        from ...engine.warm import die_with_parent
 
         die_with_parent()  # a measurement killed takes its child (and the child's helper) along
         res = _child(sys.argv[2])

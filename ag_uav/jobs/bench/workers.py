@@ -9,14 +9,14 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
-from ..config import Config, config_from_dict
-from .executor import LocalPoolExecutor
+from ...config import Config, config_from_dict
+from ..executor import LocalPoolExecutor
 
 __all__ = ["bench_workers"]
 
 
 def _bench_task(cfg_dict: dict[str, Any]) -> float:
-    from ..engine.missions import simulate
+    from ...engine.missions import simulate
 
     res = simulate(config_from_dict(cfg_dict))
     return float(res.summary["sim_time_s"])

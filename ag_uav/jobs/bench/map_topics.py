@@ -3,7 +3,7 @@ mission's loop unlogged, with the full log, and with the full log without the ma
 (``rates={"geo": 0}``), with the writer process and inline, interleaved in each repeat so that
 every ratio is taken between neighbouring runs (as :func:`ag_uav.jobs.bench.logging_cost`).
 
-    python -m ag_uav.jobs.bench_map [REPEATS]     # JSON: median, min, max of each ratio
+    python -m ag_uav.jobs.bench.map_topics [REPEATS]     # JSON: median, min, max of each ratio
 
 Ratios over the unlogged loop: ``wall`` (the loop's wall time), ``cpu`` (the loop process's CPU
 time) and ``cpu_with_writer`` (plus the writer process's).  Figures: docs/guides/foxglove.md.
@@ -18,7 +18,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from ..config import Config, load_config
+from ...config import Config, load_config
 
 KINDS = ("full", "nogeo", "inline", "inline_nogeo")
 
@@ -26,9 +26,9 @@ KINDS = ("full", "nogeo", "inline", "inline_nogeo")
 def _fly(cfg: Config, path: Path | None, geo: bool = True, writer: str = "process",
          ) -> tuple[tuple[float, float, float], tuple[int, int]]:
     """(loop wall, loop CPU, loop + writer CPU), (log bytes, messages) of one flight."""
-    from ..engine.missions import simulate
-    from ..record.runlog import RunLog
-    from .bench import LoopCpu
+    from ...engine.missions import simulate
+    from ...record.runlog import RunLog
+    from .suite import LoopCpu
 
     hook = LoopCpu()
     if path is None:
@@ -44,7 +44,7 @@ def _fly(cfg: Config, path: Path | None, geo: bool = True, writer: str = "proces
 
 def map_topics_cost(cfg: Config, repeats: int = 3) -> dict[str, Any]:
     """The ratios of each logged kind (:data:`KINDS`) over the unlogged loop."""
-    from ..engine.missions import simulate
+    from ...engine.missions import simulate
 
     runs: dict[str, list[tuple[float, float, float]]] = {k: [] for k in ("plain", *KINDS)}
     sizes: dict[str, tuple[int, int]] = {}

@@ -30,7 +30,7 @@ cache. The INS's compile is then shared between the two cores instead of running
 
 It starts only when it can help: the run flies the INS, the INS's tick kernel is not in the
 cache, this process may use at least two cores, and ``AG_UAV_WARM`` is not ``0``.
-``python -m ag_uav.jobs.first_run`` measures the first run with and without it.
+``python -m ag_uav.jobs.bench.first_run`` measures the first run with and without it.
 
 Nothing outlives the run. The helper dies with the process that started it, however that ends
 (SIGKILL included: :func:`die_with_parent`, Linux's ``PR_SET_PDEATHSIG``, and a thread that
@@ -49,6 +49,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -212,10 +213,13 @@ def die_with_parent(parent: int | None = None) -> None:
         threading.Thread(target=watch, name="ag-uav-parent-watch", daemon=True).start()
 
 
-def start(cfg: Any) -> Warmer | None:
+def start(cfg: Any, command: Sequence[str]) -> Warmer | None:
     """The helper for ``cfg``'s run, started, or None when :func:`wanted` says no (or it could
-    not start: the run then compiles everything itself, as it would anyway). The helper ends
-    with this process (:func:`die_with_parent`); its folder names this process as its owner
+    not start: the run then compiles everything itself, as it would anyway). ``command``: the
+    arguments after the interpreter that run the helper, its folder appended (a module calling
+    :func:`ag_uav.engine.warm.helper.run_helper` with the caller's flight: the run's
+    :data:`ag_uav.jobs.run.WARM_HELPER`). The helper ends with this process
+    (:func:`die_with_parent`); its folder names this process as its owner
     (:func:`owned_folder`)."""
     if not wanted(cfg):
         return None
@@ -227,7 +231,7 @@ def start(cfg: Any) -> Warmer | None:
         (folder / "config.toml").write_text(cfg.to_toml())
         env = {**os.environ, "AG_UAV_WARM": "0", "AG_UAV_ENGINE_THREADS": "1",
                PARENT_ENV: str(os.getpid())}
-        proc = subprocess.Popen([sys.executable, "-m", "ag_uav.jobs.warm_helper", str(folder)],
+        proc = subprocess.Popen([sys.executable, *command, str(folder)],
                                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL, env=env)
     except OSError:

@@ -8,7 +8,7 @@ peak resident memory of the flying process (``peak_rss_mb``, its ``VmHWM``) and 
 writer process (``writer_peak_rss_mb``, its child, from ``getrusage``: a forked writer's figure
 includes the pages it shared with the flying process when it was forked). Kernels are loaded
 from the cache (the first run's compile is ``first_run``'s figure). ``python -m
-ag_uav.jobs.bench_big`` prints it alone.
+ag_uav.jobs.bench.big`` prints it alone.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from typing import Any
 __all__ = ["BIG_JOB_OVERRIDES", "FIELD_38HA", "measure_big_job"]
 
 #: the 38 ha field (a 690 m × 560 m rectangle) in the repository's examples
-FIELD_38HA = Path(__file__).resolve().parents[2] / "examples" / "field_38ha.geojson"
+FIELD_38HA = Path(__file__).resolve().parents[3] / "examples" / "field_38ha.geojson"
 
 #: the job of docs/guides/spray-jobs.md's 38 ha table (with the full log instead of the light one)
 BIG_JOB_OVERRIDES: dict[str, Any] = {
@@ -37,8 +37,8 @@ BIG_JOB_OVERRIDES: dict[str, Any] = {
 def _child() -> dict[str, Any]:
     """Fly the big job here (in the child) and report its figures."""
     t0 = time.perf_counter()
-    from ..config import load_config
-    from .run import fly
+    from ...config import load_config
+    from ..run import fly
 
     cfg = load_config(None, dict(BIG_JOB_OVERRIDES))
     with tempfile.TemporaryDirectory(prefix="ag-uav-big-job-") as out:
@@ -71,7 +71,7 @@ def _peak_rss_kb() -> float:
 def measure_big_job(timeout_s: float = 3600.0) -> dict[str, Any]:
     """The big job in a fresh process (see the module docstring); ``{"error": ...}`` if it
     fails."""
-    p = subprocess.run([sys.executable, "-m", "ag_uav.jobs.bench_big", "--child"],
+    p = subprocess.run([sys.executable, "-m", "ag_uav.jobs.bench.big", "--child"],
                        capture_output=True, text=True, timeout=timeout_s)
     lines = [ln for ln in p.stdout.splitlines() if ln.startswith("{")]
     if p.returncode or not lines:

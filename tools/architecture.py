@@ -2,9 +2,10 @@
 every ``import`` and ``from … import`` of every module, function-local ones included, relative
 ones resolved) and the picture of the flow in ``docs/architecture.md``.
 
-``python -m ag_uav.jobs.architecture`` prints the generated section; ``--write`` puts it into
+A development tool of the repository, not part of the installed package (it reads the source
+tree): ``python tools/architecture.py`` prints the generated section; ``--write`` puts it into
 ``docs/architecture.md`` between the markers; ``--check`` exits 1 when the doc is stale or the
-graph has a cycle (``tests/test_architecture.py`` does the same).
+graph has a cycle (``tests/test_architecture.py`` loads it and does the same).
 
 The picture has one box per stage (a folder of ``ag_uav``, or a top-level module) listing its
 modules, in :data:`STAGES` order (the flow). An arrow ``A --> B`` means "B builds on A": some
@@ -22,10 +23,10 @@ import sys
 import textwrap
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "ag_uav"
 DOC = ROOT / "docs" / "architecture.md"
-BEGIN = "<!-- BEGIN GENERATED: python -m ag_uav.jobs.architecture --write -->"
+BEGIN = "<!-- BEGIN GENERATED: python tools/architecture.py --write -->"
 END = "<!-- END GENERATED -->"
 
 #: the stages in flow order: top-level modules and the folders of ag_uav
@@ -233,7 +234,7 @@ def render_doc(text: str, package: Path = PACKAGE) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m ag_uav.jobs.architecture",
+    ap = argparse.ArgumentParser(prog="python tools/architecture.py",
                                  description=textwrap.dedent(__doc__ or "").split("\n\n")[0])
     g = ap.add_mutually_exclusive_group()
     g.add_argument("--write", action="store_true", help=f"rewrite the section of {DOC.name}")
@@ -251,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         for c in cyc:
             print("import cycle:", " → ".join(c))
         if stale:
-            print(f"{DOC} is stale: run python -m ag_uav.jobs.architecture --write")
+            print(f"{DOC} is stale: run python tools/architecture.py --write")
         return 1 if cyc or stale else 0
     sys.stdout.write(section())
     return 0
