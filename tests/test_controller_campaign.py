@@ -75,7 +75,7 @@ def test_rotor_thrust_loss_scales_one_actuator_not_the_command_range():
     ({"unknown_payload_kg": 1.0, "unknown_payload_pos_m": [0.8, 0.0, 0.0]},
      "unknown_payload_pos_m[0]"),
     ({"rotor_thrust_loss": [0.95, 0, 0, 0]}, "rotor_thrust_loss[0]"),
-    ({"rotor_thrust_loss": [0.1, 0.1]}, "list of 4"),
+    ({"rotor_thrust_loss": [0.1, 0.1]}, "one value per rotor"),
 ])
 def test_model_error_keys_are_validated(veh, needle):
     with pytest.raises(ConfigError) as e:

@@ -67,11 +67,13 @@ def test_10km_field_flies_its_max_time_in_bounded_memory(tmp_path):
 def test_memory_budget_refuses_before_flying_one_line_exit_2(tmp_path, capsys, budget, what):
     """The default mission at 6 m lanes needs ~48,500 control ticks (~71 MB of tables at 1.5 KB a
     tick): 1 MB is refused on the plan's lower bound (394 s at cruise speed, before the
-    reference is built), 64 MB on the reference's duration (485 s)."""
+    reference is built), 64 MB on the reference's duration (485 s); planned on the flown wind
+    (a drawn forecast moves the legs and the plan's length)."""
     six = {"mission.swath_m": 6.0, "mission.headland_m": 6.0}
     rc = main(["fly", "--no-render", "--no-log", "-q", "--out", str(tmp_path), "--set",
                f"sim.memory_budget_mb={budget}", "--set", "mission.swath_m=6", "--set",
-               "mission.headland_m=6"])
+               "mission.headland_m=6", "--set", "forecast.speed_sigma_mps=0", "--set",
+               "forecast.direction_sigma_deg=0"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2
     assert len(err) == 1, err

@@ -93,7 +93,8 @@ def test_auto_stops_the_spray_and_lands_a_full_tank():
     """A full 40 L tank (the run cut short keeps it) cannot hover on seven rotors holding yaw:
     auto gives yaw up and lands with the nozzles off, and says so."""
     c = _cfg(**{"vehicle.preset": "x8-40l", "vehicle.rotor_fault.rotor": 0,
-                "vehicle.rotor_fault.at_s": 12.0, "sim.max_time_s": 12.5})
+                "vehicle.rotor_fault.at_s": 12.0, "sim.max_time_s": 12.5,
+                "forecast.speed_sigma_mps": 0.0, "forecast.direction_sigma_deg": 0.0})
     rf = ag_uav.simulate(c).summary["rotor_fault"]
     assert "gave up yaw" in rf["action"] and "spray stopped" in rf["action"]
     assert rf["action"].endswith("landing")

@@ -524,6 +524,17 @@ def work_rate(cfg: Config, summ: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _fault_cut(out: LoopOutput, summ: dict, cut: str | None) -> str | None:
+    """The rotor fault into the summary; a landing it caused ends the mission early."""
+    rf = out.rotor_fault
+    if rf is None:
+        return cut
+    summ["rotor_fault"] = rf
+    if rf["landed_s"] is not None and not summ.get("crashed"):
+        return f"rotor {rf['rotor']} failed: {rf['action']}; landed at t={rf['landed_s']}s"
+    return cut
+
+
 def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     """Metrics and the summary of one flown run (``batch``: the size of the engine batch it
     flew in)."""
@@ -547,12 +558,8 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         summ.update(loss)
         out.notes.append(f"GNSS loss: {loss['gnss_loss_off_target_m2']:.1f} m² sprayed off "
                          "target while the fix was lost")
-    cut = _cut_reason(cfg, ref, out, summ, metrics.incomplete_reason(summ, res, cfg))
-    if out.rotor_fault is not None:
-        summ["rotor_fault"] = out.rotor_fault
-        if out.rotor_fault["landed_s"] is not None and not summ.get("crashed"):
-            cut = (f"rotor {out.rotor_fault['rotor']} failed: {out.rotor_fault['action']}; "
-                   f"landed at t={out.rotor_fault['landed_s']}s")
+    cut = _fault_cut(out, summ, _cut_reason(cfg, ref, out, summ,
+                                            metrics.incomplete_reason(summ, res, cfg)))
     if cut:
         summ["incomplete_reason"] = cut
     if not summ["legs_flown"]:  # the end of a mission never flown is no mission time

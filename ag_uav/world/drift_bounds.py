@@ -48,12 +48,16 @@ __all__ = ["BOUNDS", "DY", "FAR", "bound_config", "drift_ratios", "meander", "pa
 DY = 0.02              # m, the grid the single-pass profile is evaluated on
 FAR = 400.0            # m, the furthest distance the profile (and the buffers) are evaluated to
 
-def _ig_pdf(t: np.ndarray, mu: float, lam: float) -> np.ndarray:
-    from scipy.stats import invgauss
 
+def _ig_pdf(t: np.ndarray, mu: float, lam: float) -> np.ndarray:
+    """Inverse-Gaussian density IG(μ, λ): f(t) = √(λ / (2π t³)) exp(−λ (t − μ)² / (2 μ² t)),
+    t > 0 (Chhikara & Folks 1989; scipy.stats.invgauss with shape μ/λ and scale λ, written out
+    so that a flight's summary does not import scipy.stats)."""
     out = np.zeros_like(t)
     pos = t > 0
-    out[pos] = invgauss.pdf(t[pos], mu / lam, scale=lam)
+    tp = t[pos]
+    out[pos] = np.sqrt(lam / (2.0 * math.pi * tp ** 3)) * np.exp(
+        -lam * (tp - mu) ** 2 / (2.0 * mu * mu * tp))
     return out
 
 
@@ -63,8 +67,6 @@ def pass_profile(cfg: DepositionConfig, wind: float, height: float, speed: float
     """Tracer deposit density across one pass in a crosswind ``wind`` (1/m; integrates to the
     landed share): y grid, density, and the volume book of the pass (shares of the sprayed
     volume)."""
-    from scipy.signal import fftconvolve
-
     R, thrust = pass_states(speed, height, wind, mass_kg, drag_lin, drag_quad)
     inp = pack_input([0.0, 0.0, height], [speed, 0.0, 0.0], R, thrust, [0.0, wind, 0.0], 1)
     fp = footprints(cfg, inp)
@@ -86,7 +88,7 @@ def pass_profile(cfg: DepositionConfig, wind: float, height: float, speed: float
         if fp["esc"][k] > 0 and uy > 1e-9:
             y0 = fp["ey"][k] - uy * fp["mut"][k]     # where the escaped part starts to settle
             esc = _ig_pdf((y - y0) / uy, fp["mut"][k], fp["lamt"][k]) / uy
-            esc = fftconvolve(esc, kern, mode="same")
+            esc = np.convolve(esc, kern, mode="same")
         elif fp["esc"][k] > 0:
             esc = np.exp(-0.5 * ((y - fp["ey"][k]) / s_e) ** 2) / (s_e * math.sqrt(2 * math.pi))
         for m in range(len(ym)):
