@@ -56,10 +56,11 @@ def test_no_import_cycles():
 
 
 def test_libraries_do_not_import_ag_uav_or_mujoco():
-    """Nor does the shared numba cache sweep import either library."""
+    """Nor do the shared numba cache sweep and the shared numerics (``numkit``) import either."""
     bad = []
     for lib, banned in (("controllers", ("ag_uav", "mujoco")), ("estimators", ("ag_uav", "mujoco")),
-                        ("jitcache", ("ag_uav", "mujoco", "controllers", "estimators"))):
+                        ("jitcache", ("ag_uav", "mujoco", "controllers", "estimators")),
+                        ("numkit", ("ag_uav", "mujoco", "controllers", "estimators"))):
         for p in sorted((ROOT / lib).rglob("*.py")):
             for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
                 if isinstance(node, ast.Import):
@@ -164,7 +165,7 @@ def test_product_text_has_no_history():
 # -------------------------------------------------------------------------- the house limits
 #: the product code the limits hold (the application, the two libraries and the numba cache
 #: sweep the three share)
-PRODUCT_CODE = ("ag_uav", "controllers", "estimators", "jitcache")
+PRODUCT_CODE = ("ag_uav", "controllers", "estimators", "jitcache", "numkit")
 MAX_FILE_LINES = 700
 MAX_FUNCTION_LINES = 80
 #: parameters of a function, ``self`` and ``cls`` not counted (``*args`` and ``**kw`` count one)
