@@ -302,6 +302,50 @@ class GeometricAttitudeController(RowBlocks):
         return _attitude_call(self._p, self._s, x)
 
 
+#: the least damping ratio the attitude loop keeps with the motor lag (:func:`lag_time_scale`)
+LAG_DAMPING_MIN = 0.3
+
+
+def lag_damping(r: float, zeta: float) -> float:
+    """Damping ratio of the least-damped pole pair of one attitude axis with a motor lag.
+
+    The axis ``J θ̈ = τ_a`` under the PD torque ``τ = −J (ω_n² θ + 2ζω_n θ̇)`` of
+    :class:`GeometricAttitudeController` delivered through the first-order motor lag
+    ``τ_m τ̇_a = τ − τ_a`` (the actuators' ``vehicle.motor_tau_s``) has the characteristic
+    polynomial ``τ_m s³ + s² + 2ζω_n s + ω_n²``; in ``σ = τ_m s`` it is
+    ``σ³ + σ² + 2ζ r σ + r²`` with ``r = ω_n τ_m``, so the damping depends on ``r`` and ``ζ``
+    alone. Returns 1 when every pole is real."""
+    roots = np.roots([1.0, 1.0, 2.0 * zeta * r, r * r])
+    pair = roots[np.abs(roots.imag) > 1e-12]
+    return float(np.min(-pair.real / np.abs(pair))) if pair.size else 1.0
+
+
+def lag_time_scale(tau_m: float, wn: Sequence[float], zeta: Sequence[float],
+                   zeta_min: float = LAG_DAMPING_MIN) -> float:
+    """The time scale ``s`` in (0, 1] of the cascade for a motor lag ``tau_m`` (s).
+
+    1 when every axis of ``wn``, ``zeta`` (rad/s and damping ratios of the attitude loop, the
+    roll and pitch axes) keeps a closed-loop damping of at least ``zeta_min`` with the lag
+    (:func:`lag_damping`); else the largest ``s`` with ``lag_damping(s ω_n τ_m, ζ) ≥ ζ_min`` on
+    every axis (bisection). The cascade is then slowed as a whole by ``s`` (every loop's
+    bandwidth times ``s``), so the position loop stays as much slower than the attitude loop as
+    the tuning had it (a cascade's outer loop must stay well below its inner loop's bandwidth:
+    Åström & Hägglund, *Advanced PID Control*, ISA 2006, on cascade control). The lag caps
+    the bandwidth of a PD loop: with the default ``ω_n = 9`` rad/s and ``ζ = 0.9`` the damping
+    is 0.53 at 0.04 s, 0.25 at 0.08 s and 0.12 at 0.12 s."""
+    if tau_m <= 0.0:
+        return 1.0
+    if all(lag_damping(w * tau_m, z) >= zeta_min for w, z in zip(wn, zeta, strict=True)):
+        return 1.0
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        ok = all(lag_damping(mid * w * tau_m, z) >= zeta_min
+                 for w, z in zip(wn, zeta, strict=True))
+        lo, hi = (mid, hi) if ok else (lo, mid)
+    return lo
+
+
 def effectiveness(positions: Sequence[Sequence[float]], spin: Sequence[int], k_yaw: float,
                   eff: Sequence[float] | None = None) -> np.ndarray:
     """The frame's effectiveness matrix ``B`` (4 × n): ``[T, τx, τy, τz]ᵀ = B f``.
