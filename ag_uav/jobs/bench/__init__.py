@@ -10,6 +10,8 @@ each also runnable alone where it says so:
   (``python -m ag_uav.jobs.bench.map_topics``);
 - :mod:`~ag_uav.jobs.bench.first_run`: the first run on an empty kernel cache
   (``python -m ag_uav.jobs.bench.first_run``);
+- :mod:`~ag_uav.jobs.bench.vehicles`: the default mission on each vehicle preset against MuJoCo
+  stepping its own model (``python -m ag_uav.jobs.bench.vehicles``);
 - :mod:`~ag_uav.jobs.bench.big`: a 38 ha job with the full log
   (``python -m ag_uav.jobs.bench.big``).
 """

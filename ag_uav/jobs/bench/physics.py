@@ -15,6 +15,43 @@ import numpy as np
 from ...config import Config
 from ...vehicle.mjcf import G, build_vehicle
 
+#: the true-state configuration the closed-loop, raw and logging ratios are measured on
+TRUE_STATE_OVERRIDES: dict[str, Any] = {"estimator.name": "true", "estimator.shadow": []}
+
+
+def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float, float]:
+    """Raw MuJoCo stepping of the mission's model: hover thrust, ``mj_step(m, d, nstep)`` in a
+    Python loop (nstep=1: one call per physics step)."""
+    veh = build_vehicle(cfg)
+    m = veh.model
+    d = mujoco.MjData(m)
+    d.qpos[2] = 3.0
+    d.ctrl[:] = veh.mass * G / sum(veh.eff)  # hover: the thrust each rotor of the frame holds
+    d.act[:] = veh.mass * G / sum(veh.eff)
+    n_calls = int(sim_seconds / (m.opt.timestep * nstep))
+    step = mujoco.mj_step
+    t0 = time.perf_counter()
+    if nstep == 1:
+        for _ in range(n_calls):
+            step(m, d)
+    else:
+        for _ in range(n_calls):
+            step(m, d, nstep)
+    wall = time.perf_counter() - t0
+    return n_calls * nstep * m.opt.timestep, wall
+
+
+def closed_loop(cfg: Config) -> tuple[float, float, dict]:
+    """One mission of ``cfg`` without a log: its simulated seconds, its loop's wall seconds and
+    its summary."""
+    from ...engine.missions import simulate
+
+    c = copy.deepcopy(cfg)
+    c.log.enabled = False
+    res = simulate(c)
+    s = res.summary
+    return s["sim_time_s"], s["loop_wall_time_s"], s
+
 
 def spread(ratios: list[float]) -> dict[str, float]:
     """The min and max of ``ratios`` (rounded): the spread beside a median."""

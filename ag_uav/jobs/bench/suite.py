@@ -20,13 +20,15 @@ from typing import Any
 import mujoco
 
 from ...config import Config
-from ...vehicle.mjcf import G, build_vehicle
 from .physics import (
+    TRUE_STATE_OVERRIDES,
     batched_capture,
     batched_rate,
     batched_summaries,
+    closed_loop,
     paired,
     physics_alone,
+    raw_stepping,
     spread,
 )
 
@@ -85,38 +87,6 @@ def _cpu_model() -> str:
     return platform.processor() or "unknown"  # pragma: no cover
 
 
-def raw_stepping(cfg: Config, sim_seconds: float, nstep: int = 1) -> tuple[float, float]:
-    """Raw MuJoCo stepping of the mission's model: hover thrust, ``mj_step(m, d, nstep)`` in a
-    Python loop (nstep=1: one call per physics step)."""
-    veh = build_vehicle(cfg)
-    m = veh.model
-    d = mujoco.MjData(m)
-    d.qpos[2] = 3.0
-    d.ctrl[:] = veh.mass * G / 4
-    d.act[:] = veh.mass * G / 4
-    n_calls = int(sim_seconds / (m.opt.timestep * nstep))
-    step = mujoco.mj_step
-    t0 = time.perf_counter()
-    if nstep == 1:
-        for _ in range(n_calls):
-            step(m, d)
-    else:
-        for _ in range(n_calls):
-            step(m, d, nstep)
-    wall = time.perf_counter() - t0
-    return n_calls * nstep * m.opt.timestep, wall
-
-
-def closed_loop(cfg: Config) -> tuple[float, float, dict]:
-    from ...engine.missions import simulate
-
-    c = copy.deepcopy(cfg)
-    c.log.enabled = False
-    res = simulate(c)
-    s = res.summary
-    return s["sim_time_s"], s["loop_wall_time_s"], s
-
-
 def run_bench(cfg: Config, repeats: int = 3, quick: bool = False) -> dict[str, Any]:
     out: dict[str, Any] = {"repeats": repeats, "machine": machine_facts()}
     c = with_overrides(cfg, TRUE_STATE_OVERRIDES)
@@ -162,9 +132,6 @@ def run_bench(cfg: Config, repeats: int = 3, quick: bool = False) -> dict[str, A
             out[f"{extra.__name__}_error"] = f"{type(e).__name__}: {e}"
     return out
 
-
-#: the true-state configuration the closed-loop, raw and logging ratios are measured on
-TRUE_STATE_OVERRIDES: dict[str, Any] = {"estimator.name": "true", "estimator.shadow": []}
 
 #: the estimator configuration the logging section also measures: RTK GNSS, PCA-MCKF in the loop,
 #: KF/MCKF/PCA-KF shadows (logs /gps and four /estimator/<name> channels on top of the state)
@@ -539,6 +506,14 @@ def _first_run(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     return {"first_run": measure_first_run()}
 
 
+def _vehicles(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
+    """``vehicles``: the default mission on each preset, single and batched, against MuJoCo
+    stepping that preset's own model (:mod:`ag_uav.jobs.bench.vehicles`)."""
+    from .vehicles import bench_vehicles
+
+    return {"vehicles": bench_vehicles(repeats=repeats, quick=quick)}
+
+
 def _big_job(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
     """``big_job``: the 38 ha job flown whole in a fresh process, with the full log
     (:mod:`ag_uav.jobs.bench.big`); skipped with ``--quick``."""
@@ -550,8 +525,8 @@ def _big_job(c: Config, repeats: int, quick: bool) -> dict[str, Any]:
 
 
 _EXTRA: list[Callable[[Config, int, bool], dict[str, Any]]] = [_estimators, _workers, _batched,
-                                                               _deposition, _stages, _first_run,
-                                                               _big_job]
+                                                               _deposition, _stages, _vehicles,
+                                                               _first_run, _big_job]
 
 
 def print_bench(out: dict[str, Any]) -> None:
