@@ -36,7 +36,7 @@ def test_time_scaled_gains():
     h = time_scaled(g, 0.5)
     assert (h.ke, h.kd, h.k0, h.k1) == pytest.approx((g.ke, 2 * g.kd, g.k0 / 4, g.k1 / 8))
     assert (h.kp, h.kdd, h.ki, h.i_limit) == pytest.approx(
-        (g.kp / 4, g.kdd / 2, g.ki / 8, g.i_limit / 4))
+        (g.kp / 4, g.kdd / 2, g.ki / 8, g.i_limit))
 
 
 @pytest.mark.parametrize(("tank_l", "mass_kg"), [(2.0, 52.0), (40.0, 90.0)])

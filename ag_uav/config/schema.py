@@ -316,7 +316,9 @@ class AxisGains:
 @dataclass
 class AttitudeGains:
     wn: list[float] = _f([9.0, 9.0, 3.0], "attitude loop natural frequency roll, pitch, yaw "
-                         "(rad/s)", gt=0, length=3)
+                         "(rad/s); a vehicle whose motor lag would leave it damped below 0.3 "
+                         "flies every loop slowed by one factor (docs/vehicles.md)",
+                         gt=0, length=3)
     zeta: list[float] = _f([0.9, 0.9, 0.9], "attitude loop damping ratio roll, pitch, yaw",
                            gt=0, length=3)
 

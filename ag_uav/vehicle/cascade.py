@@ -35,11 +35,12 @@ def time_scaled(g: AxisGains, s: float) -> AxisGains:
     """``g`` for the same loop run ``1/s`` times slower: the closed loop's response to an error
     ``e(t)`` becomes ``e(s t)`` (accelerations ``s²`` as large). The fuzzy inputs
     ``E = Ke e``, ``dE = Kd ė`` keep their values with ``Kd/s``; the output ``K0 U + K1 ∫U dt``
-    (m/s²) takes ``K0 s²``, ``K1 s³``; a PID ``Kp s²``, ``Kd s``, ``Ki s³``; the integral's bound
-    (m/s²) ``s²``."""
+    (m/s²) takes ``K0 s²``, ``K1 s³``; a PID ``Kp s²``, ``Kd s``, ``Ki s³``. The integral's bound
+    ``i_limit`` is kept: it is the acceleration the integral may spend against a steady force
+    (the wind's drag), which does not shrink with the loop's speed (scaled by ``s²`` too, the
+    octocopter's tracking RMSE on 150 s of the default mission read 0.26 m against 0.23 m)."""
     return dataclasses.replace(g, kd=g.kd / s, k0=g.k0 * s * s, k1=g.k1 * s ** 3,
-                               kp=g.kp * s * s, kdd=g.kdd * s, ki=g.ki * s ** 3,
-                               i_limit=g.i_limit * s * s)
+                               kp=g.kp * s * s, kdd=g.kdd * s, ki=g.ki * s ** 3)
 
 
 def cascade_time_scale(cfg: Config) -> float:
