@@ -73,7 +73,9 @@ def process_noise(cfg: Config, model: str | None = None) -> tuple[float, float, 
     return q, q_bias, var0
 
 
-def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
+def make_filter(name: str, cfg: Config, r_diag: np.ndarray, components: tuple = ()) -> Any:
+    """One position filter of the ideal-attitude chain; ``components``: the receiver's base
+    noise components (the coloured-noise filters model its Gauss–Markov part)."""
     e = cfg.estimator
     dt = 1.0 / cfg.sim.control_hz
     q, q_bias, _ = process_noise(cfg)
@@ -89,7 +91,29 @@ def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
                       recovery=None if e.mckf_recovery == "none" else e.mckf_recovery)
     if name.startswith("pca"):
         params.update(window=e.window, mode=e.pca_mode)
+    if name in ("kf-bias", "kf-diff"):
+        params.update(coloured_noise(name, cfg, r_diag, components))
     return estimators.make(name, **params)
+
+
+def coloured_noise(name: str, cfg: Config, r_diag: np.ndarray,
+                   components: tuple) -> dict[str, Any]:
+    """The coloured-noise filters' model of the receiver: its Gauss–Markov component's
+    correlation time τ and per-axis σ (σ · axis_scale).  "kf-bias" takes σ as its bias states'
+    σ_b and the rest of the variance as its white R; "kf-diff" takes τ (its R is the whole
+    stationary variance).  A preset without a Gauss–Markov part is refused."""
+    gm = [c for c in components
+          if str(c.get("type", "")).lower().replace("_", "-") in ("gauss-markov", "gm")]
+    if not gm:
+        raise ConfigError(f'estimator.name = "{name}": the GPS preset "{cfg.gps.preset}" has no '
+                          'gauss-markov component to model (use a preset with one, e.g. '
+                          '"rtk-m350", or estimator.name = "kf")')
+    c = gm[0]
+    sigma = float(c["sigma"]) * np.asarray(c.get("axis_scale", (1.0, 1.0, 1.0)), dtype=float)
+    if name == "kf-diff":
+        return {"tau": float(c["tau_s"]), "r": list(r_diag)}
+    white = np.maximum(np.asarray(r_diag, dtype=float) - sigma**2, R_FLOOR)
+    return {"tau": float(c["tau_s"]), "sigma_b": sigma, "r": list(white)}
 
 
 class FilterBank:
@@ -208,7 +232,8 @@ class EstimatorFeedback(FilterBank, Feedback):
         self.name = e.name
         names = ([e.name] if e.name != "true" else []) + [s for s in e.shadow if s != e.name]
         self.names = names
-        self.filters = {n: make_filter(n, cfg, self.r_diag) for n in names}
+        comps = tuple(getattr(self.gps, "config_components", ()))
+        self.filters = {n: make_filter(n, cfg, self.r_diag, comps) for n in names}
         mdl = next(iter(self.filters.values())).model if self.filters else None
         self.pos_idx = list(mdl.pos_idx) if mdl is not None else [0, 2, 4]
         self.vel_idx = list(mdl.vel_idx) if mdl is not None else [1, 3, 5]
