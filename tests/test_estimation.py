@@ -82,7 +82,8 @@ def test_coloured_noise_filters_model_the_receivers_gauss_markov_part(name):
     with a traceback)."""
     from ag_uav.navigation.estimation import make_filter
 
-    cfg = _cfg(**{"estimator.name": name, "gps.preset": "rtk-m350", "sim.max_time_s": 6.0})
+    cfg = _cfg(**{"estimator.name": name, "gps.preset": "rtk-m350", "sim.max_time_s": 6.0,
+                  "estimator.imu": name == "kf-bias"})
     comps = ({"type": "gauss-markov", "sigma": 0.5, "tau_s": 20.0, "axis_scale": [1, 1, 2]},
              {"type": "gaussian", "sigma": 0.3})
     f = make_filter(name, cfg, np.array([0.34, 0.34, 1.09]), comps)
@@ -102,3 +103,6 @@ def test_coloured_noise_filter_needs_a_gauss_markov_part():
 
     with pytest.raises(ConfigError, match="no gauss-markov component"):
         make_filter("kf-bias", _cfg(), np.ones(3), ({"type": "gaussian", "sigma": 1.0},))
+    gm = ({"type": "gauss-markov", "sigma": 0.5, "tau_s": 20.0},)
+    with pytest.raises(ConfigError, match="no control input"):   # it crashed the drone at 3 s
+        make_filter("kf-diff", _cfg(**{"estimator.imu": True}), np.ones(3), gm)

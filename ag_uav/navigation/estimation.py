@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 import estimators
+from numkit import Z
 
 from .._jit import njit
 from ..config import Config, ConfigError
@@ -108,12 +109,19 @@ def coloured_noise(name: str, cfg: Config, r_diag: np.ndarray,
         raise ConfigError(f'estimator.name = "{name}": the GPS preset "{cfg.gps.preset}" has no '
                           'gauss-markov component to model (use a preset with one, e.g. '
                           '"rtk-m350", or estimator.name = "kf")')
+    if name == "kf-diff" and cfg.estimator.imu:
+        raise ConfigError('estimator.name = "kf-diff": the differencing filter has no control '
+                          'input, and in the loop the IMU drives the filters (estimator.imu = '
+                          'true); use it with estimator.imu = false, or kf-bias')
     c = gm[0]
     sigma = float(c["sigma"]) * np.asarray(c.get("axis_scale", (1.0, 1.0, 1.0)), dtype=float)
+    tau = np.full(3, float(c["tau_s"]))
+    if cfg.gps.altitude_source == "radar":   # the height channel is the radar's: white noise
+        sigma[Z], tau[Z] = 0.0, 1e-9           # (σ_b = 0; Γ = e^(−Δt/τ) = 0: a plain update)
     if name == "kf-diff":
-        return {"tau": float(c["tau_s"]), "r": list(r_diag)}
+        return {"tau": tau, "r": list(r_diag)}
     white = np.maximum(np.asarray(r_diag, dtype=float) - sigma**2, R_FLOOR)
-    return {"tau": float(c["tau_s"]), "sigma_b": sigma, "r": list(white)}
+    return {"tau": tau, "sigma_b": np.maximum(sigma, 1e-9), "r": list(white)}
 
 
 class FilterBank:
