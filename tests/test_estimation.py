@@ -88,8 +88,10 @@ def test_coloured_noise_filters_model_the_receivers_gauss_markov_part(name):
              {"type": "gaussian", "sigma": 0.3})
     f = make_filter(name, cfg, np.array([0.34, 0.34, 1.09]), comps)
     if name == "kf-bias":
-        assert np.allclose(f.sigma_b, [0.5, 0.5, 1.0]) and np.allclose(f.tau, 20.0)
-        assert np.allclose(np.diag(f.R), [0.09, 0.09, 0.09])
+        # the height is the radar's (white): no bias state there
+        assert cfg.gps.altitude_source == "radar"
+        assert np.allclose(f.sigma_b, [0.5, 0.5, 0.0]) and np.allclose(f.tau[:2], 20.0)
+        assert np.allclose(np.diag(f.R), [0.09, 0.09, 1.09])
         f.x, f.P = np.arange(f.n, dtype=float), 2.0 * np.eye(f.n)   # (re)start, bias to prior
         assert np.array_equal(f.x, np.arange(f.n)) and not f.bias.any()
         assert np.allclose(np.diag(f.P_aug)[f.n:], f.sigma_b**2)
