@@ -16,7 +16,7 @@ Conventions (the same everywhere, and MuJoCo's):
   about the new y, then roll about the new x): ``R = Rz(ψ) Ry(θ) Rx(φ)`` (scipy's
   ``Rotation.from_euler("ZYX", [ψ, θ, φ])``); back from a matrix
   ``φ = atan2(R₂₁, R₂₂)``, ``θ = −asin(R₂₀)``, ``ψ = atan2(R₁₀, R₀₀)``, with θ ∈ [−π/2, π/2]
-  (at θ = ±π/2 only ψ ∓ φ is defined);
+  (at θ = ±π/2, gimbal lock, only ψ ∓ φ is defined: φ and ψ come out of round-off there);
 - the exponential map ``Exp(φ) = (cos(θ/2), sin(θ/2) φ/θ)``, θ = ‖φ‖, turns a rotation vector
   into a quaternion (Solà eq 101) and ``Log`` is its inverse.
 
@@ -40,7 +40,7 @@ __all__ = ["RXX", "RXY", "RXZ", "RYX", "RYY", "RYZ", "RZX", "RZY", "RZZ", "euler
            "euler_to_rots", "quat_conj", "quat_exp", "quat_log_err", "quat_mul", "quat_normalize",
            "quat_rotate", "quat_to_euler", "quat_to_rot", "quat_to_rot9", "quat_to_rot_flat",
            "quats_to_rots", "rot_to_euler", "rot_to_quat", "rot_to_yaw", "rots_to_euler",
-           "rots_to_quats"]
+           "rots_to_quats", "yaw_to_quat"]
 
 #: positions of R[i, j] in a flat row-major rotation matrix
 RXX, RXY, RXZ = 3 * X + X, 3 * X + Y, 3 * X + Z
@@ -191,6 +191,13 @@ def euler_to_quat(roll: float, pitch: float, yaw: float, q) -> None:
     q[QX] = sr * cp * cy - cr * sp * sy
     q[QY] = cr * sp * cy + sr * cp * sy
     q[QZ] = cr * cp * sy - sr * sp * cy
+
+
+@njit
+def yaw_to_quat(yaw: float, q) -> None:
+    """q ← (cos(ψ/2), 0, 0, sin(ψ/2)): a turn by ψ about z (:func:`euler_to_quat` at φ = θ = 0,
+    its zeros exact)."""
+    q[QW], q[QX], q[QY], q[QZ] = math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)
 
 
 @njit
