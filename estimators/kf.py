@@ -34,8 +34,11 @@ by the caller is not changed in place).
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
+
+from numkit import Layout
 
 from ._jit import njit
 from ._linalg import (
@@ -48,13 +51,17 @@ from ._linalg import (
     quad_form,
 )
 
-__all__ = ["KF", "inv_small", "as_fix", "as_matrix", "as_vector", "block3", "csr", "joseph",
+__all__ = ["KF", "KFWork", "KF_WORK_FIELDS", "inv_small", "as_fix", "as_matrix", "as_vector",
+           "block3", "csr", "joseph",
            "joseph_row", "kf_gain_row",
            "kf_innovation_row", "kf_input_row", "kf_predict_row", "kf_update_row", "kf_work",
-           "kf_work_in", "kf_work_size",
+           "kf_work_in", "kf_work_layout", "kf_work_size", "kf_work_spec",
            "predict_b3_row", "predict_csr_row"]
 
 _dot = np.dot
+
+#: the names of one KF update's work arrays, in their order in the buffer
+KF_WORK_FIELDS = ("nu", "PHT", "S", "Si", "K", "xo", "A", "AP", "KR")
 
 
 def inv_small(S: np.ndarray) -> np.ndarray:
@@ -270,10 +277,28 @@ def kf_work_size(n, m):
     return m + 3 * n * m + 2 * m * m + n + 2 * n * n
 
 
+#: the work arrays of one KF update, by name (:func:`kf_work_in`; a plain tuple in this order)
+KFWork = namedtuple("KFWork", KF_WORK_FIELDS)
+
+
+def kf_work_spec(n: int, m: int) -> str:
+    """The fields of :func:`kf_work_in`'s buffer for n states and m measurements (a
+    :class:`numkit.Layout` text): ν (m), P Hᵀ (n, m), S (m, m), S⁻¹ (m, m), K (n, m), x̂ (n),
+    and :func:`joseph_row`'s A, A P (n, n), K S (n, m)."""
+    return (f"nu:{m} PHT:{n}x{m} S:{m}x{m} Si:{m}x{m} K:{n}x{m} xo:{n} A:{n}x{n} AP:{n}x{n} "
+            f"KR:{n}x{m}")
+
+
+def kf_work_layout(n: int, m: int) -> Layout:
+    """The layout of :func:`kf_work_in`'s buffer (:func:`kf_work_spec`)."""
+    return Layout(kf_work_spec(n, m))
+
+
 @njit(inline="always")
 def kf_work_in(buf, n, m):
-    """The work arrays of one update (ν, P Hᵀ, S, S⁻¹, K, x̂, and :func:`joseph_row`'s A, AP,
-    K S) as views of ``buf`` (≥ :func:`kf_work_size`): a per-tick caller allocates nothing."""
+    """The work arrays of one update (:class:`KFWork`: ν, P Hᵀ, S, S⁻¹, K, x̂, and
+    :func:`joseph_row`'s A, AP, K S) as views of ``buf`` (≥ :func:`kf_work_size`), laid out
+    as :func:`kf_work_layout`: a per-tick caller allocates nothing."""
     o1 = m
     o2 = o1 + n * m
     o3 = o2 + m * m
@@ -282,10 +307,10 @@ def kf_work_in(buf, n, m):
     o6 = o5 + n
     o7 = o6 + n * n
     o8 = o7 + n * n
-    return (buf[0:o1], buf[o1:o2].reshape((n, m)), buf[o2:o3].reshape((m, m)),
-            buf[o3:o4].reshape((m, m)), buf[o4:o5].reshape((n, m)), buf[o5:o6],
-            buf[o6:o7].reshape((n, n)), buf[o7:o8].reshape((n, n)),
-            buf[o8:o8 + n * m].reshape((n, m)))
+    return KFWork(buf[0:o1], buf[o1:o2].reshape((n, m)), buf[o2:o3].reshape((m, m)),
+                  buf[o3:o4].reshape((m, m)), buf[o4:o5].reshape((n, m)), buf[o5:o6],
+                  buf[o6:o7].reshape((n, n)), buf[o7:o8].reshape((n, n)),
+                  buf[o8:o8 + n * m].reshape((n, m)))
 
 
 @njit
@@ -299,7 +324,7 @@ def kf_update_row(x, P, R, H, z, w):
     """The KF update of one filter in place (x, P); returns its NIS.  A non-finite NIS (NaN/inf
     in z, or an overflow) is "no fix": x and P are then untouched.  ``w``: the work arrays
     (:func:`kf_work`, or :func:`kf_work_in` on the caller's buffer); after a fix they hold ν
-    (w[0]), S (w[2]), K (w[4])."""
+    (``w.nu``), S (``w.S``), K (``w.K``)."""
     nu, PHT, S, Si, K, xo, _, _, KR = w
     v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
     if not math.isfinite(v):
@@ -440,5 +465,5 @@ class KF(LinearGaussianBase):
         if not math.isfinite(v):
             return False
         self.x, self.P = x, P
-        self.y, self.S, self.K, self.nis = w[0].copy(), w[2].copy(), w[4].copy(), float(v)
+        self.y, self.S, self.K, self.nis = w.nu.copy(), w.S.copy(), w.K.copy(), float(v)
         return True
