@@ -11,10 +11,13 @@ tuple of offsets that numba freezes into the compiled code (``x[S.QUAT:S.QUAT_EN
 * ``PRM`` (``PR``): the bank's shared parameters (``INSConfig.prm``);
 * ``INTS`` (``CT``): each row's counters and queue state; ``DG`` (``DGA``): each row's
   diagnostics and the adaptive kernel's state; ``MPAR`` (``MP``): each row's MCKF parameters;
-* ``REC`` (``RC``): one record of the delayed-fusion queue; ``GIN`` (``GI``), ``RIN``
-  (``RI``): one GNSS, one radar input row; ``IMU`` (``U``): one IMU sample;
+* ``REC`` (``RC``): one record of the delayed-fusion queue, its measurement laid out as
+  ``GZ``; ``GIN`` (``GI``), ``RIN`` (``RI``): one GNSS, one radar input row; ``IMU`` (``U``):
+  one IMU sample; ``POPT`` (``PO``): the PCA block's options;
 * ``SCRATCH`` (``W``): the tick's work, one flat buffer per bank shared by its rows (the
-  per-tick path allocates nothing); :func:`view2` / :func:`view3` give its blocks' views.
+  per-tick path allocates nothing); :func:`view2` / :func:`view3` give its blocks' views, and
+  ``STEP`` (``WS``), ``RESET`` (``RS``), ``PMAT`` (``PM``), ``HMAT`` (``HM``) name the slots of
+  the prediction's and the injection's vectors and of the stacks of 3×3 matrices.
 """
 
 from __future__ import annotations
@@ -63,12 +66,13 @@ NZ = 3
 IMU = Layout("f:3 w:3")
 U = IMU.at
 
-#: shared parameters: Δt, g, the Q impulses (δv, δθ, δb_a, δb_g), lever arm, heading baseline,
-#: radar offset, ground height, cos(max tilt), max range, delay D (ticks), delayed (0/1), ring
-#: length B = D + 2 (the core's sample and the one before it, for the coning correction),
-#: queue length, the innovation gate (σ; inf = off), its reset time (ticks), the step latch's
-#: hold limit (ticks; 0 = no latch, inf = no limit), the PCA block's window (fixes), the
-#: coning and sculling corrections (0/1)
+#: shared parameters: Δt, g, the Q impulses (δv, δθ, δb_a, δb_g, in the order of the error state's
+#: blocks: :func:`~.model.cov_step` adds ``prm[PR.QV + b]`` to block b), lever arm, heading
+#: baseline, radar offset, ground height, cos(max tilt), max range, delay D (ticks), delayed (0/1),
+#: ring length B = D + 2 (the core's sample and the one before it, for the coning correction),
+#: queue length, the innovation gate (σ; inf = off), its reset time (ticks), the step latch's hold
+#: limit (ticks; 0 = no latch, inf = no limit), the PCA block's window (fixes), the coning and
+#: sculling corrections (0/1)
 PRM = Layout("dt g qv qt qba qbg r_ant:3 r_b:3 r_rad:3 z_g cos_max r_max delay delayed ring "
              "queue gate gate_reset gate_latch pca_window coning")
 PR = PRM.at
