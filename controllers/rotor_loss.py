@@ -109,7 +109,7 @@ class RelaxedHover:
 
     F_SHARE = 0.92        # the pair's collective share of f_max (the rest: control)
     RHO_MIN = 0.1         # the opposite rotor's least share of the pair's thrust
-    TILT_N_MAX = math.radians(35.0)   # n̄ off body z at most
+    TILT_N_MAX = math.radians(20.0)   # n̄ off body z at most
     TILT_MAX = math.radians(20.0)     # the commanded thrust direction off vertical at most
     R_RESCHEDULE = 0.05   # recompute K when r moved this share (or 0.5 rad/s)
     KP_XY, KD_XY, KP_Z, KD_Z = 0.8, 1.6, 1.5, 2.5
