@@ -40,9 +40,11 @@ body frame::
 
 discretised with the control period (zero-order hold, the matrix exponential) and closed with
 the discrete LQR gain ``K`` (Riccati iteration), recomputed when ``r`` has moved by more than
-``R_RESCHEDULE`` of itself: ``τ_cmd = τ̄ − K s``. The three rotors then solve
-``[f_Σ, τ_x, τ_y]`` exactly (a 3 × 3 system: thrust, roll and pitch; yaw is what is left),
-clipped to ``[0, f_max]``.
+``R_RESCHEDULE`` of itself: ``τ_cmd = τ̄ − K s``. The rotors get the torque first
+(:meth:`RelaxedHover.allocate`): the opposite rotor alone pushes along ``u_o = (y_o, −x_o)/|xy_o|``
+and only one way (``f_o = max(τ·u_o, 0)/|xy_o|``; the stopped rotor gave the other), the pair's
+difference along ``u_p`` both ways; what the limits leave goes to the collective. Yaw is what
+is left (``k Σ s_i f_i``), which spins the vehicle up.
 
 **Translation** (the paper's §V): a PD on the position and velocity errors gives the commanded
 acceleration ``a`` (horizontal part limited to ``tan(TILT_MAX)`` g), ``n_W = (a + g e_z) /

@@ -23,13 +23,17 @@ its response by frame: a stage of the engine's tick, before the controller.
   ``auto`` — ``continue`` when the re-allocated hover needs at most
   :attr:`RotorFaults.HOVER_SHARE_MAX` (90 %) of a rotor's limit, else the nozzles off and
   ``land`` (the load-dependent answer: a full tank on seven rotors leaves no margin); ``none``
-  — no detector. A quad on any response but ``none`` gives up yaw (its three rotors allocate
-  thrust, roll and pitch; the yaw reference follows the spinning vehicle) and lands where it
+  — no detector. A quad on any response but ``none`` gives up yaw and flies its three
+  rotors with :class:`controllers.rotor_loss.RelaxedHover` (the relaxed hover of Mueller and
+  D'Andrea, ICRA 2014: it spins, the spin's gyroscopic torque balancing the opposite rotor's),
+  its commands replacing the cascade's (:meth:`RotorFaults.after_control`), and lands where it
   is. The landing is the position failsafe's: brake at 2 m/s², descend at
   0.7 m/s, the last 1.5 m at 0.3 m/s (PX4's ``MPC_LAND_SPEED``, ``MPC_LAND_CRWL``), nozzles off;
   once the set point is on the ground and the vehicle still for 1 s (PX4's land detector) the
   flight ends; the touchdown speed is the largest vertical speed over the last 0.3 m (a skid
-  contact above 1 m/s ends the flight as a crash first). The way home: the set point moves
+  contact above 1 m/s ends the flight as a crash first; a spinning quad's flight ends at its
+  skids' first ground contact, motors off). The rotors' yaw damping (:meth:`yaw_damping`) is
+  put into the vehicle's model with the fault. The way home: the set point moves
   from where the failure was met towards the base at up to the transit speed (accelerating
   and braking at 1 m/s²), at the height it had.
 
