@@ -29,7 +29,6 @@ ALLOWANCE: dict[str, int] = {
     "ag_uav/engine/missions.py": 6,
     "ag_uav/engine/observers.py": 1,
     "ag_uav/engine/physics.py": 2,
-    "ag_uav/engine/rotor_fault.py": 18,
     "ag_uav/engine/spray_batched.py": 11,
     "ag_uav/engine/sprayer.py": 4,
     "ag_uav/engine/stages.py": 15,
