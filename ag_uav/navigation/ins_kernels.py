@@ -397,8 +397,8 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
     Re = np.empty((3, 3))
     q_t = np.empty(4)
     dth = np.empty(3)
-    e = np.empty(ERROR_STATE.size)
-    oe = np.empty(ERRORS.size)
+    e = np.empty(XE.SIZE)
+    oe = np.empty(ER.SIZE)
     L, y = np.empty((15, 15)), np.empty(15)
     Pb, eb = np.empty((3, 3)), np.empty(3)
     Pc = np.empty((15, 15))
@@ -425,7 +425,7 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
         for j in range(nr):
             row = i * nr + j
             row_errors(xo[row], p[i], v[i], Rt[i], yaw_t, Re, oe)
-            for c in range(ERRORS.size):
+            for c in range(ER.SIZE):
                 err[k, i, c, j] = oe[c]
             if at_fix:
                 tr = ring[i, (k0[i] + core[row]) % B]
