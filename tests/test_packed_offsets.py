@@ -57,7 +57,6 @@ ALLOWANCE: dict[str, int] = {
     "ag_uav/world/plan_export.py": 4,
     "ag_uav/world/reference.py": 21,
     "ag_uav/world/spray_job.py": 11,
-    "ag_uav/world/wind.py": 19,
     "controllers/attitude.py": 3,
     "estimators/_ins_laws.py": 2,
     "estimators/_linalg.py": 8,
