@@ -45,8 +45,6 @@ ALLOWANCE: dict[str, int] = {
     "ag_uav/navigation/replay/runner.py": 2,
     "ag_uav/navigation/replay/scores.py": 8,
     "ag_uav/navigation/route.py": 4,
-    "ag_uav/world/deposition.py": 6,
-    "ag_uav/world/pattern.py": 7,
     "controllers/attitude.py": 3,
     "estimators/_ins_laws.py": 2,
     "estimators/_linalg.py": 8,
