@@ -1,12 +1,35 @@
-"""The world's packed rows are what their Layouts say: a wind row built by :class:`Wind` has the
-layout's size and its named fields hold the configuration and the last tick's state."""
+"""The world's packed rows are what their Layouts say: a wind row built by :class:`Wind` and the
+deposition's parameter vector and input rows built by their packers have the layouts' sizes,
+and their named fields hold the configuration and the last tick's state."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
+from ag_uav.world.deposition import (
+    DepositionBatch,
+    DepositionConfig,
+    GridSpec,
+    footprints,
+    pack_input,
+    pack_params,
+)
+from ag_uav.world.deposition_kernels import (
+    DEP_PARAMS,
+    DEP_STATE,
+    FOOTPRINT,
+    INPUT,
+    MOMENTS,
+    NACC,
+    NFOOT,
+    NSLOW,
+    P_HEADER,
+    S_ACC,
+    WIDE,
+)
 from ag_uav.world.wind import (
     DRAWS,
     FILTER2,
@@ -49,3 +72,62 @@ def test_a_wind_row_holds_the_last_tick_by_name():
     v = su * (0.5 * fs[0, W.ZV1] + math.sqrt(3.0) / 2.0 * fs[0, W.ZV2])
     ex, ey = fs[0, W.EX], fs[0, W.EY]
     assert (wx, wy) == (fs[0, W.MX] + u * ex - v * ey, fs[0, W.MY] + u * ey + v * ex)
+
+
+P, I = DEP_PARAMS.at, INPUT.at
+
+
+def test_the_deposition_parameters_hold_the_config_by_name():
+    cfg = DepositionConfig(rate_l_per_ha=12.5, swath_m=5.5, speed_min_mps=0.7,
+                           pressure_tau_s=0.2, rotor_z_m=0.09, n_classes=7, flush_ticks=40,
+                           wake_escape=0.35, airborne_after_s=300.0)
+    g = GridSpec(-3.0, -4.0, 0.5, 16, 8, 2, (0, 128, 160))
+    par = pack_params(cfg, g)
+    assert P_HEADER == DEP_PARAMS.size == P.SIZE and S_ACC == DEP_STATE.size
+    assert (NACC, NSLOW, NFOOT) == (MOMENTS.size, WIDE.size, FOOTPRINT.size)
+    assert (par[P.RATE], par[P.SWATH], par[P.VMIN], par[P.TAU], par[P.ROTZ]) == (
+        12.5, 5.5, 0.7, 0.2, 0.09)
+    assert (par[P.X0], par[P.Y0], par[P.CELL], par[P.NX], par[P.NY], par[P.NLEV]) == (
+        -3.0, -4.0, 0.5, 16, 8, 2)
+    assert (par[P.FLUSHT], par[P.ESC], par[P.TMAX]) == (40, 0.35, 300.0)
+    noz = np.asarray(cfg.nozzle_xyz_m, float).reshape(-1, 3)
+    assert (par[P.M], par[P.K]) == (len(noz), 7)
+    # the arrays follow the header at the offsets its o_* slots hold
+    assert par[P.O_NOZ] == P_HEADER
+    o = int(par[P.O_NOZ])
+    assert np.array_equal(par[o:o + noz.size], noz.ravel())
+    o = int(par[P.O_SHARE])
+    assert np.array_equal(par[o:o + len(noz)], cfg.nozzle_share)
+    o = int(par[P.O_LEV])
+    assert np.array_equal(par[o:o + g.levels], g.offsets[:-1])
+
+
+def test_an_input_row_holds_its_fields_by_name():
+    R = np.arange(1.0, 10.0) / 10.0
+    inp = pack_input((1.0, 2.0, 3.0), (4.0, 5.0, 6.0), R, 21.5, (0.5, -0.25, 0.0), True)
+    assert inp.shape == (1, INPUT.size)
+    assert tuple(inp[0, I.POS:I.POS_END]) == (1.0, 2.0, 3.0)
+    assert tuple(inp[0, I.VEL:I.VEL_END]) == (4.0, 5.0, 6.0)
+    assert np.array_equal(inp[0, I.R:I.R_END], R)
+    assert (inp[0, I.THRUST], inp[0, I.CMD]) == (21.5, 1.0)
+    assert tuple(inp[0, I.WIND:I.WIND_END]) == (0.5, -0.25, 0.0)
+    f = footprints(DepositionConfig(n_classes=3), inp)
+    assert list(f)[:NFOOT] == list(FOOTPRINT.offset)
+
+
+def test_a_deposition_state_row_books_by_name():
+    cfg = DepositionConfig(n_classes=3)
+    dep = DepositionBatch(cfg, None, 1, bounds=(-5.0, -5.0, 5.0, 5.0))
+    R = np.eye(3).ravel()
+    inp = pack_input((0.0, 0.0, 3.0), (2.0, 0.0, 0.0), R, 60.0, (0.0, 0.0, 0.0), True)
+    S = DEP_STATE.at
+    sprayed = last = 0.0
+    for _ in range(30):
+        last = float(dep.step_packed(0.01, inp)[0])
+        sprayed += last
+    st = dep.st[0]
+    m = int(dep.par[P.M])
+    assert dep.st.shape[1] >= S_ACC + 1 + INPUT.size + m * NACC
+    assert st[S.ON] == 1.0 and st[S.INSIDE] == 1.0 and st[S.INC] == -1.0  # on, settled
+    assert st[S.SPRAYED] == pytest.approx(sprayed, rel=1e-12) and sprayed > 0.0
+    assert st[S.LITRES_TICK] == last and st[S.Q] == dep.flow_lps[0] > 0.0
