@@ -34,28 +34,6 @@ Vec3 = tuple[float, float, float]
 
 
 @njit
-def quat_to_rot(w: float, x: float, y: float, z: float) -> Mat3:
-    """Rotation matrix (body → world, row-major) of a unit quaternion (w, x, y, z); compiled,
-    so the engine's per-tick kernel calls this one law (:mod:`ag_uav.engine.kernels`)."""
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    return (
-        1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
-        2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
-        2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy),
-    )
-
-
-def rot_to_euler(R: Mat3) -> tuple[float, float, float]:
-    """ZYX Euler angles (roll, pitch, yaw) in radians of a row-major body → world matrix."""
-    roll = math.atan2(R[7], R[8])
-    pitch = -math.asin(max(-1.0, min(1.0, R[6])))
-    yaw = math.atan2(R[3], R[0])
-    return roll, pitch, yaw
-
-
-@njit
 def thrust_attitude(ax: float, ay: float, az: float, yaw: float, mass: float, g: float,
                     tilt_max: float) -> tuple[Mat3, float, float]:
     """Desired attitude and collective thrust for a desired acceleration (world frame).

@@ -12,7 +12,8 @@ import pytest
 from ag_uav.cli import main
 from ag_uav.navigation.replay import ReplayOptions, read_log, run_replay, score_replay
 from ag_uav.navigation.replay.align import clock_lag, mount_rotation
-from ag_uav.navigation.replay.data import Track, euler_zyx_to_rot, rot_to_euler_zyx
+from ag_uav.navigation.replay.data import Track
+from numkit.geometry import euler_to_rots, quats_to_rots, rots_to_euler, rots_to_quats
 
 G = 9.81
 
@@ -31,9 +32,9 @@ def _truth(t: np.ndarray):
 
 def _rates(t: np.ndarray, h: float = 1e-5) -> np.ndarray:
     """Body rate ω = vee(Rᵀ Ṙ) by a central difference of the analytic attitude."""
-    Rm = euler_zyx_to_rot(*_truth(t - h)[3].T)
-    Rp = euler_zyx_to_rot(*_truth(t + h)[3].T)
-    R = euler_zyx_to_rot(*_truth(t)[3].T)
+    Rm = euler_to_rots(*_truth(t - h)[3].T)
+    Rp = euler_to_rots(*_truth(t + h)[3].T)
+    R = euler_to_rots(*_truth(t)[3].T)
     W = np.einsum("nji,njk->nik", R, (Rp - Rm) / (2 * h))
     return np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], 1)
 
@@ -44,7 +45,7 @@ def write_flight(folder, seed: int = 1, duration: float = 60.0, imu_hz: float = 
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, 1.0 / imu_hz)
     p, v, a, rpy = _truth(t)
-    R = euler_zyx_to_rot(*rpy.T)
+    R = euler_to_rots(*rpy.T)
     f = np.einsum("nji,nj->ni", R, a + np.array([0, 0, G]))
     w = _rates(t)
     f += 0.05 * rng.standard_normal(f.shape) + np.array([0.03, -0.02, 0.04])
@@ -99,17 +100,17 @@ def test_a_gnss_gap_drifts_and_is_reported(tmp_path):
 def test_clock_lag_and_mounting_are_found():
     t = np.arange(0.0, 40.0, 1 / 120)
     _, _, a, rpy = _truth(t)
-    R = euler_zyx_to_rot(*rpy.T)
+    R = euler_to_rots(*rpy.T)
     w = _rates(t)
     f = np.einsum("nji,nj->ni", R, a + np.array([0, 0, G]))
-    M = euler_zyx_to_rot(np.array([0.02]), np.array([-0.03]), np.array([1.2]))[0]
+    M = euler_to_rots(np.array([0.02]), np.array([-0.03]), np.array([1.2]))[0]
     imu = np.c_[f @ M.T, w @ M.T]   # ω_imu = M ω_body
     tr = np.arange(0.0, 40.0, 0.1)
-    ref = Track(tr, _truth(tr)[0], euler_zyx_to_rot(*_truth(tr)[3].T))
+    ref = Track(tr, _truth(tr)[0], euler_to_rots(*_truth(tr)[3].T))
     lag, corr = clock_lag(t - 0.37, imu, ref)   # the IMU's clock reads 0.37 s early
     assert abs(lag - 0.37) < 0.02 and corr > 0.95
     Mf, res = mount_rotation(t - 0.37 + lag, imu, ref)
-    assert np.allclose(rot_to_euler_zyx(Mf[None])[0], [0.02, -0.03, 1.2], atol=0.01)
+    assert np.allclose(rots_to_euler(Mf[None])[0], [0.02, -0.03, 1.2], atol=0.01)
 
 
 def test_cli_writes_the_run_folder_and_the_table(tmp_path, capsys):
@@ -155,13 +156,12 @@ _F = np.diag([1.0, -1.0, -1.0])                                        # FLU <->
 def _flight_ned(duration: float, imu_hz: float, seed: int = 2):
     """The figure-8 as an autopilot logs it: IMU (FRD), fixes (lat, lon, alt, NED velocity)
     at 5 Hz and the truth as its estimate (NED position, FRD → NED attitude)."""
-    from ag_uav.navigation.replay.data import rot_to_quat
     from ag_uav.world.geodesy import enu_to_geodetic
 
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, 1.0 / imu_hz)
     _, _, a, rpy = _truth(t)
-    R = euler_zyx_to_rot(*rpy.T)
+    R = euler_to_rots(*rpy.T)
     f = np.einsum("nji,nj->ni", R, a + np.array([0, 0, G]))
     f += 0.05 * rng.standard_normal((t.size, 3))
     w = _rates(t) + math.radians(0.1) * rng.standard_normal((t.size, 3))
@@ -171,7 +171,7 @@ def _flight_ned(duration: float, imu_hz: float, seed: int = 2):
     lon, lat, h = enu_to_geodetic(noisy[:, 0], noisy[:, 1], ORIGIN, noisy[:, 2])
     te = np.arange(0.0, duration, 0.05)
     pe, ve, _, re = _truth(te)
-    q = np.array([rot_to_quat(_T @ Rm @ _F) for Rm in euler_zyx_to_rot(*re.T)])
+    q = rots_to_quats(_T @ euler_to_rots(*re.T) @ _F)
     return {"t": t, "f": f @ _F, "w": w @ _F, "tg": tg, "lat": lat, "lon": lon, "alt": h,
             "vg": vg @ _T, "te": te, "pe": pe @ _T, "ve": ve @ _T, "q": q}
 
@@ -255,10 +255,8 @@ def write_dataflash(path, d: dict) -> None:
                                      int(round(d["lon"][k] * 1e7)), d["alt"][k], 0.015, 12.0,
                                      math.hypot(vn, ve), crs, vd, tn)))
     for k in range(d["te"].size):
-        from ag_uav.navigation.replay.data import quat_to_rot_np
-
-        R = quat_to_rot_np(d["q"][k][None])
-        rpy = np.degrees(rot_to_euler_zyx(R)[0])
+        R = quats_to_rots(d["q"][k][None])
+        rpy = np.degrees(rots_to_euler(R)[0])
         rows.append((ms(d["te"][k]), struct.pack("<BI9f", 131, ms(d["te"][k]), *rpy,
                                                  *d["ve"][k], *d["pe"][k])))
     for _, body in sorted(rows, key=lambda r: r[0]):

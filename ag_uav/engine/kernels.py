@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from controllers.attitude import quat_to_rot
+from numkit.geometry import quat_to_rot9
 
 from .._jit import njit
 
@@ -128,7 +128,7 @@ def tick_in(k, S, iq, iv, cos_tilt, guard, pose, ref):  # pragma: no cover
         for j in range(3):
             v[i, j] = S[i, iv + j]
             omega[i, j] = S[i, iv + 3 + j]
-        Ri = quat_to_rot(w, x, y, z)
+        Ri = quat_to_rot9(w, x, y, z)
         for j in range(9):
             R[i, j] = Ri[j]
         if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(pz)):

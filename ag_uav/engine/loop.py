@@ -52,6 +52,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from numkit.geometry import yaw_to_quat
+
 from ..config import Config
 from ..vehicle.mjcf import Vehicle, build_vehicle
 from .compiling import compile_notice, first_tick
@@ -158,8 +160,7 @@ def _initial_state(fl: Flight, veh: Vehicle, S: np.ndarray, sens: np.ndarray) ->
     start = fl.reference.sample(0.0)
     data.qpos[0], data.qpos[1] = start.pos[0], start.pos[1]
     data.qpos[2] = veh.hover_z if cfg.sim.takeoff else start.pos[2]
-    data.qpos[3] = math.cos(start.yaw / 2)
-    data.qpos[6] = math.sin(start.yaw / 2)
+    yaw_to_quat(start.yaw, data.qpos[3:7])
     if not cfg.sim.takeoff:
         data.ctrl[:] = veh.mass * 9.81 / 4
         data.act[:] = veh.mass * 9.81 / 4

@@ -47,6 +47,7 @@ import numpy as np
 
 from controllers.attitude import effectiveness, fault_allocation
 from controllers.cascade import P_AINV, P_G, P_MASS, S_ER
+from numkit.geometry import rot_to_yaw
 
 from .stages import Batch
 
@@ -226,8 +227,7 @@ class RotorFaults:
         b.rv[i, 2] = 0.0
         b.ra[i] = 0.0
         if self.yaw_free[i]:
-            R = b.Rc[i]
-            b.yaw[i] = math.atan2(R[3], R[0])
+            b.yaw[i] = rot_to_yaw(b.Rc[i])
 
     # ----------------------------------------------------------------------------- the landing
     def _start_landing(self, i: int, t: float) -> None:
@@ -255,8 +255,7 @@ class RotorFaults:
         b.rv[i, 2] = -speed if self.zr[i] > ground - 0.5 else 0.0
         b.spray[i] = False
         if self.yaw_free[i]:
-            R = b.Rc[i]
-            b.yaw[i] = math.atan2(R[3], R[0])
+            b.yaw[i] = rot_to_yaw(b.Rc[i])
         info = self.info[i]
         vz = abs(float(b.v[i, 2]))
         if info is not None and b.p[i, 2] < ground + 0.3:  # the last 0.3 m: the touchdown

@@ -47,6 +47,7 @@ from .._jit import njit
 from ..config import Config, ConfigError
 from ..vehicle.mjcf import G
 from .aiding import fuse_height, horizontal_sigma
+from .coloured import coloured_noise
 from .feedback import Feedback
 from .receiver import make_gps
 
@@ -73,7 +74,9 @@ def process_noise(cfg: Config, model: str | None = None) -> tuple[float, float, 
     return q, q_bias, var0
 
 
-def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
+def make_filter(name: str, cfg: Config, r_diag: np.ndarray, components: tuple = ()) -> Any:
+    """One position filter of the ideal-attitude chain; ``components``: the receiver's base
+    noise components (the coloured-noise filters model its Gauss–Markov part)."""
     e = cfg.estimator
     dt = 1.0 / cfg.sim.control_hz
     q, q_bias, _ = process_noise(cfg)
@@ -89,7 +92,10 @@ def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
                       recovery=None if e.mckf_recovery == "none" else e.mckf_recovery)
     if name.startswith("pca"):
         params.update(window=e.window, mode=e.pca_mode)
+    if name in ("kf-bias", "kf-diff"):
+        params.update(coloured_noise(name, cfg, r_diag, components, R_FLOOR))
     return estimators.make(name, **params)
+
 
 
 class FilterBank:
@@ -208,7 +214,8 @@ class EstimatorFeedback(FilterBank, Feedback):
         self.name = e.name
         names = ([e.name] if e.name != "true" else []) + [s for s in e.shadow if s != e.name]
         self.names = names
-        self.filters = {n: make_filter(n, cfg, self.r_diag) for n in names}
+        comps = tuple(getattr(self.gps, "config_components", ()))
+        self.filters = {n: make_filter(n, cfg, self.r_diag, comps) for n in names}
         mdl = next(iter(self.filters.values())).model if self.filters else None
         self.pos_idx = list(mdl.pos_idx) if mdl is not None else [0, 2, 4]
         self.vel_idx = list(mdl.vel_idx) if mdl is not None else [1, 3, 5]

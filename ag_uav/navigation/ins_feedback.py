@@ -100,6 +100,7 @@ from typing import Any
 import numpy as np
 
 from estimators.ins import BatchINS, INSConfig
+from numkit.geometry import euler_to_quat, quat_to_rot_flat
 
 from ..config import Config, ConfigError
 from ..vehicle.gps import ReceiverReport, derive_seed
@@ -123,7 +124,6 @@ from .ins_kernels import (
     Scores,
     SensorRows,
     outputs,
-    quat_to_rot,
     radar_rows,
     tick_in,
 )
@@ -632,9 +632,10 @@ class BatchInsFeedback:
         f = self.imu[i, :3]
         roll = math.atan2(f[1], f[2])
         pitch = math.atan2(-f[0], math.hypot(f[1], f[2]))
-        q = _euler_quat(roll, pitch, float(row[7]))
+        q = np.empty(4)
+        euler_to_quat(roll, pitch, float(row[7]), q)
         Rm = np.empty(9)
-        quat_to_rot(q, Rm)
+        quat_to_rot_flat(q, Rm)
         p = row[1:4] - Rm.reshape(3, 3) @ np.asarray(ANTENNA)
         im = self.cfg.imu
         sd = np.r_[np.sqrt(row[8:11]), [0.1] * 3, [DEG, DEG, 2 * DEG],
@@ -658,9 +659,10 @@ class BatchInsFeedback:
         """Vehicles without a fix yet: radar height, zero velocity, levelled attitude."""
         for i in np.flatnonzero(act & ~self.init):
             f = self.imu[i, :3]
-            q = _euler_quat(math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2])),
-                            0.0)
-            quat_to_rot(q, self.R_out[i])
+            q = np.empty(4)
+            euler_to_quat(math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2])), 0.0,
+                          q)
+            quat_to_rot_flat(q, self.R_out[i])
             h = self.radar[i, 0]
             self.p_out[i, :2] = 0.0
             if np.isfinite(h):   # body height = slant range + the radar's offset (level)
@@ -688,11 +690,3 @@ class BatchInsFeedback:
                       "counters": {key: [int(x) for x in val[i * self.nr:(i + 1) * self.nr]]
                                    for key, val in counters.items()}}
 
-
-def _euler_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """ZYX Euler angles → Hamilton (w, x, y, z), body → world."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])

@@ -17,14 +17,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from estimators.ins import quat_log_err
-from estimators.ins import quat_to_rot as quat_to_rot_3x3
+from numkit.geometry import quat_log_err, quat_to_rot, quat_to_rot_flat, rot_to_quat, rot_to_yaw
 
 from .._jit import njit
 
 __all__ = ["BLOCKS", "FIX_DUE", "NOT_INITIALISED", "NREC", "RING_WIDTH", "BankView", "Outputs",
            "Pose", "Scores", "SensorRows", "Truth", "outputs", "quad_inv", "quad_inv_at",
-           "quat_to_rot", "radar_rows", "ring_write", "rot_to_quat", "tick_in"]
+           "radar_rows", "ring_write", "tick_in"]
 
 #: the per-fix score record's columns (``BatchInsFeedback.nees[i, fix, :, row]``): NEES15,
 #: the NEES of the position, velocity, attitude, accel-bias and gyro-bias blocks (3 dof each),
@@ -231,35 +230,6 @@ def radar_rows(ring, slot, act, noise, noise_i, sig, radar, range_last):  # prag
 
 
 @njit(cache=True)
-def quat_to_rot(q, R):  # pragma: no cover
-    """Unit quaternion (w, x, y, z) → row-major rotation (9,), body → world: the INS's own
-    law (:func:`estimators.ins.quat_to_rot`) written into R's 3 × 3 view."""
-    quat_to_rot_3x3(q, R.reshape(3, 3))
-
-
-@njit(cache=True)
-def rot_to_quat(R, q):  # pragma: no cover
-    """Row-major rotation → unit quaternion (w, x, y, z) (Shepperd's method)."""
-    tr = R[0] + R[4] + R[8]
-    if tr > 0.0:
-        s = math.sqrt(tr + 1.0) * 2.0
-        q[0], q[1] = 0.25 * s, (R[7] - R[5]) / s
-        q[2], q[3] = (R[2] - R[6]) / s, (R[3] - R[1]) / s
-    elif R[0] > R[4] and R[0] > R[8]:
-        s = math.sqrt(1.0 + R[0] - R[4] - R[8]) * 2.0
-        q[0], q[1] = (R[7] - R[5]) / s, 0.25 * s
-        q[2], q[3] = (R[1] + R[3]) / s, (R[2] + R[6]) / s
-    elif R[4] > R[8]:
-        s = math.sqrt(1.0 + R[4] - R[0] - R[8]) * 2.0
-        q[0], q[1] = (R[2] - R[6]) / s, (R[1] + R[3]) / s
-        q[2], q[3] = 0.25 * s, (R[5] + R[7]) / s
-    else:
-        s = math.sqrt(1.0 + R[8] - R[0] - R[4]) * 2.0
-        q[0], q[1] = (R[3] - R[1]) / s, (R[2] + R[6]) / s
-        q[2], q[3] = (R[5] + R[7]) / s, 0.25 * s
-
-
-@njit(cache=True)
 def nees15(x, P, tr, q_t, dth, e, L, y):  # pragma: no cover
     """eᵀ P⁻¹ e of one row's core state against the truth ``tr`` (a ring row): e = [p, v,
     Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the IMU's walked biases of that
@@ -320,9 +290,9 @@ def quad_inv(P, e, n, L, y):  # pragma: no cover
 def row_errors(x, p, v, Rt, yaw_t, Re, out):  # pragma: no cover
     """Horizontal position, 3-D velocity, tilt (angle between the body z axes) and yaw errors
     of one row's output against the truth of the tick (``Rt`` row-major, its yaw
-    ``yaw_t = atan2(Rt[3], Rt[0])``, the same for every row of a vehicle); ``Re`` (3, 3):
+    ``yaw_t = atan2(R₁₀, R₀₀)``, the same for every row of a vehicle); ``Re`` (3, 3):
     scratch."""
-    quat_to_rot_3x3(x[6:10], Re)
+    quat_to_rot(x[6:10], Re)
     dx, dy = x[0] - p[0], x[1] - p[1]
     out[0] = math.sqrt(dx * dx + dy * dy)
     s = 0.0
@@ -375,13 +345,13 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
                 p_out[i, a] = x[a]
                 v_out[i, a] = x[3 + a]
                 w_out[i, a] = imu[i, 3 + a] - x[13 + a]
-            quat_to_rot(x[6:10], R_out[i])
+            quat_to_rot_flat(x[6:10], R_out[i])
         rec = n_fix[i]
         at_fix = np.isfinite(gnss[i, 0]) and rec < fix_k.shape[1]
         if at_fix:
             fix_k[i, rec] = k
             n_fix[i] = rec + 1
-        yaw_t = math.atan2(Rt[i, 3], Rt[i, 0])
+        yaw_t = rot_to_yaw(Rt[i])
         for j in range(nr):
             row = i * nr + j
             row_errors(xo[row], p[i], v[i], Rt[i], yaw_t, Re, oe)

@@ -1,14 +1,16 @@
-"""The INS's model: quaternion algebra, the nominal and covariance prediction, the error
-injection and reset, and the measurement models (h, H) with the innovation gate; formulas and
-sources in :mod:`estimators.ins`.  Each model ``h_*`` has a twin ``h_*_w`` taking its scratch
-(the tick's path allocates nothing; the public ``h_*`` allocate it, for tests and callers
-outside the kernel)."""
+"""The INS's model: the nominal and covariance prediction (its quaternion algebra from
+:mod:`numkit.geometry`), the error injection and reset, and the measurement models (h, H)
+with the innovation gate; formulas and sources in :mod:`estimators.ins`.  Each model ``h_*``
+has a twin ``h_*_w`` taking its scratch (the tick's path allocates nothing; the public ``h_*``
+allocate it, for tests and callers outside the kernel)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+from numkit.geometry import quat_exp, quat_log_err, quat_mul, quat_normalize, quat_to_rot
 
 from .._jit import njit
 from .layout import (
@@ -28,65 +30,6 @@ __all__ = ["cov_step", "gate_ratio", "h_gnss_pos", "h_gnss_pos_w", "h_gnss_vel",
            "h_heading", "h_heading_w", "h_radar", "h_radar_w", "inject_reset", "inject_reset_w",
            "increments", "innov_var", "nominal_step", "nominal_step_R", "quat_exp", "quat_log_err",
            "quat_mul", "quat_to_rot", "skew_mul", "step_llr"]
-
-
-# ------------------------------------------------------------------------ quaternion algebra
-@njit
-def quat_mul(a, b, out):
-    """out = a ⊗ b (Hamilton, (w, x, y, z)); out may not alias a or b."""
-    out[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3]
-    out[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2]
-    out[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1]
-    out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0]
-
-
-@njit
-def quat_exp(phi, out):
-    """out = Exp(φ) = (cos(θ/2), sin(θ/2) φ/θ), θ = ‖φ‖ (Solà eq 101)."""
-    th = math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
-    if th < 1e-12:
-        out[0] = 1.0
-        for k in range(3):
-            out[k + 1] = 0.5 * phi[k]
-        return
-    s = math.sin(0.5 * th) / th
-    out[0] = math.cos(0.5 * th)
-    for k in range(3):
-        out[k + 1] = s * phi[k]
-
-
-@njit
-def quat_to_rot(q, R):
-    """R = R(q), body to world (Solà eq 115)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    R[0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    R[0, 1] = 2.0 * (x * y - w * z)
-    R[0, 2] = 2.0 * (x * z + w * y)
-    R[1, 0] = 2.0 * (x * y + w * z)
-    R[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    R[1, 2] = 2.0 * (y * z - w * x)
-    R[2, 0] = 2.0 * (x * z - w * y)
-    R[2, 1] = 2.0 * (y * z + w * x)
-    R[2, 2] = 1.0 - 2.0 * (x * x + y * y)
-
-
-@njit
-def quat_log_err(q_est, q_true, out):
-    """out = Log(q_est* ⊗ q_true): the local attitude error δθ with q_true = q_est ⊗ Exp(δθ)."""
-    c = np.empty(4)
-    c[0] = q_est[0]
-    for k in range(3):
-        c[k + 1] = -q_est[k + 1]
-    d = np.empty(4)
-    quat_mul(c, q_true, d)
-    if d[0] < 0.0:
-        for k in range(4):
-            d[k] = -d[k]
-    n = math.sqrt(d[1] * d[1] + d[2] * d[2] + d[3] * d[3])
-    th = 2.0 * math.atan2(n, d[0])
-    s = th / n if n > 1e-15 else 2.0
-    for k in range(3):
-        out[k] = s * d[k + 1]
 
 
 @njit
@@ -160,9 +103,7 @@ def nominal_step_R(x, u, up, prm, R, w):
     quat_exp(w[3:6], dq)
     qn = w[10:14]
     quat_mul(x[6:10], dq, qn)
-    nrm = math.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
-    for k in range(4):
-        x[6 + k] = qn[k] / nrm
+    quat_normalize(qn, x[6:10])
 
 
 @njit
@@ -265,9 +206,7 @@ def inject_reset_w(x, P, dx, w):
     quat_exp(dx[6:9], dq)
     qn = w[4:8]
     quat_mul(x[6:10], dq, qn)
-    nrm = math.sqrt(qn[0] * qn[0] + qn[1] * qn[1] + qn[2] * qn[2] + qn[3] * qn[3])
-    for k in range(4):
-        x[6 + k] = qn[k] / nrm
+    quat_normalize(qn, x[6:10])
     h0, h1, h2 = 0.5 * dx[6], 0.5 * dx[7], 0.5 * dx[8]
     # G = [[1, h2, −h1], [−h2, 1, h0], [h1, −h0, 1]]: rows 6-8 ← G P[6:9], then cols ← · Gᵀ
     g01, g02, g10, g12, g20, g21 = h2, -h1, -h2, h0, h1, -h0

@@ -31,7 +31,9 @@ import math
 
 import numpy as np
 
-from .data import DEG, FlightLog, ReplayError, Track, euler_zyx_to_rot, rot_to_euler_zyx
+from numkit.geometry import euler_to_rots, rots_to_euler
+
+from .data import DEG, FlightLog, ReplayError, Track
 
 __all__ = ["clock_lag", "initial_state", "mount_rotation", "rot_log"]
 
@@ -166,19 +168,19 @@ def _attitude(log: FlightLog, t_grid, imu, k0: int, src: str) -> tuple[np.ndarra
         _, Ry = tr.at(np.array([t0]))
         if not np.all(np.isfinite(Ry)):
             raise ReplayError(f"--heading {src}: no {src} attitude at the start (t = {t0:.2f} s)")
-        yaw = float(rot_to_euler_zyx(Ry)[0, 2])
+        yaw = float(rots_to_euler(Ry)[0, 2])
     else:
         j = min(int(np.searchsorted(log.gnss_t, t0)), log.gnss_t.size - 1)
         yaw = math.atan2(log.gnss_v[j, 1], log.gnss_v[j, 0])
     Rr = ref.at(np.array([t0]))[1] if ref is not None and ref.R is not None else None
     if Rr is not None and np.all(np.isfinite(Rr)):
-        rpy, how = rot_to_euler_zyx(Rr)[0], "roll/pitch from the reference"
+        rpy, how = rots_to_euler(Rr)[0], "roll/pitch from the reference"
     else:
         rpy, comp = _level(log, t_grid, imu, k0, yaw)
         how = "roll/pitch levelled from the accelerometer" + (
             " less the GNSS acceleration" if comp else "")
     rpy[2] = yaw
-    return euler_zyx_to_rot(*[np.array([a]) for a in rpy])[0], f"{how}, heading from {src}"
+    return euler_to_rots(*[np.array([a]) for a in rpy])[0], f"{how}, heading from {src}"
 
 
 def _level(log: FlightLog, t_grid, imu, k0: int, yaw: float) -> tuple[np.ndarray, bool]:
@@ -201,7 +203,7 @@ def _level(log: FlightLog, t_grid, imu, k0: int, yaw: float) -> tuple[np.ndarray
     g = f
     for _ in range(3):
         rpy[0], rpy[1] = math.atan2(g[1], g[2]), math.atan2(-g[0], math.hypot(g[1], g[2]))
-        g = f - euler_zyx_to_rot(*[np.array([a]) for a in rpy])[0].T @ a_w
+        g = f - euler_to_rots(*[np.array([a]) for a in rpy])[0].T @ a_w
     return np.array([rpy[0], rpy[1], 0.0]), comp
 
 

@@ -29,16 +29,16 @@ from pathlib import Path
 
 import numpy as np
 
+from numkit.geometry import euler_to_rots, quats_to_rots
+
 from ...world.geodesy import lonlat_to_enu
 from .data import (
     DEG,
     FlightLog,
     ReplayError,
     Track,
-    euler_zyx_to_rot,
     frd_to_flu,
     ned_frd_to_enu_flu,
-    quat_to_rot_np,
 )
 
 __all__ = ["read_log", "read_csv_folder", "read_phantom", "read_ulog", "read_dataflash"]
@@ -146,7 +146,7 @@ def read_csv_folder(folder: Path) -> FlightLog:
         rp, origin = _enu_cols(folder / "reference.csv", rt, origin)
         R = None
         if {"roll", "pitch", "yaw"} <= rt.keys():
-            R = euler_zyx_to_rot(rt["roll"] * DEG, rt["pitch"] * DEG, rt["yaw"] * DEG)
+            R = euler_to_rots(rt["roll"] * DEG, rt["pitch"] * DEG, rt["yaw"] * DEG)
         ref = Track(rt["t"], rp, R, label="reference")
     f = np.stack([imu[k] for k in ("ax", "ay", "az", "gx", "gy", "gz")], axis=1)
     return FlightLog("csv", str(folder), t, f, gn["t"], p, var, v, var_v, origin, ref,
@@ -167,7 +167,7 @@ def read_phantom(folder: Path, imu_file: str | None = None) -> FlightLog:
     f = np.stack([imu["Acc_X"], imu["Acc_Y"], imu["Acc_Z"], imu["Gyr_X"] * DEG,
                   imu["Gyr_Y"] * DEG, imu["Gyr_Z"] * DEG], axis=1)[keep]
     p = np.stack([gt["East"], gt["North"], -gt["Down"]], axis=1)
-    R_nf = euler_zyx_to_rot(gt["roll(degrees)"] * DEG, gt["pitch(degrees)"] * DEG,
+    R_nf = euler_to_rots(gt["roll(degrees)"] * DEG, gt["pitch(degrees)"] * DEG,
                             gt["compass_heading(degrees)"] * DEG)
     ref = Track(gt["time"], p, ned_frd_to_enu_flu(R_nf), label="RTK reference (GT.csv)")
     empty = np.zeros((0, 3))
@@ -273,7 +273,7 @@ def _ulog_ekf(log: FlightLog, u) -> None:
     R = None
     if att is not None:
         q = np.stack([att[f"q[{i}]"] for i in range(4)], axis=1).astype(float)
-        Ra = ned_frd_to_enu_flu(quat_to_rot_np(q))
+        Ra = ned_frd_to_enu_flu(quats_to_rots(q))
         R = np.stack([np.interp(t, att["timestamp"] * 1e-6, Ra[:, i // 3, i % 3])
                       for i in range(9)], axis=1).reshape(-1, 3, 3)
     log.autopilot = Track(t, p, R, v, label="PX4 EKF2")
@@ -376,7 +376,7 @@ def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
     rows = msgs[kind]
     t = _df_t(rows)
     eul = np.array([[r["Roll"], r["Pitch"], r["Yaw"]] for r in rows], dtype=float) * DEG
-    R = ned_frd_to_enu_flu(euler_zyx_to_rot(eul[:, 0], eul[:, 1], eul[:, 2]))
+    R = ned_frd_to_enu_flu(euler_to_rots(eul[:, 0], eul[:, 1], eul[:, 2]))
     p = np.full((len(rows), 3), np.nan)
     v = None
     if kind == "EKF1":

@@ -38,10 +38,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimators.ins import RULES, BatchINS
+from numkit.geometry import rots_to_euler, rots_to_quats
 
 from ...vehicle.gps import GpsSensor, derive_seed
 from .align import clock_lag, initial_state, mount_rotation
-from .data import DEG, FlightLog, ReplayError, rot_to_euler_zyx, rot_to_quat
+from .data import DEG, FlightLog, ReplayError
 
 __all__ = ["ReplayOptions", "ReplayResult", "run_replay"]
 
@@ -102,7 +103,7 @@ def _prepare_imu(log: FlightLog, opts: ReplayOptions, info: dict) -> None:
     if log.source == "phantom" and ref is not None:
         M, res = mount_rotation(log.imu_t, log.imu, ref)
         log.imu = np.concatenate([log.imu[:, :3] @ M, log.imu[:, 3:] @ M], axis=1)
-        info["mount_rpy_deg"] = np.round(rot_to_euler_zyx(M[None])[0] / DEG, 2).tolist()
+        info["mount_rpy_deg"] = np.round(rots_to_euler(M[None])[0] / DEG, 2).tolist()
         info["mount_rate_residual_dps"] = round(res / DEG, 3)
 
 
@@ -207,7 +208,7 @@ def run_replay(log: FlightLog, opts: ReplayOptions) -> ReplayResult:
     bank = BatchINS(1, icfg, rules)
     bs_a, bs_g = opts.bias_sd
     sd = np.r_[init["sd9"], [bs_a] * 3, [bs_g * DEG] * 3]
-    bank.reset(init["p"], init["v"], rot_to_quat(init["R"]), P0=sd)
+    bank.reset(init["p"], init["v"], rots_to_quats(init["R"][None])[0], P0=sd)
     info.update({"imu_rate_hz": round(rate, 3), "gnss_delay_s": delay,
                  "lever_arm_m": lever.tolist(), "rules": list(rules), "flown": flown,
                  "start_t_s": round(float(t_grid[k0]), 3),

@@ -16,7 +16,9 @@ import math
 
 import numpy as np
 
-from .data import DEG, Track, quat_to_rot_np, rot_to_euler_zyx
+from numkit.geometry import quats_to_rots, rots_to_euler
+
+from .data import DEG, Track
 from .runner import ReplayResult
 
 __all__ = ["score_replay"]
@@ -65,7 +67,7 @@ def score_replay(res: ReplayResult) -> dict:
     if track is not None:
         p_ref, R_ref = track.at(res.t)
         v_ref = _track_v(track, res.t)
-        e_ref = rot_to_euler_zyx(R_ref) if R_ref is not None else None
+        e_ref = rots_to_euler(R_ref) if R_ref is not None else None
     for i, rule in enumerate(res.rules):
         x = res.x[:, i]
         s = _events(res.fix_events[rule])
@@ -88,8 +90,8 @@ def _errors(res: ReplayResult, x, p_ref, v_ref, R_ref, e_ref) -> dict:
         near = np.minimum(np.abs(res.t - res.fix_t[j - 1]), np.abs(res.t - res.fix_t[j])) <= 1.0
         s["pos_h_rms_with_fixes_m"] = _rms(he[near])
     if R_ref is not None and np.isfinite(R_ref).any():
-        R = quat_to_rot_np(x[:, 6:10])
-        e = rot_to_euler_zyx(R)
+        R = quats_to_rots(x[:, 6:10])
+        e = rots_to_euler(R)
         d = _wrap(e - e_ref) / DEG
         cz = np.clip(np.einsum("ni,ni->n", R[:, :, 2], R_ref[:, :, 2]), -1.0, 1.0)
         s.update({"roll_rms_deg": _rms(d[:, 0]), "pitch_rms_deg": _rms(d[:, 1]),
