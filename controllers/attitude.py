@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from numkit import Layout, X, Y, Z
-from numkit.axes import R_XX, R_XY, R_XZ, R_YX, R_YY, R_YZ, R_ZX, R_ZY, R_ZZ
+from numkit.geometry import RXX, RXY, RXZ, RYX, RYY, RYZ, RZX, RZY, RZZ
 
 from ._jit import njit
 from .rows import RowBlocks
@@ -79,12 +79,12 @@ def geometric_torque(R: Mat3, omega: Sequence[float], R_d: Mat3, J: Sequence[flo
     d = R_d
     # M = R_dᵀ R  (only the off-diagonal entries are needed for vee(M − Mᵀ))
     # m_ij = Σ_k d_ki r_kj
-    m01 = d[R_XX] * r[R_XY] + d[R_YX] * r[R_YY] + d[R_ZX] * r[R_ZY]
-    m02 = d[R_XX] * r[R_XZ] + d[R_YX] * r[R_YZ] + d[R_ZX] * r[R_ZZ]
-    m10 = d[R_XY] * r[R_XX] + d[R_YY] * r[R_YX] + d[R_ZY] * r[R_ZX]
-    m12 = d[R_XY] * r[R_XZ] + d[R_YY] * r[R_YZ] + d[R_ZY] * r[R_ZZ]
-    m20 = d[R_XZ] * r[R_XX] + d[R_YZ] * r[R_YX] + d[R_ZZ] * r[R_ZX]
-    m21 = d[R_XZ] * r[R_XY] + d[R_YZ] * r[R_YY] + d[R_ZZ] * r[R_ZY]
+    m01 = d[RXX] * r[RXY] + d[RYX] * r[RYY] + d[RZX] * r[RZY]
+    m02 = d[RXX] * r[RXZ] + d[RYX] * r[RYZ] + d[RZX] * r[RZZ]
+    m10 = d[RXY] * r[RXX] + d[RYY] * r[RYX] + d[RZY] * r[RZX]
+    m12 = d[RXY] * r[RXZ] + d[RYY] * r[RYZ] + d[RZY] * r[RZZ]
+    m20 = d[RXZ] * r[RXX] + d[RYZ] * r[RYX] + d[RZZ] * r[RZX]
+    m21 = d[RXZ] * r[RXY] + d[RYZ] * r[RYY] + d[RZZ] * r[RZY]
     ex = 0.5 * (m21 - m12)
     ey = 0.5 * (m02 - m20)
     ez = 0.5 * (m10 - m01)

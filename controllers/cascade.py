@@ -41,7 +41,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from numkit import Layout, X, Y, Z
-from numkit.axes import R_XZ, R_YZ, R_ZZ
+from numkit.geometry import RXZ, RYZ, RZZ
 
 from ._jit import njit
 from .attitude import (
@@ -131,7 +131,7 @@ def command_step(prm: np.ndarray, st: np.ndarray, ux: float, uy: float, uz: floa
         st[S_RD + j] = R_d[j]
     # collective thrust: the desired force projected on the current body z axis,
     # T = |f| (R_d e3)·(R e3)
-    T = fn * (R_d[R_XZ] * R[R_XZ] + R_d[R_YZ] * R[R_YZ] + R_d[R_ZZ] * R[R_ZZ])
+    T = fn * (R_d[RXZ] * R[RXZ] + R_d[RYZ] * R[RYZ] + R_d[RZZ] * R[RZZ])
     if T < 0.0:
         T = 0.0
     st[S_THRUST] = T

@@ -10,7 +10,7 @@ from typing import NamedTuple
 import numpy as np
 
 from numkit import Layout, X, Y, Z
-from numkit.axes import R_XX, R_XY, R_XZ, R_YX, R_YY, R_YZ, R_ZX, R_ZY, R_ZZ
+from numkit.geometry import RXX, RXY, RXZ, RYX, RYY, RYZ, RZX, RZY, RZZ
 
 from .._jit import njit
 from .droplets import N_TAB
@@ -372,15 +372,15 @@ def _environment(par, inp):
     pz, vx, vy = inp[_I.POS + Z], inp[_I.VEL + X], inp[_I.VEL + Y]
     r = inp[_I.R:_I.R_END]
     thrust, wx, wy = inp[_I.THRUST], inp[_I.WIND + X], inp[_I.WIND + Y]
-    cz = r[R_ZZ] if r[R_ZZ] > 0.3 else 0.3           # cosine of the tilt; wake along -z_body
-    tx, ty = -r[R_XZ] / cz, -r[R_YZ] / cz            # horizontal wake drift per metre of fall
-    zr = pz + r[R_ZZ] * par[P_ROTZ]
+    cz = r[RZZ] if r[RZZ] > 0.3 else 0.3           # cosine of the tilt; wake along -z_body
+    tx, ty = -r[RXZ] / cz, -r[RYZ] / cz            # horizontal wake drift per metre of fall
+    zr = pz + r[RZZ] * par[P_ROTZ]
     zn = 0.0
     for m in range(m_n):
         b = o_noz + 3 * m
         # the nozzle's height, z + (R n_b)_z
-        zn += par[o_share + m] * (pz + r[R_ZX] * par[b + X] + r[R_ZY] * par[b + Y]
-                                  + r[R_ZZ] * par[b + Z])
+        zn += par[o_share + m] * (pz + r[RZX] * par[b + X] + r[RZY] * par[b + Y]
+                                  + r[RZZ] * par[b + Z])
     zn = max(zn, 0.0)
     s_n, s_g = max(zr - zn, 0.0), max(zr, 0.0)
     # momentum theory (Glauert in forward flight) and the wake skew tan χ = V_a / v_i
@@ -547,10 +547,10 @@ def _release(par, st, inp, litres: float) -> None:
         b = o_noz + 3 * m
         # the nozzle's position, p + R n_b (x and y)
         ro = _I.R
-        x = (px + inp[ro + R_XX] * par[b + X] + inp[ro + R_XY] * par[b + Y]
-             + inp[ro + R_XZ] * par[b + Z])
-        y = (py + inp[ro + R_YX] * par[b + X] + inp[ro + R_YY] * par[b + Y]
-             + inp[ro + R_YZ] * par[b + Z])
+        x = (px + inp[ro + RXX] * par[b + X] + inp[ro + RXY] * par[b + Y]
+             + inp[ro + RXZ] * par[b + Z])
+        y = (py + inp[ro + RYX] * par[b + X] + inp[ro + RYY] * par[b + Y]
+             + inp[ro + RYZ] * par[b + Z])
         v = litres * par[o_share + m]
         a = o + m * NACC
         st[a + _M.V] += v
