@@ -371,6 +371,8 @@ class Engine:
         if self.rotor_faults is not None:
             self.rotor_faults.step(k, t)
         self.control.step()
+        if self.rotor_faults is not None:
+            self.rotor_faults.after_control(t)
         if self.spraying is not None:
             self.spraying.step(k, t)
         self.disturbance.step(k)
