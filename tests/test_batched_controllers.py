@@ -17,7 +17,7 @@ import pytest
 
 from controllers import FPID, IT2FPID, PID, REDUCERS
 from controllers.attitude import GeometricAttitudeController, XMixer
-from controllers.axis import AX_NS, S_I
+from controllers.axis import AX_NS, S
 from controllers.batched import NP, NS, P_MASS, BatchCascade
 from controllers.cascade import PositionCascade
 from numkit.geometry import quat_to_rot9
@@ -288,8 +288,8 @@ def test_sub_objects_share_the_cascade_row():
         fa, fb, fc = a.update(*args), b.update(*args), c.update(*args)
         assert fa == fb == fc
         assert a.internals() == b.internals() == c.internals()
-    assert a.axes[2].integral == a.state[2 * AX_NS + S_I]
-    assert c.axes[2].integral == c.state[2 * AX_NS + S_I]
+    assert a.axes[2].integral == a.state[2 * AX_NS + S.I]
+    assert c.axes[2].integral == c.state[2 * AX_NS + S.I]
     assert BatchCascade.from_cascades([a]).J[0].tolist() == [0.03, 0.04, 0.05]
     with pytest.raises(ValueError, match="PID, FPID and IT2FPID"):
         BatchCascade.from_cascades([b])

@@ -132,6 +132,8 @@ import numpy as np
 from .._jit import HAVE_NUMBA
 from .deposition_config import DepositionConfig
 from .deposition_kernels import (
+    FOOTPRINT,
+    INPUT,
     INPUT_WIDTH,
     NACC,
     NFOOT,
@@ -196,6 +198,7 @@ from .deposition_kernels import (
     S_OUTSIDE,
     S_Q,
     S_SPRAYED,
+    SCRATCH,
     batch_flush,
     batch_step,
     class_footprints,
@@ -318,9 +321,7 @@ def footprints(cfg: DepositionConfig, inp: np.ndarray, par: np.ndarray | None = 
     out = np.zeros((int(par[P_K]), NFOOT))
     class_footprints(par, np.asarray(inp, float).reshape(-1)[:INPUT_WIDTH], out)
     d, frac = droplet_classes(cfg.dv10_um, cfg.dv50_um, cfg.dv90_um, cfg.n_classes)
-    names = ("wake", "wx", "wy", "wvar", "wland", "esc", "ex", "ey", "evx", "evy", "mut",
-             "lamt", "pair", "rland", "rair", "ux", "uy")
-    res = {n: out[:, i].copy() for i, n in enumerate(names)}
+    res = {n: out[:, i].copy() for n, i in FOOTPRINT.offset.items()}
     res.update(d_m=d, frac=frac)
     return res
 
@@ -331,12 +332,12 @@ def pack_input(pos, vel, R, thrust, wind, cmd, out: np.ndarray | None = None) ->
     pos = np.atleast_2d(np.asarray(pos, float))
     n = pos.shape[0]
     inp = np.empty((n, INPUT_WIDTH)) if out is None else out
-    inp[:, 0:3] = pos
-    inp[:, 3:6] = np.atleast_2d(vel)
-    inp[:, 6:15] = np.asarray(R, float).reshape(n, 9)
-    inp[:, 15] = thrust
-    inp[:, 16:19] = np.atleast_2d(wind)
-    inp[:, 19] = np.asarray(cmd, float).reshape(n) if np.ndim(cmd) else float(cmd)
+    inp[:, INPUT.slice("pos")] = pos
+    inp[:, INPUT.slice("vel")] = np.atleast_2d(vel)
+    inp[:, INPUT.slice("r")] = np.asarray(R, float).reshape(n, INPUT.width["r"])
+    inp[:, INPUT.offset["thrust"]] = thrust
+    inp[:, INPUT.slice("wind")] = np.atleast_2d(wind)
+    inp[:, INPUT.offset["cmd"]] = np.asarray(cmd, float).reshape(n) if np.ndim(cmd) else float(cmd)
     return inp
 
 
@@ -470,7 +471,7 @@ class DepositionBatch:
         self.buf = np.zeros((n, self.grid.size))
         self.out = np.zeros(n)
         self.inp = np.zeros((n, INPUT_WIDTH))
-        self.scratch = np.zeros((3, max(self.grid.nx, self.grid.ny, INPUT_WIDTH) + 2))
+        self.scratch = np.zeros((SCRATCH.size, max(self.grid.nx, self.grid.ny, INPUT_WIDTH) + 2))
         self._arrays = (self.par, self.inp, self.st, self.buf, self.scratch)  # DepArrays
 
     @property

@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from numkit.axes import Z
+
 _M350_NOZZLES = ((0.3164, -0.3164, -0.15), (0.3164, 0.3164, -0.15),
                  (-0.3164, 0.3164, -0.15), (-0.3164, -0.3164, -0.15))
 
@@ -106,7 +108,8 @@ class DepositionConfig:
                 kw[k] = tuple(v) if isinstance(v, list) else v
         xyz = kw.get("nozzle_xyz_m")
         if xyz is not None and xyz and not isinstance(xyz[0], tuple | list):  # flat x, y, z, ..
-            kw["nozzle_xyz_m"] = tuple(tuple(xyz[i:i + 3]) for i in range(0, len(xyz), 3))
+            n = Z + 1  # x, y, z per nozzle
+            kw["nozzle_xyz_m"] = tuple(tuple(xyz[i:i + n]) for i in range(0, len(xyz), n))
         if kw.get("nozzle_share") == ():  # [] in the config: equal shares
             m = len(kw.get("nozzle_xyz_m", _M350_NOZZLES))
             kw["nozzle_share"] = tuple([1.0 / m] * m)

@@ -9,6 +9,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from numkit import Layout, X, Y, Z
+from numkit.geometry import RXX, RXY, RXZ, RYX, RYY, RYZ, RZX, RZY, RZZ
+
 from .._jit import njit
 from .droplets import N_TAB
 from .surface_layer import eddy_k, layer_wind
@@ -41,24 +44,47 @@ class VehicleRows(NamedTuple):
     cmd: np.ndarray
     act: np.ndarray
 
-#: columns of one input row: pos 3, vel 3, R 9 (row-major), thrust, wind 3, cmd
-INPUT_WIDTH = 20
+#: one input row: position, velocity, R (row-major body → world), total thrust, wind, nozzle
+#: command
+INPUT = Layout("pos:3 vel:3 r:9 thrust wind:3 cmd")
+INPUT_WIDTH = INPUT.size
 
-# header slots of the parameter vector (float64); arrays follow at the offsets stored in it
-(P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF, P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0, P_ROTZ, P_IW,
- P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
- P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
- P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL,
- P_WJ, P_HI) = range(49)
-P_HEADER = 49
-# state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
-# sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
-(S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
- S_DRIFT, S_PENDING, S_LITRES_TICK, S_AIR, S_EVAP) = range(16)
-S_ACC = 16
-NACC = 5
+#: header slots of the parameter vector (float64); arrays follow at the offsets stored in it
+#: (the ``o_*`` slots)
+DEP_PARAMS = Layout("rate swath vmin don doff offnow tau rhoa area s0 rotz iw delta siga sig0 "
+                    "x0 y0 cell nx ny nlev flushd flusht m k merge o_noz o_share o_vt o_taup "
+                    "o_frac o_lev nozc qmin esc ell z0 tmax o_tt o_h o_r edge sm bd0 rj st50 "
+                    "invl wj hi")
+_P = DEP_PARAMS.at
+P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF = _P.RATE, _P.SWATH, _P.VMIN, _P.DON, _P.DOFF
+P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0 = _P.OFFNOW, _P.TAU, _P.RHOA, _P.AREA, _P.S0
+P_ROTZ, P_IW, P_DELTA, P_SIGA, P_SIG0 = _P.ROTZ, _P.IW, _P.DELTA, _P.SIGA, _P.SIG0
+P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV = _P.X0, _P.Y0, _P.CELL, _P.NX, _P.NY, _P.NLEV
+P_FLUSHD, P_FLUSHT, P_M, P_K, P_MERGE = _P.FLUSHD, _P.FLUSHT, _P.M, _P.K, _P.MERGE
+P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP = _P.O_NOZ, _P.O_SHARE, _P.O_VT, _P.O_TAUP
+P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC = _P.O_FRAC, _P.O_LEV, _P.NOZC, _P.QMIN, _P.ESC
+P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R = _P.ELL, _P.Z0, _P.TMAX, _P.O_TT, _P.O_H, _P.O_R
+P_EDGE, P_SM, P_BD0, P_RJ, P_ST50 = _P.EDGE, _P.SM, _P.BD0, _P.RJ, _P.ST50
+P_INVL, P_WJ, P_HI = _P.INVL, _P.WJ, _P.HI
+P_HEADER = DEP_PARAMS.size
+#: state slots per row; the window's accumulators follow at S_ACC: the litres, the
+#: litre-weighted sum of the input row (INPUT_WIDTH), then per nozzle its :data:`MOMENTS`
+DEP_STATE = Layout("on inc q travel ticks inside lx ly sprayed ingrid outside drift pending "
+                   "litres_tick air evap")
+_S = DEP_STATE.at
+S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS = _S.ON, _S.INC, _S.Q, _S.TRAVEL, _S.TICKS
+S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID = _S.INSIDE, _S.LX, _S.LY, _S.SPRAYED, _S.INGRID
+S_OUTSIDE, S_DRIFT, S_PENDING, S_LITRES_TICK = _S.OUTSIDE, _S.DRIFT, _S.PENDING, _S.LITRES_TICK
+S_AIR, S_EVAP = _S.AIR, _S.EVAP
+S_ACC = DEP_STATE.size
+#: a nozzle's release moments over the window: V, Σx, Σy, Σx², Σy² (litre-weighted)
+MOMENTS = Layout("v sx sy sxx syy")
+NACC = MOMENTS.size
 #: per (class, wake/escaped) a wide part's gathered moments: V, Sx, Sy, Sxx, Syy, V·σx², V·σy²
-NSLOW = 7
+WIDE = Layout("v sx sy sxx syy vkx vky")
+NSLOW = WIDE.size
+#: the rows of the splat's scratch: the x and y cell weights, the window's mean input row
+SCRATCH = Layout("wx wy row")
 #: a wide part is splatted once its release points' variance reaches this share of its kernel's
 WIDE_SPREAD = 0.25
 #: von Kármán's constant; σ_v / u* of the neutral surface layer (Panofsky & Dutton 1984,
@@ -68,9 +94,13 @@ SIGV_USTAR = 1.9
 #: slots of the per-tick environment (:func:`_environment`) and of one class's footprint
 #: (:func:`_class_footprint`)
 NENV = 16
-(F_WAKE, F_WX, F_WY, F_WVAR, F_WLAND, F_ESC, F_EX, F_EY, F_EVX, F_EVY, F_MUT, F_LAMT, F_PAIR,
- F_RLAND, F_RAIR, F_UX, F_UY) = range(17)
-NFOOT = 17
+FOOTPRINT = Layout("wake wx wy wvar wland esc ex ey evx evy mut lamt pair rland rair ux uy")
+_F = FOOTPRINT.at
+F_WAKE, F_WX, F_WY, F_WVAR, F_WLAND, F_ESC = _F.WAKE, _F.WX, _F.WY, _F.WVAR, _F.WLAND, _F.ESC
+F_EX, F_EY, F_EVX, F_EVY, F_MUT, F_LAMT = _F.EX, _F.EY, _F.EVX, _F.EVY, _F.MUT, _F.LAMT
+F_PAIR, F_RLAND, F_RAIR, F_UX, F_UY = _F.PAIR, _F.RLAND, _F.RAIR, _F.UX, _F.UY
+NFOOT = FOOTPRINT.size
+_I, _M, _W, _SC = INPUT.at, MOMENTS.at, WIDE.at, SCRATCH.at
 
 
 @njit(cache=True, inline="always")
@@ -111,7 +141,7 @@ def _splat(par, buf, vol, mx, my, vx, vy, scratch) -> float:
     j1 = min(nyl - 1, int(math.floor((my + 4.0 * sy - y0) / c)))
     if i1 < i0 or j1 < j0 or i1 - i0 >= scratch.shape[1] or j1 - j0 >= scratch.shape[1]:
         return 0.0
-    wx, wy = scratch[0], scratch[1]
+    wx, wy = scratch[_SC.WX], scratch[_SC.WY]
     tx = _cell_weights(x0, c, mx, rx, i0, i1, wx)
     ty = _cell_weights(y0, c, my, ry, j0, j1, wy)
     if tx * ty <= 0.0:
@@ -156,7 +186,7 @@ def _flush(par, st, buf, scratch, force: float) -> None:
     drift = st[S_INSIDE] > 0.5
     vtot = st[S_ACC]
     if vtot > 0.0:
-        row = scratch[2]
+        row = scratch[_SC.ROW]
         for j in range(INPUT_WIDTH):
             row[j] = st[S_ACC + 1 + j] / vtot
         env = _environment(par, row)
@@ -164,11 +194,11 @@ def _flush(par, st, buf, scratch, force: float) -> None:
         V = Sx = Sy = Sxx = Syy = 0.0
         for m in range(m_n):
             a = o + m * NACC
-            V += st[a]
-            Sx += st[a + 1]
-            Sy += st[a + 2]
-            Sxx += st[a + 3]
-            Syy += st[a + 4]
+            V += st[a + _M.V]
+            Sx += st[a + _M.SX]
+            Sy += st[a + _M.SY]
+            Sxx += st[a + _M.SXX]
+            Syy += st[a + _M.SYY]
         for k in range(k_n):
             f = _class_footprint(par, k, env)
             vk = par[o_fr + k]
@@ -189,23 +219,23 @@ def _flush(par, st, buf, scratch, force: float) -> None:
                 if math.sqrt(0.5 * (kvx + kvy)) >= merge_r:
                     q = o + m_n * NACC + (2 * k + part) * NSLOW
                     w = share * V
-                    st[q] += w
-                    st[q + 1] += share * (Sx + ox * V)
-                    st[q + 2] += share * (Sy + oy * V)
-                    st[q + 3] += share * (Sxx + 2.0 * ox * Sx + ox * ox * V)
-                    st[q + 4] += share * (Syy + 2.0 * oy * Sy + oy * oy * V)
-                    st[q + 5] += w * kvx
-                    st[q + 6] += w * kvy
+                    st[q + _W.V] += w
+                    st[q + _W.SX] += share * (Sx + ox * V)
+                    st[q + _W.SY] += share * (Sy + oy * V)
+                    st[q + _W.SXX] += share * (Sxx + 2.0 * ox * Sx + ox * ox * V)
+                    st[q + _W.SYY] += share * (Syy + 2.0 * oy * Sy + oy * oy * V)
+                    st[q + _W.VKX] += w * kvx
+                    st[q + _W.VKY] += w * kvy
                     continue
                 for m in range(m_n):
                     a = o + m * NACC
-                    v = st[a]
+                    v = st[a + _M.V]
                     if v <= 0.0:
                         continue
-                    mx, my = st[a + 1] / v, st[a + 2] / v
+                    mx, my = st[a + _M.SX] / v, st[a + _M.SY] / v
                     _splat_part(par, st, buf, scratch, share * v, mx + ox, my + oy,
-                                max(st[a + 3] / v - mx * mx, 0.0) + kvx,
-                                max(st[a + 4] / v - my * my, 0.0) + kvy, drift)
+                                max(st[a + _M.SXX] / v - mx * mx, 0.0) + kvx,
+                                max(st[a + _M.SYY] / v - my * my, 0.0) + kvy, drift)
         for j in range(S_ACC, o + m_n * NACC):
             st[j] = 0.0
     _flush_wide(par, st, buf, scratch, force)
@@ -225,13 +255,13 @@ def _flush_wide(par, st, buf, scratch, force: float) -> None:
     base = S_ACC + 1 + INPUT_WIDTH + m_n * NACC
     for i in range(2 * k_n):
         q = base + i * NSLOW
-        w = st[q]
+        w = st[q + _W.V]
         if w <= 0.0:
             continue
-        mx, my = st[q + 1] / w, st[q + 2] / w
-        px = max(st[q + 3] / w - mx * mx, 0.0)
-        py = max(st[q + 4] / w - my * my, 0.0)
-        kx, ky = st[q + 5] / w, st[q + 6] / w
+        mx, my = st[q + _W.SX] / w, st[q + _W.SY] / w
+        px = max(st[q + _W.SXX] / w - mx * mx, 0.0)
+        py = max(st[q + _W.SYY] / w - my * my, 0.0)
+        kx, ky = st[q + _W.VKX] / w, st[q + _W.VKY] / w
         if force > 0.0 or px + py >= WIDE_SPREAD * (kx + ky):
             _splat_part(par, st, buf, scratch, w, mx, my, px + kx, py + ky, drift)
             for j in range(NSLOW):
@@ -297,7 +327,8 @@ def _tab_time(par, k: int, h: float) -> float:
     if h <= 0.0:
         return 0.0
     if h >= par[o + n - 1]:
-        v = (par[o + n - 1] - par[o + n - 2]) / (par[o_t + n - 1] - par[o_t + n - 2])
+        j = n - 1  # the table's last point
+        v = (par[o + j] - par[o + j - 1]) / (par[o_t + j] - par[o_t + j - 1])
         return par[o_t + n - 1] + (h - par[o + n - 1]) / max(v, 1e-12)
     lo, hi = 0, n - 1
     while hi - lo > 1:
@@ -338,16 +369,18 @@ def _environment(par, inp):
     u*, h_n, f_u, σ_s, s_m cos χ, B D_0 cos χ)."""
     m_n = int(par[P_M])
     o_noz, o_share = int(par[P_O_NOZ]), int(par[P_O_SHARE])
-    pz, vx, vy = inp[2], inp[3], inp[4]
-    r = inp[6:15]
-    thrust, wx, wy = inp[15], inp[16], inp[17]
-    cz = r[8] if r[8] > 0.3 else 0.3                 # cosine of the tilt; wake along -z_body
-    tx, ty = -r[2] / cz, -r[5] / cz                  # horizontal wake drift per metre of fall
-    zr = pz + r[8] * par[P_ROTZ]
+    pz, vx, vy = inp[_I.POS + Z], inp[_I.VEL + X], inp[_I.VEL + Y]
+    r = inp[_I.R:_I.R_END]
+    thrust, wx, wy = inp[_I.THRUST], inp[_I.WIND + X], inp[_I.WIND + Y]
+    cz = r[RZZ] if r[RZZ] > 0.3 else 0.3           # cosine of the tilt; wake along -z_body
+    tx, ty = -r[RXZ] / cz, -r[RYZ] / cz            # horizontal wake drift per metre of fall
+    zr = pz + r[RZZ] * par[P_ROTZ]
     zn = 0.0
     for m in range(m_n):
         b = o_noz + 3 * m
-        zn += par[o_share + m] * (pz + r[6] * par[b] + r[7] * par[b + 1] + r[8] * par[b + 2])
+        # the nozzle's height, z + (R n_b)_z
+        zn += par[o_share + m] * (pz + r[RZX] * par[b + X] + r[RZY] * par[b + Y]
+                                  + r[RZZ] * par[b + Z])
     zn = max(zn, 0.0)
     s_n, s_g = max(zr - zn, 0.0), max(zr, 0.0)
     # momentum theory (Glauert in forward flight) and the wake skew tan χ = V_a / v_i
@@ -512,24 +545,28 @@ def _release(par, st, inp, litres: float) -> None:
     o = S_ACC + 1 + INPUT_WIDTH
     for m in range(m_n):
         b = o_noz + 3 * m
-        x = px + inp[6] * par[b] + inp[7] * par[b + 1] + inp[8] * par[b + 2]
-        y = py + inp[9] * par[b] + inp[10] * par[b + 1] + inp[11] * par[b + 2]
+        # the nozzle's position, p + R n_b (x and y)
+        ro = _I.R
+        x = (px + inp[ro + RXX] * par[b + X] + inp[ro + RXY] * par[b + Y]
+             + inp[ro + RXZ] * par[b + Z])
+        y = (py + inp[ro + RYX] * par[b + X] + inp[ro + RYY] * par[b + Y]
+             + inp[ro + RYZ] * par[b + Z])
         v = litres * par[o_share + m]
         a = o + m * NACC
-        st[a] += v
-        st[a + 1] += v * x
-        st[a + 2] += v * y
-        st[a + 3] += v * x * x
-        st[a + 4] += v * y * y
+        st[a + _M.V] += v
+        st[a + _M.SX] += v * x
+        st[a + _M.SY] += v * y
+        st[a + _M.SXX] += v * x * x
+        st[a + _M.SYY] += v * y * y
 
 
 @njit(cache=True)
 def _row_step(par, inp, st, buf, dt: float, scratch) -> float:
     """One vehicle, one control tick: valve, flow, release, and a flush when the window is full
     or the vehicle crosses the grid's edge. Returns the litres sprayed in the tick."""
-    vx, vy = inp[3], inp[4]
+    vx, vy = inp[_I.VEL + X], inp[_I.VEL + Y]
     speed = math.sqrt(vx * vx + vy * vy)
-    _valve(par, st, dt, inp[19] > 0.5, speed)
+    _valve(par, st, dt, inp[_I.CMD] > 0.5, speed)
     litres = _flow(par, st, dt, speed)
     st[S_LITRES_TICK] = litres
     x0, y0, cell = par[P_X0], par[P_Y0], par[P_CELL]
@@ -578,16 +615,16 @@ def engine_step(arrays, out, dt, rows, vehicles, ia, na) -> None:
             continue
         r = inp[j]
         for c in range(3):
-            r[c] = p[i, c]
-            r[3 + c] = v[i, c]
-            r[16 + c] = w[i, c]
+            r[_I.POS + c] = p[i, c]
+            r[_I.VEL + c] = v[i, c]
+            r[_I.WIND + c] = w[i, c]
         for c in range(9):
-            r[6 + c] = R[i, c]
+            r[_I.R + c] = R[i, c]
         th = 0.0
         for c in range(na):
             th += S[i, ia + c]
-        r[15] = th
-        r[19] = 1.0 if cmd[i] else 0.0
+        r[_I.THRUST] = th
+        r[_I.CMD] = 1.0 if cmd[i] else 0.0
         out[j] = _row_step(par, r, st[j], buf[j], dt, scratch)
 
 
@@ -632,11 +669,11 @@ def row_step_args(arrays, dt, pos, vel, R, thrust, wind, cmd) -> float:
     d = DepArrays(*arrays)
     par, inp, st, buf, scratch = d.par, d.inp, d.st, d.buf, d.scratch
     for j in range(3):
-        inp[j] = pos[j]
-        inp[3 + j] = vel[j]
-        inp[16 + j] = wind[j]
+        inp[_I.POS + j] = pos[j]
+        inp[_I.VEL + j] = vel[j]
+        inp[_I.WIND + j] = wind[j]
     for j in range(9):
-        inp[6 + j] = R[j]
-    inp[15] = thrust
-    inp[19] = 1.0 if cmd else 0.0
+        inp[_I.R + j] = R[j]
+    inp[_I.THRUST] = thrust
+    inp[_I.CMD] = 1.0 if cmd else 0.0
     return _row_step(par, inp, st, buf, dt, scratch)

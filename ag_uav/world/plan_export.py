@@ -54,7 +54,9 @@ from typing import Any
 import numpy as np
 from shapely.geometry import LineString
 
-from .geodesy import enu_to_lonlat, split_antimeridian
+from numkit.axes import XY
+
+from .geodesy import ORIGIN, enu_to_lonlat, origin_height, split_antimeridian
 from .plan import CoveragePlan
 
 __all__ = [
@@ -110,24 +112,26 @@ def _origin(plan: CoveragePlan, origin: Sequence[float] | None) -> tuple[float, 
     every waypoint off the field, so it is refused)."""
     own = plan.field.origin
     if origin is not None and own is not None and not np.allclose(
-            [float(v) for v in origin[:2]], own[:2], rtol=0.0, atol=1e-12):
-        raise ValueError(f"field {plan.field.name!r} is georeferenced about {own[0]:.6f}, "
-                         f"{own[1]:.6f}; another origin would move every waypoint off the field "
+            [float(origin[ORIGIN.LAT]), float(origin[ORIGIN.LON])],
+            [own[ORIGIN.LAT], own[ORIGIN.LON]], rtol=0.0, atol=1e-12):
+        raise ValueError(f"field {plan.field.name!r} is georeferenced about "
+                         f"{own[ORIGIN.LAT]:.6f}, {own[ORIGIN.LON]:.6f}; another origin would move "
+                         "every waypoint off the field "
                          "(project the field about a point instead: load_field(..., origin=))")
     o = origin if origin is not None else own
     if o is None:
         raise ValueError(f"field {plan.field.name!r} is in local metres with no geodetic origin; "
                          "give one (LAT,LON) to export lon/lat")
-    lat, lon = float(o[0]), float(o[1])
+    lat, lon = float(o[ORIGIN.LAT]), float(o[ORIGIN.LON])
     if not (abs(lat) <= 90.0 and abs(lon) <= 180.0):
         raise ValueError(f"origin ({lat}, {lon}) is out of range; expected LAT,LON in degrees")
-    return lat, lon, float(o[2]) if len(o) > 2 else 0.0
+    return lat, lon, origin_height(o)
 
 
 def _thin(points: np.ndarray, tol: float) -> np.ndarray:
     if len(points) <= 2 or tol <= 0:
         return np.asarray(points, float)
-    return np.asarray(LineString(points).simplify(tol, preserve_topology=False).coords)[:, :2]
+    return np.asarray(LineString(points).simplify(tol, preserve_topology=False).coords)[:, XY]
 
 
 def plan_waypoints(plan: CoveragePlan, origin: Sequence[float] | None = None,
@@ -399,7 +403,7 @@ def plan_to_qgc(plan: CoveragePlan, *, altitude: float, speed: float,
             "vehicleType": MAV_TYPE_QUADROTOR,
             "cruiseSpeed": speed,
             "hoverSpeed": speed,
-            "plannedHomePosition": [round(w0.lat, r9), round(w0.lon, r9), org[2]],
+            "plannedHomePosition": [round(w0.lat, r9), round(w0.lon, r9), org[ORIGIN.H]],
             "items": items,
         },
         "geoFence": {"version": 2, "circles": [], "polygons": []},
