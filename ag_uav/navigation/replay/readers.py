@@ -287,7 +287,7 @@ UERE_M = 2.0
 def _df_messages(path: Path) -> dict[str, list[dict]]:
     from pymavlink import DFReader
 
-    want = ("IMU", "GPS", "EKF1", "AHRS2", "ATT", "PARM")
+    want = ("IMU", "GPS", "GPA", "EKF1", "AHRS2", "ATT", "PARM")
     out: dict[str, list[dict]] = {k: [] for k in want}
     # pymavlink prints each damaged message on standard output: kept off the terminal
     with contextlib.redirect_stdout(io.StringIO()):
@@ -315,9 +315,10 @@ def _df_t(rows: list[dict], keys=("TimeUS", "TimeMS")) -> np.ndarray:
 
 
 def read_dataflash(path: Path, uere_m: float = 2.0) -> FlightLog:
-    """ArduPilot DataFlash: ``IMU`` (FRD), ``GPS`` (Lat, Lng, Alt, HDop, Spd, GCrs, VZ; the
-    accuracy σ = HDop × ``uere_m``: these logs carry no reported accuracy), ``EKF1`` (or
-    ``AHRS2`` / ``ATT``) as the autopilot's estimate."""
+    """ArduPilot DataFlash: ``IMU`` (FRD), ``GPS`` (Lat, Lng, Alt, HDop, Spd, GCrs, VZ) with
+    the receiver's reported accuracy from ``GPA`` (HAcc, VAcc, SAcc, m and m/s; logged by
+    ArduPilot since 3.4 beside each ``GPS`` record) where the log has it, else σ = HDop ×
+    ``uere_m``; ``EKF1`` (or ``AHRS2`` / ``ATT``) as the autopilot's estimate."""
     msgs = _df_messages(path)
     imu = msgs["IMU"]
     if not imu:
@@ -362,8 +363,41 @@ def _df_gnss(log: FlightLog, msgs: dict[str, list[dict]], uere_m: float) -> None
     vz = np.array([r.get("VZ", 0.0) for r in g])
     log.gnss_v = np.stack([spd * np.sin(crs), spd * np.cos(crs), -vz], axis=1)
     log.gnss_var_v = np.full((len(g), 3), 0.3**2)
-    log.notes.append(f"GNSS accuracy not logged: σ_e = σ_n = HDop × {uere_m:g} m (--uere), "
-                     "σ_u = 2 σ_e; velocity σ 0.3 m/s")
+    n_gpa = _df_gpa(log, msgs["GPA"], g)
+    if n_gpa < len(g):
+        which = f" on {len(g) - n_gpa} fixes" if n_gpa else ""
+        log.notes.append(f"GNSS accuracy not logged{which}: σ_e = σ_n = HDop × {uere_m:g} m "
+                         "(--uere), σ_u = 2 σ_e; velocity σ 0.3 m/s")
+
+
+def _df_gpa(log: FlightLog, gpa: list[dict], g: list[dict]) -> int:
+    """The receiver's reported accuracy (``GPA``: HAcc, VAcc, SAcc; the first receiver's,
+    ``I`` = 0) onto the fixes it was logged with (the nearest stamp within 0.1 s; HAcc > 0):
+    σ_e = σ_n = HAcc, σ_u = VAcc, the velocity's σ = SAcc per axis (as PX4's eph, epv and
+    s_variance are read).  Returns the number of fixes given a reported accuracy."""
+    gpa = [r for r in gpa if r.get("I", 0) == 0 and r.get("HAcc", 0) > 0]
+    if not gpa or not log.gnss_t.size:
+        return 0
+    ta, tg = _df_t(gpa, ("TimeUS",)), log.gnss_t   # both on the boot clock
+    if ta.size < 2:
+        return 0
+    order = np.argsort(ta, kind="stable")
+    gpa, ta = [gpa[i] for i in order], ta[order]
+    j = np.clip(np.searchsorted(ta, tg), 1, ta.size - 1)
+    j = np.where(np.abs(ta[j - 1] - tg) <= np.abs(ta[j] - tg), j - 1, j)
+    ok = np.abs(ta[j] - tg) <= 0.1
+    h = np.array([gpa[i]["HAcc"] for i in j], dtype=float)
+    v = np.array([gpa[i].get("VAcc", 0.0) for i in j], dtype=float)
+    sp = np.array([gpa[i].get("SAcc", 0.0) for i in j], dtype=float)
+    v = np.where(v > 0, v, 2.0 * h)
+    log.gnss_var[ok] = np.stack([h, h, v], axis=1)[ok] ** 2
+    okv = ok & (sp > 0)
+    log.gnss_var_v[okv] = (sp[okv, None] * np.ones(3)) ** 2
+    n = int(ok.sum())
+    if n:
+        log.notes.append(f"GNSS accuracy from GPA (HAcc, VAcc, SAcc as σ) on {n} of "
+                         f"{len(g)} fixes: HAcc median {np.median(h[ok]):.3g} m")
+    return n
 
 
 def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:

@@ -8,10 +8,12 @@ PCA window, gate, reset and latch), and these from the log:
   linear interpolation (real logs jitter; the INS integrates at a fixed Δt).
 * **Process noise.** The per-sample white noise of each sensor is read from the log itself:
   σ = std(f̃_k+1 − f̃_k)/√2 per axis (the difference removes the slow motion and keeps the
-  white part, vibration included), the median over the three axes, times the margins
-  :data:`REPLAY_Q_ACCEL`, :data:`REPLAY_Q_GYRO` (× 2, × 32 on the variance).  The samples are
-  integrated as rates held over Δt (``INSConfig.coning = False``: no coning or sculling
-  correction; not measured with them on real logs).  The bias random walks
+  white part, vibration included), the median over the three axes, times the simulated
+  flight's margins on the variance (``estimator.ins_q_accel``, ``estimator.ins_q_gyro`` of the
+  default config: × 1, × 1), or ``q_margins`` where asked.  The samples are taken as the
+  sensor's means over Δt (delta-angles and delta-velocities over the interval) with the coning
+  and sculling corrections, as the simulated flight's ``imu.sampling = "increments"`` (``coning
+  = False``: rates held over Δt, no correction).  The bias random walks
   are the ``[imu]`` defaults; the initial bias σ are ``bias_sd`` (0.2 m/s², 0.3 °/s: a MEMS
   unit's turn-on bias without a calibration).
 * **Fixes.** A fix stamped ``t`` (the arrival stamp of an autopilot log, whose position is
@@ -64,6 +66,8 @@ class ReplayOptions:
     heading: str = "auto"
     bias_sd: tuple[float, float] = (0.2, 0.3)
     gnss_velocity: bool = True
+    q_margins: tuple[float, float] | None = None
+    coning: bool | None = None
 
 
 @dataclass
@@ -139,20 +143,17 @@ def gnss_from_reference(log: FlightLog, preset: str, rate_hz: float, seed: int) 
                      f" ({int(ok.sum())} fixes)")
 
 
-#: the process-noise margins (variance) on the log's white noise: those calibrated on the
-#: simulated IMU when it was point-sampled, which docs/replay.md was measured with (the
-#: simulation's default is 1, 1 since its IMU reports delta-angles and delta-velocities; not
-#: measured on real logs)
-REPLAY_Q_ACCEL, REPLAY_Q_GYRO = 2.0, 32.0
-
-
 def white_sigma(a: np.ndarray) -> float:
     """Per-sample white noise σ of a sampled signal (n, 3): median over the axes of
     std(diff)/√2 (module docstring)."""
     return float(np.median(np.std(np.diff(a, axis=0), axis=0)) / math.sqrt(2.0))
 
 
-def _ins_cfg(log: FlightLog, dt: float, delay: float, lever: np.ndarray, info: dict):
+def _ins_cfg(log: FlightLog, opts: ReplayOptions, dt: float, delay: float, lever: np.ndarray,
+             info: dict):
+    """The default config's INS settings with the log's noise, rate, delay and lever arm
+    (module docstring); the margins and the coning switch as the simulated flight's unless
+    ``opts`` says otherwise."""
     from ...config import load_config
     from ..ins_feedback import ins_config
 
@@ -160,11 +161,13 @@ def _ins_cfg(log: FlightLog, dt: float, delay: float, lever: np.ndarray, info: d
     e = cfg.estimator
     sa, sg = white_sigma(log.imu[:, :3]), white_sigma(log.imu[:, 3:])
     info["imu_white_sigma"] = {"accel_mps2": round(sa, 4), "gyro_dps": round(sg / DEG, 4)}
+    qa, qg = opts.q_margins if opts.q_margins is not None else (e.ins_q_accel, e.ins_q_gyro)
     base = ins_config(cfg)
+    coning = base.coning if opts.coning is None else bool(opts.coning)
+    info["q_margins"], info["coning"] = [qa, qg], coning
     return dataclasses.replace(
-        base, dt=dt, accel_sigma=sa * math.sqrt(REPLAY_Q_ACCEL),
-        gyro_sigma=sg * math.sqrt(REPLAY_Q_GYRO), lever_arm=tuple(lever),
-        delay_s=delay + 2.0 * dt, delayed=True, coning=False), e.name
+        base, dt=dt, accel_sigma=sa * math.sqrt(qa), gyro_sigma=sg * math.sqrt(qg),
+        lever_arm=tuple(lever), delay_s=delay + 2.0 * dt, delayed=True, coning=coning), e.name
 
 
 def _gap(opts: ReplayOptions, t0: float, t1: float) -> tuple[float, float] | None:
@@ -195,7 +198,7 @@ def run_replay(log: FlightLog, opts: ReplayOptions) -> ReplayResult:
     lever = np.asarray(opts.lever_arm if opts.lever_arm is not None else
                        (log.lever_arm if log.lever_arm is not None else (0.0, 0.0, 0.0)), float)
     delay = opts.gnss_delay_s if opts.gnss_delay_s is not None else log.gnss_delay_s
-    icfg, flown = _ins_cfg(log, dt, delay, lever, info)
+    icfg, flown = _ins_cfg(log, opts, dt, delay, lever, info)
     flown = opts.flown or flown
     rules = (flown,) + tuple(r for r in RULES if r != flown)
     init = initial_state(log, t_grid, imu, lever, opts.heading)
