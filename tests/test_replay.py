@@ -366,3 +366,17 @@ def test_the_replay_flies_the_simulated_flights_ins_settings_unless_told(tmp_pat
     assert main(["replay", str(folder), "--q-margins", "1,0", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--q-margins" in err[0]
+
+
+def test_a_velocity_differenced_from_a_reference_carries_its_error():
+    """The built fix's velocity variance adds the RMS of (differenced speed − logged speed):
+    a record whose logged speed is off by a known σ gives that σ; no logged speed gives 0."""
+    from ag_uav.navigation.replay.runner import difference_sigma
+
+    tr = np.arange(0.0, 30.0, 0.1)
+    p, v, _, _ = _truth(tr)
+    sp = np.hypot(v[:, 0], v[:, 1]) + 0.12 * np.random.default_rng(3).standard_normal(tr.size)
+    t = np.arange(1.0, 29.0, 0.2)
+    vt = _truth(t)[1]
+    assert difference_sigma(Track(tr, p), t, vt) == 0.0
+    assert abs(difference_sigma(Track(tr, p, speed=sp), t, vt) - 0.12) < 0.02

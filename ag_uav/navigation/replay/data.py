@@ -43,13 +43,15 @@ class ReplayError(ValueError):
 class Track:
     """A position/attitude track: ``t`` (n,), ``p`` (n, 3) ENU m (NaN where unknown), ``R`` (n,
     3, 3) FLU → ENU rotation (NaN where unknown), ``v`` (n, 3) ENU m/s or None; ``label``
-    names it in tables."""
+    names it in tables; ``speed`` (n,) the horizontal speed the record logs beside its
+    positions (m/s), or None."""
 
     t: np.ndarray
     p: np.ndarray
     R: np.ndarray | None = None
     v: np.ndarray | None = None
     label: str = "reference"
+    speed: np.ndarray | None = None
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """(p, R) linearly interpolated at ``t`` (NaN outside the track's span; R by the

@@ -169,7 +169,8 @@ def read_phantom(folder: Path, imu_file: str | None = None) -> FlightLog:
     p = np.stack([gt["East"], gt["North"], -gt["Down"]], axis=1)
     R_nf = euler_zyx_to_rot(gt["roll(degrees)"] * DEG, gt["pitch(degrees)"] * DEG,
                             gt["compass_heading(degrees)"] * DEG)
-    ref = Track(gt["time"], p, ned_frd_to_enu_flu(R_nf), label="RTK reference (GT.csv)")
+    ref = Track(gt["time"], p, ned_frd_to_enu_flu(R_nf), label="RTK reference (GT.csv)",
+                speed=gt.get("speed(m/s)"))
     empty = np.zeros((0, 3))
     log = FlightLog("phantom", str(folder), t, f, np.zeros(0), empty, empty, None, None,
                     None, ref, imu_rate_hz=rate)
