@@ -32,6 +32,7 @@ import numpy as np
 from ...world.geodesy import lonlat_to_enu
 from .data import (
     DEG,
+    IMU,
     FlightLog,
     ReplayError,
     Track,
@@ -67,7 +68,7 @@ def read_log(path: str | Path, imu_file: str | None = None, uere_m: float | None
         head = f.read(8)
     if head.startswith(b"ULog"):
         return read_ulog(p)
-    if head[:2] == b"\xa3\x95":
+    if head.startswith(b"\xa3\x95"):
         return read_dataflash(p, UERE_M if uere_m is None else uere_m)
     raise ReplayError(f"{p}: not a PX4 ULog, an ArduPilot DataFlash .BIN or a log folder "
                       "(imu.csv + gnss.csv, or a Phantom 4 RTK path)")
@@ -206,7 +207,8 @@ def read_ulog(path: Path) -> FlightLog:
     t = sc["timestamp"] * 1e-6
     f = np.stack([sc[f"accelerometer_m_s2[{i}]"] for i in range(3)]
                  + [sc[f"gyro_rad[{i}]"] for i in range(3)], axis=1).astype(float)
-    f[:, :3], f[:, 3:] = frd_to_flu(f[:, :3]), frd_to_flu(f[:, 3:])
+    acc, gyr = slice(IMU.ACC, IMU.ACC_END), slice(IMU.GYRO, IMU.GYRO_END)
+    f[:, acc], f[:, gyr] = frd_to_flu(f[:, acc]), frd_to_flu(f[:, gyr])
     rate = _check_imu(path, t)
     log = FlightLog("ulog", str(path), t, f, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
                     imu_rate_hz=rate, gnss_delay_s=0.11)
@@ -328,7 +330,8 @@ def read_dataflash(path: Path, uere_m: float = 2.0) -> FlightLog:
     t, idx = np.unique(t, return_index=True)
     f = np.array([[imu[i][k] for k in ("AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ")]
                   for i in idx], dtype=float)
-    f[:, :3], f[:, 3:] = frd_to_flu(f[:, :3]), frd_to_flu(f[:, 3:])
+    acc, gyr = slice(IMU.ACC, IMU.ACC_END), slice(IMU.GYRO, IMU.GYRO_END)
+    f[:, acc], f[:, gyr] = frd_to_flu(f[:, acc]), frd_to_flu(f[:, gyr])
     rate = _check_imu(path, t)
     log = FlightLog("dataflash", str(path), t, f, np.zeros(0), np.zeros((0, 3)),
                     np.zeros((0, 3)), imu_rate_hz=rate, gnss_delay_s=0.22)
@@ -411,7 +414,7 @@ def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
     rows = msgs[kind]
     t = _df_t(rows)
     eul = np.array([[r["Roll"], r["Pitch"], r["Yaw"]] for r in rows], dtype=float) * DEG
-    R = ned_frd_to_enu_flu(euler_zyx_to_rot(eul[:, 0], eul[:, 1], eul[:, 2]))
+    R = ned_frd_to_enu_flu(euler_zyx_to_rot(*eul.T))
     p = np.full((len(rows), 3), np.nan)
     v = None
     if kind == "EKF1":
@@ -425,7 +428,7 @@ def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
                 p = p + off
                 log.notes.append("ArduPilot EKF1's origin is not logged: its track is shifted "
                                  "by the median of (GNSS − EKF1), "
-                                 f"({off[0]:.2f}, {off[1]:.2f}, {off[2]:.2f}) m ENU")
+                                 f"({', '.join(f'{c:.2f}' for c in off)}) m ENU")
     ok = ~np.all(np.abs(eul) < 1e-12, axis=1)   # EKF1 logs zeros before it starts
     if not ok.any():
         return

@@ -46,7 +46,7 @@ from estimators.ins import RULES, BatchINS
 
 from ...vehicle.gps import GpsSensor, derive_seed
 from .align import clock_lag, initial_state, mount_rotation
-from .data import DEG, FlightLog, ReplayError, rot_to_euler_zyx, rot_to_quat
+from .data import DEG, IMU, FlightLog, ReplayError, rot_to_euler_zyx, rot_to_quat
 
 __all__ = ["ReplayOptions", "ReplayResult", "run_replay"]
 
@@ -108,7 +108,8 @@ def _prepare_imu(log: FlightLog, opts: ReplayOptions, info: dict) -> None:
         log.imu_t = log.imu_t + lag
     if log.source == "phantom" and ref is not None:
         M, res = mount_rotation(log.imu_t, log.imu, ref)
-        log.imu = np.concatenate([log.imu[:, :3] @ M, log.imu[:, 3:] @ M], axis=1)
+        acc, gyr = log.imu[:, IMU.ACC:IMU.ACC_END], log.imu[:, IMU.GYRO:IMU.GYRO_END]
+        log.imu = np.concatenate([acc @ M, gyr @ M], axis=1)
         info["mount_rpy_deg"] = np.round(rot_to_euler_zyx(M[None])[0] / DEG, 2).tolist()
         info["mount_rate_residual_dps"] = round(res / DEG, 3)
 
@@ -180,7 +181,8 @@ def _ins_cfg(log: FlightLog, opts: ReplayOptions, dt: float, delay: float, lever
 
     cfg = load_config(None)
     e = cfg.estimator
-    sa, sg = white_sigma(log.imu[:, :3]), white_sigma(log.imu[:, 3:])
+    sa = white_sigma(log.imu[:, IMU.ACC:IMU.ACC_END])
+    sg = white_sigma(log.imu[:, IMU.GYRO:IMU.GYRO_END])
     info["imu_white_sigma"] = {"accel_mps2": round(sa, 4), "gyro_dps": round(sg / DEG, 4)}
     qa, qg = opts.q_margins if opts.q_margins is not None else (e.ins_q_accel, e.ins_q_gyro)
     base = ins_config(cfg)
