@@ -9,7 +9,8 @@ Per flight, the replay with a ``--gap`` s GNSS gap in the middle (seed 0, the de
 settings) and:
 
 * ``drift``: the flown rule's horizontal error at the gap's last tick; ``sigma``: its own
-  horizontal 1σ there, √(P_ee + P_nn);
+  horizontal 1σ there, √(P_ee + P_nn) (and, over the flights, the mean of (drift / sigma)²:
+  1 for a filter whose covariance covers its drift);
 * ``acc``, ``gyro``, ``rss``: the horizontal error free inertial navigation gets from the log's
   white noise alone after T s (σ_a, σ_g per sample at Δt, as the replay reads them):
   √2 σ_a √Δt T^{3/2}/√3 and √2 g σ_g √Δt T^{5/2}/√20 (a white acceleration error integrated
@@ -138,8 +139,10 @@ def main() -> None:
         r = analyse(path, a.gnss_from_reference, a.gap)
         rows.append([r[c] for c in cols])
         print(f"{path.rstrip('/').split('/')[-1]:<7} " + "  ".join(f"{r[c]:10.3f}" for c in cols))
-    med = np.median(np.array(rows), axis=0)
-    print("median  " + "  ".join(f"{x:10.3f}" for x in med))
+    arr = np.array(rows)
+    print("median  " + "  ".join(f"{x:10.3f}" for x in np.median(arr, axis=0)))
+    # E[d²] = P_ee + P_nn for a consistent filter: the mean of (drift / sigma)² reads 1
+    print(f"mean (drift / sigma)²: {np.mean((arr[:, 0] / arr[:, 1]) ** 2):.3f} (1 = consistent)")
 
 
 if __name__ == "__main__":
