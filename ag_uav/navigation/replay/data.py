@@ -139,7 +139,7 @@ def rot_to_euler_zyx(R: np.ndarray) -> np.ndarray:
     """Rotation matrices (n, 3, 3) → (n, 3) roll, pitch, yaw (rad) of R = Rz Ry Rx."""
     roll = np.arctan2(R[:, Z, Y], R[:, Z, Z])
     pitch = np.arcsin(np.clip(-R[:, Z, X], -1.0, 1.0))
-    yaw = np.arctan2(R[:, 1, 0], R[:, 0, 0])
+    yaw = np.arctan2(R[:, Y, X], R[:, X, X])
     return np.stack([roll, pitch, yaw], axis=1)
 
 
