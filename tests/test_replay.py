@@ -227,20 +227,22 @@ def write_ulog(path, d: dict, cut: int | None = None, params: dict | None = None
 def _df_fmt(typ: int, name: str, fmt: str, cols: str) -> bytes:
     import struct
 
-    n = 3 + struct.calcsize("<" + fmt.replace("L", "i").replace("n", "4s"))
+    n = 3 + struct.calcsize("<" + fmt.replace("L", "i").replace("n", "4s").replace("C", "H"))
     return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", typ, n, name.encode(), fmt.encode(),
                                          cols.encode())
 
 
 def write_dataflash(path, d: dict) -> None:
     """An ArduPilot DataFlash log by hand (FMT, then IMU, GPS stamped 0.22 s after its epoch,
-    and EKF1 records)."""
+    and EKF1 records); with ``d["gpa"]`` = (HAcc, VAcc, SAcc) a ``GPA`` record beside each fix
+    from the ``d["gpa_from"]``-th on (ArduPilot ≥ 3.4: uint16 centimetres, 'C')."""
     import struct
 
     out = _df_fmt(129, "IMU", "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
     out += _df_fmt(130, "GPS", "BIHLLffffffI",
                    "Status,TimeMS,Week,Lat,Lng,Alt,HDop,NSats,Spd,GCrs,VZ,T")
     out += _df_fmt(131, "EKF1", "Ifffffffff", "TimeMS,Roll,Pitch,Yaw,VN,VE,VD,PN,PE,PD")
+    out += _df_fmt(132, "GPA", "QBCCCC", "TimeUS,I,VDop,HAcc,VAcc,SAcc")
     rows = []
     ms = lambda x: int(round(x * 1e3)) + 1000  # noqa: E731
     for k in range(d["t"].size):
@@ -254,6 +256,9 @@ def write_dataflash(path, d: dict) -> None:
                                      int(round(d["lat"][k] * 1e7)),
                                      int(round(d["lon"][k] * 1e7)), d["alt"][k], 0.015, 12.0,
                                      math.hypot(vn, ve), crs, vd, tn)))
+        if "gpa" in d and k >= d.get("gpa_from", 0):
+            cm = [int(round(x * 100)) for x in d["gpa"]]
+            rows.append((tn, struct.pack("<BQB4H", 132, tn * 1000, 0, 90, *cm)))
     for k in range(d["te"].size):
         R = quats_to_rots(d["q"][k][None])
         rpy = np.degrees(rots_to_euler(R)[0])
@@ -324,3 +329,52 @@ def test_a_ulog_gives_its_lever_arm_and_gnss_delay(tmp_path):
     log = read_log(path)
     assert np.allclose(log.lever_arm, (0.08, -0.05, 0.3), atol=1e-6)   # FRD → FLU
     assert abs(log.gnss_delay_s - 0.15) < 1e-6
+
+
+def test_dataflash_gpa_reported_accuracy_is_read(tmp_path):
+    """ArduPilot ≥ 3.4 logs the receiver's HAcc, VAcc, SAcc in GPA beside each GPS record:
+    the reader takes them as σ (HDop × UERE only for fixes without one), and the replay
+    follows the truth."""
+    d = _flight_ned(30.0, 100.0)
+    d["gpa"], d["gpa_from"] = (0.03, 0.05, 0.04), 10
+    path = tmp_path / "g.BIN"
+    write_dataflash(path, d)
+    log = read_log(path)
+    n = log.gnss_t.size
+    assert n == d["tg"].size
+    # the first 10 fixes: HDop 0.015 × 2 m; the rest: the reported figures
+    assert np.allclose(log.gnss_var[:10], [0.03**2, 0.03**2, 0.06**2], rtol=1e-6)
+    assert np.allclose(log.gnss_var[10:], [0.03**2, 0.03**2, 0.05**2], rtol=1e-6)
+    assert np.allclose(log.gnss_var_v[:10], 0.3**2) and np.allclose(log.gnss_var_v[10:], 0.04**2)
+    assert any(f"GPA (HAcc, VAcc, SAcc as σ) on {n - 10} of {n}" in x for x in log.notes)
+    assert any("not logged on 10 fixes" in x for x in log.notes)
+    kf = score_replay(run_replay(log, ReplayOptions()))["estimators"]["kf"]
+    assert kf["pos_h_rms_m"] < 0.05 and kf["tilt_rms_deg"] < 0.4, kf
+
+
+def test_the_replay_flies_the_simulated_flights_ins_settings_unless_told(tmp_path, capsys):
+    from ag_uav.config import load_config
+
+    e = load_config(None).estimator
+    folder = write_flight(tmp_path / "flight", duration=12.0)
+    info = run_replay(read_log(folder), ReplayOptions()).info
+    assert info["q_margins"] == [e.ins_q_accel, e.ins_q_gyro] and info["coning"] is True
+    info = run_replay(read_log(folder), ReplayOptions(q_margins=(2.0, 32.0), coning=False)).info
+    assert info["q_margins"] == [2.0, 32.0] and info["coning"] is False
+    assert main(["replay", str(folder), "--q-margins", "1,0", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--q-margins" in err[0]
+
+
+def test_a_velocity_differenced_from_a_reference_carries_its_error():
+    """The built fix's velocity variance adds the RMS of (differenced speed − logged speed):
+    a record whose logged speed is off by a known σ gives that σ; no logged speed gives 0."""
+    from ag_uav.navigation.replay.runner import difference_sigma
+
+    tr = np.arange(0.0, 30.0, 0.1)
+    p, v, _, _ = _truth(tr)
+    sp = np.hypot(v[:, 0], v[:, 1]) + 0.12 * np.random.default_rng(3).standard_normal(tr.size)
+    t = np.arange(1.0, 29.0, 0.2)
+    vt = _truth(t)[1]
+    assert difference_sigma(Track(tr, p), t, vt) == 0.0
+    assert abs(difference_sigma(Track(tr, p, speed=sp), t, vt) - 0.12) < 0.02

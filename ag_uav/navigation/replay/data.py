@@ -25,7 +25,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["ReplayError", "FlightLog", "Track", "frd_to_flu", "ned_frd_to_enu_flu"]
+from numkit import Layout, Z
+
+#: an IMU row: specific force f̃ (m/s²) then rate ω̃ (rad/s), body FLU
+IMU = Layout("acc:3 gyro:3").at
+#: a row of the INS bank's output state (``BatchINS.x_out``): p, v (ENU), q (FLU → ENU), b_a, b_g
+XOUT = Layout("pos:3 vel:3 quat:4 ba:3 bg:3").at
+#: a processed fix (``ReplayResult.fix_events``): time, gate verdict, position and velocity NIS
+EVENT = Layout("t verdict nis_pos nis_vel").at
+
+__all__ = ["EVENT", "IMU", "XOUT", "ReplayError", "FlightLog", "Track", "frd_to_flu",
+           "ned_frd_to_enu_flu"]
 
 DEG = math.pi / 180.0
 _T_EN = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -40,13 +50,15 @@ class ReplayError(ValueError):
 class Track:
     """A position/attitude track: ``t`` (n,), ``p`` (n, 3) ENU m (NaN where unknown), ``R`` (n,
     3, 3) FLU → ENU rotation (NaN where unknown), ``v`` (n, 3) ENU m/s or None; ``label``
-    names it in tables."""
+    names it in tables; ``speed`` (n,) the horizontal speed the record logs beside its
+    positions (m/s), or None."""
 
     t: np.ndarray
     p: np.ndarray
     R: np.ndarray | None = None
     v: np.ndarray | None = None
     label: str = "reference"
+    speed: np.ndarray | None = None
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """(p, R) linearly interpolated at ``t`` (NaN outside the track's span; R by the
@@ -66,7 +78,7 @@ class Track:
         if ok.any():
             u, _, vt = np.linalg.svd(M[ok])
             d = np.sign(np.linalg.det(u @ vt))
-            u[:, :, 2] *= d[:, None]
+            u[:, :, Z] *= d[:, None]
             sub = np.full((int(inside.sum()), 3, 3), np.nan)
             sub[ok] = u @ vt
             R[inside] = sub
@@ -109,8 +121,13 @@ def frd_to_flu(a: np.ndarray) -> np.ndarray:
     return a
 
 
+
+
+
+
 def ned_frd_to_enu_flu(R_nf: np.ndarray) -> np.ndarray:
     """An autopilot's attitude (FRD body → NED) → the INS's (FLU body → ENU): T R T'."""
     return _T_EN @ R_nf @ _T_FF
+
 
 
