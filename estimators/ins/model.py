@@ -26,11 +26,11 @@ __all__ = ["cov_step", "gate_ratio", "h_gnss_pos", "h_gnss_pos_w", "h_gnss_vel",
 
 @njit
 def skew_mul(M, r, out):
-    """out = M [r]× (3×3)."""
+    """out = M [r]× (3×3): row i of M times the cross-product matrix of r."""
     for i in range(3):
-        out[i, 0] = M[i, 1] * r[2] - M[i, 2] * r[1]
-        out[i, 1] = M[i, 2] * r[0] - M[i, 0] * r[2]
-        out[i, 2] = M[i, 0] * r[1] - M[i, 1] * r[0]
+        out[i, X] = M[i, Y] * r[Z] - M[i, Z] * r[Y]
+        out[i, Y] = M[i, Z] * r[X] - M[i, X] * r[Z]
+        out[i, Z] = M[i, X] * r[Y] - M[i, Y] * r[X]
 
 
 # ------------------------------------------------------------------------ prediction
