@@ -112,6 +112,7 @@ from .geodesy import (
     lonlat_to_enu,
     origin_height,
     pole_winding,
+    split_polygon_rings,
 )
 
 #: the widest a lon/lat field may be (m): its projection about one origin stays a good plane
@@ -432,7 +433,8 @@ class Field:
 
     def to_geojson(self) -> dict:
         """GeoJSON Feature in lon/lat (needs ``origin``): a Polygon, or a MultiPolygon for a
-        multi-part field (RFC 7946 winding: counter-clockwise boundaries, clockwise holes)."""
+        multi-part field or one cut at the antimeridian (RFC 7946 §3.1.9; its winding:
+        counter-clockwise boundaries, clockwise holes)."""
         if self.origin is None:
             raise ValueError("field has no geodetic origin; cannot export lon/lat")
         polys = []
@@ -442,7 +444,7 @@ class Field:
                 lon, lat = enu_to_lonlat(r[:, 0], r[:, 1], self.origin)
                 rings.append([[round(float(a), 9), round(float(b), 9)]
                               for a, b in zip(lon, lat, strict=True)])
-            polys.append(rings)
+            polys += split_polygon_rings(rings)   # cut at ±180° (RFC 7946 §3.1.9)
         geom = ({"type": "Polygon", "coordinates": polys[0]} if len(polys) == 1
                 else {"type": "MultiPolygon", "coordinates": polys})
         return {"type": "Feature", "properties": {"name": self.name}, "geometry": geom}

@@ -185,3 +185,17 @@ def split_antimeridian(geom):
                 if q.geom_type == geom.geom_type and not q.is_empty:
                     out.append(translate(q, xoff=-360.0 * k))
     return out
+
+
+def split_polygon_rings(rings: list[list[list[float]]]) -> list[list[list[list[float]]]]:
+    """A GeoJSON polygon's lon/lat rings → the polygons it is, cut at the antimeridian where it
+    crosses it (:func:`split_antimeridian`, RFC 7946 §3.1.9; the pieces
+    oriented the RFC's way); a polygon that does not cross is returned as it is."""
+    import shapely
+
+    poly = shapely.Polygon(rings[0], rings[1:])
+    pieces = split_antimeridian(poly)
+    if len(pieces) == 1 and pieces[0] is poly:
+        return [rings]
+    return [[np.round(np.asarray(r.coords), 9).tolist() for r in (q.exterior, *q.interiors)]
+            for q in (shapely.orient_polygons(p, exterior_cw=False) for p in pieces)]
