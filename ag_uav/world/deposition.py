@@ -135,6 +135,7 @@ from .deposition_kernels import (
     INPUT_WIDTH,
     NACC,
     NFOOT,
+    NPART,
     NSLOW,
     P_AREA,
     P_BD0,
@@ -177,11 +178,13 @@ from .deposition_kernels import (
     P_SIG0,
     P_SIGA,
     P_SM,
+    P_SPAN,
     P_ST50,
     P_SWATH,
     P_TAU,
     P_TMAX,
     P_VMIN,
+    P_VTX,
     P_WJ,
     P_X0,
     P_Y0,
@@ -262,6 +265,13 @@ class GridSpec:
         return cls(cx - 0.5 * nx * cell, cy - 0.5 * ny * cell, cell, nx, ny, levels, tuple(offs))
 
 
+def rotor_span(n_rotors: int, arm_m: float, rotor_d_m: float) -> float:
+    """The rotors' width across the flight direction: 2 × arm × max |sin θ_k| + D, the hubs at
+    θ_k = (k + ½) 360°/n (an X layout: √2 × arm + D for four)."""
+    s = max(abs(math.sin((k + 0.5) * 2.0 * math.pi / n_rotors)) for k in range(n_rotors))
+    return 2.0 * arm_m * s + rotor_d_m
+
+
 def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
     """The flat parameter vector of the compiled kernels (layout: the P_* slots)."""
     noz = np.asarray(c.nozzle_xyz_m, float).reshape(-1, 3)
@@ -294,7 +304,9 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
             P_RJ: 0.5 * math.sqrt(c.n_rotors) * c.rotor_diameter_m,
             P_ST50: c.outwash_impaction_st50, P_INVL: c.obukhov_inv_m,
             P_WJ: c.wall_jet_growth,
-            P_HI: c.impingement_diameters * math.sqrt(c.n_rotors / 2.0) * c.rotor_diameter_m}
+            P_HI: c.impingement_diameters * math.sqrt(c.n_rotors / 2.0) * c.rotor_diameter_m,
+            P_SPAN: 0.25 * math.pi * rotor_span(c.n_rotors, c.rotor_arm_m, c.rotor_diameter_m),
+            P_VTX: c.vortex_life_tstar}
     for k, v in head.items():
         par[k] = v
     o = P_HEADER
@@ -312,14 +324,17 @@ def footprints(cfg: DepositionConfig, inp: np.ndarray, par: np.ndarray | None = 
     loop computes it (the same compiled :func:`_class_footprint`): a dict of arrays over the
     classes, keys ``d_m``, ``frac`` and the F_* names in lower case (``wake``, ``wx``, ``wy``,
     ``wvar``, ``wland``, ``esc``, ``ex``, ``ey``, ``evx``, ``evy``, ``mut``, ``lamt``,
-    ``pair``, ``rland``, ``rair``, ``ux``, ``uy``); offsets are from the nozzle centroid."""
+    ``pair``, ``rland``, ``rair``, ``ux``, ``uy``, and the trailing vortex pair's part
+    ``vort``, ``vx``, ``vy``, ``vvx``, ``vvy``, ``vland``); offsets are from the nozzle
+    centroid."""
     if par is None:
         par = pack_params(cfg, GridSpec(0.0, 0.0, 1.0, 1, 1, 1, (0, 1)))
     out = np.zeros((int(par[P_K]), NFOOT))
     class_footprints(par, np.asarray(inp, float).reshape(-1)[:INPUT_WIDTH], out)
     d, frac = droplet_classes(cfg.dv10_um, cfg.dv50_um, cfg.dv90_um, cfg.n_classes)
     names = ("wake", "wx", "wy", "wvar", "wland", "esc", "ex", "ey", "evx", "evy", "mut",
-             "lamt", "pair", "rland", "rair", "ux", "uy")
+             "lamt", "pair", "rland", "rair", "ux", "uy", "vort", "vx", "vy", "vvx", "vvy",
+             "vland")
     res = {n: out[:, i].copy() for i, n in enumerate(names)}
     res.update(d_m=d, frac=frac)
     return res
@@ -463,7 +478,7 @@ class DepositionBatch:
                                     cfg.cell_m, cfg.levels, cfg.max_cells)
         self.par = pack_params(cfg, self.grid)
         nst = (S_ACC + 1 + INPUT_WIDTH + int(self.par[P_M]) * NACC
-               + 2 * int(self.par[P_K]) * NSLOW)
+               + NPART * int(self.par[P_K]) * NSLOW)
         self.st = np.zeros((n, nst))
         self.st[:, S_INC] = -1.0
         self.st[:, S_INSIDE] = -1.0

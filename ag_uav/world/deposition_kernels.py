@@ -12,7 +12,7 @@ import numpy as np
 from .._jit import njit
 from .droplets import N_TAB
 from .surface_layer import eddy_k, layer_wind
-from .wake import centreline_speed, fall_time
+from .wake import centreline_speed, fall_time, vortex_landing, vortex_pair, wing_share
 
 
 class DepArrays(NamedTuple):
@@ -49,8 +49,8 @@ INPUT_WIDTH = 20
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
  P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
  P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL,
- P_WJ, P_HI) = range(49)
-P_HEADER = 49
+ P_WJ, P_HI, P_SPAN, P_VTX) = range(51)
+P_HEADER = 51
 # state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
 # sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
 (S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
@@ -69,8 +69,11 @@ SIGV_USTAR = 1.9
 #: (:func:`_class_footprint`)
 NENV = 16
 (F_WAKE, F_WX, F_WY, F_WVAR, F_WLAND, F_ESC, F_EX, F_EY, F_EVX, F_EVY, F_MUT, F_LAMT, F_PAIR,
- F_RLAND, F_RAIR, F_UX, F_UY) = range(17)
-NFOOT = 17
+ F_RLAND, F_RAIR, F_UX, F_UY, F_VORT, F_VX, F_VY, F_VVX, F_VVY, F_VLAND) = range(23)
+NFOOT = 23
+#: the parts of a class that land apart: the wake (the jet and its outwash), the escaped, and the
+#: forward-flight wake's trailing vortex pair (an option, share 0 when off)
+NPART = 3
 
 
 @njit(cache=True, inline="always")
@@ -140,6 +143,17 @@ def _splat_part(par, st, buf, scratch, vol, mx, my, vx, vy, drift) -> None:
         st[S_OUTSIDE] += vol - put
 
 
+@njit(cache=True, inline="always")
+def _part(f, part: int, vw: float, land_e: float, vv: float):
+    """(share, mean x, mean y, variance x, variance y) of a class's part: 0 the wake, 1 the
+    escaped part that lands, 2 the trailing vortex pair's."""
+    if part == 0:
+        return vw, f[F_WX], f[F_WY], f[F_WVAR], f[F_WVAR]
+    if part == 1:
+        return land_e, f[F_EX], f[F_EY], f[F_EVX], f[F_EVY]
+    return vv, f[F_VX], f[F_VY], f[F_VVX], f[F_VVY]
+
+
 @njit(cache=True)
 def _flush(par, st, buf, scratch, force: float) -> None:
     """The window's landing law, once: every class's footprint (:func:`_class_footprint`) at
@@ -172,22 +186,18 @@ def _flush(par, st, buf, scratch, force: float) -> None:
         for k in range(k_n):
             f = _class_footprint(par, k, env)
             vk = par[o_fr + k]
-            vw, ve = vk * f[F_WAKE], vk * f[F_ESC]
+            vw, ve, vv = vk * f[F_WAKE], vk * f[F_ESC], vk * f[F_VORT]
             land_e = ve * (1.0 - f[F_PAIR])
             air = ve * f[F_PAIR]
             st[S_AIR] += vtot * air
             st[S_EVAP] += vtot * (vw * (1.0 - f[F_WLAND]) + land_e * (1.0 - f[F_RLAND])
-                                  + air * (1.0 - f[F_RAIR]))
-            for part in range(2):
-                share = vw if part == 0 else land_e
+                                  + air * (1.0 - f[F_RAIR]) + vv * (1.0 - f[F_VLAND]))
+            for part in range(NPART):
+                share, ox, oy, kvx, kvy = _part(f, part, vw, land_e, vv)
                 if share <= 0.0:
                     continue
-                ox = f[F_WX] if part == 0 else f[F_EX]
-                oy = f[F_WY] if part == 0 else f[F_EY]
-                kvx = f[F_WVAR] if part == 0 else f[F_EVX]
-                kvy = f[F_WVAR] if part == 0 else f[F_EVY]
                 if math.sqrt(0.5 * (kvx + kvy)) >= merge_r:
-                    q = o + m_n * NACC + (2 * k + part) * NSLOW
+                    q = o + m_n * NACC + (NPART * k + part) * NSLOW
                     w = share * V
                     st[q] += w
                     st[q + 1] += share * (Sx + ox * V)
@@ -223,7 +233,7 @@ def _flush_wide(par, st, buf, scratch, force: float) -> None:
     m_n, k_n = int(par[P_M]), int(par[P_K])
     drift = st[S_INSIDE] > 0.5
     base = S_ACC + 1 + INPUT_WIDTH + m_n * NACC
-    for i in range(2 * k_n):
+    for i in range(NPART * k_n):
         q = base + i * NSLOW
         w = st[q]
         if w <= 0.0:
@@ -335,7 +345,8 @@ def _environment(par, inp):
     """What every class of one tick shares: nozzle and ground depths below the rotor plane, the
     wake (speed a, skew, the rotors' core, the merged jet), the wind and the surface layer.
     Laws in the module docstring. Returns (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin χ,
-    u*, h_n, f_u, σ_s, s_m cos χ, B D_0 cos χ)."""
+    u*, h_n, f_u, σ_s, s_m cos χ, B D_0 cos χ, the trailing pair: (wing share, w₀, c, U,
+    lifetime, lateral unit x, y) of :mod:`ag_uav.world.wake`)."""
     m_n = int(par[P_M])
     o_noz, o_share = int(par[P_O_NOZ]), int(par[P_O_SHARE])
     pz, vx, vy = inp[2], inp[3], inp[4]
@@ -368,7 +379,18 @@ def _environment(par, inp):
     w = math.sqrt(wx * wx + wy * wy)
     ust, fu = layer_wind(w, pz, zn, par[P_Z0], par[P_INVL])
     return (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, zn, fu,
-            par[P_IW] * 2.0 * vi, zmw, bdw)
+            par[P_IW] * 2.0 * vi, zmw, bdw, _pair(par, thrust, vx - wx, vy - wy, vh2, s_g))
+
+
+@njit(cache=True, inline="always")
+def _pair(par, thrust: float, ax: float, ay: float, vh2: float, z_r: float):
+    """The forward-flight wake's trailing vortex pair (option ``P_VTX`` > 0, its lifetime in
+    t*): (wing share, w₀, c, U, lifetime s, lateral unit x, y), :mod:`ag_uav.world.wake`."""
+    va = math.sqrt(ax * ax + ay * ay)
+    if par[P_VTX] <= 0.0 or va <= 1e-6:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    _, w0, c, u, tstar = vortex_pair(thrust, par[P_RHOA], va, par[P_SPAN], z_r)
+    return (wing_share(va, math.sqrt(vh2)), w0, c, u, par[P_VTX] * tstar, -ay / va, ax / va)
 
 
 @njit(cache=True, inline="always")
@@ -421,7 +443,7 @@ def _class_footprint(par, k: int, env):
     part (share, mean, axis variances, fall-time law IG(μ_T, λ_T), airborne share, volume left
     on landing and when counted airborne, mean wind). Slots F_*."""
     (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, h_n, fu, sig_s, zmw,
-     bdw) = env
+     bdw, pair_v) = env
     vt, tp = par[int(par[P_O_VT]) + k], par[int(par[P_O_TAUP]) + k]
     sig0 = par[P_SIG0]
     # wake: carried down the decaying skewed jet
@@ -459,6 +481,18 @@ def _class_footprint(par, k: int, env):
     wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * ovar
             + (par[P_SIGA] * tf) ** 2 + lvar)
     wland = _tab_left(par, k, tf)
+    # the share carried by the trailing vortex pair (option): its own part, spread across the
+    # airspeed by the pair's outward run (lateral unit lx, ly; the axis variances its projection)
+    fv, w0, c, u, life, lx, ly = pair_v
+    vxo = vyo = vvx = vvy = 0.0
+    vland = 1.0
+    if fv > 0.0:
+        t_v, lat = vortex_landing(vt, par[P_SPAN], h_n, w0, c, u, life)
+        rel_v = tp * (1.0 - math.exp(-t_v / tp))
+        base = sig0 * sig0 + (par[P_SIGA] * t_v) ** 2
+        vxo, vyo = wx * t_v + (vx - wx) * rel_v, wy * t_v + (vy - wy) * rel_v
+        vvx, vvy = base + lat * lx * lx, base + lat * ly * ly
+        vland = _tab_left(par, k, t_v)
     # escape at the wake's edge: ε₀ sin χ, damped by the droplet's response 1/(1 + St)
     st_k = tp * sig_s / par[P_ELL]
     esc = par[P_ESC] * sin_chi / (1.0 + st_k)
@@ -484,8 +518,8 @@ def _class_footprint(par, k: int, env):
         evx = evy = s0e + vlat
     rland = _tab_left(par, k, mu_t)
     rair = _tab_left(par, k, tmax)
-    return (1.0 - esc, wxo, wyo, wvar, wland, esc, exo, eyo, evx, evy, mu_t, lam_t, pair,
-            rland, rair, ux, uy)
+    return ((1.0 - esc) * (1.0 - fv), wxo, wyo, wvar, wland, esc, exo, eyo, evx, evy, mu_t,
+            lam_t, pair, rland, rair, ux, uy, (1.0 - esc) * fv, vxo, vyo, vvx, vvy, vland)
 
 
 @njit(cache=True)
