@@ -185,6 +185,7 @@ from .deposition_kernels import (
     P_TMAX,
     P_VMIN,
     P_VTX,
+    P_WINGV,
     P_WJ,
     P_X0,
     P_Y0,
@@ -306,7 +307,7 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
             P_WJ: c.wall_jet_growth,
             P_HI: c.impingement_diameters * math.sqrt(c.n_rotors / 2.0) * c.rotor_diameter_m,
             P_SPAN: 0.25 * math.pi * rotor_span(c.n_rotors, c.rotor_arm_m, c.rotor_diameter_m),
-            P_VTX: c.vortex_life_tstar}
+            P_VTX: c.vortex_life_tstar, P_WINGV: c.wing_speed_vh}
     for k, v in head.items():
         par[k] = v
     o = P_HEADER

@@ -19,7 +19,7 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
            ("outwash_impaction_st50", 0.0, 10.0), ("jet_merge_lengths", 0.0, 100.0),
            ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0),
            ("wall_jet_growth", 0.0, 1.0), ("impingement_diameters", 0.0, 10.0),
-           ("vortex_life_tstar", 0.0, 100.0))
+           ("vortex_life_tstar", 0.0, 100.0), ("wing_speed_vh", 0.01, 100.0))
 
 
 #: the hover law's options (off by default): the merged jet, the impaction cut, the outwash as a
@@ -74,6 +74,8 @@ class DepositionConfig:
     vortex_life_tstar: float = 0.0                # > 0: in forward flight the wake rolls up
                                                   # into a trailing vortex pair that carries
                                                   # droplets outward for this many t* (wake.py)
+    wing_speed_vh: float = 2.0                    # the pair takes the whole wake from V_a =
+                                                  # this × v_h on (Leishman: 2), blended below
     release_sigma_m: float = 0.1
     ambient_sigma_mps: float = 0.0
     temperature_c: float = 20.0                   # air temperature (°C)
@@ -119,5 +121,6 @@ class DepositionConfig:
         if kw.get("nozzle_share") == ():  # [] in the config: equal shares
             m = len(kw.get("nozzle_xyz_m", _M350_NOZZLES))
             kw["nozzle_share"] = tuple([1.0 / m] * m)
+        kw.update(LAWS[getattr(cfg.spray, "deposition_law", "default")])
         kw.update(over)
         return cls(**kw)

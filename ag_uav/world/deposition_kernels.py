@@ -49,8 +49,8 @@ INPUT_WIDTH = 20
  P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
  P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
  P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL,
- P_WJ, P_HI, P_SPAN, P_VTX) = range(51)
-P_HEADER = 51
+ P_WJ, P_HI, P_SPAN, P_VTX, P_WINGV) = range(52)
+P_HEADER = 52
 # state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
 # sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
 (S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
@@ -390,7 +390,8 @@ def _pair(par, thrust: float, ax: float, ay: float, vh2: float, z_r: float):
     if par[P_VTX] <= 0.0 or va <= 1e-6:
         return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     _, w0, c, u, tstar = vortex_pair(thrust, par[P_RHOA], va, par[P_SPAN], z_r)
-    return (wing_share(va, math.sqrt(vh2)), w0, c, u, par[P_VTX] * tstar, -ay / va, ax / va)
+    return (wing_share(va, math.sqrt(vh2), par[P_WINGV]), w0, c, u, par[P_VTX] * tstar,
+            -ay / va, ax / va)
 
 
 @njit(cache=True, inline="always")
@@ -434,6 +435,23 @@ def wall_jet(beta: float, r_j: float, st50: float, tp: float, vt: float, u_g: fl
     dj = beta * r_j
     rs = math.sqrt(r_j * r_j + 2.0 * u_g * r_j * dj / vt) - r_j
     return ride, dj, 0.5 * rs * rs
+
+
+@njit(cache=True, inline="always")
+def _vortex_part(par, k: int, vt: float, tp: float, h_n: float, wx: float, wy: float,
+                 vx: float, vy: float, pair_v):
+    """The share carried by the trailing vortex pair (option; :mod:`ag_uav.world.wake`): its
+    mean offset (the wind over its landing time, the vehicle's velocity relaxing), its variances
+    (the nozzle sheet, ambient turbulence, and the pair's outward run across the airspeed:
+    lateral unit lx, ly, projected on the axes) and the volume left on landing."""
+    fv, w0, c, u, life, lx, ly = pair_v
+    if fv <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0
+    t_v, lat = vortex_landing(vt, par[P_SPAN], h_n, w0, c, u, life)
+    rel_v = tp * (1.0 - math.exp(-t_v / tp))
+    base = par[P_SIG0] ** 2 + (par[P_SIGA] * t_v) ** 2
+    return (wx * t_v + (vx - wx) * rel_v, wy * t_v + (vy - wy) * rel_v, base + lat * lx * lx,
+            base + lat * ly * ly, _tab_left(par, k, t_v))
 
 
 @njit(cache=True)
@@ -481,18 +499,8 @@ def _class_footprint(par, k: int, env):
     wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * ovar
             + (par[P_SIGA] * tf) ** 2 + lvar)
     wland = _tab_left(par, k, tf)
-    # the share carried by the trailing vortex pair (option): its own part, spread across the
-    # airspeed by the pair's outward run (lateral unit lx, ly; the axis variances its projection)
-    fv, w0, c, u, life, lx, ly = pair_v
-    vxo = vyo = vvx = vvy = 0.0
-    vland = 1.0
-    if fv > 0.0:
-        t_v, lat = vortex_landing(vt, par[P_SPAN], h_n, w0, c, u, life)
-        rel_v = tp * (1.0 - math.exp(-t_v / tp))
-        base = sig0 * sig0 + (par[P_SIGA] * t_v) ** 2
-        vxo, vyo = wx * t_v + (vx - wx) * rel_v, wy * t_v + (vy - wy) * rel_v
-        vvx, vvy = base + lat * lx * lx, base + lat * ly * ly
-        vland = _tab_left(par, k, t_v)
+    fv = pair_v[0]
+    vxo, vyo, vvx, vvy, vland = _vortex_part(par, k, vt, tp, h_n, wx, wy, vx, vy, pair_v)
     # escape at the wake's edge: ε₀ sin χ, damped by the droplet's response 1/(1 + St)
     st_k = tp * sig_s / par[P_ELL]
     esc = par[P_ESC] * sin_chi / (1.0 + st_k)

@@ -141,14 +141,14 @@ WING_SPEED_VH = 2.0
 
 
 @njit(cache=True, inline="always")
-def wing_share(va: float, vh: float) -> float:
+def wing_share(va: float, vh: float, end: float = WING_SPEED_VH) -> float:
     """Share of the wake in the wing-like regime, a smooth blend of the advance ratio
-    normalised by the hover induced velocity: x = V_a / (2 v_h) clipped to [0, 1],
+    normalised by the hover induced velocity: x = V_a / (``end`` v_h) clipped to [0, 1],
     f = 3x² − 2x³ (0 in hover, where the merged jet impinges; 1 from V_a = 2 v_h on, where the
     wake is swept clear of the ground and rolls up as a wing's)."""
     if vh <= 0.0:
         return 1.0 if va > 0.0 else 0.0
-    x = min(va / (WING_SPEED_VH * vh), 1.0)
+    x = min(va / (end * vh), 1.0)
     return x * x * (3.0 - 2.0 * x)
 
 
