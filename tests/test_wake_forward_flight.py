@@ -128,3 +128,28 @@ def test_wind_tunnel_medium_with_the_wake_law():
     hover = dataclasses.replace(base, vortex_life_tstar=0.0)
     _, sh = wt.compare(hover, wt.Trial(), wt.read_measured(None), [4.5], ["medium"], [2.0])
     assert s["downwind_model"] > sh[0]["downwind_model"]     # the pair carries some downwind
+
+
+def test_a_flight_selects_the_law_and_the_vehicle_arm():
+    from ag_uav.config import load_config
+
+    d = DepositionConfig.from_config(load_config(None, {"spray.deposition_law": "wake"}))
+    assert d.vortex_life_tstar == WAKE_LAW["vortex_life_tstar"] and d.wake_escape == 0.6
+    assert DepositionConfig.from_config(load_config(None)).vortex_life_tstar == 0.0
+    x8 = DepositionConfig.from_config(load_config(None, {"vehicle.preset": "x8-40l"}))
+    assert x8.rotor_arm_m == pytest.approx(1.092) and x8.rotor_diameter_m == pytest.approx(1.372)
+
+
+def test_swath_cli_with_a_vehicle_preset(tmp_path, capsys):
+    from ag_uav.cli import main
+
+    rc = main(["experiment", "swath", "--law", "wake", "--set", "vehicle.preset=x8-40l",
+               "--heights", "2.5", "--speeds", "7", "--winds", "0", "--out", str(tmp_path)])
+    assert rc == 0
+    import csv
+
+    row = next(csv.DictReader((tmp_path / "swath.csv").open()))
+    assert 3.0 < float(row["effective_swath_m"]) < 11.0 * 1.3
+    assert main(["experiment", "swath", "--set", "vehicle.preset=nope", "--out",
+                 str(tmp_path)]) == 2
+    assert "vehicle.preset" in capsys.readouterr().err
