@@ -76,6 +76,15 @@ rides the outwash (St_g = τ_p u_g / r_j, r_j = √n D/2: a round impinging jet'
 Marple & Liu 1974, Environ. Sci. Technol. 8(7):648), drifting with the log-law wind at δ for
 δ / v_t (the mixture's mean and variance; off by default).
 
+**The trailing vortex pair** (option ``vortex_life_tstar`` > 0; the law ``wake``). In forward
+flight a share f = 3x² − 2x³, x = V_a / (``wing_speed_vh`` v_h) ≤ 1, of the wake part rolls up
+as a lifting wing's: a vortex pair of separation b₀ = (π/4) b (b the rotors' width),
+circulation Γ = T / (ρ V_a b₀) and descent w₀ = Γ / (2π b₀) (Prandtl's lifting line; the rotor
+as a wing, Leishman §2.14), which near the ground runs apart at Γ / (4π c) (the image vortices;
+Lamb, *Hydrodynamics* §155) and carries a droplet outward while it settles out of the pair's
+layer. It is a third part of each class (its own mean and axis variances), laws in
+:mod:`ag_uav.world.wake`; 0 when the option is off.
+
 **The escaped part.** At the wake's edge the shear layer's eddies (velocity σ_s = i_w 2 v_i,
 size ℓ = ``shear_eddy_m``) carry droplets out as the wake skews; a droplet follows them by the
 response 1 / (1 + St), St = τ_p σ_s / ℓ (Stokes number). The escaped share of class k is ε =

@@ -24,6 +24,11 @@ In forward flight or wind the wake skews back by χ (tan χ = V_a / v_i, Glauert
 is along the skewed axis, so at depth z the axial distance is z / cos χ (the lengths in depth
 are the axial lengths × cos χ).
 
+**In forward flight** the wake also rolls up as a lifting wing's into a trailing vortex pair
+(:func:`vortex_pair`, :func:`vortex_landing`), which takes the share :func:`wing_share` of the
+wake, a smooth blend by V_a / (2 v_h): the hover jet at V_a = 0, all of it from V_a = 2 v_h on
+(where ground effect is negligible, Leishman §5).
+
 The compiled :func:`centreline_speed` and :func:`fall_time` are the laws the deposition kernels
 use (:mod:`ag_uav.world.deposition_kernels`); :class:`MultirotorWake` is the same law from a
 vehicle's mass and geometry (mass, rotor count, rotor diameter, arm), for tests and reports.

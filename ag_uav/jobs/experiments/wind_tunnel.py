@@ -314,8 +314,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tunnel-width", type=float, default=t.tunnel_width_m,
                    help="tunnel width (m; assumed); 0: no side walls")
     p.add_argument("--law", default="default", choices=sorted(LAWS),
-                   help="the deposition law: default (the outwash layer calibrated on the T40) "
-                        "or hover (the wall jet and the impinging jet; ε₀ from these rows)")
+                   help="the deposition law: default (the outwash layer calibrated on the T40), "
+                        "hover (the wall jet and the impinging jet; ε₀ from these rows) or wake "
+                        "(hover and the forward-flight vortex pair)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a DepositionConfig field (e.g. wake_escape=0.6)")
     p.add_argument("--out", default="runs/experiment-wind-tunnel", metavar="DIR",
