@@ -17,7 +17,7 @@ from ag_uav.world.deposition import (
     pack_input,
     pack_params,
 )
-from ag_uav.world.deposition_kernels import (
+from ag_uav.world.deposition_layout import (
     DEP_PARAMS,
     DEP_STATE,
     FOOTPRINT,

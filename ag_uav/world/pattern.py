@@ -41,7 +41,7 @@ import numpy as np
 from numkit import X, Y, Z
 
 from .deposition import DepositionBatch, DepositionConfig
-from .deposition_kernels import INPUT
+from .deposition_layout import INPUT
 from .forecast import plan_wind
 
 __all__ = ["pass_states", "single_pass", "cv_vs_spacing", "effective_swath", "swath_pattern",
