@@ -236,6 +236,6 @@ def test_the_band_check_places_a_synthetic_profile():
     assert checks[-1] == (50.0, "above", pytest.approx(1.6), "E")
     assert checks[0] == (5.0, "below", pytest.approx(0.5), "F")
     assert band_verdict(checks) == ("above E at 30, 50 m (up to 1.6 ×); "
-                                    "below F at 5 m (down to 0.5 ×)")
+                                    "below F at 5 m (down to 0.50 ×)")
     # distances the band has no value at (1-3 m) are not checked
     assert band_check({1.0: 1e3, 3.0: 1e3}) == []

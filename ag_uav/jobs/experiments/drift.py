@@ -106,7 +106,7 @@ def band_verdict(checks: list[tuple[float, str, float, str]]) -> str:
             worst = max(r for _, r in out) if side == "above" else min(r for _, r in out)
             at = ", ".join(f"{d:g}" for d, _ in out)
             parts.append(f"{side} {edge} at {at} m ({'up' if side == 'above' else 'down'} "
-                         f"to {worst:.2g} ×)")
+                         f"to {worst:#.2g} ×)")
     return "; ".join(parts) if parts else "inside"
 
 
@@ -284,7 +284,7 @@ def _band_table(rows: list[dict], summ: list[dict], base_cases: list[Case]
                       s["temperature_c"], s["rh_percent"]) == key), None)
         if not dep or s is None:
             continue
-        cells = [f"{st} {r:.2g} {e}" for _, st, r, e in band_check(dep)]
+        cells = [f"{st} {r:#.2g} {e}" for _, st, r, e in band_check(dep)]
         table.append([f"{c.height:g} m, {c.wind:g} m/s"] + cells
                      + [s["jki_band"], s.get("jki_band_low", "—"), s.get("jki_band_high", "—")])
     return header, table
