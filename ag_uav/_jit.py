@@ -5,7 +5,7 @@ run as plain Python, correct and slow. Kernels use ``@njit(cache=True)`` and kee
 GIL at each of them handed it to another lane's Python and waited to get it back
 (docs/speed.md); no ``fastmath`` (a vehicle's results must not depend on the batch it flies
 in). At import a module's kernels are swept from the cache when its source or any
-source it imports (in ``ag_uav``, ``estimators`` or ``controllers``) changed
+source it imports (in ``ag_uav``, ``estimators``, ``controllers`` or ``numkit``) changed
 (:func:`jitcache.sweep_stale_caches`: numba alone would keep a kernel that inlined an old
 law from another file).
 
@@ -61,4 +61,4 @@ except ImportError:  # pragma: no cover - numba is a dependency
 if HAVE_NUMBA:  # the application's kernels call the estimators' and the controllers'
     _set_opt_level()
     sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent, package_dir("estimators"),
-                                               package_dir("controllers")])
+                                               package_dir("controllers"), package_dir("numkit")])

@@ -3,7 +3,8 @@
 Depends on numpy and numba (optional: :mod:`controllers._jit`), nothing from ``ag_uav`` or
 ``mujoco``. Each control law is written once, as a compiled function on one controller's (or one
 vehicle's) parameter and state arrays: the axis law in :mod:`controllers.axis`, thrust vectoring,
-attitude and mixer in :mod:`controllers.attitude`, the cascade row in :mod:`controllers.cascade`.
+attitude and mixer in :mod:`controllers.attitude`, the cascade row in :mod:`controllers.cascade`;
+a quad's three-rotor law after a rotor loss in :mod:`controllers.rotor_loss` (numpy).
 The classes (``PID``, ``FPID``, ``IT2FPID``, ``PositionCascade``, ...) are thin shells that call
 them on their own arrays; :mod:`controllers.batched` calls them row by row.
 """
@@ -13,6 +14,7 @@ from .fpid import FPID, IT2FPID, PAPER_TABLE_I, equivalent_pid
 from .fuzzy import REDUCERS, IT2FuzzyPD, T1FuzzyPD, heights_from_alpha, small_signal_gain
 from .optim import BBBC, PSO, OptimResult, bbbc_minimize, pso_minimize
 from .pid import PID
+from .rotor_loss import RelaxedHover
 
 __all__ = [
     "BBBC",
@@ -25,6 +27,7 @@ __all__ = [
     "PID",
     "PSO",
     "REDUCERS",
+    "RelaxedHover",
     "T1FuzzyPD",
     "bbbc_minimize",
     "equivalent_pid",

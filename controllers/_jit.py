@@ -5,7 +5,7 @@ compiled with it), but :mod:`controllers` must stay importable and correct on nu
 numba the decorated functions run as plain Python (same results, much slower).
 No ``fastmath``: the compiled kernels must give the scalar Python floats' results (IEEE order of
 operations kept), to ~1e-12.  At import the package's stale kernels are swept from the cache
-(:func:`jitcache.sweep_stale_caches`).
+(:func:`jitcache.sweep_stale_caches`), the shared laws of ``numkit`` among their sources.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
-from jitcache import sweep_stale_caches
+from jitcache import package_dir, sweep_stale_caches
 
 __all__ = ["HAVE_NUMBA", "njit"]
 
@@ -44,4 +44,4 @@ def njit(fn: F) -> F:
 
 
 if _numba is not None:
-    sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent])
+    sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent, package_dir("numkit")])

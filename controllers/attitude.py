@@ -23,33 +23,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from numkit import Layout, X, Y, Z
+from numkit.geometry import RXX, RXY, RXZ, RYX, RYY, RYZ, RZX, RZY, RZZ
+
 from ._jit import njit
 from .rows import RowBlocks
 
 Mat3 = tuple[float, float, float, float, float, float, float, float, float]
 Vec3 = tuple[float, float, float]
-
-
-@njit
-def quat_to_rot(w: float, x: float, y: float, z: float) -> Mat3:
-    """Rotation matrix (body → world, row-major) of a unit quaternion (w, x, y, z); compiled,
-    so the engine's per-tick kernel calls this one law (:mod:`ag_uav.engine.kernels`)."""
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    return (
-        1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy),
-        2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx),
-        2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy),
-    )
-
-
-def rot_to_euler(R: Mat3) -> tuple[float, float, float]:
-    """ZYX Euler angles (roll, pitch, yaw) in radians of a row-major body → world matrix."""
-    roll = math.atan2(R[7], R[8])
-    pitch = -math.asin(max(-1.0, min(1.0, R[6])))
-    yaw = math.atan2(R[3], R[0])
-    return roll, pitch, yaw
 
 
 @njit
@@ -97,36 +78,44 @@ def geometric_torque(R: Mat3, omega: Sequence[float], R_d: Mat3, J: Sequence[flo
     r = R
     d = R_d
     # M = R_dᵀ R  (only the off-diagonal entries are needed for vee(M − Mᵀ))
-    m01 = d[0] * r[1] + d[3] * r[4] + d[6] * r[7]
-    m02 = d[0] * r[2] + d[3] * r[5] + d[6] * r[8]
-    m10 = d[1] * r[0] + d[4] * r[3] + d[7] * r[6]
-    m12 = d[1] * r[2] + d[4] * r[5] + d[7] * r[8]
-    m20 = d[2] * r[0] + d[5] * r[3] + d[8] * r[6]
-    m21 = d[2] * r[1] + d[5] * r[4] + d[8] * r[7]
+    # m_ij = Σ_k d_ki r_kj
+    m01 = d[RXX] * r[RXY] + d[RYX] * r[RYY] + d[RZX] * r[RZY]
+    m02 = d[RXX] * r[RXZ] + d[RYX] * r[RYZ] + d[RZX] * r[RZZ]
+    m10 = d[RXY] * r[RXX] + d[RYY] * r[RYX] + d[RZY] * r[RZX]
+    m12 = d[RXY] * r[RXZ] + d[RYY] * r[RYZ] + d[RZY] * r[RZZ]
+    m20 = d[RXZ] * r[RXX] + d[RYZ] * r[RYX] + d[RZZ] * r[RZX]
+    m21 = d[RXZ] * r[RXY] + d[RYZ] * r[RYY] + d[RZZ] * r[RZY]
     ex = 0.5 * (m21 - m12)
     ey = 0.5 * (m02 - m20)
     ez = 0.5 * (m10 - m01)
-    wx, wy, wz = omega[0], omega[1], omega[2]
-    Jx, Jy, Jz = J[0], J[1], J[2]
+    wx, wy, wz = omega[X], omega[Y], omega[Z]
+    Jx, Jy, Jz = J[X], J[Y], J[Z]
     # ω × Jω
     gx = wy * Jz * wz - wz * Jy * wy
     gy = wz * Jx * wx - wx * Jz * wz
     gz = wx * Jy * wy - wy * Jx * wx
+    # τ = −k_R e_R − k_ω ω + ω × Jω
     return (
-        (-kR[0] * ex - kw[0] * wx + gx, -kR[1] * ey - kw[1] * wy + gy,
-         -kR[2] * ez - kw[2] * wz + gz),
+        (-kR[X] * ex - kw[X] * wx + gx, -kR[Y] * ey - kw[Y] * wy + gy,
+         -kR[Z] * ez - kw[Z] * wz + gz),
         (ex, ey, ez),
     )
 
 
-# --- attitude block: parameters J (3), kR (3), kw (3); state τ (3), e_R (3) -----------------------
-ATT_J, ATT_KR, ATT_KW, ATT_NP = 0, 3, 6, 9
-ATT_TAU, ATT_ER, ATT_NS = 0, 3, 6
-# --- mixer block: parameters Ainv (MIX_NMAX × 4, row-major, one row per rotor), f_max, number of
-# rotors n; state: saturated flag
+#: attitude block: parameters J, kR, kw (3 each); state τ, e_R (3 each)
+ATT_PARAMS = Layout("j:3 kr:3 kw:3")
+ATT_STATE = Layout("tau:3 er:3")
+#: the wrench ``[T, τx, τy, τz]`` a rotor's allocation row weighs
+WRENCH = Layout("t tx ty tz")
+#: mixer block: parameters Ainv (MIX_NMAX × 4, row-major, one :data:`WRENCH` row per rotor),
+#: f_max, number of rotors n; state: saturated flag
 MIX_NMAX = 8
-MIX_AINV, MIX_FMAX, MIX_N, MIX_NP = 0, 4 * MIX_NMAX, 4 * MIX_NMAX + 1, 4 * MIX_NMAX + 2
-MIX_SAT, MIX_NS = 0, 1
+MIX_PARAMS = Layout(f"ainv:{MIX_NMAX}x{WRENCH.size} fmax n")
+MIX_STATE = Layout("sat")
+#: the scalar attitude shell's packed inputs: R, ω, R_d
+_ATT_IN = Layout("r:9 omega:3 rd:9").at
+_AP, _AS, _W = ATT_PARAMS.at, ATT_STATE.at, WRENCH.at
+_MP, _MS = MIX_PARAMS.at, MIX_STATE.at
 
 
 @njit
@@ -134,22 +123,22 @@ def attitude_step(prm: np.ndarray, st: np.ndarray, R: Sequence[float], omega: Se
                   R_d: Sequence[float]) -> tuple[float, float, float]:
     """:func:`geometric_torque` on an attitude block (``prm``: J, kR, kw; ``st``: τ, e_R written
     here); returns τ."""
-    tau, eR = geometric_torque(R, omega, R_d, prm[ATT_J:ATT_J + 3], prm[ATT_KR:ATT_KR + 3],
-                               prm[ATT_KW:ATT_KW + 3])
-    st[ATT_TAU] = tau[0]
-    st[ATT_TAU + 1] = tau[1]
-    st[ATT_TAU + 2] = tau[2]
-    st[ATT_ER] = eR[0]
-    st[ATT_ER + 1] = eR[1]
-    st[ATT_ER + 2] = eR[2]
+    tau, eR = geometric_torque(R, omega, R_d, prm[_AP.J:_AP.J_END], prm[_AP.KR:_AP.KR_END],
+                               prm[_AP.KW:_AP.KW_END])
+    st[_AS.TAU + X] = tau[X]
+    st[_AS.TAU + Y] = tau[Y]
+    st[_AS.TAU + Z] = tau[Z]
+    st[_AS.ER + X] = eR[X]
+    st[_AS.ER + Y] = eR[Y]
+    st[_AS.ER + Z] = eR[Z]
     return tau
 
 
 @njit
 def _alloc_one(a: np.ndarray, i: int, T: float, tx: float, ty: float, tz: float) -> float:
     """Rotor ``i``'s thrust ``(Ainv [T, τx, τy, τz]ᵀ)_i`` (``a``: Ainv row-major)."""
-    j = 4 * i
-    return a[j] * T + a[j + 1] * tx + a[j + 2] * ty + a[j + 3] * tz
+    j = _W.SIZE * i
+    return a[j + _W.T] * T + a[j + _W.TX] * tx + a[j + _W.TY] * ty + a[j + _W.TZ] * tz
 
 
 @njit
@@ -200,9 +189,9 @@ def mix_step(prm: np.ndarray, st: np.ndarray, T: float, tx: float, ty: float, tz
     to ``[0, f_max]``. Roll and pitch come first, then the collective, then yaw (PX4's and
     Betaflight's priority).
     """
-    a = prm[MIX_AINV:MIX_AINV + 4 * MIX_NMAX]
-    fmax = prm[MIX_FMAX]
-    n = int(prm[MIX_N])
+    a = prm[_MP.AINV:_MP.AINV_END]
+    fmax = prm[_MP.FMAX]
+    n = int(prm[_MP.N])
     lo = math.inf
     hi = -math.inf
     for i in range(n):
@@ -211,7 +200,7 @@ def mix_step(prm: np.ndarray, st: np.ndarray, T: float, tx: float, ty: float, tz
         lo = min(lo, f)
         hi = max(hi, f)
     sat = lo < 0.0 or hi > fmax
-    st[MIX_SAT] = 1.0 if sat else 0.0
+    st[_MS.SAT] = 1.0 if sat else 0.0
     if not sat:
         return
     lo0, hi0 = _yaw_free_range(a, n, T, tx, ty)  # 1. drop yaw
@@ -233,12 +222,13 @@ def mix_step(prm: np.ndarray, st: np.ndarray, T: float, tx: float, ty: float, tz
 
 @njit
 def _attitude_call(prm: np.ndarray, st: np.ndarray, x: np.ndarray) -> tuple[float, float, float]:
-    """:func:`attitude_step` with R, ω, R_d packed in ``x`` (9 + 3 + 9)."""
-    return attitude_step(prm, st, x[0:9], x[9:12], x[12:21])
+    """:func:`attitude_step` with R, ω, R_d packed in ``x`` (``_ATT_IN``)."""
+    return attitude_step(prm, st, x[_ATT_IN.R:_ATT_IN.R_END], x[_ATT_IN.OMEGA:_ATT_IN.OMEGA_END],
+                         x[_ATT_IN.RD:_ATT_IN.RD_END])
 
 
 def _vec3(arr: np.ndarray) -> Vec3:
-    return (float(arr[0]), float(arr[1]), float(arr[2]))
+    return (float(arr[X]), float(arr[Y]), float(arr[Z]))
 
 
 class GeometricAttitudeController(RowBlocks):
@@ -255,50 +245,52 @@ class GeometricAttitudeController(RowBlocks):
     zeta: damping ratios for roll, pitch, yaw.
 
     ``J`` (writable: a draining tank changes it; the gains ``kR``, ``kw`` stay as built), ``kR``,
-    ``kw`` and ``eR`` (last attitude error) live in the blocks ``_p`` (ATT_NP,) and ``_s``
-    (ATT_NS,), which a :class:`~controllers.cascade.PositionCascade` adopts.
+    ``kw`` and ``eR`` (last attitude error) live in the blocks ``_p`` (ATT_PARAMS) and ``_s``
+    (ATT_STATE), which a :class:`~controllers.cascade.PositionCascade` adopts.
     """
 
     def __init__(self, inertia: Sequence[float], wn: Sequence[float] = (9.0, 9.0, 3.0),
                  zeta: Sequence[float] = (0.9, 0.9, 0.9)) -> None:
         J = tuple(float(v) for v in inertia)
-        self._p = np.zeros(ATT_NP)
-        self._s = np.zeros(ATT_NS)
-        self._x = np.zeros(21)
-        self._p[ATT_J:ATT_J + 3] = J
-        self._p[ATT_KR:ATT_KR + 3] = [j * w * w for j, w in zip(J, wn, strict=True)]
-        self._p[ATT_KW:ATT_KW + 3] = [2.0 * j * z * w for j, z, w in zip(J, zeta, wn, strict=True)]
+        self._p = np.zeros(ATT_PARAMS.size)
+        self._s = np.zeros(ATT_STATE.size)
+        self._x = np.zeros(_ATT_IN.SIZE)
+        self._p[ATT_PARAMS.slice("j")] = J
+        # k_R = J ω_n², k_ω = 2 J ζ ω_n per axis
+        self._p[ATT_PARAMS.slice("kr")] = [j * w * w for j, w in zip(J, wn, strict=True)]
+        self._p[ATT_PARAMS.slice("kw")] = [2.0 * j * z * w
+                                          for j, z, w in zip(J, zeta, wn, strict=True)]
 
     @property
     def J(self) -> Vec3:
         """Principal inertia (kg m²); writable."""
-        return _vec3(self._p[ATT_J:ATT_J + 3])
+        return _vec3(self._p[ATT_PARAMS.slice("j")])
 
     @J.setter
     def J(self, value: Sequence[float]) -> None:
-        self._p[ATT_J:ATT_J + 3] = [float(v) for v in value]
+        self._p[ATT_PARAMS.slice("j")] = [float(v) for v in value]
 
     @property
     def kR(self) -> Vec3:
         """Attitude gains J ω_n²."""
-        return _vec3(self._p[ATT_KR:ATT_KR + 3])
+        return _vec3(self._p[ATT_PARAMS.slice("kr")])
 
     @property
     def kw(self) -> Vec3:
         """Rate gains 2 J ζ ω_n."""
-        return _vec3(self._p[ATT_KW:ATT_KW + 3])
+        return _vec3(self._p[ATT_PARAMS.slice("kw")])
 
     @property
     def eR(self) -> Vec3:
         """Last attitude error e_R."""
-        return _vec3(self._s[ATT_ER:ATT_ER + 3])
+        return _vec3(self._s[ATT_STATE.slice("er")])
 
     def update(self, R: Mat3, omega: Sequence[float], R_d: Mat3) -> tuple[float, float, float]:
         """Body torques (τx, τy, τz) in N m for attitude R, body rates omega, target R_d."""
         x = self._x
-        x[0:9] = R
-        x[9:12] = omega
-        x[12:21] = R_d
+        x[_ATT_IN.R:_ATT_IN.R_END] = R
+        x[_ATT_IN.OMEGA:_ATT_IN.OMEGA_END] = omega
+        x[_ATT_IN.RD:_ATT_IN.RD_END] = R_d
         return _attitude_call(self._p, self._s, x)
 
 
@@ -407,12 +399,12 @@ def fault_allocation(B: np.ndarray, eff: Sequence[float] | None, failed: int,
             w = balanced_weights(sub, w, hover_share, 0.8)
         out[keep] = allocation(sub, w)
     else:
-        sub_b = B[:3, keep]
+        sub_b = B[:_W.TZ, keep]  # the rows T, τx, τy
         w = [e[i] for i in keep]
         if hover_share is not None and len(keep) > 3:
             w = balanced_weights(sub_b, w, hover_share, 0.8)
         a3 = np.linalg.inv(sub_b) if len(keep) == 3 else allocation(sub_b, w)
-        out[keep, :3] = a3
+        out[keep, :_W.TZ] = a3
     return out
 
 
@@ -466,32 +458,33 @@ class XMixer(RowBlocks):
         A = effectiveness(positions, spin, k_yaw, eff)
         self.A = A
         self.n = n
-        self._p = np.zeros(MIX_NP)
-        self._s = np.zeros(MIX_NS)
+        self._p = np.zeros(MIX_PARAMS.size)
+        self._s = np.zeros(MIX_STATE.size)
         self._out = np.zeros(n)
-        self._p[MIX_AINV:MIX_AINV + 4 * n] = allocation(A, eff).ravel()
-        self._p[MIX_N] = n
+        self._p[_MP.AINV:_MP.AINV + WRENCH.size * n] = allocation(A, eff).ravel()
+        self._p[_MP.N] = n
         self.f_max = f_max
 
     @property
     def Ainv(self) -> tuple[tuple[float, ...], ...]:
         """The allocation (n × 4, rows per rotor)."""
-        n = int(self._p[MIX_N])
-        return tuple(tuple(r) for r in self._p[MIX_AINV:MIX_AINV + 4 * n].reshape(n, 4).tolist())
+        n = int(self._p[_MP.N])
+        rows = self._p[_MP.AINV:_MP.AINV + WRENCH.size * n].reshape(n, WRENCH.size)
+        return tuple(tuple(r) for r in rows.tolist())
 
     @property
     def f_max(self) -> float:
         """Rotor thrust limit (N); writable."""
-        return float(self._p[MIX_FMAX])
+        return float(self._p[_MP.FMAX])
 
     @f_max.setter
     def f_max(self, value: float) -> None:
-        self._p[MIX_FMAX] = float(value)
+        self._p[_MP.FMAX] = float(value)
 
     @property
     def saturated(self) -> bool:
         """Whether the last :meth:`mix` saturated."""
-        return bool(self._s[MIX_SAT] != 0.0)
+        return bool(self._s[_MS.SAT] != 0.0)
 
     def mix(self, T: float, tx: float, ty: float, tz: float) -> list[float]:
         """Rotor thrusts (N) for collective ``T`` (N) and body torques (N m)."""

@@ -36,23 +36,28 @@ import math
 
 import numpy as np
 
+from numkit import Layout
+
 from ._jit import njit
 from .fuzzy import it2_phi_jit as _it2_phi
 from .fuzzy import t1_phi_jit as _t1_phi
 from .rows import RowBlocks
 
-__all__ = ["AX_NP", "AX_NS", "ControllerBase", "axis_step"]
+__all__ = ["AXIS_PARAMS", "AXIS_STATE", "AX_NP", "AX_NS", "ControllerBase", "axis_step"]
 
 KIND_PID, KIND_T1, KIND_IT2 = 0, 1, 2
 
-# --- parameter block --------------------------------------------------------------------------
-A_TYPE, A_RED, A_G0, A_G1, A_G2, A_G3, A_CM, A_ZETA = 0, 1, 2, 3, 4, 5, 6, 7
-A_HN1, A_HZ1, A_HP1, A_HN2, A_HZ2, A_HP2 = 8, 9, 10, 11, 12, 13
-A_ONMEAS, A_ILIM, A_UMIN, A_UMAX, A_DTAU = 14, 15, 16, 17, 18
-AX_NP = 19
-# --- state block ------------------------------------------------------------------------------
-S_E, S_DE, S_U, S_I, S_UOUT, S_PREV, S_HASPREV, S_DFILT, S_ERR, S_RATE = range(10)
-AX_NS = 10
+#: parameter block: type code, reducer code, gains G0..G3, c_m, ζ, lower-MF heights (h_N, h_Z,
+#: h_P) of E then of dE, derivative-on-measurement flag, i_limit, u_limit lower and upper, d_tau
+AXIS_PARAMS = Layout("type red g0 g1 g2 g3 cm zeta hn1 hz1 hp1 hn2 hz2 hp2 onmeas ilim umin umax "
+                     "dtau")
+#: state block: E, dE, U, integral, u, derivative memory x, has-memory flag, derivative-filter
+#: state, e, ed
+AXIS_STATE = Layout("e de u i uout prev hasprev dfilt err rate")
+A = AXIS_PARAMS.at
+S = AXIS_STATE.at
+AX_NP = AXIS_PARAMS.size
+AX_NS = AXIS_STATE.size
 
 _DERIVATIVE_MODES = ("error", "measurement")
 
@@ -61,9 +66,9 @@ _DERIVATIVE_MODES = ("error", "measurement")
 @njit
 def _integrate(prm: np.ndarray, st: np.ndarray, dI: float, K: float, u_rest: float) -> float:
     """Integral clamp, output clamp and conditional integration; stores I and u, returns u."""
-    I_old = st[S_I]
+    I_old = st[S.I]
     I = I_old + dI  # noqa: E741
-    lim = prm[A_ILIM]
+    lim = prm[A.ILIM]
     if lim != math.inf and K != 0.0:
         imax = lim / abs(K)
         if I > imax:
@@ -71,8 +76,8 @@ def _integrate(prm: np.ndarray, st: np.ndarray, dI: float, K: float, u_rest: flo
         elif I < -imax:
             I = -imax  # noqa: E741
     u = u_rest + K * I
-    umax = prm[A_UMAX]
-    umin = prm[A_UMIN]
+    umax = prm[A.UMAX]
+    umin = prm[A.UMIN]
     # conditional integration: drop this tick's step where it drives further into saturation
     if (u > umax and K * (I - I_old) > 0.0) or (u < umin and K * (I - I_old) < 0.0):
         I = I_old  # noqa: E741
@@ -81,8 +86,8 @@ def _integrate(prm: np.ndarray, st: np.ndarray, dI: float, K: float, u_rest: flo
         u = umax
     elif u < umin:
         u = umin
-    st[S_I] = I
-    st[S_UOUT] = u
+    st[S.I] = I
+    st[S.UOUT] = u
     return u
 
 
@@ -96,48 +101,48 @@ def axis_step(prm: np.ndarray, st: np.ndarray, error: float, meas: float, has_me
     ``rate``/``has_rate``: the error rate used as the derivative. The caller checks dt > 0 and
     that a measurement-mode controller without a rate gets a measurement.
     """
-    x = -meas if (prm[A_ONMEAS] != 0.0 and has_meas) else error
+    x = -meas if (prm[A.ONMEAS] != 0.0 and has_meas) else error
     if has_rate:
         de = rate
-    elif st[S_HASPREV] == 0.0:
+    elif st[S.HASPREV] == 0.0:
         de = 0.0
     else:
-        de = (x - st[S_PREV]) / dt
-        tau = prm[A_DTAU]
+        de = (x - st[S.PREV]) / dt
+        tau = prm[A.DTAU]
         if tau > 0.0:
-            df = st[S_DFILT]
+            df = st[S.DFILT]
             de = df + dt / (tau + dt) * (de - df)
-            st[S_DFILT] = de
-    st[S_PREV] = x
-    st[S_HASPREV] = 1.0
-    st[S_ERR] = error
-    st[S_RATE] = de
-    kind = int(prm[A_TYPE])
+            st[S.DFILT] = de
+    st[S.PREV] = x
+    st[S.HASPREV] = 1.0
+    st[S.ERR] = error
+    st[S.RATE] = de
+    kind = int(prm[A.TYPE])
     if kind == KIND_PID:
-        p = prm[A_G0] * error
-        d = prm[A_G1] * de
-        return _integrate(prm, st, dt * error, prm[A_G3], p + d)
-    E = prm[A_G0] * error
+        p = prm[A.G0] * error
+        d = prm[A.G1] * de
+        return _integrate(prm, st, dt * error, prm[A.G3], p + d)
+    E = prm[A.G0] * error
     if E > 1.0:
         E = 1.0
     elif E < -1.0:
         E = -1.0
-    dE = prm[A_G1] * de
+    dE = prm[A.G1] * de
     if dE > 1.0:
         dE = 1.0
     elif dE < -1.0:
         dE = -1.0
-    cm = prm[A_CM]
+    cm = prm[A.CM]
     y = (-1.0, -cm, 0.0, cm, 1.0)
     if kind == KIND_T1:
         U = _t1_phi(E, dE, y)
     else:
-        U = _it2_phi(E, dE, y, (prm[A_HN1], prm[A_HZ1], prm[A_HP1]),
-                     (prm[A_HN2], prm[A_HZ2], prm[A_HP2]), int(prm[A_RED]), prm[A_ZETA])
-    st[S_E] = E
-    st[S_DE] = dE
-    st[S_U] = U
-    return _integrate(prm, st, dt * U, prm[A_G3], prm[A_G2] * U)
+        U = _it2_phi(E, dE, y, (prm[A.HN1], prm[A.HZ1], prm[A.HP1]),
+                     (prm[A.HN2], prm[A.HZ2], prm[A.HP2]), int(prm[A.RED]), prm[A.ZETA])
+    st[S.E] = E
+    st[S.DE] = dE
+    st[S.U] = U
+    return _integrate(prm, st, dt * U, prm[A.G3], prm[A.G2] * U)
 
 
 # ================================================================================ Python shell
@@ -183,16 +188,16 @@ class ControllerBase(RowBlocks):
 
     _KIND: int = KIND_PID
 
-    e = state(S_ERR, "Last error e.")
-    de = state(S_RATE, "Last derivative of the error used (rate, difference or filtered).")
-    u = state(S_UOUT, "Last (clamped) output.")
+    e = state(S.ERR, "Last error e.")
+    de = state(S.RATE, "Last derivative of the error used (rate, difference or filtered).")
+    u = state(S.UOUT, "Last (clamped) output.")
 
     def _init_blocks(self) -> None:
         self._p = np.zeros(AX_NP)
         self._s = np.zeros(AX_NS)
-        self._p[A_TYPE] = float(self._KIND)
-        self._p[A_HN1:A_HP2 + 1] = 1.0
-        self._p[A_CM] = 0.5
+        self._p[A.TYPE] = float(self._KIND)
+        self._p[A.HN1:A.HP2_END] = 1.0
+        self._p[A.CM] = 0.5
 
     def _init_common(self, derivative: str, i_limit: float | None,
                      u_limit: float | tuple[float, float] | None, d_tau: float) -> None:
@@ -204,25 +209,25 @@ class ControllerBase(RowBlocks):
     @property
     def derivative(self) -> str:
         """"error" (d e/dt) or "measurement" (−d y/dt)."""
-        return _DERIVATIVE_MODES[int(self._p[A_ONMEAS] != 0.0)]
+        return _DERIVATIVE_MODES[int(self._p[A.ONMEAS] != 0.0)]
 
     @derivative.setter
     def derivative(self, mode: str) -> None:
         if mode not in _DERIVATIVE_MODES:
             raise ValueError(f"derivative must be one of {_DERIVATIVE_MODES}, got {mode!r}")
-        self._p[A_ONMEAS] = 1.0 if mode == "measurement" else 0.0
+        self._p[A.ONMEAS] = 1.0 if mode == "measurement" else 0.0
 
     @property
     def i_limit(self) -> float | None:
         """Integral clamp |K·I| <= i_limit (None: none)."""
-        lim = float(self._p[A_ILIM])
+        lim = float(self._p[A.ILIM])
         return None if lim == math.inf else lim
 
     @i_limit.setter
     def i_limit(self, value: float | None) -> None:
         if value is not None and not value >= 0.0:
             raise ValueError(f"i_limit must be >= 0, got {value}")
-        self._p[A_ILIM] = math.inf if value is None else float(value)
+        self._p[A.ILIM] = math.inf if value is None else float(value)
 
     @property
     def u_limit(self) -> float | tuple[float, float] | None:
@@ -231,33 +236,33 @@ class ControllerBase(RowBlocks):
 
     @u_limit.setter
     def u_limit(self, value: float | tuple[float, float] | None) -> None:
-        self._p[A_UMIN], self._p[A_UMAX] = _limits(value)
+        self._p[A.UMIN], self._p[A.UMAX] = _limits(value)
         self._u_limit = value
 
     @property
     def d_tau(self) -> float:
         """Time constant of the derivative low-pass (0: none)."""
-        return float(self._p[A_DTAU])
+        return float(self._p[A.DTAU])
 
     @d_tau.setter
     def d_tau(self, value: float) -> None:
         if not value >= 0.0:
             raise ValueError(f"d_tau must be >= 0, got {value}")
-        self._p[A_DTAU] = float(value)
+        self._p[A.DTAU] = float(value)
 
     @property
     def integral(self) -> float:
         """Integral state I."""
-        return float(self._s[S_I])
+        return float(self._s[S.I])
 
     @integral.setter
     def integral(self, value: float) -> None:
-        self._s[S_I] = float(value)
+        self._s[S.I] = float(value)
 
     def reset(self, integral: float = 0.0) -> None:
         """Clear derivative memory and the last tick's values; set the integral (default 0)."""
         self._s[:] = 0.0
-        self._s[S_I] = float(integral)
+        self._s[S.I] = float(integral)
 
     def update(self, error: float, dt: float, measurement: float | None = None,
                error_rate: float | None = None) -> float:
@@ -270,7 +275,7 @@ class ControllerBase(RowBlocks):
             raise ValueError(f"dt must be > 0, got {dt}")
         has_rate = error_rate is not None
         if measurement is None:
-            if not has_rate and self._p[A_ONMEAS] != 0.0:
+            if not has_rate and self._p[A.ONMEAS] != 0.0:
                 raise ValueError('derivative="measurement" needs update(..., measurement=y)')
             return float(axis_step(self._p, self._s, error, 0.0, False,
                                    error_rate if has_rate else 0.0, has_rate, dt))

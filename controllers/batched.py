@@ -51,15 +51,11 @@ import numpy as np
 from ._jit import njit
 from .attitude import GeometricAttitudeController, XMixer
 from .axis import (
-    A_TYPE,
     AX_NP,
     AX_NS,
     KIND_PID,
-    S_DE,
-    S_E,
-    S_I,
-    S_U,
-    S_UOUT,
+    A,
+    S,
 )
 from .cascade import (
     NP,
@@ -69,6 +65,7 @@ from .cascade import (
     P_FMAX,
     P_G,
     P_J,
+    P_J_END,
     P_MASS,
     P_NROT,
     P_TILT,
@@ -91,7 +88,7 @@ __all__ = ["AX_NP", "AX_NS", "NP", "NS", "TYPE_CODES", "BatchCascade", "PoseRows
 TYPE_CODES: dict[type, int] = {PID: 0, FPID: 1, IT2FPID: 2}
 
 _AXIS_ATTRS = ("E", "dE", "U", "integral", "u")
-_STATE_COL = {"E": S_E, "dE": S_DE, "U": S_U, "integral": S_I, "u": S_UOUT}
+_STATE_COL = {"E": S.E, "dE": S.DE, "U": S.U, "integral": S.I, "u": S.UOUT}
 
 
 class PoseRows(NamedTuple):
@@ -277,7 +274,7 @@ class BatchCascade:
         """(N, 3) principal inertia of each vehicle (kg m²), a writable view of ``params``: the
         gyroscopic term ``ω × Jω`` uses it (a draining tank changes it); the attitude gains
         ``kR``, ``kw`` stay as built, as in :class:`GeometricAttitudeController`."""
-        return self.params[:, P_J:P_J + 3]
+        return self.params[:, P_J:P_J_END]
 
     def reset_rows(self, rows: np.ndarray) -> None:
         """:meth:`reset` for the vehicles ``rows`` only (index array or bool mask)."""
@@ -294,7 +291,7 @@ class BatchCascade:
         """Vehicle ``i``'s log keys (those of :meth:`PositionCascade.internals`), each with
         the column of ``state[i]`` that holds its value."""
         P = self.params
-        key = (int(P[i, A_TYPE]), int(P[i, AX_NP + A_TYPE]), int(P[i, 2 * AX_NP + A_TYPE]))
+        key = (int(P[i, A.TYPE]), int(P[i, AX_NP + A.TYPE]), int(P[i, 2 * AX_NP + A.TYPE]))
         keys = self._keys.get(key)
         if keys is None:
             keys = self._keys[key] = [

@@ -40,22 +40,16 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from numkit import Layout, X, Y, Z
+from numkit.geometry import RXZ, RYZ, RZZ
+
 from ._jit import njit
 from .attitude import (
-    ATT_ER,
-    ATT_J,
-    ATT_KR,
-    ATT_KW,
-    ATT_NP,
-    ATT_NS,
-    ATT_TAU,
-    MIX_AINV,
-    MIX_FMAX,
-    MIX_N,
+    ATT_PARAMS,
+    ATT_STATE,
     MIX_NMAX,
-    MIX_NP,
-    MIX_NS,
-    MIX_SAT,
+    MIX_PARAMS,
+    MIX_STATE,
     GeometricAttitudeController,
     Mat3,
     XMixer,
@@ -72,34 +66,32 @@ __all__ = ["MIX_NMAX", "NP", "NS", "PositionCascade", "command_step", "vehicle_s
 #: Axis controller classes the compiled row runs itself (exact classes).
 ROW_AXES: tuple[type, ...] = (PID, FPID, IT2FPID)
 
-# --- params row ---------------------------------------------------------------------------------
-P_MASS = 3 * AX_NP
-P_G = P_MASS + 1
-P_TILT = P_MASS + 2
-P_FF = P_MASS + 3
-P_ALIM = P_MASS + 4
-P_ATT = P_MASS + 5  # attitude block
-P_J = P_ATT + ATT_J  # 3
-P_KR = P_ATT + ATT_KR  # 3
-P_KW = P_ATT + ATT_KW  # 3
-P_MIX = P_ATT + ATT_NP  # mixer block
-P_AINV = P_MIX + MIX_AINV  # 4 MIX_NMAX, row-major (rotor rows)
-P_FMAX = P_MIX + MIX_FMAX
-P_NROT = P_MIX + MIX_N  # number of rotors
-NP = P_MIX + MIX_NP
-# --- state row ----------------------------------------------------------------------------------
-S_ACMD = 3 * AX_NS  # 3
-S_THRUST = S_ACMD + 3
-S_TILT = S_ACMD + 4
-S_RD = S_ACMD + 5  # 9
-S_ATT = S_RD + 9  # attitude block
-S_TAU = S_ATT + ATT_TAU  # 3
-S_ER = S_ATT + ATT_ER  # 3
-S_MIX = S_ATT + ATT_NS  # mixer block
-S_SAT = S_MIX + MIX_SAT
-NS = S_MIX + MIX_NS
-# --- packed inputs of the scalar shell ----------------------------------------------------------
-X_P, X_V, X_R, X_W, X_PR, X_VR, X_AR, X_YAW, NX = 0, 3, 6, 15, 18, 21, 24, 27, 28
+#: the parameter row: the axis parameter blocks of x, y, z, then mass, g, tilt_max,
+#: feed-forward factor, a_limit, the attitude block and the mixer block
+ROW_PARAMS = Layout(f"axes:3x{AX_NP} mass g tilt ff alim att:{ATT_PARAMS.size} "
+                    f"mix:{MIX_PARAMS.size}")
+#: the state row: the axis state blocks of x, y, z, then the commanded acceleration, collective
+#: thrust, tilt, R_d (row-major), the attitude block and the mixer block
+ROW_STATE = Layout(f"axes:3x{AX_NS} acmd:3 thrust tilt rd:9 att:{ATT_STATE.size} "
+                   f"mix:{MIX_STATE.size}")
+#: the scalar shell's packed inputs
+_IN = Layout("p:3 v:3 r:9 omega:3 p_ref:3 v_ref:3 a_ref:3 yaw").at
+_RP, _RS = ROW_PARAMS.at, ROW_STATE.at
+# --- params row, by name (the attitude and mixer blocks' fields offset by their block) ----------
+P_MASS, P_G, P_TILT, P_FF, P_ALIM = _RP.MASS, _RP.G, _RP.TILT, _RP.FF, _RP.ALIM
+P_ATT, P_MIX = _RP.ATT, _RP.MIX
+P_J, P_J_END = P_ATT + ATT_PARAMS.at.J, P_ATT + ATT_PARAMS.at.J_END
+P_KR, P_KW = P_ATT + ATT_PARAMS.at.KR, P_ATT + ATT_PARAMS.at.KW
+P_AINV = P_MIX + MIX_PARAMS.at.AINV  # MIX_NMAX rotor rows of the wrench [T, τx, τy, τz]
+P_FMAX = P_MIX + MIX_PARAMS.at.FMAX
+P_NROT = P_MIX + MIX_PARAMS.at.N  # number of rotors
+NP = ROW_PARAMS.size
+# --- state row, by name -------------------------------------------------------------------------
+S_ACMD, S_THRUST, S_TILT, S_RD = _RS.ACMD, _RS.THRUST, _RS.TILT, _RS.RD
+S_ATT, S_MIX = _RS.ATT, _RS.MIX
+S_TAU, S_ER = S_ATT + ATT_STATE.at.TAU, S_ATT + ATT_STATE.at.ER
+S_SAT = S_MIX + MIX_STATE.at.SAT
+NS = ROW_STATE.size
 
 
 class AxisController(Protocol):
@@ -126,18 +118,20 @@ def command_step(prm: np.ndarray, st: np.ndarray, ux: float, uy: float, uz: floa
     R_d and T in the state row."""
     lim = prm[P_ALIM]
     ff = prm[P_FF]
-    ax = _clip(ux, lim) + ff * a_ref[0]
-    ay = _clip(uy, lim) + ff * a_ref[1]
-    az = _clip(uz, lim) + ff * a_ref[2]
-    st[S_ACMD] = ax
-    st[S_ACMD + 1] = ay
-    st[S_ACMD + 2] = az
+    # a = clip(u, ±a_limit) + ff a_ref per axis
+    ax = _clip(ux, lim) + ff * a_ref[X]
+    ay = _clip(uy, lim) + ff * a_ref[Y]
+    az = _clip(uz, lim) + ff * a_ref[Z]
+    st[S_ACMD + X] = ax
+    st[S_ACMD + Y] = ay
+    st[S_ACMD + Z] = az
     R_d, fn, tilt = thrust_attitude(ax, ay, az, yaw, prm[P_MASS], prm[P_G], prm[P_TILT])
     st[S_TILT] = tilt
     for j in range(9):
         st[S_RD + j] = R_d[j]
-    # collective thrust: the desired force projected on the current body z axis
-    T = fn * (R_d[2] * R[2] + R_d[5] * R[5] + R_d[8] * R[8])
+    # collective thrust: the desired force projected on the current body z axis,
+    # T = |f| (R_d e3)·(R e3)
+    T = fn * (R_d[RXZ] * R[RXZ] + R_d[RYZ] * R[RYZ] + R_d[RZZ] * R[RZZ])
     if T < 0.0:
         T = 0.0
     st[S_THRUST] = T
@@ -155,30 +149,37 @@ def vehicle_step(prm: np.ndarray, st: np.ndarray, fb: tuple, ref: tuple, dt: flo
     """
     p, v, R, omega = fb
     p_ref, v_ref, a_ref, yaw = ref
-    u0 = axis_step(prm[0:AX_NP], st[0:AX_NS], p_ref[0] - p[0], p[0], True, v_ref[0] - v[0],
-                   True, dt)
-    u1 = axis_step(prm[AX_NP:2 * AX_NP], st[AX_NS:2 * AX_NS], p_ref[1] - p[1], p[1], True,
-                   v_ref[1] - v[1], True, dt)
-    u2 = axis_step(prm[2 * AX_NP:3 * AX_NP], st[2 * AX_NS:3 * AX_NS], p_ref[2] - p[2], p[2],
-                   True, v_ref[2] - v[2], True, dt)
+    # per axis k: e = p_ref − p, error rate v_ref − v, on the k-th axis blocks of the rows
+    u0 = axis_step(prm[_RP.AXES + X * AX_NP:_RP.AXES + (X + 1) * AX_NP],
+                   st[_RS.AXES + X * AX_NS:_RS.AXES + (X + 1) * AX_NS], p_ref[X] - p[X], p[X],
+                   True, v_ref[X] - v[X], True, dt)
+    u1 = axis_step(prm[_RP.AXES + Y * AX_NP:_RP.AXES + (Y + 1) * AX_NP],
+                   st[_RS.AXES + Y * AX_NS:_RS.AXES + (Y + 1) * AX_NS], p_ref[Y] - p[Y], p[Y],
+                   True, v_ref[Y] - v[Y], True, dt)
+    u2 = axis_step(prm[_RP.AXES + Z * AX_NP:_RP.AXES + (Z + 1) * AX_NP],
+                   st[_RS.AXES + Z * AX_NS:_RS.AXES + (Z + 1) * AX_NS], p_ref[Z] - p[Z], p[Z],
+                   True, v_ref[Z] - v[Z], True, dt)
     T, R_d = command_step(prm, st, u0, u1, u2, R, a_ref, yaw)
-    tx, ty, tz = attitude_step(prm[P_ATT:P_ATT + ATT_NP], st[S_ATT:S_ATT + ATT_NS], R, omega, R_d)
-    mix_step(prm[P_MIX:P_MIX + MIX_NP], st[S_MIX:S_MIX + MIX_NS], T, tx, ty, tz, out)
+    tx, ty, tz = attitude_step(prm[_RP.ATT:_RP.ATT_END], st[_RS.ATT:_RS.ATT_END], R, omega, R_d)
+    mix_step(prm[_RP.MIX:_RP.MIX_END], st[_RS.MIX:_RS.MIX_END], T, tx, ty, tz, out)
 
 
 @njit
 def _vehicle_call(prm: np.ndarray, st: np.ndarray, x: np.ndarray, dt: float,
                   out: np.ndarray) -> None:
     """:func:`vehicle_step` with the inputs packed in ``x`` (the scalar shell's call)."""
-    vehicle_step(prm, st, (x[X_P:X_P + 3], x[X_V:X_V + 3], x[X_R:X_R + 9], x[X_W:X_W + 3]),
-                 (x[X_PR:X_PR + 3], x[X_VR:X_VR + 3], x[X_AR:X_AR + 3], x[X_YAW]), dt, out)
+    vehicle_step(prm, st, (x[_IN.P:_IN.P_END], x[_IN.V:_IN.V_END], x[_IN.R:_IN.R_END],
+                           x[_IN.OMEGA:_IN.OMEGA_END]),
+                 (x[_IN.P_REF:_IN.P_REF_END], x[_IN.V_REF:_IN.V_REF_END],
+                  x[_IN.A_REF:_IN.A_REF_END], x[_IN.YAW]), dt, out)
 
 
 @njit
 def _command_call(prm: np.ndarray, st: np.ndarray, x: np.ndarray, ux: float, uy: float,
                   uz: float) -> float:
     """:func:`command_step` with the inputs packed in ``x``; returns T."""
-    T, _ = command_step(prm, st, ux, uy, uz, x[X_R:X_R + 9], x[X_AR:X_AR + 3], x[X_YAW])
+    T, _ = command_step(prm, st, ux, uy, uz, x[_IN.R:_IN.R_END], x[_IN.A_REF:_IN.A_REF_END],
+                        x[_IN.YAW])
     return T
 
 
@@ -244,8 +245,8 @@ class PositionCascade:
         self.mixer = mixer
         self._P = np.zeros(NP)
         self._S = np.zeros(NS)
-        self._S[S_RD:S_RD + 9] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
-        self._x = np.zeros(NX)
+        self._S[_RS.RD:_RS.RD_END] = np.eye(3).ravel()  # R_d = I
+        self._x = np.zeros(_IN.SIZE)
         self._out = np.zeros(getattr(mixer, "n", 4))
         self.mass = mass
         self.g = g
@@ -266,11 +267,12 @@ class PositionCascade:
         return self._S
 
     def _blocks(self) -> list[tuple[Any, type, slice, slice]]:
-        return [(a, ControllerBase, slice(k * AX_NP, (k + 1) * AX_NP),
-                 slice(k * AX_NS, (k + 1) * AX_NS)) for k, a in enumerate(self.axes)] + [
-            (self.attitude, GeometricAttitudeController, slice(P_ATT, P_ATT + ATT_NP),
-             slice(S_ATT, S_ATT + ATT_NS)),
-            (self.mixer, XMixer, slice(P_MIX, P_MIX + MIX_NP), slice(S_MIX, S_MIX + MIX_NS))]
+        return [(a, ControllerBase, slice(_RP.AXES + k * AX_NP, _RP.AXES + (k + 1) * AX_NP),
+                 slice(_RS.AXES + k * AX_NS, _RS.AXES + (k + 1) * AX_NS))
+                for k, a in enumerate(self.axes)] + [
+            (self.attitude, GeometricAttitudeController, ROW_PARAMS.slice("att"),
+             ROW_STATE.slice("att")),
+            (self.mixer, XMixer, ROW_PARAMS.slice("mix"), ROW_STATE.slice("mix"))]
 
     def _adopt(self, copy: bool) -> None:
         """Make the sub-objects' blocks views of this row (copying their values in first)."""
@@ -301,14 +303,14 @@ class PositionCascade:
         if not dt > 0.0:
             raise ValueError(f"dt must be > 0, got {dt}")
         x = self._x
-        x[X_P:X_P + 3] = p
-        x[X_V:X_V + 3] = v
-        x[X_R:X_R + 9] = R
-        x[X_W:X_W + 3] = omega
-        x[X_PR:X_PR + 3] = p_ref
-        x[X_VR:X_VR + 3] = v_ref
-        x[X_AR:X_AR + 3] = a_ref
-        x[X_YAW] = yaw_ref
+        x[_IN.P:_IN.P_END] = p
+        x[_IN.V:_IN.V_END] = v
+        x[_IN.R:_IN.R_END] = R
+        x[_IN.OMEGA:_IN.OMEGA_END] = omega
+        x[_IN.P_REF:_IN.P_REF_END] = p_ref
+        x[_IN.V_REF:_IN.V_REF_END] = v_ref
+        x[_IN.A_REF:_IN.A_REF_END] = a_ref
+        x[_IN.YAW] = yaw_ref
         if self._compiled:
             _vehicle_call(self._P, self._S, x, dt, self._out)
             return self._out.tolist()
@@ -318,12 +320,12 @@ class PositionCascade:
                         dt: float) -> list[float]:
         """The same tick through the sub-objects' own ``update`` / ``mix`` (other classes)."""
         xs = x.tolist()
-        u = [a.update(xs[X_PR + k] - xs[X_P + k], dt, xs[X_P + k],
-                      xs[X_VR + k] - xs[X_V + k]) for k, a in enumerate(self.axes)]
-        T = _command_call(self._P, self._S, x, u[0], u[1], u[2])
+        u = [a.update(xs[_IN.P_REF + k] - xs[_IN.P + k], dt, xs[_IN.P + k],
+                      xs[_IN.V_REF + k] - xs[_IN.V + k]) for k, a in enumerate(self.axes)]
+        T = _command_call(self._P, self._S, x, u[X], u[Y], u[Z])
         tau = self.attitude.update(R, omega, self.R_d)
-        self._S[S_TAU:S_TAU + 3] = tau
-        return self.mixer.mix(T, tau[0], tau[1], tau[2])
+        self._S[S_TAU + X:S_TAU + Z + 1] = tau
+        return self.mixer.mix(T, tau[X], tau[Y], tau[Z])
 
     def internals(self) -> dict[str, Any]:
         """Per-tick values for logs: per-axis controller state, command, thrust, tilt."""

@@ -23,25 +23,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .axis import (
-    A_CM,
-    A_G0,
-    A_G1,
-    A_G2,
-    A_G3,
-    A_HN1,
-    A_HP2,
-    A_RED,
-    A_ZETA,
-    KIND_IT2,
-    KIND_T1,
-    S_DE,
-    S_E,
-    S_U,
-    ControllerBase,
-    param,
-    state,
-)
+from .axis import KIND_IT2, KIND_T1, A, ControllerBase, S, param, state
 from .fuzzy import IT2FuzzyPD, T1FuzzyPD
 
 __all__ = ["FPID", "IT2FPID", "PAPER_TABLE_I", "equivalent_pid"]
@@ -92,13 +74,13 @@ class _FuzzyPID(ControllerBase):
     """
 
     core: IT2FuzzyPD | T1FuzzyPD
-    Ke = param(A_G0, "Input scaling of the error.")
-    Kd = param(A_G1, "Input scaling of the error's derivative.")
-    K0 = param(A_G2, "Output gain of the PD part K0·U.")
-    K1 = param(A_G3, "Output gain of the PI part K1·∫U.")
-    E = state(S_E, "Last scaled, clipped error E.")
-    dE = state(S_DE, "Last scaled, clipped derivative dE.")
-    U = state(S_U, "Last core output U = Φ(E, dE).")
+    Ke = param(A.G0, "Input scaling of the error.")
+    Kd = param(A.G1, "Input scaling of the error's derivative.")
+    K0 = param(A.G2, "Output gain of the PD part K0·U.")
+    K1 = param(A.G3, "Output gain of the PI part K1·∫U.")
+    E = state(S.E, "Last scaled, clipped error E.")
+    dE = state(S.DE, "Last scaled, clipped derivative dE.")
+    U = state(S.U, "Last core output U = Φ(E, dE).")
 
     def _init_gains(
         self,
@@ -113,11 +95,11 @@ class _FuzzyPID(ControllerBase):
     ) -> None:
         self._init_blocks()
         core = self.core
-        self._p[A_CM] = core.cm
+        self._p[A.CM] = core.cm
         if isinstance(core, IT2FuzzyPD):
-            self._p[A_RED] = float(core.reducer_code)
-            self._p[A_ZETA] = core.zeta
-            self._p[A_HN1:A_HP2 + 1] = (*core.heights_e, *core.heights_de)
+            self._p[A.RED] = float(core.reducer_code)
+            self._p[A.ZETA] = core.zeta
+            self._p[A.HN1:A.HP2_END] = (*core.heights_e, *core.heights_de)
         self.Ke = Ke
         self.Kd = Kd
         self.K0 = K0
@@ -140,7 +122,8 @@ class _FuzzyPID(ControllerBase):
         core = self.core
         if isinstance(core, T1FuzzyPD):
             return core.cm, core.cm
-        if core.heights_e == core.heights_de and core.heights_e[0] == core.heights_e[2]:
+        h_n, _, h_p = core.heights_e
+        if core.heights_e == core.heights_de and h_n == h_p:
             g = core.small_signal_gain()
             return g, g
         return core.small_signal_gains()

@@ -10,8 +10,8 @@ Structure (Kumbasar-group IT2-FPID; Kumbasar & Hagras, Information Sciences 282
 * Lower MF = height × UMF (same support). From Table I's ``alpha``: h_Z = alpha,
   h_N = h_P = 1 - alpha; explicit per-set heights per input are accepted too.
 * Product t-norm: upper firing f̄_ij = UMF_i(E)·UMF_j(dE), lower f_ij = h_i·h_j·f̄_ij.
-* 3×3 diagonal rule base: consequent y = (-1, -c_m, 0, c_m, 1)[s_i + s_j + 2] with
-  s = (-1, 0, 1) for (N, Z, P).
+* 3×3 diagonal rule base: consequent y = (-1, -c_m, 0, c_m, 1)[r_i + r_j] with
+  r = (0, 1, 2) for (N, Z, P).
 * Type reducers:
 
   - ``"km"`` (Karnik–Mendel, exact):
@@ -23,7 +23,7 @@ Structure (Kumbasar-group IT2-FPID; Kumbasar & Hagras, Information Sciences 282
 
 Because the UMFs of each input form a partition of unity, at most two sets per input
 fire, i.e. at most four rules, and their consequents fall into three ordered groups
-(sums s_i + s_j = m, m+1, m+2; the two middle rules share a consequent). The scalar
+(sums r_i + r_j = m, m+1, m+2; the two middle rules share a consequent). The scalar
 evaluation below exploits this: no sorting, no numpy, ~40 float operations, which keeps
 one Φ evaluation at a few microseconds. Rules with equal consequents can be merged in
 the KM reducer without changing y_l, y_r (the optimal KM weight vector treats equal
@@ -41,6 +41,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from numkit import Layout
+
 from ._jit import njit
 
 __all__ = [
@@ -57,6 +59,12 @@ REDUCERS = ("km", "nt", "bmm", "zeta")
 _RED_CODE = {"km": 0, "nt": 1, "bmm": 2, "zeta": 3}
 
 Heights3 = tuple[float, float, float]
+
+#: the three groups of active rules, by consequent above the lowest active one y[p]: both inputs
+#: in their lower active set (r_i + r_j = p), one in each (p + 1), both in the higher (p + 2)
+GROUP = Layout("low mid high").at
+#: the lower-MF heights (h_N, h_Z, h_P) of E then of dE, flat (``_grid``'s ``h``)
+HEIGHTS = Layout("hn_e hz_e hp_e hn_de hz_de hp_de").at
 
 
 def heights_from_alpha(alpha: float) -> Heights3:
@@ -159,7 +167,8 @@ def t1_phi(E: float, dE: float, y: tuple[float, ...]) -> float:
         b1 = dE
         p += 1
     # Σ f̄ = 1 (partition of unity), so no division is needed.
-    return a0 * b0 * y[p] + (a0 * b1 + a1 * b0) * y[p + 1] + a1 * b1 * y[p + 2]
+    return (a0 * b0 * y[p + GROUP.LOW] + (a0 * b1 + a1 * b0) * y[p + GROUP.MID]
+            + a1 * b1 * y[p + GROUP.HIGH])
 
 
 def it2_phi(E: float, dE: float, y: tuple[float, ...], h_e: tuple[float, float, float],
@@ -201,9 +210,9 @@ def it2_phi(E: float, dE: float, y: tuple[float, ...], h_e: tuple[float, float, 
         hb0 = hz2
         hb1 = hp2
         p += 1
-    y0 = y[p]
-    y1 = y[p + 1]
-    y2 = y[p + 2]
+    y0 = y[p + GROUP.LOW]
+    y1 = y[p + GROUP.MID]
+    y2 = y[p + GROUP.HIGH]
     # Upper firing of the three consequent groups (Σ = 1) ...
     u01 = a0 * b1
     u10 = a1 * b0
@@ -252,8 +261,9 @@ def _grid(E: np.ndarray, dE: np.ndarray, y: tuple[float, ...], h: np.ndarray, co
         if code < 0:
             out[k] = t1_phi_jit(E[k], dE[k], y)
         else:
-            out[k] = it2_phi_jit(E[k], dE[k], y, (h[0], h[1], h[2]), (h[3], h[4], h[5]), code,
-                                 zeta)
+            h_e = (h[HEIGHTS.HN_E], h[HEIGHTS.HZ_E], h[HEIGHTS.HP_E])
+            h_de = (h[HEIGHTS.HN_DE], h[HEIGHTS.HZ_DE], h[HEIGHTS.HP_DE])
+            out[k] = it2_phi_jit(E[k], dE[k], y, h_e, h_de, code, zeta)
 
 
 class _FuzzyPDBase:
@@ -269,12 +279,12 @@ class _FuzzyPDBase:
         self._y = (-1.0, -cm, 0.0, cm, 1.0)
 
     def consequents(self) -> np.ndarray:
-        """3×3 consequent table, rows = E set (N, Z, P), columns = dE set."""
-        s = np.array([-1, 0, 1])
-        return np.asarray(self._y)[s[:, None] + s[None, :] + 2]
+        """3×3 consequent table, rows = E set (N, Z, P), columns = dE set: y[r_i + r_j]."""
+        r = np.array([0, 1, 2])
+        return np.asarray(self._y)[r[:, None] + r[None, :]]
 
     def _grid_args(self) -> tuple[np.ndarray, int, float]:
-        return np.ones(6), -1, 0.5
+        return np.ones(HEIGHTS.SIZE), -1, 0.5
 
     def phi_grid(self, E: np.ndarray, dE: np.ndarray) -> np.ndarray:
         """Φ over broadcast arrays E, dE (for plots): the scalar core, compiled, per point."""
@@ -317,7 +327,7 @@ class IT2FuzzyPD(_FuzzyPDBase):
     ----------
     alpha : Table I's height parameter: h_Z = alpha, h_N = h_P = 1 - alpha (ignored when
         ``heights`` is given).
-    cm : consequent of the off-diagonal rules (s_i + s_j = ±1), in [0, 1].
+    cm : consequent of the off-diagonal rules (r_i + r_j = 1 or 3), in [0, 1].
     reducer : "km" (exact Karnik–Mendel), "nt", "bmm" (m = n = 0.5) or "zeta".
     zeta : weight of the lower firing strengths for the "zeta" reducer.
     heights : optional (h_N, h_Z, h_P) for both inputs, or a pair of such triples

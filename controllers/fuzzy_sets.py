@@ -44,7 +44,7 @@ UMF_ABC: dict[str, tuple[float, float, float]] = {
     "Z": (-1.0, 0.0, 1.0),
     "P": (0.0, 1.0, 1.8),
 }
-_SIGN = {"N": -1, "Z": 0, "P": 1}
+_RANK = {"N": 0, "Z": 1, "P": 2}
 
 
 def _heights(alpha: float, heights: Sequence[float] | None) -> tuple[float, float, float]:
@@ -78,7 +78,7 @@ def firing_strengths(
     """Nine rules (E set i, dE set j, row-major N/Z/P): (y, f_lower, f_upper).
 
     Product t-norm: f̄_ij = UMF_i(E)·UMF_j(dE), f_ij = LMF_i(E)·LMF_j(dE); consequent
-    y_ij = (-1, -c_m, 0, c_m, 1)[s_i + s_j + 2] with s = (-1, 0, 1) for (N, Z, P).
+    y_ij = (-1, -c_m, 0, c_m, 1)[r_i + r_j] with r = (0, 1, 2) for (N, Z, P).
     """
     E, dE = np.broadcast_arrays(np.asarray(E, float), np.asarray(dE, float))
     ue, ud = upper_memberships(E), upper_memberships(dE)
@@ -87,7 +87,7 @@ def firing_strengths(
     ys, fl, fu = [], [], []
     for i in SET_NAMES:
         for j in SET_NAMES:
-            ys.append(table[_SIGN[i] + _SIGN[j] + 2])
+            ys.append(table[_RANK[i] + _RANK[j]])
             fu.append(ue[i] * ud[j])
             fl.append(le[i] * ld[j])
     return np.array(ys), np.array(fl), np.array(fu)
@@ -116,6 +116,6 @@ class SkfuzzyT1FPD:
         for i in SET_NAMES:
             for j in SET_NAMES:
                 w = ue[i] * ud[j]  # product t-norm of the two membership grades
-                num += w * table[_SIGN[i] + _SIGN[j] + 2]
+                num += w * table[_RANK[i] + _RANK[j]]
                 den += w
         return (num / den).reshape(shape)

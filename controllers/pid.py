@@ -24,7 +24,7 @@ further out, the integral keeps its previous value.
 
 from __future__ import annotations
 
-from .axis import A_G0, A_G1, A_G3, KIND_PID, ControllerBase, param
+from .axis import KIND_PID, A, ControllerBase, param
 
 __all__ = ["PID", "ControllerBase"]
 
@@ -37,9 +37,9 @@ class PID(ControllerBase):
     """
 
     _KIND = KIND_PID
-    Kp = param(A_G0, "Proportional gain.")
-    Kd = param(A_G1, "Derivative gain.")
-    Ki = param(A_G3, "Integral gain.")
+    Kp = param(A.G0, "Proportional gain.")
+    Kd = param(A.G1, "Derivative gain.")
+    Ki = param(A.G3, "Integral gain.")
 
     def __init__(
         self,

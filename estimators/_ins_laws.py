@@ -17,7 +17,8 @@ write them a second time.  It binds the bank's row functions (``estimators.kf.kf
     ``kx``/``ky`` the kernel coefficients −1/(2σ²) / −1/(4σ²), ``fpar`` = (kernel_floor, ε²,
     reject_weight, inflate, inflate_gate), ``ipar`` = (max_iter, lockout_n, recovery,
     inflate_jmax), ``ist`` = (n_rejected, n_iter, rejected, recovered) updated, ``wy`` ← diag
-    C_y.  ``ad`` = (apar, sig, ast, kxa, kya): with ``apar`` = (adaptive 0/1, λ, clip) and
+    C_y.  ``ad`` = (apar, sig, ast, kxa, kya): with ``apar`` = (adaptive 0/1, λ, clip)
+    (``estimators.mckf.MCKF_A``) and
     adaptive = 1 the kernels come from the adaptive bandwidth rule instead
     (``estimators.mckf.mckf_adaptive_update_row``: base widths ``sig``, n + m values, state ŝ
     in ``ast[0]``, the kernels written to ``kxa`` (n), ``kya`` (m)), as :class:`estimators.MCKF`
@@ -36,7 +37,7 @@ import math
 from ._jit import njit
 from .kf import kf_update_row as _kf_row
 from .kf import kf_work_in, kf_work_size
-from .mckf import adapt_kernels_row, mckf_work_in, mckf_work_size
+from .mckf import AP, adapt_kernels_row, mckf_work_in, mckf_work_size
 from .mckf import mckf_update_row as _mckf_row
 from .pca import pca_row
 
@@ -52,9 +53,11 @@ def kf_fuse_b(dx, P, R, H, nu, buf):
 def mckf_fuse_b(dx, P, R, H, nu, mp, st, ad, buf):
     w = mckf_work_in(buf, dx.shape[0], nu.shape[0])
     apar, sig, ast, kxa, kya = ad
-    if apar[0] > 0.0:  # mckf_adaptive_update_row's law, with one call of the MCKF row
-        v = adapt_kernels_row(dx, P, R, H, nu, w, (sig, apar[1], apar[2], ast, kxa, kya))
+    if apar[AP.ADAPTIVE] > 0.0:  # mckf_adaptive_update_row's law, one call of the MCKF row
+        v = adapt_kernels_row(dx, P, R, H, nu, w,
+                              (sig, apar[AP.LAM], apar[AP.CLIP], ast, kxa, kya))
         if not math.isfinite(v):
             return v
-        mp = (kxa, kya, mp[2], mp[3])
+        _, _, fpar, ipar = mp
+        mp = (kxa, kya, fpar, ipar)
     return _mckf_row(dx, P, R, H, nu, mp, st, w)

@@ -27,7 +27,8 @@ except ImportError:  # pragma: no cover
     HAVE_NUMBA = False
 
 if _numba is not None:  # the estimators use the controllers (estimators.pso_r): both are keys
-    sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent, package_dir("controllers")])
+    sweep_stale_caches(Path(__file__).parent, [Path(__file__).parent, package_dir("controllers"),
+                                               package_dir("numkit")])
 
 
 def njit(func: Callable[..., Any] | None = None, **options: Any) -> Any:

@@ -18,6 +18,8 @@ import math
 
 import numpy as np
 
+from numkit import X, Y, Z
+
 from ._jit import njit
 
 __all__ = ["add_into", "chol", "chol_inv_lower", "copy_vec", "inv_small_into", "mat_mul",
@@ -110,21 +112,21 @@ def inv_small_into(S, Si):
         Si[0, 1] = -b / det
         Si[1, 0] = -c / det
         Si[1, 1] = a / det
-    elif m == 3:
-        a, b, c = S[0, 0], S[0, 1], S[0, 2]
-        d, e, f = S[1, 0], S[1, 1], S[1, 2]
-        g, h, k = S[2, 0], S[2, 1], S[2, 2]
-        c00, c01, c02 = e * k - f * h, f * g - d * k, d * h - e * g
+    elif m == 3:  # a 3-axis covariance (x, y, z): S⁻¹ = adj(S) / det S
+        a, b, c = S[X, X], S[X, Y], S[X, Z]
+        d, e, f = S[Y, X], S[Y, Y], S[Y, Z]
+        g, h, k = S[Z, X], S[Z, Y], S[Z, Z]
+        c00, c01, c02 = e * k - f * h, f * g - d * k, d * h - e * g  # cofactors of row x
         det = a * c00 + b * c01 + c * c02
-        Si[0, 0] = c00 / det
-        Si[0, 1] = (c * h - b * k) / det
-        Si[0, 2] = (b * f - c * e) / det
-        Si[1, 0] = c01 / det
-        Si[1, 1] = (a * k - c * g) / det
-        Si[1, 2] = (c * d - a * f) / det
-        Si[2, 0] = c02 / det
-        Si[2, 1] = (b * g - a * h) / det
-        Si[2, 2] = (a * e - b * d) / det
+        Si[X, X] = c00 / det
+        Si[X, Y] = (c * h - b * k) / det
+        Si[X, Z] = (b * f - c * e) / det
+        Si[Y, X] = c01 / det
+        Si[Y, Y] = (a * k - c * g) / det
+        Si[Y, Z] = (c * d - a * f) / det
+        Si[Z, X] = c02 / det
+        Si[Z, Y] = (b * g - a * h) / det
+        Si[Z, Z] = (a * e - b * d) / det
     else:
         _inv_lapack(S, Si)
 

@@ -59,7 +59,7 @@ from .kf import (
     predict_b3_row,
     predict_csr_row,
 )
-from .mckf import MCKF, RECOVERY, mckf_update_row, mckf_work
+from .mckf import MCKF, MCKF_F, MCKF_I, MCKF_ST, RECOVERY, ST, mckf_update_row, mckf_work
 from .pca import PCA_MODE, PCAKF, PCAMCKF, pca_row
 
 __all__ = [
@@ -165,7 +165,7 @@ def _kf_update_batch(x, P, R, nis, y, H, z, mask, ok):
         v = kf_update_row(x[i], P[i], R[i], H, z[i], w)
         if not math.isfinite(v):
             continue
-        copy_vec(w[0], y[i])
+        copy_vec(w.nu, y[i])
         nis[i] = v
         ok[i] = True
 
@@ -188,7 +188,7 @@ def _mckf_update_batch(x, P, R, H, z, mask, mp, st, res):
                             (ist[i], wy[i]), w)
         if not math.isfinite(v):
             continue
-        copy_vec(w[0], y[i])
+        copy_vec(w.nu, y[i])
         nis[i] = v
         ok[i] = True
 
@@ -396,9 +396,9 @@ class _MCKFMixin:
         N, n = self.N, self.n
         self._kx = np.empty((N, n))
         self._ky = np.empty((N, self.m))
-        self._fpar = np.empty((N, 5))
-        self._ipar = np.empty((N, 4), dtype=np.int64)
-        self._ist = np.zeros((N, 4), dtype=np.int64)
+        self._fpar = np.empty((N, MCKF_F.size))
+        self._ipar = np.empty((N, MCKF_I.size), dtype=np.int64)
+        self._ist = np.zeros((N, MCKF_ST.size), dtype=np.int64)
         self.weights = np.ones((N, self.m))
         for i, f in enumerate(filters):
             if f.adaptive_sigma:
@@ -409,24 +409,25 @@ class _MCKFMixin:
                 raise ValueError(f"batched MCKF: unknown recovery {f.recovery!r}")
             self._kx[i], self._ky[i] = f.kernels
             self._fpar[i], self._ipar[i] = f.params()
-            self._ist[i] = (f.n_rejected, f.n_iter, int(f.rejected), int(f.recovered))
+            self._ist[i, ST.N_REJECTED], self._ist[i, ST.N_ITER] = f.n_rejected, f.n_iter
+            self._ist[i, ST.REJECTED], self._ist[i, ST.RECOVERED] = f.rejected, f.recovered
             self.weights[i] = f.weights
 
     @property
     def n_rejected(self) -> np.ndarray:
-        return self._ist[:, 0]
+        return self._ist[:, ST.N_REJECTED]
 
     @property
     def n_iter(self) -> np.ndarray:
-        return self._ist[:, 1]
+        return self._ist[:, ST.N_ITER]
 
     @property
     def rejected(self) -> np.ndarray:
-        return self._ist[:, 2].astype(bool)
+        return self._ist[:, ST.REJECTED].astype(bool)
 
     @property
     def recovered(self) -> np.ndarray:
-        return self._ist[:, 3].astype(bool)
+        return self._ist[:, ST.RECOVERED].astype(bool)
 
     def _fuse(self, z: np.ndarray, mask: np.ndarray) -> None:
         _mckf_update_batch(self.x, self.P, self.R, self.H, z, mask,
@@ -435,10 +436,10 @@ class _MCKFMixin:
 
     def _to(self, i: int, f: Any) -> None:
         super()._to(i, f)  # type: ignore[misc]
-        f.n_rejected = int(self._ist[i, 0])
-        f.n_iter = int(self._ist[i, 1])
-        f.rejected = bool(self._ist[i, 2])
-        f.recovered = bool(self._ist[i, 3])
+        f.n_rejected = int(self._ist[i, ST.N_REJECTED])
+        f.n_iter = int(self._ist[i, ST.N_ITER])
+        f.rejected = bool(self._ist[i, ST.REJECTED])
+        f.recovered = bool(self._ist[i, ST.RECOVERED])
         f.weights = self.weights[i].copy()
 
 

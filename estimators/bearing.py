@@ -33,6 +33,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from numkit import X, Y
+
 __all__ = [
     "BearingModel",
     "angle_residual",
@@ -48,6 +50,9 @@ __all__ = [
 ]
 
 TWO_PI = 2.0 * math.pi
+
+#: the observer's columns (its x, y) of a reduced Jacobian, before each target's two
+OBS_COLS = 2
 
 
 def wrap_angle(a):
@@ -263,11 +268,11 @@ class BearingModel:
         obs, pts = self._points(X)
         g_obs, g_pts = bearing_jacobian(obs[:, None, :], pts)
         k = X.shape[0]
-        H = np.zeros((k, self.m, 2 + 2 * len(self.targets)))
-        H[:, :, 0:2] = g_obs
+        H = np.zeros((k, self.m, OBS_COLS + 2 * len(self.targets)))
+        H[:, :, :OBS_COLS] = g_obs
         L = self.landmarks.shape[0]
         for j in range(len(self.targets)):
-            H[:, L + j, 2 + 2 * j: 4 + 2 * j] = g_pts[:, L + j, :]
+            H[:, L + j, OBS_COLS + 2 * j:OBS_COLS + 2 * (j + 1)] = g_pts[:, L + j, :]
         return H[0] if single else H
 
     def observer_jacobian(self, obs: np.ndarray, x: np.ndarray) -> tuple[np.ndarray,
@@ -286,17 +291,18 @@ class BearingModel:
             pts[..., L + j, 0] = x[..., tx]
             pts[..., L + j, 1] = x[..., ty]
         pts = pts[..., None, :, :]  # (…, 1, m, 2)
-        dx = pts[..., 0] - obs[..., 0:1]
-        dy = pts[..., 1] - obs[..., 1:2]
+        dx = pts[..., X] - obs[..., X:X + 1]
+        dy = pts[..., Y] - obs[..., Y:Y + 1]
         d2 = dx * dx + dy * dy
         a = dy / d2
         b = -dx / d2
-        H = np.zeros(d2.shape + (2 + 2 * len(self.targets),))
-        H[..., 0] = a
-        H[..., 1] = b
+        H = np.zeros(d2.shape + (OBS_COLS + 2 * len(self.targets),))
+        H[..., X] = a                        # ∂β/∂(observer x, y) = (Δy, −Δx) / d²
+        H[..., Y] = b
         for j in range(len(self.targets)):
-            H[..., L + j, 2 + 2 * j] = -a[..., L + j]
-            H[..., L + j, 3 + 2 * j] = -b[..., L + j]
+            c = OBS_COLS + 2 * j             # the target's (x, y) columns: the opposite sign
+            H[..., L + j, c + X] = -a[..., L + j]
+            H[..., L + j, c + Y] = -b[..., L + j]
         return H, d2
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:

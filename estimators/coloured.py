@@ -113,9 +113,25 @@ class BiasAugmentedKF:
     def x(self) -> np.ndarray:
         return self.kf.x[: self.n]
 
+    @x.setter
+    def x(self, value) -> None:
+        """(Re)start the base state at ``value``; the bias estimate returns to its prior mean 0."""
+        xa = np.zeros(self.n + self.m)
+        xa[: self.n] = np.asarray(value, dtype=float).reshape(self.n)
+        self.kf.x = xa
+
     @property
     def P(self) -> np.ndarray:
         return self.kf.P[: self.n, : self.n]
+
+    @P.setter
+    def P(self, value) -> None:
+        """(Re)start the base covariance at ``value``: no cross-covariance with the bias, whose
+        covariance returns to its stationary prior diag(σ_b²)."""
+        Pa = np.zeros((self.n + self.m, self.n + self.m))
+        Pa[: self.n, : self.n] = as_matrix(value, "P", (self.n, self.n))
+        Pa[self.n :, self.n :] = np.diag(self.sigma_b**2)
+        self.kf.P = Pa
 
     @property
     def x_aug(self) -> np.ndarray:

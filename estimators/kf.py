@@ -34,8 +34,11 @@ by the caller is not changed in place).
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
+
+from numkit import Layout
 
 from ._jit import njit
 from ._linalg import (
@@ -48,13 +51,22 @@ from ._linalg import (
     quad_form,
 )
 
-__all__ = ["KF", "inv_small", "as_fix", "as_matrix", "as_vector", "block3", "csr", "joseph",
+__all__ = ["AXIS_BLOCK", "KF", "KFWork", "KF_WORK_FIELDS", "inv_small", "as_fix", "as_matrix",
+           "as_vector", "block3", "csr", "joseph",
            "joseph_row", "kf_gain_row",
            "kf_innovation_row", "kf_input_row", "kf_predict_row", "kf_update_row", "kf_work",
-           "kf_work_in", "kf_work_size",
+           "kf_work_in", "kf_work_layout", "kf_work_size", "kf_work_spec",
            "predict_b3_row", "predict_csr_row"]
 
 _dot = np.dot
+
+#: one axis's block of the per-axis motion models (:mod:`estimators.models`): position,
+#: velocity, and the third state (acceleration, or the input's bias)
+AXIS_BLOCK = Layout("p v d")
+B = AXIS_BLOCK.at
+
+#: the names of one KF update's work arrays, in their order in the buffer
+KF_WORK_FIELDS = ("nu", "PHT", "S", "Si", "K", "xo", "A", "AP", "KR")
 
 
 def inv_small(S: np.ndarray) -> np.ndarray:
@@ -110,7 +122,7 @@ def block3(F: np.ndarray) -> np.ndarray:
     empty (0, 0) array: the argument ``Fb`` of :func:`kf_predict_row`."""
     F = np.asarray(F, dtype=float)
     n = F.shape[0]
-    Fb = np.ascontiguousarray(F[:3, :3])
+    Fb = np.ascontiguousarray(F[:B.SIZE, :B.SIZE])
     if n % 3 == 0 and np.array_equal(F, np.kron(np.eye(n // 3), Fb)):
         return Fb
     return np.zeros((0, 0))
@@ -155,22 +167,25 @@ def predict_csr_row(x, P, fptr, fidx, fval, Q, tx, FP):
 
 @njit(inline="always")
 def predict_b3_row(x, P, Fb, Q):
-    """:func:`kf_predict_row` for F = blkdiag(Fb, …, Fb), 3×3 blocks, unrolled."""
-    na = x.shape[0] // 3
-    f00, f01, f02 = Fb[0, 0], Fb[0, 1], Fb[0, 2]
-    f10, f11, f12 = Fb[1, 0], Fb[1, 1], Fb[1, 2]
-    f20, f21, f22 = Fb[2, 0], Fb[2, 1], Fb[2, 2]
+    """:func:`kf_predict_row` for F = blkdiag(Fb, …, Fb), 3×3 blocks (one per axis, layout
+    :data:`AXIS_BLOCK`), unrolled: x_a ← Fb x_a, P_ab ← Fb P_ab Fbᵀ + Q_ab."""
+    na = x.shape[0] // B.SIZE
+    f00, f01, f02 = Fb[B.P, B.P], Fb[B.P, B.V], Fb[B.P, B.D]
+    f10, f11, f12 = Fb[B.V, B.P], Fb[B.V, B.V], Fb[B.V, B.D]
+    f20, f21, f22 = Fb[B.D, B.P], Fb[B.D, B.V], Fb[B.D, B.D]
     for a in range(na):
-        o = 3 * a
-        x0, x1, x2 = x[o], x[o + 1], x[o + 2]
-        x[o] = f00 * x0 + f01 * x1 + f02 * x2
-        x[o + 1] = f10 * x0 + f11 * x1 + f12 * x2
-        x[o + 2] = f20 * x0 + f21 * x1 + f22 * x2
+        o = B.SIZE * a
+        op, ov, od = o + B.P, o + B.V, o + B.D   # axis a's p, v, d rows
+        x0, x1, x2 = x[op], x[ov], x[od]
+        x[op] = f00 * x0 + f01 * x1 + f02 * x2
+        x[ov] = f10 * x0 + f11 * x1 + f12 * x2
+        x[od] = f20 * x0 + f21 * x1 + f22 * x2
         for bb in range(na):
-            c = 3 * bb
-            p00, p01, p02 = P[o, c], P[o, c + 1], P[o, c + 2]
-            p10, p11, p12 = P[o + 1, c], P[o + 1, c + 1], P[o + 1, c + 2]
-            p20, p21, p22 = P[o + 2, c], P[o + 2, c + 1], P[o + 2, c + 2]
+            c = B.SIZE * bb
+            cp, cv, cd = c + B.P, c + B.V, c + B.D
+            p00, p01, p02 = P[op, cp], P[op, cv], P[op, cd]
+            p10, p11, p12 = P[ov, cp], P[ov, cv], P[ov, cd]
+            p20, p21, p22 = P[od, cp], P[od, cv], P[od, cd]
             g00 = f00 * p00 + f01 * p10 + f02 * p20  # G = Fb P_ab
             g01 = f00 * p01 + f01 * p11 + f02 * p21
             g02 = f00 * p02 + f01 * p12 + f02 * p22
@@ -180,15 +195,15 @@ def predict_b3_row(x, P, Fb, Q):
             g20 = f20 * p00 + f21 * p10 + f22 * p20
             g21 = f20 * p01 + f21 * p11 + f22 * p21
             g22 = f20 * p02 + f21 * p12 + f22 * p22
-            P[o, c] = (g00 * f00 + g01 * f01 + g02 * f02) + Q[o, c]  # G Fbᵀ + Q
-            P[o, c + 1] = (g00 * f10 + g01 * f11 + g02 * f12) + Q[o, c + 1]
-            P[o, c + 2] = (g00 * f20 + g01 * f21 + g02 * f22) + Q[o, c + 2]
-            P[o + 1, c] = (g10 * f00 + g11 * f01 + g12 * f02) + Q[o + 1, c]
-            P[o + 1, c + 1] = (g10 * f10 + g11 * f11 + g12 * f12) + Q[o + 1, c + 1]
-            P[o + 1, c + 2] = (g10 * f20 + g11 * f21 + g12 * f22) + Q[o + 1, c + 2]
-            P[o + 2, c] = (g20 * f00 + g21 * f01 + g22 * f02) + Q[o + 2, c]
-            P[o + 2, c + 1] = (g20 * f10 + g21 * f11 + g22 * f12) + Q[o + 2, c + 1]
-            P[o + 2, c + 2] = (g20 * f20 + g21 * f21 + g22 * f22) + Q[o + 2, c + 2]
+            P[op, cp] = (g00 * f00 + g01 * f01 + g02 * f02) + Q[op, cp]  # G Fbᵀ + Q
+            P[op, cv] = (g00 * f10 + g01 * f11 + g02 * f12) + Q[op, cv]
+            P[op, cd] = (g00 * f20 + g01 * f21 + g02 * f22) + Q[op, cd]
+            P[ov, cp] = (g10 * f00 + g11 * f01 + g12 * f02) + Q[ov, cp]
+            P[ov, cv] = (g10 * f10 + g11 * f11 + g12 * f12) + Q[ov, cv]
+            P[ov, cd] = (g10 * f20 + g11 * f21 + g12 * f22) + Q[ov, cd]
+            P[od, cp] = (g20 * f00 + g21 * f01 + g22 * f02) + Q[od, cp]
+            P[od, cv] = (g20 * f10 + g21 * f11 + g22 * f12) + Q[od, cv]
+            P[od, cd] = (g20 * f20 + g21 * f21 + g22 * f22) + Q[od, cd]
 
 
 @njit(inline="always")
@@ -270,10 +285,28 @@ def kf_work_size(n, m):
     return m + 3 * n * m + 2 * m * m + n + 2 * n * n
 
 
+#: the work arrays of one KF update, by name (:func:`kf_work_in`; a plain tuple in this order)
+KFWork = namedtuple("KFWork", KF_WORK_FIELDS)
+
+
+def kf_work_spec(n: int, m: int) -> str:
+    """The fields of :func:`kf_work_in`'s buffer for n states and m measurements (a
+    :class:`numkit.Layout` text): ν (m), P Hᵀ (n, m), S (m, m), S⁻¹ (m, m), K (n, m), x̂ (n),
+    and :func:`joseph_row`'s A, A P (n, n), K S (n, m)."""
+    return (f"nu:{m} PHT:{n}x{m} S:{m}x{m} Si:{m}x{m} K:{n}x{m} xo:{n} A:{n}x{n} AP:{n}x{n} "
+            f"KR:{n}x{m}")
+
+
+def kf_work_layout(n: int, m: int) -> Layout:
+    """The layout of :func:`kf_work_in`'s buffer (:func:`kf_work_spec`)."""
+    return Layout(kf_work_spec(n, m))
+
+
 @njit(inline="always")
 def kf_work_in(buf, n, m):
-    """The work arrays of one update (ν, P Hᵀ, S, S⁻¹, K, x̂, and :func:`joseph_row`'s A, AP,
-    K S) as views of ``buf`` (≥ :func:`kf_work_size`): a per-tick caller allocates nothing."""
+    """The work arrays of one update (:class:`KFWork`: ν, P Hᵀ, S, S⁻¹, K, x̂, and
+    :func:`joseph_row`'s A, AP, K S) as views of ``buf`` (≥ :func:`kf_work_size`), laid out
+    as :func:`kf_work_layout`: a per-tick caller allocates nothing."""
     o1 = m
     o2 = o1 + n * m
     o3 = o2 + m * m
@@ -282,10 +315,10 @@ def kf_work_in(buf, n, m):
     o6 = o5 + n
     o7 = o6 + n * n
     o8 = o7 + n * n
-    return (buf[0:o1], buf[o1:o2].reshape((n, m)), buf[o2:o3].reshape((m, m)),
-            buf[o3:o4].reshape((m, m)), buf[o4:o5].reshape((n, m)), buf[o5:o6],
-            buf[o6:o7].reshape((n, n)), buf[o7:o8].reshape((n, n)),
-            buf[o8:o8 + n * m].reshape((n, m)))
+    return KFWork(buf[0:o1], buf[o1:o2].reshape((n, m)), buf[o2:o3].reshape((m, m)),
+                  buf[o3:o4].reshape((m, m)), buf[o4:o5].reshape((n, m)), buf[o5:o6],
+                  buf[o6:o7].reshape((n, n)), buf[o7:o8].reshape((n, n)),
+                  buf[o8:o8 + n * m].reshape((n, m)))
 
 
 @njit
@@ -299,7 +332,7 @@ def kf_update_row(x, P, R, H, z, w):
     """The KF update of one filter in place (x, P); returns its NIS.  A non-finite NIS (NaN/inf
     in z, or an overflow) is "no fix": x and P are then untouched.  ``w``: the work arrays
     (:func:`kf_work`, or :func:`kf_work_in` on the caller's buffer); after a fix they hold ν
-    (w[0]), S (w[2]), K (w[4])."""
+    (``w.nu``), S (``w.S``), K (``w.K``)."""
     nu, PHT, S, Si, K, xo, _, _, KR = w
     v = kf_innovation_row(x, P, R, H, z, nu, PHT, S, Si)
     if not math.isfinite(v):
@@ -440,5 +473,5 @@ class KF(LinearGaussianBase):
         if not math.isfinite(v):
             return False
         self.x, self.P = x, P
-        self.y, self.S, self.K, self.nis = w[0].copy(), w[2].copy(), w[4].copy(), float(v)
+        self.y, self.S, self.K, self.nis = w.nu.copy(), w.S.copy(), w.K.copy(), float(v)
         return True

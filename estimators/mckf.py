@@ -74,9 +74,12 @@ Diagnostics after an update: ``n_iter`` (fixed-point iterations), ``weights`` (d
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass, replace
 
 import numpy as np
+
+from numkit import Layout
 
 from ._jit import njit
 from ._linalg import (
@@ -92,6 +95,7 @@ from ._linalg import (
     scale,
 )
 from .kf import (
+    KF_WORK_FIELDS,
     LinearGaussianBase,
     as_matrix,
     as_vector,
@@ -101,18 +105,46 @@ from .kf import (
     kf_innovation_row,
     kf_work_in,
     kf_work_size,
+    kf_work_spec,
 )
 
-__all__ = ["MCKF", "MCKFOptions", "REL_PIVOT", "RECOVERY", "adapt_kernel_row", "adapt_kernels_row",
+__all__ = ["AP", "FP", "IP", "MCKF", "MCKFOptions", "MCKFWork", "MCKF_A", "MCKF_F", "MCKF_I",
+           "MCKF_ST", "REL_PIVOT", "ST", "RECOVERY", "adapt_kernel_row", "adapt_kernels_row",
            "kernel_coeffs", "mckf_adaptive_update_row", "mckf_fixed_point_row", "mckf_update_row",
-           "mckf_work", "mckf_work_in", "mckf_work_size", "safe_cholesky"]
+           "mckf_work", "mckf_work_in", "mckf_work_layout", "mckf_work_size", "safe_cholesky",
+           "MCKF_WORK_FIELDS"]
 
 #: Cholesky pivots below REL_PIVOT · P̄_jj send P̄ to :func:`safe_cholesky` (jitter), so the
 #: positive-definite decision never hinges on the summation order
 REL_PIVOT = 1e-8
 
-#: recovery rule → code of the row functions (``ipar[2]``)
+#: recovery rule → code of the row functions (``ipar[IP.RECOVERY]``)
 RECOVERY = {None: 0, "kf": 1, "inflate": 2}
+
+#: the row functions' float options ``fpar``: the state weights' floor, ε² of the stop rule,
+#: the rejection weight, the inflation factor and its gate (:func:`mckf_update_row`)
+MCKF_F = Layout("floor eps2 reject inflate gate")
+FP = MCKF_F.at
+#: their integer options ``ipar``: the iteration cap, the lock-out count, the recovery rule
+#: (:data:`RECOVERY`), the inflation's largest power
+MCKF_I = Layout("max_iter lockout recovery jmax")
+IP = MCKF_I.at
+#: a row's state ``ist``: consecutive rejections, fixed-point iterations, the last fix rejected
+#: (0/1), recovered (0/1)
+MCKF_ST = Layout("n_rejected n_iter rejected recovered")
+ST = MCKF_ST.at
+#: the adaptive bandwidth rule's options as the INS passes them (``apar``): on (0/1), λ, clip
+MCKF_A = Layout("adaptive lam clip")
+AP = MCKF_A.at
+
+#: the names of one MCKF update's work arrays, in their order in the buffer: the KF update's
+#: (:data:`estimators.kf.KF_WORK_FIELDS`), then B_p, B_r, B_r⁻¹, G = B_r⁻¹ H, A, ν_w, T, M,
+#: M⁻¹, √C_y, S ν_w, β, C_x⁻¹, u, x̂ before, e_y, C_x, N, V and the inflated prior's α P̄,
+#: α P̄ Hᵀ, S_α, S_α⁻¹ (:func:`mckf_work_in`)
+MCKF_WORK_FIELDS = KF_WORK_FIELDS + (
+    "Lp", "Lr", "Brinv", "G", "Aw", "nw", "T", "M", "Mi", "sy", "sn", "be", "q", "u", "ox", "e",
+    "cx", "Nm", "V", "Pa", "PaHT", "Sa", "Sai")
+MCKFWork = namedtuple("MCKFWork", MCKF_WORK_FIELDS)
 
 
 def safe_cholesky(P: np.ndarray) -> np.ndarray:
@@ -182,7 +214,7 @@ def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, fpar, ipar, fw):
     Finally K̃ = L C_x⁻¹ Aᵀ N, N = S M⁻¹ S B_r⁻¹.  One straight loop (helper calls inside the
     iteration measured slower)."""
     A, nw, T, M, Mi, s, sn, be, q, u, xn, o, e, c, K, Nm, V = fw
-    floor, eps2, max_iter = fpar[0], fpar[1], ipar[0]
+    floor, eps2, max_iter = fpar[FP.FLOOR], fpar[FP.EPS2], ipar[IP.MAX_ITER]
     n = xb.shape[0]
     m = nu.shape[0]
     _whitened_A(G, L, A)
@@ -250,17 +282,32 @@ def mckf_fixed_point_row(xb, L, nu, Brinv, G, kx, ky, fpar, ipar, fw):
     return it
 
 
+def mckf_work_layout(n: int, m: int) -> Layout:
+    """The layout of :func:`mckf_work_in`'s buffer for n states and m measurements:
+    :func:`estimators.kf.kf_work_layout`'s fields, then the fixed point's and the recovery's
+    (:data:`MCKF_WORK_FIELDS`)."""
+    nn, mm, nm = f"{n}x{n}", f"{m}x{m}", f"{n}x{m}"
+    return Layout(kf_work_spec(n, m) + " " + " ".join(
+        f"{name}:{shape}" for name, shape in (
+            ("Lp", nn), ("Lr", mm), ("Brinv", mm), ("G", f"{m}x{n}"), ("Aw", f"{m}x{n}"),
+            ("nw", m), ("T", mm), ("M", mm), ("Mi", mm), ("sy", m), ("sn", m), ("be", m),
+            ("q", n), ("u", n), ("ox", n), ("e", m), ("cx", n), ("Nm", mm), ("V", nm),
+            ("Pa", nn), ("PaHT", nm), ("Sa", mm), ("Sai", mm))))
+
+
 @njit
 def mckf_work_size(n, m):
-    """Length of a buffer holding :func:`mckf_work_in`'s arrays."""
+    """Length of a buffer holding :func:`mckf_work_in`'s arrays (the size of
+    :func:`mckf_work_layout`)."""
     return kf_work_size(n, m) + 2 * n * n + 8 * m * m + 4 * n * m + 4 * n + 5 * m
 
 
 @njit(inline="always")
 def mckf_work_in(buf, n, m):
     """The work arrays of one MCKF update (:func:`mckf_update_row`) as views of ``buf`` (≥
-    :func:`mckf_work_size`): those of :func:`estimators.kf.kf_work_in` (ν, P Hᵀ, S, S⁻¹, K,
-    x̂, …) then the fixed point's — a per-tick caller allocates nothing."""
+    :func:`mckf_work_size`), laid out as :func:`mckf_work_layout`: those of
+    :func:`estimators.kf.kf_work_in` (ν, P Hᵀ, S, S⁻¹, K, x̂, …) then the fixed point's — a
+    per-tick caller allocates nothing.  Returns a :class:`MCKFWork` (fields by name)."""
     nu, PHT, S, Si, K, xo, A, AP, KR = kf_work_in(buf, n, m)
     o = kf_work_size(n, m)
     nn, mm, mn = n * n, m * m, m * n
@@ -286,8 +333,8 @@ def mckf_work_in(buf, n, m):
     Pa, PaHT = buf[o:o + nn].reshape((n, n)), buf[o + nn:o + nn + mn].reshape((n, m))
     o += nn + mn
     Sa, Sai = buf[o:o + mm].reshape((m, m)), buf[o + mm:o + 2 * mm].reshape((m, m))
-    return (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn, be,
-            q, u, ox, e, c, Nm, V, Pa, PaHT, Sa, Sai)
+    return MCKFWork(nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn,
+                    be, q, u, ox, e, c, Nm, V, Pa, PaHT, Sa, Sai)
 
 
 @njit
@@ -301,27 +348,27 @@ def mckf_work(n, m):
 def _recover(x, P, R, H, nu, fpar, ipar, ist, rw):
     """The lock-out recovery rule after a rejected fix (count in ist[0] already raised; ``rw``
     = (P̄ Hᵀ, S⁻¹ of the innovation, K, x̂, Pa, Pa Hᵀ, Sa, Sa⁻¹) of the update's work):
-    ``"kf"`` (ipar[2] = 1) K = P̄ Hᵀ S⁻¹, x̂ = x̄ + K ν; ``"inflate"`` (2) the same on α P̄,
+    ``"kf"`` (recovery 1) K = P̄ Hᵀ S⁻¹, x̂ = x̄ + K ν; ``"inflate"`` (2) the same on α P̄,
     α = inflate^j, if νᵀ (H α P̄ Hᵀ + R)⁻¹ ν ≤ gate.  Returns 0 (no recovery), 1 (recovered on
     P̄) or 2 (recovered on α P̄, now in w's Pa: the prior of the Joseph update)."""
     PHT, Si, K, xo, Pa, PaHT, Sa, Sai = rw
-    if ist[0] < ipar[1]:
+    if ist[ST.N_REJECTED] < ipar[IP.LOCKOUT]:
         return 0
-    if ipar[2] == 1:
-        kf_gain_row(x, PHT, Si, nu, K, xo)
-        ist[0] = 0
+    if ipar[IP.RECOVERY] == 1:
+        kf_gain_row(x, PHT, Si, nu, K, xo)  # K = P̄ Hᵀ S⁻¹, x̂ = x̄ + K ν
+        ist[ST.N_REJECTED] = 0
         return 1
-    if ipar[2] == 2:
-        j = min(ist[0] - ipar[1] + 1, ipar[3])
-        alpha = math.pow(fpar[3], float(j))
+    if ipar[IP.RECOVERY] == 2:
+        j = min(ist[ST.N_REJECTED] - ipar[IP.LOCKOUT] + 1, ipar[IP.JMAX])
+        alpha = math.pow(fpar[FP.INFLATE], float(j))  # α = inflate^j
         scale(alpha, PHT, PaHT)
         mat_mul(H, PaHT, Sa)
         add_into(Sa, R)
         inv_small_into(Sa, Sai)
-        if quad_form(Sai, nu) <= fpar[4]:
+        if quad_form(Sai, nu) <= fpar[FP.GATE]:  # νᵀ (H α P̄ Hᵀ + R)⁻¹ ν ≤ gate
             scale(alpha, P, Pa)
             kf_gain_row(x, PaHT, Sai, nu, K, xo)
-            ist[0] = 0
+            ist[ST.N_REJECTED] = 0
             return 2
     return 0
 
@@ -335,8 +382,9 @@ def mckf_update_row(x, P, R, H, z, mp, st, w):
     (:func:`kernel_coeffs`), fpar = (kernel_floor, ε², reject_weight, inflate, inflate_gate),
     ipar = (max_iter, lockout_n, recovery 0/1/2 = None/"kf"/"inflate", inflate_jmax);
     ``st`` = (ist, wy) its state: ist = (n_rejected, n_iter, rejected, recovered) (updated),
-    wy ← diag C_y; w = :func:`mckf_work` (or :func:`mckf_work_in` on the caller's buffer); after
-    a fix w holds ν (w[0]), S (w[2]), K̃ (w[4]) and C_x (w[25], valid when n_iter > 1)."""
+    wy ← diag C_y (layouts :data:`MCKF_F`, :data:`MCKF_I`, :data:`MCKF_ST`); w =
+    :func:`mckf_work` (or :func:`mckf_work_in` on the caller's buffer); after a fix w holds ν
+    (``w.nu``), S (``w.S``), K̃ (``w.K``) and C_x (``w.cx``, valid when n_iter > 1)."""
     kx, ky, fpar, ipar = mp
     ist, wy = st
     (nu, PHT, S, Si, K, xo, A, AP, KR, Lp, Lr, Brinv, G, Aw, nw, T, M, Mi, s, sn, be, q, u,
@@ -355,13 +403,13 @@ def mckf_update_row(x, P, R, H, z, mp, st, w):
         wy[a] = s[a] * s[a]
         if wy[a] < wmin:
             wmin = wy[a]
-    rejected = wmin < fpar[2]
+    rejected = wmin < fpar[FP.REJECT]  # some channel's weight C_y below reject_weight
     rec = 0
     if rejected:
-        ist[0] += 1
+        ist[ST.N_REJECTED] += 1
         rec = _recover(x, P, R, H, nu, fpar, ipar, ist, (PHT, Si, K, xo, Pa, PaHT, Sa, Sai))
     else:
-        ist[0] = 0
+        ist[ST.N_REJECTED] = 0
     copy_vec(xo, x)
     # the original P̄ and R (P̄ Hᵀ and S as the innovation formed them), or the inflated prior
     # after an "inflate" reset
@@ -369,9 +417,9 @@ def mckf_update_row(x, P, R, H, z, mp, st, w):
         joseph_row(Pa, K, H, R, P, A, AP, KR)
     else:
         joseph_from(P, K, PHT, S, P, KR)
-    ist[1] = it
-    ist[2] = 1 if rejected else 0
-    ist[3] = 1 if rec else 0
+    ist[ST.N_ITER] = it
+    ist[ST.REJECTED] = 1 if rejected else 0
+    ist[ST.RECOVERED] = 1 if rec else 0
     return v
 
 
@@ -408,7 +456,7 @@ def adapt_kernels_row(x, P, R, H, z, w, ad):
     clip, state ŝ, kx, ky; kx, ky are written).  Returns the NIS (not finite: no fix, nothing
     changes)."""
     sigma, lam, clip, ast, kx, ky = ad
-    v = kf_innovation_row(x, P, R, H, z, w[0], w[1], w[2], w[3])
+    v = kf_innovation_row(x, P, R, H, z, w.nu, w.PHT, w.S, w.Si)
     if math.isfinite(v):
         adapt_kernel_row(v, z.shape[0], sigma, lam, clip, ast, kx, ky)
     return v
@@ -466,7 +514,7 @@ class MCKF(LinearGaussianBase):
     def __init__(self, F, H, Q, R, x0=None, P0=None, options: MCKFOptions | None = None,
                  **changes) -> None:
         opts = replace(options or MCKFOptions(), **changes)  # TypeError names a bad keyword
-        self._ist = np.zeros(4, dtype=np.int64)
+        self._ist = np.zeros(MCKF_ST.size, dtype=np.int64)
         super().__init__(F, H, Q, R, x0, P0)
         if opts.recovery not in RECOVERY:
             raise ValueError(f"recovery must be None, 'kf' or 'inflate', got {opts.recovery!r}")
@@ -497,14 +545,14 @@ class MCKF(LinearGaussianBase):
         self._w = mckf_work(self.n, self.m)
 
     # state of the lock-out rule and the last fixed point (views of the row's ``ist``) ---------
-    n_rejected = property(lambda self: int(self._ist[0]),
-                          lambda self, v: self._ist.__setitem__(0, int(v)))
-    n_iter = property(lambda self: int(self._ist[1]),
-                      lambda self, v: self._ist.__setitem__(1, int(v)))
-    rejected = property(lambda self: bool(self._ist[2]),
-                        lambda self, v: self._ist.__setitem__(2, int(bool(v))))
-    recovered = property(lambda self: bool(self._ist[3]),
-                         lambda self, v: self._ist.__setitem__(3, int(bool(v))))
+    n_rejected = property(lambda self: int(self._ist[ST.N_REJECTED]),
+                          lambda self, v: self._ist.__setitem__(ST.N_REJECTED, int(v)))
+    n_iter = property(lambda self: int(self._ist[ST.N_ITER]),
+                      lambda self, v: self._ist.__setitem__(ST.N_ITER, int(v)))
+    rejected = property(lambda self: bool(self._ist[ST.REJECTED]),
+                        lambda self, v: self._ist.__setitem__(ST.REJECTED, int(bool(v))))
+    recovered = property(lambda self: bool(self._ist[ST.RECOVERED]),
+                         lambda self, v: self._ist.__setitem__(ST.RECOVERED, int(bool(v))))
 
     scale2 = property(lambda self: float(self._ast[0]),
                       lambda self, v: self._ast.__setitem__(0, float(v)))
@@ -540,10 +588,13 @@ class MCKF(LinearGaussianBase):
         """The row functions' parameters ``(fpar, ipar)`` from the attributes (see
         :func:`mckf_update_row`)."""
         jmax = max(1, int(12.0 / math.log10(self.inflate))) if self.inflate > 1.0 else 1
-        fpar = np.array([self.kernel_floor, self.eps * self.eps, self.reject_weight,
-                         self.inflate, self.inflate_gate])
-        ipar = np.array([self.max_iter, self.lockout_n, RECOVERY[self.recovery], jmax],
-                        dtype=np.int64)
+        fpar = np.empty(MCKF_F.size)
+        fpar[FP.FLOOR], fpar[FP.EPS2], fpar[FP.REJECT] = (self.kernel_floor, self.eps * self.eps,
+                                                           self.reject_weight)
+        fpar[FP.INFLATE], fpar[FP.GATE] = self.inflate, self.inflate_gate
+        ipar = np.empty(MCKF_I.size, dtype=np.int64)
+        ipar[IP.MAX_ITER], ipar[IP.LOCKOUT] = self.max_iter, self.lockout_n
+        ipar[IP.RECOVERY], ipar[IP.JMAX] = RECOVERY[self.recovery], jmax
         return fpar, ipar
 
     def update(self, z) -> bool:
@@ -574,7 +625,7 @@ class MCKF(LinearGaussianBase):
                 return False
         self.x, self.P = x, P
         self.weights = wy
-        self.weights_x = np.ones(n) if self._ist[1] == 1 else w[25].copy()
-        self.y, self.S, self.K = w[0].copy(), w[2].copy(), w[4].copy()
+        self.weights_x = np.ones(n) if self._ist[ST.N_ITER] == 1 else w.cx.copy()
+        self.y, self.S, self.K = w.nu.copy(), w.S.copy(), w.K.copy()
         self.nis = float(v)
         return True

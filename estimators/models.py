@@ -66,6 +66,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from numkit import Layout, Z
+
+#: one axis of the "cvb" model's state: position, velocity, the input's bias
+CVB = Layout("p v b").at
+
 __all__ = [
     "LinearModel",
     "axis_count",
@@ -110,7 +115,7 @@ def _axis_values(dim: Dim, value, alt_value, name: str) -> np.ndarray:
     n_axes = axis_count(dim)
     vals = _per_axis(value, n_axes, name)
     if isinstance(dim, str) and alt_value is not None:
-        vals[2] = float(alt_value)
+        vals[Z] = float(alt_value)
     return vals
 
 
@@ -151,7 +156,8 @@ def _cvb_block(dt: float, q: float, q_bias: float, form: str) -> np.ndarray:
     if form != "continuous":
         raise ValueError("the 'cvb' model is defined with q_form='continuous' only")
     m = np.zeros((3, 3))
-    m[:2, :2] = _q_block(2, dt, q, form)
+    pv = slice(CVB.P, CVB.V_END)
+    m[pv, pv] = _q_block(2, dt, q, form)   # the (p, v) block of white acceleration noise
     cb = _q_block(3, dt, q_bias, form) * np.array([[1, 1, -1], [1, 1, -1], [-1, -1, 1]])
     return m + cb
 

@@ -71,7 +71,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import linalg, stats
 
+from numkit import Layout, X, Y, Z
+
 from .kf import KF, joseph
+
+#: one axis of the Singer model's state: position, velocity, acceleration
+SG = Layout("p v a").at
 
 __all__ = ["Route", "RouteConstrainedKF", "RouteOptions", "chi2_gate", "paper_gate", "singer_model"]
 
@@ -97,15 +102,16 @@ def singer_model(dt: float, lam: float | Sequence[float], sigma_a: float | Seque
         lm = float(lams[i])
         A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -lm]])
         q = 2.0 * lm * float(sig[i]) ** 2
-        Gq = np.zeros((3, 3))
-        Gq[2, 2] = q
-        M = np.zeros((6, 6))
-        M[:3, :3] = -A
-        M[:3, 3:] = Gq
-        M[3:, 3:] = A.T
+        n = SG.SIZE
+        Gq = np.zeros((n, n))
+        Gq[SG.A, SG.A] = q                  # G q Gᵀ: white noise on the acceleration
+        M = np.zeros((2 * n, 2 * n))        # Van Loan: M = [[−A, G q Gᵀ], [0, Aᵀ]]
+        M[:n, :n] = -A
+        M[:n, n:] = Gq
+        M[n:, n:] = A.T
         E = linalg.expm(M * dt)
-        Phi = E[3:, 3:].T
-        Qi = Phi @ E[:3, 3:]
+        Phi = E[n:, n:].T                   # Φ = (lower-right block)ᵀ
+        Qi = Phi @ E[:n, n:]                # Q = Φ · (upper-right block)
         sl = slice(3 * i, 3 * i + 3)
         F[sl, sl] = Phi
         Q[sl, sl] = 0.5 * (Qi + Qi.T)
@@ -142,7 +148,7 @@ def _rotation_between(u: np.ndarray, w: np.ndarray) -> np.ndarray:
             return np.eye(3)
         k = _normals(u)[0]  # U-turn: half turn about an axis normal to u
         return 2.0 * np.outer(k, k) - np.eye(3)
-    vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    vx = np.array([[0.0, -v[Z], v[Y]], [v[Z], 0.0, -v[X]], [-v[Y], v[X], 0.0]])  # [v]×
     return np.eye(3) + vx + vx @ vx * ((1.0 - c) / (sv * sv))
 
 

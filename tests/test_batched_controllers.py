@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 
 from controllers import FPID, IT2FPID, PID, REDUCERS
-from controllers.attitude import GeometricAttitudeController, XMixer, quat_to_rot
-from controllers.axis import AX_NS, S_I
+from controllers.attitude import GeometricAttitudeController, XMixer
+from controllers.axis import AX_NS, S
 from controllers.batched import NP, NS, P_MASS, BatchCascade
 from controllers.cascade import PositionCascade
+from numkit.geometry import quat_to_rot9
 
 ROTORS = [(0.2, -0.2), (-0.2, 0.2), (0.2, 0.2), (-0.2, -0.2)]
 SPIN = [1, 1, -1, -1]
@@ -76,7 +77,7 @@ def inputs(n: int, ticks: int, seed: int, scale: float = 1.0):
         q = rng.normal(size=(n, 4))
         q[:, 0] += 3.0
         q /= np.linalg.norm(q, axis=1, keepdims=True)
-        R = np.array([quat_to_rot(*row) for row in q])
+        R = np.array([quat_to_rot9(*row) for row in q])
         big = scale * rng.choice([0.1, 1.0, 10.0], size=(n, 1))
         yield (rng.normal(size=(n, 3)) * big, rng.normal(size=(n, 3)) * big, R,
                rng.normal(size=(n, 3)) * 2.0, rng.normal(size=(n, 3)) * big,
@@ -287,8 +288,8 @@ def test_sub_objects_share_the_cascade_row():
         fa, fb, fc = a.update(*args), b.update(*args), c.update(*args)
         assert fa == fb == fc
         assert a.internals() == b.internals() == c.internals()
-    assert a.axes[2].integral == a.state[2 * AX_NS + S_I]
-    assert c.axes[2].integral == c.state[2 * AX_NS + S_I]
+    assert a.axes[2].integral == a.state[2 * AX_NS + S.I]
+    assert c.axes[2].integral == c.state[2 * AX_NS + S.I]
     assert BatchCascade.from_cascades([a]).J[0].tolist() == [0.03, 0.04, 0.05]
     with pytest.raises(ValueError, match="PID, FPID and IT2FPID"):
         BatchCascade.from_cascades([b])

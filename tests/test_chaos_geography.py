@@ -90,6 +90,33 @@ def test_the_plan_geojson_is_cut_at_the_antimeridian(tmp_path):
             _no_jump(part)
 
 
+def test_the_plan_kml_and_the_field_geojson_are_cut_at_the_antimeridian(tmp_path):
+    """The KML export and Field.to_geojson() cut at ±180° as the plan's GeoJSON does (before,
+    their edges ran 360° the wrong way round the globe)."""
+    import xml.etree.ElementTree as ET
+
+    p = _geojson(tmp_path / "across.geojson", ACROSS)
+    feat = load_field(str(p)).to_geojson()
+    assert feat["geometry"]["type"] == "MultiPolygon" and len(feat["geometry"]["coordinates"]) == 2
+    for poly in feat["geometry"]["coordinates"]:
+        _no_jump(poly[0])
+    out = tmp_path / "across.kml"
+    assert main(["plan", str(p), "-o", str(out)]) == 0
+    ns = {"k": "http://www.opengis.net/kml/2.2"}
+    root = ET.parse(out).getroot()
+
+    def coords(el):
+        text = el.find("k:coordinates", ns).text
+        return [[float(v) for v in c.split(",")[:2]] for c in text.split()]
+
+    rings = root.findall(".//k:LinearRing", ns)
+    assert len(rings) == 2
+    lines = root.findall(".//k:LineString", ns)
+    assert len(lines) > sum(1 for _ in root.iterfind(".//k:Folder/k:Placemark/k:LineString", ns))
+    for el in rings + lines:
+        _no_jump(coords(el))
+
+
 def _geo_messages(path: Path) -> dict[str, list[dict]]:
     out: dict[str, list[dict]] = {}
     with open(path, "rb") as f:

@@ -204,9 +204,38 @@ def test_the_experiment_writes_its_tables_and_refuses_bad_input(tmp_path, capsys
     case = next(csv.DictReader((tmp_path / "cases.csv").open()))
     assert 0 < float(case["buffer_1pct_m"]) < float(case["buffer_0p1pct_m"])
     assert "JKI field crops" in (tmp_path / "drift.md").read_text()
+    assert "In the band of the JKI curves" in (tmp_path / "drift.md").read_text()
+    assert case["jki_band"] and case["jki_band_low"] and case["jki_band_high"]
     assert (tmp_path / "drift.png").stat().st_size > 0
     bad = p.parse_args(["--rhs", "120", "--out", str(tmp_path / "x")])
     from ag_uav.config import ConfigError
 
     with pytest.raises(ConfigError, match="rh_percent = 120"):  # the CLI: one line, exit 2
         drift.main(bad)
+
+
+def test_the_band_check_places_a_synthetic_profile():
+    """Inside, above the early-fruit edge and below the field-crop edge, with the ratio to the
+    nearest edge; the verdict names the side, the distances and the furthest ratio."""
+    from ag_uav.jobs.experiments.drift import BAND, BAND_DISTANCES, JKI, band_check, band_verdict
+
+    lo, hi = JKI[BAND[0]], JKI[BAND[1]]
+    assert BAND_DISTANCES == (5.0, 10.0, 15.0, 20.0, 30.0, 50.0)
+    # 1.5 x the field-crop curve: inside everywhere, nearer F with ratio 1.5
+    mid = {d: 1.5 * lo[d] for d in BAND_DISTANCES}
+    checks = band_check(mid)
+    assert [c[1] for c in checks] == ["inside"] * 6
+    assert all(c[3] == "F" and c[2] == pytest.approx(1.5) for c in checks)
+    assert band_verdict(checks) == "inside"
+    # 0.8 x early fruit is nearer the E edge
+    assert band_check({10.0: 0.8 * hi[10]})[0][1:] == ("inside", pytest.approx(0.8), "E")
+    # above E at the last two distances, below F at 5 m
+    prof = dict(mid)
+    prof[30.0], prof[50.0], prof[5.0] = 1.2 * hi[30], 1.6 * hi[50], 0.5 * lo[5]
+    checks = band_check(prof)
+    assert checks[-1] == (50.0, "above", pytest.approx(1.6), "E")
+    assert checks[0] == (5.0, "below", pytest.approx(0.5), "F")
+    assert band_verdict(checks) == ("above E at 30, 50 m (up to 1.6 ×); "
+                                    "below F at 5 m (down to 0.50 ×)")
+    # distances the band has no value at (1-3 m) are not checked
+    assert band_check({1.0: 1e3, 3.0: 1e3}) == []

@@ -78,3 +78,23 @@ def test_a_missing_api_reference_fails_the_build(tmp_path):
     out = _build(cfg, tmp_path / "site")
     assert out.returncode != 0
     assert "NoSuchFilter" in out.stderr
+
+
+README_MAX_LINES = 170
+HEADLINE_MAX_WORDS = 30
+
+
+def test_the_readme_answers_in_a_line():
+    """The README stays short, and each headline answer is a line: the conditions and the history
+    of a figure live on the page it links to (docs/results.md gives them all)."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= README_MAX_LINES
+    table = text.split("## Headline results", 1)[1].split("\n## ", 1)[0]
+    rows = [r for r in table.splitlines() if r.startswith("| ") and not r.startswith("| question")]
+    assert len(rows) >= 10
+    long = [(r.split(" | ")[0], len(r.split(" | ")[1].split())) for r in rows
+            if len(r.split(" | ")[1].split()) > HEADLINE_MAX_WORDS]
+    assert not long, long
+    results = (ROOT / "docs/results.md").read_text(encoding="utf-8")
+    missing = [r.split(" | ")[0][2:] for r in rows if r.split(" | ")[0][2:] not in results]
+    assert not missing, f"questions without their full answer in docs/results.md: {missing}"

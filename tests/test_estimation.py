@@ -73,3 +73,38 @@ def test_gps_denied_switch_flies_on_landmark_bearings():
     s = ag_uav.simulate(cfg).summary
     assert s["gps_denied"] and s["gps_fixes"] == 0 and not s["crashed"]
     assert s["feedback"] == "mcc-ekf" and s["estimate_rmse_m"] < 2.0
+
+
+@pytest.mark.parametrize("name", ["kf-bias", "kf-diff"])
+def test_coloured_noise_filters_model_the_receivers_gauss_markov_part(name):
+    """kf-bias and kf-diff in the loop take the receiver's Gauss–Markov τ (and σ per axis as
+    kf-bias's bias σ_b), start from the first fix, and fly (they used to stop at the first fix
+    with a traceback)."""
+    from ag_uav.navigation.estimation import make_filter
+
+    cfg = _cfg(**{"estimator.name": name, "gps.preset": "rtk-m350", "sim.max_time_s": 6.0,
+                  "estimator.imu": name == "kf-bias"})
+    comps = ({"type": "gauss-markov", "sigma": 0.5, "tau_s": 20.0, "axis_scale": [1, 1, 2]},
+             {"type": "gaussian", "sigma": 0.3})
+    f = make_filter(name, cfg, np.array([0.34, 0.34, 1.09]), comps)
+    if name == "kf-bias":
+        # the height is the radar's (white): no bias state there
+        assert cfg.gps.altitude_source == "radar"
+        assert np.allclose(f.sigma_b, [0.5, 0.5, 0.0]) and np.allclose(f.tau[:2], 20.0)
+        assert np.allclose(np.diag(f.R), [0.09, 0.09, 1.09])
+        f.x, f.P = np.arange(f.n, dtype=float), 2.0 * np.eye(f.n)   # (re)start, bias to prior
+        assert np.array_equal(f.x, np.arange(f.n)) and not f.bias.any()
+        assert np.allclose(np.diag(f.P_aug)[f.n:], f.sigma_b**2)
+    res = ag_uav.simulate(cfg)
+    assert np.isfinite(res.p_fb).all() and res.summary["estimate_rmse_m"] < 0.5
+
+
+def test_coloured_noise_filter_needs_a_gauss_markov_part():
+    from ag_uav.config import ConfigError
+    from ag_uav.navigation.estimation import make_filter
+
+    with pytest.raises(ConfigError, match="no gauss-markov component"):
+        make_filter("kf-bias", _cfg(), np.ones(3), ({"type": "gaussian", "sigma": 1.0},))
+    gm = ({"type": "gauss-markov", "sigma": 0.5, "tau_s": 20.0},)
+    with pytest.raises(ConfigError, match="no control input"):   # it crashed the drone at 3 s
+        make_filter("kf-diff", _cfg(**{"estimator.imu": True}), np.ones(3), gm)

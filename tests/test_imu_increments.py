@@ -26,6 +26,7 @@ import ag_uav
 from ag_uav.vehicle.imu import filter_alpha, imu_integrate_row
 from ag_uav.vehicle.mjcf import build_vehicle
 from estimators.ins import INSConfig, nominal_step, quat_log_err, quat_mul
+from estimators.ins.layout import STEP
 
 
 def _fly(u: np.ndarray, x0: np.ndarray, coning: bool, gravity: float = 0.0) -> np.ndarray:
@@ -33,7 +34,7 @@ def _fly(u: np.ndarray, x0: np.ndarray, coning: bool, gravity: float = 0.0) -> n
     biases zero."""
     prm = INSConfig(dt=DT, gravity=gravity, coning=coning).prm()
     x = x0.copy()
-    S3, w = np.zeros((1, 3, 3)), np.zeros(18)
+    S3, w = np.zeros((1, 3, 3)), np.zeros(STEP.size)
     out = [x.copy()]
     for k in range(1, len(u)):
         nominal_step(x, u[k], u[k - 1], prm, S3, w)

@@ -409,4 +409,4 @@ def test_the_bank_scratch_holds_the_mckf_work():
     from estimators.ins import layout
     from estimators.mckf import mckf_work_size
 
-    assert layout.SCRATCH.size - layout.W_KF == mckf_work_size(15, 3)
+    assert layout.SCRATCH.size - layout.W.KF == mckf_work_size(15, 3)

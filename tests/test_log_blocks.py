@@ -13,6 +13,7 @@ import pytest
 from ag_uav.record import wire as R
 from ag_uav.record.encode import EST, POSE, REF, STATE, TF, TickFormat, encode_flat, encode_ticks
 from ag_uav.record.runlog import RunLog
+from numkit.geometry import quat_to_euler
 
 
 def _rows(rng, n, nm, extra):
@@ -31,7 +32,7 @@ def _state_ref(row, nm, ctrl_cols):
     w, x, y, z = row[R.TICK_Q:R.TICK_V]
     vx, vy, vz = row[R.TICK_V:R.TICK_PREF]
     rx, ry, rz = row[R.TICK_PREF:R.TICK_VREF]
-    roll, pitch, yaw = R.rpy_deg(w, x, y, z)
+    roll, pitch, yaw = (math.degrees(a) for a in quat_to_euler(w, x, y, z))
     has = int(row[1]) & 8
     est = list(row[R.TICK_PEST:R.TICK_WIND]) if has else [math.nan] * 6
     ex, ey, ez = px - rx, py - ry, pz - rz

@@ -151,7 +151,7 @@ def test_default_mission_dose_figures_the_readme_states(default_run):
     """The README's dose figures of the default mission (seed 0; the plan made on the default
     forecast, 5.2 m/s from 255°, the flight in 3 m/s from 240° meandering 10°: legs across the
     forecast, lanes 3 m from the pattern test at CV <= 15 %: mean 1.006 L/ha of tank mix, CV
-    18.3 %, 10.5 % under-dosed, 12.3 % over-dosed, 3.2 % off the field, 0.66 % drifting past
+    18.2 %, 10.4 % under-dosed, 12.4 % over-dosed, 3.2 % off the field, 0.66 % drifting past
     the buffer (0.32-1.28 % from its bounds); on the exact wind CV 16.3 %, 8.5 % under-dosed)
     and its cross-track RMSE on the INS, within bounds that a broken deposition, plan or
     navigation would leave (legs along the wind at the effective swath and light turbulence

@@ -12,7 +12,8 @@ import pytest
 from ag_uav.cli import main
 from ag_uav.navigation.replay import ReplayOptions, read_log, run_replay, score_replay
 from ag_uav.navigation.replay.align import clock_lag, mount_rotation
-from ag_uav.navigation.replay.data import Track, euler_zyx_to_rot, rot_to_euler_zyx
+from ag_uav.navigation.replay.data import Track
+from numkit.geometry import euler_to_rots, quats_to_rots, rots_to_euler, rots_to_quats
 
 G = 9.81
 
@@ -31,9 +32,9 @@ def _truth(t: np.ndarray):
 
 def _rates(t: np.ndarray, h: float = 1e-5) -> np.ndarray:
     """Body rate ω = vee(Rᵀ Ṙ) by a central difference of the analytic attitude."""
-    Rm = euler_zyx_to_rot(*_truth(t - h)[3].T)
-    Rp = euler_zyx_to_rot(*_truth(t + h)[3].T)
-    R = euler_zyx_to_rot(*_truth(t)[3].T)
+    Rm = euler_to_rots(*_truth(t - h)[3].T)
+    Rp = euler_to_rots(*_truth(t + h)[3].T)
+    R = euler_to_rots(*_truth(t)[3].T)
     W = np.einsum("nji,njk->nik", R, (Rp - Rm) / (2 * h))
     return np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], 1)
 
@@ -44,7 +45,7 @@ def write_flight(folder, seed: int = 1, duration: float = 60.0, imu_hz: float = 
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, 1.0 / imu_hz)
     p, v, a, rpy = _truth(t)
-    R = euler_zyx_to_rot(*rpy.T)
+    R = euler_to_rots(*rpy.T)
     f = np.einsum("nji,nj->ni", R, a + np.array([0, 0, G]))
     w = _rates(t)
     f += 0.05 * rng.standard_normal(f.shape) + np.array([0.03, -0.02, 0.04])
@@ -99,17 +100,17 @@ def test_a_gnss_gap_drifts_and_is_reported(tmp_path):
 def test_clock_lag_and_mounting_are_found():
     t = np.arange(0.0, 40.0, 1 / 120)
     _, _, a, rpy = _truth(t)
-    R = euler_zyx_to_rot(*rpy.T)
+    R = euler_to_rots(*rpy.T)
     w = _rates(t)
     f = np.einsum("nji,nj->ni", R, a + np.array([0, 0, G]))
-    M = euler_zyx_to_rot(np.array([0.02]), np.array([-0.03]), np.array([1.2]))[0]
+    M = euler_to_rots(np.array([0.02]), np.array([-0.03]), np.array([1.2]))[0]
     imu = np.c_[f @ M.T, w @ M.T]   # ω_imu = M ω_body
     tr = np.arange(0.0, 40.0, 0.1)
-    ref = Track(tr, _truth(tr)[0], euler_zyx_to_rot(*_truth(tr)[3].T))
+    ref = Track(tr, _truth(tr)[0], euler_to_rots(*_truth(tr)[3].T))
     lag, corr = clock_lag(t - 0.37, imu, ref)   # the IMU's clock reads 0.37 s early
     assert abs(lag - 0.37) < 0.02 and corr > 0.95
     Mf, res = mount_rotation(t - 0.37 + lag, imu, ref)
-    assert np.allclose(rot_to_euler_zyx(Mf[None])[0], [0.02, -0.03, 1.2], atol=0.01)
+    assert np.allclose(rots_to_euler(Mf[None])[0], [0.02, -0.03, 1.2], atol=0.01)
 
 
 def test_cli_writes_the_run_folder_and_the_table(tmp_path, capsys):
@@ -155,13 +156,12 @@ _F = np.diag([1.0, -1.0, -1.0])                                        # FLU <->
 def _flight_ned(duration: float, imu_hz: float, seed: int = 2):
     """The figure-8 as an autopilot logs it: IMU (FRD), fixes (lat, lon, alt, NED velocity)
     at 5 Hz and the truth as its estimate (NED position, FRD → NED attitude)."""
-    from ag_uav.navigation.replay.data import rot_to_quat
     from ag_uav.world.geodesy import enu_to_geodetic
 
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, 1.0 / imu_hz)
     _, _, a, rpy = _truth(t)
-    R = euler_zyx_to_rot(*rpy.T)
+    R = euler_to_rots(*rpy.T)
     f = np.einsum("nji,nj->ni", R, a + np.array([0, 0, G]))
     f += 0.05 * rng.standard_normal((t.size, 3))
     w = _rates(t) + math.radians(0.1) * rng.standard_normal((t.size, 3))
@@ -171,7 +171,7 @@ def _flight_ned(duration: float, imu_hz: float, seed: int = 2):
     lon, lat, h = enu_to_geodetic(noisy[:, 0], noisy[:, 1], ORIGIN, noisy[:, 2])
     te = np.arange(0.0, duration, 0.05)
     pe, ve, _, re = _truth(te)
-    q = np.array([rot_to_quat(_T @ Rm @ _F) for Rm in euler_zyx_to_rot(*re.T)])
+    q = rots_to_quats(_T @ euler_to_rots(*re.T) @ _F)
     return {"t": t, "f": f @ _F, "w": w @ _F, "tg": tg, "lat": lat, "lon": lon, "alt": h,
             "vg": vg @ _T, "te": te, "pe": pe @ _T, "ve": ve @ _T, "q": q}
 
@@ -227,20 +227,22 @@ def write_ulog(path, d: dict, cut: int | None = None, params: dict | None = None
 def _df_fmt(typ: int, name: str, fmt: str, cols: str) -> bytes:
     import struct
 
-    n = 3 + struct.calcsize("<" + fmt.replace("L", "i").replace("n", "4s"))
+    n = 3 + struct.calcsize("<" + fmt.replace("L", "i").replace("n", "4s").replace("C", "H"))
     return b"\xa3\x95\x80" + struct.pack("<BB4s16s64s", typ, n, name.encode(), fmt.encode(),
                                          cols.encode())
 
 
 def write_dataflash(path, d: dict) -> None:
     """An ArduPilot DataFlash log by hand (FMT, then IMU, GPS stamped 0.22 s after its epoch,
-    and EKF1 records)."""
+    and EKF1 records); with ``d["gpa"]`` = (HAcc, VAcc, SAcc) a ``GPA`` record beside each fix
+    from the ``d["gpa_from"]``-th on (ArduPilot ≥ 3.4: uint16 centimetres, 'C')."""
     import struct
 
     out = _df_fmt(129, "IMU", "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
     out += _df_fmt(130, "GPS", "BIHLLffffffI",
                    "Status,TimeMS,Week,Lat,Lng,Alt,HDop,NSats,Spd,GCrs,VZ,T")
     out += _df_fmt(131, "EKF1", "Ifffffffff", "TimeMS,Roll,Pitch,Yaw,VN,VE,VD,PN,PE,PD")
+    out += _df_fmt(132, "GPA", "QBCCCC", "TimeUS,I,VDop,HAcc,VAcc,SAcc")
     rows = []
     ms = lambda x: int(round(x * 1e3)) + 1000  # noqa: E731
     for k in range(d["t"].size):
@@ -254,11 +256,12 @@ def write_dataflash(path, d: dict) -> None:
                                      int(round(d["lat"][k] * 1e7)),
                                      int(round(d["lon"][k] * 1e7)), d["alt"][k], 0.015, 12.0,
                                      math.hypot(vn, ve), crs, vd, tn)))
+        if "gpa" in d and k >= d.get("gpa_from", 0):
+            cm = [int(round(x * 100)) for x in d["gpa"]]
+            rows.append((tn, struct.pack("<BQB4H", 132, tn * 1000, 0, 90, *cm)))
     for k in range(d["te"].size):
-        from ag_uav.navigation.replay.data import quat_to_rot_np
-
-        R = quat_to_rot_np(d["q"][k][None])
-        rpy = np.degrees(rot_to_euler_zyx(R)[0])
+        R = quats_to_rots(d["q"][k][None])
+        rpy = np.degrees(rots_to_euler(R)[0])
         rows.append((ms(d["te"][k]), struct.pack("<BI9f", 131, ms(d["te"][k]), *rpy,
                                                  *d["ve"][k], *d["pe"][k])))
     for _, body in sorted(rows, key=lambda r: r[0]):
@@ -326,3 +329,52 @@ def test_a_ulog_gives_its_lever_arm_and_gnss_delay(tmp_path):
     log = read_log(path)
     assert np.allclose(log.lever_arm, (0.08, -0.05, 0.3), atol=1e-6)   # FRD → FLU
     assert abs(log.gnss_delay_s - 0.15) < 1e-6
+
+
+def test_dataflash_gpa_reported_accuracy_is_read(tmp_path):
+    """ArduPilot ≥ 3.4 logs the receiver's HAcc, VAcc, SAcc in GPA beside each GPS record:
+    the reader takes them as σ (HDop × UERE only for fixes without one), and the replay
+    follows the truth."""
+    d = _flight_ned(30.0, 100.0)
+    d["gpa"], d["gpa_from"] = (0.03, 0.05, 0.04), 10
+    path = tmp_path / "g.BIN"
+    write_dataflash(path, d)
+    log = read_log(path)
+    n = log.gnss_t.size
+    assert n == d["tg"].size
+    # the first 10 fixes: HDop 0.015 × 2 m; the rest: the reported figures
+    assert np.allclose(log.gnss_var[:10], [0.03**2, 0.03**2, 0.06**2], rtol=1e-6)
+    assert np.allclose(log.gnss_var[10:], [0.03**2, 0.03**2, 0.05**2], rtol=1e-6)
+    assert np.allclose(log.gnss_var_v[:10], 0.3**2) and np.allclose(log.gnss_var_v[10:], 0.04**2)
+    assert any(f"GPA (HAcc, VAcc, SAcc as σ) on {n - 10} of {n}" in x for x in log.notes)
+    assert any("not logged on 10 fixes" in x for x in log.notes)
+    kf = score_replay(run_replay(log, ReplayOptions()))["estimators"]["kf"]
+    assert kf["pos_h_rms_m"] < 0.05 and kf["tilt_rms_deg"] < 0.4, kf
+
+
+def test_the_replay_flies_the_simulated_flights_ins_settings_unless_told(tmp_path, capsys):
+    from ag_uav.config import load_config
+
+    e = load_config(None).estimator
+    folder = write_flight(tmp_path / "flight", duration=12.0)
+    info = run_replay(read_log(folder), ReplayOptions()).info
+    assert info["q_margins"] == [e.ins_q_accel, e.ins_q_gyro] and info["coning"] is True
+    info = run_replay(read_log(folder), ReplayOptions(q_margins=(2.0, 32.0), coning=False)).info
+    assert info["q_margins"] == [2.0, 32.0] and info["coning"] is False
+    assert main(["replay", str(folder), "--q-margins", "1,0", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--q-margins" in err[0]
+
+
+def test_a_velocity_differenced_from_a_reference_carries_its_error():
+    """The built fix's velocity variance adds the RMS of (differenced speed − logged speed):
+    a record whose logged speed is off by a known σ gives that σ; no logged speed gives 0."""
+    from ag_uav.navigation.replay.runner import difference_sigma
+
+    tr = np.arange(0.0, 30.0, 0.1)
+    p, v, _, _ = _truth(tr)
+    sp = np.hypot(v[:, 0], v[:, 1]) + 0.12 * np.random.default_rng(3).standard_normal(tr.size)
+    t = np.arange(1.0, 29.0, 0.2)
+    vt = _truth(t)[1]
+    assert difference_sigma(Track(tr, p), t, vt) == 0.0
+    assert abs(difference_sigma(Track(tr, p, speed=sp), t, vt) - 0.12) < 0.02

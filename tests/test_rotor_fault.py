@@ -115,3 +115,36 @@ def test_home_flies_to_the_base_and_lands():
     assert rf["landed_s"] is not None and rf["touchdown_mps"] < 1.0
     dx = [a - b for a, b in zip(rf["landed_xy"], s["base_xy"], strict=True)]
     assert (dx[0] ** 2 + dx[1] ** 2) ** 0.5 < 0.5
+
+
+def test_a_quad_flies_the_three_rotor_law_and_the_summary_says_how_it_ended():
+    """The M350, rotor 0 stopped on the climb: detected within the stated time, the relaxed-hover
+    law (controllers.rotor_loss) takes the three rotors, and the summary ends one way or the
+    other (at this vehicle's yaw authority the spin comes too late: docs/vehicles.md)."""
+    c = _cfg(**FRAMES["quad-x"], **{"vehicle.rotor_fault.rotor": 0,
+                                    "vehicle.rotor_fault.at_s": 12.0, "sim.max_time_s": 14.0})
+    s = ag_uav.simulate(c).summary
+    rf = s["rotor_fault"]
+    assert rf["detection_delay_s"] <= DETECT_WITHIN_S
+    assert "relaxed hover" in rf["action"]
+    assert bool(s["crashed"]) != (rf["landed_s"] is not None)
+    assert s["crash_reason"] or rf["touchdown_mps"] is not None
+
+
+#: a quad that can spin up in time: 15 ms motors, yaw torque 0.04 m per newton, thrust-to-weight
+#: 2.5 (the M350's airframe otherwise), the plan flown at 20 m
+SPINNER = {"vehicle.preset": "m350", "vehicle.motor_tau_s": 0.015,
+           "vehicle.yaw_torque_coeff_m": 0.04, "vehicle.thrust_to_weight": 2.5,
+           "mission.altitude_m": 20.0, "spray.max_height_m": 30.0}
+
+
+@pytest.mark.slow
+def test_a_quad_that_can_spin_up_lands_on_three_rotors_below_1_mps():
+    """One flight of the 10-seed campaign of docs/vehicles.md (seed 8, rotor 0: 0.375 m/s)."""
+    c = ag_uav.load_config(None, {"log.enabled": False, **SPINNER, "seed": 8,
+                                  "vehicle.rotor_fault.rotor": 0, "vehicle.rotor_fault.at_s": 20.0,
+                                  "sim.max_time_s": 80.0})
+    s = ag_uav.simulate(c).summary
+    rf = s["rotor_fault"]
+    assert not s["crashed"], s["crash_reason"]
+    assert rf["landed_s"] is not None and rf["touchdown_mps"] < 1.0

@@ -20,7 +20,8 @@ from mcap.reader import NonSeekingReader, make_reader
 
 from ag_uav.record.runlog import FlatSchema, LogIO, RunLog, Tick
 from ag_uav.record.synthetic import synthetic_run
-from ag_uav.record.wire import enc_pose_in_frame, enc_transform, rpy_deg, str_field, ts_pb
+from ag_uav.record.wire import enc_pose_in_frame, enc_transform, str_field, ts_pb
+from numkit.geometry import quat_to_euler
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -407,7 +408,7 @@ def test_state_attitude_and_numpy_inputs(tmp_path):
         log.tick(0.0, kw._replace(q_true_wxyz=q, p_true=np.array([1.0, 2.0, 3.0])))
         log.tick(0.05, kw._replace(q_true_wxyz=tuple(q.tolist()), p_true=(1.0, 2.0, 3.0)))
     st = [d for topic, _, d in _decoded(path) if topic == "/drone/state"]
-    expect = rpy_deg(*q.tolist())
+    expect = [math.degrees(a) for a in quat_to_euler(*q.tolist())]
     assert min(abs(a) for a in expect) > 3.0  # all three angles non-trivial
     for d in st:
         assert (d.rpy.roll, d.rpy.pitch, d.rpy.yaw) == pytest.approx(expect, abs=1e-12)

@@ -35,6 +35,15 @@ def _gap(text: str) -> tuple[float, float]:
                       "from the replay's start, or mid; DURATION > 0)")
 
 
+def _margins(text: str) -> tuple[float, float]:
+    from ..config import ConfigError
+
+    v = _floats(text, 2, "--q-margins")
+    if not (v[0] > 0 and v[1] > 0):
+        raise ConfigError(f'--q-margins = "{text}": both margins must be > 0 (variance factors)')
+    return v
+
+
 def _replay(args: argparse.Namespace) -> int:
     from ..config import ConfigError
     from ..jobs.replay import replay, replay_table
@@ -48,7 +57,9 @@ def _replay(args: argparse.Namespace) -> int:
         gnss_gap=_gap(args.gnss_gap) if args.gnss_gap else None,
         lever_arm=_floats(args.lever_arm, 3, "--lever-arm") if args.lever_arm else None,
         gnss_delay_s=args.gnss_delay, clock_lag_s=args.clock_lag, heading=args.heading,
-        gnss_velocity=not args.no_gnss_velocity)
+        gnss_velocity=not args.no_gnss_velocity,
+        q_margins=_margins(args.q_margins) if args.q_margins else None,
+        coning=False if args.no_coning else None)
     try:
         s, run_dir = replay(args.log, opts, args.out, args.run_id, args.overwrite,
                             args.imu_file, mcap=not args.no_log, uere_m=args.uere)
@@ -93,6 +104,12 @@ def register(sub) -> None:
                    "IMU_avg.csv, else IMU_1.csv)")
     p.add_argument("--uere", type=float, metavar="M", help="a DataFlash fix's σ per unit of "
                    "HDOP (m; default 2): those logs report no accuracy")
+    p.add_argument("--q-margins", metavar="ACCEL,GYRO", help="process-noise margins on the "
+                   "log's white noise, in variance (default: the simulated flight's, "
+                   "estimator.ins_q_accel / ins_q_gyro: 1,1)")
+    p.add_argument("--no-coning", action="store_true", help="integrate the samples as rates "
+                   "held over the step (no coning or sculling correction; default: corrected, "
+                   "as the simulated flight's delta-angle IMU)")
     p.add_argument("--no-gnss-velocity", action="store_true", help="fuse GNSS positions only")
     p.add_argument("--out", default="runs", help="root folder of the run folders (default runs)")
     p.add_argument("--run-id", help="run folder name (default replay-<log name>)")

@@ -224,6 +224,12 @@ class SprayConfig:
     # ---- the dose on the ground (ag_uav.world.deposition; docs/spray_deposition.md)
     deposition: bool = _f(True, "model what lands: nozzles, droplets, downwash, wind and the "
                           "dose map (L/ha) with its summary metrics (false: skip it)")
+    deposition_law: str = _f("default", "the downwash law: default (the ground outwash a layer "
+                             "calibrated on the T40's swath), hover (the merged jet, wall jet "
+                             "and impaction checked on a wind tunnel; sets wake_escape 0.6) or "
+                             "wake (hover, and in forward flight the wake rolled up into a "
+                             "trailing vortex pair); docs/spray_deposition.md",
+                             choices=("default", "hover", "wake"))
     nozzle_on_delay_s: float = _f(0.1, "valve opening delay (s); ArduPilot AC_Sprayer "
                                   "TURN_ON_DELAY 100 ms", ge=0, le=60)
     nozzle_off_delay_s: float = _f(1.0, "valve closing delay (s) when the ground speed drops "

@@ -15,9 +15,31 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from controllers.attitude import quat_to_rot
+from numkit import QW, QX, QY, QZ, Layout, X, Y, Z
+from numkit.geometry import quat_to_rot9
 
 from .._jit import njit
+from .reftable import RF
+
+#: a free joint's slots of a state row (MuJoCo's qpos and qvel of a free body): position,
+#: attitude quaternion (w, x, y, z); velocity (world), body rates
+FREE_QPOS = Layout("pos:3 quat:4")
+FREE_QVEL = Layout("vel:3 omega:3")
+FQ, FV = FREE_QPOS.at, FREE_QVEL.at
+#: the guard's bounding box per vehicle (:class:`GuardRows` ``box``)
+BOUNDS = Layout("x0 y0 x1 y1 z_max")
+BX = BOUNDS.at
+#: the loop record's row (:data:`~ag_uav.engine.stages.REC_COLUMNS`): p, v, the reference's
+#: position, the fed-back position, the segment, the nozzles (0/1), the first four rotor
+#: commands, the wind; rotors past the fourth follow it
+RECORD = Layout("p:3 v:3 rp:3 p_fb:3 seg spray f:4 wind:3")
+RC = RECORD.at
+#: the MEMS IMU's record row (:data:`~ag_uav.engine.stages.IMU_KEYS`): measured specific
+#: force, gyro, attitude error
+IMU_REC = Layout("f:3 om:3 att_err:3")
+IR = IMU_REC.at
+#: the rotor commands the record holds before the wind
+NF = RECORD.width["f"]
 
 
 def zeros_touched(shape: tuple[int, ...], dtype: Any = np.float64) -> np.ndarray:
@@ -39,7 +61,7 @@ CRASHED, NEAR_GROUND, ACTIVE = 1, 2, 4
 
 class GuardRows(NamedTuple):
     """The guard's rows (N vehicles): ``act`` the active ones, ``n_ticks`` the ticks each
-    flies, ``box`` (N, 5) the bounding box x0, y0, x1, y1, z_max, the crash ``code``, the
+    flies, ``box`` (N, :data:`BOUNDS`) the bounding box, the crash ``code``, the
     lift-off latch ``airborne``, ``hover_z`` the body height on the skids, ``low`` near the
     ground this tick."""
 
@@ -64,7 +86,7 @@ class PoseRows(NamedTuple):
 
 
 class RefRows(NamedTuple):
-    """The reference: the block of rows ``ref_tab`` (refs, ticks, 12) from tick ``ref_k0[0]``
+    """The reference: the block of rows ``ref_tab`` (refs, ticks, ``REF``) from ``ref_k0[0]``
     (:class:`~ag_uav.engine.reftable.RefTable`), each vehicle's row of it ``ref_ids``, and the
     tick's ``rp``, ``rv``, ``ra`` (N, 3), ``yaw`` and ``spray`` (N,)."""
 
@@ -121,22 +143,23 @@ def tick_in(k, S, iq, iv, cos_tilt, guard, pose, ref):  # pragma: no cover
         if not act[i]:
             continue
         flags |= ACTIVE
-        px, py, pz = S[i, iq], S[i, iq + 1], S[i, iq + 2]
-        w, x, y, z = S[i, iq + 3], S[i, iq + 4], S[i, iq + 5], S[i, iq + 6]
-        p[i, 0], p[i, 1], p[i, 2] = px, py, pz
-        quat[i, 0], quat[i, 1], quat[i, 2], quat[i, 3] = w, x, y, z
+        q0, o = iq + FQ.QUAT, iq + FQ.POS
+        px, py, pz = S[i, o + X], S[i, o + Y], S[i, o + Z]
+        w, x, y, z = S[i, q0 + QW], S[i, q0 + QX], S[i, q0 + QY], S[i, q0 + QZ]
+        p[i, X], p[i, Y], p[i, Z] = px, py, pz
+        quat[i, QW], quat[i, QX], quat[i, QY], quat[i, QZ] = w, x, y, z
         for j in range(3):
-            v[i, j] = S[i, iv + j]
-            omega[i, j] = S[i, iv + 3 + j]
-        Ri = quat_to_rot(w, x, y, z)
+            v[i, j] = S[i, iv + FV.VEL + j]
+            omega[i, j] = S[i, iv + FV.OMEGA + j]
+        Ri = quat_to_rot9(w, x, y, z)
         for j in range(9):
             R[i, j] = Ri[j]
         if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(pz)):
             code[i] = _NONFINITE
-        elif R[i, 8] < cos_tilt:
+        elif R[i, 3 * Z + Z] < cos_tilt:   # R_zz (row-major) = cos(tilt)
             code[i] = _TILT
-        elif (px < box[i, 0] or py < box[i, 1] or px > box[i, 2] or py > box[i, 3]
-              or pz > box[i, 4]):
+        elif (px < box[i, BX.X0] or py < box[i, BX.Y0] or px > box[i, BX.X1]
+              or py > box[i, BX.Y1] or pz > box[i, BX.Z_MAX]):
             code[i] = _BOX
         if code[i] != 0:
             flags |= CRASHED
@@ -148,11 +171,11 @@ def tick_in(k, S, iq, iv, cos_tilt, guard, pose, ref):  # pragma: no cover
             flags |= NEAR_GROUND
         row = ref_tab[ref_ids[i], kr]
         for j in range(3):
-            rp[i, j] = row[j]
-            rv[i, j] = row[3 + j]
-            ra[i, j] = row[6 + j]
-        yaw[i] = row[9]
-        spray[i] = row[11] > 0.5
+            rp[i, j] = row[RF.P + j]
+            rv[i, j] = row[RF.V + j]
+            ra[i, j] = row[RF.A + j]
+        yaw[i] = row[RF.YAW]
+        spray[i] = row[RF.SPRAY] > 0.5
     return flags
 
 
@@ -185,21 +208,21 @@ def tick_out(rec, k, act, flown, row):  # pragma: no cover
             continue
         r = rec[k, i]
         for j in range(3):
-            r[j] = p[i, j]
-            r[3 + j] = v[i, j]
-            r[6 + j] = rp[i, j]
-            r[9 + j] = pfb[i, j]
-            r[18 + j] = w[i, j]
-        r[12] = ref_tab[ref_ids[i], kr, 10]
-        r[13] = 1.0 if spray[i] else 0.0
+            r[RC.P + j] = p[i, j]
+            r[RC.V + j] = v[i, j]
+            r[RC.RP + j] = rp[i, j]
+            r[RC.P_FB + j] = pfb[i, j]
+            r[RC.WIND + j] = w[i, j]
+        r[RC.SEG] = ref_tab[ref_ids[i], kr, RF.SEG]
+        r[RC.SPRAY] = 1.0 if spray[i] else 0.0
         for j in range(f.shape[1]):  # rotors past the fourth after the wind
-            r[14 + j if j < 4 else 17 + j] = f[i, j]
+            r[RC.F + j if j < NF else RC.SIZE + j - NF] = f[i, j]
         flown[i] = k + 1
 
 
 @njit(cache=True)
 def imu_record(imu_rec, now, k, act, f_m, om, err):  # pragma: no cover
-    """The tick's IMU row (measured f, gyro, attitude error) into ``now`` (N, 9) and into the
+    """The tick's IMU row (:data:`IMU_REC`) into ``now`` (N, 9) and into the
     record ``imu_rec[k]`` (its dtype: float32 in the engine); an ended vehicle's ``now`` row is
     zero, as its record's rows are."""
     for i in range(act.shape[0]):
@@ -207,10 +230,10 @@ def imu_record(imu_rec, now, k, act, f_m, om, err):  # pragma: no cover
             now[i, :] = 0.0
             continue
         for j in range(3):
-            now[i, j] = f_m[i, j]
-            now[i, 3 + j] = om[i, j]
-            now[i, 6 + j] = err[i, j]
-        for j in range(9):
+            now[i, IR.F + j] = f_m[i, j]
+            now[i, IR.OM + j] = om[i, j]
+            now[i, IR.ATT_ERR + j] = err[i, j]
+        for j in range(IR.SIZE):
             imu_rec[k, i, j] = now[i, j]
 
 

@@ -52,10 +52,14 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from numkit import X, Y, Z
+from numkit.geometry import yaw_to_quat
+
 from ..config import Config
 from ..vehicle.mjcf import Vehicle, build_vehicle
 from .compiling import compile_notice, first_tick
 from .heap import trim_heap
+from .kernels import FQ
 from .observers import HookObserver, LogObserver, Observer, TickView, frames_of
 from .physics import STATE_SPEC, default_threads, make_stepper, reset_rows, unstable_reason
 from .reftable import RefTable
@@ -156,10 +160,10 @@ def _initial_state(fl: Flight, veh: Vehicle, S: np.ndarray, sens: np.ndarray) ->
     cfg, model = fl.cfg, veh.model
     data = mujoco.MjData(model)
     start = fl.reference.sample(0.0)
-    data.qpos[0], data.qpos[1] = start.pos[0], start.pos[1]
-    data.qpos[2] = veh.hover_z if cfg.sim.takeoff else start.pos[2]
-    data.qpos[3] = math.cos(start.yaw / 2)
-    data.qpos[6] = math.sin(start.yaw / 2)
+    qpos, o = data.qpos, FQ.POS   # the vehicle's free joint (FREE_QPOS)
+    qpos[o + X], qpos[o + Y] = start.pos[X], start.pos[Y]
+    qpos[o + Z] = veh.hover_z if cfg.sim.takeoff else start.pos[Z]
+    yaw_to_quat(start.yaw, qpos[FQ.QUAT:FQ.QUAT_END])   # q = (cos ψ/2, 0, 0, sin ψ/2)
     if not cfg.sim.takeoff:
         data.ctrl[:] = veh.mass * 9.81 / 4
         data.act[:] = veh.mass * 9.81 / 4
@@ -174,8 +178,9 @@ def _box(fl: Flight) -> tuple[float, ...]:
     b = fl.bounds
     if b is None:
         p0 = fl.reference.sample(0.0).pos
-        b = (p0[0] - 100, p0[1] - 100, p0[0] + 100, p0[1] + 100)
-    return (b[0] - 100.0, b[1] - 100.0, b[2] + 100.0, b[3] + 100.0, 120.0)
+        b = (p0[X] - 100, p0[Y] - 100, p0[X] + 100, p0[Y] + 100)
+    x0, y0, x1, y1 = b
+    return (x0 - 100.0, y0 - 100.0, x1 + 100.0, y1 + 100.0, 120.0)   # BOUNDS's fields
 
 
 def _batch(flights: Sequence[Flight], vehs: Sequence[Vehicle], dt: float
@@ -370,6 +375,8 @@ class Engine:
         if self.rotor_faults is not None:
             self.rotor_faults.step(k, t)
         self.control.step()
+        if self.rotor_faults is not None:
+            self.rotor_faults.after_control(t)
         if self.spraying is not None:
             self.spraying.step(k, t)
         self.disturbance.step(k)
@@ -470,7 +477,7 @@ def _homes(flights: Sequence[Flight]) -> np.ndarray:
     for i, fl in enumerate(flights):
         job = getattr(fl.reference, "spray_job", None)
         out[i] = (job.base_xy if job is not None
-                  else np.asarray(fl.reference.sample(0.0).pos, float)[:2])
+                  else np.asarray(fl.reference.sample(0.0).pos, float)[:Z])
     return out
 
 

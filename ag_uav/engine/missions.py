@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from numkit import Z
+
 from ..config import Config, ConfigError
 from ..navigation.feedback import Feedback, TrueFeedback
 from ..seeds import rng_streams, seed_sequences
@@ -43,6 +45,7 @@ from ..world.mission import build_field, build_plan, field_outline
 from ..world.pattern import lane_choice, mission_swath
 from ..world.reference import Reference
 from .heap import trim_heap
+from .kernels import RC
 from .loop import REC_COLUMNS, Flight, LoopOutput, fly  # noqa: F401
 from .stages import failsafe_warning, rec_motors
 
@@ -254,7 +257,8 @@ def prepare_run(cfg: Config, feedback: Feedback | None = None,
     job = getattr(ref, "spray_job", None)
     if job is not None:  # the base may lie outside the field
         bx, by = (float(v) for v in job.base_xy)
-        bounds = (min(bounds[0], bx), min(bounds[1], by), max(bounds[2], bx), max(bounds[3], by))
+        x0, y0, x1, y1 = bounds
+        bounds = (min(x0, bx), min(y0, by), max(x1, bx), max(y1, by))
     outline = field_outline(fld)
     if log is not None:
         log.geo(fld.origin, dose_target_l_per_ha=cfg.spray.rate_l_per_ha)
@@ -416,6 +420,8 @@ def _ins_key(cfg: Config) -> tuple:
 
 
 _LAYOUTS: dict[str, str] = {}
+#: the hex digits of a model signature's hash that key a layout
+_SIG_DIGITS = 12
 
 
 def model_layout(cfg: Config) -> str:
@@ -427,7 +433,7 @@ def model_layout(cfg: Config) -> str:
     key = repr(cfg.vehicle) + repr(cfg.sim)
     if key not in _LAYOUTS:
         sig = repr(model_signature(build_vehicle(cfg).model)).encode()
-        _LAYOUTS[key] = hashlib.sha1(sig).hexdigest()[:12]
+        _LAYOUTS[key] = hashlib.sha1(sig).hexdigest()[:_SIG_DIGITS]
     return _LAYOUTS[key]
 
 
@@ -543,10 +549,11 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     cfg, fld, plan, ref, fb, log = prep.cfg, prep.fld, prep.plan, prep.ref, prep.fb, prep.log
     arr = out.rec
     res = RunResult(
-        summary={}, t=out.t, p_true=arr[:, 0:3], v_true=arr[:, 3:6], p_ref=arr[:, 6:9],
-        p_fb=arr[:, 9:12], seg=arr[:, 12].astype(np.int32), spray=arr[:, 13].astype(bool),
+        summary={}, t=out.t, p_true=arr[:, RC.P:RC.P_END], v_true=arr[:, RC.V:RC.V_END],
+        p_ref=arr[:, RC.RP:RC.RP_END], p_fb=arr[:, RC.P_FB:RC.P_FB_END],
+        seg=arr[:, RC.SEG].astype(np.int32), spray=arr[:, RC.SPRAY].astype(bool),
         motors=rec_motors(arr), field=fld, plan=plan,
-        extra={"wind": arr[:, 18:21], "reference": ref, "vehicle": out.vehicle.info(),
+        extra={"wind": arr[:, RC.WIND:RC.WIND_END], "reference": ref, "vehicle": out.vehicle.info(),
                "imu": out.imu, "imu_bias0": out.imu_bias0},
     )
     sim_time = float(len(out.t) / cfg.sim.control_hz)
@@ -621,7 +628,7 @@ def _log_outputs(log: Any, res: RunResult, out: LoopOutput, swath: float, sim_ti
     from ..analysis.metrics import contiguous_runs
 
     trim_heap()
-    tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
+    tracks = [res.p_true[a:b, :Z] for a, b in contiguous_runs(res.spray) if b - a >= 2]
     if tracks:
         import shapely
 

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from ..world.deposition import S_ON, S_Q
-from .physics import STATE_SPEC
+from .physics import STATE_SPEC, XF
 from .stages import IMU_KEYS, Batch, Control, Sensing
 
 _NAN6 = (np.full(3, np.nan), np.full(3, np.nan))  # no estimate: its position and velocity
@@ -50,7 +50,7 @@ class TickView:
             m = self.models[i]
             mujoco.mj_setState(m, d, self.b.S[i], STATE_SPEC)
             d.ctrl[:] = self.b.f[i]
-            d.xfrc_applied[self.body, :3] = self.b.xf[i]
+            d.xfrc_applied[self.body, XF.FORCE:XF.FORCE_END] = self.b.xf[i]
             mujoco.mj_forward(m, d)
             self._fresh.add(i)
         return d

@@ -33,10 +33,16 @@ import mujoco
 import numpy as np
 from mujoco import rollout as _rollout
 
+from numkit import Layout, X, Y, Z
+
 from .kernels import controls
 
 STATE_SPEC = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
 CTRL_SPEC = int(mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_XFRC_APPLIED)
+#: a body's row of MuJoCo's ``xfrc_applied``: the force (world, at the body's centre of mass),
+#: then the torque
+XFRC = Layout("force:3 torque:3")
+XF = XFRC.at
 
 #: four contiguous chunks of vehicles per thread: at N = 64 on 2 threads this measured ~1000
 #: vehicle-sim-s/s against 950-985 with one chunk per thread (uneven vehicles: some on the
@@ -137,7 +143,7 @@ class DirectStepper(Stepper):
         self.model, self.nsub = model, nsub
         self.data = mujoco.MjData(model)
         mujoco.mj_setState(model, self.data, S0, STATE_SPEC)
-        self._xfrc = self.data.xfrc_applied[body, :3]
+        self._xfrc = self.data.xfrc_applied[body, XF.FORCE:XF.FORCE_END]
 
     def step(self, S, sens, f, xf, act, sub=None) -> None:
         m, d = self.model, self.data
@@ -241,7 +247,7 @@ def ground_contact(model: mujoco.MjModel, data: mujoco.MjData, s: np.ndarray, gr
     mujoco.mj_collision(model, data)
     if not data.ncon:
         return None
-    speed = math.sqrt(float(vel[0]) ** 2 + float(vel[1]) ** 2 + min(float(vel[2]), 0.0) ** 2)
+    speed = math.sqrt(float(vel[X]) ** 2 + float(vel[Y]) ** 2 + min(float(vel[Z]), 0.0) ** 2)
     # the geom pairs as one array: a Python object per contact costs more than the collision
     for g1, g2 in data.contact.geom[:data.ncon].tolist():
         if ground not in (g1, g2):

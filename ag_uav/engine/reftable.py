@@ -19,11 +19,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BLOCK", "COLUMNS", "RefTable"]
+from numkit import Layout
+
+__all__ = ["BLOCK", "COLUMNS", "REF", "RF", "RefTable"]
 
 #: ticks per block of rows
 BLOCK = 4096
-#: a row's columns
+#: a row's fields (position, velocity, acceleration, yaw, segment, nozzles 0/1), and its
+#: columns by name
+REF = Layout("p:3 v:3 a:3 yaw seg spray")
+RF = REF.at
 COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "ax", "ay", "az", "yaw", "seg", "spray")
 
 
@@ -36,7 +41,7 @@ class RefTable:
                  block: int = BLOCK) -> None:
         self.refs, self.dt, self.block = list(references), float(dt), int(block)
         self.n = np.asarray(n_ticks, dtype=np.int64)
-        self.tab = np.zeros((len(self.refs), self.block, len(COLUMNS)))
+        self.tab = np.zeros((len(self.refs), self.block, REF.size))
         self.k0 = np.zeros(1, dtype=np.int64)
         self._fill(0)
 

@@ -23,13 +23,17 @@ its response by frame: a stage of the engine's tick, before the controller.
   ``auto`` — ``continue`` when the re-allocated hover needs at most
   :attr:`RotorFaults.HOVER_SHARE_MAX` (90 %) of a rotor's limit, else the nozzles off and
   ``land`` (the load-dependent answer: a full tank on seven rotors leaves no margin); ``none``
-  — no detector. A quad on any response but ``none`` gives up yaw (its three rotors allocate
-  thrust, roll and pitch; the yaw reference follows the spinning vehicle) and lands where it
+  — no detector. A quad on any response but ``none`` gives up yaw and flies its three
+  rotors with :class:`controllers.rotor_loss.RelaxedHover` (the relaxed hover of Mueller and
+  D'Andrea, ICRA 2014: it spins, the spin's gyroscopic torque balancing the opposite rotor's),
+  its commands replacing the cascade's (:meth:`RotorFaults.after_control`), and lands where it
   is. The landing is the position failsafe's: brake at 2 m/s², descend at
   0.7 m/s, the last 1.5 m at 0.3 m/s (PX4's ``MPC_LAND_SPEED``, ``MPC_LAND_CRWL``), nozzles off;
   once the set point is on the ground and the vehicle still for 1 s (PX4's land detector) the
   flight ends; the touchdown speed is the largest vertical speed over the last 0.3 m (a skid
-  contact above 1 m/s ends the flight as a crash first). The way home: the set point moves
+  contact above 1 m/s ends the flight as a crash first; a spinning quad's flight ends at its
+  skids' first ground contact, motors off). The rotors' yaw damping (:meth:`yaw_damping`) is
+  put into the vehicle's model with the fault. The way home: the set point moves
   from where the failure was met towards the base at up to the transit speed (accelerating
   and braking at 1 m/s²), at the height it had.
 
@@ -43,12 +47,26 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from controllers.attitude import effectiveness, fault_allocation
 from controllers.cascade import P_AINV, P_G, P_MASS, S_ER
+from controllers.rotor_loss import RelaxedHover
+from numkit.axes import X, Y, Z
+from numkit.geometry import rot_to_yaw
 
+from .physics import STATE_SPEC
 from .stages import Batch
+
+#: a rotor actuator's gear: its force along body z (the thrust), its torque about body z (yaw)
+GEAR_THRUST, GEAR_YAW = 2, 5
+#: the free joint's yaw degree of freedom (its sixth: body-frame rate about z)
+DOF_YAW = 5
+#: the horizontal components of a 3-vector
+HORIZ = slice(X, Z)
+#: the attitude error's roll and pitch components in the cascade's state row
+ER_ROLL_PITCH = slice(S_ER, S_ER + Z)
 
 
 class RotorFaults:
@@ -64,13 +82,15 @@ class RotorFaults:
     LAND_S = 1.0  # still on the ground this long: landed (PX4 LNDMC_TRIG_TIME)
     HOVER_SHARE_MAX = 0.9  # auto: fly on only if the re-allocated hover needs at most this
     HOME_ACC = 1.0  # m/s², the way home
+    C_T = 0.1  # a propeller's thrust coefficient T / (ρ n² D⁴): the rotors' yaw damping
+    RHO_AIR = 1.225
 
     def __init__(self, b: Batch, cfgs: Sequence[Any], vehicles: Sequence[Any], bc: Any,
                  homes: np.ndarray | None = None) -> None:
         self.b, self.bc, self.vehs = b, bc, list(vehicles)
         n = b.n
         #: where ``home`` flies to (the base), and the way's set point and speed
-        self.home = np.zeros((n, 2)) if homes is None else np.asarray(homes, float)[:, :2]
+        self.home = np.zeros((n, 2)) if homes is None else np.asarray(homes, float)[:, HORIZ]
         self.v_home = np.array([c.spray.transit_speed_mps for c in cfgs])
         self.going = np.zeros(n, dtype=bool)
         self.yaw_free = np.array([c.vehicle.frame == "quad-x" for c in cfgs])
@@ -96,6 +116,9 @@ class RotorFaults:
         self.t0 = np.zeros(n)
         self.zr = np.zeros(n)
         self.still_s = np.zeros(n)
+        #: a quad's three-rotor law (controllers.rotor_loss), once its fault is detected
+        self.relaxed: dict[int, RelaxedHover] = {}
+        self.contact: dict[int, mujoco.MjData] = {}
         self.info: list[dict[str, Any] | None] = [
             None if f.rotor < 0 else {"rotor": int(f.rotor), "at_s": f.at_s,
                                       "efficiency": f.efficiency, "response": f.response,
@@ -121,8 +144,10 @@ class RotorFaults:
     def _inject(self, t: float) -> None:
         for i in np.flatnonzero(~self.applied & (self.at <= t)):
             m, j = self.vehs[i].model, int(self.rotor[i])
-            m.actuator_gear[j, 2] *= self.eff[i]
-            m.actuator_gear[j, 5] *= self.eff[i]
+            m.actuator_gear[j, GEAR_THRUST] *= self.eff[i]
+            m.actuator_gear[j, GEAR_YAW] *= self.eff[i]
+            body = self.vehs[i].body_id
+            m.dof_damping[m.jnt_dofadr[m.body_jntadr[body]] + DOF_YAW] = self.yaw_damping(i)
             self.applied[i] = True
             if self.eff[i] < self.ESC_RATIO:
                 self.esc_low[i] = j
@@ -134,9 +159,9 @@ class RotorFaults:
     # ---------------------------------------------------------------------------- the detector
     def _detect(self, t: float) -> None:
         b, st = self.b, self.bc.state
-        eR = st[:, S_ER:S_ER + 2]
-        tilt = np.sqrt(eR[:, 0] ** 2 + eR[:, 1] ** 2)
-        over = (tilt > math.sin(self.TILT_ERR_RAD)) | (np.abs(b.om[:, 2]) > self.YAW_RATE_RAD_S)
+        eR = st[:, ER_ROLL_PITCH]
+        tilt = np.sqrt(eR[:, X] ** 2 + eR[:, Y] ** 2)
+        over = (tilt > math.sin(self.TILT_ERR_RAD)) | (np.abs(b.om[:, Z]) > self.YAW_RATE_RAD_S)
         live = self.watch & ~self.detected & b.act & b.airborne
         self.over_s = np.where(live & over, self.over_s + b.dt, 0.0)
         for i in np.flatnonzero(live & (self.esc_low >= 0)):
@@ -151,7 +176,7 @@ class RotorFaults:
         """ESC telemetry: the motor delivering least of its command."""
         b, veh = self.b, self.vehs[i]
         self.over_s[i] = 0.0
-        ratio = veh.model.actuator_gear[:, 2] / np.asarray(veh.eff)
+        ratio = veh.model.actuator_gear[:, GEAR_THRUST] / np.asarray(veh.eff)
         j = int(np.argmin(ratio))
         if ratio[j] >= self.ESC_RATIO:
             b.notes[i].append(f"failure detector: attitude/rate errors at t={t:.2f}s, every "
@@ -164,16 +189,17 @@ class RotorFaults:
         info["detected_s"] = round(t, 2)
         if self.applied[i]:
             info["detection_delay_s"] = round(t - float(self.at[i]), 2)
-        quad = self.frame[i] == "quad-x"
-        B = effectiveness(veh.ctrl_rotor_xy, veh.spin, veh.k_yaw, veh.eff)
-        mg = float(self.bc.params[i, P_MASS] * self.bc.params[i, P_G])
-        A = fault_allocation(B, veh.eff, j, keep_yaw=not quad,
-                             hover_share=None if quad else mg / veh.f_max)
-        self.bc.params[i, P_AINV:P_AINV + A.size] = A.ravel()
-        if quad:
-            info["action"] = "gave up yaw, re-allocated to three rotors, landing"
+        if self.frame[i] == "quad-x":
+            self.relaxed[i] = RelaxedHover(veh.ctrl_rotor_xy, j, veh.f_max, self.bc.J[i],
+                                           self._motor_tau(i), float(self.bc.params[i, P_MASS]),
+                                           float(self.bc.params[i, P_G]))
+            info["action"] = "gave up yaw: three rotors, spinning (relaxed hover), landing"
             resp = "land"
         else:
+            B = effectiveness(veh.ctrl_rotor_xy, veh.spin, veh.k_yaw, veh.eff)
+            mg = float(self.bc.params[i, P_MASS] * self.bc.params[i, P_G])
+            A = fault_allocation(B, veh.eff, j, keep_yaw=True, hover_share=mg / veh.f_max)
+            self.bc.params[i, P_AINV:P_AINV + A.size] = A.ravel()
             share = float((A[:, 0] * mg).max()) / veh.f_max
             what = f"re-allocated without the rotor (hover at {share:.0%} of a rotor's limit)"
             if share > 1.0:  # no hover with yaw held: give yaw up (the vehicle spins)
@@ -199,12 +225,52 @@ class RotorFaults:
             self.hp[i] = b.p_fb[i]
             self.hs[i] = 0.0
 
+    # ------------------------------------------------------------------- the quad's three rotors
+    def after_control(self, t: float) -> None:
+        """After the cascade: a quad whose fault is detected flies on :class:`RelaxedHover`
+        (its rotor commands replace the cascade's) towards the landing's set points."""
+        b = self.b
+        for i, law in self.relaxed.items():
+            if not b.act[i]:
+                continue
+            law.mass = float(self.bc.params[i, P_MASS])
+            err = np.concatenate([b.rp[i] - b.p_fb[i], b.rv[i] - b.v_fb[i]])
+            b.f[i] = law.update(err, b.dt, b.Rc[i], b.om[i], b.ra[i])
+
+    def yaw_damping(self, i: int) -> float:
+        """The rotors' yaw damping γ (N m s): a rotor's drag torque ``Q = k f`` grows as the
+        square of its airspeed, so a body yaw rate ``r`` changes it by ``2 Q r / Ω``; summed
+        over the rotors at hover, ``γ = 2 k Σ f_i / Ω_i`` with ``Ω = 2π √(f / (C_T ρ D⁴))``
+        (propeller momentum scaling; ``C_T`` = 0.1 an estimate). The plant's only yaw damping:
+        it sets the spin a quad on three rotors reaches. Applied with the fault (the model's
+        unfailed flights are unchanged)."""
+        veh = self.vehs[i]
+        spec = veh.spec
+        d = spec.rotor_diameter_m if spec is not None else 0.533
+        f = float(self.bc.params[i, P_MASS] * self.bc.params[i, P_G]) / veh.n_rotors
+        omega = 2.0 * math.pi * math.sqrt(f / (self.C_T * self.RHO_AIR * d ** 4))
+        return 2.0 * veh.k_yaw * veh.n_rotors * f / omega
+
+    def _motor_tau(self, i: int) -> float:
+        spec = self.vehs[i].spec
+        return spec.motor_tau_s if spec is not None else 0.04
+
+    def _touching(self, i: int) -> bool:
+        """Any contact with the ground (the vehicle's own collision pass)."""
+        veh = self.vehs[i]
+        m = veh.model
+        d = self.contact.setdefault(i, mujoco.MjData(m))
+        mujoco.mj_setState(m, d, self.b.S[i], STATE_SPEC)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
+        return any(veh.ground_geom in pair for pair in d.contact.geom[:d.ncon].tolist())
+
     # ----------------------------------------------------------------------------- the way home
     def _go_home(self, i: int, t: float) -> None:
         """The set point moves towards the base at up to the transit speed (trapezoidal: 1 m/s²
         up, and down so that it stops there), nozzles off; there, the landing."""
         b = self.b
-        d = self.home[i] - self.hp[i, :2]
+        d = self.home[i] - self.hp[i, HORIZ]
         dist = math.hypot(d[0], d[1])
         b.spray[i] = False
         if dist < 0.05:
@@ -220,23 +286,22 @@ class RotorFaults:
         v = min(self.v_home[i], self.hs[i] + self.HOME_ACC * b.dt,
                 math.sqrt(2.0 * self.HOME_ACC * dist))
         self.hs[i] = v
-        self.hp[i, :2] += u * min(v * b.dt, dist)
+        self.hp[i, HORIZ] += u * min(v * b.dt, dist)
         b.rp[i] = self.hp[i]
-        b.rv[i, :2] = u * v
-        b.rv[i, 2] = 0.0
+        b.rv[i, HORIZ] = u * v
+        b.rv[i, Z] = 0.0
         b.ra[i] = 0.0
         if self.yaw_free[i]:
-            R = b.Rc[i]
-            b.yaw[i] = math.atan2(R[3], R[0])
+            b.yaw[i] = rot_to_yaw(b.Rc[i])
 
     # ----------------------------------------------------------------------------- the landing
     def _start_landing(self, i: int, t: float) -> None:
         b = self.b
         self.landing[i] = True
         v0 = b.v_fb[i].copy()
-        v0[2] = 0.0
+        v0[Z] = 0.0
         self.v0[i], self.at_xy[i], self.t0[i] = v0, b.p_fb[i], t
-        self.zr[i] = b.p_fb[i, 2]
+        self.zr[i] = b.p_fb[i, Z]
 
     def _land(self, i: int, t: float) -> None:
         """Brake to a stop where the failure was met, descend there (the failsafe's profile);
@@ -251,22 +316,29 @@ class RotorFaults:
         ground = b.hover_z[i]
         speed = self.DESCENT_MPS if self.zr[i] > ground + self.CRAWL_FROM_M else self.CRAWL_MPS
         self.zr[i] = max(self.zr[i] - speed * b.dt, ground - 0.5)
-        b.rp[i, 2] = self.zr[i]
-        b.rv[i, 2] = -speed if self.zr[i] > ground - 0.5 else 0.0
+        b.rp[i, Z] = self.zr[i]
+        b.rv[i, Z] = -speed if self.zr[i] > ground - 0.5 else 0.0
         b.spray[i] = False
         if self.yaw_free[i]:
-            R = b.Rc[i]
-            b.yaw[i] = math.atan2(R[3], R[0])
+            b.yaw[i] = rot_to_yaw(b.Rc[i])
         info = self.info[i]
-        vz = abs(float(b.v[i, 2]))
-        if info is not None and b.p[i, 2] < ground + 0.3:  # the last 0.3 m: the touchdown
+        vz = abs(float(b.v[i, Z]))
+        if info is not None and b.p[i, Z] < ground + 0.3:  # the last 0.3 m: the touchdown
             info["touchdown_mps"] = max(info["touchdown_mps"] or 0.0, round(vz, 3))
+        if i in self.relaxed:
+            if b.p[i, Z] < ground + 0.5 and self._touching(i):  # skids down: motors off
+                self._landed(i, t, "touched down spinning, motors off")
+            return
         # PX4's land detector: the set point on the ground, still for LAND_S
-        still = self.zr[i] <= ground - 0.5 and vz < 0.2 and float(np.abs(b.v[i, :2]).max()) < 0.2
+        still = self.zr[i] <= ground - 0.5 and vz < 0.2 and float(np.abs(b.v[i, HORIZ]).max()) < 0.2
         self.still_s[i] = self.still_s[i] + b.dt if still else 0.0
         if self.still_s[i] >= self.LAND_S - 1e-9:
-            if info is not None:
-                info["landed_s"] = round(t, 2)
-                info["landed_xy"] = [round(float(v), 2) for v in b.p[i, :2]]
-            b.notes[i].append(f"rotor failure: landed at t={t:.1f}s")
-            b.act[i] = False
+            self._landed(i, t, "landed")
+
+    def _landed(self, i: int, t: float, how: str) -> None:
+        b, info = self.b, self.info[i]
+        if info is not None:
+            info["landed_s"] = round(t, 2)
+            info["landed_xy"] = [round(float(v), 2) for v in b.p[i, HORIZ]]
+        b.notes[i].append(f"rotor failure: {how} at t={t:.1f}s")
+        b.act[i] = False

@@ -41,38 +41,51 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from numkit import Layout, X, Y, Z
+
 from .._jit import njit
 from .kernels import zeros_touched
 from .sprayer import Sprayer
 
 SetMass = Callable[[int, float, tuple[float, float, float]], None]
 
-# ---- columns of the per-vehicle constants (float64, (N, _NP))
-P_LPM, P_RHO, P_HMIN, P_HMAX, P_KP, P_PAV, P_CAP, P_DT, P_FILL, P_DRY = range(10)
-P_NOZZLES = 10  # 1: the nozzle model (valve, pressure lag) gives the litres: :meth:`draw`
-_NP = 11
-# ---- columns of the float state (float64, (N, _NS)); NaN stands for None in ran-dry/landing
-S_TANK, S_E, S_ETOT, S_LTOT, S_MSET, S_GATED, S_DRY = range(7)
-S_LIT, S_EJ, S_MINSOC, S_RANDRY, S_TLAND = range(7, 12)  # the current sortie's totals
-C_LIT, C_EJ, C_MINSOC, C_RANDRY, C_TLAND = range(12, 17)  # the sortie closed on this tick
-S_MREFILL, S_MSPRAY = 17, 18  # liquid masses to set this tick (refill, then spray)
-S_FLOW = 19  # the flow of this tick (L/s)
-_NS = 20
-# ---- columns of the integer state (int64, (N, _NI))
-# current sortie, offset into the flat tables, ticks available, this tick's event flags
-I_CUR, I_OFF, I_LIM, I_FLAGS = range(4)
-_NI = 4
-# ---- the event flags (bits of ist[:, I_FLAGS])
+# ---- the per-vehicle constants (float64, (N, PAR.size)): litres per metre, liquid density,
+# the nozzles' height gate (min, max), the power law's gain and hover power, the battery's
+# capacity (J), Δt, the tank's fill (L), the dry mass; ``nozzles`` 1: the nozzle model (valve,
+# pressure lag) gives the litres (:meth:`BatchSprayer.draw`)
+PAR = Layout("lpm rho hmin hmax kp pav cap dt fill dry nozzles")
+PA = PAR.at
+# ---- the float state (float64, (N, STATE.size)); NaN stands for None in ran-dry/landing:
+# tank (L), energy of the battery (J), of the job, litres of the job, the liquid mass last set,
+# time gated and dry; the current sortie's totals (lit .. tland) and those of the sortie closed
+# on this tick (c_*); the liquid masses to set this tick (refill, then spray); this tick's flow
+# (L/s)
+STATE = Layout("tank e etot ltot mset gated dry lit ej minsoc randry tland "
+               "c_lit c_ej c_minsoc c_randry c_tland mrefill mspray flow")
+ST = STATE.at
+# ---- the integer state (int64, (N, INTS.size)): current sortie, offset into the flat tables,
+# ticks available, this tick's event flags
+INTS = Layout("cur off lim flags")
+IS = INTS.at
+# ---- the rows of the flat tables ``tab`` (int32) and of the per-tick records ``rec``, of
+# ``out`` (nozzles on, controller reset) and of the log's spray row (``RunLog.SPRAY_FIELDS``)
+TABS = Layout("sortie ground")
+RECS = Layout("tank mass power soc")
+OUTS = Layout("on reset")
+LOG_ROW = Layout("t tank_l mass_kg flow_lps nozzles power_w energy_wh battery_frac sortie ground")
+TB, RR, OU, LR = TABS.at, RECS.at, OUTS.at, LOG_ROW.at
+# ---- the event flags (bits of ist[:, IS.FLAGS])
 F_CHANGE, F_CLOSE, F_REFILL, F_MASS = 1, 2, 4, 8
 
 
 class SprayArrays(NamedTuple):
     """A batch's own arrays that :func:`_spray_kernel` reads and writes, declared once: the
-    per-vehicle constants ``par`` (N, _NP), the float and integer state ``st`` (N, _NS) and
-    ``ist`` (N, _NI), the flat sortie and ground tables ``tab`` (2, total), the per-tick
-    records ``rec`` (4, total) and ``rec_on`` (total,), and ``out`` (2, N): nozzles on and
-    controller reset. Passed as a plain tuple in field order and named again in the kernel
-    (as :mod:`ag_uav.engine.kernels` does)."""
+    per-vehicle constants ``par`` (N, :data:`PAR`), the float and integer state ``st`` (N,
+    :data:`STATE`) and ``ist`` (N, :data:`INTS`), the flat sortie and ground tables ``tab``
+    (:data:`TABS`, total), the per-tick records ``rec`` (:data:`RECS`, total) and ``rec_on``
+    (total,), and ``out`` (:data:`OUTS`, N): nozzles on and controller reset. Passed as a
+    plain tuple in field order and named again in the kernel (as :mod:`ag_uav.engine.kernels`
+    does)."""
 
     par: np.ndarray
     st: np.ndarray
@@ -85,20 +98,20 @@ class SprayArrays(NamedTuple):
 
 @njit(cache=True)
 def _spray_log_row(row, st, rec, tab, rec_on, ist, i, j):
-    """Vehicle ``i``'s spray state at its record ``j`` -> ``row[1:10]`` in
-    :attr:`ag_uav.record.runlog.RunLog.SPRAY_FIELDS` order: tank, mass, flow (the tick's
-    litres per second), nozzles, power, energy (Wh), battery fraction, sortie (from 1), on the
-    ground."""
+    """Vehicle ``i``'s spray state at its record ``j`` -> ``row`` (:data:`LOG_ROW`, the
+    :attr:`ag_uav.record.runlog.RunLog.SPRAY_FIELDS`; its time is the caller's): tank, mass,
+    flow (the tick's litres per second), nozzles, power, energy (Wh), battery fraction, sortie
+    (from 1), on the ground."""
     on = rec_on[j]
-    row[1] = st[i, S_TANK]
-    row[2] = rec[1, j]
-    row[3] = st[i, S_FLOW]
-    row[4] = 1.0 if on else 0.0
-    row[5] = rec[2, j]
-    row[6] = st[i, S_ETOT] / 3600.0
-    row[7] = rec[3, j]
-    row[8] = ist[i, I_CUR] + 1
-    row[9] = tab[1, j]
+    row[LR.TANK_L] = st[i, ST.TANK]
+    row[LR.MASS_KG] = rec[RR.MASS, j]
+    row[LR.FLOW_LPS] = st[i, ST.FLOW]
+    row[LR.NOZZLES] = 1.0 if on else 0.0
+    row[LR.POWER_W] = rec[RR.POWER, j]
+    row[LR.ENERGY_WH] = st[i, ST.ETOT] / 3600.0
+    row[LR.BATTERY_FRAC] = rec[RR.SOC, j]
+    row[LR.SORTIE] = ist[i, IS.CUR] + 1
+    row[LR.GROUND] = tab[TB.GROUND, j]
 
 
 @njit(cache=True)
@@ -106,26 +119,26 @@ def _sortie_row(i, s, par, st, ist):  # pragma: no cover
     """A sortie change: close the last one, refill and a fresh battery, open the new one.
     Returns the event flags."""
     fl = F_CHANGE
-    if ist[i, I_CUR] >= 0:
+    if ist[i, IS.CUR] >= 0:
         fl |= F_CLOSE
-        st[i, C_LIT] = st[i, S_LIT]
-        st[i, C_EJ] = st[i, S_EJ]
-        st[i, C_MINSOC] = st[i, S_MINSOC]
-        st[i, C_RANDRY] = st[i, S_RANDRY]
-        st[i, C_TLAND] = st[i, S_TLAND]
-    ist[i, I_CUR] = s
+        st[i, ST.C_LIT] = st[i, ST.LIT]
+        st[i, ST.C_EJ] = st[i, ST.EJ]
+        st[i, ST.C_MINSOC] = st[i, ST.MINSOC]
+        st[i, ST.C_RANDRY] = st[i, ST.RANDRY]
+        st[i, ST.C_TLAND] = st[i, ST.TLAND]
+    ist[i, IS.CUR] = s
     if s > 0:
-        st[i, S_TANK] = par[i, P_FILL]
-        st[i, S_E] = 0.0
-        m = st[i, S_TANK] * par[i, P_RHO]
-        st[i, S_MREFILL] = m
-        st[i, S_MSET] = m
+        st[i, ST.TANK] = par[i, PA.FILL]
+        st[i, ST.E] = 0.0
+        m = st[i, ST.TANK] * par[i, PA.RHO]
+        st[i, ST.MREFILL] = m
+        st[i, ST.MSET] = m
         fl |= F_REFILL
-    st[i, S_LIT] = 0.0
-    st[i, S_EJ] = 0.0
-    st[i, S_MINSOC] = 1.0
-    st[i, S_RANDRY] = np.nan
-    st[i, S_TLAND] = np.nan
+    st[i, ST.LIT] = 0.0
+    st[i, ST.EJ] = 0.0
+    st[i, ST.MINSOC] = 1.0
+    st[i, ST.RANDRY] = np.nan
+    st[i, ST.TLAND] = np.nan
     return fl
 
 
@@ -135,20 +148,20 @@ def _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st):  # pragma: no cover
     band. Without the nozzle model the flow follows the command at once (per ground distance,
     :func:`_draw_row`); with it, :func:`_draw_kernel` draws what the nozzles let out. Returns
     (command, event flags)."""
-    dt = par[i, P_DT]
+    dt = par[i, PA.DT]
     on = False
     if spray_ref[i]:
-        if st[i, S_TANK] <= 0.0:
-            st[i, S_DRY] += dt
-            if math.isnan(st[i, S_RANDRY]):
-                st[i, S_RANDRY] = t
-        elif par[i, P_HMIN] < pz[i] < par[i, P_HMAX]:
+        if st[i, ST.TANK] <= 0.0:
+            st[i, ST.DRY] += dt
+            if math.isnan(st[i, ST.RANDRY]):
+                st[i, ST.RANDRY] = t
+        elif par[i, PA.HMIN] < pz[i] < par[i, PA.HMAX]:
             on = True
         else:
-            st[i, S_GATED] += dt
-    if par[i, P_NOZZLES] > 0.5:
+            st[i, ST.GATED] += dt
+    if par[i, PA.NOZZLES] > 0.5:
         return on, 0
-    dv = par[i, P_LPM] * math.sqrt(vx[i] * vx[i] + vy[i] * vy[i]) * dt if on else 0.0
+    dv = par[i, PA.LPM] * math.sqrt(vx[i] * vx[i] + vy[i] * vy[i]) * dt if on else 0.0
     return on, _draw_row(i, dv, par, st)
 
 
@@ -156,21 +169,21 @@ def _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st):  # pragma: no cover
 def _draw_row(i, dv, par, st):  # pragma: no cover
     """``dv`` litres out of the tank (at most what is in it): the totals, the tick's flow, and
     the liquid mass re-set when it fell by 1 g or the tank is empty. Returns the event flags."""
-    st[i, S_FLOW] = 0.0
+    st[i, ST.FLOW] = 0.0
     if dv <= 0.0:
         return 0
-    tank = st[i, S_TANK]
+    tank = st[i, ST.TANK]
     if dv > tank:
         dv = tank
     tank -= dv
-    st[i, S_TANK] = tank
-    st[i, S_LTOT] += dv
-    st[i, S_LIT] += dv
-    st[i, S_FLOW] = dv / par[i, P_DT]
-    m_liq = tank * par[i, P_RHO]
-    if st[i, S_MSET] - m_liq >= 1e-3 or tank <= 0.0:
-        st[i, S_MSET] = m_liq
-        st[i, S_MSPRAY] = m_liq
+    st[i, ST.TANK] = tank
+    st[i, ST.LTOT] += dv
+    st[i, ST.LIT] += dv
+    st[i, ST.FLOW] = dv / par[i, PA.DT]
+    m_liq = tank * par[i, PA.RHO]
+    if st[i, ST.MSET] - m_liq >= 1e-3 or tank <= 0.0:
+        st[i, ST.MSET] = m_liq
+        st[i, ST.MSPRAY] = m_liq
         return F_MASS
     return 0
 
@@ -185,7 +198,7 @@ def _draw_kernel(k, rows, litres, nozzles, on_col, spray, active, arrays):  # pr
     a = SprayArrays(*arrays)
     par, st, ist, rec, rec_on = a.par, a.st, a.ist, a.rec, a.rec_on
     for i in range(ist.shape[0]):
-        ist[i, I_FLAGS] = 0
+        ist[i, IS.FLAGS] = 0
     nev = 0
     for j in range(rows.shape[0]):
         i = rows[j]
@@ -194,12 +207,12 @@ def _draw_kernel(k, rows, litres, nozzles, on_col, spray, active, arrays):  # pr
         if not active[i]:
             continue
         fl = _draw_row(i, litres[j], par, st)
-        r = ist[i, I_OFF] + k
-        tank = st[i, S_TANK]
-        rec[0, r] = tank
-        rec[1, r] = par[i, P_DRY] + tank * par[i, P_RHO]
+        r = ist[i, IS.OFF] + k
+        tank = st[i, ST.TANK]
+        rec[RR.TANK, r] = tank
+        rec[RR.MASS, r] = par[i, PA.DRY] + tank * par[i, PA.RHO]   # m = m_dry + V ρ
         rec_on[r] = 1 if on else 0
-        ist[i, I_FLAGS] = fl
+        ist[i, IS.FLAGS] = fl
         if fl:
             nev += 1
     return nev
@@ -209,21 +222,21 @@ def _draw_kernel(k, rows, litres, nozzles, on_col, spray, active, arrays):  # pr
 def _energy_row(i, g, act, par, st):  # pragma: no cover
     """Electrical power of the actual rotor thrusts (zero on the ground), energy, state of
     charge. Returns (power, state of charge)."""
-    p = par[i, P_PAV]
-    kp = par[i, P_KP]
+    p = par[i, PA.PAV]
+    kp = par[i, PA.KP]
     for c in range(act.shape[1]):
         a = act[i, c]
         if a > 0.0:
             p += kp * a * math.sqrt(a)
     if g:
         p = 0.0
-    e = p * par[i, P_DT]
-    st[i, S_E] += e
-    st[i, S_ETOT] += e
-    st[i, S_EJ] += e
-    soc = 1.0 - st[i, S_E] / par[i, P_CAP]
-    if soc < st[i, S_MINSOC]:
-        st[i, S_MINSOC] = soc
+    e = p * par[i, PA.DT]
+    st[i, ST.E] += e
+    st[i, ST.ETOT] += e
+    st[i, ST.EJ] += e
+    soc = 1.0 - st[i, ST.E] / par[i, PA.CAP]
+    if soc < st[i, ST.MINSOC]:
+        st[i, ST.MINSOC] = soc
     return p, soc
 
 
@@ -239,37 +252,37 @@ def _spray_kernel(k, t, pz, vx, vy, spray_ref, f, act, active, arrays):  # pragm
     par, st, ist, tab, rec, rec_on, out = a.par, a.st, a.ist, a.tab, a.rec, a.rec_on, a.out
     n = pz.shape[0]
     for i in range(n):
-        if active[i] and (k < 0 or k >= ist[i, I_LIM]):
+        if active[i] and (k < 0 or k >= ist[i, IS.LIM]):
             return -(i + 1)
     nev = 0
     for i in range(n):
-        out[0, i] = False
-        out[1, i] = False
-        ist[i, I_FLAGS] = 0
+        out[OU.ON, i] = False
+        out[OU.RESET, i] = False
+        ist[i, IS.FLAGS] = 0
         if not active[i]:
             continue
-        j = ist[i, I_OFF] + k
-        s = tab[0, j]
-        fl = _sortie_row(i, s, par, st, ist) if s != ist[i, I_CUR] else 0
-        g = tab[1, j] != 0
+        j = ist[i, IS.OFF] + k
+        s = tab[TB.SORTIE, j]
+        fl = _sortie_row(i, s, par, st, ist) if s != ist[i, IS.CUR] else 0
+        g = tab[TB.GROUND, j] != 0
         if g:  # on the ground at the base: motors off, controller reset
-            out[1, i] = True
+            out[OU.RESET, i] = True
             for c in range(f.shape[1]):
                 f[i, c] = 0.0
-            if math.isnan(st[i, S_TLAND]):
-                st[i, S_TLAND] = t
+            if math.isnan(st[i, ST.TLAND]):
+                st[i, ST.TLAND] = t
         on, fm = _nozzle_row(i, t, pz, vx, vy, spray_ref, par, st)
         fl |= fm
         p, soc = _energy_row(i, g, act, par, st)
-        tank = st[i, S_TANK]
-        rec[0, j] = tank
-        rec[1, j] = par[i, P_DRY] + tank * par[i, P_RHO]
-        rec[2, j] = p
-        rec[3, j] = soc
+        tank = st[i, ST.TANK]
+        rec[RR.TANK, j] = tank
+        rec[RR.MASS, j] = par[i, PA.DRY] + tank * par[i, PA.RHO]   # m = m_dry + V ρ
+        rec[RR.POWER, j] = p
+        rec[RR.SOC, j] = soc
         rec_on[j] = 1 if on else 0
-        out[0, i] = on
+        out[OU.ON, i] = on
         if fl:
-            ist[i, I_FLAGS] = fl
+            ist[i, IS.FLAGS] = fl
             nev += 1
     return nev
 
@@ -305,7 +318,7 @@ class _JSink:
     @J.setter
     def J(self, value: Sequence[float]) -> None:
         o = self._owner
-        o.J = (float(value[0]), float(value[1]), float(value[2]))
+        o.J = (float(value[X]), float(value[Y]), float(value[Z]))
         o.set_mass(o.index, float(o.mass), o.J)
 
 
@@ -366,35 +379,42 @@ class BatchSprayer:
         total = int(off[-1])
         self._off = off
         self._n_rec = n_rec
-        self._par = np.zeros((n, _NP))
-        self._st = np.zeros((n, _NS))
-        self._ist = np.zeros((n, _NI), np.int64)
-        self._tab = np.zeros((2, total), np.int32)  # sortie, ground
-        self._rec = zeros_touched((4, total))  # written tick by tick: faulted in now
+        self._par = np.zeros((n, PA.SIZE))
+        self._st = np.zeros((n, ST.SIZE))
+        self._ist = np.zeros((n, IS.SIZE), np.int64)
+        self._tab = np.zeros((TABS.size, total), np.int32)
+        self._rec = zeros_touched((RECS.size, total))  # written tick by tick: faulted in now
         self._rec_on = np.zeros(total, np.uint8)
         for i, sp in enumerate(self.sprayers):
             a, b = int(off[i]), int(off[i + 1])
             nr = b - a
-            self._par[i] = (sp.lpm, sp.rho, sp.h_min, sp.h_max, sp.k_p, sp.p_av, sp.cap_j,
-                            sp.dt, sp.job.fill_l, sp.dry, float(sp.nozzle_model))
-            self._ist[i] = (sp.cur, a, min(nr, len(sp.sortie), len(sp.ground)), 0)
+            par = {"lpm": sp.lpm, "rho": sp.rho, "hmin": sp.h_min, "hmax": sp.h_max, "kp": sp.k_p,
+                   "pav": sp.p_av, "cap": sp.cap_j, "dt": sp.dt, "fill": sp.job.fill_l,
+                   "dry": sp.dry, "nozzles": float(sp.nozzle_model)}
+            for f, v in par.items():   # by name (PAR)
+                self._par[i, PAR.offset[f]] = v
+            ints = {"cur": sp.cur, "off": a, "lim": min(nr, len(sp.sortie), len(sp.ground)),
+                    "flags": 0}
+            for f, v in ints.items():   # by name (INTS)
+                self._ist[i, INTS.offset[f]] = v
             st = self._st[i]
-            st[S_TANK], st[S_E], st[S_ETOT] = sp.tank, sp.energy_j, sp.energy_total_j
-            st[S_LTOT], st[S_MSET] = sp.litres_total, sp.mass_set
-            st[S_GATED], st[S_DRY] = sp.gated_s, sp.dry_s
-            st[C_LIT:C_TLAND + 1] = math.nan
+            st[ST.TANK], st[ST.E], st[ST.ETOT] = sp.tank, sp.energy_j, sp.energy_total_j
+            st[ST.LTOT], st[ST.MSET] = sp.litres_total, sp.mass_set
+            st[ST.GATED], st[ST.DRY] = sp.gated_s, sp.dry_s
+            st[ST.C_LIT:ST.C_TLAND_END] = math.nan
             if sp.cur >= 0:  # wrapped mid-job: the current sortie's totals so far
                 if not sp.per:
                     raise ValueError(f"sprayer {i}: sortie {sp.cur} without a per-sortie dict")
                 per = sp.per[-1]
-                st[S_LIT], st[S_EJ], st[S_MINSOC] = per["litres"], per["energy_j"], \
+                st[ST.LIT], st[ST.EJ], st[ST.MINSOC] = per["litres"], per["energy_j"], \
                     per["min_soc"]
-                st[S_RANDRY] = _none_nan(per["ran_dry_s"])
-                st[S_TLAND] = _none_nan(per["t_land_s"])
-            self._tab[0, a:b] = _table(sp.sortie, nr, np.int32)
-            self._tab[1, a:b] = _table(sp.ground, nr, np.int32)
+                st[ST.RANDRY] = _none_nan(per["ran_dry_s"])
+                st[ST.TLAND] = _none_nan(per["t_land_s"])
+            self._tab[TB.SORTIE, a:b] = _table(sp.sortie, nr, np.int32)
+            self._tab[TB.GROUND, a:b] = _table(sp.ground, nr, np.int32)
             # the records so far, then each Sprayer's rec_* become views of its slice
-            for r, name in enumerate(("rec_tank", "rec_mass", "rec_power", "rec_soc")):
+            for field, r in RECS.offset.items():   # rec_tank, rec_mass, rec_power, rec_soc
+                name = "rec_" + field
                 self._rec[r, a:b] = np.frombuffer(getattr(sp, name), np.float64, count=nr)
                 setattr(sp, name, memoryview(self._rec[r, a:b]))
             self._rec_on[a:b] = np.frombuffer(sp.rec_on, np.uint8, count=nr)
@@ -402,15 +422,15 @@ class BatchSprayer:
             self._cascades.append(sp.cascade)
             sp.cascade = MassSink(i, set_mass)
         self._all = np.ones(n, bool)
-        self._out = np.zeros((2, n), bool)
+        self._out = np.zeros((OUTS.size, n), bool)
         self._arrays = (self._par, self._st, self._ist, self._tab, self._rec, self._rec_on,
                         self._out)  # SprayArrays, as a plain tuple
-        self._on, self._reset = self._out[0], self._out[1]
+        self._on, self._reset = self._out[OU.ON], self._out[OU.RESET]
         self._logged = [(i, sp) for i, sp in enumerate(self.sprayers)
                         if sp.log is not None and hasattr(sp.log, "spray_row")]
         self._log_next = -math.inf  # the earliest time a logged vehicle's spray state is due
         # with the nozzle model, the tick's litres (and the log) come after it: :meth:`draw`
-        self.nozzle_model = bool(self._par[:, P_NOZZLES].any()) if n else False
+        self.nozzle_model = bool(self._par[:, PA.NOZZLES].any()) if n else False
         if push_initial:
             for sp in self.sprayers:
                 if sp.mass_set >= 0.0:
@@ -466,7 +486,7 @@ class BatchSprayer:
             if nev < 0:
                 i = -nev - 1
                 raise IndexError(f"tick {k} is outside vehicle {i}'s tables "
-                                 f"({int(self._ist[i, I_LIM])} ticks)")
+                                 f"({int(self._ist[i, IS.LIM])} ticks)")
             self._events(t)
         if self._logged and not self.nozzle_model and t >= self._log_next:
             self._log(t, active)
@@ -474,14 +494,14 @@ class BatchSprayer:
 
     def draw(self, k: int, t: float, rows: np.ndarray, litres: np.ndarray,
              nozzles: np.ndarray, on_col: int, spray: np.ndarray, active: np.ndarray) -> None:
-        """After the nozzle model's tick (``P_NOZZLES`` rows): vehicle ``rows[j]`` let
+        """After the nozzle model's tick (``PA.NOZZLES`` rows): vehicle ``rows[j]`` let
         ``litres[j]`` out with its valve open when ``nozzles[j, on_col]`` > 0.5 (the nozzle
         model's state rows), and ``spray[rows[j]]`` (the nozzles on, for the record and the
         coverage) follows the valve of the active rows. The tank, the liquid mass, the totals
         and the nozzle records follow them (:func:`_draw_kernel`, one compiled call), so that
         the tank, the coverage and the dose count one flow. Then the spray log (every 0.1 s)."""
         if not rows.shape[0]:
-            self._ist[:, I_FLAGS] = 0  # step's events are done
+            self._ist[:, IS.FLAGS] = 0  # step's events are done
         elif _draw_kernel(k, rows, litres, nozzles, on_col, spray, active, self._arrays):
             self._events(t)
         if self._logged and t >= self._log_next:
@@ -490,26 +510,26 @@ class BatchSprayer:
     def _events(self, t: float) -> None:
         """Sortie changes and liquid-mass updates of the rows the kernel flagged (Python)."""
         st, ist = self._st, self._ist
-        for i in np.flatnonzero(ist[:, I_FLAGS]).tolist():
-            fl = int(ist[i, I_FLAGS])
+        for i in np.flatnonzero(ist[:, IS.FLAGS]).tolist():
+            fl = int(ist[i, IS.FLAGS])
             sp = self.sprayers[i]
             if fl & F_CHANGE:
                 if fl & F_CLOSE:
                     per = sp.per[-1]
-                    per["litres"] = float(st[i, C_LIT])
-                    per["energy_j"] = float(st[i, C_EJ])
-                    per["min_soc"] = float(st[i, C_MINSOC])
-                    per["ran_dry_s"] = _nan_none(st[i, C_RANDRY])
-                    per["t_land_s"] = _nan_none(st[i, C_TLAND])
+                    per["litres"] = float(st[i, ST.C_LIT])
+                    per["energy_j"] = float(st[i, ST.C_EJ])
+                    per["min_soc"] = float(st[i, ST.C_MINSOC])
+                    per["ran_dry_s"] = _nan_none(st[i, ST.C_RANDRY])
+                    per["t_land_s"] = _nan_none(st[i, ST.C_TLAND])
                     sp.close_sortie(t)
                 if fl & F_REFILL:
-                    _set_mass(sp, t, float(st[i, S_MREFILL]))
-                s = int(self._ist[i, I_CUR])
+                    _set_mass(sp, t, float(st[i, ST.MREFILL]))
+                s = int(self._ist[i, IS.CUR])
                 sp.per.append({"sortie": s + 1, "t_takeoff_s": t, "litres": 0.0,
                                "energy_j": 0.0, "min_soc": 1.0, "ran_dry_s": None,
                                "t_land_s": None})
             if fl & F_MASS:
-                _set_mass(sp, t, float(st[i, S_MSPRAY]))
+                _set_mass(sp, t, float(st[i, ST.MSPRAY]))
 
     def _log(self, t: float, active: np.ndarray) -> None:
         """The spray state row of the vehicles that have a log, every 0.1 s (at most; the log's
@@ -533,21 +553,21 @@ class BatchSprayer:
         ``series`` then work on them; the batch may go on stepping."""
         st, ist = self._st, self._ist
         for i, sp in enumerate(self.sprayers):
-            sp.tank = float(st[i, S_TANK])
-            sp.energy_j = float(st[i, S_E])
-            sp.energy_total_j = float(st[i, S_ETOT])
-            sp.litres_total = float(st[i, S_LTOT])
-            sp.mass_set = float(st[i, S_MSET])
-            sp.gated_s = float(st[i, S_GATED])
-            sp.dry_s = float(st[i, S_DRY])
-            sp.cur = int(ist[i, I_CUR])
+            sp.tank = float(st[i, ST.TANK])
+            sp.energy_j = float(st[i, ST.E])
+            sp.energy_total_j = float(st[i, ST.ETOT])
+            sp.litres_total = float(st[i, ST.LTOT])
+            sp.mass_set = float(st[i, ST.MSET])
+            sp.gated_s = float(st[i, ST.GATED])
+            sp.dry_s = float(st[i, ST.DRY])
+            sp.cur = int(ist[i, IS.CUR])
             if sp.cur >= 0 and sp.per:
                 per = sp.per[-1]
-                per["litres"] = float(st[i, S_LIT])
-                per["energy_j"] = float(st[i, S_EJ])
-                per["min_soc"] = float(st[i, S_MINSOC])
-                per["ran_dry_s"] = _nan_none(st[i, S_RANDRY])
-                per["t_land_s"] = _nan_none(st[i, S_TLAND])
+                per["litres"] = float(st[i, ST.LIT])
+                per["energy_j"] = float(st[i, ST.EJ])
+                per["min_soc"] = float(st[i, ST.MINSOC])
+                per["ran_dry_s"] = _nan_none(st[i, ST.RANDRY])
+                per["t_land_s"] = _nan_none(st[i, ST.TLAND])
 
     def finish(self) -> list[Sprayer]:
         """:meth:`sync`, then give each Sprayer its own cascade back; its records stay the

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from numkit import X, Y, Z
+
 from ..config import Config
 from ..world.spray_job import SprayJob, liquid_l_per_m, rotor_power_coeff
 
@@ -55,8 +57,8 @@ class Sprayer:
         self.tank_half = tuple(float(x) for x in self.model.geom("tank").size)
         self.drone = veh.body_id
         self.dry = float(self.model.body_subtreemass[self.drone] - self.model.body_mass[self.liq])
-        self.com_dry_z = float(self.model.body_ipos[self.drone][2])
-        self.liq_z = float(self.model.body_pos[self.liq][2])
+        self.com_dry_z = float(self.model.body_ipos[self.drone][Z])
+        self.liq_z = float(self.model.body_pos[self.liq][Z])
         self.J_dry = tuple(float(v) for v in veh.ctrl_inertia)  # the controller's model
         self.unknown = veh.mass - veh.ctrl_mass  # vehicle.unknown_payload_kg: not told to it
         # the model's arrays the liquid's mass changes write (views, looked up once)
@@ -103,7 +105,7 @@ class Sprayer:
         inertia[:] = (ml * ((2 * c) ** 2 + (2 * hz) ** 2) / 12,
                       ml * ((2 * a) ** 2 + (2 * hz) ** 2) / 12,
                       ml * ((2 * a) ** 2 + (2 * c) ** 2) / 12)
-        ipos[2] = -h + hz
+        ipos[Z] = -h + hz
         total = self.dry + ml
         subtree[self.liq] = ml
         subtree[self.drone] = total
@@ -115,7 +117,7 @@ class Sprayer:
         Ix, Iy, Iz = self.J_dry
         li = inertia
         self.cascade.mass = total - self.unknown
-        self.cascade.attitude.J = (Ix + li[0] + dz2, Iy + li[1] + dz2, Iz + li[2])
+        self.cascade.attitude.J = (Ix + li[X] + dz2, Iy + li[Y] + dz2, Iz + li[Z])
         self.mass_set = m_liq
 
     def close_sortie(self, t: float) -> None:

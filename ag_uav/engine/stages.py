@@ -21,13 +21,17 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from numkit import X, Y, Z
+
 from ..world.deposition import S_ON
 from .kernels import (
     ACTIVE,
     BOX,
     CRASHED,
+    IMU_REC,
     NEAR_GROUND,
     NONFINITE,
+    RC,
     GuardRows,
     PoseRows,
     RefRows,
@@ -49,8 +53,8 @@ REC_COLUMNS = ("px", "py", "pz", "vx", "vy", "vz", "rx", "ry", "rz", "fx", "fy",
 def rec_motors(rec: np.ndarray) -> np.ndarray:
     """The rotor commands (n, rotors) of a loop record (:data:`REC_COLUMNS`)."""
     if rec.shape[1] == len(REC_COLUMNS):
-        return rec[:, 14:18]
-    return np.concatenate([rec[:, 14:18], rec[:, len(REC_COLUMNS):]], axis=1)
+        return rec[:, RC.F:RC.F_END]
+    return np.concatenate([rec[:, RC.F:RC.F_END], rec[:, len(REC_COLUMNS):]], axis=1)
 #: the MEMS IMU record's keys in the log (measured f, gyro, attitude error)
 IMU_KEYS = ("imu.fx", "imu.fy", "imu.fz", "imu.wx", "imu.wy", "imu.wz", "imu.att_err_x",
             "imu.att_err_y", "imu.att_err_z")
@@ -169,14 +173,17 @@ class Sensing:
                  increments: bool = False) -> None:
         self.b, self.imu, self.att = b, imu, att
         self.ia, self.ig = accel_adr, gyro_adr
+        self.fa = slice(accel_adr, accel_adr + IMU_REC.width["f"])   # the sensors' 3-vectors
+        self.fg = slice(gyro_adr, gyro_adr + IMU_REC.width["om"])
         #: the IMU integrates the period's sub-steps (``imu.sampling = "increments"``; the
         #: physics then keeps them in ``b.sub``), else reads the last sub-step's sensors
         self.increments = increments and imu is not None
         # tick-major (n_max, N, 9): one tick's rows are contiguous (the per-tick writes stay in
         # cache lines the physics step did not evict); a vehicle's record is copied out at the
         # end. float32: a record for plots and checks (7 significant digits), half the memory
-        self.rec = zeros_touched((b.n_max, b.n, 9), np.float32) if imu is not None else None
-        self.now = np.zeros((b.n, 9))   # the tick's row in full precision (the log's)
+        self.rec = (zeros_touched((b.n_max, b.n, IMU_REC.size), np.float32) if imu is not None
+                    else None)
+        self.now = np.zeros((b.n, IMU_REC.size))   # the tick's row in full precision (the log's)
 
     def step(self, k: int) -> None:
         b = self.b
@@ -186,7 +193,7 @@ class Sensing:
         if self.increments:   # the rates at the period's end: the state's (Guard, b.omega)
             f, w = self.imu.integrate(b.sub, self.ia, self.ig, b.omega, b.act)
         else:
-            f, w = sens[:, self.ia:self.ia + 3], sens[:, self.ig:self.ig + 3]
+            f, w = sens[:, self.fa], sens[:, self.fg]
         f_m, b.om = self.imu.measure(f, w, b.act)
         b.Rc = self.att.apply(b.R, b.act)
         imu_record(self.rec, self.now, k, b.act, f_m, b.om, self.att.last)
@@ -242,19 +249,19 @@ class Feedback:
         else:
             out = (self.bank.update(k, t, b.p, b.v, b.imu_in, b.act) if self.bank is not None
                    else self._per_vehicle(t))
-            pf, vf = out[0], out[1]
-            if len(out) > 2:
-                b.Rc = out[2]
-            if len(out) > 3:
-                b.om = out[3]
+            pf, vf, *more = out   # (p, v[, R[, ω̃ − b̂_g]])
+            if len(more) > 0:
+                b.Rc = more[0]
+            if len(more) > 1:
+                b.om = more[1]
         hold_on_ground(b.act, b.airborne, pf, vf, b.rp, b.rv, b.p_fb, b.v_fb)
 
     def _per_vehicle(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         b = self.b
         p_fb, v_fb = b.p.copy(), b.v.copy()
         for i in np.flatnonzero(b.act):
-            pt = (float(b.p[i, 0]), float(b.p[i, 1]), float(b.p[i, 2]))
-            vt = (float(b.v[i, 0]), float(b.v[i, 1]), float(b.v[i, 2]))
+            pt = (float(b.p[i, X]), float(b.p[i, Y]), float(b.p[i, Z]))
+            vt = (float(b.v[i, X]), float(b.v[i, Y]), float(b.v[i, Z]))
             if b.imu_in is not None:
                 f_m, Rc, om = b.imu_in
                 pf, vf = self.fbs[i].update(t, pt, vt, (f_m[i].tolist(), tuple(Rc[i].tolist()),
@@ -369,12 +376,12 @@ class Failsafe:
         self.engaged[i] = True
         self.n_engaged += 1
         v0 = b.v_fb[i].copy()
-        v0[2] = 0.0
-        tb = math.sqrt(v0[0] * v0[0] + v0[1] * v0[1]) / self.BRAKE_MPS2
+        v0[Z] = 0.0
+        tb = math.sqrt(v0[X] * v0[X] + v0[Y] * v0[Y]) / self.BRAKE_MPS2
         self.at[i] = b.p_fb[i]
         self.v0[i] = v0
         self.t0[i] = t
-        self.zr[i] = b.p_fb[i, 2]
+        self.zr[i] = b.p_fb[i, Z]
         self.t_land[i] = t + max(self.hold_s[i], tb)
         why = (f"GNSS failsafe ({self.mode[i]}) at t={t:.1f}s: horizontal position 1-sigma "
                f"{self.sig[i]:.2f} m > gps.failsafe_sigma_m = {self.bound[i]:.3g} m")
@@ -386,14 +393,14 @@ class Failsafe:
         """The reference of a stop at :attr:`BRAKE_MPS2` from the velocity at the engagement,
         then a hold where it stopped."""
         b, v0 = self.b, self.v0[i]
-        sp = math.sqrt(v0[0] * v0[0] + v0[1] * v0[1])
+        sp = math.sqrt(v0[X] * v0[X] + v0[Y] * v0[Y])
         s = min(t - self.t0[i], sp / self.BRAKE_MPS2)
         a = self.BRAKE_MPS2 / sp if sp > 0.0 else 0.0  # per unit of v0
         f = s - 0.5 * a * s * s
         b.rp[i] = self.at[i] + f * v0
         b.rv[i] = (1.0 - a * s) * v0
         b.ra[i] = -a * v0 if s < sp / self.BRAKE_MPS2 else 0.0
-        b.rp[i, 2] = self.zr[i]
+        b.rp[i, Z] = self.zr[i]
 
     def _fly(self, i: int, t: float) -> None:
         """Brake, hold, then descend; the flight ends on the ground."""
@@ -405,9 +412,9 @@ class Failsafe:
         ground = b.hover_z[i]
         speed = self.DESCENT_MPS if self.zr[i] > ground + 1.0 else self.CRAWL_MPS
         self.zr[i] = max(self.zr[i] - speed * b.dt, ground - 0.5)
-        b.rp[i, 2] = self.zr[i]
-        b.rv[i, 2] = -speed if self.zr[i] > ground - 0.5 else 0.0
-        if b.p[i, 2] < ground + 0.1 and abs(b.v[i, 2]) < 0.2:
+        b.rp[i, Z] = self.zr[i]
+        b.rv[i, Z] = -speed if self.zr[i] > ground - 0.5 else 0.0
+        if b.p[i, Z] < ground + 0.1 and abs(b.v[i, Z]) < 0.2:
             self.info[i]["failsafe_landed_s"] = round(t, 2)
             b.notes[i].append(f"GNSS failsafe: landed at t={t:.1f}s")
             b.act[i] = False
@@ -489,7 +496,7 @@ class Spraying:
 
     def step(self, k: int, t: float) -> None:
         b = self.b
-        on, reset = self.spr.step(k, t, b.p[:, 2], b.v[:, 0], b.v[:, 1], b.spray, b.f,
+        on, reset = self.spr.step(k, t, b.p[:, Z], b.v[:, X], b.v[:, Y], b.spray, b.f,
                                   b.S[:, self.ia:self.ia + self.na], b.act)
         b.spray[:] = on
         if np.count_nonzero(reset):  # every tick: cheaper than reset.any()
@@ -522,7 +529,7 @@ class Disturbance:
         b = self.b
         if self.meander is not None and k % self.every == 0:
             self.wind.turn(self.meander[:, min(k // self.every, self.meander.shape[1] - 1)])
-        b.w, b.xf = self.wind.step_drag(b.dt, b.p[:, 2], b.v, self.c_lin, self.c_quad, b.act)
+        b.w, b.xf = self.wind.step_drag(b.dt, b.p[:, Z], b.v, self.c_lin, self.c_quad, b.act)
 
 
 class Depositing:

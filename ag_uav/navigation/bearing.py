@@ -70,6 +70,7 @@ from estimators.ekf import EKF
 from estimators.mccekf import MCCEKF
 from estimators.models import motion_model
 from estimators.ukf import UKF
+from numkit import Z
 
 from ..config import Config
 from ..seeds import seed_sequences
@@ -207,7 +208,7 @@ class BearingFeedback(FilterBank, Feedback):
     def h(self, x: np.ndarray) -> np.ndarray:
         """[θ_1 … θ_N, z] for a state (n,) or a stack (k, n)."""
         x = np.asarray(x, dtype=float)
-        iz = self.pos_idx[2]
+        iz = self.pos_idx[Z]
         if x.ndim == 1:
             return np.append(self.bm.h(x), x[iz])
         return np.column_stack([self.bm.h(x), x[:, iz]])
@@ -215,7 +216,7 @@ class BearingFeedback(FilterBank, Feedback):
     def H_jac(self, x: np.ndarray) -> np.ndarray:
         H = np.zeros((self.L + 1, self.n))
         H[: self.L] = self.bm.jacobian(x)
-        H[self.L, self.pos_idx[2]] = 1.0
+        H[self.L, self.pos_idx[Z]] = 1.0
         return H
 
     def _make(self, name: str) -> Any:
@@ -245,7 +246,7 @@ class BearingFeedback(FilterBank, Feedback):
             self.n_outliers += int(out.sum())
         else:
             v = math.sqrt(self.var1) * self.rng.standard_normal(self.L)
-        hz = float(p[2]) + self.radar_sigma * float(self.radar_rng.standard_normal())
+        hz = float(p[Z]) + self.radar_sigma * float(self.radar_rng.standard_normal())
         return np.append(wrap_angle(theta + v), hz)
 
     # --------------------------------------------------------------------------- the seam

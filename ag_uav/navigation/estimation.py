@@ -41,56 +41,20 @@ from typing import Any
 
 import numpy as np
 
-import estimators
+from numkit import Layout, X, Y, Z
 
 from .._jit import njit
-from ..config import Config, ConfigError
+from ..config import Config
 from ..vehicle.mjcf import G
 from .aiding import fuse_height, horizontal_sigma
 from .feedback import Feedback
+from .position_filters import R_FLOOR, make_filter, process_noise
 from .receiver import make_gps
 
-R_FLOOR = 1e-4
-
-
-def process_noise(cfg: Config, model: str | None = None) -> tuple[float, float, float]:
-    """``(q, q_bias, bias_var0)`` of the bank's motion model: ``estimator.q`` (and ``q_bias``),
-    or with ``"auto"`` what the IMU's figures imply (:func:`ag_uav.vehicle.imu.process_noise_psd`);
-    without IMU aiding, ``q`` = 2 m²/s³ (the motion model alone must then carry the manoeuvres).
-    ``bias_var0`` is the initial variance of the ``"cvb"`` model's bias states. ``model``:
-    the motion model it is for (default ``estimator.model``)."""
-    from ..vehicle.imu import process_noise_psd
-
-    e = cfg.estimator
-    q, q_bias, var0 = process_noise_psd(cfg.imu, cfg.sim.control_hz,
-                                        bias_states=(model or e.model) == "cvb")
-    if not e.imu and isinstance(e.q, str):
-        q = 2.0
-    if not isinstance(e.q, str):
-        q = float(e.q)
-    if not isinstance(e.q_bias, str):
-        q_bias = float(e.q_bias)
-    return q, q_bias, var0
-
-
-def make_filter(name: str, cfg: Config, r_diag: np.ndarray) -> Any:
-    e = cfg.estimator
-    dt = 1.0 / cfg.sim.control_hz
-    q, q_bias, _ = process_noise(cfg)
-    params: dict[str, Any] = {"model": e.model, "dim": 3, "dt": dt, "q": q, "r": list(r_diag)}
-    if e.model == "cvb":
-        params["q_bias"] = q_bias
-    if "mckf" in name:
-        if e.mckf_kernel != "fixed":
-            raise ConfigError(f'estimator.mckf_kernel = "{e.mckf_kernel}": only with '
-                              'estimator.nav = "ins" (the ideal-attitude bank\'s batched MCKF '
-                              'has a fixed kernel)')
-        params.update(sigma=e.sigma, max_iter=e.max_iter,
-                      recovery=None if e.mckf_recovery == "none" else e.mckf_recovery)
-    if name.startswith("pca"):
-        params.update(window=e.window, mode=e.pca_mode)
-    return estimators.make(name, **params)
-
+#: a consistency record's row (per update): the estimate's tick index, the NIS, the position
+#: covariance P_pp (3 × 3, row-major)
+CONS = Layout("j nis P:3x3")
+C = CONS.at
 
 class FilterBank:
     """What every estimator feedback shares: each control tick, predict every filter of
@@ -166,14 +130,14 @@ class FilterBank:
                 if self.log is not None and self.log.want_estimator(name, t):
                     x = f.x
                     self.log.estimator(t, name, x, np.diag(f.P), getattr(f, "y", None),
-                                       pos=(x[pi[0]], x[pi[1]], x[pi[2]]))
+                                       pos=(x[pi[X]], x[pi[Y]], x[pi[Z]]))
             x = f.x
-            self.est[name].append((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])))
+            self.est[name].append((float(x[pi[X]]), float(x[pi[Y]]), float(x[pi[Z]])))
         if self.primary not in self.filters:
             return None
         x = self.filters[self.primary].x
-        return ((float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]])),
-                (float(x[vi[0]]), float(x[vi[1]]), float(x[vi[2]])))
+        return ((float(x[pi[X]]), float(x[pi[Y]]), float(x[pi[Z]])),
+                (float(x[vi[X]]), float(x[vi[Y]]), float(x[vi[Z]])))
 
 class EstimatorFeedback(FilterBank, Feedback):
     """GPS + primary estimator (+ shadows) behind the feedback seam."""
@@ -192,7 +156,7 @@ class EstimatorFeedback(FilterBank, Feedback):
         if self.radar:
             self.radar_sigma = cfg.gps.radar_sigma_m
             self.radar_rng = np.random.default_rng(altimeter_seed)
-            self.r_diag[2] = max(self.radar_sigma**2, R_FLOOR)
+            self.r_diag[Z] = max(self.radar_sigma**2, R_FLOOR)
         # R per reported fix type (RTK fixed / float / DGPS), when the preset has fix types
         self.r_by_fix: dict[str, np.ndarray] = {}
         if cfg.gps.r_from_fix_type and getattr(self.gps, "fix_types", ()):
@@ -200,7 +164,7 @@ class EstimatorFeedback(FilterBank, Feedback):
                 r = np.maximum(cfg.estimator.r_scale * np.asarray(self.gps.mode_variance(mode)),
                                R_FLOOR)
                 if self.radar:
-                    r[2] = self.r_diag[2]
+                    r[Z] = self.r_diag[Z]
                 self.r_by_fix[mode] = np.diag(r)
         self._r_mode: str | None = None
         e = cfg.estimator
@@ -208,7 +172,8 @@ class EstimatorFeedback(FilterBank, Feedback):
         self.name = e.name
         names = ([e.name] if e.name != "true" else []) + [s for s in e.shadow if s != e.name]
         self.names = names
-        self.filters = {n: make_filter(n, cfg, self.r_diag) for n in names}
+        comps = tuple(getattr(self.gps, "config_components", ()))
+        self.filters = {n: make_filter(n, cfg, self.r_diag, comps) for n in names}
         mdl = next(iter(self.filters.values())).model if self.filters else None
         self.pos_idx = list(mdl.pos_idx) if mdl is not None else [0, 2, 4]
         self.vel_idx = list(mdl.vel_idx) if mdl is not None else [1, 3, 5]
@@ -231,7 +196,8 @@ class EstimatorFeedback(FilterBank, Feedback):
         P0[self.pos_idx, self.pos_idx] = self.r_diag
         if self.cfg.estimator.model == "cvb":   # bias states: the IMU's turn-on figures
             bi = [i + 2 for i in self.pos_idx]
-            P0[bi, bi] = process_noise(self.cfg)[2]
+            _, _, bias_var0 = process_noise(self.cfg)
+            P0[bi, bi] = bias_var0
         return x0, P0
 
     def _init(self, z: np.ndarray) -> None:
@@ -249,14 +215,14 @@ class EstimatorFeedback(FilterBank, Feedback):
         if z is None:
             return None, None
         if self.radar:
-            z[2] = p_true[2] + self.radar_sigma * self.radar_rng.standard_normal()
+            z[Z] = p_true[Z] + self.radar_sigma * self.radar_rng.standard_normal()
         R_new = None
         if self.r_by_fix:
             mode = self.gps.last_fix_type
             if mode != self._r_mode and mode in self.r_by_fix:
                 self._r_mode = mode
                 R_new = self.r_by_fix[mode]
-        self.fixes.append((t, float(z[0]), float(z[1]), float(z[2])))
+        self.fixes.append((t, float(z[X]), float(z[Y]), float(z[Z])))
         if self.log is not None:  # what the receiver reports: its fix type and variance
             mode = self.gps.last_fix_type
             var = self.gps.reported_variance(mode)
@@ -300,7 +266,7 @@ class EstimatorFeedback(FilterBank, Feedback):
         _sync_solo(self)
         out: dict[str, Any] = {}
         n = len(p_true)
-        d = p_true[mission, :2] - p_ref[mission, :2]
+        d = p_true[mission, :Z] - p_ref[mission, :Z]   # horizontal
         track_ms = float(np.mean(np.sum(d * d, axis=1))) if len(d) else float("nan")
         lo, hi, _ = mission.indices(n)
         for name in self.names:
@@ -310,7 +276,7 @@ class EstimatorFeedback(FilterBank, Feedback):
             m = min(len(est), n)
             off = n - m
             full[off:] = est[:m] if len(est) <= n else est[-n:]
-            e = full[mission, :2] - p_true[mission, :2]
+            e = full[mission, :Z] - p_true[mission, :Z]
             ok = np.all(np.isfinite(e), axis=1)
             e2 = np.sum(e[ok] ** 2, axis=1)
             ms = float(np.mean(e2)) if ok.any() else float("nan")
@@ -353,18 +319,18 @@ def _sync_solo(fb: Any) -> None:
 def _nees_nis(cons: Any, full: np.ndarray, p_true: np.ndarray, off: int, lo: int, hi: int,
               n: int) -> tuple[list[float], list[float]]:
     """NEES ``eᵀ P⁻¹ e`` and NIS of the updates whose tick lies in ``[lo, hi)``. ``cons``: the
-    consistency record, a list of ``(j, nis, P_pp)`` or an (M, 11) array of rows
-    ``[j, nis, P_pp (9)]``; ``j`` + ``off`` is the update's tick."""
+    consistency record, a list of ``(j, nis, P_pp)`` or an (M, :data:`CONS`) array of its
+    rows; ``j`` + ``off`` is the update's tick."""
     if isinstance(cons, np.ndarray):
         arr = cons
     else:
         arr = np.array([[j, nis_j, *np.asarray(P).ravel()] for j, nis_j, P in cons],
-                       dtype=float).reshape(-1, 11)
+                       dtype=float).reshape(-1, CONS.size)
     if not len(arr):
         return [], []
-    k = off + arr[:, 0].astype(np.int64)
+    k = off + arr[:, C.J].astype(np.int64)
     sel = (k >= lo) & (k < hi) & (k < n)
-    k, nis, P = k[sel], arr[sel, 1], arr[sel, 2:].reshape(-1, 3, 3)
+    k, nis, P = k[sel], arr[sel, C.NIS], arr[sel, C.P:C.P_END].reshape(-1, 3, 3)
     ev = full[k] - p_true[k]
     fin = np.all(np.isfinite(ev), axis=1)
     ev, P = ev[fin], P[fin]
@@ -466,7 +432,7 @@ class BatchEstimatorFeedback:
         # tick-major (n_max, N, 3): one tick's rows contiguous (cache-friendly per-tick writes)
         self.est = {n: np.full((n_max, N, 3), np.nan) for n in self.names}
         # per update: tick, NIS, position covariance (3×3) — the NEES/NIS record
-        self.cons = {n: np.zeros((N, n_fix, 11)) for n in self.names}
+        self.cons = {n: np.zeros((N, n_fix, CONS.size)) for n in self.names}
         self.n_cons = np.zeros(N, dtype=np.int64)
         self.upd_ns = dict.fromkeys(self.names, 0)
         self.n_upd = dict.fromkeys(self.names, 0)
@@ -482,12 +448,12 @@ class BatchEstimatorFeedback:
         """Vehicle ``i``'s GNSS (and radar) at ``t`` (:meth:`EstimatorFeedback.measure`):
         initialise at the first fix, else stage the fix for this tick's update."""
         fb = self.fbs[i]
-        pt = (float(p[0]), float(p[1]), float(p[2]))
+        pt = (float(p[X]), float(p[Y]), float(p[Z]))
         z, R_new = fb.measure(t, pt)
         self.next_t[i] = fb.gps.next_fix_t
         if z is None:
             if fb.radar and self.init[i]:  # no fix: the radar altimeter still reads
-                self.h[i] = pt[2] + fb.radar_sigma * fb.radar_rng.standard_normal()
+                self.h[i] = pt[Z] + fb.radar_sigma * fb.radar_rng.standard_normal()
                 self.h_mask[i] = True
             return
         if R_new is not None:
@@ -583,7 +549,7 @@ class BatchEstimatorFeedback:
     def _height(self) -> None:
         """The radar heights read without a fix (:func:`~ag_uav.navigation.aiding.fuse_height`),
         as autopilots fly on a range finder when the fix is lost."""
-        iz = int(self.pos_idx[2])
+        iz = int(self.pos_idx[Z])
         for i in np.flatnonzero(self.h_mask):
             fuse_height(self.bank.filters.values(), i, self.h[i], self.fbs[i].radar_sigma ** 2, iz)
 
@@ -591,7 +557,7 @@ class BatchEstimatorFeedback:
         """Each vehicle's horizontal position 1σ (m) of the primary filter (NaN before its
         first fix): :func:`~ag_uav.navigation.aiding.horizontal_sigma`."""
         bf = self.bank.filters.get(self.primary)
-        horizontal_sigma(None if bf is None else bf.P, int(self.pos_idx[0]), int(self.pos_idx[1]),
+        horizontal_sigma(None if bf is None else bf.P, int(self.pos_idx[X]), int(self.pos_idx[Y]),
                          self.init, out)
 
     def _ideal_accel(self, v: np.ndarray, run: np.ndarray) -> np.ndarray | None:
@@ -619,7 +585,7 @@ class BatchEstimatorFeedback:
                     y = bf.y[i] if getattr(bf, "y", None) is not None else None
                     xl = x.tolist()
                     log.estimator(t, name, x, np.diagonal(bf.P[i]).copy(), y,
-                                  pos=(xl[pi[0]], xl[pi[1]], xl[pi[2]]))
+                                  pos=(xl[pi[X]], xl[pi[Y]], xl[pi[Z]]))
 
     def finish(self, flown: np.ndarray) -> None:
         """Hand the records back to the per-run feedbacks (for their ``scores``/``summary``)
@@ -650,9 +616,9 @@ def _world_accel(R, f, g, out):  # pragma: no cover
     """â = R̂ f̃ + g (world frame, z up): the IMU input of the filters' prediction."""
     for i in range(R.shape[0]):
         for r in range(3):
-            out[i, r] = (R[i, 3 * r] * f[i, 0] + R[i, 3 * r + 1] * f[i, 1]
-                         + R[i, 3 * r + 2] * f[i, 2])
-        out[i, 2] -= g
+            out[i, r] = (R[i, 3 * r + X] * f[i, X] + R[i, 3 * r + Y] * f[i, Y]
+                         + R[i, 3 * r + Z] * f[i, Z])   # row r of R̂ f̃
+        out[i, Z] -= g
 
 
 @njit(cache=True)
@@ -668,11 +634,11 @@ def _cons_record(cons, n_cons, k, mask, nis, P, pos):  # pragma: no cover
     for i in range(mask.shape[0]):
         if mask[i]:
             r = cons[i, n_cons[i]]
-            r[0] = k
-            r[1] = nis[i]
+            r[C.J] = k
+            r[C.NIS] = nis[i]
             for a in range(3):
                 for b in range(3):
-                    r[2 + 3 * a + b] = P[i, pos[a], pos[b]]
+                    r[C.P + 3 * a + b] = P[i, pos[a], pos[b]]
 
 
 @njit(cache=True)

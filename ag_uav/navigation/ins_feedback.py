@@ -100,6 +100,8 @@ from typing import Any
 import numpy as np
 
 from estimators.ins import BatchINS, INSConfig
+from numkit import X, Y, Z
+from numkit.geometry import euler_to_quat, quat_to_rot_flat
 
 from ..config import Config, ConfigError
 from ..vehicle.gps import ReceiverReport, derive_seed
@@ -107,23 +109,21 @@ from .aiding import horizontal_sigma
 from .feedback import Feedback
 from .ins_kernels import (
     BLOCKS,
+    ERRORS,
     FIX_DUE,
-    N_GATE,
-    N_NEES15,
-    N_NISP,
-    N_NISV,
-    N_NISY,
-    N_NOTPD,
-    N_POS,
+    GN,
+    IM,
     NOT_INITIALISED,
+    NR,
     NREC,
+    RG,
     RING_WIDTH,
+    RN,
     BankView,
     Outputs,
     Scores,
     SensorRows,
     outputs,
-    quat_to_rot,
     radar_rows,
     tick_in,
 )
@@ -280,9 +280,8 @@ class InsFeedback(Feedback):
 
     def fix(self, t: float, p_ant, v_ant, yaw: float) -> list[float] | None:
         """The receiver's fix of this tick from the delayed antenna truth (position, velocity,
-        heading), as one :meth:`BatchINS.gnss_row` (a list of 15; None: no fix due, or lost).
-        Python floats, since numpy's per-call cost would dominate at one vehicle (the same IEEE
-        operations, so the same bits)."""
+        heading), as one GNSS input row (``GIN``, a list; None: no fix due, or lost). Python
+        floats: numpy's per-call cost would dominate at one vehicle (the same bits)."""
         z = self.gps.measure_xyz(t, p_ant)
         if z is None or (self.outages and any(a <= t < b for a, b in self.outages)):
             return None
@@ -293,7 +292,7 @@ class InsFeedback(Feedback):
         if self.report is not None:
             bias, rep, scale = self.report.step(true_type)
             if self.report.in_false:   # a false fix carries its bias
-                zx, zy, zz = zx + bias[0], zy + bias[1], zz + bias[2]
+                zx, zy, zz = zx + bias[X], zy + bias[Y], zz + bias[Z]
                 self.last_false = bool(bias.any())
             else:   # the bias is zero (added, as it always was: -0.0 becomes 0.0)
                 zx, zy, zz = zx + 0.0, zy + 0.0, zz + 0.0
@@ -308,28 +307,30 @@ class InsFeedback(Feedback):
             vp = self._var_lists.get(rep, self._var_nominal_list)
             if self.colour == "consider":   # else the considered variance stays zero
                 cv = self._cv_lists.get(rep, self._cv_nominal_list)
-                self.cvar = [cv[0] * s2, cv[1] * s2, cv[2] * s2]
-        n = self._aux4()
+                self.cvar = [cv[X] * s2, cv[Y] * s2, cv[Z] * s2]
+        nx, ny, nz, n_yaw = self._aux4()
         sv = self.sig_v
         self.fixes += 1
         if self.log is not None:  # the reported type and its variance (times the calibration)
             v, c2 = self.gps.reported_variance(rep), scale * scale * self.scale0 ** 2
-            self.log.gps(t, np.array((zx, zy, zz)), (v[0] * c2, v[1] * c2, v[2] * c2), rep,
+            self.log.gps(t, np.array((zx, zy, zz)), (v[X] * c2, v[Y] * c2, v[Z] * c2), rep,
                          t_meas=t - self.age_s, truth=p_ant)  # the antenna, age_s ago
-        vv = self.var_v
-        return [self.age_s, zx, zy, zz,
-                v_ant[0] + sv * n[0], v_ant[1] + sv * n[1], v_ant[2] + sv * n[2],
-                yaw + self.sig_yaw * n[3], vp[0] * rs * rs, vp[1] * rs * rs, vp[2] * rs * rs,
-                vv, vv, vv, self.var_yaw]
+        vv, row = self.var_v, [0.0] * GN.SIZE   # the row's fields by name (GIN)
+        row[GN.AGE], row[GN.P:GN.P_END] = self.age_s, (zx, zy, zz)
+        row[GN.V:GN.V_END] = v_ant[X] + sv * nx, v_ant[Y] + sv * ny, v_ant[Z] + sv * nz
+        row[GN.YAW] = yaw + self.sig_yaw * n_yaw
+        row[GN.VAR_P:GN.VAR_P_END] = vp[X] * rs * rs, vp[Y] * rs * rs, vp[Z] * rs * rs
+        row[GN.VAR_V:GN.VAR_V_END], row[GN.VAR_YAW] = (vv, vv, vv), self.var_yaw
+        return row
 
     def _aux4(self) -> list[float]:
         """The next four standard normals of the receiver's auxiliary stream (velocity noise,
         heading noise), drawn in blocks: the same sequence as four at a time."""
-        j = self._aux_j
-        if j + 4 > len(self._aux):
+        j, m = self._aux_j, 4   # v (3), heading
+        if j + m > len(self._aux):
             self._aux, j = self.aux_rng.standard_normal(4096).tolist(), 0
-        self._aux_j = j + 4
-        return self._aux[j:j + 4]
+        self._aux_j = j + m
+        return self._aux[j:j + m]
 
     def update(self, t, p_true, v_true, imu=None):
         raise NotImplementedError("InsFeedback flies through the engine's batch "
@@ -450,18 +451,18 @@ class BatchInsFeedback:
         self.icfg = ins_config(f0.cfg)
         self.bank = BatchINS(NV, self.icfg, self.names) if nr else None
         self.D, self.dt = f0.D, f0.dt
-        self.ring = np.full((NV, self.D + 1, RING_WIDTH), np.nan)
+        self.ring = np.full((NV, self.D + 1, RING_WIDTH), np.nan)   # rows: RING
         self.R_true: np.ndarray | None = None
         self.w_true: np.ndarray | None = None
         self.init = np.zeros(NV, dtype=np.bool_)
         self.k0 = np.zeros(NV, dtype=np.int64)
         self.next_t = np.zeros(NV)
         self.radar_every = max(1, int(round(f0.cfg.sim.control_hz / f0.cfg.gps.radar_hz)))
-        self.imu = np.zeros((NV, 6))
+        self.imu = np.zeros((NV, IM.SIZE))
         self.due = np.zeros(NV, dtype=np.bool_)
         self.radar_on = f0.radar
-        self.gnss = np.full((NV, 15), np.nan)
-        self.radar = np.full((NV, 3), np.nan)
+        self.gnss = np.full((NV, GN.SIZE), np.nan)
+        self.radar = np.full((NV, RN.SIZE), np.nan)
         self.range_last = np.full(NV, np.nan)  # each vehicle's latest radar reading (range aid)
         #: 1.0 while the vehicle's last fix had its height kept out (range aid), else 0.0; each
         #: feedback sees its own element (``aid_on``, a view: the log records it per tick)
@@ -480,17 +481,17 @@ class BatchInsFeedback:
         self.blk = f0.imu_twin.block
         self.btru = np.zeros((NV, self.blk, 6))
         self.b_next, self.twins = 0, True   # twins: no engine IMU tapped (imu_tap)
-        self.prm = np.array([*ANTENNA, *RADAR, *self.icfg.heading_baseline,
+        self.prm = np.array([*ANTENNA, *RADAR, *self.icfg.heading_baseline,  # SENSOR_PRM
                              math.cos(self.icfg.radar_max_tilt_deg * DEG),
                              self.icfg.radar_max_range])
         nrec = max(nr, 1)
         # herr, verr, tilt, yaw; tick-major (one tick's rows contiguous: cache-friendly writes).
         # The scoring records are float32 (7 significant digits; the scores sum in float64):
         # half the memory of a long job's records
-        self.err = np.full((n_max, NV, 4, nrec), np.nan, dtype=np.float32)
+        self.err = np.full((n_max, NV, ERRORS.size, nrec), np.nan, dtype=np.float32)
         n_fix = int(n_max * max(fb.gps.rate_hz for fb in fbs) * self.dt) + 4
         self.fix_k = np.full((NV, n_fix), -1, dtype=np.int64)
-        # the per-fix score record (columns N_*)
+        # the per-fix score record (NEES_REC)
         self.nees = np.full((NV, n_fix, NREC, nrec), np.nan, dtype=np.float32)
         self.n_fix = np.zeros(NV, dtype=np.int64)
         self.noise = np.stack([fb.radar_rng.standard_normal(4096) for fb in fbs])
@@ -546,7 +547,8 @@ class BatchInsFeedback:
                     self.btru[i] = fb.imu_twin.walk_block()
             self.b_next += self.blk
         # Truth's fields, as a plain tuple (ins_kernels: a named one types slower)
-        truth = (p, v, self.R_true, self.w_true, act, imu[0], imu[2])
+        f_m, _, om = imu   # the engine's (f̃, R, ω̃)
+        truth = (p, v, self.R_true, self.w_true, act, f_m, om)
         flags = tick_in(truth, self.rows, k, t, k % self.blk)
         if flags & FIX_DUE:
             self._fixes(k, t)
@@ -593,7 +595,7 @@ class BatchInsFeedback:
         batch's rows in one assignment each (``gnss``, ``cvar``, ``aid_on``, ``next_t``)."""
         ii = np.flatnonzero(self.due).tolist()
         slot = max(k - self.D, 0) % (self.D + 1)
-        rings = self.ring[ii, slot, :7].tolist()
+        rings = self.ring[ii, slot, :RG.YAW_END].tolist()   # antenna p, v, heading
         rl, init = self.range_last[ii].tolist(), self.init[ii].tolist()
         fused: list[int] = []
         rows: list[list[float]] = []
@@ -601,19 +603,18 @@ class BatchInsFeedback:
         aid_on: list[float] = []
         for i, r, rng, ok in zip(ii, rings, rl, init, strict=True):
             if not math.isfinite(r[0]):   # before D ticks of history: the oldest there is
-                r = self.ring[i, 0, :7].tolist()
+                r = self.ring[i, 0, :RG.YAW_END].tolist()
             fb = self.fbs[i]
-            row = fb.fix(t, r[0:3], r[3:6], r[6])
-            if row is None or not (math.isfinite(row[1]) and math.isfinite(row[2])
-                                   and math.isfinite(row[3])):
+            row = fb.fix(t, r[RG.ANT_P:RG.ANT_P_END], r[RG.ANT_V:RG.ANT_V_END], r[RG.YAW])
+            if row is None or not all(math.isfinite(c) for c in row[GN.P:GN.P_END]):
                 continue
             if not ok:
-                if abs(float(np.linalg.norm(self.imu[i, :3])) - 9.81) < 0.5:  # at rest: levels
+                if abs(float(np.linalg.norm(self.imu[i, :IM.F_END])) - 9.81) < 0.5:  # at rest
                     self._initialise(i, k, np.array(row))
                 continue
-            aid = rng < fb.aid_m and math.hypot(row[4], row[5]) < fb.aid_mps
+            aid = rng < fb.aid_m and math.hypot(row[GN.V + X], row[GN.V + Y]) < fb.aid_mps
             if aid:
-                row[10] = NOT_FUSED_VAR  # range aid: the radar is the height source
+                row[GN.VAR_P + Z] = NOT_FUSED_VAR  # range aid: the radar is the height source
                 fb.range_aid_fixes += 1
             aid_on.append(1.0 if aid else 0.0)
             fused.append(i)
@@ -629,15 +630,16 @@ class BatchInsFeedback:
 
     def _initialise(self, i: int, k: int, row: np.ndarray) -> None:
         """On the ground at the first fix (module docstring)."""
-        f = self.imu[i, :3]
-        roll = math.atan2(f[1], f[2])
-        pitch = math.atan2(-f[0], math.hypot(f[1], f[2]))
-        q = _euler_quat(roll, pitch, float(row[7]))
+        f = self.imu[i, IM.F:IM.F_END]
+        roll = math.atan2(f[Y], f[Z])   # φ = atan2(f̃_y, f̃_z)
+        pitch = math.atan2(-f[X], math.hypot(f[Y], f[Z]))   # θ = atan2(−f̃_x, √(f̃_y² + f̃_z²))
+        q = np.empty(4)
+        euler_to_quat(roll, pitch, float(row[GN.YAW]), q)
         Rm = np.empty(9)
-        quat_to_rot(q, Rm)
-        p = row[1:4] - Rm.reshape(3, 3) @ np.asarray(ANTENNA)
+        quat_to_rot_flat(q, Rm)
+        p = row[GN.P:GN.P_END] - Rm.reshape(3, 3) @ np.asarray(ANTENNA)   # fix − R r_ant
         im = self.cfg.imu
-        sd = np.r_[np.sqrt(row[8:11]), [0.1] * 3, [DEG, DEG, 2 * DEG],
+        sd = np.r_[np.sqrt(row[GN.VAR_P:GN.VAR_P_END]), [0.1] * 3, [DEG, DEG, 2 * DEG],
                    [max(im.accel_bias_mg * 1e-3 * 9.81, 1e-3)] * 3,
                    [max(im.gyro_bias_dps, 1e-3) * DEG] * 3]
         self.bank.reset_vehicle(i, p, np.zeros(3), q, P0=sd)
@@ -657,14 +659,15 @@ class BatchInsFeedback:
     def _pre_init(self, act: np.ndarray) -> None:
         """Vehicles without a fix yet: radar height, zero velocity, levelled attitude."""
         for i in np.flatnonzero(act & ~self.init):
-            f = self.imu[i, :3]
-            q = _euler_quat(math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2])),
-                            0.0)
-            quat_to_rot(q, self.R_out[i])
-            h = self.radar[i, 0]
-            self.p_out[i, :2] = 0.0
+            f = self.imu[i, IM.F:IM.F_END]
+            q = np.empty(4)
+            euler_to_quat(math.atan2(f[Y], f[Z]), math.atan2(-f[X], math.hypot(f[Y], f[Z])), 0.0,
+                          q)
+            quat_to_rot_flat(q, self.R_out[i])
+            h = self.radar[i, RN.RANGE]
+            self.p_out[i, :Z] = 0.0
             if np.isfinite(h):   # body height = slant range + the radar's offset (level)
-                self.p_out[i, 2] = h - RADAR[2]
+                self.p_out[i, Z] = h - RADAR[Z]
             self.v_out[i] = 0.0
 
     def finish(self, flown: np.ndarray) -> None:
@@ -674,25 +677,17 @@ class BatchInsFeedback:
         for i, fb in enumerate(self.fbs):
             n, nf = int(flown[i]), int(self.n_fix[i])
             e = np.ascontiguousarray(self.err[:n, i])
-            fb.rec = {"herr": e[:, 0], "verr": e[:, 1], "tilt": e[:, 2], "yaw": e[:, 3],
-                      "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, N_NEES15],
-                      "nis": self.nees[i, :nf, N_NISP], "nis_vel": self.nees[i, :nf, N_NISV],
-                      "nis_yaw": self.nees[i, :nf, N_NISY],
-                      **{f"nees_{b}": self.nees[i, :nf, N_POS + m]
+            fb.rec = {**{name: e[:, c] for name, c in ERRORS.offset.items()},  # herr .. yaw
+                      "fix_k": self.fix_k[i, :nf], "nees": self.nees[i, :nf, NR.NEES15],
+                      "nis": self.nees[i, :nf, NR.NISP], "nis_vel": self.nees[i, :nf, NR.NISV],
+                      "nis_yaw": self.nees[i, :nf, NR.NISY],
+                      **{f"nees_{b}": self.nees[i, :nf, NR.POS + m]
                          for m, b in enumerate(BLOCKS)},
-                      "not_pd": self.nees[i, :nf, N_NOTPD],
-                      "gate": self.nees[i, :nf, N_GATE],
+                      "not_pd": self.nees[i, :nf, NR.NOTPD],
+                      "gate": self.nees[i, :nf, NR.GATE],
                       "nis_radar": (self.bank.radar_nis[i * self.nr:(i + 1) * self.nr].tolist()
                                     if self.bank is not None else []),
                       "update_us": us,
                       "counters": {key: [int(x) for x in val[i * self.nr:(i + 1) * self.nr]]
                                    for key, val in counters.items()}}
 
-
-def _euler_quat(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """ZYX Euler angles → Hamilton (w, x, y, z), body → world."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])

@@ -13,33 +13,68 @@ read."""
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from estimators.ins import quat_log_err
-from estimators.ins import quat_to_rot as quat_to_rot_3x3
+from estimators.ins.layout import DG, GIN, RIN
+from numkit import Layout, X, Y, Z
+from numkit.geometry import quat_log_err, quat_to_rot, quat_to_rot_flat, rot_to_quat, rot_to_yaw
 
 from .._jit import njit
 
-__all__ = ["BLOCKS", "FIX_DUE", "NOT_INITIALISED", "NREC", "RING_WIDTH", "BankView", "Outputs",
-           "Pose", "Scores", "SensorRows", "Truth", "outputs", "quad_inv", "quad_inv_at",
-           "quat_to_rot", "radar_rows", "ring_write", "rot_to_quat", "tick_in"]
+__all__ = ["BLOCKS", "ERRORS", "ERROR_STATE", "FIX_DUE", "IMU_ROW", "NEES_REC", "NOMINAL",
+           "NOT_INITIALISED", "NREC", "RING", "RING_WIDTH", "ROT", "SENSOR_PRM", "BankView",
+           "Outputs", "Pose", "Scores", "SensorRows", "Truth", "layout_at", "outputs",
+           "quad_inv", "quad_inv_at", "radar_rows", "ring_write", "tick_in"]
 
 #: the per-fix score record's columns (``BatchInsFeedback.nees[i, fix, :, row]``): NEES15,
 #: the NEES of the position, velocity, attitude, accel-bias and gyro-bias blocks (3 dof each),
 #: 1 where the core P was not positive definite (no NEES), the NIS of the fix's position,
 #: velocity and heading updates, the gate's verdict on the position (0 fused, 1 rejected,
 #: 2 rejected and reset to the receiver)
-(N_NEES15, N_POS, N_VEL, N_ATT, N_BA, N_BG, N_NOTPD, N_NISP, N_NISV, N_NISY,
- N_GATE) = range(11)
-NREC = 11
-#: the NEES blocks' names (summary keys nees_<name>_mean), in record order from N_POS
+NEES_REC = Layout("nees15 pos vel att ba bg notpd nisp nisv nisy gate")
+NR = NEES_REC.at
+NREC = NEES_REC.size
+#: the NEES blocks' names (summary keys nees_<name>_mean), in record order from ``NR.POS``
 BLOCKS = ("pos", "vel", "att", "ba", "bg")
+#: the per-tick error record's columns (``BatchInsFeedback.err[k, i, :, row]``): horizontal
+#: position, 3-D velocity, tilt and yaw errors
+ERRORS = Layout("herr verr tilt yaw")
+ER = ERRORS.at
 
-#: ring layout per tick: antenna position, antenna velocity, heading, R, slant range, p, v,
-#: the walked IMU biases (accel, gyro)
-RING_WIDTH = 29
+#: the INS's nominal state (:class:`estimators.ins.BatchINS` ``x_core``, ``x_out``): position,
+#: velocity, attitude quaternion (w, x, y, z), accel and gyro biases; and its 15-state error
+#: (the order of ``P``): δp, δv, δθ, δb_a, δb_g
+NOMINAL = Layout("p:3 v:3 q:4 ba:3 bg:3")
+ERROR_STATE = Layout("p:3 v:3 th:3 ba:3 bg:3")
+XN, XE = NOMINAL.at, ERROR_STATE.at
+#: the bank's IMU input row (``BatchINS.step_raw``'s ``imu``): specific force f̃, rate ω̃
+IMU_ROW = Layout("f:3 om:3")
+IM = IMU_ROW.at
+#: a row-major rotation matrix (9,): ``R[RM.R21]`` is R₂₁
+ROT = Layout("r00 r01 r02 r10 r11 r12 r20 r21 r22")
+RM = ROT.at
+
+#: the truth ring's row per tick: antenna position, antenna velocity, heading, R (row-major),
+#: slant range, p, v, the walked IMU biases (accel, gyro; contiguous, as the IMU walks them)
+RING = Layout("ant_p:3 ant_v:3 yaw R:9 range p:3 v:3 ba:3 bg:3")
+RG = RING.at
+RING_WIDTH = RING.size
+#: the sensor offsets (``SensorRows.prm``): antenna, radar, heading baseline (body axes, m),
+#: the radar's cos(max tilt) and its max range (m)
+SENSOR_PRM = Layout("r_ant:3 r_rad:3 r_b:3 cos_max r_max")
+SP = SENSOR_PRM.at
+
+
+def layout_at(layout: Any) -> tuple:
+    """The offsets by name (``Layout.at``) of one of :mod:`estimators.ins.layout`'s arrays."""
+    return Layout(" ".join(f"{n}:{'x'.join(map(str, s))}" for n, s in layout.shape.items())).at
+
+
+#: the bank's GNSS and radar input rows and its diagnostics (:mod:`estimators.ins.layout`;
+#: ``BatchINS.nis`` is the diagnostics' head: the last NIS of position, velocity, heading)
+GN, RN, DN = layout_at(GIN), layout_at(RIN), layout_at(DG)
 
 #: :func:`tick_in`'s return: a bit set when some vehicle has a fix due (its receiver runs)
 FIX_DUE = 1
@@ -111,7 +146,7 @@ class Scores(NamedTuple):
     ``gnss`` and ``imu`` as in :class:`SensorRows`, the considered GNSS variance ``cvar``
     (N, 3), and the score records: the errors ``err`` (ticks, N, 4, rules: horizontal,
     velocity, tilt, yaw), each fix's tick ``fix_k`` (N, fixes), the per-fix record ``nees``
-    (N, fixes, :data:`NREC`, rules; columns ``N_*``), the fixes recorded ``n_fix`` (N,) and
+    (N, fixes, :data:`NREC`, rules; :data:`NEES_REC`), the fixes recorded ``n_fix`` (N,) and
     the tick before each vehicle's initialisation ``k0`` (N,)."""
 
     ring: np.ndarray
@@ -141,41 +176,43 @@ def ring_write(tr, s, k, j):  # pragma: no cover
     """Tick k's sensor truth per vehicle (row ``k % B``): the antenna position p + R r_ant
     (0:3), the antenna velocity v + R(ω × r_ant) (3:6), the dual-antenna heading
     ψ = atan2(b_y, b_x) − atan2(r_b,y, r_b,x) with b = R r_b (6), R (7:16), the radar's slant
-    range ρ = s_z / R₂₂ with s = p + R r_rad over the ground z = 0 (16; NaN beyond the radar's
-    cone or range), p (17:20), v (20:23), the IMU's walked biases ``btru[i, j]`` (23:29);
+    range ρ = s_z / R₂₂ with s = p + R r_rad over the ground z = 0 (NaN beyond the radar's
+    cone or range), p, v, the IMU's walked biases ``btru[i, j]`` (:data:`RING`'s fields);
     ``tr``: :class:`Truth`, ``s``: :class:`SensorRows`."""
     p, v, R, w, act = tr.p, tr.v, tr.R, tr.w, tr.act
     ring, prm, bt = s.ring, s.prm, s.btru
     B = ring.shape[1]
-    ra = prm[0:3]
-    rr = prm[3:6]
-    rb = prm[6:9]
-    psi_b = math.atan2(rb[1], rb[0])   # the baseline's body azimuth
+    ra = prm[SP.R_ANT:SP.R_ANT_END]
+    rr = prm[SP.R_RAD:SP.R_RAD_END]
+    rb = prm[SP.R_B:SP.R_B_END]
+    psi_b = math.atan2(rb[Y], rb[X])   # the baseline's body azimuth
     for i in range(p.shape[0]):
         if not act[i]:
             continue
         r = ring[i, k % B]
-        wx = w[i, 1] * ra[2] - w[i, 2] * ra[1]
-        wy = w[i, 2] * ra[0] - w[i, 0] * ra[2]
-        wz = w[i, 0] * ra[1] - w[i, 1] * ra[0]
+        wx = w[i, Y] * ra[Z] - w[i, Z] * ra[Y]   # ω × r_ant
+        wy = w[i, Z] * ra[X] - w[i, X] * ra[Z]
+        wz = w[i, X] * ra[Y] - w[i, Y] * ra[X]
         for a in range(3):
-            R0, R1, R2 = R[i, 3 * a], R[i, 3 * a + 1], R[i, 3 * a + 2]
-            r[a] = p[i, a] + R0 * ra[0] + R1 * ra[1] + R2 * ra[2]
-            r[3 + a] = v[i, a] + R0 * wx + R1 * wy + R2 * wz
-            r[17 + a] = p[i, a]
-            r[20 + a] = v[i, a]
-        bx = R[i, 0] * rb[0] + R[i, 1] * rb[1] + R[i, 2] * rb[2]
-        by = R[i, 3] * rb[0] + R[i, 4] * rb[1] + R[i, 5] * rb[2]
+            R0, R1, R2 = R[i, RM.R00 + 3 * a], R[i, RM.R01 + 3 * a], R[i, RM.R02 + 3 * a]  # row a
+            r[RG.ANT_P + a] = p[i, a] + R0 * ra[X] + R1 * ra[Y] + R2 * ra[Z]   # p + R r_ant
+            r[RG.ANT_V + a] = v[i, a] + R0 * wx + R1 * wy + R2 * wz   # v + R(ω × r_ant)
+            r[RG.P + a] = p[i, a]
+            r[RG.V + a] = v[i, a]
+        # b = R r_b (its x and y rows)
+        bx = R[i, RM.R00] * rb[X] + R[i, RM.R01] * rb[Y] + R[i, RM.R02] * rb[Z]
+        by = R[i, RM.R10] * rb[X] + R[i, RM.R11] * rb[Y] + R[i, RM.R12] * rb[Z]
         psi = math.atan2(by, bx) - psi_b
-        r[6] = math.atan2(math.sin(psi), math.cos(psi))
+        r[RG.YAW] = math.atan2(math.sin(psi), math.cos(psi))
         for m in range(9):
-            r[7 + m] = R[i, m]
-        for m in range(6):
-            r[23 + m] = bt[i, j, m]
-        c = R[i, 8]
-        sz = p[i, 2] + R[i, 6] * rr[0] + R[i, 7] * rr[1] + R[i, 8] * rr[2]
+            r[RG.R + m] = R[i, m]
+        for m in range(6):   # b_a then b_g
+            r[RG.BA + m] = bt[i, j, m]
+        c = R[i, RM.R22]
+        # s_z = (p + R r_rad)_z
+        sz = p[i, Z] + R[i, RM.R20] * rr[X] + R[i, RM.R21] * rr[Y] + R[i, RM.R22] * rr[Z]
         rho = sz / c if c > 0 else np.nan
-        r[16] = rho if (c >= prm[9] and rho <= prm[10]) else np.nan
+        r[RG.RANGE] = rho if (c >= prm[SP.COS_MAX] and rho <= prm[SP.R_MAX]) else np.nan
 
 
 @njit(cache=True)
@@ -192,10 +229,10 @@ def tick_in(truth, rows, k, t, j):  # pragma: no cover
     flags = 0
     for i in range(act.shape[0]):
         for a in range(3):
-            imu[i, a] = tr.f_m[i, a]
-            imu[i, 3 + a] = tr.om[i, a]
-        gnss[i, 0] = np.nan
-        radar[i, 0] = np.nan
+            imu[i, IM.F + a] = tr.f_m[i, a]
+            imu[i, IM.OM + a] = tr.om[i, a]
+        gnss[i, GN.AGE] = np.nan
+        radar[i, RN.RANGE] = np.nan
         due[i] = act[i] and t >= s.next_t[i] - 1e-9
         if due[i]:
             flags |= FIX_DUE
@@ -206,8 +243,8 @@ def tick_in(truth, rows, k, t, j):  # pragma: no cover
 
 @njit(cache=True)
 def radar_rows(ring, slot, act, noise, noise_i, sig, radar, range_last):  # pragma: no cover
-    """The radar's slant range of every active vehicle: the truth ring's range (column 16 of
-    row ``slot``) plus ``sig`` times the vehicle's next standard normal, ``noise[i,
+    """The radar's slant range of every active vehicle: the truth ring's range (``RG.RANGE``
+    of row ``slot``) plus ``sig`` times the vehicle's next standard normal, ``noise[i,
     noise_i[i]]`` (its own stream's block), into ``radar[i] = (range, sig², age 0)`` and
     ``range_last[i]`` (NaN: a dropout). Returns 0, or (nothing done) the number of active
     vehicles whose block is used up (the caller draws the next block and calls again)."""
@@ -222,59 +259,30 @@ def radar_rows(ring, slot, act, noise, noise_i, sig, radar, range_last):  # prag
             continue
         j = noise_i[i]
         noise_i[i] = j + 1
-        z = ring[i, slot, 16] + sig * noise[i, j]
-        radar[i, 0] = z
-        radar[i, 1] = sig * sig
-        radar[i, 2] = 0.0
+        z = ring[i, slot, RG.RANGE] + sig * noise[i, j]   # ρ̃ = ρ + σ n
+        radar[i, RN.RANGE] = z
+        radar[i, RN.VAR] = sig * sig
+        radar[i, RN.AGE] = 0.0
         range_last[i] = z
     return 0
-
-
-@njit(cache=True)
-def quat_to_rot(q, R):  # pragma: no cover
-    """Unit quaternion (w, x, y, z) → row-major rotation (9,), body → world: the INS's own
-    law (:func:`estimators.ins.quat_to_rot`) written into R's 3 × 3 view."""
-    quat_to_rot_3x3(q, R.reshape(3, 3))
-
-
-@njit(cache=True)
-def rot_to_quat(R, q):  # pragma: no cover
-    """Row-major rotation → unit quaternion (w, x, y, z) (Shepperd's method)."""
-    tr = R[0] + R[4] + R[8]
-    if tr > 0.0:
-        s = math.sqrt(tr + 1.0) * 2.0
-        q[0], q[1] = 0.25 * s, (R[7] - R[5]) / s
-        q[2], q[3] = (R[2] - R[6]) / s, (R[3] - R[1]) / s
-    elif R[0] > R[4] and R[0] > R[8]:
-        s = math.sqrt(1.0 + R[0] - R[4] - R[8]) * 2.0
-        q[0], q[1] = (R[7] - R[5]) / s, 0.25 * s
-        q[2], q[3] = (R[1] + R[3]) / s, (R[2] + R[6]) / s
-    elif R[4] > R[8]:
-        s = math.sqrt(1.0 + R[4] - R[0] - R[8]) * 2.0
-        q[0], q[1] = (R[2] - R[6]) / s, (R[1] + R[3]) / s
-        q[2], q[3] = 0.25 * s, (R[5] + R[7]) / s
-    else:
-        s = math.sqrt(1.0 + R[8] - R[0] - R[4]) * 2.0
-        q[0], q[1] = (R[3] - R[1]) / s, (R[2] + R[6]) / s
-        q[2], q[3] = (R[5] + R[7]) / s, 0.25 * s
 
 
 @njit(cache=True)
 def nees15(x, P, tr, q_t, dth, e, L, y):  # pragma: no cover
     """eᵀ P⁻¹ e of one row's core state against the truth ``tr`` (a ring row): e = [p, v,
     Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the IMU's walked biases of that
-    tick (ring 23:29)."""
-    if not np.isfinite(tr[17]):
-        e[0] = np.nan
+    tick (the ring's ``ba``, ``bg``)."""
+    if not np.isfinite(tr[RG.P]):
+        e[XE.P] = np.nan
         return np.nan
-    rot_to_quat(tr[7:16], q_t)
-    quat_log_err(x[6:10], q_t, dth)
+    rot_to_quat(tr[RG.R:RG.R_END], q_t)
+    quat_log_err(x[XN.Q:XN.Q_END], q_t, dth)
     for a in range(3):
-        e[a] = tr[17 + a] - x[a]
-        e[3 + a] = tr[20 + a] - x[3 + a]
-        e[6 + a] = dth[a]
-        e[9 + a] = tr[23 + a] - x[10 + a]
-        e[12 + a] = tr[26 + a] - x[13 + a]
+        e[XE.P + a] = tr[RG.P + a] - x[XN.P + a]
+        e[XE.V + a] = tr[RG.V + a] - x[XN.V + a]
+        e[XE.TH + a] = dth[a]
+        e[XE.BA + a] = tr[RG.BA + a] - x[XN.BA + a]
+        e[XE.BG + a] = tr[RG.BG + a] - x[XN.BG + a]
     return quad_inv(P, e, e.shape[0], L, y)
 
 
@@ -320,26 +328,27 @@ def quad_inv(P, e, n, L, y):  # pragma: no cover
 def row_errors(x, p, v, Rt, yaw_t, Re, out):  # pragma: no cover
     """Horizontal position, 3-D velocity, tilt (angle between the body z axes) and yaw errors
     of one row's output against the truth of the tick (``Rt`` row-major, its yaw
-    ``yaw_t = atan2(Rt[3], Rt[0])``, the same for every row of a vehicle); ``Re`` (3, 3):
-    scratch."""
-    quat_to_rot_3x3(x[6:10], Re)
-    dx, dy = x[0] - p[0], x[1] - p[1]
-    out[0] = math.sqrt(dx * dx + dy * dy)
+    ``yaw_t = atan2(R₁₀, R₀₀)``, the same for every row of a vehicle); ``Re`` (3, 3):
+    scratch; ``out``: :data:`ERRORS`."""
+    quat_to_rot(x[XN.Q:XN.Q_END], Re)
+    dx, dy = x[XN.P + X] - p[X], x[XN.P + Y] - p[Y]
+    out[ER.HERR] = math.sqrt(dx * dx + dy * dy)
     s = 0.0
     for a in range(3):
-        s += (x[3 + a] - v[a]) ** 2
-    out[1] = math.sqrt(s)
-    cz = Re[0, 2] * Rt[2] + Re[1, 2] * Rt[5] + Re[2, 2] * Rt[8]
-    out[2] = math.acos(min(1.0, max(-1.0, cz)))
-    ye = math.atan2(Re[1, 0], Re[0, 0]) - yaw_t
-    out[3] = abs(math.atan2(math.sin(ye), math.cos(ye)))
+        s += (x[XN.V + a] - v[a]) ** 2
+    out[ER.VERR] = math.sqrt(s)   # |v̂ − v|
+    # cos tilt = ẑ_b · z_b: the third columns of R̂ and R
+    cz = Re[X, Z] * Rt[RM.R02] + Re[Y, Z] * Rt[RM.R12] + Re[Z, Z] * Rt[RM.R22]
+    out[ER.TILT] = math.acos(min(1.0, max(-1.0, cz)))
+    ye = math.atan2(Re[Y, X], Re[X, X]) - yaw_t
+    out[ER.YAW] = abs(math.atan2(math.sin(ye), math.cos(ye)))
 
 
 @njit(cache=True, nogil=True)
 def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
     """The flown row's (p, v, R) per vehicle and the bias-corrected rates ω̃ − b̂_g (the raw
     gyro before the filter is initialised); per row the tick's errors (:func:`row_errors`)
-    and, at a fix, the record ``nees[i, fix, :, row]`` (columns ``N_*``): the NEES of the
+    and, at a fix, the record ``nees[i, fix, :, row]`` (:data:`NEES_REC`): the NEES of the
     core's 15-state error against the truth of the core's tick (:func:`nees15`), of each
     3-state block on its marginal covariance, and the fix's NIS (position, velocity, heading;
     NaN for a part not in the fix). The covariance scored is the one the INS reports: its P
@@ -357,8 +366,8 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
     Re = np.empty((3, 3))
     q_t = np.empty(4)
     dth = np.empty(3)
-    e = np.empty(15)
-    oe = np.empty(4)
+    e = np.empty(XE.SIZE)
+    oe = np.empty(ER.SIZE)
     L, y = np.empty((15, 15)), np.empty(15)
     Pb, eb = np.empty((3, 3)), np.empty(3)
     Pc = np.empty((15, 15))
@@ -366,26 +375,26 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
         if not act[i]:
             continue
         for a in range(3):
-            w_out[i, a] = imu[i, 3 + a]
+            w_out[i, a] = imu[i, IM.OM + a]
         if not init[i]:
             continue
         if flown >= 0:
             x = xo[i * nr + flown]
             for a in range(3):
-                p_out[i, a] = x[a]
-                v_out[i, a] = x[3 + a]
-                w_out[i, a] = imu[i, 3 + a] - x[13 + a]
-            quat_to_rot(x[6:10], R_out[i])
+                p_out[i, a] = x[XN.P + a]
+                v_out[i, a] = x[XN.V + a]
+                w_out[i, a] = imu[i, IM.OM + a] - x[XN.BG + a]   # ω̃ − b̂_g
+            quat_to_rot_flat(x[XN.Q:XN.Q_END], R_out[i])
         rec = n_fix[i]
-        at_fix = np.isfinite(gnss[i, 0]) and rec < fix_k.shape[1]
+        at_fix = np.isfinite(gnss[i, GN.AGE]) and rec < fix_k.shape[1]
         if at_fix:
             fix_k[i, rec] = k
             n_fix[i] = rec + 1
-        yaw_t = math.atan2(Rt[i, 3], Rt[i, 0])
+        yaw_t = rot_to_yaw(Rt[i])
         for j in range(nr):
             row = i * nr + j
             row_errors(xo[row], p[i], v[i], Rt[i], yaw_t, Re, oe)
-            for c in range(4):
+            for c in range(ER.SIZE):
                 err[k, i, c, j] = oe[c]
             if at_fix:
                 tr = ring[i, (k0[i] + core[row]) % B]
@@ -395,12 +404,12 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
                         Pc[a, b] = P[row, a, b]
                 for a in range(3):
                     Pc[a, a] += cvar[i, a]
-                rc[N_NEES15] = nees15(xc[row], Pc, tr, q_t, dth, e, L, y)
-                rc[N_NISP] = nis[row, 0]
-                rc[N_NISV] = nis[row, 1]
-                rc[N_NISY] = nis[row, 2]
-                rc[N_GATE] = gate[row]
-                if np.isfinite(e[0]):   # each 3-state block alone (3 dof)
-                    for b in range(5):
-                        rc[N_POS + b] = quad_inv_at(Pc, e, 3 * b, eb.shape[0], L, y, Pb, eb)
-                    rc[N_NOTPD] = 0.0 if np.isfinite(rc[N_NEES15]) else 1.0
+                rc[NR.NEES15] = nees15(xc[row], Pc, tr, q_t, dth, e, L, y)
+                rc[NR.NISP] = nis[row, DN.NISP]
+                rc[NR.NISV] = nis[row, DN.NISV]
+                rc[NR.NISY] = nis[row, DN.NISY]
+                rc[NR.GATE] = gate[row]
+                if np.isfinite(e[XE.P]):   # each 3-state block alone (3 dof)
+                    for b in range(5):   # block b of the error state: δp, δv, δθ, δb_a, δb_g
+                        rc[NR.POS + b] = quad_inv_at(Pc, e, 3 * b, eb.shape[0], L, y, Pb, eb)
+                    rc[NR.NOTPD] = 0.0 if np.isfinite(rc[NR.NEES15]) else 1.0

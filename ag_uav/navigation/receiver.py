@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from numkit import X, Y, Z
+
 from ..config import Config, ConfigError
 from ..vehicle.gps import GpsSensor
 
@@ -117,8 +119,8 @@ def reported_acc(var: tuple[float, float, float] | list[float], s2: float) -> li
     (:class:`~ag_uav.vehicle.gps.ReceiverReport`): one horizontal and one vertical figure, as
     u-blox UBX-NAV-PVT ``hAcc``/``vAcc`` and NMEA GST give, and as PX4's EKF2 uses ``eph``
     for both horizontal axes."""
-    h = 0.5 * (var[0] + var[1]) * s2
-    return [h, h, var[2] * s2]
+    h = 0.5 * (var[X] + var[Y]) * s2
+    return [h, h, var[Z] * s2]
 
 
 def reported_r(acc: list[float], colour: str, share: float, inflate: float,

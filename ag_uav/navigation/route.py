@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from estimators.route import Route, RouteConstrainedKF
+from numkit import X, Y, Z
 
 from ..config import Config
 from ..seeds import seed_sequences
@@ -156,11 +157,11 @@ class RouteConstrainedFeedback(EstimatorFeedback):
         self.n_virtual_rejected += 0 if ok else 1
         x = rf.x
         pi, vi = self.pos_idx, self.vel_idx
-        pos = (float(x[pi[0]]), float(x[pi[1]]), float(x[pi[2]]))
+        pos = (float(x[pi[X]]), float(x[pi[Y]]), float(x[pi[Z]]))
         if self.est[ROUTE_NAME]:
             self.est[ROUTE_NAME][-1] = pos
         if self.primary == ROUTE_NAME:
-            return pos, (float(x[vi[0]]), float(x[vi[1]]), float(x[vi[2]]))
+            return pos, (float(x[vi[X]]), float(x[vi[Y]]), float(x[vi[Z]]))
         return p, v
 
     def summary(self) -> dict[str, Any]:
@@ -185,9 +186,9 @@ def outage_cross_track(res: Any, window: tuple[float, float], plan: CoveragePlan
         pts = shapely.points(xy[:, 0], xy[:, 1])
         return shapely.distance(line, pts)
 
-    d = dist(res.p_true[sel, :2])
+    d = dist(res.p_true[sel, :Z])   # horizontal
     out = {"peak_cross_track_m": float(d.max()), "rms_cross_track_m": float(np.sqrt(np.mean(d**2)))}
     if est is not None:
-        e = np.asarray(est)[sel, :2] - res.p_true[sel, :2]
+        e = np.asarray(est)[sel, :Z] - res.p_true[sel, :Z]
         out["peak_estimate_error_m"] = float(np.max(np.hypot(e[:, 0], e[:, 1])))
     return out

@@ -22,6 +22,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from numkit.geometry import quat_to_euler
+
 from .._jit import njit
 
 #: message kinds in the kernel's output, in the order the log's channels are listed
@@ -85,12 +87,8 @@ def _state_values(row: np.ndarray, n_motors: int, ctrl_cols: np.ndarray,
     vx, vy, vz = row[9], row[10], row[11]
     rx, ry, rz = row[12], row[13], row[14]
     deg = 57.29577951308232
-    sp = 2.0 * (qw * qy - qz * qx)
-    sp = 1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp)
-    head = (row[0], px, py, pz, vx, vy, vz,
-            np.arctan2(2.0 * (qw * qx + qy * qz), 1.0 - 2.0 * (qx * qx + qy * qy)) * deg,
-            np.arcsin(sp) * deg,
-            np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)) * deg)
+    roll, pitch, yaw = quat_to_euler(qw, qx, qy, qz)
+    head = (row[0], px, py, pz, vx, vy, vz, roll * deg, pitch * deg, yaw * deg)
     for j in range(10):
         v[j] = head[j]
     for j in range(7):  # reference x, y, z, vx, vy, vz, yaw

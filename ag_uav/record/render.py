@@ -33,6 +33,8 @@ if os.environ["MUJOCO_GL"].lower() == "egl":
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from numkit.geometry import quat_mul  # noqa: E402
+
 __all__ = ["RenderThread", "Renderer", "RenderUnavailable", "optical_quat"]
 
 
@@ -56,15 +58,6 @@ def _ensure_backend() -> None:
         gl_context.GLContext = GLContext
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-                     w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-                     w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-
-
 # MuJoCo cameras look along -z with y up; the optical convention (Foxglove, ROS) looks along +z
 # with y down: rotate 180 degrees about the camera's x axis.
 _FLIP_X = np.array([0.0, 1.0, 0.0, 0.0])
@@ -74,7 +67,9 @@ def optical_quat(cam_xmat: np.ndarray) -> np.ndarray:
     """World orientation (wxyz) of the optical frame of a MuJoCo camera with ``cam_xmat``."""
     q = np.zeros(4)
     mujoco.mju_mat2Quat(q, np.asarray(cam_xmat, dtype=float).reshape(9))
-    return _quat_mul(q, _FLIP_X)
+    out = np.empty(4)
+    quat_mul(q, _FLIP_X, out)
+    return out
 
 
 #: scenery strips: half-width (m), height above the ground (m), colour

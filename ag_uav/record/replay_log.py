@@ -24,7 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..navigation.replay.data import DEG, quat_to_rot_np, rot_to_euler_zyx
+from numkit.geometry import quats_to_rots, rots_to_euler
+
+from ..navigation.replay.data import DEG
 from ..navigation.replay.runner import ReplayResult
 from .geo import GeoFrame, location_fixes
 
@@ -42,7 +44,7 @@ def _ns(t: float, t0: float) -> int:
 
 def _rows(t: np.ndarray, p: np.ndarray, v: np.ndarray | None, R: np.ndarray | None,
           extra: dict[str, np.ndarray] | None = None) -> list[dict]:
-    rpy = rot_to_euler_zyx(R) / DEG if R is not None else None
+    rpy = rots_to_euler(R) / DEG if R is not None else None
     out = []
     for k in range(t.size):
         if not np.all(np.isfinite(p[k])):
@@ -71,7 +73,7 @@ def write_replay_mcap(path: Path, res: ReplayResult, summary: dict) -> dict[str,
     for i, rule in enumerate(res.rules):
         x = res.x[sel, i]
         extra = ({"sd_p": np.sqrt(np.maximum(res.pdiag[sel, :3], 0.0))} if i == 0 else None)
-        topics[f"/replay/{rule}"] = _rows(t, x[:, :3], x[:, 3:6], quat_to_rot_np(x[:, 6:10]),
+        topics[f"/replay/{rule}"] = _rows(t, x[:, :3], x[:, 3:6], quats_to_rots(x[:, 6:10]),
                                           extra)
     for name, track in (("reference", res.log.reference), ("autopilot", res.log.autopilot)):
         if track is not None:

@@ -9,6 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from numkit.axes import QX, QY
+from numkit.geometry import quat_normalize, yaw_to_quat
+
 from .log_ticks import Tick
 from .runlog import RunLog
 
@@ -77,9 +80,11 @@ def synthetic_run(
         lag = 0.97 * lag + 0.03 * rng.normal(0.0, 0.3, 3)
         p = p_ref + lag
         v = v_ref + rng.normal(0.0, 0.05, 3)
-        q = (math.cos(yaw / 2), 0.02, -0.03, math.sin(yaw / 2))
-        qn = math.sqrt(sum(c * c for c in q))
-        q = tuple(c / qn for c in q)
+        q = np.empty(4)
+        yaw_to_quat(yaw, q)
+        q[QX], q[QY] = 0.02, -0.03   # a small steady tilt
+        quat_normalize(q, q)
+        q = tuple(q.tolist())
         e = p_ref - p
         ctrl = {}
         for ax, ev in zip(("x", "y", "z"), e, strict=True):

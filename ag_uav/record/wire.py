@@ -8,7 +8,6 @@ the encoding is protobuf's wire format (https://protobuf.dev/programming-guides/
 
 from __future__ import annotations
 
-import math
 import struct
 import sys
 import time
@@ -247,24 +246,6 @@ POSE_TMPL, POSE_SLOTS = template([b"\x0a\x1b\x09", b"\x11", b"\x19", b"\x12\x24\
 TF_TMPL = POSE_TMPL.copy()
 TF_TMPL[[0, 29]] = (0x22, 0x2A)  # FrameTransform: translation (4), rotation (5)
 NO_BYTES = np.zeros(0, dtype=np.uint8)
-
-
-
-# --------------------------------------------------------------------------------------------
-# Small geometry helpers (plain floats: faster than numpy for 3-vectors)
-# --------------------------------------------------------------------------------------------
-
-
-def rpy_deg(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
-    """ZYX Euler angles (roll, pitch, yaw) in degrees from a unit quaternion (w, x, y, z)."""
-    sr = 2.0 * (w * x + y * z)
-    cr = 1.0 - 2.0 * (x * x + y * y)
-    sp = 2.0 * (w * y - z * x)
-    sp = 1.0 if sp > 1.0 else (-1.0 if sp < -1.0 else sp)
-    sy = 2.0 * (w * z + x * y)
-    cy = 1.0 - 2.0 * (y * y + z * z)
-    d = 57.29577951308232
-    return math.atan2(sr, cr) * d, math.asin(sp) * d, math.atan2(sy, cy) * d
 
 
 # Hand-encoded foxglove.PoseInFrame / foxglove.FrameTransform (protobuf wire format; the field

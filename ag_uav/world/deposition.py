@@ -76,6 +76,15 @@ rides the outwash (St_g = τ_p u_g / r_j, r_j = √n D/2: a round impinging jet'
 Marple & Liu 1974, Environ. Sci. Technol. 8(7):648), drifting with the log-law wind at δ for
 δ / v_t (the mixture's mean and variance; off by default).
 
+**The trailing vortex pair** (option ``vortex_life_tstar`` > 0; the law ``wake``). In forward
+flight a share f = 3x² − 2x³, x = V_a / (``wing_speed_vh`` v_h) ≤ 1, of the wake part rolls up
+as a lifting wing's: a vortex pair of separation b₀ = (π/4) b (b the rotors' width),
+circulation Γ = T / (ρ V_a b₀) and descent w₀ = Γ / (2π b₀) (Prandtl's lifting line; the rotor
+as a wing, Leishman §2.14), which near the ground runs apart at Γ / (4π c) (the image vortices;
+Lamb, *Hydrodynamics* §155) and carries a droplet outward while it settles out of the pair's
+layer. It is a third part of each class (its own mean and axis variances), laws in
+:mod:`ag_uav.world.wake`; 0 when the option is off.
+
 **The escaped part.** At the wake's edge the shear layer's eddies (velocity σ_s = i_w 2 v_i,
 size ℓ = ``shear_eddy_m``) carry droplets out as the wake skews; a droplet follows them by the
 response 1 / (1 + St), St = τ_p σ_s / ℓ (Stokes number). The escaped share of class k is ε =
@@ -132,9 +141,20 @@ import numpy as np
 from .._jit import HAVE_NUMBA
 from .deposition_config import DepositionConfig
 from .deposition_kernels import (
+    batch_flush,
+    batch_step,
+    class_footprints,
+    engine_step,
+    levels_sum,
+    row_step_args,
+)
+from .deposition_layout import (
+    FOOTPRINT,
+    INPUT,
     INPUT_WIDTH,
     NACC,
     NFOOT,
+    NPART,
     NSLOW,
     P_AREA,
     P_BD0,
@@ -177,11 +197,14 @@ from .deposition_kernels import (
     P_SIG0,
     P_SIGA,
     P_SM,
+    P_SPAN,
     P_ST50,
     P_SWATH,
     P_TAU,
     P_TMAX,
     P_VMIN,
+    P_VTX,
+    P_WINGV,
     P_WJ,
     P_X0,
     P_Y0,
@@ -196,12 +219,7 @@ from .deposition_kernels import (
     S_OUTSIDE,
     S_Q,
     S_SPRAYED,
-    batch_flush,
-    batch_step,
-    class_footprints,
-    engine_step,
-    levels_sum,
-    row_step_args,
+    SCRATCH,
 )
 from .droplets import (
     Air,
@@ -262,6 +280,13 @@ class GridSpec:
         return cls(cx - 0.5 * nx * cell, cy - 0.5 * ny * cell, cell, nx, ny, levels, tuple(offs))
 
 
+def rotor_span(n_rotors: int, arm_m: float, rotor_d_m: float) -> float:
+    """The rotors' width across the flight direction: 2 × arm × max |sin θ_k| + D, the hubs at
+    θ_k = (k + ½) 360°/n (an X layout: √2 × arm + D for four)."""
+    s = max(abs(math.sin((k + 0.5) * 2.0 * math.pi / n_rotors)) for k in range(n_rotors))
+    return 2.0 * arm_m * s + rotor_d_m
+
+
 def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
     """The flat parameter vector of the compiled kernels (layout: the P_* slots)."""
     noz = np.asarray(c.nozzle_xyz_m, float).reshape(-1, 3)
@@ -294,7 +319,9 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
             P_RJ: 0.5 * math.sqrt(c.n_rotors) * c.rotor_diameter_m,
             P_ST50: c.outwash_impaction_st50, P_INVL: c.obukhov_inv_m,
             P_WJ: c.wall_jet_growth,
-            P_HI: c.impingement_diameters * math.sqrt(c.n_rotors / 2.0) * c.rotor_diameter_m}
+            P_HI: c.impingement_diameters * math.sqrt(c.n_rotors / 2.0) * c.rotor_diameter_m,
+            P_SPAN: 0.25 * math.pi * rotor_span(c.n_rotors, c.rotor_arm_m, c.rotor_diameter_m),
+            P_VTX: c.vortex_life_tstar, P_WINGV: c.wing_speed_vh}
     for k, v in head.items():
         par[k] = v
     o = P_HEADER
@@ -312,15 +339,15 @@ def footprints(cfg: DepositionConfig, inp: np.ndarray, par: np.ndarray | None = 
     loop computes it (the same compiled :func:`_class_footprint`): a dict of arrays over the
     classes, keys ``d_m``, ``frac`` and the F_* names in lower case (``wake``, ``wx``, ``wy``,
     ``wvar``, ``wland``, ``esc``, ``ex``, ``ey``, ``evx``, ``evy``, ``mut``, ``lamt``,
-    ``pair``, ``rland``, ``rair``, ``ux``, ``uy``); offsets are from the nozzle centroid."""
+    ``pair``, ``rland``, ``rair``, ``ux``, ``uy``, and the trailing vortex pair's part
+    ``vort``, ``vx``, ``vy``, ``vvx``, ``vvy``, ``vland``); offsets are from the nozzle
+    centroid."""
     if par is None:
         par = pack_params(cfg, GridSpec(0.0, 0.0, 1.0, 1, 1, 1, (0, 1)))
     out = np.zeros((int(par[P_K]), NFOOT))
     class_footprints(par, np.asarray(inp, float).reshape(-1)[:INPUT_WIDTH], out)
     d, frac = droplet_classes(cfg.dv10_um, cfg.dv50_um, cfg.dv90_um, cfg.n_classes)
-    names = ("wake", "wx", "wy", "wvar", "wland", "esc", "ex", "ey", "evx", "evy", "mut",
-             "lamt", "pair", "rland", "rair", "ux", "uy")
-    res = {n: out[:, i].copy() for i, n in enumerate(names)}
+    res = {n: out[:, i].copy() for n, i in FOOTPRINT.offset.items()}
     res.update(d_m=d, frac=frac)
     return res
 
@@ -331,12 +358,12 @@ def pack_input(pos, vel, R, thrust, wind, cmd, out: np.ndarray | None = None) ->
     pos = np.atleast_2d(np.asarray(pos, float))
     n = pos.shape[0]
     inp = np.empty((n, INPUT_WIDTH)) if out is None else out
-    inp[:, 0:3] = pos
-    inp[:, 3:6] = np.atleast_2d(vel)
-    inp[:, 6:15] = np.asarray(R, float).reshape(n, 9)
-    inp[:, 15] = thrust
-    inp[:, 16:19] = np.atleast_2d(wind)
-    inp[:, 19] = np.asarray(cmd, float).reshape(n) if np.ndim(cmd) else float(cmd)
+    inp[:, INPUT.slice("pos")] = pos
+    inp[:, INPUT.slice("vel")] = np.atleast_2d(vel)
+    inp[:, INPUT.slice("r")] = np.asarray(R, float).reshape(n, INPUT.width["r"])
+    inp[:, INPUT.offset["thrust"]] = thrust
+    inp[:, INPUT.slice("wind")] = np.atleast_2d(wind)
+    inp[:, INPUT.offset["cmd"]] = np.asarray(cmd, float).reshape(n) if np.ndim(cmd) else float(cmd)
     return inp
 
 
@@ -463,14 +490,14 @@ class DepositionBatch:
                                     cfg.cell_m, cfg.levels, cfg.max_cells)
         self.par = pack_params(cfg, self.grid)
         nst = (S_ACC + 1 + INPUT_WIDTH + int(self.par[P_M]) * NACC
-               + 2 * int(self.par[P_K]) * NSLOW)
+               + NPART * int(self.par[P_K]) * NSLOW)
         self.st = np.zeros((n, nst))
         self.st[:, S_INC] = -1.0
         self.st[:, S_INSIDE] = -1.0
         self.buf = np.zeros((n, self.grid.size))
         self.out = np.zeros(n)
         self.inp = np.zeros((n, INPUT_WIDTH))
-        self.scratch = np.zeros((3, max(self.grid.nx, self.grid.ny, INPUT_WIDTH) + 2))
+        self.scratch = np.zeros((SCRATCH.size, max(self.grid.nx, self.grid.ny, INPUT_WIDTH) + 2))
         self._arrays = (self.par, self.inp, self.st, self.buf, self.scratch)  # DepArrays
 
     @property

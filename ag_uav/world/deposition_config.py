@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from numkit.axes import Z
+
 _M350_NOZZLES = ((0.3164, -0.3164, -0.15), (0.3164, 0.3164, -0.15),
                  (-0.3164, 0.3164, -0.15), (-0.3164, -0.3164, -0.15))
 
@@ -18,7 +20,8 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
            ("airborne_after_s", 1.0, 1e5), ("n_classes", 1, 40),
            ("outwash_impaction_st50", 0.0, 10.0), ("jet_merge_lengths", 0.0, 100.0),
            ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0),
-           ("wall_jet_growth", 0.0, 1.0), ("impingement_diameters", 0.0, 10.0))
+           ("wall_jet_growth", 0.0, 1.0), ("impingement_diameters", 0.0, 10.0),
+           ("vortex_life_tstar", 0.0, 100.0), ("wing_speed_vh", 0.01, 100.0))
 
 
 #: the hover law's options (off by default): the merged jet, the impaction cut, the outwash as a
@@ -26,8 +29,12 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
 #: calibration on the wind tunnel's 2 L rows (docs/spray_deposition.md, "A hover law")
 HOVER_LAW = {"jet_merge_lengths": 2.5, "outwash_impaction_st50": 0.24, "wall_jet_growth": 0.098,
              "impingement_diameters": 1.2, "wake_escape": 0.6}
+#: the rotor-wake law: the hover law and, in forward flight, the wake rolled up into a trailing
+#: vortex pair (blended in by V_a / 2 v_h; the pair lives 4 t*, an assumption); docs/
+#: spray_deposition.md, "The forward-flight wake"
+WAKE_LAW = {**HOVER_LAW, "vortex_life_tstar": 4.0}
 #: the laws ``--law`` selects in the experiments
-LAWS = {"default": {}, "hover": HOVER_LAW}
+LAWS = {"default": {}, "hover": HOVER_LAW, "wake": WAKE_LAW}
 
 
 @dataclass(frozen=True)
@@ -66,6 +73,11 @@ class DepositionConfig:
                                                   # δ = β r (Poreh et al.); 0: the layer δ
     impingement_diameters: float = 0.0            # > 0 (1.2): the jet stagnates over that many
                                                   # merged-jet diameters above the ground
+    vortex_life_tstar: float = 0.0                # > 0: in forward flight the wake rolls up
+                                                  # into a trailing vortex pair that carries
+                                                  # droplets outward for this many t* (wake.py)
+    wing_speed_vh: float = 2.0                    # the pair takes the whole wake from V_a =
+                                                  # this × v_h on (Leishman: 2), blended below
     release_sigma_m: float = 0.1
     ambient_sigma_mps: float = 0.0
     temperature_c: float = 20.0                   # air temperature (°C)
@@ -99,16 +111,19 @@ class DepositionConfig:
             "rate_l_per_ha": cfg.spray.rate_l_per_ha, "swath_m": cfg.mission.swath_m,
             "rotor_diameter_m": cfg.battery.rotor_diameter_m,
             "air_density": cfg.battery.air_density_kgm3,
-            "liquid_density": 1000.0 * cfg.spray.density_kg_per_l}
+            "liquid_density": 1000.0 * cfg.spray.density_kg_per_l,
+            "rotor_arm_m": cfg.vehicle.arm_m}
         names = set(cls.__dataclass_fields__)
         for k, v in vars(cfg.spray).items():
             if k in names and k not in kw:
                 kw[k] = tuple(v) if isinstance(v, list) else v
         xyz = kw.get("nozzle_xyz_m")
         if xyz is not None and xyz and not isinstance(xyz[0], tuple | list):  # flat x, y, z, ..
-            kw["nozzle_xyz_m"] = tuple(tuple(xyz[i:i + 3]) for i in range(0, len(xyz), 3))
+            n = Z + 1  # x, y, z per nozzle
+            kw["nozzle_xyz_m"] = tuple(tuple(xyz[i:i + n]) for i in range(0, len(xyz), n))
         if kw.get("nozzle_share") == ():  # [] in the config: equal shares
             m = len(kw.get("nozzle_xyz_m", _M350_NOZZLES))
             kw["nozzle_share"] = tuple([1.0 / m] * m)
+        kw.update(LAWS[getattr(cfg.spray, "deposition_law", "default")])
         kw.update(over)
         return cls(**kw)

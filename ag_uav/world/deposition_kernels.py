@@ -9,15 +9,28 @@ from typing import NamedTuple
 
 import numpy as np
 
+from numkit import X, Y, Z
+from numkit.geometry import RXX, RXY, RXZ, RYX, RYY, RYZ, RZX, RZY, RZZ
+
 from .._jit import njit
+from .deposition_layout import (
+    DEP_PARAMS,
+    DEP_STATE,
+    FOOTPRINT,
+    INPUT,
+    MOMENTS,
+    NPART,
+    SCRATCH,
+    WIDE,
+)
 from .droplets import N_TAB
 from .surface_layer import eddy_k, layer_wind
-from .wake import centreline_speed, fall_time
+from .wake import centreline_speed, fall_time, vortex_landing, vortex_pair, wing_share
 
 
 class DepArrays(NamedTuple):
     """A deposition batch's arrays, declared once: the packed parameters ``par``, the input
-    rows ``inp`` (N, INPUT_WIDTH), the state rows ``st``, the dose buffers ``buf`` and the
+    rows ``inp`` (N, _I.SIZE), the state rows ``st``, the dose buffers ``buf`` and the
     splat's ``scratch``; or one row's (``inp``, ``st``, ``buf`` 1-D). Passed to a kernel as a
     plain tuple in field order and named again inside (as :mod:`ag_uav.engine.kernels` does)."""
 
@@ -41,24 +54,6 @@ class VehicleRows(NamedTuple):
     cmd: np.ndarray
     act: np.ndarray
 
-#: columns of one input row: pos 3, vel 3, R 9 (row-major), thrust, wind 3, cmd
-INPUT_WIDTH = 20
-
-# header slots of the parameter vector (float64); arrays follow at the offsets stored in it
-(P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF, P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0, P_ROTZ, P_IW,
- P_DELTA, P_SIGA, P_SIG0, P_X0, P_Y0, P_CELL, P_NX, P_NY, P_NLEV, P_FLUSHD, P_FLUSHT, P_M, P_K,
- P_MERGE, P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC,
- P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R, P_EDGE, P_SM, P_BD0, P_RJ, P_ST50, P_INVL,
- P_WJ, P_HI) = range(49)
-P_HEADER = 49
-# state slots per row; the window's accumulators follow at S_ACC: the litres, the litre-weighted
-# sum of the input row (INPUT_WIDTH), then per nozzle (NACC: V, Sx, Sy, Sxx, Syy)
-(S_ON, S_INC, S_Q, S_TRAVEL, S_TICKS, S_INSIDE, S_LX, S_LY, S_SPRAYED, S_INGRID, S_OUTSIDE,
- S_DRIFT, S_PENDING, S_LITRES_TICK, S_AIR, S_EVAP) = range(16)
-S_ACC = 16
-NACC = 5
-#: per (class, wake/escaped) a wide part's gathered moments: V, Sx, Sy, Sxx, Syy, V·σx², V·σy²
-NSLOW = 7
 #: a wide part is splatted once its release points' variance reaches this share of its kernel's
 WIDE_SPREAD = 0.25
 #: von Kármán's constant; σ_v / u* of the neutral surface layer (Panofsky & Dutton 1984,
@@ -68,9 +63,9 @@ SIGV_USTAR = 1.9
 #: slots of the per-tick environment (:func:`_environment`) and of one class's footprint
 #: (:func:`_class_footprint`)
 NENV = 16
-(F_WAKE, F_WX, F_WY, F_WVAR, F_WLAND, F_ESC, F_EX, F_EY, F_EVX, F_EVY, F_MUT, F_LAMT, F_PAIR,
- F_RLAND, F_RAIR, F_UX, F_UY) = range(17)
-NFOOT = 17
+#: the layouts' offsets, by field name (numba freezes them into the compiled code)
+_P, _S, _F = DEP_PARAMS.at, DEP_STATE.at, FOOTPRINT.at
+_I, _M, _W, _SC = INPUT.at, MOMENTS.at, WIDE.at, SCRATCH.at
 
 
 @njit(cache=True, inline="always")
@@ -91,8 +86,8 @@ def _cell_weights(lo, c, m, r, i0, i1, w) -> float:
 def _splat(par, buf, vol, mx, my, vx, vy, scratch) -> float:
     """Add ``vol`` litres as an axis-aligned Gaussian (mean mx, my; variances vx, vy) to the
     level buffers; returns the litres put on the grid (exactly the analytic in-grid share)."""
-    x0, y0, cell = par[P_X0], par[P_Y0], par[P_CELL]
-    nx, ny, nlev = int(par[P_NX]), int(par[P_NY]), int(par[P_NLEV])
+    x0, y0, cell = par[_P.X0], par[_P.Y0], par[_P.CELL]
+    nx, ny, nlev = int(par[_P.NX]), int(par[_P.NY]), int(par[_P.NLEV])
     sx, sy = math.sqrt(vx), math.sqrt(vy)
     s = max(sx, sy)
     lev = 0
@@ -111,14 +106,14 @@ def _splat(par, buf, vol, mx, my, vx, vy, scratch) -> float:
     j1 = min(nyl - 1, int(math.floor((my + 4.0 * sy - y0) / c)))
     if i1 < i0 or j1 < j0 or i1 - i0 >= scratch.shape[1] or j1 - j0 >= scratch.shape[1]:
         return 0.0
-    wx, wy = scratch[0], scratch[1]
+    wx, wy = scratch[_SC.WX], scratch[_SC.WY]
     tx = _cell_weights(x0, c, mx, rx, i0, i1, wx)
     ty = _cell_weights(y0, c, my, ry, j0, j1, wy)
     if tx * ty <= 0.0:
         return 0.0
     put = vol * px * py
     scale = put / (tx * ty)
-    base0 = int(par[int(par[P_O_LEV]) + lev])
+    base0 = int(par[int(par[_P.O_LEV]) + lev])
     for j in range(j0, j1 + 1):
         wj = wy[j - j0] * scale
         base = base0 + j * nxl
@@ -133,11 +128,22 @@ def _splat_part(par, st, buf, scratch, vol, mx, my, vx, vy, drift) -> None:
     if vol <= 0.0:
         return
     put = _splat(par, buf, vol, mx, my, vx, vy, scratch)
-    st[S_INGRID] += put
+    st[_S.INGRID] += put
     if drift:
-        st[S_DRIFT] += vol - put
+        st[_S.DRIFT] += vol - put
     else:
-        st[S_OUTSIDE] += vol - put
+        st[_S.OUTSIDE] += vol - put
+
+
+@njit(cache=True, inline="always")
+def _part(f, part: int, vw: float, land_e: float, vv: float):
+    """(share, mean x, mean y, variance x, variance y) of a class's part: 0 the wake, 1 the
+    escaped part that lands, 2 the trailing vortex pair's."""
+    if part == 0:
+        return vw, f[_F.WX], f[_F.WY], f[_F.WVAR], f[_F.WVAR]
+    if part == 1:
+        return land_e, f[_F.EX], f[_F.EY], f[_F.EVX], f[_F.EVY]
+    return vv, f[_F.VX], f[_F.VY], f[_F.VVX], f[_F.VVY]
 
 
 @njit(cache=True)
@@ -150,68 +156,64 @@ def _flush(par, st, buf, scratch, force: float) -> None:
     (its tracer, as a deposition trial's collectors measure it): evaporation shrinks a droplet
     but not the mix it carries, so the splatted and airborne shares are the whole class's, and
     the water it loses on the way is booked apart."""
-    m_n, k_n = int(par[P_M]), int(par[P_K])
-    o_fr = int(par[P_O_FRAC])
-    merge_r = par[P_MERGE] * par[P_NOZC]
-    drift = st[S_INSIDE] > 0.5
-    vtot = st[S_ACC]
+    m_n, k_n = int(par[_P.M]), int(par[_P.K])
+    o_fr = int(par[_P.O_FRAC])
+    merge_r = par[_P.MERGE] * par[_P.NOZC]
+    drift = st[_S.INSIDE] > 0.5
+    vtot = st[_S.SIZE]
     if vtot > 0.0:
-        row = scratch[2]
-        for j in range(INPUT_WIDTH):
-            row[j] = st[S_ACC + 1 + j] / vtot
+        row = scratch[_SC.ROW]
+        for j in range(_I.SIZE):
+            row[j] = st[_S.SIZE + 1 + j] / vtot
         env = _environment(par, row)
-        o = S_ACC + 1 + INPUT_WIDTH
+        o = _S.SIZE + 1 + _I.SIZE
         V = Sx = Sy = Sxx = Syy = 0.0
         for m in range(m_n):
-            a = o + m * NACC
-            V += st[a]
-            Sx += st[a + 1]
-            Sy += st[a + 2]
-            Sxx += st[a + 3]
-            Syy += st[a + 4]
+            a = o + m * _M.SIZE
+            V += st[a + _M.V]
+            Sx += st[a + _M.SX]
+            Sy += st[a + _M.SY]
+            Sxx += st[a + _M.SXX]
+            Syy += st[a + _M.SYY]
         for k in range(k_n):
             f = _class_footprint(par, k, env)
             vk = par[o_fr + k]
-            vw, ve = vk * f[F_WAKE], vk * f[F_ESC]
-            land_e = ve * (1.0 - f[F_PAIR])
-            air = ve * f[F_PAIR]
-            st[S_AIR] += vtot * air
-            st[S_EVAP] += vtot * (vw * (1.0 - f[F_WLAND]) + land_e * (1.0 - f[F_RLAND])
-                                  + air * (1.0 - f[F_RAIR]))
-            for part in range(2):
-                share = vw if part == 0 else land_e
+            vw, ve, vv = vk * f[_F.WAKE], vk * f[_F.ESC], vk * f[_F.VORT]
+            land_e = ve * (1.0 - f[_F.PAIR])
+            air = ve * f[_F.PAIR]
+            st[_S.AIR] += vtot * air
+            st[_S.EVAP] += vtot * (vw * (1.0 - f[_F.WLAND]) + land_e * (1.0 - f[_F.RLAND])
+                                  + air * (1.0 - f[_F.RAIR]) + vv * (1.0 - f[_F.VLAND]))
+            for part in range(NPART):
+                share, ox, oy, kvx, kvy = _part(f, part, vw, land_e, vv)
                 if share <= 0.0:
                     continue
-                ox = f[F_WX] if part == 0 else f[F_EX]
-                oy = f[F_WY] if part == 0 else f[F_EY]
-                kvx = f[F_WVAR] if part == 0 else f[F_EVX]
-                kvy = f[F_WVAR] if part == 0 else f[F_EVY]
                 if math.sqrt(0.5 * (kvx + kvy)) >= merge_r:
-                    q = o + m_n * NACC + (2 * k + part) * NSLOW
+                    q = o + m_n * _M.SIZE + (NPART * k + part) * _W.SIZE
                     w = share * V
-                    st[q] += w
-                    st[q + 1] += share * (Sx + ox * V)
-                    st[q + 2] += share * (Sy + oy * V)
-                    st[q + 3] += share * (Sxx + 2.0 * ox * Sx + ox * ox * V)
-                    st[q + 4] += share * (Syy + 2.0 * oy * Sy + oy * oy * V)
-                    st[q + 5] += w * kvx
-                    st[q + 6] += w * kvy
+                    st[q + _W.V] += w
+                    st[q + _W.SX] += share * (Sx + ox * V)
+                    st[q + _W.SY] += share * (Sy + oy * V)
+                    st[q + _W.SXX] += share * (Sxx + 2.0 * ox * Sx + ox * ox * V)
+                    st[q + _W.SYY] += share * (Syy + 2.0 * oy * Sy + oy * oy * V)
+                    st[q + _W.VKX] += w * kvx
+                    st[q + _W.VKY] += w * kvy
                     continue
                 for m in range(m_n):
-                    a = o + m * NACC
-                    v = st[a]
+                    a = o + m * _M.SIZE
+                    v = st[a + _M.V]
                     if v <= 0.0:
                         continue
-                    mx, my = st[a + 1] / v, st[a + 2] / v
+                    mx, my = st[a + _M.SX] / v, st[a + _M.SY] / v
                     _splat_part(par, st, buf, scratch, share * v, mx + ox, my + oy,
-                                max(st[a + 3] / v - mx * mx, 0.0) + kvx,
-                                max(st[a + 4] / v - my * my, 0.0) + kvy, drift)
-        for j in range(S_ACC, o + m_n * NACC):
+                                max(st[a + _M.SXX] / v - mx * mx, 0.0) + kvx,
+                                max(st[a + _M.SYY] / v - my * my, 0.0) + kvy, drift)
+        for j in range(_S.SIZE, o + m_n * _M.SIZE):
             st[j] = 0.0
     _flush_wide(par, st, buf, scratch, force)
-    st[S_PENDING] = 0.0
-    st[S_TRAVEL] = 0.0
-    st[S_TICKS] = 0.0
+    st[_S.PENDING] = 0.0
+    st[_S.TRAVEL] = 0.0
+    st[_S.TICKS] = 0.0
 
 
 @njit(cache=True, inline="always")
@@ -220,54 +222,54 @@ def _flush_wide(par, st, buf, scratch, force: float) -> None:
     spread of its release points reaches a quarter of its kernel's variance (so the smear
     changes its shape by little; mean and variance are matched exactly), or when ``force`` > 0
     (the end, the vehicle crossing the grid's edge)."""
-    m_n, k_n = int(par[P_M]), int(par[P_K])
-    drift = st[S_INSIDE] > 0.5
-    base = S_ACC + 1 + INPUT_WIDTH + m_n * NACC
-    for i in range(2 * k_n):
-        q = base + i * NSLOW
-        w = st[q]
+    m_n, k_n = int(par[_P.M]), int(par[_P.K])
+    drift = st[_S.INSIDE] > 0.5
+    base = _S.SIZE + 1 + _I.SIZE + m_n * _M.SIZE
+    for i in range(NPART * k_n):
+        q = base + i * _W.SIZE
+        w = st[q + _W.V]
         if w <= 0.0:
             continue
-        mx, my = st[q + 1] / w, st[q + 2] / w
-        px = max(st[q + 3] / w - mx * mx, 0.0)
-        py = max(st[q + 4] / w - my * my, 0.0)
-        kx, ky = st[q + 5] / w, st[q + 6] / w
+        mx, my = st[q + _W.SX] / w, st[q + _W.SY] / w
+        px = max(st[q + _W.SXX] / w - mx * mx, 0.0)
+        py = max(st[q + _W.SYY] / w - my * my, 0.0)
+        kx, ky = st[q + _W.VKX] / w, st[q + _W.VKY] / w
         if force > 0.0 or px + py >= WIDE_SPREAD * (kx + ky):
             _splat_part(par, st, buf, scratch, w, mx, my, px + kx, py + ky, drift)
-            for j in range(NSLOW):
+            for j in range(_W.SIZE):
                 st[q + j] = 0.0
 
 
 @njit(cache=True, inline="always")
 def _valve(par, st, dt: float, cmd: bool, speed: float) -> None:
     """ArduPilot AC_Sprayer's state machine on want = cmd ∧ speed ≥ v_min (module docstring)."""
-    on = st[S_ON] > 0.5
-    want = cmd and speed >= par[P_VMIN]
-    if on and not cmd and par[P_OFFNOW] > 0.5:
-        st[S_ON] = 0.0
-        st[S_INC] = -1.0
+    on = st[_S.ON] > 0.5
+    want = cmd and speed >= par[_P.VMIN]
+    if on and not cmd and par[_P.OFFNOW] > 0.5:
+        st[_S.ON] = 0.0
+        st[_S.INC] = -1.0
         return
     if want == on:
-        st[S_INC] = -1.0
+        st[_S.INC] = -1.0
         return
-    st[S_INC] = 0.0 if st[S_INC] < 0.0 else st[S_INC] + dt
-    delay = par[P_DOFF] if on else par[P_DON]
-    if st[S_INC] >= delay - 1e-9:
-        st[S_ON] = 0.0 if on else 1.0
-        st[S_INC] = -1.0
+    st[_S.INC] = 0.0 if st[_S.INC] < 0.0 else st[_S.INC] + dt
+    delay = par[_P.DOFF] if on else par[_P.DON]
+    if st[_S.INC] >= delay - 1e-9:
+        st[_S.ON] = 0.0 if on else 1.0
+        st[_S.INC] = -1.0
 
 
 @njit(cache=True, inline="always")
 def _flow(par, st, dt: float, speed: float) -> float:
     """Litres out this tick: the first-order pressure lag toward q* = max(R·w·v/10⁴, q_min),
     exactly."""
-    qs = max(par[P_RATE] * par[P_SWATH] * speed * 1e-4, par[P_QMIN]) if st[S_ON] > 0.5 else 0.0
-    q0, tau = st[S_Q], par[P_TAU]
+    qs = max(par[_P.RATE] * par[_P.SWATH] * speed * 1e-4, par[_P.QMIN]) if st[_S.ON] > 0.5 else 0.0
+    q0, tau = st[_S.Q], par[_P.TAU]
     if tau <= 0.0:
-        st[S_Q] = qs
+        st[_S.Q] = qs
         return qs * dt
     e = math.exp(-dt / tau)
-    st[S_Q] = qs + (q0 - qs) * e
+    st[_S.Q] = qs + (q0 - qs) * e
     return qs * dt + (q0 - qs) * tau * (1.0 - e)
 
 
@@ -292,12 +294,13 @@ def _ig_cdf(t: float, mu: float, lam: float) -> float:
 def _tab_time(par, k: int, h: float) -> float:
     """Still-air fall time (s) of class ``k`` through ``h`` metres, evaporating (the table of
     :func:`fall_tables`, linear between its points, the last speed beyond it)."""
-    n, o_t = N_TAB, int(par[P_O_TT])
-    o = int(par[P_O_H]) + k * n
+    n, o_t = N_TAB, int(par[_P.O_TT])
+    o = int(par[_P.O_H]) + k * n
     if h <= 0.0:
         return 0.0
     if h >= par[o + n - 1]:
-        v = (par[o + n - 1] - par[o + n - 2]) / (par[o_t + n - 1] - par[o_t + n - 2])
+        j = n - 1  # the table's last point
+        v = (par[o + j] - par[o + j - 1]) / (par[o_t + j] - par[o_t + j - 1])
         return par[o_t + n - 1] + (h - par[o + n - 1]) / max(v, 1e-12)
     lo, hi = 0, n - 1
     while hi - lo > 1:
@@ -313,8 +316,8 @@ def _tab_time(par, k: int, h: float) -> float:
 @njit(cache=True, inline="always")
 def _tab_left(par, k: int, t: float) -> float:
     """Share of class ``k``'s volume left after ``t`` s of evaporation (table, linear)."""
-    n, o_t = N_TAB, int(par[P_O_TT])
-    o = int(par[P_O_R]) + k * n
+    n, o_t = N_TAB, int(par[_P.O_TT])
+    o = int(par[_P.O_R]) + k * n
     if t >= par[o_t + n - 1]:
         return par[o + n - 1]
     if t <= 0.0:
@@ -335,23 +338,26 @@ def _environment(par, inp):
     """What every class of one tick shares: nozzle and ground depths below the rotor plane, the
     wake (speed a, skew, the rotors' core, the merged jet), the wind and the surface layer.
     Laws in the module docstring. Returns (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin χ,
-    u*, h_n, f_u, σ_s, s_m cos χ, B D_0 cos χ)."""
-    m_n = int(par[P_M])
-    o_noz, o_share = int(par[P_O_NOZ]), int(par[P_O_SHARE])
-    pz, vx, vy = inp[2], inp[3], inp[4]
-    r = inp[6:15]
-    thrust, wx, wy = inp[15], inp[16], inp[17]
-    cz = r[8] if r[8] > 0.3 else 0.3                 # cosine of the tilt; wake along -z_body
-    tx, ty = -r[2] / cz, -r[5] / cz                  # horizontal wake drift per metre of fall
-    zr = pz + r[8] * par[P_ROTZ]
+    u*, h_n, f_u, σ_s, s_m cos χ, B D_0 cos χ, the trailing pair: (wing share, w₀, c, U,
+    lifetime, lateral unit x, y) of :mod:`ag_uav.world.wake`)."""
+    m_n = int(par[_P.M])
+    o_noz, o_share = int(par[_P.O_NOZ]), int(par[_P.O_SHARE])
+    pz, vx, vy = inp[_I.POS + Z], inp[_I.VEL + X], inp[_I.VEL + Y]
+    r = inp[_I.R:_I.R_END]
+    thrust, wx, wy = inp[_I.THRUST], inp[_I.WIND + X], inp[_I.WIND + Y]
+    cz = r[RZZ] if r[RZZ] > 0.3 else 0.3           # cosine of the tilt; wake along -z_body
+    tx, ty = -r[RXZ] / cz, -r[RYZ] / cz            # horizontal wake drift per metre of fall
+    zr = pz + r[RZZ] * par[_P.ROTZ]
     zn = 0.0
     for m in range(m_n):
         b = o_noz + 3 * m
-        zn += par[o_share + m] * (pz + r[6] * par[b] + r[7] * par[b + 1] + r[8] * par[b + 2])
+        # the nozzle's height, z + (R n_b)_z
+        zn += par[o_share + m] * (pz + r[RZX] * par[b + X] + r[RZY] * par[b + Y]
+                                  + r[RZZ] * par[b + Z])
     zn = max(zn, 0.0)
     s_n, s_g = max(zr - zn, 0.0), max(zr, 0.0)
     # momentum theory (Glauert in forward flight) and the wake skew tan χ = V_a / v_i
-    vh2 = max(thrust, 0.0) / (2.0 * par[P_RHOA] * par[P_AREA])
+    vh2 = max(thrust, 0.0) / (2.0 * par[_P.RHOA] * par[_P.AREA])
     va2 = (vx - wx) ** 2 + (vy - wy) ** 2
     vi = math.sqrt(0.5 * (-va2 + math.sqrt(va2 * va2 + 4.0 * vh2 * vh2)))
     hyp = math.sqrt(va2 + vi * vi)
@@ -359,16 +365,28 @@ def _environment(par, inp):
     sin_chi = math.sqrt(va2) / hyp if hyp > 0.0 else 0.0
     a = 2.0 * vi * cz
     # the rotors' jets and the merged jet (ag_uav.world.wake); lengths along the skewed axis
-    z0w = par[P_S0] * cos_chi
-    zmw, bdw = par[P_SM] * cos_chi, par[P_BD0] * cos_chi
+    z0w = par[_P.S0] * cos_chi
+    zmw, bdw = par[_P.SM] * cos_chi, par[_P.BD0] * cos_chi
     # the free jet's speed at the ground, or (option) at the top of the impingement region
-    u_g = centreline_speed(a, z0w, zmw, bdw, max(s_g - par[P_HI], 0.0))
+    u_g = centreline_speed(a, z0w, zmw, bdw, max(s_g - par[_P.HI], 0.0))
     # surface layer (Monin–Obukhov; neutral: the log law): u* from the wind at the vehicle's
     # height, f_u the mean of u(z) over the layer below the nozzle as a share of it
     w = math.sqrt(wx * wx + wy * wy)
-    ust, fu = layer_wind(w, pz, zn, par[P_Z0], par[P_INVL])
+    ust, fu = layer_wind(w, pz, zn, par[_P.Z0], par[_P.INVL])
     return (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, zn, fu,
-            par[P_IW] * 2.0 * vi, zmw, bdw)
+            par[_P.IW] * 2.0 * vi, zmw, bdw, _pair(par, thrust, vx - wx, vy - wy, vh2, s_g))
+
+
+@njit(cache=True, inline="always")
+def _pair(par, thrust: float, ax: float, ay: float, vh2: float, z_r: float):
+    """The forward-flight wake's trailing vortex pair (option ``_P.VTX`` > 0, its lifetime in
+    t*): (wing share, w₀, c, U, lifetime s, lateral unit x, y), :mod:`ag_uav.world.wake`."""
+    va = math.sqrt(ax * ax + ay * ay)
+    if par[_P.VTX] <= 0.0 or va <= 1e-6:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    _, w0, c, u, tstar = vortex_pair(thrust, par[_P.RHOA], va, par[_P.SPAN], z_r)
+    return (wing_share(va, math.sqrt(vh2), par[_P.WINGV]), w0, c, u, par[_P.VTX] * tstar,
+            -ay / va, ax / va)
 
 
 @njit(cache=True, inline="always")
@@ -414,6 +432,23 @@ def wall_jet(beta: float, r_j: float, st50: float, tp: float, vt: float, u_g: fl
     return ride, dj, 0.5 * rs * rs
 
 
+@njit(cache=True, inline="always")
+def _vortex_part(par, k: int, vt: float, tp: float, h_n: float, wx: float, wy: float,
+                 vx: float, vy: float, pair_v):
+    """The share carried by the trailing vortex pair (option; :mod:`ag_uav.world.wake`): its
+    mean offset (the wind over its landing time, the vehicle's velocity relaxing), its variances
+    (the nozzle sheet, ambient turbulence, and the pair's outward run across the airspeed:
+    lateral unit lx, ly, projected on the axes) and the volume left on landing."""
+    fv, w0, c, u, life, lx, ly = pair_v
+    if fv <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 1.0
+    t_v, lat = vortex_landing(vt, par[_P.SPAN], h_n, w0, c, u, life)
+    rel_v = tp * (1.0 - math.exp(-t_v / tp))
+    base = par[_P.SIG0] ** 2 + (par[_P.SIGA] * t_v) ** 2
+    return (wx * t_v + (vx - wx) * rel_v, wy * t_v + (vy - wy) * rel_v, base + lat * lx * lx,
+            base + lat * ly * ly, _tab_left(par, k, t_v))
+
+
 @njit(cache=True)
 def _class_footprint(par, k: int, env):
     """Class ``k``'s landing law at one tick (offsets from the nozzle; laws in the module
@@ -421,13 +456,13 @@ def _class_footprint(par, k: int, env):
     part (share, mean, axis variances, fall-time law IG(μ_T, λ_T), airborne share, volume left
     on landing and when counted airborne, mean wind). Slots F_*."""
     (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, h_n, fu, sig_s, zmw,
-     bdw) = env
-    vt, tp = par[int(par[P_O_VT]) + k], par[int(par[P_O_TAUP]) + k]
-    sig0 = par[P_SIG0]
+     bdw, pair_v) = env
+    vt, tp = par[int(par[_P.O_VT]) + k], par[int(par[_P.O_TAUP]) + k]
+    sig0 = par[_P.SIG0]
     # wake: carried down the decaying skewed jet
     tf = fall_time(vt, a, z0w, zmw, bdw, s_n, s_g) if s_g > s_n else 0.0
-    if par[P_HI] > 0.0 and s_g > s_n:
-        tf = impinging_fall_time(vt, a, z0w, zmw, bdw, s_n, s_g, par[P_HI])
+    if par[_P.HI] > 0.0 and s_g > s_n:
+        tf = impinging_fall_time(vt, a, z0w, zmw, bdw, s_n, s_g, par[_P.HI])
     dw = max((s_g - s_n) - vt * tf, 0.0)
     relax = tp * (1.0 - math.exp(-tf / tp))
     wxo = wx * tf + tx * dw + (vx - wx) * relax
@@ -438,35 +473,37 @@ def _class_footprint(par, k: int, env):
     # St₅₀ = 0.24, Marple & Liu 1974, Environ. Sci. Technol. 8(7):648); the share that rides
     # settles through the layer δ in δ / v_t, carried by the log-law wind at δ; the mean and
     # variance are the mixture's
-    st50 = par[P_ST50]
+    st50 = par[_P.ST50]
     ride = 1.0
     lvar = 0.0
-    delta = par[P_DELTA]
+    delta = par[_P.DELTA]
     ovar = (delta * u_g / vt) ** 2
-    if par[P_WJ] > 0.0:
-        ride, delta, ovar = wall_jet(par[P_WJ], par[P_RJ], st50, tp, vt, u_g)
+    if par[_P.WJ] > 0.0:
+        ride, delta, ovar = wall_jet(par[_P.WJ], par[_P.RJ], st50, tp, vt, u_g)
     elif st50 > 0.0:
-        st_g = tp * u_g / par[P_RJ]
+        st_g = tp * u_g / par[_P.RJ]
         ride = st50 * st50 / (st_g * st_g + st50 * st50)
-    if st50 > 0.0 or par[P_WJ] > 0.0:
+    if st50 > 0.0 or par[_P.WJ] > 0.0:
         w = math.sqrt(wx * wx + wy * wy)
-        z0 = par[P_Z0]
+        z0 = par[_P.Z0]
         if w > 0.0 and delta > z0:
             sh = delta / vt * ust / KAPPA * math.log(delta / z0) / w
             wxo += ride * sh * wx
             wyo += ride * sh * wy
             lvar = ride * (1.0 - ride) * sh * sh * w * w
-    wvar = (sig0 * sig0 + (par[P_IW] * dw) ** 2 + ride * ovar
-            + (par[P_SIGA] * tf) ** 2 + lvar)
+    wvar = (sig0 * sig0 + (par[_P.IW] * dw) ** 2 + ride * ovar
+            + (par[_P.SIGA] * tf) ** 2 + lvar)
     wland = _tab_left(par, k, tf)
+    fv = pair_v[0]
+    vxo, vyo, vvx, vvy, vland = _vortex_part(par, k, vt, tp, h_n, wx, wy, vx, vy, pair_v)
     # escape at the wake's edge: ε₀ sin χ, damped by the droplet's response 1/(1 + St)
-    st_k = tp * sig_s / par[P_ELL]
-    esc = par[P_ESC] * sin_chi / (1.0 + st_k)
+    st_k = tp * sig_s / par[_P.ELL]
+    esc = par[_P.ESC] * sin_chi / (1.0 + st_k)
     # escaped: settles from the nozzle height through the surface layer (first passage)
     mu_t = _tab_time(par, k, h_n)
-    kz = eddy_k(ust, h_n, par[P_INVL])
+    kz = eddy_k(ust, h_n, par[_P.INVL])
     lam_t = h_n * h_n / (2.0 * kz) if kz > 1e-12 else 1e30
-    tmax = par[P_TMAX]
+    tmax = par[_P.TMAX]
     pair = 1.0 - _ig_cdf(tmax, mu_t, lam_t) if mu_t > 0.0 else 0.0
     ux, uy = fu * wx, fu * wy
     erel = tp * (1.0 - math.exp(-mu_t / tp)) if mu_t > 0.0 else 0.0
@@ -475,7 +512,7 @@ def _class_footprint(par, k: int, env):
     u2 = ux * ux + uy * uy
     val = u2 * mu_t ** 3 / lam_t                     # along the wind: X = ū·T, T ~ IG
     vlat = (SIGV_USTAR * ust * mu_t) ** 2            # across it: σ_v·t (Taylor, short times)
-    s0e = sig0 * sig0 + 0.5 * par[P_EDGE] ** 2        # leaves from the wake's edge (a ring)
+    s0e = sig0 * sig0 + 0.5 * par[_P.EDGE] ** 2        # leaves from the wake's edge (a ring)
     if u2 > 0.0:
         ex2 = ux * ux / u2
         evx = s0e + val * ex2 + vlat * (1.0 - ex2)
@@ -484,18 +521,18 @@ def _class_footprint(par, k: int, env):
         evx = evy = s0e + vlat
     rland = _tab_left(par, k, mu_t)
     rair = _tab_left(par, k, tmax)
-    return (1.0 - esc, wxo, wyo, wvar, wland, esc, exo, eyo, evx, evy, mu_t, lam_t, pair,
-            rland, rair, ux, uy)
+    return ((1.0 - esc) * (1.0 - fv), wxo, wyo, wvar, wland, esc, exo, eyo, evx, evy, mu_t,
+            lam_t, pair, rland, rair, ux, uy, (1.0 - esc) * fv, vxo, vyo, vvx, vvy, vland)
 
 
 @njit(cache=True)
 def class_footprints(par, inp, out) -> None:
-    """Every class's :func:`_class_footprint` at the tick ``inp`` into ``out`` (K, NFOOT): what
+    """Every class's :func:`_class_footprint` at the tick ``inp`` into ``out`` (K, _F.SIZE): what
     the drift trial evaluates analytically."""
     env = _environment(par, inp)
-    for k in range(int(par[P_K])):
+    for k in range(int(par[_P.K])):
         f = _class_footprint(par, k, env)
-        for j in range(NFOOT):
+        for j in range(_F.SIZE):
             out[k, j] = f[j]
 
 
@@ -503,53 +540,57 @@ def class_footprints(par, inp, out) -> None:
 def _release(par, st, inp, litres: float) -> None:
     """This tick's litres into the window: the litre-weighted input row and each nozzle's
     release moments (the landing law is applied once per window, in :func:`_flush`)."""
-    m_n = int(par[P_M])
-    o_noz, o_share = int(par[P_O_NOZ]), int(par[P_O_SHARE])
+    m_n = int(par[_P.M])
+    o_noz, o_share = int(par[_P.O_NOZ]), int(par[_P.O_SHARE])
     px, py = inp[0], inp[1]
-    st[S_ACC] += litres
-    for j in range(INPUT_WIDTH):
-        st[S_ACC + 1 + j] += litres * inp[j]
-    o = S_ACC + 1 + INPUT_WIDTH
+    st[_S.SIZE] += litres
+    for j in range(_I.SIZE):
+        st[_S.SIZE + 1 + j] += litres * inp[j]
+    o = _S.SIZE + 1 + _I.SIZE
     for m in range(m_n):
         b = o_noz + 3 * m
-        x = px + inp[6] * par[b] + inp[7] * par[b + 1] + inp[8] * par[b + 2]
-        y = py + inp[9] * par[b] + inp[10] * par[b + 1] + inp[11] * par[b + 2]
+        # the nozzle's position, p + R n_b (x and y)
+        ro = _I.R
+        x = (px + inp[ro + RXX] * par[b + X] + inp[ro + RXY] * par[b + Y]
+             + inp[ro + RXZ] * par[b + Z])
+        y = (py + inp[ro + RYX] * par[b + X] + inp[ro + RYY] * par[b + Y]
+             + inp[ro + RYZ] * par[b + Z])
         v = litres * par[o_share + m]
-        a = o + m * NACC
-        st[a] += v
-        st[a + 1] += v * x
-        st[a + 2] += v * y
-        st[a + 3] += v * x * x
-        st[a + 4] += v * y * y
+        a = o + m * _M.SIZE
+        st[a + _M.V] += v
+        st[a + _M.SX] += v * x
+        st[a + _M.SY] += v * y
+        st[a + _M.SXX] += v * x * x
+        st[a + _M.SYY] += v * y * y
 
 
 @njit(cache=True)
 def _row_step(par, inp, st, buf, dt: float, scratch) -> float:
     """One vehicle, one control tick: valve, flow, release, and a flush when the window is full
     or the vehicle crosses the grid's edge. Returns the litres sprayed in the tick."""
-    vx, vy = inp[3], inp[4]
+    vx, vy = inp[_I.VEL + X], inp[_I.VEL + Y]
     speed = math.sqrt(vx * vx + vy * vy)
-    _valve(par, st, dt, inp[19] > 0.5, speed)
+    _valve(par, st, dt, inp[_I.CMD] > 0.5, speed)
     litres = _flow(par, st, dt, speed)
-    st[S_LITRES_TICK] = litres
-    x0, y0, cell = par[P_X0], par[P_Y0], par[P_CELL]
-    inside = (inp[0] >= x0 and inp[0] <= x0 + par[P_NX] * cell
-              and inp[1] >= y0 and inp[1] <= y0 + par[P_NY] * cell)
+    st[_S.LITRES_TICK] = litres
+    x0, y0, cell = par[_P.X0], par[_P.Y0], par[_P.CELL]
+    inside = (inp[0] >= x0 and inp[0] <= x0 + par[_P.NX] * cell
+              and inp[1] >= y0 and inp[1] <= y0 + par[_P.NY] * cell)
     flag = 1.0 if inside else 0.0
-    if flag != st[S_INSIDE] and st[S_INSIDE] >= 0.0:
+    if flag != st[_S.INSIDE] and st[_S.INSIDE] >= 0.0:
         _flush(par, st, buf, scratch, 1.0)       # what was released inside stays inside
-    st[S_INSIDE] = flag
+    st[_S.INSIDE] = flag
     if litres > 0.0:
-        st[S_SPRAYED] += litres
+        st[_S.SPRAYED] += litres
         _release(par, st, inp, litres)
-        st[S_PENDING] += litres
-        if st[S_TICKS] > 0.0:
-            st[S_TRAVEL] += math.hypot(inp[0] - st[S_LX], inp[1] - st[S_LY])
-        st[S_TICKS] += 1.0
-        st[S_LX], st[S_LY] = inp[0], inp[1]
-        if st[S_TRAVEL] >= par[P_FLUSHD] or st[S_TICKS] >= par[P_FLUSHT]:
+        st[_S.PENDING] += litres
+        if st[_S.TICKS] > 0.0:
+            st[_S.TRAVEL] += math.hypot(inp[0] - st[_S.LX], inp[1] - st[_S.LY])
+        st[_S.TICKS] += 1.0
+        st[_S.LX], st[_S.LY] = inp[0], inp[1]
+        if st[_S.TRAVEL] >= par[_P.FLUSHD] or st[_S.TICKS] >= par[_P.FLUSHT]:
             _flush(par, st, buf, scratch, 0.0)
-    elif st[S_PENDING] > 0.0:
+    elif st[_S.PENDING] > 0.0:
         _flush(par, st, buf, scratch, 0.0)
     return litres
 
@@ -578,16 +619,16 @@ def engine_step(arrays, out, dt, rows, vehicles, ia, na) -> None:
             continue
         r = inp[j]
         for c in range(3):
-            r[c] = p[i, c]
-            r[3 + c] = v[i, c]
-            r[16 + c] = w[i, c]
+            r[_I.POS + c] = p[i, c]
+            r[_I.VEL + c] = v[i, c]
+            r[_I.WIND + c] = w[i, c]
         for c in range(9):
-            r[6 + c] = R[i, c]
+            r[_I.R + c] = R[i, c]
         th = 0.0
         for c in range(na):
             th += S[i, ia + c]
-        r[15] = th
-        r[19] = 1.0 if cmd[i] else 0.0
+        r[_I.THRUST] = th
+        r[_I.CMD] = 1.0 if cmd[i] else 0.0
         out[j] = _row_step(par, r, st[j], buf[j], dt, scratch)
 
 
@@ -632,11 +673,11 @@ def row_step_args(arrays, dt, pos, vel, R, thrust, wind, cmd) -> float:
     d = DepArrays(*arrays)
     par, inp, st, buf, scratch = d.par, d.inp, d.st, d.buf, d.scratch
     for j in range(3):
-        inp[j] = pos[j]
-        inp[3 + j] = vel[j]
-        inp[16 + j] = wind[j]
+        inp[_I.POS + j] = pos[j]
+        inp[_I.VEL + j] = vel[j]
+        inp[_I.WIND + j] = wind[j]
     for j in range(9):
-        inp[6 + j] = R[j]
-    inp[15] = thrust
-    inp[19] = 1.0 if cmd else 0.0
+        inp[_I.R + j] = R[j]
+    inp[_I.THRUST] = thrust
+    inp[_I.CMD] = 1.0 if cmd else 0.0
     return _row_step(par, inp, st, buf, dt, scratch)

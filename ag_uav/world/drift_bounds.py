@@ -95,9 +95,13 @@ def pass_profile(cfg: DepositionConfig, wind: float, height: float, speed: float
             g = np.exp(-0.5 * ((y - ym[m] - fp["wy"][k]) / sw) ** 2) / (sw * math.sqrt(2 * math.pi))
             e = np.interp(y - ym[m], y, esc, left=0.0, right=0.0)
             dens += share[m] * f * (fp["wake"][k] * g + fp["esc"][k] * e)
+            if fp["vort"][k] > 0.0:                  # the trailing vortex pair's part
+                sv = math.sqrt(fp["vvy"][k])
+                dens += (share[m] * f * fp["vort"][k] / (sv * math.sqrt(2 * math.pi))
+                         * np.exp(-0.5 * ((y - ym[m] - fp["vy"][k]) / sv) ** 2))
     book = {"evaporated": float(np.sum(fp["frac"] * (
-        fp["wake"] * (1 - fp["wland"]) + fp["esc"] * ((1 - fp["pair"]) * (1 - fp["rland"])
-                                                      + fp["pair"] * (1 - fp["rair"]))))),
+        fp["wake"] * (1 - fp["wland"]) + fp["vort"] * (1 - fp["vland"])
+        + fp["esc"] * ((1 - fp["pair"]) * (1 - fp["rland"]) + fp["pair"] * (1 - fp["rair"]))))),
             "airborne": float(np.sum(fp["frac"] * fp["esc"] * fp["pair"] * fp["rair"])),
             "escaped": float(np.sum(fp["frac"] * fp["esc"]))}
     return y, dens, book

@@ -65,6 +65,8 @@ from shapely.geometry import MultiPolygon, Polygon
 from shapely.geometry.polygon import orient
 from shapely.validation import explain_validity
 
+from numkit.axes import XY
+
 __all__ = [
     "BUILTIN_FIELDS",
     "DEFAULT_ORIGIN",
@@ -96,6 +98,7 @@ from .field_files import (
     shp_features,
 )
 from .geodesy import (
+    ORIGIN,
     WGS84_A,
     WGS84_B,
     WGS84_E2,
@@ -107,7 +110,9 @@ from .geodesy import (
     geodetic_to_ecef,
     lonlat_centre,
     lonlat_to_enu,
+    origin_height,
     pole_winding,
+    split_polygon_rings,
 )
 
 #: the widest a lon/lat field may be (m): its projection about one origin stays a good plane
@@ -129,7 +134,7 @@ def _check_span(local: list[list[np.ndarray]], ll: list[list[np.ndarray]]) -> No
     xy = np.concatenate([r for rings in local for r in rings])
     span = float(max(np.ptp(xy[:, 0]), np.ptp(xy[:, 1])))
     if span > MAX_FIELD_SPAN_M:
-        allv = np.concatenate([r[:, :2] for rings in ll for r in rings])
+        allv = np.concatenate([r[:, XY] for rings in ll for r in rings])
         raise ValueError(f"read as lon/lat degrees ({_extent(allv)}) the field spans "
                          f"{span / 1000:.1f} km, more than the {MAX_FIELD_SPAN_M / 1000:g} km "
                          f"a field may span{_METRES}")
@@ -139,7 +144,7 @@ def _check_lonlat_ring(r: np.ndarray, where: str) -> None:
     """One lon/lat ring: (N, 2+) finite degrees in range, not around a pole."""
     if r.ndim != 2 or r.shape[1] < 2 or len(r) == 0:
         raise ValueError(f"{where}: expected [[lon, lat], ...]")
-    if not np.all(np.isfinite(r[:, :2])):
+    if not np.all(np.isfinite(r[:, XY])):
         raise ValueError(f"{where}: non-finite coordinates")
     if np.any(np.abs(r[:, 1]) > 90.0) or np.any(np.abs(r[:, 0]) > 180.0):
         raise ValueError(f"{where}: coordinates out of range ({_extent(r)}); expected WGS-84 "
@@ -157,7 +162,7 @@ def _as_ring(pts: Iterable[Sequence[float]], what: str) -> np.ndarray:
     a = np.asarray(list(pts), dtype=float)
     if a.ndim != 2 or a.shape[0] == 0 or a.shape[1] < 2:
         raise ValueError(f"{what}: expected a sequence of (x, y) points, got shape {a.shape}")
-    a = a[:, :2]
+    a = a[:, XY]
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{what}: contains non-finite coordinates")
     # drop the closing point and consecutive duplicates
@@ -286,17 +291,16 @@ class Field:
         if origin is None:
             outers = []
             for rings in ll:
-                o = rings[0][:, :2]
+                o = rings[0][:, XY]
                 if len(o) > 1 and np.allclose(o[0], o[-1]):
                     o = o[:-1]
                 outers.append(o)
             allv = np.concatenate(outers)
             org = (*lonlat_centre(allv[:, 0], allv[:, 1]), 0.0)
         else:
-            org = (float(origin[0]), float(origin[1]),
-                   float(origin[2]) if len(origin) > 2 else 0.0)
+            org = (float(origin[ORIGIN.LAT]), float(origin[ORIGIN.LON]), origin_height(origin))
         # vertices at the origin's height: the ground the field lies on
-        local = [[lonlat_to_enu(r[:, 0], r[:, 1], org, org[2])[:, :2] for r in rings]
+        local = [[lonlat_to_enu(r[:, 0], r[:, 1], org, org[ORIGIN.H])[:, XY] for r in rings]
                  for rings in ll]
         _check_span(local, ll)
         f = cls.from_parts(local, name=name, origin=org)
@@ -350,7 +354,7 @@ class Field:
             p = Path(src)
             fallback = p.stem
             data = read_bytes(p, "KML")
-            if p.suffix.lower() == ".kmz" or data[:2] == b"PK":
+            if p.suffix.lower() == ".kmz" or data.startswith(b"PK"):  # a zip
                 data = kmz_doc(p)
         return from_features(cls, kml_features(data), select, "KML", origin, name, fallback)
 
@@ -414,22 +418,23 @@ class Field:
     def exterior(self) -> np.ndarray:
         """Outer ring (closed) as an (N, 2) array; of the first part for a multi-part field (see
         :meth:`rings` for all)."""
-        return np.asarray(self.parts[0].exterior.coords)[:, :2]
+        return np.asarray(self.parts[0].exterior.coords)[:, XY]
 
     @property
     def holes(self) -> list[np.ndarray]:
         """Hole rings (closed) as (N, 2) arrays; of the first part for a multi-part field (see
         :meth:`rings` for all)."""
-        return [np.asarray(r.coords)[:, :2] for r in self.parts[0].interiors]
+        return [np.asarray(r.coords)[:, XY] for r in self.parts[0].interiors]
 
     def rings(self) -> list[tuple[np.ndarray, list[np.ndarray]]]:
         """``[(outer, [hole, ...]), ...]``: closed (N, 2) rings of every part."""
-        return [(np.asarray(p.exterior.coords)[:, :2],
-                 [np.asarray(r.coords)[:, :2] for r in p.interiors]) for p in self.parts]
+        return [(np.asarray(p.exterior.coords)[:, XY],
+                 [np.asarray(r.coords)[:, XY] for r in p.interiors]) for p in self.parts]
 
     def to_geojson(self) -> dict:
         """GeoJSON Feature in lon/lat (needs ``origin``): a Polygon, or a MultiPolygon for a
-        multi-part field (RFC 7946 winding: counter-clockwise boundaries, clockwise holes)."""
+        multi-part field or one cut at the antimeridian (RFC 7946 §3.1.9; its winding:
+        counter-clockwise boundaries, clockwise holes)."""
         if self.origin is None:
             raise ValueError("field has no geodetic origin; cannot export lon/lat")
         polys = []
@@ -439,7 +444,7 @@ class Field:
                 lon, lat = enu_to_lonlat(r[:, 0], r[:, 1], self.origin)
                 rings.append([[round(float(a), 9), round(float(b), 9)]
                               for a, b in zip(lon, lat, strict=True)])
-            polys.append(rings)
+            polys += split_polygon_rings(rings)   # cut at ±180° (RFC 7946 §3.1.9)
         geom = ({"type": "Polygon", "coordinates": polys[0]} if len(polys) == 1
                 else {"type": "MultiPolygon", "coordinates": polys})
         return {"type": "Feature", "properties": {"name": self.name}, "geometry": geom}
@@ -469,10 +474,6 @@ _DEFAULT_OUTER = [(0.0, 0.0), (112.0, 5.0), (116.0, 96.0), (-3.0, 90.0)]
 DEFAULT_ORIGIN = (46.7250, -117.0200, 760.0)
 
 
-def _h(origin: Sequence[float]) -> float:
-    return float(origin[2]) if len(origin) > 2 else 0.0
-
-
 def split_field_spec(spec: str) -> tuple[str, str | None]:
     """``"path.geojson#name=North"`` → ``("path.geojson", "name=North")``; no ``#`` (or a file
     whose name holds one) → ``(spec, None)``."""
@@ -494,8 +495,8 @@ def load_field(name: str, origin: Sequence[float] | None = None) -> Field:
     key = path.strip().lower().replace("_", "-")
     org = None if origin is None else tuple(float(v) for v in origin)
     if select is None and key == "default":
-        return Field.from_coords(_DEFAULT_OUTER, name="default",
-                                 origin=None if org is None else (*org[:2], _h(org)))
+        full = None if org is None else (org[ORIGIN.LAT], org[ORIGIN.LON], origin_height(org))
+        return Field.from_coords(_DEFAULT_OUTER, name="default", origin=full)
     if select is None and key in BUILTIN_FIELDS:
         ref = resources.files("ag_uav") / "data" / f"{key}.geojson"
         return Field.from_geojson(json.loads(ref.read_text()), name=key, origin=org)

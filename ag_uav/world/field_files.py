@@ -22,12 +22,16 @@ from typing import Any
 import numpy as np
 from shapely.geometry import Polygon
 
+from numkit.axes import XY
+
 #: file name endings :func:`load_field` and :meth:`Field.from_file` accept
 FIELD_FILE_SUFFIXES = (".geojson", ".json", ".kml", ".kmz", ".shp")
 #: the largest field file (or shapefile part, or KMZ document once inflated) read, in bytes:
 #: 64 MiB, some 300 000 vertices of GeoJSON text, far more than a farm's fields; a parsed
 #: document takes several times its size in memory
 MAX_FIELD_BYTES = 64 * 2**20
+#: how many property values an error message lists
+_SHOWN = 12
 
 
 def _too_big(what: str, p: Path | str, size: int) -> ValueError:
@@ -117,7 +121,8 @@ def from_features(cls, feats: list[_Feature], select: str | None, what: str,
                 and _prop_get(f.props, key) is not None]
         if len(hits) != 1:
             have = [_fmt_val(v) for f in feats if (v := _prop_get(f.props, key)) is not None]
-            allowed = (", ".join(f'"{h}"' for h in have[:12]) + (" …" if len(have) > 12 else "")
+            allowed = (", ".join(f'"{h}"' for h in have[:_SHOWN])
+                       + (" …" if len(have) > _SHOWN else "")
                        if have else f"none of the {len(feats)} polygon features has a {key!r}")
             if len(hits) > 1:
                 raise ValueError(f"{what}: {len(hits)} polygon features have {key} = \"{val}\"; "
@@ -127,7 +132,7 @@ def from_features(cls, feats: list[_Feature], select: str | None, what: str,
         feat = hits[0]
     elif len(feats) > 1:
         names = [_fmt_val(v) for f in feats if (v := _prop_get(f.props, "name")) is not None]
-        hint = (" (names: " + ", ".join(f'"{n}"' for n in names[:12]) + ")") if names else ""
+        hint = (" (names: " + ", ".join(f'"{n}"' for n in names[:_SHOWN]) + ")") if names else ""
         raise ValueError(f"{what}: {len(feats)} polygon features{hint}; pick one with "
                          "PATH#name=VALUE or PATH#KEY=VALUE")
     else:
@@ -295,7 +300,7 @@ def kmz_doc(p: Path) -> bytes:
 def _group_rings(rings: list[np.ndarray]) -> list[list[np.ndarray]]:
     """Sort rings into parts by containment (even nesting depth = boundary, odd = hole of the
     smallest boundary around it); winding is ignored."""
-    polys = [Polygon(r[:, :2]) for r in rings]  # callers pass rings of >= 3 points
+    polys = [Polygon(r[:, XY]) for r in rings]  # callers pass rings of >= 3 points
     # a point strictly inside each ring (an invalid ring is reported later, by _make_polygon)
     probe = [p.representative_point() if p.is_valid else p.centroid for p in polys]
     areas = [p.area for p in polys]
@@ -343,7 +348,7 @@ def shp_features(p: Path) -> list[_Feature]:
                 shp = r.shape(i)
                 if shp.shapeType not in poly_types or not shp.points:
                     continue
-                pts = np.asarray(shp.points, dtype=float)[:, :2]
+                pts = np.asarray(shp.points, dtype=float)[:, XY]
                 idx = [*list(shp.parts), len(pts)]
                 rings = [pts[a:b] for a, b in zip(idx[:-1], idx[1:], strict=True) if b - a >= 3]
                 props = dict(r.record(i).as_dict()) if has_dbf else {}

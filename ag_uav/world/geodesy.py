@@ -18,15 +18,26 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from numkit import Layout
+from numkit.axes import XY, X, Y, Z
+
 __all__ = ["WGS84_A", "WGS84_F", "WGS84_E2", "WGS84_B", "geodetic_to_ecef", "lonlat_to_enu",
            "enu_to_geodetic", "enu_frame", "ecef_to_geodetic", "enu_to_lonlat", "lonlat_centre",
-           "pole_winding", "split_antimeridian"]
+           "pole_winding", "split_antimeridian", "ORIGIN", "origin_height"]
 
 # WGS-84 ellipsoid
 WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 WGS84_B = WGS84_A * (1.0 - WGS84_F)
+
+#: a geodetic origin ``(lat °, lon °[, h m])``, by name: ``origin[ORIGIN.LAT]``
+ORIGIN = Layout("lat lon h").at
+
+
+def origin_height(origin: Sequence[float]) -> float:
+    """The height h (m) of ``origin`` = (lat, lon[, h]); 0 where it gives none."""
+    return float(origin[ORIGIN.H]) if len(origin) > ORIGIN.H else 0.0
 
 
 def geodetic_to_ecef(lat_deg, lon_deg, h=0.0) -> np.ndarray:
@@ -59,8 +70,8 @@ def lonlat_to_enu(lon_deg, lat_deg, origin: Sequence[float], h=0.0) -> np.ndarra
     """Geodetic lon/lat (degrees) → local ENU (..., 3) metres about ``origin`` = (lat0, lon0[, h0]).
 
     Exact WGS-84 geodetic → ECEF → ENU (see module docstring)."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    h0 = float(origin[2]) if len(origin) > 2 else 0.0
+    lat0, lon0 = float(origin[ORIGIN.LAT]), float(origin[ORIGIN.LON])
+    h0 = origin_height(origin)
     p = geodetic_to_ecef(lat_deg, lon_deg, h)
     p0 = geodetic_to_ecef(lat0, lon0, h0)
     return (p - p0) @ _enu_rotation(lat0, lon0).T
@@ -71,8 +82,8 @@ def enu_to_geodetic(e, n, origin: Sequence[float], u=0.0
     """Local ENU metres → (lon, lat, h): degrees and WGS-84 ellipsoidal height (m); the exact
     inverse of :func:`lonlat_to_enu` (with its ``h``): ENU → ECEF by the transposed rotation,
     then :func:`ecef_to_geodetic`."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    h0 = float(origin[2]) if len(origin) > 2 else 0.0
+    lat0, lon0 = float(origin[ORIGIN.LAT]), float(origin[ORIGIN.LON])
+    h0 = origin_height(origin)
     enu = np.stack(np.broadcast_arrays(np.asarray(e, float), np.asarray(n, float),
                                        np.asarray(u, float)), axis=-1)
     xyz = enu @ _enu_rotation(lat0, lon0) + geodetic_to_ecef(lat0, lon0, h0)
@@ -82,8 +93,8 @@ def enu_to_geodetic(e, n, origin: Sequence[float], u=0.0
 def enu_frame(origin: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
     """(R, p0) of the ENU frame about ``origin`` = (lat, lon[, h]): ECEF = ENU @ R + p0 (what
     :func:`enu_to_geodetic` computes per call, for a caller converting many batches)."""
-    lat0, lon0 = float(origin[0]), float(origin[1])
-    h0 = float(origin[2]) if len(origin) > 2 else 0.0
+    lat0, lon0 = float(origin[ORIGIN.LAT]), float(origin[ORIGIN.LON])
+    h0 = origin_height(origin)
     return _enu_rotation(lat0, lon0), geodetic_to_ecef(lat0, lon0, h0)
 
 
@@ -91,7 +102,7 @@ def ecef_to_geodetic(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     """ECEF metres (..., 3) → (lon °, lat °, h m) on WGS-84: Bowring's parametric-latitude
     iteration (3 rounds; converged to ~1e-12 rad for terrestrial heights) and the height
     ``h = p cosφ + z sinφ − a sqrt(1 − e² sin²φ)`` (valid at every latitude)."""
-    x, y, z = xyz[..., 0], xyz[..., 1], xyz[..., 2]
+    x, y, z = xyz[..., X], xyz[..., Y], xyz[..., Z]
     lon = np.arctan2(y, x)
     p = np.hypot(x, y)
     ep2 = (WGS84_A**2 - WGS84_B**2) / WGS84_B**2
@@ -156,7 +167,7 @@ def split_antimeridian(geom):
     ref = float(np.asarray(rings[0].coords)[0, 0])
 
     def unwrap(r):
-        a = np.asarray(r.coords, dtype=float)[:, :2].copy()
+        a = np.asarray(r.coords, dtype=float)[:, XY].copy()
         a[:, 0] = a[0, 0] + np.concatenate([[0.0], np.cumsum(_wrap180(np.diff(a[:, 0])))])
         a[:, 0] += 360.0 * round((ref - a[0, 0]) / 360.0)  # every ring beside the first
         return a
@@ -174,3 +185,17 @@ def split_antimeridian(geom):
                 if q.geom_type == geom.geom_type and not q.is_empty:
                     out.append(translate(q, xoff=-360.0 * k))
     return out
+
+
+def split_polygon_rings(rings: list[list[list[float]]]) -> list[list[list[list[float]]]]:
+    """A GeoJSON polygon's lon/lat rings → the polygons it is, cut at the antimeridian where it
+    crosses it (:func:`split_antimeridian`, RFC 7946 §3.1.9; the pieces
+    oriented the RFC's way); a polygon that does not cross is returned as it is."""
+    import shapely
+
+    poly = shapely.Polygon(rings[0], rings[1:])
+    pieces = split_antimeridian(poly)
+    if len(pieces) == 1 and pieces[0] is poly:
+        return [rings]
+    return [[np.round(np.asarray(r.coords), 9).tolist() for r in (q.exterior, *q.interiors)]
+            for q in (shapely.orient_polygons(p, exterior_cw=False) for p in pieces)]

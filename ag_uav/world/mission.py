@@ -9,6 +9,7 @@ import numpy as np
 
 from ..config import Config, ConfigError
 from .field import DEFAULT_ORIGIN, Field, load_field
+from .geodesy import ORIGIN
 from .pattern import lane_choice, mission_direction, mission_headland
 from .plan import CoveragePlan, plan_coverage
 
@@ -28,9 +29,9 @@ def build_field(cfg: Config) -> Field:
     try:
         fld = load_field(m.field)
         if fld.origin is None or given is not None or m.origin_alt_m != "auto":
-            org = (given or (fld.origin or DEFAULT_ORIGIN)[:2])
-            alt = (float(m.origin_alt_m) if m.origin_alt_m != "auto" else
-                   (fld.origin or DEFAULT_ORIGIN)[2])
+            o = fld.origin or DEFAULT_ORIGIN
+            org = (given or (o[ORIGIN.LAT], o[ORIGIN.LON]))
+            alt = float(m.origin_alt_m) if m.origin_alt_m != "auto" else o[ORIGIN.H]
             fld = load_field(m.field, origin=(*org, alt))
     except ValueError as e:
         raise ConfigError(f'mission.field = "{m.field}": {e}') from None

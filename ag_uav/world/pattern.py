@@ -38,7 +38,10 @@ from typing import Any
 
 import numpy as np
 
+from numkit import X, Y, Z
+
 from .deposition import DepositionBatch, DepositionConfig
+from .deposition_layout import INPUT
 from .forecast import plan_wind
 
 __all__ = ["pass_states", "single_pass", "cv_vs_spacing", "effective_swath", "swath_pattern",
@@ -83,17 +86,18 @@ def single_pass(cfg: DepositionConfig, speed: float, height: float, wind_y: floa
     dep = DepositionBatch(cfg, None, 1, bounds=(-PASS_M / 2, -1.0, PASS_M / 2, 1.0))
     x = -PASS_M / 2 - 2.0 * speed
     n = int(round((PASS_M + 4.0 * speed) / (speed * dt)))
-    inp = np.zeros((1, 20))
-    inp[0, 6:15] = R
-    inp[0, 15] = thrust
-    inp[0, 16] = wind_x
-    inp[0, 17] = wind_y
-    inp[0, 3] = speed
-    inp[0, 2] = height
+    inp = np.zeros((1, INPUT.size))
+    I = INPUT.at
+    inp[0, I.R:I.R_END] = R
+    inp[0, I.THRUST] = thrust
+    inp[0, I.WIND + X] = wind_x
+    inp[0, I.WIND + Y] = wind_y
+    inp[0, I.VEL + X] = speed
+    inp[0, I.POS + Z] = height
     for _ in range(n):
         x += speed * dt
-        inp[0, 0] = x
-        inp[0, 19] = 1.0 if -PASS_M / 2 <= x <= PASS_M / 2 else 0.0
+        inp[0, I.POS + X] = x
+        inp[0, I.CMD] = 1.0 if -PASS_M / 2 <= x <= PASS_M / 2 else 0.0
         dep.step_packed(dt, inp)
     dm = dep.dose_map(0)
     xc, yc = dm.centres()

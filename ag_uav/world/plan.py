@@ -620,13 +620,14 @@ def _nearest_task(b: _Builder, hole_rings: list[np.ndarray], hole_done: list[boo
         if cell_done[i]:
             continue
         for rev in (False, True):
-            first = cell[-1] if rev else cell[0]
+            yc, x_a, x_b = cell[-1] if rev else cell[0]  # the first strip: (y, x from, x to)
             for left in (True, False):
-                e = b.world(first[1] if left else first[2], first[0])
+                e = b.world(x_a if left else x_b, yc)
                 d = float(np.hypot(*(e - pos)))
                 if best is None or d < best[0]:
                     best = (d, "cell", i, (rev, left))
-    return best[1], best[2], best[3]
+    _, kind, i, how = best
+    return kind, i, how
 
 
 class _Builder:

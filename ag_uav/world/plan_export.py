@@ -54,7 +54,9 @@ from typing import Any
 import numpy as np
 from shapely.geometry import LineString
 
-from .geodesy import enu_to_lonlat, split_antimeridian
+from numkit.axes import XY
+
+from .geodesy import ORIGIN, enu_to_lonlat, origin_height, split_antimeridian, split_polygon_rings
 from .plan import CoveragePlan
 
 __all__ = [
@@ -110,24 +112,26 @@ def _origin(plan: CoveragePlan, origin: Sequence[float] | None) -> tuple[float, 
     every waypoint off the field, so it is refused)."""
     own = plan.field.origin
     if origin is not None and own is not None and not np.allclose(
-            [float(v) for v in origin[:2]], own[:2], rtol=0.0, atol=1e-12):
-        raise ValueError(f"field {plan.field.name!r} is georeferenced about {own[0]:.6f}, "
-                         f"{own[1]:.6f}; another origin would move every waypoint off the field "
+            [float(origin[ORIGIN.LAT]), float(origin[ORIGIN.LON])],
+            [own[ORIGIN.LAT], own[ORIGIN.LON]], rtol=0.0, atol=1e-12):
+        raise ValueError(f"field {plan.field.name!r} is georeferenced about "
+                         f"{own[ORIGIN.LAT]:.6f}, {own[ORIGIN.LON]:.6f}; another origin would move "
+                         "every waypoint off the field "
                          "(project the field about a point instead: load_field(..., origin=))")
     o = origin if origin is not None else own
     if o is None:
         raise ValueError(f"field {plan.field.name!r} is in local metres with no geodetic origin; "
                          "give one (LAT,LON) to export lon/lat")
-    lat, lon = float(o[0]), float(o[1])
+    lat, lon = float(o[ORIGIN.LAT]), float(o[ORIGIN.LON])
     if not (abs(lat) <= 90.0 and abs(lon) <= 180.0):
         raise ValueError(f"origin ({lat}, {lon}) is out of range; expected LAT,LON in degrees")
-    return lat, lon, float(o[2]) if len(o) > 2 else 0.0
+    return lat, lon, origin_height(o)
 
 
 def _thin(points: np.ndarray, tol: float) -> np.ndarray:
     if len(points) <= 2 or tol <= 0:
         return np.asarray(points, float)
-    return np.asarray(LineString(points).simplify(tol, preserve_topology=False).coords)[:, :2]
+    return np.asarray(LineString(points).simplify(tol, preserve_topology=False).coords)[:, XY]
 
 
 def plan_waypoints(plan: CoveragePlan, origin: Sequence[float] | None = None,
@@ -233,20 +237,6 @@ def _ll(x: np.ndarray, y: np.ndarray, org) -> list[list[float]]:
     return [[round(float(a), 9), round(float(b), 9)] for a, b in zip(lon, lat, strict=True)]
 
 
-def _split_polygon(rings: list[list[list[float]]]) -> list[list[list[list[float]]]]:
-    """A GeoJSON polygon's lon/lat rings → the polygons it is, cut at the antimeridian where it
-    crosses it (:func:`~ag_uav.world.geodesy.split_antimeridian`, RFC 7946 §3.1.9; the pieces
-    oriented the RFC's way); a polygon that does not cross is returned as it is."""
-    import shapely
-
-    poly = shapely.Polygon(rings[0], rings[1:])
-    pieces = split_antimeridian(poly)
-    if len(pieces) == 1 and pieces[0] is poly:
-        return [rings]
-    return [[np.round(np.asarray(r.coords), 9).tolist() for r in (q.exterior, *q.interiors)]
-            for q in (shapely.orient_polygons(p, exterior_cw=False) for p in pieces)]
-
-
 def _split_line(coords: list[list[float]]) -> dict[str, Any]:
     """A GeoJSON LineString, or a MultiLineString of its pieces where it crosses the
     antimeridian (RFC 7946 §3.1.9)."""
@@ -265,7 +255,7 @@ def plan_to_geojson(plan: CoveragePlan, *, altitude: float, speed: float,
     org = _origin(plan, origin)
     polys = []
     for outer, holes in plan.field.rings():
-        polys += _split_polygon([_ll(r[:, 0], r[:, 1], org) for r in [outer, *holes]])
+        polys += split_polygon_rings([_ll(r[:, 0], r[:, 1], org) for r in [outer, *holes]])
     geom = ({"type": "Polygon", "coordinates": polys[0]} if len(polys) == 1
             else {"type": "MultiPolygon", "coordinates": polys})
     feats: list[dict] = [{"type": "Feature", "geometry": geom,
@@ -326,14 +316,16 @@ def plan_to_kml(plan: CoveragePlan, *, altitude: float, speed: float,
     ext = _kml_el(pm, "ExtendedData")
     for k, v in {"role": "field", "area_m2": f"{plan.field.area:.1f}"}.items():
         _kml_el(_kml_el(ext, "Data", name=k), "value", str(v))
-    rings = plan.field.rings()
-    holder = _kml_el(pm, "MultiGeometry") if len(rings) > 1 else pm
-    for outer, holes in rings:
+    polys = [q for outer, holes in plan.field.rings()   # cut at ±180° as the GeoJSON is
+             for q in split_polygon_rings([_ll(r[:, 0], r[:, 1], org) for r in [outer, *holes]])]
+    holder = _kml_el(pm, "MultiGeometry") if len(polys) > 1 else pm
+    for rings in polys:
         pg = _kml_el(holder, "Polygon")
         _kml_el(pg, "altitudeMode", "clampToGround")
-        for tag, r in [("outerBoundaryIs", outer)] + [("innerBoundaryIs", h) for h in holes]:
+        for k, r in enumerate(rings):
+            tag = "outerBoundaryIs" if k == 0 else "innerBoundaryIs"
             lr = _kml_el(_kml_el(pg, tag), "LinearRing")
-            _kml_el(lr, "coordinates", _kml_coords(_ll(r[:, 0], r[:, 1], org), None))
+            _kml_el(lr, "coordinates", _kml_coords(r, None))
     path = _kml_el(doc, "Folder")
     _kml_el(path, "name", "path")
     for k, s in enumerate(plan.segments):
@@ -344,9 +336,13 @@ def plan_to_kml(plan: CoveragePlan, *, altitude: float, speed: float,
         ext = _kml_el(p, "ExtendedData")
         for key, v in (("kind", s.kind), ("spray", str(bool(s.spray)).lower()), ("index", k)):
             _kml_el(_kml_el(ext, "Data", name=key), "value", str(v))
-        ls = _kml_el(p, "LineString")
-        _kml_el(ls, "altitudeMode", "relativeToGround")
-        _kml_el(ls, "coordinates", _kml_coords(_ll(q[:, 0], q[:, 1], org), altitude))
+        g = _split_line(_ll(q[:, 0], q[:, 1], org))
+        lines = g["coordinates"] if g["type"] == "MultiLineString" else [g["coordinates"]]
+        holder = _kml_el(p, "MultiGeometry") if len(lines) > 1 else p
+        for coords in lines:
+            ls = _kml_el(holder, "LineString")
+            _kml_el(ls, "altitudeMode", "relativeToGround")
+            _kml_el(ls, "coordinates", _kml_coords(coords, altitude))
     noz = _kml_el(doc, "Folder")
     _kml_el(noz, "name", "nozzles")
     for i, w in enumerate(plan_waypoints(plan, org, simplify_m, *leads)):
@@ -399,7 +395,7 @@ def plan_to_qgc(plan: CoveragePlan, *, altitude: float, speed: float,
             "vehicleType": MAV_TYPE_QUADROTOR,
             "cruiseSpeed": speed,
             "hoverSpeed": speed,
-            "plannedHomePosition": [round(w0.lat, r9), round(w0.lon, r9), org[2]],
+            "plannedHomePosition": [round(w0.lat, r9), round(w0.lon, r9), org[ORIGIN.H]],
             "items": items,
         },
         "geoFence": {"version": 2, "circles": [], "polygons": []},

@@ -37,10 +37,14 @@ climb and end hover off); ``seg`` is the plan segment index, −1 during the cli
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass, replace
 from typing import Any, NamedTuple
 
 import numpy as np
+
+from numkit import Layout
+from numkit.axes import XY, X, Y, Z
 
 from .plan import CoveragePlan
 
@@ -48,6 +52,10 @@ __all__ = ["RefSample", "Reference", "ReferenceOptions"]
 
 #: ticks per piece of the output grid's build (its fine grid: ``_sub`` × this many points)
 _CHUNK = 1 << 14
+REF_ROW = Layout("pos:3 vel:3 acc:3")  #: a row of the output grid (world ENU)
+_POS, _VEL, _ACC = REF_ROW.slice("pos"), REF_ROW.slice("vel"), REF_ROW.slice("acc")
+_Line = namedtuple("_Line", "kind a b seg cap stop")  # a primitive of the path: a line a → b
+_Arc = namedtuple("_Arc", "kind a c r phi u_in seg0 seg1 cap")  # an arc from a about centre c
 
 
 class RefSample(NamedTuple):
@@ -182,7 +190,7 @@ class Reference:
         for _ in range(6):
             self._build_time_law(a_int)
             self._build_outputs()
-            amax = self._max_norm(slice(6, 9))
+            amax = self._max_norm(_ACC)
             if amax <= self.a_max * (1.0 + 1e-6):
                 break
             a_int *= 0.995 * self.a_max / amax
@@ -227,8 +235,8 @@ class Reference:
                     ecap.append(cap_j)
         if self._landing:
             z_flare = self._z_land + self._flare
-            if pts[-1][2] > z_flare + 1e-6:
-                pts.append(np.array([pts[-1][0], pts[-1][1], z_flare]))
+            if pts[-1][Z] > z_flare + 1e-6:
+                pts.append(np.array([pts[-1][X], pts[-1][Y], z_flare]))
                 eseg.append(-1)
                 ecap.append(climb_speed)
             pts.append(np.array([pts[-1][0], pts[-1][1], self._z_land]))
@@ -242,7 +250,6 @@ class Reference:
         n = len(P)
         if n < 2:
             raise ValueError("plan path is degenerate")
-        # primitives: ("line", a, b, seg, cap, stop_at_end) / ("arc", A, C, r, phi, u_in, ...)
         prims: list[tuple] = []
         cur = P[0]
         n_stops = 0
@@ -251,11 +258,11 @@ class Reference:
             u_out, l_out = _unit(P[i + 1] - P[i])
             phi = math.acos(max(-1.0, min(1.0, float(u_in @ u_out))))
             if phi < 1e-7:
-                prims.append(("line", cur, P[i], eseg[i - 1], ecap[i - 1], False))
+                prims.append(_Line("line", cur, P[i], eseg[i - 1], ecap[i - 1], False))
                 cur = P[i]
                 continue
-            if phi >= stop_angle or u_in[2] != 0.0 or u_out[2] != 0.0:
-                prims.append(("line", cur, P[i], eseg[i - 1], ecap[i - 1], True))
+            if phi >= stop_angle or u_in[Z] != 0.0 or u_out[Z] != 0.0:
+                prims.append(_Line("line", cur, P[i], eseg[i - 1], ecap[i - 1], True))
                 cur = P[i]
                 n_stops += 1
                 continue
@@ -264,19 +271,19 @@ class Reference:
             t = min(0.5 * l_in, 0.5 * l_out, t_dev)
             r = t / math.tan(half)
             a_pt = P[i] - t * u_in
-            prims.append(("line", cur, a_pt, eseg[i - 1], ecap[i - 1], False))
+            prims.append(_Line("line", cur, a_pt, eseg[i - 1], ecap[i - 1], False))
             bis, _ = _unit(u_out - u_in)
             c = P[i] + bis * (r / math.cos(half))
-            prims.append(("arc", a_pt, c, r, phi, u_in, eseg[i - 1], eseg[i],
-                          min(ecap[i - 1], ecap[i])))
+            prims.append(_Arc("arc", a_pt, c, r, phi, u_in, eseg[i - 1], eseg[i],
+                              min(ecap[i - 1], ecap[i])))
             cur = P[i] + t * u_out
-        prims.append(("line", cur, P[-1], eseg[-1], ecap[-1], True))
+        prims.append(_Line("line", cur, P[-1], eseg[-1], ecap[-1], True))
         self.n_stops = n_stops
         return prims
 
     def _heading(self) -> None:
         """The heading along s (unwrapped): its jump-free part and the jumps at stops."""
-        txy = self._T[:, :2]
+        txy = self._T[:, XY]
         nrm = np.hypot(txy[:, 0], txy[:, 1])
         psi = np.full(len(nrm), np.nan)
         ok = nrm > 1e-6
@@ -309,8 +316,8 @@ class Reference:
         ds = self._ds
         sized: list[tuple[tuple, float, int]] = []  # (primitive, length, m); m < 0: no samples
         for pr in prims:
-            ln = _unit(pr[2] - pr[1])[1] if pr[0] == "line" else pr[3] * pr[4]
-            m = -1 if pr[0] == "line" and ln < 1e-9 else max(2, math.ceil(ln / ds))
+            ln = _unit(pr.b - pr.a)[1] if pr.kind == "line" else pr.r * pr.phi  # length
+            m = -1 if pr.kind == "line" and ln < 1e-9 else max(2, math.ceil(ln / ds))
             sized.append((pr, ln, m))
         n = sum(m + 1 for _, _, m in sized if m > 0)
         S, P, T, K = np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.zeros((n, 3))
@@ -319,11 +326,11 @@ class Reference:
         k = 0
         for pr, ln, m in sized:
             if m < 0:  # a zero-length line: its stop flag goes to the previous sample
-                if pr[5] and k:
+                if pr.stop and k:
                     stop[k - 1] = True
                 continue
             sl = slice(k, k + m + 1)
-            if pr[0] == "line":
+            if pr.kind == "line":
                 _, a, b, sg, cp, st = pr
                 f = np.linspace(0.0, 1.0, m + 1)
                 S[sl] = s_acc + f * ln
@@ -345,8 +352,7 @@ class Reference:
             cap[sl] = cp
             s_acc += ln
             k += m + 1
-        stop[0] = True
-        stop[-1] = True
+        stop[0] = stop[-1] = True
         self._s, self._P, self._T, self._K, self._dP = S, P, T, K, P[1:] - P[:-1]
         self._cap, self._seg_s, self._stop = cap, seg, stop
 
@@ -377,10 +383,7 @@ class Reference:
         dwell[0] = self.window  # rest before the first move
         # knots: node i reached at tk[i]; departs at tk[i] + dwell[i]
         tk = np.concatenate([[0.0], np.cumsum(dwell + dur)])
-        self._tk = tk
-        self._tdep = tk[:-1] + dwell
-        self._v = v_arr
-        self._acc_i = acc
+        self._tk, self._tdep, self._v, self._acc_i = tk, tk[:-1] + dwell, v_arr, acc
         # integral of s over time, at knots
         tau = dur
         seg_int = (s[:-1] * (dwell + tau) + v_arr[:-1] * tau**2 / 2 + acc * tau**3 / 6)
@@ -453,9 +456,8 @@ class Reference:
         one piece to the next), so the working memory is bounded whatever the mission's length;
         what is kept is the output grid itself (pos, vel, acc; the plan segment and the smooth
         part of the yaw)."""
-        n = int(math.floor(self.duration * self.rate + 1e-9)) + 1
-        self._n = n
-        self._R = np.empty((n, 9))
+        self._n = n = int(math.floor(self.duration * self.rate + 1e-9)) + 1
+        self._R = np.empty((n, REF_ROW.size))
         self._seg = np.empty(n, dtype=np.int32)   # plan segment (−1: climb, end hover)
         self._yaw_u = np.empty(n)
         carry = np.zeros(3)
@@ -477,9 +479,9 @@ class Reference:
         j = np.clip(np.searchsorted(self._tk, t, side="right") - 1, 0, len(self._tk) - 2)
         moving = (t > self._tdep[j]) & (t <= self._tk[-1])
         ar = np.where(moving, self._acc_i[j], 0.0)
-        self._R[a:b, 0:3] = P
-        self._R[a:b, 3:6] = vr[:, None] * T
-        self._R[a:b, 6:9] = ar[:, None] * T + (vr**2)[:, None] * K
+        self._R[a:b, _POS] = P
+        self._R[a:b, _VEL] = vr[:, None] * T  # v = ṡ T
+        self._R[a:b, _ACC] = ar[:, None] * T + (vr**2)[:, None] * K  # a = s̈ T + ṡ² K
         return np.clip(sr, 0.0, self.length)
 
     def _outputs_smoothed(self, t: np.ndarray, a: int, b: int,
@@ -494,8 +496,8 @@ class Reference:
         sm, vm, im = self._raw(t - h)
         Pp, Tp = self._path_at(sp)
         Pm, Tm = self._path_at(sm)
-        self._R[a:b, 3:6] = (Pp - Pm) / w
-        self._R[a:b, 6:9] = (vp[:, None] * Tp - vm[:, None] * Tm) / w
+        self._R[a:b, _VEL] = (Pp - Pm) / w  # v_W = (p(t + W/2) − p(t − W/2)) / W
+        self._R[a:b, _ACC] = (vp[:, None] * Tp - vm[:, None] * Tm) / w  # a_W likewise from v
         m = self._sub
         dtf = self.dt / m
         nh = int(round(h / dtf))
@@ -504,7 +506,7 @@ class Reference:
         Pf, _ = self._path_at(self._raw(tf, pos_only=True), tangent=False)
         cum = np.cumsum(np.vstack([carry[None], 0.5 * (Pf[1:] + Pf[:-1]) * dtf]), axis=0)
         k = np.arange(b - a) * m
-        self._R[a:b, 0:3] = (cum[k + 2 * nh] - cum[k]) / (2 * nh * dtf)
+        self._R[a:b, _POS] = (cum[k + 2 * nh] - cum[k]) / (2 * nh * dtf)
         sw = (ip - im) / w   # _smoothed(t)'s progress, from the same two raw samples
         return np.clip(sw, 0.0, self.length), cum[(b - a) * m].copy()
 
@@ -531,8 +533,7 @@ class Reference:
         return out
 
     def _finalise(self):
-        n = self._n
-        seg = self._seg
+        n, seg = self._n, self._seg
         spray_of = np.array([s.spray for s in self.plan.segments] + [False], bool)
         self._spray = spray_of[seg]  # seg == -1 picks the trailing False
         # yaw: smooth part + raised-cosine ramps at stops
@@ -549,9 +550,8 @@ class Reference:
                 yaw[j0:j1] += d * (0.5 - 0.5 * np.cos(math.pi * x))
                 yaw[j1:] += d
         self._R.setflags(write=False)
-        self.max_acc = self._max_norm(slice(6, 9))
-        self.max_speed = self._max_norm(slice(3, 6))
-        self.max_jerk = self._max_norm(slice(6, 9), diff=True) if n > 1 else 0.0
+        self.max_acc, self.max_speed = self._max_norm(_ACC), self._max_norm(_VEL)
+        self.max_jerk = self._max_norm(_ACC, diff=True) if n > 1 else 0.0
         # the arc-length grid and the time law are not needed once the grid is built
         for name in ("_s", "_P", "_dP", "_T", "_K", "_cap", "_stop", "_seg_s", "_psi_smooth", "_tk",
                      "_tdep", "_v", "_acc_i", "_Sk"):
@@ -565,15 +565,15 @@ class Reference:
 
     @property
     def positions(self) -> np.ndarray:
-        return self._R[:, 0:3]
+        return self._R[:, _POS]
 
     @property
     def velocities(self) -> np.ndarray:
-        return self._R[:, 3:6]
+        return self._R[:, _VEL]
 
     @property
     def accelerations(self) -> np.ndarray:
-        return self._R[:, 6:9]
+        return self._R[:, _ACC]
 
     @property
     def yaws(self) -> np.ndarray:
@@ -590,7 +590,7 @@ class Reference:
 
     @property
     def initial_position(self) -> np.ndarray:
-        return self._R[0, 0:3].copy()
+        return self._R[0, _POS].copy()
 
     @property
     def nbytes(self) -> int:
@@ -626,7 +626,7 @@ class Reference:
             yu = y0 + f * (y1 - y0)
             yaw = (yu + math.pi) % (2 * math.pi) - math.pi
         j = i + 1 if f >= 0.5 else i
-        return RefSample(row[0:3], row[3:6], row[6:9], yaw, float(self._yaw_rate_at(j)),
+        return RefSample(row[_POS], row[_VEL], row[_ACC], yaw, float(self._yaw_rate_at(j)),
                          bool(self._spray[j]), int(self._seg[j]))
 
     def sample_all(self, times) -> dict[str, np.ndarray]:
@@ -641,9 +641,9 @@ class Reference:
         j = np.minimum(np.where(f[:, 0] >= 0.5, i + 1, i), self._n - 1)
         yu = self._yaw_u[i] + f[:, 0] * (self._yaw_u[i1] - self._yaw_u[i])
         return {
-            "pos": row[:, 0:3],
-            "vel": row[:, 3:6],
-            "acc": row[:, 6:9],
+            "pos": row[:, _POS],
+            "vel": row[:, _VEL],
+            "acc": row[:, _ACC],
             "yaw": (yu + math.pi) % (2 * math.pi) - math.pi,
             "yaw_rate": self._yaw_rate_at(j),
             "spray": self._spray[j],
@@ -663,7 +663,7 @@ class Reference:
         edges = np.flatnonzero(np.diff(np.concatenate([[0], sp.astype(np.int8), [0]])))
         for a, b in zip(edges[::2], edges[1::2], strict=True):
             if b - a >= 1:
-                out.append(self._R[a:b, 0:2])
+                out.append(self._R[a:b, _POS][:, XY])
         return out
 
     def summary(self) -> str:
@@ -674,7 +674,7 @@ class Reference:
 
 def cross_track(plan: CoveragePlan, points_xy, seg_idx) -> np.ndarray:
     """Signed distance of points to the polyline of plan segment(s) ``seg_idx`` (left > 0)."""
-    q = np.atleast_2d(np.asarray(points_xy, float))[:, :2]
+    q = np.atleast_2d(np.asarray(points_xy, float))[:, XY]
     n = len(q)
     segs = np.broadcast_to(np.asarray(seg_idx, int), (n,))
     out = np.full(n, np.nan)

@@ -63,6 +63,8 @@ from typing import Any
 
 import numpy as np
 
+from numkit.axes import XY
+
 from ..config import Config, ConfigError
 from .pattern import mission_swath
 from .reference import Reference, RefSample
@@ -128,8 +130,8 @@ def base_point(cfg: Config, field, takeoff_xy) -> np.ndarray:
     """``spray.base``, or the field corner (exterior vertex) nearest the take-off point."""
     if not isinstance(cfg.spray.base, str):
         return np.asarray(cfg.spray.base, float)
-    ext = np.asarray(field.exterior, float)[:, :2]
-    d = np.hypot(*(ext - np.asarray(takeoff_xy, float)[:2]).T)
+    ext = np.asarray(field.exterior, float)[:, XY]
+    d = np.hypot(*(ext - np.asarray(takeoff_xy, float)[XY]).T)
     return ext[int(np.argmin(d))].copy()
 
 
@@ -252,9 +254,9 @@ def _split_at(points: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray
     a, b = points[:-1], points[1:]
     ab = b - a
     l2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
-    tp = np.clip(np.einsum("ij,ij->i", q[None, :2] - a, ab) / l2, 0.0, 1.0)
+    tp = np.clip(np.einsum("ij,ij->i", q[None, XY] - a, ab) / l2, 0.0, 1.0)
     proj = a + tp[:, None] * ab
-    j = int(np.argmin(np.hypot(*(proj - q[None, :2]).T)))
+    j = int(np.argmin(np.hypot(*(proj - q[None, XY]).T)))
     p = proj[j]
     head = np.vstack([points[:j + 1], p[None]])
     tail = np.vstack([p[None], points[j + 1:]])
@@ -270,8 +272,8 @@ def transit_path(a, b, field, clearance: float) -> np.ndarray:
 
     import shapely
 
-    a = np.asarray(a, float)[:2]
-    b = np.asarray(b, float)[:2]
+    a = np.asarray(a, float)[XY]
+    b = np.asarray(b, float)[XY]
     holes = [shapely.Polygon(h) for h in getattr(field, "holes", [])]
     if not holes:
         return np.array([a, b])
@@ -336,7 +338,7 @@ def _walk(ref: Reference, base: np.ndarray, lpm: float, dt: float
         seg[a:b] = tab["seg"]
         speed = np.hypot(tab["vel"][:, 0], tab["vel"][:, 1])
         flow[a:b] = np.where(tab["spray"], speed, 0.0) * dt * lpm
-        d_home[a:b] = np.hypot(*(tab["pos"][:, :2] - base[None]).T)
+        d_home[a:b] = np.hypot(*(tab["pos"][:, XY] - base[None]).T)
     litres_cum = np.concatenate([[0.0], np.cumsum(flow)])[:-1]
     return seg, litres_cum, d_home
 
@@ -365,8 +367,8 @@ def plan_job(cfg: Config, plan, ref: Reference, field, *, dry_mass_kg: float,
     job = SprayJob(base_xy=base, sorties=[], fill_l=fill, dry_mass_kg=dry_mass_kg,
                    service_s=sp.service_s, tank_l=sp.tank_l)
     if len(cuts) == 1:
-        job.sorties.append(Sortie(0, 0.0, ref.duration, None, cuts[0][1], cuts[0][2] / 3600.0,
-                                  False))
+        _, litres, e_j = cuts[0]
+        job.sorties.append(Sortie(0, 0.0, ref.duration, None, litres, e_j / 3600.0, False))
         ref.spray_job = job
         return ref, job
     pieces = _sortie_references(cfg, plan, ref, field, walk[0], cuts, job, z_land)
@@ -497,7 +499,7 @@ def _cuts(cfg: Config, energy: tuple[Any, Any], walk: tuple[np.ndarray, np.ndarr
     litres each sortie takes off with (:func:`sortie_fill`)."""
     sp, b = cfg.spray, cfg.battery
     t_way, power = energy
-    seg = walk[0]
+    seg, _, d_home = walk  # per tick: plan segment, litres sprayed before, distance to base
     i0 = 0
     cuts: list[tuple[int, float, float]] = []  # (tick of the cut, litres, energy J)
     e_pre = 0.0
@@ -523,7 +525,7 @@ def _cuts(cfg: Config, energy: tuple[Any, Any], walk: tuple[np.ndarray, np.ndarr
         cuts.append((k, float(left[0] - left[kk]), float(e_run[kk] + e_home[kk])))
         i0 = k
         # next sortie: climb at the base and transit out to the cut point, with the fill
-        e_pre = float(power(fill) * t_way(walk[2][k]))
+        e_pre = float(power(fill) * t_way(d_home[k]))
 
 
 def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray,
@@ -550,12 +552,12 @@ def _sortie_references(cfg: Config, plan, ref: Reference, field, seg: np.ndarray
             first_pts = None
         else:
             j_from, q = resume
-            sub.append(_seg("transit", transit_path(land_xy, q[:2], field, clear), False))
+            sub.append(_seg("transit", transit_path(land_xy, q[XY], field, clear), False))
             gmap.append(SEG_TRANSIT)
             speeds.append(sp.transit_speed_mps)
             _, first_pts = _split_at(segs[j_from].points, q)
         j_to = len(segs) - 1 if last else int(seg[k])
-        cut_q = None if last else ref.sample_all(np.array([k * dt]))["pos"][0, :2].copy()
+        cut_q = None if last else ref.sample_all(np.array([k * dt]))["pos"][0, XY].copy()
         last_pts = _plan_part(segs, j_from, j_to, first_pts, cut_q, sub, gmap, speeds)
         if not last:
             end_xy = np.asarray(last_pts[-1], float)

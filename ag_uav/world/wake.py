@@ -24,6 +24,11 @@ In forward flight or wind the wake skews back by χ (tan χ = V_a / v_i, Glauert
 is along the skewed axis, so at depth z the axial distance is z / cos χ (the lengths in depth
 are the axial lengths × cos χ).
 
+**In forward flight** the wake also rolls up as a lifting wing's into a trailing vortex pair
+(:func:`vortex_pair`, :func:`vortex_landing`), which takes the share :func:`wing_share` of the
+wake, a smooth blend by V_a / (2 v_h): the hover jet at V_a = 0, all of it from V_a = 2 v_h on
+(where ground effect is negligible, Leishman §5).
+
 The compiled :func:`centreline_speed` and :func:`fall_time` are the laws the deposition kernels
 use (:mod:`ag_uav.world.deposition_kernels`); :class:`MultirotorWake` is the same law from a
 vehicle's mass and geometry (mass, rotor count, rotor diameter, arm), for tests and reports.
@@ -131,3 +136,65 @@ class MultirotorWake:
         c = vi / math.hypot(vi, airspeed)
         s_r, s_m, bd0 = self.lengths()
         return centreline_speed(2.0 * vi, s_r * c, s_m * c, bd0 * c, depth)
+
+
+# ------------------------------------------------------------------ the wake in forward flight
+#: the wake is wing-like (swept clear of the ground) from V_a = this × v_h on: "ground effect is
+#: usually considered negligible for V > 2 v_h" (Leishman, *Principles of Helicopter
+#: Aerodynamics* §5, after Curtiss et al. 1984)
+WING_SPEED_VH = 2.0
+
+
+@njit(cache=True, inline="always")
+def wing_share(va: float, vh: float, end: float = WING_SPEED_VH) -> float:
+    """Share of the wake in the wing-like regime, a smooth blend of the advance ratio
+    normalised by the hover induced velocity: x = V_a / (``end`` v_h) clipped to [0, 1],
+    f = 3x² − 2x³ (0 in hover, where the merged jet impinges; 1 from V_a = 2 v_h on, where the
+    wake is swept clear of the ground and rolls up as a wing's)."""
+    if vh <= 0.0:
+        return 1.0 if va > 0.0 else 0.0
+    x = min(va / (end * vh), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@njit(cache=True, inline="always")
+def vortex_pair(thrust: float, rho: float, va: float, b0: float, z_r: float
+                ) -> tuple[float, float, float, float, float]:
+    """The trailing vortex pair of a lifting system of weight ``thrust`` at airspeed ``va``
+    (Prandtl's lifting line; the rotor in forward flight as a wing: Leishman §2.14, §10):
+    separation b₀ = (π/4) b (elliptic loading; ``b0`` is passed in), circulation
+    Γ = T / (ρ V_a b₀), the pair's descent w₀ = Γ / (2π b₀), its time scale t* = b₀ / w₀.
+    Near the ground the image vortices turn the descent outward: with the pair's half
+    separation y and height z, 1/y² + 1/z² = 1/c² (Lamb 1932, *Hydrodynamics* §155, the pair
+    and its images; inviscid), c = (4/b₀² + 1/z_r²)^(−1/2) from the start (b₀/2, z_r); the
+    vortices end at height c running apart at U = Γ / (4π c). Returns (Γ, w₀, c, U, t*);
+    zeros where there is no airspeed or lift."""
+    if va <= 1e-6 or thrust <= 0.0 or b0 <= 0.0 or z_r <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0, 0.0
+    gam = thrust / (rho * va * b0)
+    w0 = gam / (2.0 * math.pi * b0)
+    c = 1.0 / math.sqrt(4.0 / (b0 * b0) + 1.0 / (z_r * z_r))
+    return gam, w0, c, gam / (4.0 * math.pi * c), b0 / w0
+
+
+@njit(cache=True, inline="always")
+def vortex_landing(vt: float, b0: float, z_n: float, w0: float, c: float, u: float,
+                   t_life: float) -> tuple[float, float]:
+    """A droplet of terminal velocity ``vt`` released at height ``z_n`` into the pair of
+    :func:`vortex_pair`: it descends with the pair to its ground-effect height c in
+    t_d = (z_n − c) / (w₀ + v_t), then rides a vortex outward at U while it settles out of the
+    pair's layer (height h = min(z_n, c), the droplets even in height) at v_t, so it lands
+    after s ~ U[0, h / v_t], having run U min(s, t_l), t_l = t_life − t_d the pair's time left.
+    Each side it lands on [b₀/2, b₀/2 + U t_l] (a share p = v_t t_l / h, evenly) or at its end
+    (the rest). Returns (mean landing time t_d + h / (2 v_t), lateral variance
+    p (a² + a L + L²/3) + (1 − p)(a + L)², a = b₀/2, L = U min(t_l, h / v_t))."""
+    a = 0.5 * b0
+    t_d = max(z_n - c, 0.0) / (w0 + vt)
+    h = min(z_n, c)
+    s_max = h / vt
+    t_l = max(min(s_max, t_life - t_d), 0.0)
+    run = u * t_l
+    p = t_l / s_max if s_max > 0.0 else 1.0
+    var = p * (a * a + a * run + run * run / 3.0) + (1.0 - p) * (a + run) ** 2
+    return t_d + 0.5 * s_max, var
+

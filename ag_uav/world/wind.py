@@ -48,13 +48,13 @@ explicit W20 in m/s; ``"none"`` (or 0) disables turbulence.
 
 Where the law lives (each law written once)
 -------------------------------------------
-One vehicle's wind is one **row** of state: ``fs[i]`` (float columns ``WF_*``: the cached
-discretisation, the five filter states, the mean wind and its direction), ``ist[i]`` (int
-columns ``WI_*``: read position and length of the draw buffer, turbulence on, block size) and
-``buf[i]`` (the buffered standard normals).  The per-tick law is :func:`wind_row` (mean wind +
-rotated gusts) over :func:`gust_row` (clamps, coefficient refresh by :func:`_refresh_row` when
-V or h drift by more than ``rel_tol`` relative or dt changes, the exact discretised filters),
-numba-compiled (``cache=True``, no fastmath).  :meth:`Wind.step` and
+One vehicle's wind is one **row** of state: ``fs[i]`` (float columns :data:`WIND_ROW`: the
+cached discretisation, the five filter states, the mean wind and its direction), ``ist[i]`` (int
+columns :data:`WIND_INTS`: read position and length of the draw buffer, turbulence on, block
+size) and ``buf[i]`` (the buffered standard normals).  The per-tick law is :func:`wind_row`
+(mean wind + rotated gusts) over :func:`gust_row` (clamps, coefficient refresh by
+:func:`_refresh_row` when V or h drift by more than ``rel_tol`` relative or dt changes, the exact
+discretised filters), numba-compiled (``cache=True``, no fastmath).  :meth:`Wind.step` and
 :meth:`DrydenTurbulence.step` call them on their own one-row arrays (a batch of one);
 :class:`ag_uav.vehicle.sensors_batched.BatchWind` runs the loops over rows below
 (:func:`wind_rows`, :func:`wind_drag_rows`), which call the same functions.  The
@@ -72,6 +72,8 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
+
+from numkit import Layout, X, Y, Z
 
 from .._jit import njit, register_jitable
 
@@ -110,17 +112,25 @@ H_MAX_M = 1000.0 * M_PER_FT
 V_MIN = 1.0
 _SQRT3_2 = math.sqrt(3.0) / 2.0
 
-# ---- the wind row: float columns of fs[i] (one row per vehicle)
-WF_V, WF_H, WF_DT, WF_TOLV, WF_TOLH, WF_SU, WF_SW, WF_A, WF_B = range(9)  # cached V, h, dt ...
-WF_VC = 9         # 7 coefficients (f11, f12, f21, f22, l11, l21, l22) of the lateral filter
-WF_WC = 16        # 7 coefficients of the vertical filter
-WF_LU, WF_LW, WF_RELTOL, WF_W20 = 23, 24, 25, 26
-WF_Z = 27         # 5 filter states zu, zv1, zv2, zw1, zw2 (unit stationary variance)
-WF_EX, WF_EY, WF_MX, WF_MY = 32, 33, 34, 35  # downwind unit vector, mean wind (ENU)
-WF_N = 36
-# ---- int columns of ist[i]: next unread normal, normals buffered, turbulence on, block size
-WI_I, WI_LEN, WI_TURB, WI_BLOCK = range(4)
-WI_N = 4
+#: the float columns of a wind row ``fs[i]`` (one row per vehicle): the cached discretisation
+#: (V, h, dt, the tolerances on V and h, σ_u, σ_w, a = e^−θu, b = √(1 − e^−2θu)), the
+#: :data:`FILTER2` coefficients of the lateral (vc) and vertical (wc) filters, L_u, L_w, rel_tol,
+#: W20, the five filter states (unit stationary variance), the downwind unit vector and the mean
+#: wind (ENU)
+WIND_ROW = Layout("v h dt tolv tolh su sw a b vc:7 wc:7 lu lw reltol w20 zu zv1 zv2 zw1 zw2 "
+                  "ex ey mx my")
+#: the coefficients of an exactly discretised 2nd-order filter, z' = F z + L n
+#: (:func:`_second_order_coeffs`)
+FILTER2 = Layout("f11 f12 f21 f22 l11 l21 l22")
+#: the int columns of ``ist[i]``: next unread normal, normals buffered, turbulence on, block size
+WIND_INTS = Layout("i len turb block")
+#: the standard normals one tick reads, in buffer order: one for u, two for v, two for w
+DRAWS = Layout("nu nv1 nv2 nw1 nw2")
+W, F2, WI, D = WIND_ROW.at, FILTER2.at, WIND_INTS.at, DRAWS.at
+WF_N, WI_N = WIND_ROW.size, WIND_INTS.size
+# (the columns :mod:`ag_uav.vehicle.sensors_batched` reads, by name)
+WF_EX, WF_EY, WF_MX, WF_MY, WF_LU, WF_LW = W.EX, W.EY, W.MX, W.MY, W.LU, W.LW
+WI_TURB = WI.TURB
 
 
 @register_jitable
@@ -194,25 +204,25 @@ def drag_axis(r: float, c_lin: float, c_quad: float) -> float:
 @njit(cache=True)
 def _refresh_row(fs: np.ndarray, i: int, dt: float, h: float, V: float) -> None:
     """Recompute row ``i``'s cached discretisation at (dt, h, V) (h, V already clamped)."""
-    su, sw, l_u, l_w, _ = dryden_parameters(fs[i, WF_W20], h)
-    fs[i, WF_SU] = su
-    fs[i, WF_SW] = sw
-    fs[i, WF_LU] = l_u
-    fs[i, WF_LW] = l_w
+    su, sw, l_u, l_w, _ = dryden_parameters(fs[i, W.W20], h)
+    fs[i, W.SU] = su
+    fs[i, W.SW] = sw
+    fs[i, W.LU] = l_u
+    fs[i, W.LW] = l_w
     theta_u = V * dt / l_u
-    fs[i, WF_A] = math.exp(-theta_u)
-    fs[i, WF_B] = math.sqrt(-math.expm1(-2.0 * theta_u))
+    fs[i, W.A] = math.exp(-theta_u)  # a = e^−θu
+    fs[i, W.B] = math.sqrt(-math.expm1(-2.0 * theta_u))  # b = √(1 − e^−2θu)
     co = _second_order_coeffs(theta_u)  # L_v = L_u
-    for j in range(7):
-        fs[i, WF_VC + j] = co[j]
+    for j in range(F2.SIZE):
+        fs[i, W.VC + j] = co[j]
     co = _second_order_coeffs(V * dt / l_w)
-    for j in range(7):
-        fs[i, WF_WC + j] = co[j]
-    fs[i, WF_V] = V
-    fs[i, WF_H] = h
-    fs[i, WF_DT] = dt
-    fs[i, WF_TOLV] = fs[i, WF_RELTOL] * V
-    fs[i, WF_TOLH] = fs[i, WF_RELTOL] * h
+    for j in range(F2.SIZE):
+        fs[i, W.WC + j] = co[j]
+    fs[i, W.V] = V
+    fs[i, W.H] = h
+    fs[i, W.DT] = dt
+    fs[i, W.TOLV] = fs[i, W.RELTOL] * V
+    fs[i, W.TOLH] = fs[i, W.RELTOL] * h
 
 
 @njit(cache=True)
@@ -228,35 +238,40 @@ def gust_row(fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, i: int, dt: float
     h = altitude if altitude > H_MIN_M else H_MIN_M
     if h > H_MAX_M:
         h = H_MAX_M
-    if (abs(V - fs[i, WF_V]) > fs[i, WF_TOLV] or abs(h - fs[i, WF_H]) > fs[i, WF_TOLH]
-            or dt != fs[i, WF_DT]):
+    if (abs(V - fs[i, W.V]) > fs[i, W.TOLV] or abs(h - fs[i, W.H]) > fs[i, W.TOLH]
+            or dt != fs[i, W.DT]):
         _refresh_row(fs, i, dt, h, V)
-    k = ist[i, WI_I]
-    n0 = buf[i, k]
-    n1 = buf[i, k + 1]
-    n2 = buf[i, k + 2]
-    n3 = buf[i, k + 3]
-    n4 = buf[i, k + 4]
-    ist[i, WI_I] = k + 5
-    zu = fs[i, WF_A] * fs[i, WF_Z] + fs[i, WF_B] * n0
-    z1 = fs[i, WF_Z + 1]
-    z2 = fs[i, WF_Z + 2]
-    c = WF_VC
-    zv1 = fs[i, c] * z1 + fs[i, c + 1] * z2 + fs[i, c + 4] * n1
-    zv2 = fs[i, c + 2] * z1 + fs[i, c + 3] * z2 + fs[i, c + 5] * n1 + fs[i, c + 6] * n2
-    z1 = fs[i, WF_Z + 3]
-    z2 = fs[i, WF_Z + 4]
-    c = WF_WC
-    zw1 = fs[i, c] * z1 + fs[i, c + 1] * z2 + fs[i, c + 4] * n3
-    zw2 = fs[i, c + 2] * z1 + fs[i, c + 3] * z2 + fs[i, c + 5] * n3 + fs[i, c + 6] * n4
-    fs[i, WF_Z] = zu
-    fs[i, WF_Z + 1] = zv1
-    fs[i, WF_Z + 2] = zv2
-    fs[i, WF_Z + 3] = zw1
-    fs[i, WF_Z + 4] = zw2
-    su = fs[i, WF_SU]
+    k = ist[i, WI.I]
+    n0 = buf[i, k + D.NU]
+    n1 = buf[i, k + D.NV1]
+    n2 = buf[i, k + D.NV2]
+    n3 = buf[i, k + D.NW1]
+    n4 = buf[i, k + D.NW2]
+    ist[i, WI.I] = k + D.SIZE
+    zu = fs[i, W.A] * fs[i, W.ZU] + fs[i, W.B] * n0  # zu ← a zu + b n
+    # (zv1, zv2) ← F (zv1, zv2) + L (n1, n2), L lower-triangular
+    z1 = fs[i, W.ZV1]
+    z2 = fs[i, W.ZV2]
+    c = W.VC
+    zv1 = fs[i, c + F2.F11] * z1 + fs[i, c + F2.F12] * z2 + fs[i, c + F2.L11] * n1
+    zv2 = (fs[i, c + F2.F21] * z1 + fs[i, c + F2.F22] * z2 + fs[i, c + F2.L21] * n1
+           + fs[i, c + F2.L22] * n2)
+    # (zw1, zw2) ← F (zw1, zw2) + L (n3, n4)
+    z1 = fs[i, W.ZW1]
+    z2 = fs[i, W.ZW2]
+    c = W.WC
+    zw1 = fs[i, c + F2.F11] * z1 + fs[i, c + F2.F12] * z2 + fs[i, c + F2.L11] * n3
+    zw2 = (fs[i, c + F2.F21] * z1 + fs[i, c + F2.F22] * z2 + fs[i, c + F2.L21] * n3
+           + fs[i, c + F2.L22] * n4)
+    fs[i, W.ZU] = zu
+    fs[i, W.ZV1] = zv1
+    fs[i, W.ZV2] = zv2
+    fs[i, W.ZW1] = zw1
+    fs[i, W.ZW2] = zw2
+    su = fs[i, W.SU]
+    # (u, v, w) = (σu zu, σu (½ zv1 + √3/2 zv2), σw (½ zw1 + √3/2 zw2))
     return (su * zu, su * (0.5 * zv1 + _SQRT3_2 * zv2),
-            fs[i, WF_SW] * (0.5 * zw1 + _SQRT3_2 * zw2))
+            fs[i, W.SW] * (0.5 * zw1 + _SQRT3_2 * zw2))
 
 
 @njit(cache=True)
@@ -265,28 +280,29 @@ def wind_row(fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, i: int, dt: float
     """Row ``i``'s wind ``(wx, wy, wz)`` (m/s, ENU) for this tick: the mean wind, plus the gust
     of :func:`gust_row` rotated from the mean-wind frame when turbulence is on
     (``e_u = (ex, ey, 0)`` downwind, ``e_v = e_w x e_u = (-ey, ex, 0)``, ``e_w = (0, 0, 1)``)."""
-    if ist[i, WI_TURB] == 0:
-        return fs[i, WF_MX], fs[i, WF_MY], 0.0
+    if ist[i, WI.TURB] == 0:
+        return fs[i, W.MX], fs[i, W.MY], 0.0
     u, v, w = gust_row(fs, ist, buf, i, dt, altitude, airspeed)
-    ex = fs[i, WF_EX]
-    ey = fs[i, WF_EY]
-    return fs[i, WF_MX] + u * ex - v * ey, fs[i, WF_MY] + u * ey + v * ex, w
+    ex = fs[i, W.EX]
+    ey = fs[i, W.EY]
+    # wind = mean + u e_u + v e_v + w e_w
+    return fs[i, W.MX] + u * ex - v * ey, fs[i, W.MY] + u * ey + v * ex, w
 
 
 @register_jitable
 def needs_draws(ist: np.ndarray, i: int) -> bool:
     """Row ``i`` is turbulent and has fewer than 5 unread normals (its next step needs a block)."""
-    return ist[i, WI_TURB] != 0 and ist[i, WI_I] + 5 > ist[i, WI_LEN]
+    return ist[i, WI.TURB] != 0 and ist[i, WI.I] + D.SIZE > ist[i, WI.LEN]
 
 
 def refill_row(rng: np.random.Generator, ist: np.ndarray, buf: np.ndarray, i: int) -> None:
-    """Draw row ``i``'s next block of ``ist[i, WI_BLOCK]`` standard normals into ``buf[i]`` when
+    """Draw row ``i``'s next block of ``ist[i, WI.BLOCK]`` standard normals into ``buf[i]`` when
     :func:`needs_draws` (the Generator is touched only then; the unread rest is dropped)."""
     if needs_draws(ist, i):
-        m = int(ist[i, WI_BLOCK])
+        m = int(ist[i, WI.BLOCK])
         buf[i, :m] = rng.standard_normal(m)
-        ist[i, WI_I] = 0
-        ist[i, WI_LEN] = m
+        ist[i, WI.I] = 0
+        ist[i, WI.LEN] = m
 
 
 # ============================================================================ over a batch
@@ -315,9 +331,9 @@ def wind_rows(dt: float, altitude: np.ndarray, airspeed: np.ndarray, active: np.
     for i in range(fs.shape[0]):
         if active[i]:
             wx, wy, wz = wind_row(fs, ist, buf, i, dt, altitude[i], airspeed[i])
-            out[i, 0] = wx
-            out[i, 1] = wy
-            out[i, 2] = wz
+            out[i, X] = wx
+            out[i, Y] = wy
+            out[i, Z] = wz
     return 0
 
 
@@ -337,20 +353,20 @@ def wind_drag_rows(dt: float, z: np.ndarray, v: np.ndarray, c_lin: np.ndarray,
     for i in range(fs.shape[0]):
         if not active[i]:
             continue
-        vx = v[i, 0]
-        vy = v[i, 1]
-        vz = v[i, 2]
+        vx = v[i, X]
+        vy = v[i, Y]
+        vz = v[i, Z]
         pz = z[i]
-        ax = vx - fs[i, WF_MX]
-        ay = vy - fs[i, WF_MY]
+        ax = vx - fs[i, W.MX]
+        ay = vy - fs[i, W.MY]
         wx, wy, wz = wind_row(fs, ist, buf, i, dt, pz if pz > 0.0 else 0.0,
                               math.sqrt(ax * ax + ay * ay))
-        out[i, 0] = wx
-        out[i, 1] = wy
-        out[i, 2] = wz
-        force[i, 0] = drag_axis(vx - wx, c_lin[i, 0], c_quad[i, 0])
-        force[i, 1] = drag_axis(vy - wy, c_lin[i, 1], c_quad[i, 1])
-        force[i, 2] = drag_axis(vz - wz, c_lin[i, 2], c_quad[i, 2])
+        out[i, X] = wx
+        out[i, Y] = wy
+        out[i, Z] = wz
+        force[i, X] = drag_axis(vx - wx, c_lin[i, X], c_quad[i, X])
+        force[i, Y] = drag_axis(vy - wy, c_lin[i, Y], c_quad[i, Y])
+        force[i, Z] = drag_axis(vz - wz, c_lin[i, Z], c_quad[i, Z])
     return 0
 
 
@@ -368,11 +384,11 @@ def _new_row(w20: float, rel_tol: float, block: int) -> tuple[np.ndarray, np.nda
     """One wind row (``fs`` (1, WF_N), ``ist`` (1, WI_N), ``buf`` (1, block)) before its first
     step: no discretisation cached, no normals buffered."""
     fs = np.zeros((1, WF_N))
-    fs[0, WF_V] = fs[0, WF_H] = fs[0, WF_DT] = -1.0
-    fs[0, WF_RELTOL] = rel_tol
-    fs[0, WF_W20] = w20
+    fs[0, W.V] = fs[0, W.H] = fs[0, W.DT] = -1.0
+    fs[0, W.RELTOL] = rel_tol
+    fs[0, W.W20] = w20
     ist = np.zeros((1, WI_N), dtype=np.int64)
-    ist[0, WI_BLOCK] = block
+    ist[0, WI.BLOCK] = block
     return fs, ist, np.zeros((1, block))
 
 
@@ -414,18 +430,18 @@ class DrydenTurbulence:
         self.rel_tol = float(rel_tol)
         self.block = max(5, (int(block) // 5) * 5)
         self._fs, self._ist, self._buf = _new_row(self.w20, self.rel_tol, self.block)
-        self._ist[0, WI_TURB] = 1
-        self._fs[0, WF_Z:WF_Z + 5] = rng.standard_normal(5)
+        self._ist[0, WI.TURB] = 1
+        self._fs[0, W.ZU:W.ZW2_END] = rng.standard_normal(W.ZW2_END - W.ZU)  # the 5 states
 
     @property
     def L_u(self) -> float:
         """Longitudinal (= lateral) scale length of the last step (m; 0 before the first)."""
-        return float(self._fs[0, WF_LU])
+        return float(self._fs[0, W.LU])
 
     @property
     def L_w(self) -> float:
         """Vertical scale length of the last step (m; 0 before the first)."""
-        return float(self._fs[0, WF_LW])
+        return float(self._fs[0, W.LW])
 
     def sigmas(self, altitude_m: float) -> tuple[float, float, float]:
         """Stationary stds (sigma_u, sigma_v, sigma_w) in m/s at ``altitude_m``."""
@@ -441,7 +457,8 @@ class DrydenTurbulence:
 
 class WindRow(NamedTuple):
     """A wind's row state (module docstring), one row each: the floats ``fs`` (1, NF; columns
-    ``WF_*``), the integers ``ist`` (1, NI; columns ``WI_*``) and the draw buffer ``buf``.
+    :data:`WIND_ROW`), the integers ``ist`` (1, NI; columns :data:`WIND_INTS`) and the draw
+    buffer ``buf``.
     :class:`~ag_uav.vehicle.sensors_batched.BatchWind` stacks the rows of its winds."""
 
     fs: np.ndarray
@@ -501,8 +518,8 @@ class Wind:
             self._fs, self._ist, self._buf = t._fs, t._ist, t._buf
         else:
             self._fs, self._ist, self._buf = _new_row(w20, float(rel_tol), 0)
-        self._fs[0, WF_EX], self._fs[0, WF_EY] = ex, ey
-        self._fs[0, WF_MX], self._fs[0, WF_MY] = self.mean[0], self.mean[1]
+        self._fs[0, W.EX], self._fs[0, W.EY] = ex, ey
+        self._fs[0, W.MX], self._fs[0, W.MY] = self.mean[X], self.mean[Y]
 
     @property
     def row_state(self) -> WindRow:
@@ -563,4 +580,4 @@ def drag_force(
     cq = ([float(c_d_quad)] * 3 if isinstance(c_d_quad, (int, float))
           else [float(c) for c in c_d_quad])
     f = [drag_axis(float(v[j]) - float(v_wind[j]), cl[j], cq[j]) for j in range(3)]
-    return f[0], f[1], f[2]
+    return f[X], f[Y], f[Z]

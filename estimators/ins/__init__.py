@@ -123,10 +123,11 @@ single-vehicle :class:`INS` is a :class:`BatchINS` of one vehicle, so a row's ar
 same whatever the batch (bit-identical rows).
 
 The package, one idea a module: :mod:`~estimators.ins.layout` (the bank's flat arrays, each
-declared once by name and size), :mod:`~estimators.ins.model` (quaternions, prediction,
-injection, the measurement models and the gate), :mod:`~estimators.ins.fusion` (one
-measurement, the delayed-fusion queue, the tick), :mod:`~estimators.ins.config`
-(:class:`INSConfig`) and :mod:`~estimators.ins.bank` (:class:`BatchINS`, :class:`INS`).
+declared once by name and size), :mod:`~estimators.ins.model` (prediction, injection, the
+measurement models and the gate; its quaternion algebra is :mod:`numkit.geometry`'s),
+:mod:`~estimators.ins.fusion` (one measurement, the delayed-fusion queue, the tick),
+:mod:`~estimators.ins.config` (:class:`INSConfig`) and :mod:`~estimators.ins.bank`
+(:class:`BatchINS`, :class:`INS`).
 """
 
 from __future__ import annotations

@@ -7,10 +7,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from numkit import QW
+
 from ..pca import PCA_MODE
 from . import layout
 from .config import DEG, RULE_CODE, RULES, INSConfig
 from .fusion import step_kernel
+from .layout import DGA, ERR, GI, GIN, IMU, PO, POPT, RIN, STATE, S, U
 
 __all__ = ["COUNTERS", "BatchINS", "INS"]
 
@@ -46,17 +49,17 @@ class BatchINS:
         self.NV, self.rules = int(n_vehicles), tuple(rules)
         N = self.N = self.NV * len(rules)
         self.prm = cfg.prm()
-        B = int(self.prm[layout.PRM_B])
-        self.x_core = np.zeros((N, 16))
-        self.x_core[:, 6] = 1.0
-        self.P = np.tile(np.eye(15), (N, 1, 1))
+        B = int(self.prm[layout.PR.RING])
+        self.x_core = np.zeros((N, STATE.size))
+        self.x_core[:, S.QUAT + QW] = 1.0
+        self.P = np.tile(np.eye(ERR.size), (N, 1, 1))
         self.x_out = self.x_core.copy()
-        self._ib = np.zeros((N, B, 6))
+        self._ib = np.zeros((N, B, IMU.size))
         self._ints = np.zeros((N, layout.INTS.size), dtype=np.int64)
         self._mq = np.zeros((N, cfg.queue, layout.REC.size))
         self._dg = np.full((N, layout.DG.size), np.nan)
-        self._dg[:, layout.DG_S2] = 1.0
-        self._dg[:, layout.DG_RSUM:layout.DG_RN + 1] = 0.0
+        self._dg[:, DGA.S2] = 1.0
+        self._dg[:, DGA.RSUM:DGA.RN_END] = 0.0
         mpar, ipar = cfg.mckf_params()
         self._mpar = np.tile(mpar, (N, 1))
         self._ipar = np.tile(ipar, (N, 1))
@@ -66,34 +69,36 @@ class BatchINS:
         L = (Nw // 2 if cfg.pca_embed is None else int(cfg.pca_embed)) if mode == "hankel" else 0
         r = cfg.pca_components or (2 if mode == "hankel" else 1)
         any_pca = any(x.startswith("pca") for x in rules)
-        self._popt = np.array([Nw, L, r, PCA_MODE[mode], int(any_pca)], dtype=np.int64)
+        self._popt = np.empty(POPT.size, dtype=np.int64)
+        self._popt[PO.WINDOW], self._popt[PO.EMBED], self._popt[PO.COMPONENTS] = Nw, L, r
+        self._popt[PO.MODE], self._popt[PO.ANY_PCA] = PCA_MODE[mode], int(any_pca)
         self._pbuf = np.zeros((self.NV, 3, 2 * Nw))
         self._pcs = np.zeros((self.NV, 2), dtype=np.int64)
-        self._no_g = np.full((self.NV, layout.GIN.size), np.nan)
-        self._no_r = np.full((self.NV, 3), np.nan)
-        self._no_imu = np.zeros((self.NV, 6))
+        self._no_g = np.full((self.NV, GIN.size), np.nan)
+        self._no_r = np.full((self.NV, RIN.size), np.nan)
+        self._no_imu = np.zeros((self.NV, IMU.size))
         self._fb = np.empty(layout.SCRATCH.size)
-        self._fb[layout.W_NAN:layout.W_NAN + 3] = np.nan
+        self._fb[layout.SCRATCH.slice("nan")] = np.nan
 
     # -- state ------------------------------------------------------------------------------
     def reset(self, p, v, q, ba=None, bg=None, P0=None) -> None:
         """Initial nominal per vehicle ((NV, 3) / (NV, 4) or one row for all) and P0 (15
         standard deviations, or a 15×15 matrix); clears the buffers and queues."""
         NV, nr = self.NV, len(self.rules)
-        x = np.zeros((NV, 16))
-        x[:, 0:3], x[:, 3:6], x[:, 6:10] = p, v, q
-        x[:, 10:13] = 0.0 if ba is None else ba
-        x[:, 13:16] = 0.0 if bg is None else bg
-        x[:, 6:10] /= np.linalg.norm(x[:, 6:10], axis=1, keepdims=True)
+        x = np.zeros((NV, STATE.size))
+        x[:, S.POS:S.POS_END], x[:, S.VEL:S.VEL_END], x[:, S.QUAT:S.QUAT_END] = p, v, q
+        x[:, S.BA:S.BA_END] = 0.0 if ba is None else ba
+        x[:, S.BG:S.BG_END] = 0.0 if bg is None else bg
+        x[:, S.QUAT:S.QUAT_END] /= np.linalg.norm(x[:, S.QUAT:S.QUAT_END], axis=1, keepdims=True)
         self.x_core[:] = np.repeat(x, nr, axis=0)
         self.x_out[:] = self.x_core
-        P0 = np.eye(15) if P0 is None else np.asarray(P0, dtype=float)
+        P0 = np.eye(ERR.size) if P0 is None else np.asarray(P0, dtype=float)
         self.P[:] = np.diag(P0**2) if P0.ndim == 1 else P0
         self._ib[:] = 0.0
         self._ints[:] = 0
         self._dg[:] = np.nan
-        self._dg[:, layout.DG_S2] = 1.0
-        self._dg[:, layout.DG_RSUM:layout.DG_RN + 1] = 0.0
+        self._dg[:, DGA.S2] = 1.0
+        self._dg[:, DGA.RSUM:DGA.RN_END] = 0.0
         self._pcs[:] = 0
 
     def reset_vehicle(self, iv: int, p, v, q, ba=None, bg=None, P0=None) -> None:
@@ -101,20 +106,20 @@ class BatchINS:
         batch initialised at its own first fix."""
         nr = len(self.rules)
         rows = slice(iv * nr, (iv + 1) * nr)
-        x = np.zeros(16)
-        x[0:3], x[3:6], x[6:10] = p, v, q
-        x[10:13] = 0.0 if ba is None else ba
-        x[13:16] = 0.0 if bg is None else bg
-        x[6:10] /= np.linalg.norm(x[6:10])
+        x = np.zeros(STATE.size)
+        x[S.POS:S.POS_END], x[S.VEL:S.VEL_END], x[S.QUAT:S.QUAT_END] = p, v, q
+        x[S.BA:S.BA_END] = 0.0 if ba is None else ba
+        x[S.BG:S.BG_END] = 0.0 if bg is None else bg
+        x[S.QUAT:S.QUAT_END] /= np.linalg.norm(x[S.QUAT:S.QUAT_END])
         self.x_core[rows] = x
         self.x_out[rows] = x
-        P0 = np.eye(15) if P0 is None else np.asarray(P0, dtype=float)
+        P0 = np.eye(ERR.size) if P0 is None else np.asarray(P0, dtype=float)
         self.P[rows] = np.diag(P0**2) if P0.ndim == 1 else P0
         self._ib[rows] = 0.0
         self._ints[rows] = 0
         self._dg[rows] = np.nan
-        self._dg[rows, layout.DG_S2] = 1.0
-        self._dg[rows, layout.DG_RSUM:layout.DG_RN + 1] = 0.0
+        self._dg[rows, DGA.S2] = 1.0
+        self._dg[rows, DGA.RSUM:DGA.RN_END] = 0.0
         self._pcs[iv] = 0
 
     # -- ticks ------------------------------------------------------------------------------
@@ -151,29 +156,30 @@ class BatchINS:
     def gnss_row(pos=None, vel=None, yaw=None, var_pos=(1e-4,) * 3, var_vel=(1e-4,) * 3,
                  var_yaw=(0.5 * DEG) ** 2, age_s: float = 0.0) -> np.ndarray:
         """One ``gnss`` input row (absent parts NaN)."""
-        g = np.full(layout.GIN.size, np.nan)
-        g[0] = age_s
+        g = np.full(GIN.size, np.nan)
+        g[GI.AGE] = age_s
         if pos is not None:
-            g[1:4] = pos
+            g[GI.P:GI.P_END] = pos
         if vel is not None:
-            g[4:7] = vel
+            g[GI.V:GI.V_END] = vel
         if yaw is not None:
-            g[7] = yaw
-        g[8:11], g[11:14], g[14] = var_pos, var_vel, var_yaw
+            g[GI.YAW] = yaw
+        g[GI.VAR_P:GI.VAR_P_END], g[GI.VAR_V:GI.VAR_V_END] = var_pos, var_vel
+        g[GI.VAR_YAW] = var_yaw
         return g
 
     # -- views ------------------------------------------------------------------------------
     @property
     def now_tick(self) -> np.ndarray:
-        return self._ints[:, layout.INTS_NOW]
+        return self._ints[:, layout.CT.NOW]
 
     @property
     def core_tick(self) -> np.ndarray:
-        return self._ints[:, layout.INTS_CORE]
+        return self._ints[:, layout.CT.CORE]
 
     @property
     def nis(self) -> np.ndarray:
-        return self._dg[:, :4]
+        return self._dg[:, DGA.NISP:DGA.NISR_END]
 
     @property
     def counters(self) -> dict[str, np.ndarray]:
@@ -185,12 +191,12 @@ class BatchINS:
     def gate_state(self) -> np.ndarray:
         """(N,) the last fix's position per row: 0 fused, 1 rejected by the gate, 2 rejected
         and reset to the receiver (NaN: no position in the last fix)."""
-        return self._dg[:, layout.DG_GATE]
+        return self._dg[:, DGA.GATE]
 
     @property
     def radar_nis(self) -> np.ndarray:
         """(N, 2) the radar NIS summed over the fused ranges, and their number."""
-        return self._dg[:, layout.DG_RSUM:layout.DG_RN + 1]
+        return self._dg[:, DGA.RSUM:DGA.RN_END]
 
 
 class INS:
@@ -201,16 +207,16 @@ class INS:
     def __init__(self, cfg: INSConfig | None = None, rule: str = "kf") -> None:
         self.batch = BatchINS(1, cfg, (rule,))
         self.cfg, self.rule = self.batch.cfg, rule
-        self._g = np.full((1, layout.GIN.size), np.nan)
-        self._r = np.full((1, 3), np.nan)
-        self._u = np.zeros((1, 6))
+        self._g = np.full((1, GIN.size), np.nan)
+        self._r = np.full((1, RIN.size), np.nan)
+        self._u = np.zeros((1, IMU.size))
 
     def reset(self, p, v, q, ba=None, bg=None, P0=None) -> None:
         self.batch.reset(p, v, q, ba, bg, P0)
 
     def predict(self, f, w) -> None:
         """One IMU sample: specific force f̃ and body rate ω̃ (body axes)."""
-        self._u[0, :3], self._u[0, 3:] = f, w
+        self._u[0, U.F:U.F_END], self._u[0, U.W:U.W_END] = f, w
         self.batch.step(self._u)
 
     def update_gnss(self, pos=None, vel=None, yaw=None, var_pos=(1e-4,) * 3,
@@ -234,8 +240,8 @@ class INS:
     def P(self) -> np.ndarray:
         return self.batch.P[0]
 
-    p = property(lambda self: self.x[0:3])
-    v = property(lambda self: self.x[3:6])
-    q = property(lambda self: self.x[6:10])
-    b_a = property(lambda self: self.x[10:13])
-    b_g = property(lambda self: self.x[13:16])
+    p = property(lambda self: self.x[S.POS:S.POS_END])
+    v = property(lambda self: self.x[S.VEL:S.VEL_END])
+    q = property(lambda self: self.x[S.QUAT:S.QUAT_END])
+    b_a = property(lambda self: self.x[S.BA:S.BA_END])
+    b_g = property(lambda self: self.x[S.BG:S.BG_END])

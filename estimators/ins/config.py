@@ -8,7 +8,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..mckf import AP, FP, IP, MCKF_I
 from . import layout
+from .layout import MP
 
 __all__ = ["DEG", "G_STD", "INS_RECOVERY", "KERNELS", "RULES", "RULE_CODE", "INSConfig"]
 
@@ -112,32 +114,32 @@ class INSConfig:
     def prm(self) -> np.ndarray:
         p = np.zeros(layout.PRM.size)
         dt = self.dt
-        p[layout.PRM_DT], p[layout.PRM_G] = dt, self.gravity
-        p[layout.PRM_QV] = (self.accel_sigma * dt) ** 2
-        p[layout.PRM_QT] = (self.gyro_sigma * dt) ** 2
-        p[layout.PRM_QBA] = self.accel_bias_rw**2 * dt
-        p[layout.PRM_QBG] = self.gyro_bias_rw**2 * dt
-        p[layout.PRM_RANT:layout.PRM_RANT + 3] = self.lever_arm
+        p[layout.PR.DT], p[layout.PR.G] = dt, self.gravity
+        p[layout.PR.QV] = (self.accel_sigma * dt) ** 2
+        p[layout.PR.QT] = (self.gyro_sigma * dt) ** 2
+        p[layout.PR.QBA] = self.accel_bias_rw**2 * dt
+        p[layout.PR.QBG] = self.gyro_bias_rw**2 * dt
+        p[layout.PRM.slice("r_ant")] = self.lever_arm
         b = np.asarray(self.heading_baseline, dtype=float)
-        p[layout.PRM_RB:layout.PRM_RB + 3] = b / np.linalg.norm(b)
-        p[layout.PRM_RRAD:layout.PRM_RRAD + 3] = self.radar_offset
-        p[layout.PRM_ZG] = self.ground_z
-        p[layout.PRM_COSMAX] = math.cos(self.radar_max_tilt_deg * DEG)
-        p[layout.PRM_RMAX] = self.radar_max_range
+        p[layout.PRM.slice("r_b")] = b / np.linalg.norm(b)
+        p[layout.PRM.slice("r_rad")] = self.radar_offset
+        p[layout.PR.Z_G] = self.ground_z
+        p[layout.PR.COS_MAX] = math.cos(self.radar_max_tilt_deg * DEG)
+        p[layout.PR.R_MAX] = self.radar_max_range
         D = self.delay_ticks()
-        p[layout.PRM_D], p[layout.PRM_DELAYED] = D, float(self.delayed)
-        p[layout.PRM_B], p[layout.PRM_QC] = D + 2, self.queue
+        p[layout.PR.DELAY], p[layout.PR.DELAYED] = D, float(self.delayed)
+        p[layout.PR.RING], p[layout.PR.QUEUE] = D + 2, self.queue
         if not (self.gate_sigma > 0 and self.gate_reset_s > 0):
             raise ValueError(f"gate_sigma and gate_reset_s must be > 0 (inf = off), got "
                              f"{self.gate_sigma!r}, {self.gate_reset_s!r}")
-        p[layout.PRM_GATE] = self.gate_sigma
-        p[layout.PRM_GRESET] = self.gate_reset_s / dt
+        p[layout.PR.GATE] = self.gate_sigma
+        p[layout.PR.GATE_RESET] = self.gate_reset_s / dt
         if not self.gate_latch_s >= 0:
             raise ValueError(f"gate_latch_s must be >= 0 (0 = no latch, inf = no limit), got "
                              f"{self.gate_latch_s!r}")
-        p[layout.PRM_GLATCH] = self.gate_latch_s / dt
-        p[layout.PRM_PCAW] = self.pca_window
-        p[layout.PRM_CONING] = float(bool(self.coning))
+        p[layout.PR.GATE_LATCH] = self.gate_latch_s / dt
+        p[layout.PR.PCA_WINDOW] = self.pca_window
+        p[layout.PR.CONING] = float(bool(self.coning))
         return p
 
     def kernel_widths(self) -> np.ndarray:
@@ -172,11 +174,18 @@ class INSConfig:
             raise ValueError(f"recovery must be 'kf', 'inflate' or None, got {self.recovery!r}")
         gate = 2.0 * float(gammaincinv(1.5, 0.999))
         jmax = max(1, int(12.0 / math.log10(self.inflate))) if self.inflate > 1 else 1
-        mpar = np.concatenate([c[:15], 0.5 * c[15:], [1e-12, self.eps**2, self.reject_weight,
-                                                       self.inflate, gate],
-                               [float(self.mckf_kernel == "adaptive"), self.adapt_lambda,
-                                self.adapt_clip], s])
-        ipar = np.array([self.max_iter, self.lockout_n, INS_RECOVERY[self.recovery], jmax],
-                        dtype=np.int64)
+        mpar = np.empty(layout.MPAR.size)
+        ne = layout.ERR.size
+        mpar[MP.KX:MP.KX_END], mpar[MP.KY:MP.KY_END] = c[:ne], 0.5 * c[ne:]  # −1/(2σ²), −1/(4σ²)
+        f = mpar[MP.F:MP.F_END]
+        f[FP.FLOOR], f[FP.EPS2], f[FP.REJECT] = 1e-12, self.eps**2, self.reject_weight
+        f[FP.INFLATE], f[FP.GATE] = self.inflate, gate
+        a = mpar[MP.A:MP.A_END]
+        a[AP.ADAPTIVE], a[AP.LAM] = float(self.mckf_kernel == "adaptive"), self.adapt_lambda
+        a[AP.CLIP] = self.adapt_clip
+        mpar[MP.SIG:MP.SIG_END] = s
+        ipar = np.empty(MCKF_I.size, dtype=np.int64)
+        ipar[IP.MAX_ITER], ipar[IP.LOCKOUT] = self.max_iter, self.lockout_n
+        ipar[IP.RECOVERY], ipar[IP.JMAX] = INS_RECOVERY[self.recovery], jmax
         return mpar, ipar
 

@@ -110,12 +110,17 @@ def wanted(cfg: Any) -> bool:
             and not _ins_kernel_cached())
 
 
+#: ``/proc/PID/stat``'s field 22 (starttime) counted from field 3 (state), the first after the
+#: command's closing parenthesis
+_STARTTIME_AFTER_COMM = 19
+
+
 def _start_ticks(pid: int) -> int:
     """The process's start time (clock ticks since boot, ``/proc/PID/stat`` field 22; 0 where
     it cannot be read): with the pid, it tells a process from a later one given the same pid."""
     try:
         text = Path(f"/proc/{pid}/stat").read_text()
-        return int(text.rsplit(")", 1)[1].split()[19])
+        return int(text.rsplit(")", 1)[1].split()[_STARTTIME_AFTER_COMM])
     except (OSError, ValueError, IndexError):
         return 0
 

@@ -135,5 +135,6 @@ def flight_axes(args: Any) -> tuple[list[float], list[float], list[float]]:
     check_on_config("--winds", winds, "wind.speed_mps")
     check_on_config("--heights", heights, "mission.altitude_m")
     check_on_config("--speeds", speeds, "mission.speed_mps")
-    check_on_config("--mass", [args.mass], "vehicle.mass_kg")
+    if args.mass is not None:
+        check_on_config("--mass", [args.mass], "vehicle.mass_kg")
     return winds, heights, speeds

@@ -17,9 +17,10 @@ Writes into ``--out`` (``runs/experiment-drift``): ``drift.csv`` (one row per ca
 distance: crosswind, release height, speed, spectrum, temperature, RH, distance, deposit in %
 of the applied rate), ``cases.csv`` (per case: buffers for < 1 % and < 0.1 %, each with its
 low and high bound from the uncertain inputs (:mod:`.drift_range`), evaporated and airborne
-shares of the sprayed volume), ``drift.png`` (deposit against distance, log scale, with
-the published curves) and ``drift.md`` (the buffer table and the comparison with the published
-field measurements, with the ratio at each distance).
+shares of the sprayed volume, the place in the JKI band at the central, low and high inputs),
+``drift.png`` (deposit against distance, log scale, with the published curves and the band
+shaded) and ``drift.md`` (the buffer table, the comparison with the published field
+measurements with the ratio at each distance, and the band check: :func:`band_check`).
 """
 
 from __future__ import annotations
@@ -46,6 +47,9 @@ DISTANCES = (1.0, 2.0, 3.0, 5.0, 10.0, 15.0, 20.0, 30.0, 50.0)
 #: what the buffers' bounds are (:mod:`.drift_range`)
 BOUNDS_NOTE = ("low: wake_escape halved, an unstable surface layer, the wind's direction "
                "meandering 20°; high: wake_escape doubled, a stable layer, a steady direction")
+#: how the band table reads
+BAND_NOTE = ("Place in the band from JKI field crops (F) to JKI fruit, early (E), from 5 m: "
+             "inside / above E / below F, with the ratio to the nearest edge")
 #: illustrative spectra (Dv10, Dv50, Dv90 in µm); "medium" is the product default
 SPECTRA = {"fine": (80.0, 160.0, 290.0), "medium": (120.0, 250.0, 420.0),
            "coarse": (180.0, 360.0, 600.0)}
@@ -65,6 +69,45 @@ JKI = {
 #: "lower than aerial, higher than ground boom, and similar to orchard airblast"; so the band
 #: from the field-crop curve to the early-fruit curve is where a drone's deposit is expected.
 BAND = ("JKI field crops (ground boom)", "JKI fruit, early (orchard airblast)")
+#: the distances (m) the band is checked at: from 5 m out, where both curves have a value
+BAND_DISTANCES = tuple(d for d in DISTANCES if d >= 5 and all(d in JKI[b] for b in BAND))
+
+
+def band_check(dep: dict[float, float]) -> list[tuple[float, str, float, str]]:
+    """Each deposit (% of the rate, by distance) against the band from the field-crop curve F
+    (low edge) to the early-fruit curve E (high edge) at :data:`BAND_DISTANCES`:
+    (distance, "above" / "inside" / "below", ratio to the nearest edge, that edge "E" / "F").
+    Above: dep / E > 1; below: dep / F < 1; inside: the ratio to the edge nearer in log scale
+    (dep / F if dep / F < E / dep, else dep / E)."""
+    lo, hi = JKI[BAND[0]], JKI[BAND[1]]
+    out = []
+    for d in BAND_DISTANCES:
+        if d not in dep:
+            continue
+        v = dep[d]
+        if v > hi[d]:
+            out.append((d, "above", v / hi[d], "E"))
+        elif v < lo[d]:
+            out.append((d, "below", v / lo[d], "F"))
+        elif v / lo[d] < hi[d] / v:
+            out.append((d, "inside", v / lo[d], "F"))
+        else:
+            out.append((d, "inside", v / hi[d], "E"))
+    return out
+
+
+def band_verdict(checks: list[tuple[float, str, float, str]]) -> str:
+    """One line from :func:`band_check`: "inside", or where the deposit leaves the band and the
+    furthest it gets from the edge (e.g. "above E at 30, 50 m (up to 1.6 ×)")."""
+    parts = []
+    for side, edge in (("above", "E"), ("below", "F")):
+        out = [(d, r) for d, s, r, _ in checks if s == side]
+        if out:
+            worst = max(r for _, r in out) if side == "above" else min(r for _, r in out)
+            at = ", ".join(f"{d:g}" for d, _ in out)
+            parts.append(f"{side} {edge} at {at} m ({'up' if side == 'above' else 'down'} "
+                         f"to {worst:#.2g} ×)")
+    return "; ".join(parts) if parts else "inside"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,6 +171,8 @@ def run_cases(base: DepositionConfig, cases: list[Case], passes: int, mass_kg: f
                      "speed_mps": c.speed, "spectrum": c.spectrum, "temperature_c": c.temp_c,
                      "rh_percent": c.rh, "buffer_1pct_m": buffer_m(fine, depf, 1.0),
                      "buffer_0p1pct_m": buffer_m(fine, depf, 0.1),
+                     "jki_band": band_verdict(band_check(dict(zip(DISTANCES, dep.tolist(),
+                                                                   strict=True)))),
                      "escaped_fraction": book["escaped"],
                      "evaporated_fraction": book["evaporated"],
                      "airborne_fraction": book["airborne"]})
@@ -138,7 +183,8 @@ def run_cases(base: DepositionConfig, cases: list[Case], passes: int, mass_kg: f
 def bound_buffers(base: DepositionConfig, cases: list[Case], passes: int, mass_kg: float
                   ) -> dict:
     """Per case the buffers (< 1 %, < 0.1 %) at the low and the high bound of the uncertain
-    inputs (:mod:`.drift_range`): {case: {"low": (m, m), "high": (m, m)}}."""
+    inputs (:mod:`.drift_range`) and the bound's place in the JKI band (:func:`band_verdict`):
+    {case: {"low": (m, m, verdict), "high": (m, m, verdict)}}."""
     out: dict = {c: {} for c in cases}
     for which in drift_range.BOUNDS:
         cfg, sig = drift_range.bound_config(base, which)
@@ -146,7 +192,9 @@ def bound_buffers(base: DepositionConfig, cases: list[Case], passes: int, mass_k
         for c in cases:
             x, dep = curves[c]
             d = drift_range.meander(x, dep, sig)
-            out[c][which] = (buffer_m(x, d, 1.0), buffer_m(x, d, 0.1))
+            at = dict(zip(BAND_DISTANCES, np.interp(BAND_DISTANCES, x, d).tolist(), strict=True))
+            out[c][which] = (buffer_m(x, d, 1.0), buffer_m(x, d, 0.1),
+                             band_verdict(band_check(at)))
     return out
 
 
@@ -183,6 +231,9 @@ def _plot(path: Path, curves: dict, base_cases: list[Case]) -> None:
                     label=f"model {c.height:g} m, {c.wind:g} m/s, {c.spectrum}")
     for name, vals in JKI.items():
         ax.plot(list(vals), list(vals.values()), "o--", ms=4, label=name)
+    ax.fill_between(BAND_DISTANCES, [JKI[BAND[0]][d] for d in BAND_DISTANCES],
+                    [JKI[BAND[1]][d] for d in BAND_DISTANCES], color="0.5", alpha=0.15,
+                    label="band: field crops to fruit, early (from 5 m)")
     ax.set_yscale("log")
     ax.set_xlabel("distance from the treated strip's edge (m)")
     ax.set_ylabel("deposit (% of the applied rate)")
@@ -212,6 +263,30 @@ def _comparison(rows: list[dict], base_cases: list[Case]) -> tuple[list[str], li
     for name, vals in JKI.items():
         table.append(["published", f"{name} (%)"]
                      + [f"{vals[d]:g}" if d in vals else "—" for d in DISTANCES])
+    return header, table
+
+
+def _band_table(rows: list[dict], summ: list[dict], base_cases: list[Case]
+                ) -> tuple[list[str], list[list[str]]]:
+    """Per plotted case: its place in the JKI band at each distance from 5 m (the ratio to the
+    nearest edge, F field crops / E early fruit) and the verdict at the central, low and high
+    inputs."""
+    header = (["case"] + [f"{d:g} m" for d in BAND_DISTANCES]
+              + ["central", "low bound", "high bound"])
+    table = []
+    for c in base_cases:
+        key = dataclasses.astuple(c)
+        dep = {r["distance_m"]: r["deposit_percent"] for r in rows
+               if (r["crosswind_mps"], r["release_height_m"], r["speed_mps"], r["spectrum"],
+                   r["temperature_c"], r["rh_percent"]) == key}
+        s = next((s for s in summ
+                  if (s["crosswind_mps"], s["release_height_m"], s["speed_mps"], s["spectrum"],
+                      s["temperature_c"], s["rh_percent"]) == key), None)
+        if not dep or s is None:
+            continue
+        cells = [f"{st} {r:#.2g} {e}" for _, st, r, e in band_check(dep)]
+        table.append([f"{c.height:g} m, {c.wind:g} m/s"] + cells
+                     + [s["jki_band"], s.get("jki_band_low", "—"), s.get("jki_band_high", "—")])
     return header, table
 
 
@@ -250,8 +325,9 @@ def main(args: argparse.Namespace) -> int:
     rows, summ, curves = run_cases(base, cases, args.passes, args.mass)
     rng = bound_buffers(base, cases, args.passes, args.mass)
     for s, c in zip(summ, cases, strict=True):
-        for which, (b1, b01) in rng[c].items():
+        for which, (b1, b01, band) in rng[c].items():
             s[f"buffer_1pct_{which}_m"], s[f"buffer_0p1pct_{which}_m"] = b1, b01
+            s[f"jki_band_{which}"] = band
     wall = time.perf_counter() - t0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -260,21 +336,24 @@ def main(args: argparse.Namespace) -> int:
     _plot(out / "drift.png", curves, base_cases)
     bh = ["wind (m/s)", "h (m)", "v (m/s)", "spectrum", "T (°C)", "RH (%)",
           "< 1 % beyond (m) (low–high)", "< 0.1 % beyond (m) (low–high)", "escaped",
-          "evaporated", "airborne"]
+          "evaporated", "airborne", "JKI band (from 5 m)"]
     bt = [[f"{s['crosswind_mps']:g}", f"{s['release_height_m']:g}", f"{s['speed_mps']:g}",
            s["spectrum"], f"{s['temperature_c']:g}", f"{s['rh_percent']:g}",
            f"{s['buffer_1pct_m']:g} ({s['buffer_1pct_low_m']:g}–{s['buffer_1pct_high_m']:g})",
            f"{s['buffer_0p1pct_m']:g} ({s['buffer_0p1pct_low_m']:g}–"
            f"{s['buffer_0p1pct_high_m']:g})",
            f"{100 * s['escaped_fraction']:.1f} %", f"{100 * s['evaporated_fraction']:.2f} %",
-           f"{100 * s['airborne_fraction']:.3f} %"] for s in summ]
+           f"{100 * s['airborne_fraction']:.3f} %", s["jki_band"]] for s in summ]
     print_table(bh, bt, f"Drift trial: buffers ({len(cases)} cases, {wall:.1f} s)")
     ch, ct = _comparison(rows, base_cases)
     print_table(ch, ct, "Deposit (% of the applied rate) beside the JKI basic drift values")
+    gh, gt = _band_table(rows, summ, base_cases)
+    print_table(gh, gt, BAND_NOTE)
     (out / "drift.md").write_text(
         "## Buffers\n\nIn brackets the low and high bounds (" + BOUNDS_NOTE + ").\n\n"
         + markdown_table(bh, bt) + "\n## Against published measurements\n\n"
-        + markdown_table(ch, ct))
+        + markdown_table(ch, ct) + "\n## In the band of the JKI curves\n\n" + BAND_NOTE
+        + ".\n\n" + markdown_table(gh, gt))
     print(f"wrote {out / 'drift.csv'}, {out / 'cases.csv'}, {out / 'drift.png'}, "
           f"{out / 'drift.md'}")
     return 0

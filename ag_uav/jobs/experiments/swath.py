@@ -67,14 +67,46 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speeds", default="3,5,7", help="ground speeds (m/s)")
     p.add_argument("--winds", default="0,1.5,3", help="crosswinds (m/s)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a DepositionConfig field (e.g. outwash_layer_m=0.2)")
+                   help="override a DepositionConfig field (e.g. outwash_layer_m=0.2), or with a "
+                        "dotted key a mission config key (e.g. vehicle.preset=x8-40l: its rotors, "
+                        "arm, nozzles, spectrum, drag and full-tank mass)")
     p.add_argument("--law", default="default", choices=sorted(LAWS),
-                   help="the deposition law: default (the outwash layer calibrated on the T40) "
-                        "or hover (the options checked on the wind tunnel); --set overrides it")
-    p.add_argument("--mass", type=float, default=6.47, help="vehicle mass (kg); hover thrust")
+                   help="the deposition law: default (the outwash layer calibrated on the T40), "
+                        "hover (the options checked on the wind tunnel) or wake (hover and the "
+                        "forward-flight vortex pair); --set overrides it")
+    p.add_argument("--mass", type=float, default=None,
+                   help="vehicle mass (kg; hover thrust); default 6.47, or with a dotted --set "
+                        "the config's vehicle with a full tank")
     p.add_argument("--turbulence", type=float, default=0.2,
                    help="ambient turbulence sigma as a share of the crosswind")
     p.add_argument("--out", default="runs/experiment-swath", metavar="DIR", help="output folder")
+
+
+def _vehicle(args: argparse.Namespace) -> tuple[DepositionConfig, float, tuple[float, float]]:
+    """The deposition config, mass and drag (linear, quadratic along x) of the test: the
+    M350-class defaults, or with dotted ``--set`` keys the mission config's vehicle (rotors,
+    arm, nozzles, spectrum, drag; the mass with a full tank); the law and the field ``--set``
+    items on top."""
+    import dataclasses
+
+    from ...config import ConfigError, load_config, parse_set_items
+
+    dotted = [s for s in args.set if "." in s.partition("=")[0]]
+    fields = [s for s in args.set if s not in dotted]
+    mass, drag = 6.47, (0.25, 0.18)
+    try:
+        over = {**LAWS[args.law], **toml_overrides(fields)}
+        if dotted:
+            c = load_config(None, parse_set_items(dotted))
+            v, sp = c.vehicle, c.spray
+            mass = v.mass_kg + v.payload_kg + v.unknown_payload_kg + sp.tank_l * sp.density_kg_per_l
+            drag = (float(v.drag_linear[0]), float(v.drag_quadratic[0]))
+            cfg = dataclasses.replace(DepositionConfig.from_config(c, swath_m=6.0), **over)
+        else:
+            cfg = DepositionConfig(**over)
+    except (ValueError, TypeError) as e:
+        raise ConfigError(f"--set: {e}") from None
+    return cfg, (mass if args.mass is None else args.mass), drag
 
 
 def main(args: argparse.Namespace) -> int:
@@ -86,13 +118,10 @@ def main(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.turbulence) and args.turbulence >= 0):
         raise ConfigError(f"--turbulence = {args.turbulence:g}: must be >= 0 (a share of the "
                           "crosswind)")
-    try:
-        cfg = DepositionConfig(**{**LAWS[args.law], **toml_overrides(args.set)})
-    except (ValueError, TypeError) as e:
-        raise ConfigError(f"--set: {e}") from None
+    cfg, mass, drag = _vehicle(args)
     t0 = time.perf_counter()
-    rows, profiles = swath_pattern(cfg, heights, speeds, winds, mass_kg=args.mass,
-                                   turb=args.turbulence)
+    rows, profiles = swath_pattern(cfg, heights, speeds, winds, mass_kg=mass, drag_lin=drag[0],
+                                   drag_quad=drag[1], turb=args.turbulence)
     wall = time.perf_counter() - t0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

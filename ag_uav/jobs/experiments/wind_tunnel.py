@@ -189,6 +189,11 @@ def model_profile(cfg: DepositionConfig, trial: Trial, wind: float, payload_l: f
             wv = fp["wvar"][k]
             gx = np.exp(-0.5 * (x - xm - fp["wx"][k]) ** 2 / wv) / math.sqrt(2 * math.pi * wv)
             dens += share[m] * f * fp["wake"][k] * gx * _wall_gauss(ym + fp["wy"][k], wv, w)
+            if fp["vort"][k] > 0.0:                    # the trailing vortex pair's part
+                vv = fp["vvx"][k]
+                gv = np.exp(-0.5 * (x - xm - fp["vx"][k]) ** 2 / vv) / math.sqrt(2 * math.pi * vv)
+                dens += (share[m] * f * fp["vort"][k] * gv
+                         * _wall_gauss(ym + fp["vy"][k], fp["vvy"][k], w))
             if esc_x is not None:
                 ex = np.interp(x - xm, grid, esc_x, left=0.0, right=0.0)
                 dens += share[m] * f * land * ex * _wall_gauss(ym + fp["ey"][k], fp["evy"][k], w)
@@ -309,8 +314,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tunnel-width", type=float, default=t.tunnel_width_m,
                    help="tunnel width (m; assumed); 0: no side walls")
     p.add_argument("--law", default="default", choices=sorted(LAWS),
-                   help="the deposition law: default (the outwash layer calibrated on the T40) "
-                        "or hover (the wall jet and the impinging jet; ε₀ from these rows)")
+                   help="the deposition law: default (the outwash layer calibrated on the T40), "
+                        "hover (the wall jet and the impinging jet; ε₀ from these rows) or wake "
+                        "(hover and the forward-flight vortex pair)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a DepositionConfig field (e.g. wake_escape=0.6)")
     p.add_argument("--out", default="runs/experiment-wind-tunnel", metavar="DIR",

@@ -31,7 +31,10 @@ import math
 
 import numpy as np
 
-from .data import DEG, FlightLog, ReplayError, Track, euler_zyx_to_rot, rot_to_euler_zyx
+from numkit import X, Y, Z
+from numkit.geometry import euler_to_rots, rots_to_euler
+
+from .data import DEG, IMU, FlightLog, ReplayError, Track
 
 __all__ = ["clock_lag", "initial_state", "mount_rotation", "rot_log"]
 
@@ -40,7 +43,7 @@ def rot_log(R: np.ndarray) -> np.ndarray:
     """Rotation matrices (n, 3, 3) → rotation vectors (n, 3) (the SO(3) logarithm)."""
     c = np.clip((np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
     ang = np.arccos(c)
-    v = np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1)
+    v = np.stack([R[:, Z, Y] - R[:, Y, Z], R[:, X, Z] - R[:, Z, X], R[:, Y, X] - R[:, X, Y]], 1)
     s = np.sin(ang)
     k = np.where(s > 1e-9, ang / (2.0 * np.where(s > 1e-9, s, 1.0)), 0.5)
     return v * k[:, None]
@@ -66,7 +69,8 @@ def clock_lag(imu_t: np.ndarray, imu: np.ndarray, ref: Track, max_lag_s: float =
     """(lag s, peak normalised correlation): ``t_ref = t_imu + lag`` (module docstring)."""
     dt_imu = float(np.median(np.diff(imu_t)))
     dt_ref = float(np.median(np.diff(ref.t)))
-    w_imu = _smooth(np.linalg.norm(imu[:, 3:], axis=1), max(1, int(round(dt_ref / dt_imu))))
+    w_imu = _smooth(np.linalg.norm(imu[:, IMU.GYRO:IMU.GYRO_END], axis=1),
+                    max(1, int(round(dt_ref / dt_imu))))
     tm, w_ref = ref_rate(ref)
     grid = np.arange(tm[0], tm[-1], 1.0 / fs)
     y_ref = np.interp(grid, tm, w_ref)
@@ -104,7 +108,8 @@ def mount_rotation(imu_t: np.ndarray, imu: np.ndarray, ref: Track) -> tuple[np.n
     w_body = rot_log(np.einsum("nji,njk->nik", ref.R[:-1], ref.R[1:])) / dt[:, None]
     # the IMU's rate averaged over each reference interval (trapezoidal cumulative integral)
     cum = np.concatenate([np.zeros((1, 3)), np.cumsum(
-        0.5 * (imu[1:, 3:] + imu[:-1, 3:]) * np.diff(imu_t)[:, None], axis=0)])
+        0.5 * (imu[1:, IMU.GYRO:IMU.GYRO_END] + imu[:-1, IMU.GYRO:IMU.GYRO_END])
+        * np.diff(imu_t)[:, None], axis=0)])
     a, b = ref.t[:-1], ref.t[1:]
     ok = (a >= imu_t[0]) & (b <= imu_t[-1]) & np.all(np.isfinite(w_body), axis=1)
     if ok.sum() < 10:
@@ -166,19 +171,19 @@ def _attitude(log: FlightLog, t_grid, imu, k0: int, src: str) -> tuple[np.ndarra
         _, Ry = tr.at(np.array([t0]))
         if not np.all(np.isfinite(Ry)):
             raise ReplayError(f"--heading {src}: no {src} attitude at the start (t = {t0:.2f} s)")
-        yaw = float(rot_to_euler_zyx(Ry)[0, 2])
+        yaw = float(rots_to_euler(Ry)[0, Z])
     else:
         j = min(int(np.searchsorted(log.gnss_t, t0)), log.gnss_t.size - 1)
         yaw = math.atan2(log.gnss_v[j, 1], log.gnss_v[j, 0])
     Rr = ref.at(np.array([t0]))[1] if ref is not None and ref.R is not None else None
     if Rr is not None and np.all(np.isfinite(Rr)):
-        rpy, how = rot_to_euler_zyx(Rr)[0], "roll/pitch from the reference"
+        rpy, how = rots_to_euler(Rr)[0], "roll/pitch from the reference"
     else:
         rpy, comp = _level(log, t_grid, imu, k0, yaw)
         how = "roll/pitch levelled from the accelerometer" + (
             " less the GNSS acceleration" if comp else "")
-    rpy[2] = yaw
-    return euler_zyx_to_rot(*[np.array([a]) for a in rpy])[0], f"{how}, heading from {src}"
+    rpy[Z] = yaw
+    return euler_to_rots(*[np.array([a]) for a in rpy])[0], f"{how}, heading from {src}"
 
 
 def _level(log: FlightLog, t_grid, imu, k0: int, yaw: float) -> tuple[np.ndarray, bool]:
@@ -196,12 +201,12 @@ def _level(log: FlightLog, t_grid, imu, k0: int, yaw: float) -> tuple[np.ndarray
         if m.sum() >= 2 and np.ptp(te[m]) > 0:
             a_w, comp = np.polyfit(te[m], log.gnss_v[m], 1)[0], True
             sel = (t_grid >= te[m].min()) & (t_grid <= te[m].max())
-    f = imu[sel, :3].mean(axis=0)
+    f = imu[sel, IMU.ACC:IMU.ACC_END].mean(axis=0)
     rpy = np.array([0.0, 0.0, yaw])
     g = f
     for _ in range(3):
-        rpy[0], rpy[1] = math.atan2(g[1], g[2]), math.atan2(-g[0], math.hypot(g[1], g[2]))
-        g = f - euler_zyx_to_rot(*[np.array([a]) for a in rpy])[0].T @ a_w
+        rpy[X], rpy[Y] = math.atan2(g[Y], g[Z]), math.atan2(-g[X], math.hypot(g[Y], g[Z]))
+        g = f - euler_to_rots(*[np.array([a]) for a in rpy])[0].T @ a_w
     return np.array([rpy[0], rpy[1], 0.0]), comp
 
 
@@ -215,7 +220,7 @@ def _position(log: FlightLog, t0: float, R: np.ndarray, lever: np.ndarray):
         return p, v, np.sqrt(np.maximum(log.gnss_var[j], 1e-4)), "the first fix"
     ref = log.reference or log.autopilot
     if ref is not None:
-        pr, _ = ref.at(np.array([t0 - 0.05, t0, t0 + 0.05]))
-        if np.all(np.isfinite(pr)):
-            return pr[1], (pr[2] - pr[0]) / 0.1, np.full(3, 0.1), f"the {ref.label}"
+        (pm, p0, pp), _ = ref.at(np.array([t0 - 0.05, t0, t0 + 0.05]))
+        if np.all(np.isfinite([pm, p0, pp])):
+            return p0, (pp - pm) / 0.1, np.full(3, 0.1), f"the {ref.label}"
     return np.zeros(3), np.zeros(3), np.full(3, 1.0), "the origin (no fix, no reference)"

@@ -25,10 +25,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimators.ins import quat_to_rot
+from numkit import Layout, Z
 
-__all__ = ["ReplayError", "FlightLog", "Track", "euler_zyx_to_rot", "frd_to_flu",
-           "ned_frd_to_enu_flu", "rot_to_euler_zyx", "rot_to_quat", "quat_to_rot_np"]
+#: an IMU row: specific force f̃ (m/s²) then rate ω̃ (rad/s), body FLU
+IMU = Layout("acc:3 gyro:3").at
+#: a row of the INS bank's output state (``BatchINS.x_out``): p, v (ENU), q (FLU → ENU), b_a, b_g
+XOUT = Layout("pos:3 vel:3 quat:4 ba:3 bg:3").at
+#: a processed fix (``ReplayResult.fix_events``): time, gate verdict, position and velocity NIS
+EVENT = Layout("t verdict nis_pos nis_vel").at
+
+__all__ = ["EVENT", "IMU", "XOUT", "ReplayError", "FlightLog", "Track", "frd_to_flu",
+           "ned_frd_to_enu_flu"]
 
 DEG = math.pi / 180.0
 _T_EN = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -43,13 +50,15 @@ class ReplayError(ValueError):
 class Track:
     """A position/attitude track: ``t`` (n,), ``p`` (n, 3) ENU m (NaN where unknown), ``R`` (n,
     3, 3) FLU → ENU rotation (NaN where unknown), ``v`` (n, 3) ENU m/s or None; ``label``
-    names it in tables."""
+    names it in tables; ``speed`` (n,) the horizontal speed the record logs beside its
+    positions (m/s), or None."""
 
     t: np.ndarray
     p: np.ndarray
     R: np.ndarray | None = None
     v: np.ndarray | None = None
     label: str = "reference"
+    speed: np.ndarray | None = None
 
     def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """(p, R) linearly interpolated at ``t`` (NaN outside the track's span; R by the
@@ -69,7 +78,7 @@ class Track:
         if ok.any():
             u, _, vt = np.linalg.svd(M[ok])
             d = np.sign(np.linalg.det(u @ vt))
-            u[:, :, 2] *= d[:, None]
+            u[:, :, Z] *= d[:, None]
             sub = np.full((int(inside.sum()), 3, 3), np.nan)
             sub[ok] = u @ vt
             R[inside] = sub
@@ -112,24 +121,8 @@ def frd_to_flu(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def euler_zyx_to_rot(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
-    """ZYX Euler angles (rad) → rotation matrices (n, 3, 3), R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    R = np.empty((np.size(roll), 3, 3))
-    R[:, 0, 0], R[:, 0, 1], R[:, 0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
-    R[:, 1, 0], R[:, 1, 1], R[:, 1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
-    R[:, 2, 0], R[:, 2, 1], R[:, 2, 2] = -sp, cp * sr, cp * cr
-    return R
 
 
-def rot_to_euler_zyx(R: np.ndarray) -> np.ndarray:
-    """Rotation matrices (n, 3, 3) → (n, 3) roll, pitch, yaw (rad) of R = Rz Ry Rx."""
-    roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
-    pitch = np.arcsin(np.clip(-R[:, 2, 0], -1.0, 1.0))
-    yaw = np.arctan2(R[:, 1, 0], R[:, 0, 0])
-    return np.stack([roll, pitch, yaw], axis=1)
 
 
 def ned_frd_to_enu_flu(R_nf: np.ndarray) -> np.ndarray:
@@ -137,31 +130,4 @@ def ned_frd_to_enu_flu(R_nf: np.ndarray) -> np.ndarray:
     return _T_EN @ R_nf @ _T_FF
 
 
-def quat_to_rot_np(q: np.ndarray) -> np.ndarray:
-    """Hamilton quaternions (n, 4) (w, x, y, z), normalised here → rotation matrices (n, 3, 3)
-    by the INS's own law (:func:`estimators.ins.quat_to_rot`, Solà eq 115)."""
-    q = np.asarray(q, dtype=float)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    R = np.empty((q.shape[0], 3, 3))
-    for i in range(q.shape[0]):
-        quat_to_rot(q[i], R[i])
-    return R
 
-
-def rot_to_quat(R: np.ndarray) -> np.ndarray:
-    """One rotation matrix → Hamilton (w, x, y, z) (Shepperd's method)."""
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    if tr > 0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = [0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s]
-    else:
-        i = int(np.argmax([R[0, 0], R[1, 1], R[2, 2]]))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * math.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k])
-        q = [0.0] * 4
-        q[0] = (R[k, j] - R[j, k]) / s
-        q[1 + i] = 0.25 * s
-        q[1 + j] = (R[j, i] + R[i, j]) / s
-        q[1 + k] = (R[k, i] + R[i, k]) / s
-    q = np.asarray(q)
-    return q / np.linalg.norm(q) * (1.0 if q[0] >= 0 else -1.0)

@@ -29,16 +29,17 @@ from pathlib import Path
 
 import numpy as np
 
+from numkit.geometry import euler_to_rots, quats_to_rots
+
 from ...world.geodesy import lonlat_to_enu
 from .data import (
     DEG,
+    IMU,
     FlightLog,
     ReplayError,
     Track,
-    euler_zyx_to_rot,
     frd_to_flu,
     ned_frd_to_enu_flu,
-    quat_to_rot_np,
 )
 
 __all__ = ["read_log", "read_csv_folder", "read_phantom", "read_ulog", "read_dataflash"]
@@ -67,7 +68,7 @@ def read_log(path: str | Path, imu_file: str | None = None, uere_m: float | None
         head = f.read(8)
     if head.startswith(b"ULog"):
         return read_ulog(p)
-    if head[:2] == b"\xa3\x95":
+    if head.startswith(b"\xa3\x95"):
         return read_dataflash(p, UERE_M if uere_m is None else uere_m)
     raise ReplayError(f"{p}: not a PX4 ULog, an ArduPilot DataFlash .BIN or a log folder "
                       "(imu.csv + gnss.csv, or a Phantom 4 RTK path)")
@@ -146,7 +147,7 @@ def read_csv_folder(folder: Path) -> FlightLog:
         rp, origin = _enu_cols(folder / "reference.csv", rt, origin)
         R = None
         if {"roll", "pitch", "yaw"} <= rt.keys():
-            R = euler_zyx_to_rot(rt["roll"] * DEG, rt["pitch"] * DEG, rt["yaw"] * DEG)
+            R = euler_to_rots(rt["roll"] * DEG, rt["pitch"] * DEG, rt["yaw"] * DEG)
         ref = Track(rt["t"], rp, R, label="reference")
     f = np.stack([imu[k] for k in ("ax", "ay", "az", "gx", "gy", "gz")], axis=1)
     return FlightLog("csv", str(folder), t, f, gn["t"], p, var, v, var_v, origin, ref,
@@ -167,9 +168,10 @@ def read_phantom(folder: Path, imu_file: str | None = None) -> FlightLog:
     f = np.stack([imu["Acc_X"], imu["Acc_Y"], imu["Acc_Z"], imu["Gyr_X"] * DEG,
                   imu["Gyr_Y"] * DEG, imu["Gyr_Z"] * DEG], axis=1)[keep]
     p = np.stack([gt["East"], gt["North"], -gt["Down"]], axis=1)
-    R_nf = euler_zyx_to_rot(gt["roll(degrees)"] * DEG, gt["pitch(degrees)"] * DEG,
+    R_nf = euler_to_rots(gt["roll(degrees)"] * DEG, gt["pitch(degrees)"] * DEG,
                             gt["compass_heading(degrees)"] * DEG)
-    ref = Track(gt["time"], p, ned_frd_to_enu_flu(R_nf), label="RTK reference (GT.csv)")
+    ref = Track(gt["time"], p, ned_frd_to_enu_flu(R_nf), label="RTK reference (GT.csv)",
+                speed=gt.get("speed(m/s)"))
     empty = np.zeros((0, 3))
     log = FlightLog("phantom", str(folder), t, f, np.zeros(0), empty, empty, None, None,
                     None, ref, imu_rate_hz=rate)
@@ -205,7 +207,8 @@ def read_ulog(path: Path) -> FlightLog:
     t = sc["timestamp"] * 1e-6
     f = np.stack([sc[f"accelerometer_m_s2[{i}]"] for i in range(3)]
                  + [sc[f"gyro_rad[{i}]"] for i in range(3)], axis=1).astype(float)
-    f[:, :3], f[:, 3:] = frd_to_flu(f[:, :3]), frd_to_flu(f[:, 3:])
+    acc, gyr = slice(IMU.ACC, IMU.ACC_END), slice(IMU.GYRO, IMU.GYRO_END)
+    f[:, acc], f[:, gyr] = frd_to_flu(f[:, acc]), frd_to_flu(f[:, gyr])
     rate = _check_imu(path, t)
     log = FlightLog("ulog", str(path), t, f, np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
                     imu_rate_hz=rate, gnss_delay_s=0.11)
@@ -273,7 +276,7 @@ def _ulog_ekf(log: FlightLog, u) -> None:
     R = None
     if att is not None:
         q = np.stack([att[f"q[{i}]"] for i in range(4)], axis=1).astype(float)
-        Ra = ned_frd_to_enu_flu(quat_to_rot_np(q))
+        Ra = ned_frd_to_enu_flu(quats_to_rots(q))
         R = np.stack([np.interp(t, att["timestamp"] * 1e-6, Ra[:, i // 3, i % 3])
                       for i in range(9)], axis=1).reshape(-1, 3, 3)
     log.autopilot = Track(t, p, R, v, label="PX4 EKF2")
@@ -287,7 +290,7 @@ UERE_M = 2.0
 def _df_messages(path: Path) -> dict[str, list[dict]]:
     from pymavlink import DFReader
 
-    want = ("IMU", "GPS", "EKF1", "AHRS2", "ATT", "PARM")
+    want = ("IMU", "GPS", "GPA", "EKF1", "AHRS2", "ATT", "PARM")
     out: dict[str, list[dict]] = {k: [] for k in want}
     # pymavlink prints each damaged message on standard output: kept off the terminal
     with contextlib.redirect_stdout(io.StringIO()):
@@ -315,9 +318,10 @@ def _df_t(rows: list[dict], keys=("TimeUS", "TimeMS")) -> np.ndarray:
 
 
 def read_dataflash(path: Path, uere_m: float = 2.0) -> FlightLog:
-    """ArduPilot DataFlash: ``IMU`` (FRD), ``GPS`` (Lat, Lng, Alt, HDop, Spd, GCrs, VZ; the
-    accuracy σ = HDop × ``uere_m``: these logs carry no reported accuracy), ``EKF1`` (or
-    ``AHRS2`` / ``ATT``) as the autopilot's estimate."""
+    """ArduPilot DataFlash: ``IMU`` (FRD), ``GPS`` (Lat, Lng, Alt, HDop, Spd, GCrs, VZ) with
+    the receiver's reported accuracy from ``GPA`` (HAcc, VAcc, SAcc, m and m/s; logged by
+    ArduPilot since 3.4 beside each ``GPS`` record) where the log has it, else σ = HDop ×
+    ``uere_m``; ``EKF1`` (or ``AHRS2`` / ``ATT``) as the autopilot's estimate."""
     msgs = _df_messages(path)
     imu = msgs["IMU"]
     if not imu:
@@ -326,7 +330,8 @@ def read_dataflash(path: Path, uere_m: float = 2.0) -> FlightLog:
     t, idx = np.unique(t, return_index=True)
     f = np.array([[imu[i][k] for k in ("AccX", "AccY", "AccZ", "GyrX", "GyrY", "GyrZ")]
                   for i in idx], dtype=float)
-    f[:, :3], f[:, 3:] = frd_to_flu(f[:, :3]), frd_to_flu(f[:, 3:])
+    acc, gyr = slice(IMU.ACC, IMU.ACC_END), slice(IMU.GYRO, IMU.GYRO_END)
+    f[:, acc], f[:, gyr] = frd_to_flu(f[:, acc]), frd_to_flu(f[:, gyr])
     rate = _check_imu(path, t)
     log = FlightLog("dataflash", str(path), t, f, np.zeros(0), np.zeros((0, 3)),
                     np.zeros((0, 3)), imu_rate_hz=rate, gnss_delay_s=0.22)
@@ -362,8 +367,41 @@ def _df_gnss(log: FlightLog, msgs: dict[str, list[dict]], uere_m: float) -> None
     vz = np.array([r.get("VZ", 0.0) for r in g])
     log.gnss_v = np.stack([spd * np.sin(crs), spd * np.cos(crs), -vz], axis=1)
     log.gnss_var_v = np.full((len(g), 3), 0.3**2)
-    log.notes.append(f"GNSS accuracy not logged: σ_e = σ_n = HDop × {uere_m:g} m (--uere), "
-                     "σ_u = 2 σ_e; velocity σ 0.3 m/s")
+    n_gpa = _df_gpa(log, msgs["GPA"], g)
+    if n_gpa < len(g):
+        which = f" on {len(g) - n_gpa} fixes" if n_gpa else ""
+        log.notes.append(f"GNSS accuracy not logged{which}: σ_e = σ_n = HDop × {uere_m:g} m "
+                         "(--uere), σ_u = 2 σ_e; velocity σ 0.3 m/s")
+
+
+def _df_gpa(log: FlightLog, gpa: list[dict], g: list[dict]) -> int:
+    """The receiver's reported accuracy (``GPA``: HAcc, VAcc, SAcc; the first receiver's,
+    ``I`` = 0) onto the fixes it was logged with (the nearest stamp within 0.1 s; HAcc > 0):
+    σ_e = σ_n = HAcc, σ_u = VAcc, the velocity's σ = SAcc per axis (as PX4's eph, epv and
+    s_variance are read).  Returns the number of fixes given a reported accuracy."""
+    gpa = [r for r in gpa if r.get("I", 0) == 0 and r.get("HAcc", 0) > 0]
+    if not gpa or not log.gnss_t.size:
+        return 0
+    ta, tg = _df_t(gpa, ("TimeUS",)), log.gnss_t   # both on the boot clock
+    if ta.size < 2:
+        return 0
+    order = np.argsort(ta, kind="stable")
+    gpa, ta = [gpa[i] for i in order], ta[order]
+    j = np.clip(np.searchsorted(ta, tg), 1, ta.size - 1)
+    j = np.where(np.abs(ta[j - 1] - tg) <= np.abs(ta[j] - tg), j - 1, j)
+    ok = np.abs(ta[j] - tg) <= 0.1
+    h = np.array([gpa[i]["HAcc"] for i in j], dtype=float)
+    v = np.array([gpa[i].get("VAcc", 0.0) for i in j], dtype=float)
+    sp = np.array([gpa[i].get("SAcc", 0.0) for i in j], dtype=float)
+    v = np.where(v > 0, v, 2.0 * h)
+    log.gnss_var[ok] = np.stack([h, h, v], axis=1)[ok] ** 2
+    okv = ok & (sp > 0)
+    log.gnss_var_v[okv] = (sp[okv, None] * np.ones(3)) ** 2
+    n = int(ok.sum())
+    if n:
+        log.notes.append(f"GNSS accuracy from GPA (HAcc, VAcc, SAcc as σ) on {n} of "
+                         f"{len(g)} fixes: HAcc median {np.median(h[ok]):.3g} m")
+    return n
 
 
 def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
@@ -376,7 +414,7 @@ def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
     rows = msgs[kind]
     t = _df_t(rows)
     eul = np.array([[r["Roll"], r["Pitch"], r["Yaw"]] for r in rows], dtype=float) * DEG
-    R = ned_frd_to_enu_flu(euler_zyx_to_rot(eul[:, 0], eul[:, 1], eul[:, 2]))
+    R = ned_frd_to_enu_flu(euler_to_rots(*eul.T))
     p = np.full((len(rows), 3), np.nan)
     v = None
     if kind == "EKF1":
@@ -390,7 +428,7 @@ def _df_ekf(log: FlightLog, msgs: dict[str, list[dict]]) -> None:
                 p = p + off
                 log.notes.append("ArduPilot EKF1's origin is not logged: its track is shifted "
                                  "by the median of (GNSS − EKF1), "
-                                 f"({off[0]:.2f}, {off[1]:.2f}, {off[2]:.2f}) m ENU")
+                                 f"({', '.join(f'{c:.2f}' for c in off)}) m ENU")
     ok = ~np.all(np.abs(eul) < 1e-12, axis=1)   # EKF1 logs zeros before it starts
     if not ok.any():
         return

@@ -8,10 +8,12 @@ PCA window, gate, reset and latch), and these from the log:
   linear interpolation (real logs jitter; the INS integrates at a fixed Δt).
 * **Process noise.** The per-sample white noise of each sensor is read from the log itself:
   σ = std(f̃_k+1 − f̃_k)/√2 per axis (the difference removes the slow motion and keeps the
-  white part, vibration included), the median over the three axes, times the margins
-  :data:`REPLAY_Q_ACCEL`, :data:`REPLAY_Q_GYRO` (× 2, × 32 on the variance).  The samples are
-  integrated as rates held over Δt (``INSConfig.coning = False``: no coning or sculling
-  correction; not measured with them on real logs).  The bias random walks
+  white part, vibration included), the median over the three axes, times the simulated
+  flight's margins on the variance (``estimator.ins_q_accel``, ``estimator.ins_q_gyro`` of the
+  default config: × 1, × 1), or ``q_margins`` where asked.  The samples are taken as the
+  sensor's means over Δt (delta-angles and delta-velocities over the interval) with the coning
+  and sculling corrections, as the simulated flight's ``imu.sampling = "increments"`` (``coning
+  = False``: rates held over Δt, no correction).  The bias random walks
   are the ``[imu]`` defaults; the initial bias σ are ``bias_sd`` (0.2 m/s², 0.3 °/s: a MEMS
   unit's turn-on bias without a calibration).
 * **Fixes.** A fix stamped ``t`` (the arrival stamp of an autopilot log, whose position is
@@ -24,7 +26,10 @@ PCA window, gate, reset and latch), and these from the log:
   (:meth:`ag_uav.vehicle.gps.GpsSensor.generate_errors`, seeded), R = the preset's reported
   variance for the fix's type (floored at (1 cm)² as the INS chain floors it); the velocity is
   the reference's (central difference over ±0.05 s) plus white noise of ``gps.velocity_sigma_mps``
-  of the default config (0.05 m/s), from a stream of the same seed.
+  of the default config (0.05 m/s), from a stream of the same seed; its variance is that σ²
+  plus the differencing's own error where the record logs a speed to measure it by
+  (:func:`difference_sigma`: 0.11–0.25 m/s on the Phantom paths, where 0.05 m/s alone
+  left the velocity NIS at ~10 for 3 and the gate shut the INS out on some paths).
 * **GNSS gap** (``gnss_gap`` = (start, duration) s from the replay's start; start < 0: the
   middle): no fix inside; the drift is the horizontal error at the gap's last tick.
 """
@@ -38,10 +43,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimators.ins import RULES, BatchINS
+from numkit.geometry import rots_to_euler, rots_to_quats
 
 from ...vehicle.gps import GpsSensor, derive_seed
 from .align import clock_lag, initial_state, mount_rotation
-from .data import DEG, FlightLog, ReplayError, rot_to_euler_zyx, rot_to_quat
+from .data import DEG, IMU, FlightLog, ReplayError
 
 __all__ = ["ReplayOptions", "ReplayResult", "run_replay"]
 
@@ -64,6 +70,8 @@ class ReplayOptions:
     heading: str = "auto"
     bias_sd: tuple[float, float] = (0.2, 0.3)
     gnss_velocity: bool = True
+    q_margins: tuple[float, float] | None = None
+    coning: bool | None = None
 
 
 @dataclass
@@ -101,8 +109,9 @@ def _prepare_imu(log: FlightLog, opts: ReplayOptions, info: dict) -> None:
         log.imu_t = log.imu_t + lag
     if log.source == "phantom" and ref is not None:
         M, res = mount_rotation(log.imu_t, log.imu, ref)
-        log.imu = np.concatenate([log.imu[:, :3] @ M, log.imu[:, 3:] @ M], axis=1)
-        info["mount_rpy_deg"] = np.round(rot_to_euler_zyx(M[None])[0] / DEG, 2).tolist()
+        acc, gyr = log.imu[:, IMU.ACC:IMU.ACC_END], log.imu[:, IMU.GYRO:IMU.GYRO_END]
+        log.imu = np.concatenate([acc @ M, gyr @ M], axis=1)
+        info["mount_rpy_deg"] = np.round(rots_to_euler(M[None])[0] / DEG, 2).tolist()
         info["mount_rate_residual_dps"] = round(res / DEG, 3)
 
 
@@ -126,6 +135,7 @@ def gnss_from_reference(log: FlightLog, preset: str, rate_hz: float, seed: int) 
     span = np.clip(t + 0.05, ref.t[0], ref.t[-1]) - np.clip(t - 0.05, ref.t[0], ref.t[-1])
     v = (pp - pm) / span[:, None]
     sv = load_config(None).gps.velocity_sigma_mps
+    s_fd = difference_sigma(ref, t, v)
     rng = np.random.default_rng(derive_seed(root, "replay_gnss_velocity"))
     v = v + sv * rng.standard_normal(v.shape)
     names = gps.fix_types
@@ -133,17 +143,27 @@ def gnss_from_reference(log: FlightLog, preset: str, rate_hz: float, seed: int) 
     ok = np.all(np.isfinite(err), axis=1) & np.all(np.isfinite(p), axis=1)
     log.gnss_t, log.gnss_p = t[ok], (p + err)[ok]
     log.gnss_var = np.maximum(var[ok], R_FLOOR)
-    log.gnss_v, log.gnss_var_v = v[ok], np.full((int(ok.sum()), 3), sv**2)
+    log.gnss_v, log.gnss_var_v = v[ok], np.full((int(ok.sum()), 3), sv**2 + s_fd**2)
+    if s_fd > 0:
+        log.notes.append(f"GNSS velocity σ {math.hypot(sv, s_fd):.3f} m/s: {sv:g} m/s of "
+                         f"receiver noise and {s_fd:.3f} m/s, the RMS of the reference's "
+                         "differenced horizontal speed less the speed it logs")
     log.gnss_delay_s = 0.0
     log.notes.append(f"GNSS built from the reference: preset {preset}, {rate_hz:g} Hz, seed {seed}"
                      f" ({int(ok.sum())} fixes)")
 
 
-#: the process-noise margins (variance) on the log's white noise: those calibrated on the
-#: simulated IMU when it was point-sampled, which docs/replay.md was measured with (the
-#: simulation's default is 1, 1 since its IMU reports delta-angles and delta-velocities; not
-#: measured on real logs)
-REPLAY_Q_ACCEL, REPLAY_Q_GYRO = 2.0, 32.0
+def difference_sigma(ref, t: np.ndarray, v: np.ndarray) -> float:
+    """The error of a velocity differenced from the reference's positions, where the record
+    logs its own speed beside them: RMS(|v_h| − speed) over the fix epochs (the positions'
+    noise over the ±0.05 s span, the lever arm's ω × r, the speed's own error: all taken as the
+    built fix's); 0 without a logged speed (a reference known exactly, as a test's)."""
+    if ref.speed is None:
+        return 0.0
+    sp = np.interp(t, ref.t, ref.speed, left=np.nan, right=np.nan)
+    d = np.hypot(v[:, 0], v[:, 1]) - sp
+    d = d[np.isfinite(d)]
+    return float(np.sqrt(np.mean(d * d))) if d.size else 0.0
 
 
 def white_sigma(a: np.ndarray) -> float:
@@ -152,19 +172,26 @@ def white_sigma(a: np.ndarray) -> float:
     return float(np.median(np.std(np.diff(a, axis=0), axis=0)) / math.sqrt(2.0))
 
 
-def _ins_cfg(log: FlightLog, dt: float, delay: float, lever: np.ndarray, info: dict):
+def _ins_cfg(log: FlightLog, opts: ReplayOptions, dt: float, delay: float, lever: np.ndarray,
+             info: dict):
+    """The default config's INS settings with the log's noise, rate, delay and lever arm
+    (module docstring); the margins and the coning switch as the simulated flight's unless
+    ``opts`` says otherwise."""
     from ...config import load_config
     from ..ins_feedback import ins_config
 
     cfg = load_config(None)
     e = cfg.estimator
-    sa, sg = white_sigma(log.imu[:, :3]), white_sigma(log.imu[:, 3:])
+    sa = white_sigma(log.imu[:, IMU.ACC:IMU.ACC_END])
+    sg = white_sigma(log.imu[:, IMU.GYRO:IMU.GYRO_END])
     info["imu_white_sigma"] = {"accel_mps2": round(sa, 4), "gyro_dps": round(sg / DEG, 4)}
+    qa, qg = opts.q_margins if opts.q_margins is not None else (e.ins_q_accel, e.ins_q_gyro)
     base = ins_config(cfg)
+    coning = base.coning if opts.coning is None else bool(opts.coning)
+    info["q_margins"], info["coning"] = [qa, qg], coning
     return dataclasses.replace(
-        base, dt=dt, accel_sigma=sa * math.sqrt(REPLAY_Q_ACCEL),
-        gyro_sigma=sg * math.sqrt(REPLAY_Q_GYRO), lever_arm=tuple(lever),
-        delay_s=delay + 2.0 * dt, delayed=True, coning=False), e.name
+        base, dt=dt, accel_sigma=sa * math.sqrt(qa), gyro_sigma=sg * math.sqrt(qg),
+        lever_arm=tuple(lever), delay_s=delay + 2.0 * dt, delayed=True, coning=coning), e.name
 
 
 def _gap(opts: ReplayOptions, t0: float, t1: float) -> tuple[float, float] | None:
@@ -195,7 +222,7 @@ def run_replay(log: FlightLog, opts: ReplayOptions) -> ReplayResult:
     lever = np.asarray(opts.lever_arm if opts.lever_arm is not None else
                        (log.lever_arm if log.lever_arm is not None else (0.0, 0.0, 0.0)), float)
     delay = opts.gnss_delay_s if opts.gnss_delay_s is not None else log.gnss_delay_s
-    icfg, flown = _ins_cfg(log, dt, delay, lever, info)
+    icfg, flown = _ins_cfg(log, opts, dt, delay, lever, info)
     flown = opts.flown or flown
     rules = (flown,) + tuple(r for r in RULES if r != flown)
     init = initial_state(log, t_grid, imu, lever, opts.heading)
@@ -207,7 +234,7 @@ def run_replay(log: FlightLog, opts: ReplayOptions) -> ReplayResult:
     bank = BatchINS(1, icfg, rules)
     bs_a, bs_g = opts.bias_sd
     sd = np.r_[init["sd9"], [bs_a] * 3, [bs_g * DEG] * 3]
-    bank.reset(init["p"], init["v"], rot_to_quat(init["R"]), P0=sd)
+    bank.reset(init["p"], init["v"], rots_to_quats(init["R"][None])[0], P0=sd)
     info.update({"imu_rate_hz": round(rate, 3), "gnss_delay_s": delay,
                  "lever_arm_m": lever.tolist(), "rules": list(rules), "flown": flown,
                  "start_t_s": round(float(t_grid[k0]), 3),

@@ -16,7 +16,10 @@ import math
 
 import numpy as np
 
-from .data import DEG, Track, quat_to_rot_np, rot_to_euler_zyx
+from numkit import X, Y, Z
+from numkit.geometry import quats_to_rots, rots_to_euler
+
+from .data import DEG, EVENT, XOUT, Track
 from .runner import ReplayResult
 
 __all__ = ["score_replay"]
@@ -41,17 +44,17 @@ def _track_v(track: Track, t: np.ndarray) -> np.ndarray:
 
 
 def _events(ev: np.ndarray) -> dict:
-    fused = ev[:, 1] == 0
-    rej = ev[:, 1] >= 1
-    nisp = ev[fused, 2]
-    nisv = ev[:, 3]
+    verdict = ev[:, EVENT.VERDICT]
+    fused, rej = verdict == 0, verdict >= 1
+    nisp = ev[fused, EVENT.NIS_POS]
+    nisv = ev[:, EVENT.NIS_VEL]
     return {"fixes": int(ev.shape[0]),
             "nis_pos_mean": round(float(np.nanmean(nisp)), 3) if np.isfinite(nisp).any() else None,
             "nis_vel_mean": round(float(np.nanmean(nisv)), 3) if np.isfinite(nisv).any() else None,
-            "gate_rejected": int(np.sum((ev[:, 1] == 1) | (ev[:, 1] == 2))),
-            "gate_resets": int(np.sum(ev[:, 1] == 2)),
-            "gate_latched": int(np.sum(ev[:, 1] == 3)),
-            "rejected_t_s": [round(float(x), 2) for x in ev[rej, 0]]}
+            "gate_rejected": int(np.sum((verdict == 1) | (verdict == 2))),
+            "gate_resets": int(np.sum(verdict == 2)),
+            "gate_latched": int(np.sum(verdict == 3)),
+            "rejected_t_s": [round(float(x), 2) for x in ev[rej, EVENT.T]]}
 
 
 def score_replay(res: ReplayResult) -> dict:
@@ -65,7 +68,7 @@ def score_replay(res: ReplayResult) -> dict:
     if track is not None:
         p_ref, R_ref = track.at(res.t)
         v_ref = _track_v(track, res.t)
-        e_ref = rot_to_euler_zyx(R_ref) if R_ref is not None else None
+        e_ref = rots_to_euler(R_ref) if R_ref is not None else None
     for i, rule in enumerate(res.rules):
         x = res.x[:, i]
         s = _events(res.fix_events[rule])
@@ -76,24 +79,24 @@ def score_replay(res: ReplayResult) -> dict:
 
 
 def _errors(res: ReplayResult, x, p_ref, v_ref, R_ref, e_ref) -> dict:
-    dp = x[:, :3] - p_ref
-    he = np.hypot(dp[:, 0], dp[:, 1])
+    dp = x[:, XOUT.POS:XOUT.POS_END] - p_ref
+    he = np.hypot(dp[:, X], dp[:, Y])
     s: dict = {"pos_h_rms_m": _rms(he),
                "pos_h_max_m": round(float(np.nanmax(he)), 4) if np.isfinite(he).any() else None,
-               "pos_v_rms_m": _rms(dp[:, 2]),
-               "vel_rms_mps": _rms(np.linalg.norm(x[:, 3:6] - v_ref, axis=1)),
+               "pos_v_rms_m": _rms(dp[:, Z]),
+               "vel_rms_mps": _rms(np.linalg.norm(x[:, XOUT.VEL:XOUT.VEL_END] - v_ref, axis=1)),
                "ticks_scored": int(np.isfinite(he).sum())}
     if res.fix_t.size:   # the ticks within 1 s of a fix handed to the INS (GNSS available)
         j = np.clip(np.searchsorted(res.fix_t, res.t), 1, res.fix_t.size - 1)
         near = np.minimum(np.abs(res.t - res.fix_t[j - 1]), np.abs(res.t - res.fix_t[j])) <= 1.0
         s["pos_h_rms_with_fixes_m"] = _rms(he[near])
     if R_ref is not None and np.isfinite(R_ref).any():
-        R = quat_to_rot_np(x[:, 6:10])
-        e = rot_to_euler_zyx(R)
+        R = quats_to_rots(x[:, XOUT.QUAT:XOUT.QUAT_END])
+        e = rots_to_euler(R)
         d = _wrap(e - e_ref) / DEG
-        cz = np.clip(np.einsum("ni,ni->n", R[:, :, 2], R_ref[:, :, 2]), -1.0, 1.0)
-        s.update({"roll_rms_deg": _rms(d[:, 0]), "pitch_rms_deg": _rms(d[:, 1]),
-                  "tilt_rms_deg": _rms(np.arccos(cz) / DEG), "yaw_rms_deg": _rms(d[:, 2])})
+        cz = np.clip(np.einsum("ni,ni->n", R[:, :, Z], R_ref[:, :, Z]), -1.0, 1.0)
+        s.update({"roll_rms_deg": _rms(d[:, X]), "pitch_rms_deg": _rms(d[:, Y]),
+                  "tilt_rms_deg": _rms(np.arccos(cz) / DEG), "yaw_rms_deg": _rms(d[:, Z])})
     if res.gap is not None:
         g0, g1 = res.gap
         k0 = int(np.searchsorted(res.t, g0))
