@@ -35,14 +35,15 @@ def test_spec_conditions_and_presets(tmp_path):
 
     spec, ctrls, conds = ex.build_spec(_args(tmp_path, runs=2))
     assert ctrls == ex.ALL and len(ctrls) == 10
-    assert conds == ["nominal", "unknown-model-error", "motor-failure"]
+    assert conds == ["nominal", "unknown-model-error", "motor-failure", "weak-rotor"]
     tasks = expand(spec)
-    assert len(tasks) == 2 * 10 * 3
+    assert len(tasks) == 2 * 10 * 4
     by = {(t.axis_values["condition"], t.axis_values["controller"], t.axis_values["seed"]): t
           for t in tasks}
     nom = by[("nominal", "PID", 100)].config
     me = by[("unknown-model-error", "IT2-KM", 101)].config
     mf = by[("motor-failure", "T1@NT", 100)].config
+    wr = by[("weak-rotor", "IT2-BMM", 100)].config
     # the default navigation chain (INS, the default GNSS preset), no shadow filters
     assert nom["gps"]["preset"] == "rtk-m350" and nom["estimator"]["nav"] == "ins"
     assert nom["estimator"]["shadow"] == [] and nom["controller"]["type"] == "pid"
@@ -55,6 +56,11 @@ def test_spec_conditions_and_presets(tmp_path):
     assert me["seed"] == 101
     assert mf["vehicle"]["rotor_thrust_loss"] == [0.25, 0.0, 0.0, 0.0]
     assert mf["controller"]["type"] == "t1-fpid" and mf["controller"]["xy"]["ke"] == 1.2
+    # the weak rotor as the autopilot meets it: the fault, the detector and response on
+    assert wr["vehicle"]["rotor_fault"] == {"rotor": 0, "at_s": 0.0, "efficiency": 0.75,
+                                            "response": "auto"}
+    assert wr["vehicle"]["rotor_thrust_loss"] == [0.0] * 4
+    assert nom["vehicle"]["rotor_fault"]["rotor"] == -1
     with pytest.raises(ConfigError, match="seed0"):
         ex.build_spec(_args(tmp_path, seed0=11))
 

@@ -148,3 +148,21 @@ def test_a_quad_that_can_spin_up_lands_on_three_rotors_below_1_mps():
     rf = s["rotor_fault"]
     assert not s["crashed"], s["crash_reason"]
     assert rf["landed_s"] is not None and rf["touchdown_mps"] < 1.0
+
+
+def test_a_weak_rotor_holds_the_heading_and_the_quad_flies_through_the_turn():
+    """A 25 % weak rotor at take-off keeps more than half its thrust (no ESC alarm); ArduPilot's
+    thrust-loss check (the motor at its limit for 1 s) holds the heading, and the M350 flies
+    through the in-place turn at the end of the headland lap (~100 s) where, without a detector
+    (``response = "none"``), it hits the ground (docs/vehicles.md)."""
+    weak = {**FRAMES["quad-x"], "vehicle.rotor_fault.rotor": 0, "vehicle.rotor_fault.at_s": 0.0,
+            "vehicle.rotor_fault.efficiency": 0.75, "sim.max_time_s": 110.0}
+    s = ag_uav.simulate(_cfg(**weak)).summary
+    rf = s["rotor_fault"]
+    assert rf["detected_s"] is None  # a weak rotor is not a stopped one
+    assert rf["thrust_loss_s"] is not None and rf["thrust_loss_s"] < 5.0
+    assert "heading held" in rf["action"]
+    assert not s["crashed"], s["crash_reason"]
+    off = ag_uav.simulate(_cfg(**weak, **{"vehicle.rotor_fault.response": "none"})).summary
+    assert off["rotor_fault"]["thrust_loss_s"] is None
+    assert off["crashed"] and 90.0 < off["crash_time_s"] < 110.0

@@ -14,7 +14,14 @@ its response by frame: a stage of the engine's tick, before the controller.
   for :attr:`RotorFaults.ESC_TIMEOUT_S` (0.1 s, ``FD_ACT_MOT_TOUT``). **Isolation**: the motor
   the telemetry reports delivering least of its command (here the actuator's thrust per unit
   command); after an attitude trigger with every motor above half, a false alarm, noted, and
-  flown on. A weak rotor that keeps more than half its thrust is left to the attitude check.
+  flown on. A weak rotor that keeps more than half its thrust is left to the attitude check
+  and to (3), ArduPilot's thrust-loss check (``Copter::thrust_loss_check``: a motor at the top
+  of its range for :attr:`RotorFaults.SAT_S`, 1 s, is a potential thrust loss, the motor the
+  one commanded highest): one motor commanded at :attr:`RotorFaults.SAT_FRAC` (99 %) of
+  ``f_max`` or more, the highest of all, for 1 s holds the heading where it is (no yaw turns
+  at the lane ends: a yaw turn needs that motor higher still, and a quad's attitude loop loses
+  roll and pitch in the turn) and flies on; a later detection still responds. Run only on a
+  vehicle with a configured fault (without one the stage is not built in its solo run).
 * **Response** (``response``), on a hexa or octo always after re-allocating without the rotor
   (:func:`controllers.attitude.fault_allocation`, all four wrench components, the split among
   the remaining rotors balanced for the hover at the current mass, tank included): ``continue``
@@ -77,6 +84,8 @@ class RotorFaults:
     TRIGGER_S = 0.3
     ESC_RATIO = 0.5
     ESC_TIMEOUT_S = 0.1
+    SAT_FRAC = 0.99  # thrust-loss check: a motor at the top of its range ...
+    SAT_S = 1.0  # ... for this long (ArduPilot THRUST_LOSS_TRIGGER_SEC)
     DESCENT_MPS, CRAWL_MPS, BRAKE_MPS2 = 0.7, 0.3, 2.0
     CRAWL_FROM_M = 1.5  # the crawl's height above the ground (a sortie landing's flare)
     LAND_S = 1.0  # still on the ground this long: landed (PX4 LNDMC_TRIG_TIME)
@@ -110,6 +119,9 @@ class RotorFaults:
         self.esc_low = np.full(n, -1)  # the motor whose telemetry reads low (-1: none)
         self.esc_s = np.zeros(n)
         self.detected = np.zeros(n, dtype=bool)
+        self.sat_motor = np.full(n, -1)  # thrust-loss check: the motor at its limit, how long
+        self.sat_s = np.zeros(n)
+        self.heading_held = np.zeros(n, dtype=bool)  # by the thrust-loss check
         self.landing = np.zeros(n, dtype=bool)
         self.at_xy = np.zeros((n, 3))
         self.v0 = np.zeros((n, 3))
@@ -124,7 +136,7 @@ class RotorFaults:
                                       "efficiency": f.efficiency, "response": f.response,
                                       "detected_s": None, "detection_delay_s": None,
                                       "action": None, "landed_s": None, "touchdown_mps": None,
-                                      "hover_share": None}
+                                      "hover_share": None, "thrust_loss_s": None}
             for f in rf]
 
     def step(self, k: int, t: float) -> None:
@@ -133,7 +145,7 @@ class RotorFaults:
             self._inject(t)
         if self.watch.any():
             self._detect(t)
-        held = self.detected & b.act & ~self.yaw_free
+        held = ((self.detected & ~self.yaw_free) | (self.heading_held & ~self.detected)) & b.act
         b.yaw[held] = self.yaw_hold[held]  # no heading changes on the rotors left
         for i in np.flatnonzero(self.going & b.act):
             self._go_home(int(i), t)
@@ -171,6 +183,27 @@ class RotorFaults:
         fire = (self.over_s >= self.TRIGGER_S - 1e-9) | (self.esc_s >= self.ESC_TIMEOUT_S - 1e-9)
         for i in np.flatnonzero(fire & live):
             self._isolate(int(i), t)
+        self._thrust_loss(live & (self.rotor >= 0) & ~self.heading_held, t)
+
+    def _thrust_loss(self, live: np.ndarray, t: float) -> None:
+        """ArduPilot's thrust-loss check (module docstring, (3)): the highest-commanded motor at
+        ``SAT_FRAC`` of ``f_max`` or more, the same one for ``SAT_S``: hold the heading."""
+        b = self.b
+        for i in np.flatnonzero(live):
+            j = int(np.argmax(b.f[i]))
+            top = b.f[i, j] >= self.SAT_FRAC * self.vehs[i].f_max
+            same = top and j == self.sat_motor[i]
+            self.sat_motor[i] = j if top else -1
+            self.sat_s[i] = self.sat_s[i] + b.dt if same else (b.dt if top else 0.0)
+            if self.sat_s[i] >= self.SAT_S - 1e-9:
+                self.heading_held[i] = True
+                self.yaw_hold[i] = b.yaw[i]
+                info = self.info[i]
+                if info is not None:
+                    info["thrust_loss_s"] = round(t, 2)
+                    info["action"] = info["action"] or f"motor {j} at its limit: heading held"
+                b.notes[i].append(f"thrust-loss check: motor {j} at its limit for "
+                                  f"{self.SAT_S:g} s at t={t:.2f}s: heading held, flying on")
 
     def _isolate(self, i: int, t: float) -> None:
         """ESC telemetry: the motor delivering least of its command."""

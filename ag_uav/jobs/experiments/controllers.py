@@ -8,7 +8,7 @@ noise seeds per candidate, held-out validation; ``--tunings N`` first tunes ever
 times and flies each one's median tuning, see :mod:`.controller_tunings`), plus the controls
 that separate the type-2 *shape* from the *gain level*: ``T1@KM`` .. ``T1@zeta``, the type-1
 FPID at each IT2 variant's linearised gains (:func:`t1_at_linearised`), fly the default mission
-(1.05 ha field, ~485 s of sim time) under three conditions:
+(1.05 ha field, ~485 s of sim time) under four conditions:
 
 - ``nominal``: 3 m/s mean wind from 240° with light Dryden turbulence (as tuned) on the default
   navigation chain (INS/GNSS with the default estimator and GNSS preset; only the flown filter,
@@ -19,7 +19,10 @@ FPID at each IT2 variant's linearised gains (:func:`t1_at_linearised`), fly the 
   that the take-off mass stays 9.17 kg (the M350's maximum take-off mass is 9.2 kg; the
   controller believes 8.17 kg), motor time constant ×2 and mean wind ×2 (6 m/s);
 - ``motor-failure``: the front-right rotor delivers 25 % less thrust than commanded
-  (``vehicle.rotor_thrust_loss``; the controller does not know), nominal wind.
+  (``vehicle.rotor_thrust_loss``; the controller does not know), nominal wind;
+- ``weak-rotor``: the same weak rotor as the autopilot meets it, with the failure detector and
+  response on (``vehicle.rotor_fault``: rotor 0 keeps 75 % of its thrust from take-off,
+  ``response = "auto"``; :mod:`ag_uav.engine.rotor_fault`), nominal wind.
 
 Every controller flies the same seeds (``--seed0`` .. ``--seed0 + --runs - 1``, disjoint from the
 tuning and validation seeds), so each seed's wind and GNSS draws are common to all controllers
@@ -52,8 +55,8 @@ from typing import Any
 
 NAME = "controllers"
 HELP = ("PID vs T1-FPID vs IT2-FPID (KM, NT, BMM, zeta) and type-1 at the IT2 linearised gains, "
-        "median of N BB-BC tunings each, nominal / unknown model error / failing motor; paired "
-        "over seeds; the verdict picks the default")
+        "median of N BB-BC tunings each, nominal / unknown model error / failing motor / weak "
+        "rotor with the failure response; paired over seeds; the verdict picks the default")
 
 #: controller label -> preset file (in --presets)
 CONTROLLERS = {
@@ -81,8 +84,10 @@ CONDITIONS: dict[str, dict[str, Any]] = {
                             "vehicle.motor_tau_s": 2.0 * MOTOR_TAU_S,
                             "wind.speed_mps": 2.0 * WIND_MPS},
     "motor-failure": {"vehicle.rotor_thrust_loss": [0.25, 0.0, 0.0, 0.0]},
+    "weak-rotor": {"vehicle.rotor_fault.rotor": 0, "vehicle.rotor_fault.at_s": 0.0,
+                   "vehicle.rotor_fault.efficiency": 0.75, "vehicle.rotor_fault.response": "auto"},
 }
-#: the conditions the verdict judges (the failing motor is reported beside them)
+#: the conditions the verdict judges (the failing or weak motor is reported beside them)
 JUDGED = ("nominal", "unknown-model-error")
 #: (column, label, scale, format, lower is better)
 METRICS = (
@@ -525,6 +530,8 @@ def _report(args: argparse.Namespace, ctrls: list[str], conds: list[str], rows: 
           f"{me['vehicle.motor_tau_s']} s (×2), mean wind {me['wind.speed_mps']:g} m/s (×2)",
           "- `motor-failure`: rotor thrust loss "
           f"{CONDITIONS['motor-failure']['vehicle.rotor_thrust_loss']} (fr, fl, rl, rr)",
+          "- `weak-rotor`: rotor 0 (fr) keeps 75 % of its thrust from take-off, the failure "
+          "detector and response on (`vehicle.rotor_fault`, response `auto`)",
           f"- presets: `{args.presets}`; T1@X: type-1 at X's linearised gains",
           f"- wall time: {wall:.0f} s on {res.executor} ({res.n_run} flown now, "
           f"{res.n_skipped} resumed)",
