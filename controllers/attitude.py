@@ -324,8 +324,12 @@ def lag_time_scale(tau_m: float, wn: Sequence[float], zeta: Sequence[float],
     the tuning had it (a cascade's outer loop must stay well below its inner loop's bandwidth:
     Åström & Hägglund, *Advanced PID Control*, ISA 2006, on cascade control). The lag caps
     the bandwidth of a PD loop: with the default ``ω_n = 9`` rad/s and ``ζ = 0.9`` the damping
-    is 0.53 at 0.04 s, 0.25 at 0.08 s and 0.12 at 0.12 s."""
-    if tau_m <= 0.0:
+    is 0.53 at 0.04 s, 0.25 at 0.08 s and 0.12 at 0.12 s.
+
+    A tuning damped below ``zeta_min`` without the lag (some ``ζ < zeta_min``) is the tuning's
+    own choice, not the lag's doing: it is left as configured (1), and no ``s`` could reach
+    ``zeta_min`` for it (the damping tends to ``ζ`` as ``s → 0``)."""
+    if tau_m <= 0.0 or min(zeta) < zeta_min:
         return 1.0
     if all(lag_damping(w * tau_m, z) >= zeta_min for w, z in zip(wn, zeta, strict=True)):
         return 1.0

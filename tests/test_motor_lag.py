@@ -31,6 +31,15 @@ def test_the_default_m350_keeps_its_gains_and_a_slow_motor_slows_the_cascade():
         assert lag_damping(s * 9.0 * tau, 0.9) == pytest.approx(LAG_DAMPING_MIN, abs=1e-9)
 
 
+def test_an_under_damped_tuning_is_left_as_configured():
+    """The rule slows a cascade for its motor lag, not for its tuning: with ζ below the bound
+    without any lag (a deliberately unstable tuning) the gains stay as configured (the
+    bisection used to drive the scale to 0, and the vehicle fell instead of tilting over)."""
+    assert lag_time_scale(0.04, [60.0, 60.0], [0.01, 0.01]) == 1.0
+    assert lag_time_scale(0.12, [9.0, 9.0], [0.2, 0.9]) == 1.0
+    assert 0.0 < lag_time_scale(0.04, [60.0, 60.0], [0.9, 0.9]) < 1.0
+
+
 def test_time_scaled_gains():
     g = ag_uav.load_config(None, {}).controller.xy
     h = time_scaled(g, 0.5)
@@ -55,6 +64,7 @@ def test_the_octocopter_takes_off_and_flies_without_the_limit_cycle(tank_l, mass
     s = ag_uav.simulate(c).summary
     assert not s["crashed"], s["crash_reason"]
     assert s["mass_start_kg"] == pytest.approx(mass_kg, abs=0.1)
+    assert s["cascade_time_scale"] == pytest.approx(0.573, abs=0.001)   # said in the summary
     from ag_uav.vehicle.mjcf import build_vehicle
 
     assert s["motor_rate_rms_nps"] / build_vehicle(c).f_max < 0.4

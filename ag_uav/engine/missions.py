@@ -38,6 +38,7 @@ from numkit import Z
 from ..config import Config, ConfigError
 from ..navigation.feedback import Feedback, TrueFeedback
 from ..seeds import rng_streams, seed_sequences
+from ..vehicle.cascade import cascade_time_scale
 from ..vehicle.mjcf import build_vehicle
 from ..world.field import Field
 from ..world.forecast import plan_wind
@@ -565,6 +566,11 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         summ.update(loss)
         out.notes.append(f"GNSS loss: {loss['gnss_loss_off_target_m2']:.1f} m² sprayed off "
                          "target while the fix was lost")
+    ts = cascade_time_scale(cfg)
+    if ts < 1.0:   # the cascade slowed for the motor lag: said where the user looks
+        summ["cascade_time_scale"] = round(ts, 3)
+        out.notes.append(f"controller slowed x{ts:.3f} for the motor lag (vehicle.motor_tau_s "
+                         f"= {cfg.vehicle.motor_tau_s:g} s), to keep the attitude loop damped")
     cut = _fault_cut(out, summ, _cut_reason(cfg, ref, out, summ,
                                             metrics.incomplete_reason(summ, res, cfg)))
     if cut:
