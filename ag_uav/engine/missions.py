@@ -542,6 +542,16 @@ def _fault_cut(out: LoopOutput, summ: dict, cut: str | None) -> str | None:
     return cut
 
 
+def _say_lag_scale(cfg: Config, summ: dict, notes: list[str]) -> None:
+    """The cascade slowed for the motor lag (:func:`~ag_uav.vehicle.cascade.cascade_time_scale`
+    below 1): said where the user looks, the summary's ``cascade_time_scale`` and a note."""
+    ts = cascade_time_scale(cfg)
+    if ts < 1.0:
+        summ["cascade_time_scale"] = round(ts, 3)
+        notes.append(f"controller slowed x{ts:.3f} for the motor lag (vehicle.motor_tau_s = "
+                     f"{cfg.vehicle.motor_tau_s:g} s), to keep the attitude loop damped")
+
+
 def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     """Metrics and the summary of one flown run (``batch``: the size of the engine batch it
     flew in)."""
@@ -566,11 +576,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         summ.update(loss)
         out.notes.append(f"GNSS loss: {loss['gnss_loss_off_target_m2']:.1f} m² sprayed off "
                          "target while the fix was lost")
-    ts = cascade_time_scale(cfg)
-    if ts < 1.0:   # the cascade slowed for the motor lag: said where the user looks
-        summ["cascade_time_scale"] = round(ts, 3)
-        out.notes.append(f"controller slowed x{ts:.3f} for the motor lag (vehicle.motor_tau_s "
-                         f"= {cfg.vehicle.motor_tau_s:g} s), to keep the attitude loop damped")
+    _say_lag_scale(cfg, summ, out.notes)
     cut = _fault_cut(out, summ, _cut_reason(cfg, ref, out, summ,
                                             metrics.incomplete_reason(summ, res, cfg)))
     if cut:
