@@ -20,7 +20,7 @@ from ag_uav.navigation.ins_feedback import ANTENNA, RADAR, BatchInsFeedback, Ins
 from ag_uav.record.runlog import RunLog
 from ag_uav.seeds import seed_sequences
 from estimators.ins import INS, BatchINS
-from estimators.ins.layout import DG, GIN, RIN
+from estimators.ins.layout import DG, ERR, GIN, IMU, RIN, STATE
 
 
 def _columns(layout, names: dict[str, tuple[str, ...]]) -> list[str]:
@@ -29,24 +29,26 @@ def _columns(layout, names: dict[str, tuple[str, ...]]) -> list[str]:
 
 
 def test_the_nominal_state_is_the_filters():
-    """NOMINAL is the order the INS resets and reads its state in."""
+    """The kernels' nominal state (the bank's STATE) is the order the INS resets and reads its
+    state in."""
     ins = INS()
     p, v, ba, bg = (1.0, 2.0, 3.0), (4.0, 5.0, 6.0), (0.1, 0.2, 0.3), (0.4, 0.5, 0.6)
     q = np.array([math.cos(0.3), 0.0, 0.0, math.sin(0.3)])
     ins.reset(p, v, q, ba=ba, bg=bg)
     x = ins.x
-    assert x.shape == (IK.NOMINAL.size,)
-    for name, want in {"p": p, "v": v, "q": q, "ba": ba, "bg": bg}.items():
-        assert np.array_equal(x[IK.NOMINAL.slice(name)], want), name
-    assert np.array_equal(ins.q, x[IK.XN.Q:IK.XN.Q_END])
+    assert x.shape == (STATE.size,)
+    for name, want in {"pos": p, "vel": v, "quat": q, "ba": ba, "bg": bg}.items():
+        assert np.array_equal(x[STATE.slice(name)], want), name
+    assert np.array_equal(ins.q, x[IK.XN.QUAT:IK.XN.QUAT_END])
 
 
 def test_the_error_state_blocks_are_the_nees_blocks():
     """The 15-state error in the order of P, its 3-state blocks at 3·b (quad_inv_at) in the
     order of the score record's block columns."""
-    E = IK.ERROR_STATE
+    E = ERR
     assert E.size == 15 == INS().P.shape[0]
-    assert [E.offset[f] for f in ("p", "v", "th", "ba", "bg")] == [3 * b for b in range(5)]
+    assert [E.offset[f] for f in ("pos", "vel", "theta", "ba", "bg")] == [3 * b for b in range(5)]
+    assert IK.XE == ERR.at and IK.XN == STATE.at
     R = IK.NEES_REC.offset
     assert [R[b] - R["pos"] for b in IK.BLOCKS] == list(range(5))
     assert IK.NREC == IK.NEES_REC.size
@@ -61,7 +63,7 @@ def test_the_bank_rows_are_the_estimators():
     bank = BatchINS(1)
     assert bank.nis.shape[1] == 4 and list(DG.offset)[:4] == ["nisp", "nisv", "nisy", "nisr"]
     assert (IK.DN.NISP, IK.DN.NISV, IK.DN.NISY) == (0, 1, 2)
-    assert IK.IMU_ROW.size == 6
+    assert IK.IM == IMU.at and IMU.size == 6
 
 
 @pytest.fixture(scope="module")

@@ -13,19 +13,34 @@ read."""
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
-from estimators.ins.layout import DG, GIN, RIN
+from estimators.ins.layout import DG, ERR, GIN, IMU, RIN, STATE
 from numkit import Layout, X, Y, Z
-from numkit.geometry import quat_log_err, quat_to_rot, quat_to_rot_flat, rot_to_quat, rot_to_yaw
+from numkit.geometry import (
+    RXX,
+    RXY,
+    RXZ,
+    RYX,
+    RYY,
+    RYZ,
+    RZX,
+    RZY,
+    RZZ,
+    quat_log_err,
+    quat_to_rot,
+    quat_to_rot_flat,
+    rot_to_quat,
+    rot_to_yaw,
+)
 
 from .._jit import njit
 
-__all__ = ["BLOCKS", "ERRORS", "ERROR_STATE", "FIX_DUE", "IMU_ROW", "NEES_REC", "NOMINAL",
-           "NOT_INITIALISED", "NREC", "RING", "RING_WIDTH", "ROT", "SENSOR_PRM", "BankView",
-           "Outputs", "Pose", "Scores", "SensorRows", "Truth", "layout_at", "outputs",
+__all__ = ["BLOCKS", "ERRORS", "FIX_DUE", "NEES_REC", "NOT_INITIALISED", "NREC", "RING",
+           "RING_WIDTH", "SENSOR_PRM", "BankView", "Outputs", "Pose", "Scores", "SensorRows",
+           "Truth", "outputs",
            "quad_inv", "quad_inv_at", "radar_rows", "ring_write", "tick_in"]
 
 #: the per-fix score record's columns (``BatchInsFeedback.nees[i, fix, :, row]``): NEES15,
@@ -43,18 +58,9 @@ BLOCKS = ("pos", "vel", "att", "ba", "bg")
 ERRORS = Layout("herr verr tilt yaw")
 ER = ERRORS.at
 
-#: the INS's nominal state (:class:`estimators.ins.BatchINS` ``x_core``, ``x_out``): position,
-#: velocity, attitude quaternion (w, x, y, z), accel and gyro biases; and its 15-state error
-#: (the order of ``P``): δp, δv, δθ, δb_a, δb_g
-NOMINAL = Layout("p:3 v:3 q:4 ba:3 bg:3")
-ERROR_STATE = Layout("p:3 v:3 th:3 ba:3 bg:3")
-XN, XE = NOMINAL.at, ERROR_STATE.at
-#: the bank's IMU input row (``BatchINS.step_raw``'s ``imu``): specific force f̃, rate ω̃
-IMU_ROW = Layout("f:3 om:3")
-IM = IMU_ROW.at
-#: a row-major rotation matrix (9,): ``R[RM.R21]`` is R₂₁
-ROT = Layout("r00 r01 r02 r10 r11 r12 r20 r21 r22")
-RM = ROT.at
+#: the INS's nominal state and its 15-state error (the order of ``P``) and the bank's IMU input
+#: row: the bank's own layouts (:mod:`estimators.ins.layout` ``STATE``, ``ERR``, ``IMU``)
+XN, XE, IM = STATE.at, ERR.at, IMU.at
 
 #: the truth ring's row per tick: antenna position, antenna velocity, heading, R (row-major),
 #: slant range, p, v, the walked IMU biases (accel, gyro; contiguous, as the IMU walks them)
@@ -67,14 +73,9 @@ SENSOR_PRM = Layout("r_ant:3 r_rad:3 r_b:3 cos_max r_max")
 SP = SENSOR_PRM.at
 
 
-def layout_at(layout: Any) -> tuple:
-    """The offsets by name (``Layout.at``) of one of :mod:`estimators.ins.layout`'s arrays."""
-    return Layout(" ".join(f"{n}:{'x'.join(map(str, s))}" for n, s in layout.shape.items())).at
-
-
 #: the bank's GNSS and radar input rows and its diagnostics (:mod:`estimators.ins.layout`;
 #: ``BatchINS.nis`` is the diagnostics' head: the last NIS of position, velocity, heading)
-GN, RN, DN = layout_at(GIN), layout_at(RIN), layout_at(DG)
+GN, RN, DN = GIN.at, RIN.at, DG.at
 
 #: :func:`tick_in`'s return: a bit set when some vehicle has a fix due (its receiver runs)
 FIX_DUE = 1
@@ -194,23 +195,23 @@ def ring_write(tr, s, k, j):  # pragma: no cover
         wy = w[i, Z] * ra[X] - w[i, X] * ra[Z]
         wz = w[i, X] * ra[Y] - w[i, Y] * ra[X]
         for a in range(3):
-            R0, R1, R2 = R[i, RM.R00 + 3 * a], R[i, RM.R01 + 3 * a], R[i, RM.R02 + 3 * a]  # row a
+            R0, R1, R2 = R[i, RXX + 3 * a], R[i, RXY + 3 * a], R[i, RXZ + 3 * a]  # row a
             r[RG.ANT_P + a] = p[i, a] + R0 * ra[X] + R1 * ra[Y] + R2 * ra[Z]   # p + R r_ant
             r[RG.ANT_V + a] = v[i, a] + R0 * wx + R1 * wy + R2 * wz   # v + R(ω × r_ant)
             r[RG.P + a] = p[i, a]
             r[RG.V + a] = v[i, a]
         # b = R r_b (its x and y rows)
-        bx = R[i, RM.R00] * rb[X] + R[i, RM.R01] * rb[Y] + R[i, RM.R02] * rb[Z]
-        by = R[i, RM.R10] * rb[X] + R[i, RM.R11] * rb[Y] + R[i, RM.R12] * rb[Z]
+        bx = R[i, RXX] * rb[X] + R[i, RXY] * rb[Y] + R[i, RXZ] * rb[Z]
+        by = R[i, RYX] * rb[X] + R[i, RYY] * rb[Y] + R[i, RYZ] * rb[Z]
         psi = math.atan2(by, bx) - psi_b
         r[RG.YAW] = math.atan2(math.sin(psi), math.cos(psi))
         for m in range(9):
             r[RG.R + m] = R[i, m]
         for m in range(6):   # b_a then b_g
             r[RG.BA + m] = bt[i, j, m]
-        c = R[i, RM.R22]
+        c = R[i, RZZ]
         # s_z = (p + R r_rad)_z
-        sz = p[i, Z] + R[i, RM.R20] * rr[X] + R[i, RM.R21] * rr[Y] + R[i, RM.R22] * rr[Z]
+        sz = p[i, Z] + R[i, RZX] * rr[X] + R[i, RZY] * rr[Y] + R[i, RZZ] * rr[Z]
         rho = sz / c if c > 0 else np.nan
         r[RG.RANGE] = rho if (c >= prm[SP.COS_MAX] and rho <= prm[SP.R_MAX]) else np.nan
 
@@ -230,7 +231,7 @@ def tick_in(truth, rows, k, t, j):  # pragma: no cover
     for i in range(act.shape[0]):
         for a in range(3):
             imu[i, IM.F + a] = tr.f_m[i, a]
-            imu[i, IM.OM + a] = tr.om[i, a]
+            imu[i, IM.W + a] = tr.om[i, a]
         gnss[i, GN.AGE] = np.nan
         radar[i, RN.RANGE] = np.nan
         due[i] = act[i] and t >= s.next_t[i] - 1e-9
@@ -273,14 +274,14 @@ def nees15(x, P, tr, q_t, dth, e, L, y):  # pragma: no cover
     Log(q̂* ⊗ q), b_a, b_g] true − estimated, bias truth = the IMU's walked biases of that
     tick (the ring's ``ba``, ``bg``)."""
     if not np.isfinite(tr[RG.P]):
-        e[XE.P] = np.nan
+        e[XE.POS] = np.nan
         return np.nan
     rot_to_quat(tr[RG.R:RG.R_END], q_t)
-    quat_log_err(x[XN.Q:XN.Q_END], q_t, dth)
+    quat_log_err(x[XN.QUAT:XN.QUAT_END], q_t, dth)
     for a in range(3):
-        e[XE.P + a] = tr[RG.P + a] - x[XN.P + a]
-        e[XE.V + a] = tr[RG.V + a] - x[XN.V + a]
-        e[XE.TH + a] = dth[a]
+        e[XE.POS + a] = tr[RG.P + a] - x[XN.POS + a]
+        e[XE.VEL + a] = tr[RG.V + a] - x[XN.VEL + a]
+        e[XE.THETA + a] = dth[a]
         e[XE.BA + a] = tr[RG.BA + a] - x[XN.BA + a]
         e[XE.BG + a] = tr[RG.BG + a] - x[XN.BG + a]
     return quad_inv(P, e, e.shape[0], L, y)
@@ -330,15 +331,15 @@ def row_errors(x, p, v, Rt, yaw_t, Re, out):  # pragma: no cover
     of one row's output against the truth of the tick (``Rt`` row-major, its yaw
     ``yaw_t = atan2(R₁₀, R₀₀)``, the same for every row of a vehicle); ``Re`` (3, 3):
     scratch; ``out``: :data:`ERRORS`."""
-    quat_to_rot(x[XN.Q:XN.Q_END], Re)
-    dx, dy = x[XN.P + X] - p[X], x[XN.P + Y] - p[Y]
+    quat_to_rot(x[XN.QUAT:XN.QUAT_END], Re)
+    dx, dy = x[XN.POS + X] - p[X], x[XN.POS + Y] - p[Y]
     out[ER.HERR] = math.sqrt(dx * dx + dy * dy)
     s = 0.0
     for a in range(3):
-        s += (x[XN.V + a] - v[a]) ** 2
+        s += (x[XN.VEL + a] - v[a]) ** 2
     out[ER.VERR] = math.sqrt(s)   # |v̂ − v|
     # cos tilt = ẑ_b · z_b: the third columns of R̂ and R
-    cz = Re[X, Z] * Rt[RM.R02] + Re[Y, Z] * Rt[RM.R12] + Re[Z, Z] * Rt[RM.R22]
+    cz = Re[X, Z] * Rt[RXZ] + Re[Y, Z] * Rt[RYZ] + Re[Z, Z] * Rt[RZZ]
     out[ER.TILT] = math.acos(min(1.0, max(-1.0, cz)))
     ye = math.atan2(Re[Y, X], Re[X, X]) - yaw_t
     out[ER.YAW] = abs(math.atan2(math.sin(ye), math.cos(ye)))
@@ -375,16 +376,16 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
         if not act[i]:
             continue
         for a in range(3):
-            w_out[i, a] = imu[i, IM.OM + a]
+            w_out[i, a] = imu[i, IM.W + a]
         if not init[i]:
             continue
         if flown >= 0:
             x = xo[i * nr + flown]
             for a in range(3):
-                p_out[i, a] = x[XN.P + a]
-                v_out[i, a] = x[XN.V + a]
-                w_out[i, a] = imu[i, IM.OM + a] - x[XN.BG + a]   # ω̃ − b̂_g
-            quat_to_rot_flat(x[XN.Q:XN.Q_END], R_out[i])
+                p_out[i, a] = x[XN.POS + a]
+                v_out[i, a] = x[XN.VEL + a]
+                w_out[i, a] = imu[i, IM.W + a] - x[XN.BG + a]   # ω̃ − b̂_g
+            quat_to_rot_flat(x[XN.QUAT:XN.QUAT_END], R_out[i])
         rec = n_fix[i]
         at_fix = np.isfinite(gnss[i, GN.AGE]) and rec < fix_k.shape[1]
         if at_fix:
@@ -409,7 +410,7 @@ def outputs(bank, pose, scores, out, k, nr, flown):  # pragma: no cover
                 rc[NR.NISV] = nis[row, DN.NISV]
                 rc[NR.NISY] = nis[row, DN.NISY]
                 rc[NR.GATE] = gate[row]
-                if np.isfinite(e[XE.P]):   # each 3-state block alone (3 dof)
+                if np.isfinite(e[XE.POS]):   # each 3-state block alone (3 dof)
                     for b in range(5):   # block b of the error state: δp, δv, δθ, δb_a, δb_g
                         rc[NR.POS + b] = quad_inv_at(Pc, e, 3 * b, eb.shape[0], L, y, Pb, eb)
                     rc[NR.NOTPD] = 0.0 if np.isfinite(rc[NR.NEES15]) else 1.0
