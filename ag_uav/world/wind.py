@@ -225,6 +225,17 @@ def _refresh_row(fs: np.ndarray, i: int, dt: float, h: float, V: float) -> None:
     fs[i, W.TOLH] = fs[i, W.RELTOL] * h
 
 
+@njit(cache=True, inline="always")
+def _second_order_step(fs: np.ndarray, i: int, c: int, z1: float, z2: float, na: float,
+                       nb: float) -> tuple[float, float]:
+    """One step of a second-order Dryden filter whose coefficients sit at ``c`` of row ``i``:
+    (z1, z2) ← F (z1, z2) + L (na, nb), L lower-triangular."""
+    y1 = fs[i, c + F2.F11] * z1 + fs[i, c + F2.F12] * z2 + fs[i, c + F2.L11] * na
+    y2 = (fs[i, c + F2.F21] * z1 + fs[i, c + F2.F22] * z2 + fs[i, c + F2.L21] * na
+          + fs[i, c + F2.L22] * nb)
+    return y1, y2
+
+
 @njit(cache=True)
 def gust_row(fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, i: int, dt: float,
              altitude: float, airspeed: float) -> tuple[float, float, float]:
@@ -249,20 +260,8 @@ def gust_row(fs: np.ndarray, ist: np.ndarray, buf: np.ndarray, i: int, dt: float
     n4 = buf[i, k + D.NW2]
     ist[i, WI.I] = k + D.SIZE
     zu = fs[i, W.A] * fs[i, W.ZU] + fs[i, W.B] * n0  # zu ← a zu + b n
-    # (zv1, zv2) ← F (zv1, zv2) + L (n1, n2), L lower-triangular
-    z1 = fs[i, W.ZV1]
-    z2 = fs[i, W.ZV2]
-    c = W.VC
-    zv1 = fs[i, c + F2.F11] * z1 + fs[i, c + F2.F12] * z2 + fs[i, c + F2.L11] * n1
-    zv2 = (fs[i, c + F2.F21] * z1 + fs[i, c + F2.F22] * z2 + fs[i, c + F2.L21] * n1
-           + fs[i, c + F2.L22] * n2)
-    # (zw1, zw2) ← F (zw1, zw2) + L (n3, n4)
-    z1 = fs[i, W.ZW1]
-    z2 = fs[i, W.ZW2]
-    c = W.WC
-    zw1 = fs[i, c + F2.F11] * z1 + fs[i, c + F2.F12] * z2 + fs[i, c + F2.L11] * n3
-    zw2 = (fs[i, c + F2.F21] * z1 + fs[i, c + F2.F22] * z2 + fs[i, c + F2.L21] * n3
-           + fs[i, c + F2.L22] * n4)
+    zv1, zv2 = _second_order_step(fs, i, W.VC, fs[i, W.ZV1], fs[i, W.ZV2], n1, n2)
+    zw1, zw2 = _second_order_step(fs, i, W.WC, fs[i, W.ZW1], fs[i, W.ZW2], n3, n4)
     fs[i, W.ZU] = zu
     fs[i, W.ZV1] = zv1
     fs[i, W.ZV2] = zv2
