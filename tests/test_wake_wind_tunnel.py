@@ -92,6 +92,8 @@ def test_wind_tunnel_one_condition_against_the_measured_trial():
     assert sum(r["measured_norm"] for r in rows) == pytest.approx(1.0)
     # the measured figures: 9.5 % of the deposit at >= 2 m, the peak 1 m downwind
     assert s["downwind_measured"] == pytest.approx(0.095, abs=0.001)
+    assert s["downwind_reps_lo"] <= s["downwind_measured"] <= s["downwind_reps_hi"]
+    assert s["downwind_reps_lo"] < s["downwind_reps_hi"]   # the replicates' own spread
     assert s["peak_measured_m"] == 1.0
     assert 0.25 < s["ratio"] < 4.0
     assert abs(s["peak_model_m"] - s["peak_measured_m"]) <= 1.0

@@ -236,8 +236,17 @@ def compare(base: DepositionConfig, trial: Trial, measured: dict, winds: list[fl
             rows.append({"wind_mps": wind, "nozzle": noz, "payload_l": pay, "distance_m": d,
                          "measured_norm": float(meas[i]), "model_norm": float(model[i]),
                          "measured_reps_norm": ";".join(f"{v / total:.6g}" for v in reps[d])})
-        summ.append(summary(wind, noz, pay, pos, meas, model))
+        summ.append(summary(wind, noz, pay, pos, meas, model) | replicate_range(reps, pos))
     return rows, summ
+
+
+def replicate_range(reps: dict, pos: np.ndarray) -> dict:
+    """The data's own spread: the downwind fraction (share at ≥ 2 m) of each replicate on its
+    own total, lowest and highest."""
+    n = min(len(reps[d]) for d in pos)
+    fr = [sum(reps[d][r] for d in pos if d >= 2.0) / sum(reps[d][r] for d in pos)
+          for r in range(n)]
+    return {"downwind_reps_lo": float(min(fr)), "downwind_reps_hi": float(max(fr))}
 
 
 def summary(wind: float, noz: str, pay: float, pos: np.ndarray, meas: np.ndarray,
@@ -358,11 +367,13 @@ def _plot(path: Path, rows: list[dict], summ: list[dict]) -> None:
 
 
 def table(summ: list[dict]) -> tuple[list[str], list[list[str]]]:
-    header = ["wind (m/s)", "nozzle", "payload (L)", "downwind measured", "downwind model",
-              "model / measured", "peak measured (m)", "peak model (m)",
-              "median |log10| 2-20 m"]
+    header = ["wind (m/s)", "nozzle", "payload (L)", "downwind measured",
+              "its replicates (lo-hi)", "downwind model", "model / measured",
+              "peak measured (m)", "peak model (m)", "median |log10| 2-20 m"]
     return header, [[f"{s['wind_mps']:g}", s["nozzle"], f"{s['payload_l']:g}",
-                     f"{s['downwind_measured']:.3f}", f"{s['downwind_model']:.3f}",
+                     f"{s['downwind_measured']:.3f}",
+                     f"{s['downwind_reps_lo']:.3f}-{s['downwind_reps_hi']:.3f}",
+                     f"{s['downwind_model']:.3f}",
                      f"{s['ratio']:.2f}", f"{s['peak_measured_m']:+g}",
                      f"{s['peak_model_m']:+g}", f"{s['median_abs_log10_2_20m']:.2f}"]
                     for s in summ]
