@@ -15,7 +15,9 @@ Sources (manufacturer sheets; a figure not on a sheet is marked *estimate* with 
   24.8 kg standard take-off weight (with 8 L), 1480 mm diagonal wheelbase, 33 in propellers,
   4 rotors, 8 L spray tank, 4 hydraulic fan nozzles, max flow 2.4 L/min, battery 9500 mAh at
   51.8 V (492 Wh), hovering 19 min at 16.8 kg (no payload). These T10 figures were not
-  re-read from the page when the preset was written (the T40's were): check them there.
+  re-read from the page when the preset was written (the T40's were), nor since: check them
+  there. The least certain is the split of the 16.8 kg into 13.8 kg airframe and 3.0 kg
+  battery; it is not flown (the model flies ``mass_kg``; ``battery_mass_kg`` is reported).
 * [T40] DJI Agras T40 specs, https://www.dji.com/support/product/t40: 38 kg without battery,
   50 kg with battery, 90 kg max take-off for spraying, 2184 mm max diagonal wheelbase, 54 in
   propellers, 8 rotors (coaxial twin rotors on 4 arms), 40 L operation box, two LX8060SZ
