@@ -18,7 +18,10 @@ wind's parts taken out one at a time; the flight path stays the flown one:
 * ``steady``: the configured mean wind, no gust and no meander;
 * ``gust along`` / ``gust across``: the mean and only the gust's part along / across the legs;
 * ``gust, vehicle smoothed``: the gusts kept, the attitude and the thrust low-passed over 2 s
-  (what the vehicle's own response to the gusts adds).
+  (what the vehicle's own response to the gusts adds);
+* ``wind low-passed 1 s`` / ``3 s``: the wind the law sees low-passed (first order) over 1 s /
+  3 s, longer than the trailing pair's roll-up time t* = b₀/w₀ (a law that responds to the
+  airspeed only over its formation time sees less than this).
 
 Per variant: the dose CV, the under- and over-dosed shares over the field (the summary's
 rows) and over the interior ``--margin`` m inside the boundary (no headland laps, turns or
@@ -30,6 +33,7 @@ the same flown path, lanes and flow by each law (which of the law's parts makes 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from typing import Any
 
@@ -47,7 +51,7 @@ from ag_uav.world.pattern import lane_choice, mission_direction, mission_swath
 I = INPUT.at
 WIND = slice(I.WIND, I.WIND + 3)
 VARIANTS = ("flown", "no gust", "steady", "gust along", "gust across",
-            "gust, vehicle smoothed")
+            "gust, vehicle smoothed", "wind low-passed 1 s", "wind low-passed 3 s")
 
 
 def capture(cfg: Any) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
@@ -109,6 +113,8 @@ def variant_rows(inp: np.ndarray, mean: np.ndarray, dt: float, cfg: Any,
         elif name in ("gust along", "gust across"):
             e = along if name == "gust along" else across
             x[:, WIND] = mean + np.outer(gust @ e, e)
+        elif name.startswith("wind low-passed"):
+            x[:, WIND] = _lowpass(inp[:, WIND], dt, float(name.split()[2]))
         elif name == "gust, vehicle smoothed":
             x[:, I.R:I.R_END] = _lowpass(inp[:, I.R:I.R_END], dt, 2.0)
             x[:, I.THRUST] = _lowpass(inp[:, I.THRUST:I.THRUST + 1], dt, 2.0)[:, 0]
@@ -133,9 +139,11 @@ def stripes(dm: Any, fld: Any, margin: float, legs_deg: float) -> tuple[float, f
 
 
 def replay(cfg: Any, margin: float, laws: list[str] | None = None,
-           overrides: dict[str, Any] | None = None) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+           overrides: dict[str, Any] | None = None, dep: dict[str, Any] | None = None
+           ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Fly ``cfg``'s mission once, replay every variant by each of ``laws`` (default: the
-    flown law) on the flown path, lanes and flow; (rows, the flight's summary)."""
+    flown law; ``dep``: fields of its :class:`DepositionConfig` replaced) on the flown path,
+    lanes and flow; (rows, the flight's summary)."""
     inp, mean, dt, summary = capture(cfg)
     lc = lane_choice(cfg)
     legs = lc.case.legs_deg if lc.case is not None else None
@@ -148,7 +156,8 @@ def replay(cfg: Any, margin: float, laws: list[str] | None = None,
     out = []
     for law in laws or [cfg.spray.deposition_law]:
         c_law = ag_uav.load_config(None, dict(overrides or {}, **{"spray.deposition_law": law}))
-        dc = DepositionConfig.from_config(c_law, swath_m=mission_swath(cfg))
+        dc = dataclasses.replace(DepositionConfig.from_config(c_law, swath_m=mission_swath(cfg)),
+                                 **(dep or {}))
         batch = DepositionBatch(dc, fld, len(VARIANTS))
         for k in range(stack.shape[0]):
             batch.step_packed(dt, stack[k])
@@ -175,11 +184,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--laws", default="", metavar="LAW,...",
                    help="replay the flown path by these deposition laws too (default: the flown "
                         "one)")
+    p.add_argument("--dep", action="append", default=[], metavar="FIELD=VALUE",
+                   help="replay with a field of the law's DepositionConfig replaced, e.g. "
+                        "impingement_diameters=0 (repeatable; the flight is flown without it)")
     args = p.parse_args(argv)
     ov = parse_set_items(args.set)
+    dep = {k: float(v) for k, v in (d.split("=", 1) for d in args.dep)}
     cfg = ag_uav.load_config(None, ov)
     laws = [x.strip() for x in args.laws.split(",") if x.strip()] or None
-    rows, s = replay(cfg, args.margin, laws, ov)
+    rows, s = replay(cfg, args.margin, laws, ov, dep)
     test = ("set by hand" if s["pattern_cv"] is None
             else f"pattern test CV {100 * s['pattern_cv']:.1f} %")
     print(f"lanes {s['lanes_m']:g} m (legs {s['legs_deg']:.0f}°; {test}); the flight's dose CV "
