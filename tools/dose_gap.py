@@ -82,7 +82,7 @@ def capture(cfg: Any) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
     return np.array(rows), np.array(means), now["dt"], res.summary
 
 
-def _lowpass(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
+def lowpass(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
     """First-order low-pass y' = (x − y)/τ along axis 0, from y₀ = x₀."""
     a = 1.0 - math.exp(-dt / tau)
     y = np.empty_like(x)
@@ -114,10 +114,10 @@ def variant_rows(inp: np.ndarray, mean: np.ndarray, dt: float, cfg: Any,
             e = along if name == "gust along" else across
             x[:, WIND] = mean + np.outer(gust @ e, e)
         elif name.startswith("wind low-passed"):
-            x[:, WIND] = _lowpass(inp[:, WIND], dt, float(name.split()[2]))
+            x[:, WIND] = lowpass(inp[:, WIND], dt, float(name.split()[2]))
         elif name == "gust, vehicle smoothed":
-            x[:, I.R:I.R_END] = _lowpass(inp[:, I.R:I.R_END], dt, 2.0)
-            x[:, I.THRUST] = _lowpass(inp[:, I.THRUST:I.THRUST + 1], dt, 2.0)[:, 0]
+            x[:, I.R:I.R_END] = lowpass(inp[:, I.R:I.R_END], dt, 2.0)
+            x[:, I.THRUST] = lowpass(inp[:, I.THRUST:I.THRUST + 1], dt, 2.0)[:, 0]
         out[name] = x
     return out
 
