@@ -139,6 +139,7 @@ from typing import Any
 import numpy as np
 
 from .._jit import HAVE_NUMBA
+from .atomiser import throw_variances
 from .deposition_config import DepositionConfig
 from .deposition_kernels import (
     batch_flush,
@@ -185,6 +186,7 @@ from .deposition_layout import (
     P_O_R,
     P_O_SHARE,
     P_O_TAUP,
+    P_O_THR,
     P_O_TT,
     P_O_VT,
     P_OFFNOW,
@@ -297,8 +299,10 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
     vt = np.array([terminal_velocity(x, c.liquid_density, c.air_density, c.air_viscosity)
                    for x in d])
     tt, hh, rr = fall_tables(c, d)
+    thr = throw_variances(d, c.throw_speed_mps, c.throw_air_mps, c.liquid_density,
+                          c.air_density, c.air_viscosity)
     arrays = [noz.ravel(), share, vt, vt / G, frac, np.asarray(g.offsets[:-1], float), tt,
-              hh.ravel(), rr.ravel()]
+              hh.ravel(), rr.ravel(), thr]
     par = np.zeros(P_HEADER + sum(len(a) for a in arrays))
     head = {P_RATE: c.rate_l_per_ha, P_SWATH: c.swath_m, P_VMIN: c.speed_min_mps,
             P_DON: c.nozzle_on_delay_s, P_DOFF: c.nozzle_off_delay_s,
@@ -326,7 +330,7 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
         par[k] = v
     o = P_HEADER
     for slot, arr in zip((P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_O_TT,
-                          P_O_H, P_O_R), arrays, strict=True):
+                          P_O_H, P_O_R, P_O_THR), arrays, strict=True):
         par[slot] = o
         par[o:o + len(arr)] = arr
         o += len(arr)
@@ -340,15 +344,17 @@ def footprints(cfg: DepositionConfig, inp: np.ndarray, par: np.ndarray | None = 
     classes, keys ``d_m``, ``frac`` and the F_* names in lower case (``wake``, ``wx``, ``wy``,
     ``wvar``, ``wland``, ``esc``, ``ex``, ``ey``, ``evx``, ``evy``, ``mut``, ``lamt``,
     ``pair``, ``rland``, ``rair``, ``ux``, ``uy``, and the trailing vortex pair's part
-    ``vort``, ``vx``, ``vy``, ``vvx``, ``vvy``, ``vland``); offsets are from the nozzle
-    centroid."""
+    ``vort``, ``vx``, ``vy``, ``vvx``, ``vvy``, ``vland``, and ``throw``, the variance a
+    rotary atomiser's throw adds to each axis of the class's release); offsets are from the
+    nozzle centroid."""
     if par is None:
         par = pack_params(cfg, GridSpec(0.0, 0.0, 1.0, 1, 1, 1, (0, 1)))
     out = np.zeros((int(par[P_K]), NFOOT))
     class_footprints(par, np.asarray(inp, float).reshape(-1)[:INPUT_WIDTH], out)
     d, frac = droplet_classes(cfg.dv10_um, cfg.dv50_um, cfg.dv90_um, cfg.n_classes)
     res = {n: out[:, i].copy() for n, i in FOOTPRINT.offset.items()}
-    res.update(d_m=d, frac=frac)
+    o = int(par[P_O_THR])
+    res.update(d_m=d, frac=frac, throw=par[o:o + len(d)].copy())
     return res
 
 
