@@ -68,7 +68,8 @@ ds/dt = v_t + u(s), in closed form::
 
 lands about x = x_nozzle + W t_f + (ẑ-tilt) D_w / c + (v − W) τ_p (1 − e^{−t_f/τ_p}) (D_w =
 (s_g − s_n) − v_t t_f the wake's share of the fall, W the wind at the vehicle) with the variance
-σ² = σ₀² + (i_w D_w)² + (δ u_g / v_t)² + (σ_a t_f)² (σ₀ the nozzle sheet, i_w ≈ 0.25 the jet's
+σ² = σ₀² + (i_w D_w)² + (δ u_g / v_t)² + (σ_a t_f)² (σ₀ the nozzle sheet, to which a rotary
+atomiser adds its throw r_t(d)² / 2 per class, :mod:`~ag_uav.world.atomiser`; i_w ≈ 0.25 the jet's
 turbulence intensity, δ u_g / v_t the ground outwash of speed u_g in a layer δ, σ_a ambient
 turbulence not in the per-tick wind samples). δ = 0.17 m is calibrated (docs: DJI's 11 m T40
 swath). With ``outwash_impaction_st50`` > 0 only the share St₅₀² / (St_g² + St₅₀²) of a class
