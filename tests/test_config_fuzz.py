@@ -156,6 +156,8 @@ def _dotted(d: Mapping[str, Any], key: str) -> Any:
 def _vehicle_rules(g: Any) -> list[str]:
     """The ``[vehicle]`` rules across keys (ag_uav.config.load._check_vehicle)."""
     n = FRAME_ROTORS.get(g("vehicle.frame"), 4)
+    if g("vehicle.atomiser_rpm") > 0 and g("vehicle.sprayer") != "rotary":
+        return ["vehicle.atomiser_rpm", "vehicle.sprayer"]
     if len(g("vehicle.rotor_thrust_loss")) != n:
         return ["vehicle.rotor_thrust_loss", "vehicle.frame"]
     if g("vehicle.rotor_fault.rotor") >= n:
@@ -209,7 +211,7 @@ def cross_ok(vals: Mapping[str, Any]) -> list[str]:
 
 
 CROSS = {"vehicle.preset", "vehicle.frame", "vehicle.rotor_thrust_loss", "vehicle.inertia_kgm2",
-         "vehicle.rotor_fault.rotor",
+         "vehicle.rotor_fault.rotor", "vehicle.atomiser_rpm", "vehicle.sprayer",
          "vehicle.rotor_mass_kg", "vehicle.arm_mass_kg", "vehicle.mass_kg",
          "vehicle.battery_mass_kg",
          "sim.control_hz", "sim.timestep_s", "spray.min_height_m", "spray.max_height_m",

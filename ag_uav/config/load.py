@@ -276,6 +276,10 @@ def _check_vehicle(v: VehicleConfig) -> None:
     from .vehicles import FRAME_ROTORS
 
     n = FRAME_ROTORS[v.frame]
+    if v.atomiser_rpm > 0 and v.sprayer != "rotary":
+        raise ConfigError(f"vehicle.atomiser_rpm = {_fmt(v.atomiser_rpm)}: must be 0 with "
+                          f"vehicle.sprayer = {_fmt(v.sprayer)} (a disc speed is for "
+                          "\"rotary\" atomisers)")
     if len(v.rotor_thrust_loss) != n:
         raise ConfigError(f"vehicle.rotor_thrust_loss = {_fmt(v.rotor_thrust_loss)}: expected one "
                           f"value per rotor, {n} for vehicle.frame = {_fmt(v.frame)}")

@@ -147,6 +147,13 @@ class VehicleConfig:
                                    gt=0.0, le=1000.0)
     sprayer: str = _f("hydraulic", "spray heads: hydraulic nozzles or rotary atomisers (at "
                       "spray.nozzle_xyz_m)", choices=("hydraulic", "rotary"))
+    atomiser_rpm: float = _f(0.0, "rotary: the atomiser disc's speed (rpm); sets the spectrum's "
+                             "VMD (Walton & Prewett: d = 3.8/w sqrt(sigma/(rho D)); spray.dv10/"
+                             "dv50/dv90_um then give only its shape) and the droplets' throw "
+                             "from the rim (ag_uav.world.atomiser). 0: the fixed spectrum, no "
+                             "throw", ge=0.0, le=30000.0)
+    atomiser_radius_m: float = _f(0.04, "rotary: the atomiser disc's radius (m)", gt=0.0,
+                                  le=0.5)
     pump_l_per_min: float = _f(1.0, "pump flow limit (L/min); M350 add-on tank: an estimate",
                                gt=0.0, le=100.0)
     mass_kg: float = _f(6.47, "dry mass with batteries (DJI M350 RTK: 6.47 kg)", gt=0.5)
@@ -255,6 +262,9 @@ class SprayConfig:
                         "(ASABE S572 via GRDC: 19 % of the volume below 150 um)", gt=1, le=5000)
     dv50_um: float = _f(250.0, "volume median diameter Dv50 (um)", gt=1, le=5000)
     dv90_um: float = _f(420.0, "droplet spectrum Dv90 (um)", gt=1, le=5000)
+    surface_tension_n_m: float = _f(0.072, "the mix's surface tension (N/m; water 0.072, "
+                                    "with surfactants ~0.03-0.05): a rotary atomiser's droplet "
+                                    "size", gt=0.01, le=0.1)
     n_classes: int = _f(10, "droplet classes the spectrum is split into (bins even in the "
                         "normal score of ln D, the fine tail that drifts with its own classes)",
                         ge=1, le=40)

@@ -108,6 +108,9 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
             "rotor_mass_kg": 1.5, "arm_mass_kg": 0.8,  # estimate (100×33 mm stator motors)
             "rotor_thrust_loss": [0.0] * 8,
             "sprayer": "rotary", "pump_l_per_min": 12.0,  # [T40]
+            # estimate: an 80 mm disc at 7200 rpm gives a 151 um VMD (Walton & Prewett), inside
+            # [T40]'s 50-300 um; the sheet states neither the disc nor its speed
+            "atomiser_rpm": 7200.0, "atomiser_radius_m": 0.04,
         },
         "battery": {"capacity_wh": 1566.0,       # [T40] DB1560: 30000 mAh × 52.22 V
                     "rotor_diameter_m": 1.372,   # [T40] 54 in
@@ -115,7 +118,9 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
                     "avionics_w": 100.0},        # estimate: pumps, atomiser motors, radar
         "spray": {"tank_l": 40.0,                # [T40]
                   "nozzle_xyz_m": _under(1.092, -0.35, (2, 3)),  # estimate: rear pairs
-                  "dv10_um": 80.0, "dv50_um": 150.0, "dv90_um": 280.0},  # estimate in [T40]'s
+                  # estimate in [T40]'s 50-300 um; with atomiser_rpm > 0 only the shape (the
+                  # VMD follows the disc speed, ag_uav.world.atomiser)
+                  "dv10_um": 80.0, "dv50_um": 150.0, "dv90_um": 280.0},
     },
 }
 

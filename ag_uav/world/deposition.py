@@ -68,7 +68,8 @@ ds/dt = v_t + u(s), in closed form::
 
 lands about x = x_nozzle + W t_f + (ẑ-tilt) D_w / c + (v − W) τ_p (1 − e^{−t_f/τ_p}) (D_w =
 (s_g − s_n) − v_t t_f the wake's share of the fall, W the wind at the vehicle) with the variance
-σ² = σ₀² + (i_w D_w)² + (δ u_g / v_t)² + (σ_a t_f)² (σ₀ the nozzle sheet, i_w ≈ 0.25 the jet's
+σ² = σ₀² + (i_w D_w)² + (δ u_g / v_t)² + (σ_a t_f)² (σ₀ the nozzle sheet, to which a rotary
+atomiser adds its throw r_t(d)² / 2 per class, :mod:`~ag_uav.world.atomiser`; i_w ≈ 0.25 the jet's
 turbulence intensity, δ u_g / v_t the ground outwash of speed u_g in a layer δ, σ_a ambient
 turbulence not in the per-tick wind samples). δ = 0.17 m is calibrated (docs: DJI's 11 m T40
 swath). With ``outwash_impaction_st50`` > 0 only the share St₅₀² / (St_g² + St₅₀²) of a class
@@ -139,6 +140,7 @@ from typing import Any
 import numpy as np
 
 from .._jit import HAVE_NUMBA
+from .atomiser import throw_variances
 from .deposition_config import DepositionConfig
 from .deposition_kernels import (
     batch_flush,
@@ -185,6 +187,7 @@ from .deposition_layout import (
     P_O_R,
     P_O_SHARE,
     P_O_TAUP,
+    P_O_THR,
     P_O_TT,
     P_O_VT,
     P_OFFNOW,
@@ -297,8 +300,10 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
     vt = np.array([terminal_velocity(x, c.liquid_density, c.air_density, c.air_viscosity)
                    for x in d])
     tt, hh, rr = fall_tables(c, d)
+    thr = throw_variances(d, c.throw_speed_mps, c.throw_air_mps, c.liquid_density,
+                          c.air_density, c.air_viscosity)
     arrays = [noz.ravel(), share, vt, vt / G, frac, np.asarray(g.offsets[:-1], float), tt,
-              hh.ravel(), rr.ravel()]
+              hh.ravel(), rr.ravel(), thr]
     par = np.zeros(P_HEADER + sum(len(a) for a in arrays))
     head = {P_RATE: c.rate_l_per_ha, P_SWATH: c.swath_m, P_VMIN: c.speed_min_mps,
             P_DON: c.nozzle_on_delay_s, P_DOFF: c.nozzle_off_delay_s,
@@ -326,7 +331,7 @@ def pack_params(c: DepositionConfig, g: GridSpec) -> np.ndarray:
         par[k] = v
     o = P_HEADER
     for slot, arr in zip((P_O_NOZ, P_O_SHARE, P_O_VT, P_O_TAUP, P_O_FRAC, P_O_LEV, P_O_TT,
-                          P_O_H, P_O_R), arrays, strict=True):
+                          P_O_H, P_O_R, P_O_THR), arrays, strict=True):
         par[slot] = o
         par[o:o + len(arr)] = arr
         o += len(arr)
@@ -340,15 +345,17 @@ def footprints(cfg: DepositionConfig, inp: np.ndarray, par: np.ndarray | None = 
     classes, keys ``d_m``, ``frac`` and the F_* names in lower case (``wake``, ``wx``, ``wy``,
     ``wvar``, ``wland``, ``esc``, ``ex``, ``ey``, ``evx``, ``evy``, ``mut``, ``lamt``,
     ``pair``, ``rland``, ``rair``, ``ux``, ``uy``, and the trailing vortex pair's part
-    ``vort``, ``vx``, ``vy``, ``vvx``, ``vvy``, ``vland``); offsets are from the nozzle
-    centroid."""
+    ``vort``, ``vx``, ``vy``, ``vvx``, ``vvy``, ``vland``, and ``throw``, the variance a
+    rotary atomiser's throw adds to each axis of the class's release); offsets are from the
+    nozzle centroid."""
     if par is None:
         par = pack_params(cfg, GridSpec(0.0, 0.0, 1.0, 1, 1, 1, (0, 1)))
     out = np.zeros((int(par[P_K]), NFOOT))
     class_footprints(par, np.asarray(inp, float).reshape(-1)[:INPUT_WIDTH], out)
     d, frac = droplet_classes(cfg.dv10_um, cfg.dv50_um, cfg.dv90_um, cfg.n_classes)
     res = {n: out[:, i].copy() for n, i in FOOTPRINT.offset.items()}
-    res.update(d_m=d, frac=frac)
+    o = int(par[P_O_THR])
+    res.update(d_m=d, frac=frac, throw=par[o:o + len(d)].copy())
     return res
 
 

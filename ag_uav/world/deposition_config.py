@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -21,7 +22,8 @@ _LIMITS = (("temperature_c", -20.0, 50.0), ("rh_percent", 5.0, 99.0),
            ("outwash_impaction_st50", 0.0, 10.0), ("jet_merge_lengths", 0.0, 100.0),
            ("rotor_arm_m", 0.0, 20.0), ("obukhov_inv_m", -1.0, 1.0),
            ("wall_jet_growth", 0.0, 1.0), ("impingement_diameters", 0.0, 10.0),
-           ("vortex_life_tstar", 0.0, 100.0), ("wing_speed_vh", 0.01, 100.0))
+           ("vortex_life_tstar", 0.0, 100.0), ("wing_speed_vh", 0.01, 100.0),
+           ("throw_speed_mps", 0.0, 300.0), ("throw_air_mps", 0.0, 100.0))
 
 
 #: the hover law's options (off by default): the merged jet, the impaction cut, the outwash as a
@@ -79,6 +81,9 @@ class DepositionConfig:
     wing_speed_vh: float = 2.0                    # the pair takes the whole wake from V_a =
                                                   # this × v_h on (Leishman: 2), blended below
     release_sigma_m: float = 0.1
+    throw_speed_mps: float = 0.0                  # > 0: a rotary atomiser's rim speed ωR, the
+                                                  # droplets thrown to a ring (atomiser.py)
+    throw_air_mps: float = 0.0                    # the downwash's speed where they are thrown
     ambient_sigma_mps: float = 0.0
     temperature_c: float = 20.0                   # air temperature (°C)
     rh_percent: float = 60.0                      # relative humidity (%)
@@ -124,6 +129,30 @@ class DepositionConfig:
         if kw.get("nozzle_share") == ():  # [] in the config: equal shares
             m = len(kw.get("nozzle_xyz_m", _M350_NOZZLES))
             kw["nozzle_share"] = tuple([1.0 / m] * m)
+        kw.update(_rotary(cfg, kw))
         kw.update(LAWS[getattr(cfg.spray, "deposition_law", "default")])
         kw.update(over)
         return cls(**kw)
+
+
+def _rotary(cfg: Any, kw: dict[str, Any]) -> dict[str, Any]:
+    """A rotary atomiser's keys (``vehicle.sprayer = "rotary"`` with ``atomiser_rpm`` > 0;
+    else none): the spectrum with its VMD from the disc speed (Dv10, Dv90 scaled with it), the
+    throw's rim speed ωR and the air's downward speed there, the hover induced velocity
+    v_h = sqrt(m g / (2 ρ A)) at the take-off mass with a full tank (A the rotor discs'
+    area; :mod:`ag_uav.world.atomiser`)."""
+    v = getattr(cfg, "vehicle", None)
+    if v is None or getattr(v, "sprayer", "hydraulic") != "rotary" or v.atomiser_rpm <= 0:
+        return {}
+    from .atomiser import disc_vmd_m, rotary_spectrum, tip_speed_mps
+
+    sp = cfg.spray
+    vmd = 1e6 * disc_vmd_m(v.atomiser_rpm, v.atomiser_radius_m, sp.surface_tension_n_m,
+                           kw["liquid_density"])
+    d10, d50, d90 = rotary_spectrum(sp.dv10_um, sp.dv50_um, sp.dv90_um, vmd)
+    mass = v.mass_kg + v.payload_kg + sp.tank_l * sp.density_kg_per_l
+    area = kw.get("n_rotors", 4) * math.pi * kw["rotor_diameter_m"] ** 2 / 4.0
+    vh = math.sqrt(mass * 9.81 / (2.0 * kw["air_density"] * area))
+    return {"dv10_um": d10, "dv50_um": d50, "dv90_um": d90,
+            "throw_speed_mps": tip_speed_mps(v.atomiser_rpm, v.atomiser_radius_m),
+            "throw_air_mps": vh}

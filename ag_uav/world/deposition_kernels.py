@@ -433,6 +433,14 @@ def wall_jet(beta: float, r_j: float, st50: float, tp: float, vt: float, u_g: fl
 
 
 @njit(cache=True, inline="always")
+def _release_var(par, k: int) -> float:
+    """Class ``k``'s release variance on each horizontal axis: the nozzle sheet's σ₀² and a
+    rotary atomiser's throw to a ring of radius r_t, r_t² / 2 (0 for nozzles;
+    :mod:`ag_uav.world.atomiser`)."""
+    return par[_P.SIG0] ** 2 + par[int(par[_P.O_THR]) + k]
+
+
+@njit(cache=True, inline="always")
 def _vortex_part(par, k: int, vt: float, tp: float, h_n: float, wx: float, wy: float,
                  vx: float, vy: float, pair_v):
     """The share carried by the trailing vortex pair (option; :mod:`ag_uav.world.wake`): its
@@ -444,7 +452,7 @@ def _vortex_part(par, k: int, vt: float, tp: float, h_n: float, wx: float, wy: f
         return 0.0, 0.0, 0.0, 0.0, 1.0
     t_v, lat = vortex_landing(vt, par[_P.SPAN], h_n, w0, c, u, life)
     rel_v = tp * (1.0 - math.exp(-t_v / tp))
-    base = par[_P.SIG0] ** 2 + (par[_P.SIGA] * t_v) ** 2
+    base = _release_var(par, k) + (par[_P.SIGA] * t_v) ** 2
     return (wx * t_v + (vx - wx) * rel_v, wy * t_v + (vy - wy) * rel_v, base + lat * lx * lx,
             base + lat * ly * ly, _tab_left(par, k, t_v))
 
@@ -458,7 +466,7 @@ def _class_footprint(par, k: int, env):
     (s_n, s_g, a, z0w, tx, ty, wx, wy, vx, vy, u_g, sin_chi, ust, h_n, fu, sig_s, zmw,
      bdw, pair_v) = env
     vt, tp = par[int(par[_P.O_VT]) + k], par[int(par[_P.O_TAUP]) + k]
-    sig0 = par[_P.SIG0]
+    s02 = _release_var(par, k)
     # wake: carried down the decaying skewed jet
     tf = fall_time(vt, a, z0w, zmw, bdw, s_n, s_g) if s_g > s_n else 0.0
     if par[_P.HI] > 0.0 and s_g > s_n:
@@ -491,7 +499,7 @@ def _class_footprint(par, k: int, env):
             wxo += ride * sh * wx
             wyo += ride * sh * wy
             lvar = ride * (1.0 - ride) * sh * sh * w * w
-    wvar = (sig0 * sig0 + (par[_P.IW] * dw) ** 2 + ride * ovar
+    wvar = (s02 + (par[_P.IW] * dw) ** 2 + ride * ovar
             + (par[_P.SIGA] * tf) ** 2 + lvar)
     wland = _tab_left(par, k, tf)
     fv = pair_v[0]
@@ -512,7 +520,7 @@ def _class_footprint(par, k: int, env):
     u2 = ux * ux + uy * uy
     val = u2 * mu_t ** 3 / lam_t                     # along the wind: X = ū·T, T ~ IG
     vlat = (SIGV_USTAR * ust * mu_t) ** 2            # across it: σ_v·t (Taylor, short times)
-    s0e = sig0 * sig0 + 0.5 * par[_P.EDGE] ** 2        # leaves from the wake's edge (a ring)
+    s0e = s02 + 0.5 * par[_P.EDGE] ** 2                # leaves from the wake's edge (a ring)
     if u2 > 0.0:
         ex2 = ux * ux / u2
         evx = s0e + val * ex2 + vlat * (1.0 - ex2)

@@ -13,11 +13,12 @@ INPUT = Layout("pos:3 vel:3 r:9 thrust wind:3 cmd")
 INPUT_WIDTH = INPUT.size
 
 #: header slots of the parameter vector (float64); arrays follow at the offsets stored in it
-#: (the ``o_*`` slots); span, vtx, wingv: the forward-flight wake's vortex pair
+#: (the ``o_*`` slots); span, vtx, wingv: the forward-flight wake's vortex pair; o_thr: each
+#: class's release variance from a rotary atomiser's throw (r_t² / 2; zeros for nozzles)
 DEP_PARAMS = Layout("rate swath vmin don doff offnow tau rhoa area s0 rotz iw delta siga sig0 "
                     "x0 y0 cell nx ny nlev flushd flusht m k merge o_noz o_share o_vt o_taup "
                     "o_frac o_lev nozc qmin esc ell z0 tmax o_tt o_h o_r edge sm bd0 rj st50 "
-                    "invl wj hi span vtx wingv")
+                    "invl wj hi span vtx wingv o_thr")
 _P = DEP_PARAMS.at
 P_RATE, P_SWATH, P_VMIN, P_DON, P_DOFF = _P.RATE, _P.SWATH, _P.VMIN, _P.DON, _P.DOFF
 P_OFFNOW, P_TAU, P_RHOA, P_AREA, P_S0 = _P.OFFNOW, _P.TAU, _P.RHOA, _P.AREA, _P.S0
@@ -29,6 +30,7 @@ P_O_FRAC, P_O_LEV, P_NOZC, P_QMIN, P_ESC = _P.O_FRAC, _P.O_LEV, _P.NOZC, _P.QMIN
 P_ELL, P_Z0, P_TMAX, P_O_TT, P_O_H, P_O_R = _P.ELL, _P.Z0, _P.TMAX, _P.O_TT, _P.O_H, _P.O_R
 P_EDGE, P_SM, P_BD0, P_RJ, P_ST50 = _P.EDGE, _P.SM, _P.BD0, _P.RJ, _P.ST50
 P_INVL, P_WJ, P_HI, P_SPAN, P_VTX, P_WINGV = _P.INVL, _P.WJ, _P.HI, _P.SPAN, _P.VTX, _P.WINGV
+P_O_THR = _P.O_THR
 P_HEADER = DEP_PARAMS.size
 #: state slots per row; the window's accumulators follow at S_ACC: the litres, the
 #: litre-weighted sum of the input row (INPUT_WIDTH), then per nozzle its :data:`MOMENTS`

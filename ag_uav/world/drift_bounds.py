@@ -76,12 +76,13 @@ def pass_profile(cfg: DepositionConfig, wind: float, height: float, speed: float
     y = np.arange(-30.0, FAR + 30.0, DY)
     dens = np.zeros_like(y)
     edge2 = np.max(np.hypot(noz[:, 0], noz[:, 1])) + 0.5 * cfg.rotor_diameter_m
-    s_e = math.sqrt(cfg.release_sigma_m ** 2 + 0.5 * edge2 ** 2)
-    kern_y = np.arange(-5 * s_e, 5 * s_e + DY, DY)
-    kern = np.exp(-0.5 * (kern_y / s_e) ** 2)
-    kern /= kern.sum()
     for k in range(len(fp["frac"])):
         f = fp["frac"][k]
+        # the escaped part's release spread: the sheet, a rotary atomiser's throw, the edge ring
+        s_e = math.sqrt(cfg.release_sigma_m ** 2 + fp["throw"][k] + 0.5 * edge2 ** 2)
+        kern_y = np.arange(-5 * s_e, 5 * s_e + DY, DY)
+        kern = np.exp(-0.5 * (kern_y / s_e) ** 2)
+        kern /= kern.sum()
         sw = math.sqrt(fp["wvar"][k])
         esc = np.zeros_like(y)
         uy = fp["uy"][k]

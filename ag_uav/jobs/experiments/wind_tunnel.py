@@ -169,14 +169,15 @@ def model_profile(cfg: DepositionConfig, trial: Trial, wind: float, payload_l: f
     share = np.asarray(cfg.nozzle_share, float)
     grid = np.arange(-10.0, max(x.max(), 0.0) + 60.0, DX)
     edge2 = np.max(np.hypot(noz[:, 0], noz[:, 1])) + 0.5 * cfg.rotor_diameter_m
-    s_e = math.sqrt(cfg.release_sigma_m ** 2 + 0.5 * edge2 ** 2)
-    kx = np.arange(-5 * s_e, 5 * s_e + DX, DX)
-    kern = np.exp(-0.5 * (kx / s_e) ** 2)
-    kern /= kern.sum()
     w = trial.tunnel_width_m
     dens = np.zeros(len(x))
     for k in range(len(fp["frac"])):
         f = fp["frac"][k]
+        # the escaped part's release spread: the sheet, a rotary atomiser's throw, the edge ring
+        s_e = math.sqrt(cfg.release_sigma_m ** 2 + fp["throw"][k] + 0.5 * edge2 ** 2)
+        kx = np.arange(-5 * s_e, 5 * s_e + DX, DX)
+        kern = np.exp(-0.5 * (kx / s_e) ** 2)
+        kern /= kern.sum()
         esc_x = None
         ux = fp["ux"][k]
         land = fp["esc"][k] * (1.0 - fp["pair"][k])
