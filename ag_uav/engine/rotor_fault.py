@@ -96,6 +96,8 @@ class RotorFaults:
     TEL_HZ = 400.0
     TEL_LATENCY_S = 0.0025
     TEL_SAMPLES = 3
+    #: a quad's summary: the largest roll/pitch rate on three rotors within this of the fault
+    PEAK_WINDOW_S = 0.5
     SAT_FRAC = 0.99  # thrust-loss check: a motor at the top of its range ...
     SAT_S = 1.0  # ... for this long (ArduPilot THRUST_LOSS_TRIGGER_SEC)
     DESCENT_MPS, CRAWL_MPS, BRAKE_MPS2 = 0.7, 0.3, 2.0
@@ -151,7 +153,8 @@ class RotorFaults:
                                       "detected_s": None, "detection_delay_s": None,
                                       "action": None, "landed_s": None, "touchdown_mps": None,
                                       "hover_share": None, "thrust_loss_s": None,
-                                      "detector": f.detector, "rate_at_detection_rad_s": None}
+                                      "detector": f.detector, "rate_at_detection_rad_s": None,
+                                      "rate_peak_rad_s": None}
             for f in rf]
 
     def step(self, k: int, t: float) -> None:
@@ -299,6 +302,10 @@ class RotorFaults:
             if not b.act[i]:
                 continue
             law.mass = float(self.bc.params[i, P_MASS])
+            info = self.info[i]
+            if info is not None and t - float(self.at[i]) <= self.PEAK_WINDOW_S:
+                rate = round(math.hypot(b.om[i, X], b.om[i, Y]), 3)
+                info["rate_peak_rad_s"] = max(info.get("rate_peak_rad_s") or 0.0, rate)
             err = np.concatenate([b.rp[i] - b.p_fb[i], b.rv[i] - b.v_fb[i]])
             b.f[i] = law.update(err, b.dt, b.Rc[i], b.om[i], b.ra[i])
 
