@@ -29,6 +29,15 @@ body z: ``ρ ≤ (Iz − I_xy) r² tan(TILT_N_MAX) / (|xy_o| f)``. While the veh
 bound is the binding one and the collective falls short of the command (the descent then runs
 faster than asked: the physics of three rotors, not a choice of the law).
 
+**Spinning up** (``spun`` false: the spin cannot yet balance ``RHO_MIN`` of the pair's thrust).
+Nothing but the stopped and the opposite rotor acts about the pair's diagonal, and the opposite
+pushes one way only: the momentum it gives about that diagonal stays until the body has yawed
+about a quarter turn (the pair's differential then has a component along it). So while spinning
+up the opposite rotor pushes only to brake a body rate against its push, by no more than that
+rate's momentum over its lag (:meth:`RelaxedHover.opposite_cap`), and the pair flies at
+``F_SHARE`` of its limit whatever the translation asks: the yaw torque ``k Σ f`` that spins the
+vehicle up is the pair's thrust, and so is nearly all its lift.
+
 **Reduced attitude** (the paper's §IV): the state ``s = (δp, δq, δn_x, δn_y, δτ_x, δτ_y)``
 about the relaxed hover at the measured ``r`` (``n_B`` against ``n̄``; ``δτ`` the motors' lag,
 first order with ``τ_m``, tracked by the law's own model of it), linear time-invariant in the
@@ -141,6 +150,7 @@ class RelaxedHover:
         self.r_K = math.nan
         self.n_bar = np.array([0.0, 0.0, 1.0])
         self.rho = self.RHO_MIN
+        self.spun = False             # the spin balances the opposite rotor's least share
         self.shortfall = 0.0          # the collective asked but not given (N)
 
     # ------------------------------------------------------------------------ relaxed hover
@@ -153,6 +163,7 @@ class RelaxedHover:
         f = f_sum / (2.0 + rho)
         dI = min(Iz - Ix, Iz - Iy)
         rho_spin = dI * r * r * math.tan(self.TILT_N_MAX) / (self.arm_o * max(f, 1e-6))
+        self.spun = rho_spin >= self.RHO_MIN
         rho = min(rho, rho_spin, 1.0)
         f = min(f_sum / (2.0 + rho), cap)
         self.rho = rho
@@ -185,14 +196,30 @@ class RelaxedHover:
         R = np.eye(NU) / self.R_TORQUE_NM ** 2
         return dlqr(E[:NS, :NS], E[:NS, NS:], Q, R)
 
-    def allocate(self, f_sum: float, tau: np.ndarray) -> np.ndarray:
+    def opposite_cap(self, omega_xy: np.ndarray, dt: float) -> float:
+        """The most the opposite rotor may push (N). Spun up, its limit. While spinning up
+        (``ρ`` bounded below ``RHO_MIN`` by the spin) its push only adds momentum about the pair's
+        diagonal that nothing can take out before the body has yawed a quarter turn (the pair's
+        thrust acts about the other axis), so it pushes only to brake a body rate against it
+        (``ω·u_o < 0``), and no more than that rate's momentum over its lag:
+        ``f_o ≤ I_u |ω·u_o| / (|xy_o| (τ_m + dt))``, ``I_u = u_oᵀ diag(Ix, Iy) u_o``."""
+        if self.spun:
+            return self.f_max
+        w = float(omega_xy @ self.u_o)
+        if w >= 0.0:
+            return 0.0
+        i_u = float(self.J[X] * self.u_o[0] ** 2 + self.J[Y] * self.u_o[1] ** 2)
+        return min(self.f_max, i_u * -w / (self.arm_o * (self.tau_m + dt)))
+
+    def allocate(self, f_sum: float, tau: np.ndarray, o_max: float | None = None
+                 ) -> np.ndarray:
         """The three rotors' thrusts (pair[0], opposite, pair[1]) for the collective ``f_sum``
         and the torque ``tau``, torque first: the opposite rotor alone pushes along
         ``u_o = (y_o, −x_o)/|xy_o|`` (one sign only: the stopped rotor gave the other), the
         pair's difference along ``u_p`` (both signs); what the limits leave goes to the
         collective."""
         fm = self.f_max
-        f_o = min(max(float(tau @ self.u_o), 0.0) / self.arm_o, fm)
+        f_o = min(max(float(tau @ self.u_o), 0.0) / self.arm_o, fm if o_max is None else o_max)
         diff = float(np.clip(float(tau @ self.u_p) / self.arm_p, -fm, fm))
         pair = min(max(f_sum - f_o, abs(diff)), 2.0 * fm - abs(diff))
         return np.array([0.5 * (pair + diff), f_o, 0.5 * (pair - diff)])
@@ -220,6 +247,8 @@ class RelaxedHover:
         tau_bar, w_bar, n_bar, f_given = self.hover(f_sum, r)
         self.n_bar = n_bar
         self.shortfall = f_sum - f_given
+        if not self.spun:  # spinning up: the pair at its share of the limit (its yaw torque)
+            f_given = 2.0 * self.F_SHARE * self.f_max
         if not (abs(r - self.r_K) <= self.R_RESCHEDULE * abs(self.r_K) + 0.5):
             self.K = self.gain(r, float(n_bar[Z]), dt)
             self.r_K = r
@@ -227,7 +256,7 @@ class RelaxedHover:
         s = np.array([w[0] - w_bar[0], w[1] - w_bar[1], n_b[0] - n_bar[0], n_b[1] - n_bar[1],
                       self.tau_est[0] - tau_bar[0], self.tau_est[1] - tau_bar[1]])
         tau = tau_bar - self.K @ s
-        f3 = self.allocate(f_given, tau)
+        f3 = self.allocate(f_given, tau, self.opposite_cap(w[HORIZ], dt))
         out = np.zeros(4)
         out[self.live] = f3
         tau_real = np.array([self.xy[self.live, 1] @ f3, -(self.xy[self.live, 0] @ f3)])

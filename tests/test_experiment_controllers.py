@@ -58,7 +58,7 @@ def test_spec_conditions_and_presets(tmp_path):
     assert mf["controller"]["type"] == "t1-fpid" and mf["controller"]["xy"]["ke"] == 1.2
     # the weak rotor as the autopilot meets it: the fault, the detector and response on
     assert wr["vehicle"]["rotor_fault"] == {"rotor": 0, "at_s": 0.0, "efficiency": 0.75,
-                                            "response": "auto"}
+                                            "response": "auto", "detector": "px4"}
     assert wr["vehicle"]["rotor_thrust_loss"] == [0.0] * 4
     assert nom["vehicle"]["rotor_fault"]["rotor"] == -1
     with pytest.raises(ConfigError, match="seed0"):

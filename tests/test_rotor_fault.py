@@ -10,6 +10,9 @@ from ag_uav.config import ConfigError
 
 #: the failure detector's stated bound: the ESC check's 0.1 s (FD_ACT_MOT_TOUT) plus a tick
 DETECT_WITHIN_S = 0.11
+#: ``detector = "esc-rpm"``: three telemetry samples at 400 Hz and 2.5 ms of latency (10 ms), met
+#: at the next 100 Hz control tick
+DETECT_RPM_WITHIN_S = 0.011
 
 FRAMES = {
     "quad-x": {"vehicle.preset": "m350"},
@@ -35,6 +38,19 @@ def test_a_stopped_rotor_is_detected_within_the_stated_time(frame, rotor):
     assert rf["detected_s"] is not None
     assert 0.0 < rf["detection_delay_s"] <= DETECT_WITHIN_S
     assert rf["action"].startswith("gave up yaw" if frame == "quad-x" else "re-allocated")
+
+
+@pytest.mark.parametrize("frame", sorted(FRAMES))
+def test_the_motor_speed_telemetry_detects_a_stopped_rotor_within_a_tick(frame):
+    c = _cfg(**FRAMES[frame], **{"vehicle.rotor_fault.rotor": 1, "vehicle.rotor_fault.at_s": 12.0,
+                                  "vehicle.rotor_fault.detector": "esc-rpm",
+                                  "sim.max_time_s": 12.3})
+    rf = ag_uav.simulate(c).summary["rotor_fault"]
+    assert rf["detector"] == "esc-rpm"
+    assert 0.0 < rf["detection_delay_s"] <= DETECT_RPM_WITHIN_S
+    assert rf["action"].startswith("gave up yaw" if frame == "quad-x" else "re-allocated")
+    # the body has barely started to turn: the PX4 check's 0.09 s leaves it at ~2 rad/s
+    assert rf["rate_at_detection_rad_s"] < 0.5
 
 
 def test_no_fault_no_detection():

@@ -120,3 +120,22 @@ def test_the_law_holds_a_spinning_quad():
 def test_the_law_lands_a_spinning_quad_below_1_mps():
     o = _fly(_law(), -15.0, 6.0, 20.0, descend=True)
     assert o["touchdown"] is not None and o["touchdown"] < 1.0 and o["tilt"] < 25.0
+
+
+def test_spinning_up_the_opposite_rotor_only_brakes_and_the_pair_spins_the_quad():
+    """Before the spin balances the opposite rotor's least share, its push would only add
+    momentum about the pair's diagonal: it pushes only against a body rate, no more than that
+    rate's momentum over its lag; the pair flies at its share of the limit (the yaw torque)."""
+    law = _law()
+    law.hover(MASS * G, 0.5)
+    assert not law.spun
+    u = law.u_o
+    assert law.opposite_cap(0.5 * u, 0.01) == 0.0
+    i_u = J[0] * u[0] ** 2 + J[1] * u[1] ** 2
+    assert law.opposite_cap(-0.5 * u, 0.01) == pytest.approx(
+        i_u * 0.5 / (law.arm_o * (TAU_M + 0.01)))
+    f = law.update(np.zeros(6), 0.01, np.eye(3).ravel(), [0.3 * u[0], 0.3 * u[1], 0.5])
+    assert f[law.opp] == 0.0 and f[law.failed] == 0.0
+    assert f[law.pair].sum() == pytest.approx(2 * law.F_SHARE * F_MAX)
+    law.hover(MASS * G, -15.0)
+    assert law.spun and law.opposite_cap(0.5 * u, 0.01) == F_MAX

@@ -11,7 +11,15 @@ its response by frame: a stage of the engine's tick, before the controller.
   ``FD_FAIL_R_TTRI``); (2) the motors' ESC telemetry (PX4's actuator failure check,
   ``FD_ACT_EN``, compares each motor's current with its command): a motor delivering less than
   :attr:`RotorFaults.ESC_RATIO` (half) of its command while commanded above 5 % of ``f_max``,
-  for :attr:`RotorFaults.ESC_TIMEOUT_S` (0.1 s, ``FD_ACT_MOT_TOUT``). **Isolation**: the motor
+  for :attr:`RotorFaults.ESC_TIMEOUT_S` (0.1 s, ``FD_ACT_MOT_TOUT``); (2') with ``detector =
+  "esc-rpm"``, besides: each motor's speed telemetry against the speed its command asks
+  (bidirectional DShot returns a motor's eRPM in reply to each command frame; DJI's
+  agricultural drones report their motors' speed): a sample every 1 / :attr:`RotorFaults.TEL_HZ`
+  (400 Hz, stated), seen :attr:`RotorFaults.TEL_LATENCY_S` later (2.5 ms, stated), and
+  :attr:`RotorFaults.TEL_SAMPLES` (3) samples in a row under half: 10 ms, met at the next
+  control tick. The plant's fault is a step of the rotor's thrust per unit command at a tick,
+  so every sample after it reads the rotor's ``efficiency`` (no telemetry noise is modelled).
+  **Isolation**: the motor
   the telemetry reports delivering least of its command (here the actuator's thrust per unit
   command); after an attitude trigger with every motor above half, a false alarm, noted, and
   flown on. A weak rotor that keeps more than half its thrust is left to the attitude check
@@ -84,6 +92,12 @@ class RotorFaults:
     TRIGGER_S = 0.3
     ESC_RATIO = 0.5
     ESC_TIMEOUT_S = 0.1
+    #: ``detector = "esc-rpm"``: each motor's speed telemetry (module docstring, (2'))
+    TEL_HZ = 400.0
+    TEL_LATENCY_S = 0.0025
+    TEL_SAMPLES = 3
+    #: a quad's summary: the largest roll/pitch rate on three rotors within this of the fault
+    PEAK_WINDOW_S = 0.5
     SAT_FRAC = 0.99  # thrust-loss check: a motor at the top of its range ...
     SAT_S = 1.0  # ... for this long (ArduPilot THRUST_LOSS_TRIGGER_SEC)
     DESCENT_MPS, CRAWL_MPS, BRAKE_MPS2 = 0.7, 0.3, 2.0
@@ -113,6 +127,8 @@ class RotorFaults:
         self.response = [f.response for f in rf]
         self.frame = [c.vehicle.frame for c in cfgs]
         self.watch = np.array([f.response != "none" for f in rf])
+        self.rpm = np.array([f.detector == "esc-rpm" for f in rf])
+        self.tel_from = np.full(n, math.inf)  # since when the low motor's telemetry reads low
         self.next_fault = float(self.at.min()) if n else math.inf
         self.applied = np.zeros(n, dtype=bool)
         self.over_s = np.zeros(n)
@@ -136,7 +152,9 @@ class RotorFaults:
                                       "efficiency": f.efficiency, "response": f.response,
                                       "detected_s": None, "detection_delay_s": None,
                                       "action": None, "landed_s": None, "touchdown_mps": None,
-                                      "hover_share": None, "thrust_loss_s": None}
+                                      "hover_share": None, "thrust_loss_s": None,
+                                      "detector": f.detector, "rate_at_detection_rad_s": None,
+                                      "rate_peak_rad_s": None}
             for f in rf]
 
     def step(self, k: int, t: float) -> None:
@@ -163,6 +181,7 @@ class RotorFaults:
             self.applied[i] = True
             if self.eff[i] < self.ESC_RATIO:
                 self.esc_low[i] = j
+                self.tel_from[i] = t  # the thrust drops with the tick's physics from here
             self.b.notes[i].append(f"rotor {j} failed at t={t:.2f}s (keeps "
                                    f"{self.eff[i]:.0%} of its thrust)")
         rest = self.at[~self.applied]
@@ -181,9 +200,24 @@ class RotorFaults:
             on = b.f[i, j] > 0.05 * self.vehs[i].f_max
             self.esc_s[i] = self.esc_s[i] + b.dt if on else 0.0
         fire = (self.over_s >= self.TRIGGER_S - 1e-9) | (self.esc_s >= self.ESC_TIMEOUT_S - 1e-9)
+        fire |= self._telemetry(live & self.rpm & (self.esc_low >= 0), t)
         for i in np.flatnonzero(fire & live):
             self._isolate(int(i), t)
         self._thrust_loss(live & (self.rotor >= 0) & ~self.heading_held, t)
+
+    def _telemetry(self, live: np.ndarray, t: float) -> np.ndarray:
+        """``detector = "esc-rpm"`` (module docstring, (2')): True where the low motor's last
+        ``TEL_SAMPLES`` telemetry samples (taken every ``1 / TEL_HZ`` s, each in the autopilot
+        ``TEL_LATENCY_S`` later) all read under ``ESC_RATIO`` of the speed its command asks."""
+        b, out = self.b, np.zeros(self.b.n, dtype=bool)
+        for i in np.flatnonzero(live):
+            if b.f[i, int(self.esc_low[i])] <= 0.05 * self.vehs[i].f_max:
+                self.tel_from[i] = t  # commanded off: its speed says nothing
+                continue
+            seen = (math.floor((t - self.TEL_LATENCY_S) * self.TEL_HZ + 1e-9)
+                    - math.floor(self.tel_from[i] * self.TEL_HZ + 1e-9))
+            out[i] = seen >= self.TEL_SAMPLES
+        return out
 
     def _thrust_loss(self, live: np.ndarray, t: float) -> None:
         """ArduPilot's thrust-loss check (module docstring, (3)): the highest-commanded motor at
@@ -220,6 +254,7 @@ class RotorFaults:
         info = self.info[i] if self.info[i] is not None else {"rotor": None}
         self.info[i] = info
         info["detected_s"] = round(t, 2)
+        info["rate_at_detection_rad_s"] = round(math.hypot(b.om[i, X], b.om[i, Y]), 3)
         if self.applied[i]:
             info["detection_delay_s"] = round(t - float(self.at[i]), 2)
         if self.frame[i] == "quad-x":
@@ -267,6 +302,10 @@ class RotorFaults:
             if not b.act[i]:
                 continue
             law.mass = float(self.bc.params[i, P_MASS])
+            info = self.info[i]
+            if info is not None and t - float(self.at[i]) <= self.PEAK_WINDOW_S:
+                rate = round(math.hypot(b.om[i, X], b.om[i, Y]), 3)
+                info["rate_peak_rad_s"] = max(info.get("rate_peak_rad_s") or 0.0, rate)
             err = np.concatenate([b.rp[i] - b.p_fb[i], b.rv[i] - b.v_fb[i]])
             b.f[i] = law.update(err, b.dt, b.Rc[i], b.om[i], b.ra[i])
 
