@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+import shapely
 
 from ag_uav.config import ConfigError
 from ag_uav.config import load_config as _load_config
@@ -93,3 +94,17 @@ def test_lanes_that_hold_in_the_forecasts_spread_are_no_wider():
     # no forecast error: no spread, the lanes of the forecast alone
     exact = load_config({"mission.swath_spread": True})
     assert pattern.pattern_case(exact).spread == ()
+
+
+def test_the_offset_keeps_the_flight_over_the_field():
+    # the wake law's pattern lies further downwind than half its lanes: the boundary lap goes
+    # at most onto the boundary
+    cfg = load_config({"spray.deposition_law": "wake"})
+    lc = pattern.lane_choice(cfg)
+    assert abs(pattern.pattern_shift(lc.y, lc.profiles)) > 0.5 * lc.swath_m
+    assert math.hypot(*pattern.mission_offset(cfg)) == pytest.approx(0.5 * lc.swath_m)
+    plan = build_plan(cfg, build_field(cfg))
+    grown = build_field(cfg).polygon.buffer(0.3)
+    for s in plan.segments:
+        if s.kind in ("leg", "headland"):
+            assert all(grown.contains(shapely.Point(p)) for p in s.points)

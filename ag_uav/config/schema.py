@@ -88,8 +88,9 @@ class MissionConfig:
     upwind_offset_m: float | str = _f("auto", "the whole plan moved upwind across the legs by "
                                       "this much (m; 0 = none), or \"auto\": by the pattern "
                                       "test's downwind shift in the planning wind (the centre "
-                                      "of its deposit's half-peak width), so that the pattern, "
-                                      "not the flight line, lies on the field",
+                                      "of its deposit's half-peak width, at most half the lanes: "
+                                      "the upwind boundary lap at most on the boundary), so "
+                                      "that the pattern, not the flight line, lies on the field",
                                       ge=0, le=20, choices=("auto",))
     speed_mps: float = _f(5.0, "cruise ground speed on legs (m/s)", ge=0.5, le=15)
     altitude_m: float = _f(3.0, "spray altitude above ground (m)", gt=0.5, le=50)

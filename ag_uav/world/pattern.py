@@ -420,10 +420,11 @@ def pattern_shift(y: np.ndarray, profiles: tuple) -> float:
 def mission_offset(cfg: Any) -> tuple[float, float]:
     """The translation (east, north; m) of ``cfg``'s whole plan: ``mission.upwind_offset_m``
     upwind across the legs, or for ``"auto"`` minus the :func:`pattern_shift` of the back-and-
-    forth pattern test in the planning wind, across the legs (zero in calm air or where the
-    legs' heading is not known before the plan). The lanes and the headland are unchanged: the
-    boundary laps move with the legs, the upwind one towards (or past) the edge, the downwind
-    one inside it, as the deposit moves the other way."""
+    forth pattern test in the planning wind, across the legs, at most half the lanes (zero in
+    calm air or where the legs' heading is not known before the plan). The lanes and the
+    headland are unchanged: the boundary laps move with the legs, the upwind one towards the
+    edge (at most onto it: the flight stays over the field), the downwind one inside it, as the
+    deposit moves the other way."""
     given = cfg.mission.upwind_offset_m
     if given != "auto" and float(given) == 0.0:
         return 0.0, 0.0
@@ -433,7 +434,8 @@ def mission_offset(cfg: Any) -> tuple[float, float]:
     if given == "auto":
         lc = _cached(repr(("lanes", case, cfg.mission.swath_cv_max)),
                      lambda: run_pattern(case, cfg.mission.swath_cv_max))
-        c = pattern_shift(lc.y, lc.profiles)
+        lanes = mission_swath(cfg)
+        c = float(np.clip(pattern_shift(lc.y, lc.profiles), -0.5 * lanes, 0.5 * lanes))
     else:
         c = math.copysign(float(given), case.wind_cross_mps)
     t = math.radians(case.legs_deg)
