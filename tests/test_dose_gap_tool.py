@@ -69,3 +69,29 @@ def test_the_low_pass_holds_a_constant_and_smooths_a_step():
     y = tool.lowpass(step, 0.01, 1.0)
     # one time constant after the step: 1 - e^-1 of the way (first order, exact per step)
     assert abs(y[199, 0] - (1.0 - math.exp(-1.0))) < 1e-9
+
+
+def test_edges_name_the_upwind_edge_and_its_under_dosed_cells():
+    import shapely
+
+    tool = _tool()
+
+    class Fld:
+        polygon = shapely.Polygon([(0, 0), (20, 0), (20, 20), (0, 20)])
+
+    class Map:
+        xc = np.arange(0.25, 20.0, 0.5)
+        l_per_ha = np.where(xc[None, :] < 4.0, 0.5, 1.0) * np.ones((40, 1))
+
+        def centres(self):
+            return self.xc, self.xc
+
+        def field_mask(self, fld):
+            return np.ones((40, 40), bool)
+
+    out = tool.edges(Map(), Fld(), np.array([1.0, 0.0]))     # the wind blows to the east
+    assert len(out) == 4
+    west = [e for e in out if e.startswith("upwind 270°")]
+    east = [e for e in out if e.startswith("downwind 90°")]
+    assert len(west) == 1 and len(east) == 1
+    assert " 0 % under" not in west[0] and east[0].startswith("downwind 90°: 0 % under")

@@ -28,6 +28,8 @@ rows) and over the interior ``--margin`` m inside the boundary (no headland laps
 leg ends), with the interior's CV split into the part across the legs (the stripes: the mean
 profile across the legs) and the rest (along the legs). ``--laws default,hover,wake`` replays
 the same flown path, lanes and flow by each law (which of the law's parts makes the gap).
+``--edges`` adds, per edge of the boundary, the under-dosed share and the mean dose of the
+cells within 12 m of it (each cell with its nearest edge), the edge upwind or downwind.
 """
 
 from __future__ import annotations
@@ -138,6 +140,35 @@ def stripes(dm: Any, fld: Any, margin: float, legs_deg: float) -> tuple[float, f
     return float(prof[k].std() / mu), float((d - prof[k]).std() / mu)
 
 
+def edges(dm: Any, fld: Any, wind_to: np.ndarray, depth: float = 12.0) -> list[str]:
+    """Per edge of the field's outer boundary (its cells within ``depth`` m, each cell counted
+    with its nearest edge): the share below 80 % of the field's mean dose and the mean dose over
+    the field's, the edge labelled upwind or downwind by its outward normal against the mean
+    wind's direction ``wind_to`` (a unit vector, where it blows to)."""
+    import shapely
+
+    xc, yc = dm.centres()
+    gx, gy = np.meshgrid(xc, yc)
+    m = dm.field_mask(fld)
+    pts = shapely.points(gx[m], gy[m])
+    d = dm.l_per_ha[m]
+    mu = d.mean()
+    ring = np.asarray(fld.polygon.exterior.coords)
+    if shapely.Polygon(ring).exterior.is_ccw is False:
+        ring = ring[::-1]
+    dist = np.stack([shapely.distance(pts, shapely.LineString(ring[j:j + 2]))
+                     for j in range(len(ring) - 1)])
+    near, out = dist.argmin(axis=0), []
+    for j in range(len(ring) - 1):
+        e = ring[j + 1] - ring[j]
+        normal = np.array([e[1], -e[0]]) / np.hypot(*e)      # outward on a CCW ring
+        sel = (near == j) & (dist[j] < depth)
+        side = "upwind" if normal @ wind_to < 0 else "downwind"
+        out.append(f"{side} {math.degrees(math.atan2(e[1], e[0])) % 360:.0f}°: "
+                   f"{100 * (d[sel] < 0.8 * mu).mean():.0f} % under, {d[sel].mean() / mu:.2f}")
+    return out
+
+
 def replay(cfg: Any, margin: float, laws: list[str] | None = None,
            overrides: dict[str, Any] | None = None, dep: dict[str, Any] | None = None
            ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
@@ -167,10 +198,12 @@ def replay(cfg: Any, margin: float, laws: list[str] | None = None,
             m = dm.metrics(fld, rate, cfg.spray.dose_margin_m)
             mi = dm.metrics(fld, rate, margin)
             across, along = stripes(dm, fld, margin, legs)
+            d = math.radians(cfg.wind.direction_deg)
             out.append({"law": law, "variant": name, "cv": m["dose_cv"],
                         "under": m["underdosed_fraction"], "over": m["overdosed_fraction"],
                         "cv_in": mi["dose_cv"], "under_in": mi["underdosed_fraction"],
-                        "across_in": across, "along_in": along})
+                        "across_in": across, "along_in": along,
+                        "edges": edges(dm, fld, -np.array([math.sin(d), math.cos(d)]))})
     summary = dict(summary, pattern_cv=lc.cv, lanes_m=lc.swath_m, legs_deg=legs)
     return out, summary
 
@@ -187,6 +220,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--dep", action="append", default=[], metavar="FIELD=VALUE",
                    help="replay with a field of the law's DepositionConfig replaced, e.g. "
                         "impingement_diameters=0 (repeatable; the flight is flown without it)")
+    p.add_argument("--edges", action="store_true",
+                   help="per edge of the boundary: the under-dosed share and the mean dose of "
+                        "the cells within 12 m of it, upwind or downwind")
     args = p.parse_args(argv)
     ov = parse_set_items(args.set)
     dep = {k: float(v) for k, v in (d.split("=", 1) for d in args.dep)}
@@ -204,6 +240,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{100 * r[k]:6.1f}" for k in ("cv", "under", "over")) + " |" + " " * 19
             + " ".join(f"{100 * r[k]:6.1f}" for k in ("cv_in", "under_in", "across_in",
                                                        "along_in")))
+        if args.edges:
+            print(" " * 9 + "edges (12 m in): " + "; ".join(r["edges"]))
     return 0
 
 

@@ -10,7 +10,8 @@ Definitions (all horizontal errors in the ENU x–y plane):
 - ``altitude_rmse_m``: RMS of z_true − z_ref over the mission ticks.
 - ``coverage_fraction`` / ``overlap_fraction``: :func:`ag_uav.analysis.coverage.spray_coverage` of
 the true
-  track while spraying, with the swath footprint.
+  track while spraying, with the swath footprint; where the plan was moved upwind by the
+  pattern's crosswind shift (``plan.meta["offset_m"]``), the footprint is moved back by it.
 - ``completed``: not crashed, the reference ran to its end, the vehicle ended within half a swath
   of the path's end, and every leg was flown: while the leg was active the true track came within
   one swath of both of its ends. (How *well* it was flown is what the errors and the coverage
@@ -219,7 +220,10 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
         pt[a:b, 0][m] - pr[a:b, 0][m], pt[a:b, 1][m] - pr[a:b, 1][m])))
     alt = _root_mean(*_sumsq(on_plan, lambda a, b, m: pt[a:b, 2][m] - pr[a:b, 2][m]))
     ct_rms, ct_max = _cross_track_stats(res, plan)
-    tracks = [res.p_true[a:b, :2] for a, b in contiguous_runs(res.spray) if b - a >= 2]
+    # the footprint lies where the plan puts the pattern: a plan moved upwind by the pattern's
+    # crosswind shift (plan.meta["offset_m"], ag_uav.world.mission.shifted) lays it back downwind
+    back = np.asarray(plan.meta.get("offset_m", (0.0, 0.0)), dtype=float)
+    tracks = [res.p_true[a:b, :2] - back for a, b in contiguous_runs(res.spray) if b - a >= 2]
     cov, ovl = spray_coverage(res.field, tracks, plan.swath) if tracks else (0.0, 0.0)
     off = off_target(res.field, tracks, plan.swath, cfg.spray.offtarget_buffer_m)
     path_len = _path_length(res.p_true)

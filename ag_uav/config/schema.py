@@ -71,6 +71,11 @@ class MissionConfig:
                              "the effective swath (ASABE S386 / Martin et al. 2019), a width "
                              "for comparing aircraft, which leaves about 20 % below it",
                              gt=0, lt=1)
+    swath_spread: bool = _f(False, "swath_m = \"auto\": the lanes must also hold in the "
+                            "forecast's spread: the widest spacing whose CV is <= "
+                            "swath_cv_max at the forecast and on average over the four winds "
+                            "one sigma off it in speed and in direction "
+                            "(forecast.speed_sigma_mps, forecast.direction_sigma_deg)")
     headland_m: float | str = _f("auto", "headland margin swept by laps along the boundary (m; "
                                  "0 = none), or \"auto\": one lap of the lane spacing",
                                  ge=0, choices=("auto",))
@@ -80,6 +85,13 @@ class MissionConfig:
                                     "and back meet the same airspeed and lay the same pattern "
                                     "(\"auto\" in calm air); \"auto\": fewest turns",
                                     choices=("auto", "crosswind"))
+    upwind_offset_m: float | str = _f("auto", "the whole plan moved upwind across the legs by "
+                                      "this much (m; 0 = none), or \"auto\": by the pattern "
+                                      "test's downwind shift in the planning wind (the centre "
+                                      "of its deposit's half-peak width, at most half the lanes: "
+                                      "the upwind boundary lap at most on the boundary), so "
+                                      "that the pattern, not the flight line, lies on the field",
+                                      ge=0, le=20, choices=("auto",))
     speed_mps: float = _f(5.0, "cruise ground speed on legs (m/s)", ge=0.5, le=15)
     altitude_m: float = _f(3.0, "spray altitude above ground (m)", gt=0.5, le=50)
     accel_max_mps2: float = _f(1.5, "acceleration bound of the reference (m/s^2)", ge=0.05,

@@ -587,6 +587,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
         summ["planned_to_m"] = round(ref.plan_cut.planned_m, 1)
     if "lanes" in plan.meta:
         summ["lanes"] = plan.meta["lanes"].summary(plan.spacing)
+        summ["lanes"]["offset_m"] = list(plan.meta.get("offset_m", (0.0, 0.0)))
     summ["plan_wind"] = plan_wind(cfg).summary()
     if out.sprayer is not None:
         summ.update(out.sprayer.summary(sim_time))

@@ -32,7 +32,12 @@ import numpy as np
 
 from ..seeds import seed_sequences
 
-__all__ = ["PlanWind", "plan_wind", "forecast_errors", "meander_angles", "MEANDER_STEP_S"]
+__all__ = ["PlanWind", "plan_wind", "forecast_errors", "meander_angles", "spread_winds",
+           "SIGMA_POINTS", "MEANDER_STEP_S"]
+
+#: the forecast errors (z₁, z₂) one standard deviation off in speed, then in direction: the
+#: winds a plan made on the forecast must hold in (:func:`spread_winds`)
+SIGMA_POINTS = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
 
 #: the meander's angle is updated every this many seconds of flight (held in between)
 MEANDER_STEP_S = 1.0
@@ -90,6 +95,21 @@ def plan_wind(cfg: Any) -> PlanWind:
     src = "exact" if exact else ("given" if given else "drawn")
     return PlanWind(round(speed, 1), round(direction % 360.0) % 360.0, src,
                     float(w.speed_mps), float(w.direction_deg) % 360.0)
+
+
+def spread_winds(cross: float, along: float, z: Any, speed_sigma: float,
+                 direction_sigma: float) -> list[tuple[float, float]]:
+    """The winds (across, along the legs; m/s) a plan made on the forecast (``cross`` across,
+    ``along`` along) meets for each forecast error (z₁, z₂) of ``z``: the forecast's vector
+    turned by σ_θ z₂ and its length changed by σ_U z₁ (at least 0), the errors of
+    :func:`plan_wind` (their sign is immaterial: a normal error is symmetric)."""
+    speed, head = math.hypot(cross, along), math.atan2(along, cross)
+    out = []
+    for z1, z2 in z:
+        u = max(0.0, speed + speed_sigma * z1)
+        a = head + math.radians(direction_sigma) * z2
+        out.append((u * math.cos(a), u * math.sin(a)))
+    return out
 
 
 def meander_angles(rng: np.random.Generator, sigma_deg: float, tau_s: float, duration_s: float,

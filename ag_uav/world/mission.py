@@ -5,13 +5,16 @@ flown along the plan, which needs the vehicle for the spray job's landing height
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
+from shapely import affinity
 
 from ..config import Config, ConfigError
 from .field import DEFAULT_ORIGIN, Field, load_field
 from .geodesy import ORIGIN
-from .pattern import lane_choice, mission_direction, mission_headland
-from .plan import CoveragePlan, plan_coverage
+from .pattern import lane_choice, mission_direction, mission_headland, mission_offset
+from .plan import CoveragePlan, Segment, plan_coverage
 
 #: how far (m) a field may reach from the origin a config names: the local tangent plane's
 #: length error is ~d²/6R² (1e-7 at 5 km; :mod:`ag_uav.world.field`)
@@ -62,7 +65,20 @@ def build_plan(cfg: Config, fld: Field) -> CoveragePlan:
         what = m.swath_m if lanes.source == "config" else f'"auto" ({lanes.swath_m:g} m)'
         raise ConfigError(f"mission.swath_m = {what}: {e}") from None
     plan.meta["lanes"] = lanes
-    return plan
+    return shifted(plan, *mission_offset(cfg))
+
+
+def shifted(plan: CoveragePlan, dx: float, dy: float) -> CoveragePlan:
+    """``plan`` moved by (dx, dy) m (:func:`~ag_uav.world.pattern.mission_offset`: upwind, so
+    that the crosswind's shift of the pattern puts the deposit where the plan's lanes are);
+    ``meta["offset_m"]`` is the move. The plan itself when there is none."""
+    if dx == 0.0 and dy == 0.0:
+        return plan
+    d = np.array([dx, dy])
+    segs = [Segment(s.kind, s.points + d, s.spray) for s in plan.segments]
+    return dataclasses.replace(plan, segments=segs,
+                               interior=affinity.translate(plan.interior, dx, dy),
+                               meta={**plan.meta, "offset_m": (float(dx), float(dy))})
 
 
 def field_outline(fld: Field) -> list[np.ndarray]:

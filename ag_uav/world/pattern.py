@@ -42,11 +42,11 @@ from numkit import X, Y, Z
 
 from .deposition import DepositionBatch, DepositionConfig
 from .deposition_layout import INPUT
-from .forecast import plan_wind
+from .forecast import SIGMA_POINTS, plan_wind, spread_winds
 
 __all__ = ["pass_states", "single_pass", "cv_vs_spacing", "effective_swath", "swath_pattern",
            "LaneChoice", "lane_choice", "mission_swath", "mission_headland", "mission_direction",
-           "crosswind_heading", "CV_LIMIT", "SPACINGS"]
+           "crosswind_heading", "pattern_shift", "mission_offset", "CV_LIMIT", "SPACINGS"]
 
 PASS_M = 60.0          # length of the sprayed pass
 WINDOW_M = 10.0        # collectors: mean over this stretch of track in the middle
@@ -185,6 +185,8 @@ class PatternCase:
     masses_kg: tuple[float, ...]     # a full tank, an empty one
     drag_linear: float
     drag_quadratic: float
+    #: the winds (across, along) of the forecast's spread the lanes must also hold in
+    spread: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -202,6 +204,8 @@ class LaneChoice:
     case: PatternCase | None = None
     y: np.ndarray | None = dataclasses.field(default=None, repr=False, compare=False)
     profiles: tuple = dataclasses.field(default=(), repr=False, compare=False)
+    #: the mean CV over the forecast's spread at ``swath_m`` (:attr:`PatternCase.spread`)
+    cv_spread: float | None = None
 
     def cv_at(self, spacing: float) -> float | None:
         """The pattern test's overlaid CV at ``spacing``, the worse of the masses tested (None
@@ -232,8 +236,10 @@ class LaneChoice:
         if self.swath_m <= 0:
             return (f"lanes: no spacing of the back-and-forth pattern test at {where} has CV <= "
                     f"{100 * self.cv_max:g} %")
+        spread = ("" if self.cv_spread is None else
+                  f"; {100 * self.cv_spread:.0f} % on average one sigma off the forecast")
         return (f"lanes {self.swath_m:g} m: {rule} of the back-and-forth pattern test at "
-                f"{where} (CV {100 * (self.cv or 0.0):.0f} %)")
+                f"{where} (CV {100 * (self.cv or 0.0):.0f} %{spread})")
 
     def summary(self, leg_spacing: float | None = None) -> dict[str, Any]:
         """The ``lanes`` table of a run's summary."""
@@ -244,7 +250,7 @@ class LaneChoice:
             out.update({"cv": self.cv, "cv_max": self.cv_max, "height_m": c.height_m,
                         "speed_mps": c.speed_mps, "wind_cross_mps": c.wind_cross_mps,
                         "wind_along_mps": c.wind_along_mps, "legs_deg": c.legs_deg,
-                        "masses_kg": list(c.masses_kg)})
+                        "masses_kg": list(c.masses_kg), "cv_spread": self.cv_spread})
         if leg_spacing is not None:
             out["leg_spacing_m"] = leg_spacing
             cv = self.cv_at(leg_spacing)
@@ -335,30 +341,47 @@ def pattern_case(cfg: Any) -> PatternCase:
     t = math.radians(legs)
     along = wx * math.cos(t) + wy * math.sin(t)
     cross = -wx * math.sin(t) + wy * math.cos(t)
+    fc = cfg.forecast
+    spread = (tuple((round(c, 9), round(a, 9)) for c, a in spread_winds(
+        cross, along, SIGMA_POINTS, fc.speed_sigma_mps, fc.direction_sigma_deg))
+        if m.swath_spread and (fc.speed_sigma_mps > 0 or fc.direction_sigma_deg > 0) else ())
     return dataclasses.replace(base, wind_cross_mps=round(cross, 9),
-                               wind_along_mps=round(along, 9), legs_deg=legs)
+                               wind_along_mps=round(along, 9), legs_deg=legs, spread=spread)
+
+
+def _overlay(case: PatternCase, cross: float, along: float
+             ) -> tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """The passes out and back of ``case`` in the wind (``cross``, ``along``) at each of its
+    masses: (y, [(out, back) per mass], the worse mass's back-and-forth CV at every spacing)."""
+    profiles, cvs = [], []
+    args = (case.speed_mps, case.height_m)
+    drag = (case.drag_linear, case.drag_quadratic)
+    for mass in case.masses_kg:
+        y, fwd, _ = single_pass(case.dep, *args, cross, mass, *drag, wind_x=along)
+        yb, back, _ = single_pass(case.dep, *args, -cross, mass, *drag, wind_x=-along)
+        assert np.allclose(yb[::-1], -y)   # the collectors are symmetric about the track
+        profiles.append((fwd, back[::-1].copy()))
+        cvs.append(cv_back_and_forth(y, fwd, back[::-1], SPACINGS))
+    return y, profiles, np.max(cvs, axis=0)
 
 
 def run_pattern(case: PatternCase, cv_max: float = CV_LIMIT) -> LaneChoice:
     """The back-and-forth pattern test of ``case`` at each of its masses: a pass out along the
     legs and one back (the same pass with the wind reversed, mirrored across the track), and
     the widest spacing whose overlay CV is ≤ ``cv_max`` at every mass (the lanes must hold from
-    a full tank to an empty one)."""
-    profiles, cvs = [], []
-    for mass in case.masses_kg:
-        args = (case.speed_mps, case.height_m)
-        drag = (case.drag_linear, case.drag_quadratic)
-        y, fwd, _ = single_pass(case.dep, *args, case.wind_cross_mps, mass, *drag,
-                                wind_x=case.wind_along_mps)
-        yb, back, _ = single_pass(case.dep, *args, -case.wind_cross_mps, mass, *drag,
-                                  wind_x=-case.wind_along_mps)
-        assert np.allclose(yb[::-1], -y)   # the collectors are symmetric about the track
-        profiles.append((fwd, back[::-1].copy()))
-        cvs.append(cv_back_and_forth(y, fwd, back[::-1], SPACINGS))
-    cv = np.max(cvs, axis=0)
-    s = effective_swath(SPACINGS, cv, cv_max)
-    cv_s = float(cv[int(np.argmin(np.abs(SPACINGS - s)))]) if s > 0 else None
-    return LaneChoice(s, "auto", cv_max, cv_s, case, y, tuple(profiles))
+    a full tank to an empty one). With a :attr:`PatternCase.spread` the spacing's CV averaged
+    over those winds must be ≤ ``cv_max`` too (the lanes hold, on average, when the forecast is
+    one σ off)."""
+    y, profiles, cv = _overlay(case, case.wind_cross_mps, case.wind_along_mps)
+    need = cv
+    if case.spread:
+        cv_sp = np.mean([_overlay(case, c, a)[2] for c, a in case.spread], axis=0)
+        need = np.maximum(cv, cv_sp)
+    s = effective_swath(SPACINGS, need, cv_max)
+    i = int(np.argmin(np.abs(SPACINGS - s)))
+    cv_s = float(cv[i]) if s > 0 else None
+    cv_spread = float(cv_sp[i]) if case.spread and s > 0 else None
+    return LaneChoice(s, "auto", cv_max, cv_s, case, y, tuple(profiles), cv_spread)
 
 
 def lane_choice(cfg: Any) -> LaneChoice:
@@ -375,6 +398,48 @@ def lane_choice(cfg: Any) -> LaneChoice:
 def mission_swath(cfg: Any) -> float:
     """The lane spacing (m) of ``cfg``'s mission (:func:`lane_choice`)."""
     return lane_choice(cfg).swath_m
+
+
+def pattern_shift(y: np.ndarray, profiles: tuple) -> float:
+    """Where the pattern's deposit lies across the flight line (m, in the pattern test's y: +y
+    the way the crosswind blows when ``wind_cross_mps`` > 0): the centre of its width at half
+    its peak (the two outermost collectors at ≥ half the peak, as a pattern test's trace is
+    read for its swath: ASABE S386), of the mean of the passes out and back, averaged over the
+    masses tested. A crosswind carries the deposit downwind of the track; a spray operator
+    offsets the flight lines upwind by that much so that the pattern, not the track, covers the
+    field (the swath displacement of aerial application's pattern testing)."""
+    out = []
+    for fwd, back in profiles:
+        p = 0.5 * (fwd + back)
+        k = np.nonzero(p >= 0.5 * p.max())[0] if p.max() > 0 else np.array([], int)
+        if len(k):
+            out.append(0.5 * (y[k[0]] + y[k[-1]]))
+    return float(np.mean(out)) if out else 0.0
+
+
+def mission_offset(cfg: Any) -> tuple[float, float]:
+    """The translation (east, north; m) of ``cfg``'s whole plan: ``mission.upwind_offset_m``
+    upwind across the legs, or for ``"auto"`` minus the :func:`pattern_shift` of the back-and-
+    forth pattern test in the planning wind, across the legs, at most half the lanes (zero in
+    calm air or where the legs' heading is not known before the plan). The lanes and the
+    headland are unchanged: the boundary laps move with the legs, the upwind one towards the
+    edge (at most onto it: the flight stays over the field), the downwind one inside it, as the
+    deposit moves the other way."""
+    given = cfg.mission.upwind_offset_m
+    if given != "auto" and float(given) == 0.0:
+        return 0.0, 0.0
+    case = pattern_case(cfg)
+    if case.legs_deg is None or case.wind_cross_mps == 0.0:
+        return 0.0, 0.0
+    if given == "auto":
+        lc = _cached(repr(("lanes", case, cfg.mission.swath_cv_max)),
+                     lambda: run_pattern(case, cfg.mission.swath_cv_max))
+        lanes = mission_swath(cfg)
+        c = float(np.clip(pattern_shift(lc.y, lc.profiles), -0.5 * lanes, 0.5 * lanes))
+    else:
+        c = math.copysign(float(given), case.wind_cross_mps)
+    t = math.radians(case.legs_deg)
+    return round(c * math.sin(t), 9), round(-c * math.cos(t), 9)   # −c along (−sin t, cos t)
 
 
 def mission_headland(cfg: Any) -> float:

@@ -228,15 +228,10 @@ def flown_winds(wind: float, along: float, draws: int, speed_sigma: float, direc
     ``"forecast"`` stream of ``seed``), the forecast's vector turned by σ_θ z₂ and its length
     changed by σ_U z₁ (at least 0)."""
     from ...seeds import seed_sequences
+    from ...world.forecast import spread_winds
 
     z = np.random.default_rng(seed_sequences(seed)["forecast"]).standard_normal((draws, 2))
-    speed, head = math.hypot(wind, along), math.atan2(along, wind)
-    out = []
-    for z1, z2 in z:
-        u = max(0.0, speed + speed_sigma * z1)
-        a = head + math.radians(direction_sigma) * z2
-        out.append((u * math.cos(a), u * math.sin(a)))
-    return out
+    return spread_winds(wind, along, z, speed_sigma, direction_sigma)
 
 
 def _mass_rows(c: Case, dc: Any, base: Any, m: float, cross: float, along: float,
