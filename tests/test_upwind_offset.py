@@ -108,3 +108,12 @@ def test_the_offset_keeps_the_flight_over_the_field():
     for s in plan.segments:
         if s.kind in ("leg", "headland"):
             assert all(grown.contains(shapely.Point(p)) for p in s.points)
+
+
+def test_the_move_is_said_where_the_user_looks():
+    """The fly report and ``ag-uav plan`` print the upwind move in one line; none when 0."""
+    from ag_uav.world.mission import offset_text
+    assert offset_text((0.0, 0.0), "auto") == ""
+    line = offset_text((-0.6495, -0.375), "auto")
+    assert "0.75 m upwind" in line and "pattern test's crosswind shift" in line
+    assert "set by hand" in offset_text((1.0, 0.0), 1.0)

@@ -9,6 +9,8 @@ from rich import box
 from rich.console import Console
 from rich.table import Table
 
+from ..world.mission import offset_text
+
 #: (summary key, label, format, unit)
 ROWS = [
     ("completed", "completed", "{}", ""),
@@ -89,6 +91,9 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
     console.print(t)
     if isinstance(summary.get("lanes"), dict):
         console.print(summary["lanes"]["text"], markup=False, highlight=False)
+        moved = _offset_line(summary)
+        if moved:
+            console.print(moved, markup=False, highlight=False)
     if isinstance(summary.get("plan_wind"), dict):
         console.print(summary["plan_wind"]["text"], markup=False, highlight=False)
     est = summary.get("estimators")
@@ -98,6 +103,12 @@ def print_summary(summary: dict[str, Any], run_dir: Path | None = None,
         console.print(f"[yellow]note:[/] {note}")
     if run_dir is not None:
         console.print(f"run folder: {run_dir}")
+
+
+def _offset_line(summary: dict) -> str:
+    """The plan's upwind move as the summary records it ("" when not moved)."""
+    setting = summary.get("config", {}).get("mission", {}).get("upwind_offset_m", "auto")
+    return offset_text(summary["lanes"].get("offset_m", (0.0, 0.0)), setting)
 
 
 def _lanes_cell(lanes: dict[str, Any]) -> str:

@@ -91,6 +91,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from ..config import load_config
     from ..engine.missions import build_field, build_plan
     from ..world.forecast import plan_wind
+    from ..world.mission import offset_text
     from ..world.plan_export import nozzle_leads, write_plan
 
     if not (math.isfinite(args.simplify) and args.simplify >= 0):
@@ -118,6 +119,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     print(f"{args.output}: {info['format']}, {info['waypoints']} waypoints{items}, "
           f"{info['spray_switches']} nozzle switches; {plan.summary()}")
     print(plan.meta["lanes"].text())
+    moved = offset_text(plan.meta.get("offset_m", (0.0, 0.0)), cfg.mission.upwind_offset_m)
+    if moved:
+        print(moved)
     print(plan_wind(cfg).text())
     _write_sorties(cfg, Path(args.output), kw)
     return 0

@@ -6,6 +6,8 @@ flown along the plan, which needs the vehicle for the spray job's landing height
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from shapely import affinity
@@ -79,6 +81,17 @@ def shifted(plan: CoveragePlan, dx: float, dy: float) -> CoveragePlan:
     return dataclasses.replace(plan, segments=segs,
                                interior=affinity.translate(plan.interior, dx, dy),
                                meta={**plan.meta, "offset_m": (float(dx), float(dy))})
+
+
+def offset_text(offset_m: Sequence[float], setting: Any) -> str:
+    """One line for the plan's upwind move (:func:`shifted`), or "" when it was not moved."""
+    d = float(np.hypot(*offset_m)) if len(offset_m) == 2 else 0.0
+    if d == 0.0:
+        return ""
+    why = ("the pattern test's crosswind shift, at most half the lanes" if setting == "auto"
+           else "set by hand")
+    return (f"plan moved {d:.2f} m upwind across the legs ({why}; mission.upwind_offset_m = "
+            f"{setting!r}, 0 turns it off)")
 
 
 def field_outline(fld: Field) -> list[np.ndarray]:
