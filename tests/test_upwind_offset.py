@@ -117,3 +117,23 @@ def test_the_move_is_said_where_the_user_looks():
     line = offset_text((-0.6495, -0.375), "auto")
     assert "0.75 m upwind" in line and "pattern test's crosswind shift" in line
     assert "set by hand" in offset_text((1.0, 0.0), 1.0)
+
+
+def test_the_move_keeps_the_flight_over_the_field():
+    """A move that would carry waypoints out of the field is shortened until none is farther
+    outside than before; a move that stays over it is kept whole."""
+    from ag_uav.world.mission import over_the_field
+    cfg = _load_config(None, {"forecast.speed_sigma_mps": 0, "forecast.direction_sigma_deg": 0,
+                              "mission.upwind_offset_m": 0})
+    fld = build_field(cfg)
+    plan = build_plan(cfg, fld)
+    pts = shapely.points(np.vstack([s.points[:, :2] for s in plan.segments]))
+
+    def worst(d):
+        moved = shapely.points(shapely.get_coordinates(pts) + np.asarray(d))
+        out = ~shapely.covers(fld.polygon, moved)
+        return float(shapely.distance(fld.polygon.boundary, moved[out]).max()) if out.any() else 0
+    assert over_the_field(plan, fld, 0.0, 0.0) == (0.0, 0.0)
+    dx, dy = over_the_field(plan, fld, 20.0, 0.0)
+    assert 0.0 <= dx < 20.0 and dy == 0.0
+    assert worst((dx, dy)) <= worst((0.0, 0.0)) + 1e-6 < worst((20.0, 0.0))

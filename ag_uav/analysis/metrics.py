@@ -222,7 +222,7 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     ct_rms, ct_max = _cross_track_stats(res, plan)
     # the footprint lies where the plan puts the pattern: a plan moved upwind by the pattern's
     # crosswind shift (plan.meta["offset_m"], ag_uav.world.mission.shifted) lays it back downwind
-    back = np.asarray(plan.meta.get("offset_m", (0.0, 0.0)), dtype=float)
+    back = plan_offset(plan)
     tracks = [res.p_true[a:b, :2] - back for a, b in contiguous_runs(res.spray) if b - a >= 2]
     cov, ovl = spray_coverage(res.field, tracks, plan.swath) if tracks else (0.0, 0.0)
     off = off_target(res.field, tracks, plan.swath, cfg.spray.offtarget_buffer_m)
@@ -271,18 +271,26 @@ def summarise(res, cfg: Config, *, crash_reason: str | None, crash_time: float |
     }
 
 
-def _off_target_in(res, cfg: Config, swath: float, windows: list[tuple[float, float]]) -> float:
-    """Off-target area (m², :func:`off_target`) of the swath sprayed in the time ``windows``."""
+def plan_offset(plan: Any) -> np.ndarray:
+    """The plan's upwind move (east, north; m): a footprint is laid back downwind by it, where
+    the crosswind's shift of the pattern puts the deposit (``ag_uav.world.mission.shifted``)."""
+    return np.asarray(plan.meta.get("offset_m", (0.0, 0.0)), dtype=float)
+
+
+def _off_target_in(res, cfg: Config, plan: Any, windows: list[tuple[float, float]]) -> float:
+    """Off-target area (m², :func:`off_target`) of the swath sprayed in the time ``windows``,
+    laid back by the plan's upwind move as the run's own off-target area is."""
     m = np.zeros(len(res.t), dtype=bool)
     for a, b in windows:
         m |= (res.t >= a) & (res.t < b)
     runs = contiguous_runs(res.spray & m)
-    tracks = [res.p_true[a:b, :2] for a, b in runs if b - a >= 2]
+    back, swath = plan_offset(plan), plan.swath
+    tracks = [res.p_true[a:b, :2] - back for a, b in runs if b - a >= 2]
     off = off_target(res.field, tracks, swath, cfg.spray.offtarget_buffer_m)
     return round(off["outside"] + off["holes"], 1)
 
 
-def gnss_loss_summary(res, cfg: Config, losses: list[dict[str, Any]], swath: float
+def gnss_loss_summary(res, cfg: Config, losses: list[dict[str, Any]], plan: Any
                       ) -> dict[str, Any]:
     """The summary's GNSS losses (``{}`` without one), whatever ``gps.failsafe`` is:
     ``gnss_losses`` (each episode of :class:`ag_uav.engine.stages.GnssLoss` with its
@@ -297,8 +305,8 @@ def gnss_loss_summary(res, cfg: Config, losses: list[dict[str, Any]], swath: flo
         return ep["last_fix_s"], end if ep["regained_s"] is None else ep["regained_s"]
 
     for ep in losses:
-        ep["off_target_m2"] = _off_target_in(res, cfg, swath, [window(ep)])
-    total = _off_target_in(res, cfg, swath, [window(ep) for ep in losses])
+        ep["off_target_m2"] = _off_target_in(res, cfg, plan, [window(ep)])
+    total = _off_target_in(res, cfg, plan, [window(ep) for ep in losses])
     ep = losses[0]
     back = ("not regained" if ep["regained_s"] is None
             else f"regained at t={ep['regained_s']}s")

@@ -571,7 +571,7 @@ def finish_run(prep: Prepared, out: LoopOutput, batch: int = 1) -> RunResult:
     summ = metrics.summarise(res, cfg, crash_reason=out.crash_reason, crash_time=out.crash_time,
                              reference=ref)
     trim_heap()   # each phase's freed temporaries go back before the next (engine/heap.py)
-    loss = metrics.gnss_loss_summary(res, cfg, out.gnss_losses, plan.swath)
+    loss = metrics.gnss_loss_summary(res, cfg, out.gnss_losses, plan)
     if loss:
         summ.update(loss)
         out.notes.append(f"GNSS loss: {loss['gnss_loss_off_target_m2']:.1f} m² sprayed off "

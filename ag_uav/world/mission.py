@@ -10,7 +10,10 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import shapely
 from shapely import affinity
+
+from numkit.axes import XY
 
 from ..config import Config, ConfigError
 from .field import DEFAULT_ORIGIN, Field, load_field
@@ -67,7 +70,32 @@ def build_plan(cfg: Config, fld: Field) -> CoveragePlan:
         what = m.swath_m if lanes.source == "config" else f'"auto" ({lanes.swath_m:g} m)'
         raise ConfigError(f"mission.swath_m = {what}: {e}") from None
     plan.meta["lanes"] = lanes
-    return shifted(plan, *mission_offset(cfg))
+    return shifted(plan, *over_the_field(plan, fld, *mission_offset(cfg)))
+
+
+def over_the_field(plan: CoveragePlan, fld: Field, dx: float, dy: float,
+                   steps: int = 12) -> tuple[float, float]:
+    """The largest share of the move (dx, dy) that takes no waypoint of ``plan`` farther outside
+    ``fld`` than it was (bisection over the share, ``steps`` halvings): the flight stays over
+    the field where a turn or a lap near a slanted edge would carry it out."""
+    if dx == 0.0 and dy == 0.0:
+        return dx, dy
+    pts = np.vstack([sg.points[:, XY] for sg in plan.segments])
+    edge = fld.polygon.boundary
+
+    def outside(share: float) -> float:
+        moved = shapely.points(pts + share * np.array([dx, dy]))
+        out = ~shapely.covers(fld.polygon, moved)
+        return float(shapely.distance(edge, moved[out]).max()) if out.any() else 0.0
+
+    limit = outside(0.0) + 1e-6
+    if outside(1.0) <= limit:
+        return dx, dy
+    lo, hi = 0.0, 1.0
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if outside(mid) <= limit else (lo, mid)
+    return round(lo * dx, 9), round(lo * dy, 9)
 
 
 def shifted(plan: CoveragePlan, dx: float, dy: float) -> CoveragePlan:

@@ -375,7 +375,8 @@ def run_pattern(case: PatternCase, cv_max: float = CV_LIMIT) -> LaneChoice:
     y, profiles, cv = _overlay(case, case.wind_cross_mps, case.wind_along_mps)
     need = cv
     if case.spread:
-        cv_sp = np.mean([_overlay(case, c, a)[2] for c, a in case.spread], axis=0)
+        cv_sp = np.mean([cv_w for _, _, cv_w in (_overlay(case, c, a) for c, a in case.spread)],
+                        axis=0)
         need = np.maximum(cv, cv_sp)
     s = effective_swath(SPACINGS, need, cv_max)
     i = int(np.argmin(np.abs(SPACINGS - s)))
